@@ -1,0 +1,37 @@
+# ident-opt: the two commands a newcomer needs are `make identify` and `make test`.
+# Both create .venv and install what they need on first use (Python >= 3.11 and gcc are all it takes).
+
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+PROBLEM ?= problems/tudor_2dof.toml
+
+.PHONY: identify test lint bench codegen audit clean-venv
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test]'
+	touch $(STAMP)
+
+## The main job: every model on the real MERIt/TUDOR trials; tables and figures into results/.
+identify: $(STAMP)
+	$(BIN)/ident-opt audit --problem problems/tudor_2dof_paper.toml --out results
+	$(BIN)/ident-opt identify --problem $(PROBLEM) --out results --json results/identify.json
+
+## The whole test suite (2 workers).
+test: $(STAMP)
+	$(BIN)/python -m pytest -n 2 -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check ident_opt tests benchmarks
+
+audit: $(STAMP)
+	$(BIN)/ident-opt audit --problem problems/tudor_2dof_paper.toml --out results
+
+bench: $(STAMP)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test,bench]'
+	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+
+clean-venv:
+	rm -rf $(VENV)

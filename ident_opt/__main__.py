@@ -1,0 +1,3 @@
+from ident_opt.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,79 @@
+"""The `ident-opt` command line: one subcommand per job, each in `ident_opt/commands/<name>.py`.
+
+Exit status: 0 success, 2 bad input or usage (a one-paragraph message, no traceback), 1 anything else.
+Subcommand modules keep their heavy imports inside `run()`, so `ident-opt --help` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from ident_opt.errors import InputError
+
+#: subcommand -> one-line help. Each lives in ident_opt.commands.<name> with add_arguments() and run().
+COMMANDS = {
+    "identify": "identify every model on the problem's data; write tables and figures",
+    "compare": "constrained vs OLS vs datasheet parameters, with standard errors and consistency checks",
+    "diagnose": "what the model gets wrong, why, the extended model and its held-out gain",
+    "simulate": "write a measured-style trial from the built-in simulator (optional hidden effects)",
+    "codegen": "generate, compile and check C code for embedded torque prediction",
+    "online": "offline fit, then exact sequential updates on the rest of the trial (or a stream)",
+    "audit": "the paper audit: its datasheet model under both conventions against its own fit",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but usage errors go through the same exit-2 path as bad input."""
+
+    def error(self, message: str):  # noqa: D401 - argparse API
+        self.print_usage(sys.stderr)
+        raise InputError(f"{self.prog}: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser (subcommand modules add their own flags)."""
+    parser = _Parser(prog="ident-opt", description=__doc__.splitlines()[0],
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name, summary in COMMANDS.items():
+        module = _module(name)
+        p = sub.add_parser(name, help=summary, description=(module.__doc__ or summary).strip(),
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        module.add_arguments(p)
+    return parser
+
+
+def _module(name: str):
+    return importlib.import_module(f"ident_opt.commands.{name}")
+
+
+def _version() -> str:
+    from ident_opt import __version__
+
+    return __version__
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script; returns the exit status."""
+    try:
+        parser = build_parser()
+        args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+        if args.command is None:
+            parser.print_help()
+            return 2
+        return int(_module(args.command).run(args) or 0)
+    except InputError as exc:
+        print(f"ident-opt: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("ident-opt: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,110 @@
+"""What every subcommand shares: the standard flags, loading the problem and its trials, writing outputs."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ident_opt.errors import InputError
+
+
+def add_problem_arguments(parser: argparse.ArgumentParser, data: bool = True, json_out: bool = True) -> None:
+    """--problem, --data, --json and the bad-row flags, named the same in every subcommand."""
+    parser.add_argument("--problem", required=True, metavar="P", help="problem file (problems/*.toml)")
+    if data:
+        parser.add_argument("--data", metavar="D", action="append",
+                            help="data file(s) to use instead of the problem's [data] trials; repeat for a "
+                                 "second (unseen) trial")
+    if json_out:
+        parser.add_argument("--json", metavar="F", help="also write a machine-readable result to F")
+    parser.add_argument("--allow-implausible", action="store_true",
+                        help="proceed when values look like the wrong unit (e.g. |q| > 100 rad)")
+    parser.add_argument("--drop-invalid", action="store_true",
+                        help="skip rows with non-numeric/NaN/inf cells or non-increasing t (the count is reported)")
+
+
+@dataclass
+class Loaded:
+    """A problem with its trials: `trials[0]` identifies, `trials[1]` (if any) is the unseen trial."""
+
+    problem: Any
+    trials: list
+
+    @property
+    def train(self):
+        return self.trials[0]
+
+    @property
+    def unseen(self):
+        return self.trials[1] if len(self.trials) > 1 else None
+
+
+def load(args: argparse.Namespace, min_samples: int | None = None) -> Loaded:
+    """The problem file and its data (from --data, the problem's [data] trials, or its [simulate] section)."""
+    from ident_opt.data import load_dataset
+    from ident_opt.problem import load_problem
+
+    problem = load_problem(args.problem)
+    paths = [Path(p) for p in (getattr(args, "data", None) or [])] or list(problem.data.trials)
+    if not paths and problem.simulate is not None:
+        from ident_opt.simulate import problem_trials  # generated on first use, cached
+
+        paths = problem_trials(problem)
+    if not paths:
+        raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
+    kwargs = {"allow_implausible": args.allow_implausible, "drop_invalid": args.drop_invalid}
+    if min_samples is not None:
+        kwargs["min_samples"] = min_samples
+    trials = [load_dataset(p, problem.data, problem.robot, **kwargs) for p in paths]
+    for trial in trials:
+        if trial.dropped_rows:
+            print(f"note: {trial.source}: dropped {trial.dropped_rows} invalid row(s)", file=sys.stderr)
+    return Loaded(problem, trials)
+
+
+def output_dir(args: argparse.Namespace, problem, default: Path | None = None) -> Path:
+    """--out, else the problem's [output] dir, else `default` (the project's results/)."""
+    out = getattr(args, "out", None)
+    path = Path(out) if out else (problem.output_dir or default or Path("results"))
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot create the output folder ({exc.strerror})") from None
+    if not os.access(path, os.W_OK):
+        raise InputError(f"{path}: the output folder is not writable")
+    return path
+
+
+def write_json(path: str | Path | None, payload: dict) -> None:
+    """Write `payload` as JSON atomically (a temporary file renamed into place): never half a file."""
+    if not path:
+        return
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "w") as fh:
+            json.dump(payload, fh, indent=2, default=_plain)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write the JSON output ({exc.strerror})") from None
+
+
+def _plain(value: Any) -> Any:
+    """JSON for NumPy scalars/arrays and paths."""
+    import numpy as np
+
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

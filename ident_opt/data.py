@@ -1,0 +1,311 @@
+"""Measured trials: reading, validating, estimating missing derivatives, and splitting.
+
+The file format is `spec/data-format.md`: one row per sample, SI units, columns t, q1, q2, optional
+dq/ddq, and either joint torques tau1/tau2 or motor currents i1/i2. Every fault is reported as an
+`InputError` naming the file, the column and the first offending row; input files are only read.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import signal
+from sklearn.model_selection import train_test_split
+
+from ident_opt.datasheet import PI_NAMES
+from ident_opt.errors import InputError
+from ident_opt.problem import DataSpec, Robot
+
+#: Limits beyond which a value is almost surely in the wrong unit (degrees, encoder counts, mA ...).
+PLAUSIBLE = {"q": 100.0, "dq": 1e3, "ddq": 1e5, "tau": 1e5, "i": 1e3}
+
+
+@dataclass
+class Dataset:
+    """One trial: time [s], joint angles [rad], velocities [rad/s], accelerations [rad/s²], torques [N m]."""
+
+    source: str
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    tau: np.ndarray
+    extra: pd.DataFrame = field(default_factory=pd.DataFrame)
+    derivatives: str = "given"
+    dropped_rows: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return len(self.t)
+
+    @property
+    def rate_hz(self) -> float:
+        """Median sampling rate [Hz]."""
+        return float(1.0 / np.median(np.diff(self.t))) if self.n > 1 else float("nan")
+
+    def subset(self, index: np.ndarray) -> Dataset:
+        """The samples at `index` (an index array or boolean mask), in that order."""
+        return replace(
+            self,
+            t=self.t[index],
+            q=self.q[index],
+            dq=self.dq[index],
+            ddq=self.ddq[index],
+            tau=self.tau[index],
+            extra=self.extra.iloc[np.arange(self.n)[index]].reset_index(drop=True),
+        )
+
+    def to_frame(self) -> pd.DataFrame:
+        """The trial in the data format's column names (torques, not currents)."""
+        cols = {"t": self.t}
+        for name, arr in (("q", self.q), ("dq", self.dq), ("ddq", self.ddq), ("tau", self.tau)):
+            cols[name + "1"], cols[name + "2"] = arr[:, 0], arr[:, 1]
+        return pd.concat([pd.DataFrame(cols), self.extra.reset_index(drop=True)], axis=1)
+
+
+# ---------------------------------------------------------------------------------------------- reading
+def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
+    """The raw table of a CSV / Parquet / Excel file, every cell as read (no conversion yet)."""
+    if not path.exists():
+        raise InputError(f"{path}: data file not found")
+    if not path.is_file():
+        raise InputError(f"{path}: not a file")
+    name = path.name.lower()
+    header = 0 if spec.header else None
+    try:
+        if name.endswith(".csv") or name.endswith(".csv.gz"):
+            frame = pd.read_csv(path, header=header, sep=",", dtype=str, keep_default_na=False,
+                                skipinitialspace=True)
+        elif name.endswith(".parquet"):
+            frame = pd.read_parquet(path)
+            if not spec.header:
+                frame.columns = range(frame.shape[1])
+        elif name.endswith(".xlsx"):
+            frame = pd.read_excel(path, sheet_name=spec.sheet or 0, header=header)
+        else:
+            raise InputError(
+                f"{path}: unsupported file type; ident-opt reads .csv, .csv.gz, .parquet and .xlsx"
+            )
+    except InputError:
+        raise
+    except pd.errors.EmptyDataError:
+        raise InputError(f"{path}: the file is empty") from None
+    except (ValueError, OSError, EOFError, UnicodeDecodeError, pd.errors.ParserError, KeyError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{path}: cannot read the file ({first})") from None
+    except Exception as exc:  # pyarrow and openpyxl raise their own types for corrupt files
+        raise InputError(f"{path}: cannot read the file ({type(exc).__name__}: {exc})") from None
+    if frame.shape[0] == 0:
+        raise InputError(f"{path}: the file has no data rows")
+    return frame
+
+
+def _locate(frame: pd.DataFrame, spec: DataSpec, path: Path) -> dict[str, object]:
+    """Map each data-format column present in the file to its column label in `frame`."""
+    found: dict[str, object] = {}
+    for name in ("t", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2", "tau1", "tau2", "i1", "i2"):
+        source = spec.columns.get(name, name if spec.header else None)
+        if source is None:
+            continue
+        if isinstance(source, int) and spec.header:
+            if source >= frame.shape[1]:
+                raise InputError(f"{path}: column index {source} for '{name}' is beyond the file's "
+                                 f"{frame.shape[1]} columns")
+            found[name] = frame.columns[source]
+        elif source in frame.columns:
+            found[name] = source
+        elif name in spec.columns:
+            have = ", ".join(map(str, frame.columns[:30]))
+            raise InputError(f"{path}: column '{source}' (mapped to '{name}' by [data.columns]) not found; "
+                             f"the file has: {have}")
+    return found
+
+
+def _row_label(path: Path, row: int, spec: DataSpec) -> str:
+    if path.name.lower().endswith((".csv", ".csv.gz")):
+        return f"data row {row + 1} (line {row + 1 + int(spec.header)} of the file)"
+    return f"data row {row + 1}"
+
+
+def _numeric(frame: pd.DataFrame, label: object, name: str, path: Path, spec: DataSpec,
+             drop_invalid: bool, bad: np.ndarray) -> np.ndarray:
+    """Column `label` as floats; non-numeric or non-finite cells are an error or (drop_invalid) marked."""
+    raw = frame[label]
+    values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
+    invalid = ~np.isfinite(values)
+    if invalid.any():
+        if drop_invalid:
+            bad |= invalid
+        else:
+            row = int(np.argmax(invalid))
+            cell = raw.iloc[row]
+            what = "an empty cell" if (isinstance(cell, str) and not cell.strip()) or pd.isna(cell) \
+                else f"the value {cell!r}"
+            raise InputError(f"{path}: column '{name}' has {what} at {_row_label(path, row, spec)}; "
+                             "every used cell must be a finite number (use --drop-invalid to skip such rows)")
+    return values
+
+
+def load_dataset(path: str | Path, spec: DataSpec, robot: Robot, *, allow_implausible: bool = False,
+                 drop_invalid: bool = False, min_samples: int = len(PI_NAMES)) -> Dataset:
+    """Read, validate and complete one trial (see the module docstring); never modifies the file."""
+    path = Path(path)
+    frame = _read_table(path, spec)
+    cols = _locate(frame, spec, path)
+    have = ", ".join(map(str, frame.columns[:30]))
+    for required in ("t", "q1", "q2"):
+        if required not in cols:
+            raise InputError(f"{path}: required column '{required}' is missing; the file has: {have}. "
+                             "Map foreign names with [data.columns] in the problem file.")
+    torque = [c for c in ("tau1", "tau2") if c in cols]
+    current = [c for c in ("i1", "i2") if c in cols]
+    if len(torque) == 1 or len(current) == 1:
+        missing = ({"tau1", "tau2"} - set(torque)) if len(torque) == 1 else ({"i1", "i2"} - set(current))
+        raise InputError(f"{path}: column '{missing.pop()}' is missing; torques (tau1, tau2) or currents "
+                         f"(i1, i2) come in pairs; the file has: {have}")
+    if torque and current:
+        raise InputError(f"{path}: the file has both torques (tau1, tau2) and currents (i1, i2); keep one pair "
+                         "or map only one of them with [data.columns]")
+    if not torque and not current:
+        raise InputError(f"{path}: neither torques (tau1, tau2) nor currents (i1, i2) found; the file has: "
+                         f"{have}. Map foreign names with [data.columns] in the problem file.")
+    for pair in (("dq1", "dq2"), ("ddq1", "ddq2")):
+        if (pair[0] in cols) != (pair[1] in cols):
+            raise InputError(f"{path}: column '{pair[0] if pair[1] in cols else pair[1]}' is missing; "
+                             f"{pair[0]} and {pair[1]} come in pairs")
+
+    bad = np.zeros(len(frame), dtype=bool)
+    values = {name: _numeric(frame, label, name, path, spec, drop_invalid, bad) for name, label in cols.items()}
+    t_raw = values["t"]
+    if drop_invalid:
+        # Rows that break strict increase of t are also dropped (keep the first of a run).
+        keep_t = np.ones(len(t_raw), dtype=bool)
+        last = -np.inf
+        for k, tk in enumerate(t_raw):
+            if bad[k]:
+                continue
+            if tk > last:
+                last = tk
+            else:
+                keep_t[k] = False
+        bad |= ~keep_t
+    keep = ~bad
+    values = {name: v[keep] for name, v in values.items()}
+    t = values["t"]
+    if not drop_invalid:
+        steps = np.diff(t)
+        if (steps <= 0).any():
+            row = int(np.argmax(steps <= 0)) + 1
+            kind = "repeats" if steps[row - 1] == 0 else "goes back"
+            raise InputError(f"{path}: column 't' is not strictly increasing: it {kind} at "
+                             f"{_row_label(path, row, spec)} ({t[row - 1]!r} then {t[row]!r})")
+    n = len(t)
+    if n < max(min_samples, 2):
+        raise InputError(f"{path}: only {n} valid samples, fewer than the {max(min_samples, 2)} parameters "
+                         "to identify")
+
+    def pair(prefix: str) -> np.ndarray:
+        return np.column_stack([values[prefix + "1"], values[prefix + "2"]])
+
+    q = pair("q")
+    if "tau1" in values:
+        tau, tau_kind = pair("tau"), "tau"
+    else:
+        tau_kind = "i"
+        k = np.array([j.current_to_torque for j in robot.joints])
+        tau = pair("i") * k
+    if not allow_implausible:
+        checks = [("q", q), (tau_kind, pair(tau_kind))]
+        checks += [(p, pair(p)) for p in ("dq", "ddq") if p + "1" in values]
+        for kind, arr in checks:
+            over = np.abs(arr) > PLAUSIBLE[kind]
+            if over.any():
+                row, joint = np.unravel_index(int(np.argmax(over)), over.shape)
+                original_row = int(np.flatnonzero(keep)[row])
+                hint = " (degrees or encoder counts?)" if kind == "q" else " (wrong unit?)"
+                raise InputError(
+                    f"{path}: column '{kind}{joint + 1}' has the implausible value {arr[row, joint]!r} at "
+                    f"{_row_label(path, original_row, spec)}: |{kind}| > {PLAUSIBLE[kind]:g} in SI units"
+                    f"{hint}. Use --allow-implausible to proceed anyway."
+                )
+
+    notes: list[str] = []
+    if "dq1" in values and "ddq1" in values:
+        dq, ddq, how = pair("dq"), pair("ddq"), "given"
+    else:
+        dq_given = pair("dq") if "dq1" in values else None
+        dq, ddq, how = estimate_derivatives(t, q, spec.derivative_cutoff_hz, dq_given)
+        notes.append(f"derivatives {how}")
+    dropped = int(bad.sum())
+    if dropped:
+        notes.append(f"dropped {dropped} invalid row(s)")
+    used = set(cols.values())
+    extra = frame[[c for c in frame.columns if c not in used]][keep].reset_index(drop=True)
+    extra.columns = [f"col{c}" if isinstance(c, int) else str(c) for c in extra.columns]
+    extra = extra.apply(pd.to_numeric, errors="coerce") if len(extra.columns) else extra
+    return Dataset(str(path), t, q, dq, ddq, tau, extra, how, dropped, notes)
+
+
+# ---------------------------------------------------------------------------------------------- derivatives
+def estimate_derivatives(t: np.ndarray, q: np.ndarray, cutoff_hz: float,
+                         dq: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, str]:
+    """Zero-phase velocity and acceleration estimates from sampled angles (and velocities, if logged).
+
+    A 4th-order Butterworth low-pass run forward and backward (no phase lag) at `cutoff_hz`, then central
+    differences. Non-uniform sampling is resampled onto a uniform grid first (cubic spline) and mapped back.
+    Returns (dq, ddq, description).
+    """
+    steps = np.diff(t)
+    dt = float(np.median(steps))
+    uniform = np.max(np.abs(steps - dt)) <= 1e-6 * max(dt, 1e-12) + 1e-9 * abs(t[-1])
+    if uniform:
+        grid, qg, dqg = t, q, dq
+    else:
+        from scipy.interpolate import CubicSpline
+
+        grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
+        qg = CubicSpline(t, q, axis=0)(grid)
+        dqg = CubicSpline(t, dq, axis=0)(grid) if dq is not None else None
+    fs = 1.0 / dt
+    if cutoff_hz < 0.5 * fs and len(grid) > 30:
+        b, a = signal.butter(4, cutoff_hz / (0.5 * fs))
+
+        def smooth(x):
+            return signal.filtfilt(b, a, x, axis=0)
+
+        how = f"estimated: 4th-order Butterworth at {cutoff_hz:g} Hz, forward-backward, central differences"
+    else:
+
+        def smooth(x):
+            return x
+
+        how = "estimated: central differences (cut-off at or above Nyquist, no smoothing)"
+    if dqg is None:
+        v = np.gradient(smooth(qg), grid, axis=0)
+    else:
+        v = dqg
+        how += " (velocities as logged)"
+    acc = np.gradient(smooth(v), grid, axis=0)
+    if not uniform:
+        from scipy.interpolate import CubicSpline
+
+        v, acc = CubicSpline(grid, v, axis=0)(t), CubicSpline(grid, acc, axis=0)(t)
+        how += f"; non-uniform sampling resampled to {fs:.6g} Hz"
+    return (dq if dq is not None else v), acc, how
+
+
+# ---------------------------------------------------------------------------------------------- splits
+def shuffled_split(n: int, train_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The paper's protocol: shuffle the samples, then train on `train_fraction` of them."""
+    train, test = train_test_split(np.arange(n), train_size=train_fraction, random_state=seed, shuffle=True)
+    return np.sort(train), np.sort(test)
+
+
+def chronological_split(n: int, train_fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """The honest protocol within one trial: the first part in time trains, the rest tests."""
+    cut = int(round(train_fraction * n))
+    return np.arange(cut), np.arange(cut, n)

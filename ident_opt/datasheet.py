@@ -1,0 +1,137 @@
+"""From a datasheet (`[robot]`) to rigid-body parameters and the paper's grouped parameters π.
+
+Both conventions model each link as a uniform bar (I = m (h² + l²)/12 about its centre, centre at
+mid-length), lump an actuator as a solid cylinder (I = m r²/2) at the distal end of link 1, and move
+inertias to the combined centre of mass with the parallel-axis theorem. They differ in what a
+mechanical engineer would call right (see `spec/problem-format.md`):
+
+- ``paper``: joint 1's actuator on link 1, motor-side friction averaged and used as is, no rotor inertia.
+- ``physical``: joint 2's actuator on link 1 (joint 1's motor sits on the base); friction reflected to the
+  joint (viscous × N², Coulomb × N); rotor inertia reflected as armature N² J on the diagonal of M.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ident_opt.problem import Link, Robot
+
+#: The paper's grouped parameters, in its order (β in N·m, friction joint-side).
+PI_NAMES = ("a1", "a2", "a3", "b1", "b2", "fv1", "fv2", "fc1", "fc2")
+
+
+@dataclass(frozen=True)
+class RigidBody:
+    """Joint-side rigid-body parameters of the two-link arm [kg, m, kg m², N m s/rad, N m]."""
+
+    m1: float
+    m2: float
+    l1: float
+    l2: float
+    lc1: float
+    lc2: float
+    Ic1: float
+    Ic2: float
+    gravity: float
+    armature: tuple[float, float]  # reflected rotor inertia N² J per joint (0 under the paper convention)
+    fv: tuple[float, float]  # viscous friction, averaged over directions
+    fc: tuple[float, float]  # Coulomb friction, averaged over directions
+    fc_positive: tuple[float, float]
+    fc_negative: tuple[float, float]
+
+
+def bar_inertia(link: Link) -> float:
+    """Moment of inertia of a uniform bar about its centre, for rotation in the plane of motion [kg m²]."""
+    return link.mass * (link.height**2 + link.length**2) / 12.0
+
+
+def cylinder_inertia(mass: float, diameter: float) -> float:
+    """Moment of inertia of a solid cylinder about its axis [kg m²]."""
+    return 0.5 * mass * (diameter / 2.0) ** 2
+
+
+def combine(parts: list[tuple[float, float, float]]) -> tuple[float, float, float]:
+    """Lump point-like parts (mass, position along the link, inertia about own centre) into one body.
+
+    Returns (mass, centre of mass, inertia about that centre) by the parallel-axis theorem.
+    """
+    mass = sum(m for m, _, _ in parts)
+    com = sum(m * x for m, x, _ in parts) / mass
+    inertia = sum(i + m * (x - com) ** 2 for m, x, i in parts)
+    return mass, com, inertia
+
+
+def rigid_body(robot: Robot, convention: str | None = None) -> RigidBody:
+    """Rigid-body parameters from the datasheet under `convention` (default: the robot's own)."""
+    convention = convention or robot.convention
+    if convention not in ("paper", "physical"):
+        raise ValueError(f"unknown convention {convention!r}")
+    l1, l2 = robot.link1.length, robot.link2.length
+    # Which actuator rides at the distal end of link 1 is the paper's main slip (see module docstring).
+    rider = robot.joint1 if convention == "paper" else robot.joint2
+    m1, lc1, Ic1 = combine(
+        [
+            (robot.link1.mass, l1 / 2, bar_inertia(robot.link1)),
+            (rider.actuator_mass, l1, cylinder_inertia(rider.actuator_mass, rider.motor_diameter)),
+        ]
+    )
+    link2 = [(robot.link2.mass, l2 / 2, bar_inertia(robot.link2))]
+    if robot.payload_mass > 0:
+        link2.append((robot.payload_mass, l2, 0.0))
+    m2, lc2, Ic2 = combine(link2)
+
+    joints = robot.joints
+    if convention == "paper":
+        armature = (0.0, 0.0)
+        fv = tuple(j.viscous_friction.mean for j in joints)
+        fc_pos = tuple(j.coulomb_friction.positive for j in joints)
+        fc_neg = tuple(j.coulomb_friction.negative for j in joints)
+    else:
+        armature = tuple(j.gear_ratio**2 * j.rotor_inertia for j in joints)
+        fv = tuple(j.gear_ratio**2 * j.viscous_friction.mean for j in joints)
+        fc_pos = tuple(j.gear_ratio * j.coulomb_friction.positive for j in joints)
+        fc_neg = tuple(j.gear_ratio * j.coulomb_friction.negative for j in joints)
+    fc = tuple(0.5 * (p + n) for p, n in zip(fc_pos, fc_neg))
+    return RigidBody(m1, m2, l1, l2, lc1, lc2, Ic1, Ic2, robot.gravity, armature, fv, fc, fc_pos, fc_neg)
+
+
+def grouped(m1, m2, l1, lc1, lc2, Ic1, Ic2, g):
+    """The paper's grouped inertial and gravity parameters (α1, α2, α3, β1, β2), β in N·m.
+
+    Plain arithmetic, so it also works on CasADi symbols (used by the physical-parameter NLP).
+    """
+    a1 = Ic1 + Ic2 + m1 * lc1**2 + m2 * (l1**2 + lc2**2)
+    a2 = m2 * l1 * lc2
+    a3 = Ic2 + m2 * lc2**2
+    b1 = (m1 * lc1 + m2 * l1) * g
+    b2 = m2 * lc2 * g
+    return a1, a2, a3, b1, b2
+
+
+def datasheet_pi(robot: Robot, convention: str | None = None) -> dict[str, float]:
+    """The datasheet's π by name. Under ``physical`` the joint-1 armature is folded into ``a1``
+    (it cannot be told apart from it) and the joint-2 armature is reported as ``ia2``."""
+    convention = convention or robot.convention
+    body = rigid_body(robot, convention)
+    a1, a2, a3, b1, b2 = grouped(body.m1, body.m2, body.l1, body.lc1, body.lc2, body.Ic1, body.Ic2, body.gravity)
+    pi = {
+        "a1": a1 + body.armature[0],
+        "a2": a2,
+        "a3": a3,
+        "b1": b1,
+        "b2": b2,
+        "fv1": body.fv[0],
+        "fv2": body.fv[1],
+        "fc1": body.fc[0],
+        "fc2": body.fc[1],
+    }
+    if convention == "physical":
+        pi["ia2"] = body.armature[1]
+    return pi
+
+
+def pi_vector(pi: dict[str, float], names: tuple[str, ...]) -> np.ndarray:
+    """π as a vector in the order `names`; names the dict lacks (extensions) are 0."""
+    return np.array([pi.get(name, 0.0) for name in names], dtype=float)

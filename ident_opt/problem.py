@@ -1,0 +1,367 @@
+"""Problem files (`problems/*.toml`): which robot, which data, and how to identify it.
+
+The `[robot]` section is the contract of `spec/problem-format.md` (datasheet values as printed:
+motor-side friction and rotor inertia, everything else joint-side, SI units). The other sections are
+documented in `problems/README.md`; every key has a default, and an unknown key is an error so that a
+typo never falls back silently to a default. Paths are relative to the problem file.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ident_opt.errors import InputError
+
+_REQUIRED = object()
+
+#: Columns of the data format, in the order the loader reports them.
+DATA_COLUMNS = ("t", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2", "tau1", "tau2", "i1", "i2")
+
+
+@dataclass(frozen=True)
+class Friction:
+    """A friction coefficient per direction of motion (motor side, as the datasheet prints it)."""
+
+    positive: float
+    negative: float
+
+    @property
+    def mean(self) -> float:
+        return 0.5 * (self.positive + self.negative)
+
+
+@dataclass(frozen=True)
+class Link:
+    """A link modelled as a uniform rectangular bar [m, kg/m^3]."""
+
+    length: float
+    width: float
+    height: float
+    density: float
+
+    @property
+    def mass(self) -> float:
+        """Bar mass [kg]."""
+        return self.density * self.length * self.width * self.height
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One actuator's datasheet: motor-side friction and rotor inertia, gear ratio N, torque constant."""
+
+    torque_constant: float  # N m / A, motor side
+    gear_ratio: float
+    rotor_inertia: float  # kg m^2, motor side
+    viscous_friction: Friction  # N m s / rad, motor side
+    coulomb_friction: Friction  # N m, motor side
+    motor_diameter: float  # m
+    actuator_mass: float  # kg
+
+    @property
+    def current_to_torque(self) -> float:
+        """Joint-side torque per ampere of motor current [N m / A]: torque constant × gear ratio."""
+        return self.torque_constant * self.gear_ratio
+
+
+@dataclass(frozen=True)
+class Robot:
+    """The `[robot]` section: a two-link planar arm under gravity."""
+
+    gravity: float
+    convention: str  # "physical" or "paper"
+    link1: Link
+    link2: Link
+    joint1: Joint
+    joint2: Joint
+    payload_mass: float = 0.0
+
+    @property
+    def joints(self) -> tuple[Joint, Joint]:
+        return (self.joint1, self.joint2)
+
+
+@dataclass(frozen=True)
+class DataSpec:
+    """The `[data]` section: the trials and how to read them."""
+
+    trials: tuple[Path, ...] = ()
+    header: bool = True
+    sheet: str | None = None
+    columns: dict[str, str | int] = field(default_factory=dict)
+    derivative_cutoff_hz: float = 15.0
+
+
+@dataclass(frozen=True)
+class SplitSpec:
+    """The `[split]` section: the paper's shuffled protocol and the chronological one."""
+
+    train_fraction: float = 0.7
+    seeds: tuple[int, ...] = tuple(range(10))
+
+
+@dataclass(frozen=True)
+class ResidualSpec:
+    """The `[residual]` section: the Gaussian-mixture residual model."""
+
+    components: int | None = None  # None: chosen on validation data among `candidates`
+    candidates: tuple[int, ...] = (1, 2, 3, 4, 6, 8, 10)
+    covariance: str = "full"
+    reg_covar: float = 1e-4
+    max_train_samples: int = 20000
+
+
+@dataclass(frozen=True)
+class SimulateSpec:
+    """The `[simulate]` section: a trial from the built-in simulator instead of a data file."""
+
+    trajectory: str = "tud01"
+    duration: float = 80.0
+    rate_hz: float = 100.0
+    seed: int = 0
+    effects: tuple[str, ...] = ()
+    output: str = "torque"  # "torque" or "current"
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A parsed, validated problem file."""
+
+    name: str
+    path: Path
+    robot: Robot
+    data: DataSpec = field(default_factory=DataSpec)
+    split: SplitSpec = field(default_factory=SplitSpec)
+    residual: ResidualSpec = field(default_factory=ResidualSpec)
+    simulate: SimulateSpec | None = None
+    output_dir: Path | None = None
+
+
+class _Table:
+    """A TOML table being read: every key taken is checked, every key left over is an error."""
+
+    def __init__(self, raw: Any, where: str, path: Path):
+        if not isinstance(raw, dict):
+            raise InputError(f"{path}: [{where}] must be a table, got {type(raw).__name__}")
+        self.raw = dict(raw)
+        self.where = where
+        self.path = path
+
+    def _name(self, key: str) -> str:
+        return f"{self.path}: key '{key}' in [{self.where}]" if self.where else f"{self.path}: key '{key}'"
+
+    def take(self, key: str, kind: type | tuple[type, ...], default: Any = _REQUIRED) -> Any:
+        if key not in self.raw:
+            if default is _REQUIRED:
+                raise InputError(f"{self._name(key)} is required but missing")
+            return default
+        value = self.raw.pop(key)
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        if float in kinds and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if isinstance(value, bool) and bool not in kinds:
+            raise InputError(f"{self._name(key)} must be {_kind_name(kinds)}, got a boolean")
+        if not isinstance(value, kinds):
+            raise InputError(f"{self._name(key)} must be {_kind_name(kinds)}, got {value!r}")
+        return value
+
+    def positive(self, key: str, default: Any = _REQUIRED) -> float:
+        value = self.take(key, float, default)
+        if not value > 0:
+            raise InputError(f"{self._name(key)} must be a positive number, got {value!r}")
+        return value
+
+    def non_negative(self, key: str, default: Any = _REQUIRED) -> float:
+        value = self.take(key, float, default)
+        if not value >= 0:
+            raise InputError(f"{self._name(key)} must be zero or positive, got {value!r}")
+        return value
+
+    def table(self, key: str, required: bool = True) -> _Table:
+        where = f"{self.where}.{key}" if self.where else key
+        if key not in self.raw:
+            if required:
+                raise InputError(f"{self.path}: section [{where}] is required but missing")
+            return _Table({}, where, self.path)
+        return _Table(self.raw.pop(key), where, self.path)
+
+    def done(self) -> None:
+        if self.raw:
+            keys = ", ".join(sorted(self.raw))
+            place = f"[{self.where}]" if self.where else "the top level"
+            raise InputError(f"{self.path}: unknown key(s) {keys} in {place} (check the spelling)")
+
+
+def _kind_name(kinds: tuple[type, ...]) -> str:
+    names = {float: "a number", int: "an integer", str: "a string", bool: "true or false", list: "a list"}
+    return " or ".join(names.get(k, k.__name__) for k in kinds)
+
+
+def _friction(table: _Table, key: str) -> Friction:
+    sub = table.table(key)
+    friction = Friction(sub.non_negative("positive"), sub.non_negative("negative"))
+    sub.done()
+    return friction
+
+
+def _link(table: _Table) -> Link:
+    link = Link(
+        length=table.positive("length"),
+        width=table.positive("width"),
+        height=table.positive("height"),
+        density=table.positive("density"),
+    )
+    table.done()
+    return link
+
+
+def _joint(table: _Table) -> Joint:
+    joint = Joint(
+        torque_constant=table.positive("torque_constant"),
+        gear_ratio=table.positive("gear_ratio"),
+        rotor_inertia=table.non_negative("rotor_inertia"),
+        viscous_friction=_friction(table, "viscous_friction"),
+        coulomb_friction=_friction(table, "coulomb_friction"),
+        motor_diameter=table.positive("motor_diameter"),
+        actuator_mass=table.non_negative("actuator_mass"),
+    )
+    table.done()
+    return joint
+
+
+def _robot(table: _Table) -> Robot:
+    convention = table.take("convention", str)
+    if convention not in ("physical", "paper"):
+        raise InputError(
+            f"{table.path}: key 'convention' in [robot] must be \"physical\" or \"paper\", got {convention!r}"
+        )
+    gravity = table.positive("gravity")
+    link1, link2 = _link(table.table("link1")), _link(table.table("link2"))
+    joint1, joint2 = _joint(table.table("joint1")), _joint(table.table("joint2"))
+    payload = table.table("payload", required=False)
+    payload_mass = payload.non_negative("mass", 0.0)
+    payload.done()
+    table.done()
+    return Robot(gravity, convention, link1, link2, joint1, joint2, payload_mass)
+
+
+def _relative(base: Path, value: str) -> Path:
+    path = Path(value)
+    return path if path.is_absolute() else (base / path)
+
+
+def _data(table: _Table, base: Path) -> DataSpec:
+    trials = table.take("trials", list, [])
+    for i, trial in enumerate(trials):
+        if not isinstance(trial, str):
+            raise InputError(f"{table.path}: key 'trials' in [data]: entry {i} must be a path string")
+    columns_table = table.table("columns", required=False)
+    columns: dict[str, str | int] = {}
+    for key in list(columns_table.raw):
+        if key not in DATA_COLUMNS:
+            raise InputError(
+                f"{table.path}: unknown column '{key}' in [data.columns]; known: {', '.join(DATA_COLUMNS)}"
+            )
+        value = columns_table.take(key, (str, int))
+        if isinstance(value, int) and value < 0:
+            raise InputError(f"{table.path}: key '{key}' in [data.columns] must be a 0-based index >= 0")
+        columns[key] = value
+    spec = DataSpec(
+        trials=tuple(_relative(base, t) for t in trials),
+        header=table.take("header", bool, True),
+        sheet=table.take("sheet", str, None),
+        columns=columns,
+        derivative_cutoff_hz=table.positive("derivative_cutoff_hz", DataSpec.derivative_cutoff_hz),
+    )
+    if not spec.header and any(isinstance(v, str) for v in columns.values()):
+        raise InputError(f"{table.path}: [data] header = false needs 0-based column indices in [data.columns]")
+    table.done()
+    return spec
+
+
+def _split(table: _Table) -> SplitSpec:
+    fraction = table.take("train_fraction", float, SplitSpec.train_fraction)
+    if not 0 < fraction < 1:
+        raise InputError(f"{table.path}: key 'train_fraction' in [split] must be in (0, 1), got {fraction}")
+    seeds = table.take("seeds", list, list(SplitSpec.seeds))
+    if not seeds or not all(isinstance(s, int) and not isinstance(s, bool) for s in seeds):
+        raise InputError(f"{table.path}: key 'seeds' in [split] must be a non-empty list of integers")
+    table.done()
+    return SplitSpec(fraction, tuple(seeds))
+
+
+def _residual(table: _Table) -> ResidualSpec:
+    components = table.take("components", (int, str), "auto")
+    if components == "auto":
+        components = None
+    elif not isinstance(components, int) or components < 1:
+        raise InputError(f"{table.path}: key 'components' in [residual] must be \"auto\" or an integer >= 1")
+    candidates = table.take("candidates", list, list(ResidualSpec.candidates))
+    if not candidates or not all(isinstance(k, int) and k >= 1 for k in candidates):
+        raise InputError(f"{table.path}: key 'candidates' in [residual] must be a list of integers >= 1")
+    covariance = table.take("covariance", str, ResidualSpec.covariance)
+    if covariance not in ("full", "diag"):
+        raise InputError(f"{table.path}: key 'covariance' in [residual] must be \"full\" or \"diag\"")
+    spec = ResidualSpec(
+        components=components,
+        candidates=tuple(candidates),
+        covariance=covariance,
+        reg_covar=table.positive("reg_covar", ResidualSpec.reg_covar),
+        max_train_samples=int(table.positive("max_train_samples", ResidualSpec.max_train_samples)),
+    )
+    table.done()
+    return spec
+
+
+def _simulate(table: _Table) -> SimulateSpec:
+    effects = table.take("effects", list, [])
+    if not all(isinstance(e, str) for e in effects):
+        raise InputError(f"{table.path}: key 'effects' in [simulate] must be a list of strings")
+    output = table.take("output", str, SimulateSpec.output)
+    if output not in ("torque", "current"):
+        raise InputError(f"{table.path}: key 'output' in [simulate] must be \"torque\" or \"current\"")
+    spec = SimulateSpec(
+        trajectory=table.take("trajectory", str, SimulateSpec.trajectory),
+        duration=table.positive("duration", SimulateSpec.duration),
+        rate_hz=table.positive("rate_hz", SimulateSpec.rate_hz),
+        seed=table.take("seed", int, SimulateSpec.seed),
+        effects=tuple(effects),
+        output=output,
+    )
+    table.done()
+    return spec
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read and validate a problem file; raise `InputError` naming the file and key on any fault."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: problem file not found")
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not a valid TOML file ({exc})") from None
+    top = _Table(raw, "", path)
+    base = path.resolve().parent
+    name = top.take("name", str)
+    robot = _robot(top.table("robot"))
+    data = _data(top.table("data", required=False), base)
+    split = _split(top.table("split", required=False))
+    residual = _residual(top.table("residual", required=False))
+    simulate = _simulate(top.table("simulate")) if "simulate" in top.raw else None
+    output = top.table("output", required=False)
+    out_dir = output.take("dir", str, None)
+    output.done()
+    top.done()
+    return Problem(
+        name=name,
+        path=path,
+        robot=robot,
+        data=data,
+        split=split,
+        residual=residual,
+        simulate=simulate,
+        output_dir=_relative(base, out_dir) if out_dir else None,
+    )

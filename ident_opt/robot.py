@@ -1,0 +1,248 @@
+"""The two-link planar arm: M(q), C(q, dq), G(q), F(dq) and the regressor Y with τ = Y(q, dq, ddq) π.
+
+One source of truth, two evaluations:
+
+- the symbolic model (CasADi SX), written as physics (M ddq + C dq + G + F); its regressor is the
+  Jacobian of τ with respect to π, so Y is derived, not typed twice. NLPs, derivatives and generated C
+  use it.
+- a vectorised NumPy regressor for N samples at once (the paper's printed Y, column by column), which the
+  tests check against the symbolic one to 1e-12. Identification uses it.
+
+Conventions: q1 from the horizontal, q2 relative to link 1, counter-clockwise positive, gravity along −y;
+β in N·m (the regressor's gravity columns are cos q1, cos(q1 + q2) without g). C is the Christoffel
+form, so Ṁ − 2C is skew-symmetric; C dq equals the paper's printed C dq.
+
+Extensions (added or replaced columns, names as in `spec/cli.md`):
+
+| extension            | parameters                 | what it adds                                           |
+|----------------------|----------------------------|--------------------------------------------------------|
+| `armature`           | ia2                        | joint-2 reflected rotor inertia on M22 (joint 1's is in a1) |
+| `asymmetric_coulomb` | fc1p fc1n fc2p fc2n        | replaces fc1, fc2: Coulomb level per velocity sign     |
+| `stribeck`           | fs1 fs2                    | static excess fs·sgn(dq)·exp(−(dq/vs)²), vs given      |
+| `offset`             | b1s b2s                    | sin gravity columns: an encoder zero offset rotates G  |
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cached_property
+
+import casadi as ca
+import numpy as np
+
+from ident_opt.datasheet import PI_NAMES
+
+EXTENSIONS = {
+    "armature": ("ia2",),
+    "asymmetric_coulomb": ("fc1p", "fc1n", "fc2p", "fc2n"),
+    "stribeck": ("fs1", "fs2"),
+    "offset": ("b1s", "b2s"),
+}
+
+
+@dataclass(frozen=True)
+class ArmModel:
+    """A rigid two-link arm model: which parameters it has and how τ depends on them.
+
+    `gravity="paper"` gives the paper's printed G1 = (β1 + β2) c1 + β2 c12, kept only to reproduce its
+    Model 2; identification uses the physically correct G1 = β1 c1 + β2 c12.
+    """
+
+    extensions: tuple[str, ...] = ()
+    gravity: str = "physical"
+    stribeck_velocity: tuple[float, float] = (0.05, 0.05)  # rad/s
+
+    def __post_init__(self):
+        unknown = [e for e in self.extensions if e not in EXTENSIONS]
+        if unknown:
+            raise ValueError(f"unknown model extension(s) {unknown}; known: {sorted(EXTENSIONS)}")
+        if self.gravity not in ("physical", "paper"):
+            raise ValueError("gravity must be 'physical' or 'paper'")
+        if self.gravity == "paper" and "offset" in self.extensions:
+            raise ValueError("the offset extension needs the physical gravity vector")
+
+    # ------------------------------------------------------------------ parameters
+    @cached_property
+    def names(self) -> tuple[str, ...]:
+        """Parameter names, in the order of π and of Y's columns."""
+        names = list(PI_NAMES)
+        if "asymmetric_coulomb" in self.extensions:
+            names = [n for n in names if n not in ("fc1", "fc2")]
+        for ext in self.extensions:
+            names += EXTENSIONS[ext]
+        return tuple(names)
+
+    @property
+    def n_params(self) -> int:
+        return len(self.names)
+
+    def vector(self, pi: dict[str, float]) -> np.ndarray:
+        """π as a vector in this model's order; names absent from `pi` are 0 (asymmetric Coulomb
+        parameters default to the symmetric ``fc`` values when those are given)."""
+        out = []
+        for name in self.names:
+            if name in pi:
+                out.append(pi[name])
+            elif name[:3] in ("fc1", "fc2") and len(name) == 4 and name[:3] in pi:
+                out.append(pi[name[:3]])
+            else:
+                out.append(0.0)
+        return np.asarray(out, dtype=float)
+
+    def as_dict(self, pi: np.ndarray) -> dict[str, float]:
+        """π vector to a name → value dict."""
+        return {name: float(v) for name, v in zip(self.names, pi)}
+
+    # ------------------------------------------------------------------ symbolic (CasADi) model
+    def _terms(self, q, dq, pi) -> tuple:
+        """M(q), C(q, dq), G(q), F(dq) as CasADi expressions of the parameter vector `pi`."""
+        p = {name: pi[i] for i, name in enumerate(self.names)}
+        zero = 0
+        c1, c2, s2 = ca.cos(q[0]), ca.cos(q[1]), ca.sin(q[1])
+        c12 = ca.cos(q[0] + q[1])
+        a1, a2, a3 = p["a1"], p["a2"], p["a3"]
+        ia2 = p.get("ia2", zero)
+        M = ca.vertcat(
+            ca.horzcat(a1 + 2 * a2 * c2, a3 + a2 * c2),
+            ca.horzcat(a3 + a2 * c2, a3 + ia2),
+        )
+        C = ca.vertcat(
+            ca.horzcat(-a2 * s2 * dq[1], -a2 * s2 * (dq[0] + dq[1])),
+            ca.horzcat(a2 * s2 * dq[0], zero),
+        )
+        g1 = p["b1"] * c1 + p["b2"] * c12
+        if self.gravity == "paper":
+            g1 += p["b2"] * c1
+        g2 = p["b2"] * c12
+        if "offset" in self.extensions:
+            s1, s12 = ca.sin(q[0]), ca.sin(q[0] + q[1])
+            g1 += p["b1s"] * s1 + p["b2s"] * s12
+            g2 += p["b2s"] * s12
+        G = ca.vertcat(g1, g2)
+        F = []
+        for j in range(2):
+            k = str(j + 1)
+            f = p["fv" + k] * dq[j]
+            if "asymmetric_coulomb" in self.extensions:
+                f += p["fc" + k + "p"] * ca.if_else(dq[j] > 0, 1, 0)
+                f -= p["fc" + k + "n"] * ca.if_else(dq[j] < 0, 1, 0)
+            else:
+                f += p["fc" + k] * ca.sign(dq[j])
+            if "stribeck" in self.extensions:
+                vs = self.stribeck_velocity[j]
+                f += p["fs" + k] * ca.sign(dq[j]) * ca.exp(-((dq[j] / vs) ** 2))
+            F.append(f)
+        return M, C, G, ca.vertcat(*F)
+
+    @cached_property
+    def symbols(self) -> dict[str, ca.SX]:
+        """The CasADi symbols q, dq, ddq (2×1) and pi (P×1) and the expressions built from them."""
+        q, dq, ddq = ca.SX.sym("q", 2), ca.SX.sym("dq", 2), ca.SX.sym("ddq", 2)
+        pi = ca.SX.sym("pi", self.n_params)
+        M, C, G, F = self._terms(q, dq, pi)
+        tau = M @ ddq + C @ dq + G + F
+        return {"q": q, "dq": dq, "ddq": ddq, "pi": pi, "M": M, "C": C, "G": G, "F": F, "tau": tau,
+                "Y": ca.jacobian(tau, pi)}
+
+    def function(self, what: str) -> ca.Function:
+        """A CasADi Function for one of M, C, G, F, tau, Y, with inputs (q, dq, ddq, pi)."""
+        s = self.symbols
+        return ca.Function(what, [s["q"], s["dq"], s["ddq"], s["pi"]], [s[what]],
+                           ["q", "dq", "ddq", "pi"], [what])
+
+    def tau_expression(self, q, dq, ddq, pi):
+        """τ as a CasADi expression of any (symbolic or numeric) q, dq, ddq and π."""
+        M, C, G, F = self._terms(q, dq, pi)
+        return M @ ddq + C @ dq + G + F
+
+    # ------------------------------------------------------------------ numeric (NumPy) model
+    def regressor(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        """Y for N samples: array (N, 2, P) with τ[k] = Y[k] @ π. Inputs (N, 2) in rad, rad/s, rad/s²."""
+        q, dq, ddq = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (q, dq, ddq))
+        Y = np.empty((q.shape[0], 2, self.n_params))
+        for i, name in enumerate(self.names):
+            Y[:, 0, i], Y[:, 1, i] = self._columns[name](q, dq, ddq)
+        return Y
+
+    def predict(self, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        """Predicted joint torques (N, 2) [N m] for parameters π."""
+        return self.regressor(q, dq, ddq) @ np.asarray(pi, dtype=float)
+
+    @cached_property
+    def _columns(self) -> dict[str, Callable]:
+        """The paper's printed regressor, one function per column: (q, dq, ddq) -> (row 1, row 2)."""
+        zero = np.zeros_like
+        vs = self.stribeck_velocity
+
+        def c(a):
+            return np.cos(a)
+
+        def s(a):
+            return np.sin(a)
+
+        cols = {
+            "a1": lambda q, dq, a: (a[:, 0], zero(a[:, 0])),
+            "a2": lambda q, dq, a: (
+                c(q[:, 1]) * (2 * a[:, 0] + a[:, 1]) - s(q[:, 1]) * (2 * dq[:, 0] * dq[:, 1] + dq[:, 1] ** 2),
+                c(q[:, 1]) * a[:, 0] + s(q[:, 1]) * dq[:, 0] ** 2,
+            ),
+            "a3": lambda q, dq, a: (a[:, 1], a[:, 0] + a[:, 1]),
+            "b1": lambda q, dq, a: (c(q[:, 0]), zero(q[:, 0])),
+            "b2": lambda q, dq, a: (
+                c(q[:, 0] + q[:, 1]) + (c(q[:, 0]) if self.gravity == "paper" else 0.0),
+                c(q[:, 0] + q[:, 1]),
+            ),
+            "fv1": lambda q, dq, a: (dq[:, 0], zero(dq[:, 0])),
+            "fv2": lambda q, dq, a: (zero(dq[:, 1]), dq[:, 1]),
+            "fc1": lambda q, dq, a: (np.sign(dq[:, 0]), zero(dq[:, 0])),
+            "fc2": lambda q, dq, a: (zero(dq[:, 1]), np.sign(dq[:, 1])),
+            "ia2": lambda q, dq, a: (zero(a[:, 1]), a[:, 1]),
+            "fc1p": lambda q, dq, a: ((dq[:, 0] > 0).astype(float), zero(dq[:, 0])),
+            "fc1n": lambda q, dq, a: (-(dq[:, 0] < 0).astype(float), zero(dq[:, 0])),
+            "fc2p": lambda q, dq, a: (zero(dq[:, 1]), (dq[:, 1] > 0).astype(float)),
+            "fc2n": lambda q, dq, a: (zero(dq[:, 1]), -(dq[:, 1] < 0).astype(float)),
+            "fs1": lambda q, dq, a: (np.sign(dq[:, 0]) * np.exp(-((dq[:, 0] / vs[0]) ** 2)), zero(dq[:, 0])),
+            "fs2": lambda q, dq, a: (zero(dq[:, 1]), np.sign(dq[:, 1]) * np.exp(-((dq[:, 1] / vs[1]) ** 2))),
+            "b1s": lambda q, dq, a: (s(q[:, 0]), zero(q[:, 0])),
+            "b2s": lambda q, dq, a: (s(q[:, 0] + q[:, 1]), s(q[:, 0] + q[:, 1])),
+        }
+        return {name: cols[name] for name in self.names}
+
+    # ------------------------------------------------------------------ structure for constraints
+    @cached_property
+    def mass_matrix_maps(self) -> tuple[np.ndarray, np.ndarray]:
+        """(A0, A1), each (P, 2, 2): M(q) = Σ_p π_p (A0[p] + A1[p] cos q2) for every q.
+
+        M is affine in π and depends on q only through cos q2, so M(q) ≻ 0 for all q exactly when
+        M0 + M1 ≻ 0 and M0 − M1 ≻ 0 (the constrained fits use this).
+        """
+        s = self.symbols
+        fM = ca.Function("M", [s["q"], s["pi"]], [s["M"]])
+        P = self.n_params
+        A0, A1 = np.zeros((P, 2, 2)), np.zeros((P, 2, 2))
+        for p in range(P):
+            e = np.zeros(P)
+            e[p] = 1.0
+            m_quarter = np.array(fM([0.0, np.pi / 2], e))  # cos q2 = 0
+            m_zero = np.array(fM([0.0, 0.0], e))  # cos q2 = 1
+            A0[p], A1[p] = m_quarter, m_zero - m_quarter
+        return A0, A1
+
+    def mass_matrix(self, pi: np.ndarray, q2: np.ndarray | float) -> np.ndarray:
+        """M at joint-2 angles `q2` (any shape S) for parameters π: array (*S, 2, 2) [kg m²]."""
+        A0, A1 = self.mass_matrix_maps
+        M0, M1 = np.tensordot(pi, A0, 1), np.tensordot(pi, A1, 1)
+        c2 = np.cos(np.asarray(q2, dtype=float))[..., None, None]
+        return M0 + M1 * c2
+
+    def min_mass_eigenvalue(self, pi: np.ndarray) -> float:
+        """min over all q of the smallest eigenvalue of M(q) [kg m²]: > 0 means physically consistent."""
+        A0, A1 = self.mass_matrix_maps
+        M0, M1 = np.tensordot(pi, A0, 1), np.tensordot(pi, A1, 1)
+        # λ_min(M0 + c M1) is concave in c, so its minimum over c ∈ [−1, 1] lies at an end.
+        return float(min(np.linalg.eigvalsh(M0 + M1)[0], np.linalg.eigvalsh(M0 - M1)[0]))
+
+
+#: The paper's identification model (physically correct gravity vector).
+RIGID = ArmModel()
