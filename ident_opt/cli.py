@@ -27,7 +27,7 @@ COMMANDS = {
 class _Parser(argparse.ArgumentParser):
     """argparse, but usage errors go through the same exit-2 path as bad input."""
 
-    def error(self, message: str):  # noqa: D401 - argparse API
+    def error(self, message: str):
         self.print_usage(sys.stderr)
         raise InputError(f"{self.prog}: {message}")
 

@@ -78,8 +78,8 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
     header = 0 if spec.header else None
     try:
         if name.endswith(".csv") or name.endswith(".csv.gz"):
-            frame = pd.read_csv(path, header=header, sep=",", dtype=str, keep_default_na=False,
-                                skipinitialspace=True)
+            frame = pd.read_csv(path, header=header, sep=",", dtype=str,
+                                keep_default_na=False, skipinitialspace=True)
         elif name.endswith(".parquet"):
             frame = pd.read_parquet(path)
             if not spec.header:
@@ -94,7 +94,7 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
         raise
     except pd.errors.EmptyDataError:
         raise InputError(f"{path}: the file is empty") from None
-    except (ValueError, OSError, EOFError, UnicodeDecodeError, pd.errors.ParserError, KeyError) as exc:
+    except (ValueError, OSError, EOFError, UnicodeDecodeError, KeyError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(f"{path}: cannot read the file ({first})") from None
     except Exception as exc:  # pyarrow and openpyxl raise their own types for corrupt files
@@ -307,5 +307,5 @@ def shuffled_split(n: int, train_fraction: float, seed: int) -> tuple[np.ndarray
 
 def chronological_split(n: int, train_fraction: float) -> tuple[np.ndarray, np.ndarray]:
     """The honest protocol within one trial: the first part in time trains, the rest tests."""
-    cut = int(round(train_fraction * n))
+    cut = round(train_fraction * n)
     return np.arange(cut), np.arange(cut, n)

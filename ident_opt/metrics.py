@@ -26,7 +26,7 @@ def nmse_range(tau: np.ndarray, tau_hat: np.ndarray) -> np.ndarray:
 
 
 def coverage(tau: np.ndarray, mean: np.ndarray, std: np.ndarray, level: float = 0.95) -> np.ndarray:
-    """Fraction of samples whose measured torque lies in the central `level` predictive interval, per joint."""
+    """Fraction of samples whose measured torque lies in the central `level` predictive interval (per joint)."""
     from scipy.stats import norm
 
     z = norm.ppf(0.5 + level / 2)

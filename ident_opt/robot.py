@@ -16,7 +16,7 @@ Extensions (added or replaced columns, names as in `spec/cli.md`):
 
 | extension            | parameters                 | what it adds                                           |
 |----------------------|----------------------------|--------------------------------------------------------|
-| `armature`           | ia2                        | joint-2 reflected rotor inertia on M22 (joint 1's is in a1) |
+| `armature`           | ia2                        | joint-2 reflected rotor inertia on M22 (joint 1's: a1)  |
 | `asymmetric_coulomb` | fc1p fc1n fc2p fc2n        | replaces fc1, fc2: Coulomb level per velocity sign     |
 | `stribeck`           | fs1 fs2                    | static excess fs·sgn(dq)·exp(−(dq/vs)²), vs given      |
 | `offset`             | b1s b2s                    | sin gravity columns: an encoder zero offset rotates G  |
