@@ -20,6 +20,7 @@ COMMANDS = {
     "simulate": "write a measured-style trial from the built-in simulator (optional hidden effects)",
     "codegen": "generate, compile and check C code for embedded torque prediction",
     "online": "offline fit, then exact sequential updates on the rest of the trial (or a stream)",
+    "check": "validate a problem file and its data; summarise each trial",
     "audit": "the paper audit: its datasheet model under both conventions against its own fit",
 }
 

@@ -8,6 +8,7 @@ typo never falls back silently to a default. Paths are relative to the problem f
 
 from __future__ import annotations
 
+import difflib
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -152,10 +153,14 @@ class _Table:
     def _name(self, key: str) -> str:
         return f"{self.path}: key '{key}' in [{self.where}]" if self.where else f"{self.path}: key '{key}'"
 
+    def _misspelt(self, key: str) -> str:
+        close = difflib.get_close_matches(key, [str(k) for k in self.raw], n=1)
+        return f" (is '{close[0]}' a misspelling of it?)" if close else ""
+
     def take(self, key: str, kind: type | tuple[type, ...], default: Any = _REQUIRED) -> Any:
         if key not in self.raw:
             if default is _REQUIRED:
-                raise InputError(f"{self._name(key)} is required but missing")
+                raise InputError(f"{self._name(key)} is required but missing{self._misspelt(key)}")
             return default
         value = self.raw.pop(key)
         kinds = kind if isinstance(kind, tuple) else (kind,)
@@ -183,7 +188,7 @@ class _Table:
         where = f"{self.where}.{key}" if self.where else key
         if key not in self.raw:
             if required:
-                raise InputError(f"{self.path}: section [{where}] is required but missing")
+                raise InputError(f"{self.path}: section [{where}] is required but missing{self._misspelt(key)}")
             return _Table({}, where, self.path)
         return _Table(self.raw.pop(key), where, self.path)
 
