@@ -1,0 +1,171 @@
+"""Physically consistent least squares: a small conic program (cvxpy + Clarabel) on the statistics.
+
+    minimise    Σ_j w_j RSS_j(π) + λ Σ_p D_p (π_p − π0_p)²                (RSS from G, b, s; no data)
+    subject to  M0(π) + M1(π) ⪰ margin·I     "mass_pd_q2_0"    M(q) at cos q2 = +1
+                M0(π) − M1(π) ⪰ margin·I     "mass_pd_q2_pi"   M(q) at cos q2 = −1
+                π_p ≥ 0 for every friction parameter p    "friction_<p>"
+                lb ≤ π ≤ ub (optional)                    "lower_<p>", "upper_<p>"
+
+M(q) = M0 + M1 cos q2 with M0, M1 affine in π (`ArmModel.mass_matrix_maps`), and λ_min(M0 + c M1) is
+concave in c, so the two 2×2 LMIs are exactly "M(q) ⪰ margin·I for every q" — also with armature.
+The quadratic is written as ‖R π − d‖² with RᵀR = H (a square root of the P×P matrix), so the conic
+program has P variables whatever the number of samples.
+
+The prior term, written above as λ Σ_p D_p (π_p − π0_p)², is relative: D_p = S / π0_scale_p², with S the
+weighted torque energy Σ_j w_j s_j [N² m²] and π0_scale_p = |π0_p| (floored at 1e-3 max|π0|). So
+λ = `prior_weight` is dimensionless: at λ = 1, a 100 % deviation of one parameter from the prior costs as
+much as all the measured torque energy. Unlike a data-scaled penalty, it also reaches columns the data do
+not excite, which is where a prior is needed.
+
+Because the problem is convex, if the unconstrained minimiser (OLS, or OLS with the prior) is feasible it
+is the answer: it is returned exactly, with no constraint active.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+
+from ident_opt.identify.fit import LinearFit, _check, _normal, _solve, finish, joint_weights
+from ident_opt.identify.stats import Stats
+from ident_opt.robot import ArmModel
+
+#: A constraint whose slack is below this (SI units of the constrained quantity) is reported active.
+ACTIVE_TOL = 1e-6
+
+
+def friction_names(model: ArmModel) -> list[str]:
+    """The friction parameters (viscous, Coulomb incl. per-direction, Stribeck): all must be ≥ 0."""
+    return [n for n in model.names if n[:2] in ("fv", "fc", "fs")]
+
+
+def constraint_slacks(model: ArmModel, pi: np.ndarray, margin: float = 0.0, friction: bool = True,
+                      mass: bool = True, bounds: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, float]:
+    """Each named constraint's slack at π (≥ 0 feasible, ≈ 0 active); PSD slack = λ_min − margin."""
+    out: dict[str, float] = {}
+    if mass:
+        A0, A1 = model.mass_matrix_maps
+        M0, M1 = np.tensordot(pi, A0, 1), np.tensordot(pi, A1, 1)
+        out["mass_pd_q2_0"] = float(np.linalg.eigvalsh(M0 + M1)[0] - margin)
+        out["mass_pd_q2_pi"] = float(np.linalg.eigvalsh(M0 - M1)[0] - margin)
+    if friction:
+        for name in friction_names(model):
+            out[f"friction_{name}"] = float(pi[model.names.index(name)])
+    if bounds is not None:
+        lb, ub = (np.broadcast_to(np.asarray(v, dtype=float), pi.shape) for v in bounds)
+        for p, name in enumerate(model.names):
+            if np.isfinite(lb[p]):
+                out[f"lower_{name}"] = float(pi[p] - lb[p])
+            if np.isfinite(ub[p]):
+                out[f"upper_{name}"] = float(ub[p] - pi[p])
+    return out
+
+
+def fit_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prior: np.ndarray | None = None,
+                    prior_weight: float = 0.0, bounds: tuple[np.ndarray, np.ndarray] | None = None,
+                    weights: str | np.ndarray | None = None, friction: bool = True, mass: bool = True,
+                    shortcut: bool = True) -> LinearFit:
+    """Physically consistent π (see module doc): M(q) ⪰ margin·I ∀q [kg m²], friction ≥ 0, optional
+    bounds (lb, ub) and prior π0 with weight λ. `weights` as in `fit_ols`. `shortcut=False` always runs
+    the conic solver (tests use it to check the solver against OLS). `status` is the solver's.
+    """
+    _check(stats, model)
+    if prior_weight < 0:
+        raise ValueError("prior_weight must be ≥ 0")
+    if prior_weight > 0 and prior is None:
+        raise ValueError("prior_weight > 0 needs a prior")
+    w = joint_weights(stats, weights)
+    H, h = _normal(stats, w)
+    P = model.n_params
+    prior = np.zeros(P) if prior is None else np.asarray(prior, dtype=float)
+    scale = np.maximum(np.abs(prior), 1e-3 * max(np.abs(prior).max(), 1e-12))
+    Dp = prior_weight * joint_weights_energy(stats, w) / scale**2  # prior curvature per parameter
+    method = "constrained" if (friction or mass) else "bounded"
+
+    t0 = time.perf_counter()
+    free = _solve(H + np.diag(Dp), h + Dp * prior)
+    slacks = constraint_slacks(model, free, margin, friction, mass, bounds)
+    if shortcut and all(v >= 0 for v in slacks.values()):
+        return finish(stats, model, free, w, method, "optimal (unconstrained minimiser feasible)", [],
+                      time.perf_counter() - t0)
+    pi, status = _solve_conic(model, H, h, stats.n, margin, Dp, prior, friction, mass, bounds)
+    elapsed = time.perf_counter() - t0
+    if pi is None:
+        raise RuntimeError(f"constrained fit failed: solver status {status}")
+    slacks = constraint_slacks(model, pi, margin, friction, mass, bounds)
+    active = [name for name, v in slacks.items() if v < ACTIVE_TOL]
+    return finish(stats, model, pi, w, method, status, active, elapsed)
+
+
+def joint_weights_energy(stats: Stats, w: np.ndarray) -> float:
+    """Σ_j w_j s_j: the weighted measured torque energy [N² m²] (the prior's scale)."""
+    return float(w @ stats.s)
+
+
+def fit_bounded(stats: Stats, model: ArmModel, lb: np.ndarray, ub: np.ndarray,
+                weights: str | np.ndarray | None = None) -> LinearFit:
+    """Box-bounded least squares lb ≤ π ≤ ub (no consistency constraints), from the statistics."""
+    return fit_constrained(stats, model, bounds=(lb, ub), weights=weights, friction=False, mass=False)
+
+
+def _square_root(H: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(R, d) with ‖Rπ − d‖² = πᵀHπ − 2hᵀπ + const, from the eigen-decomposition (H may be singular)."""
+    lam, V = np.linalg.eigh(H)
+    keep = lam > lam.max() * 1e-14
+    R = np.sqrt(lam[keep])[:, None] * V[:, keep].T
+    d = (V[:, keep].T @ h) / np.sqrt(lam[keep])
+    return R, d
+
+
+def _solve_conic(model: ArmModel, H: np.ndarray, h: np.ndarray, n: int, margin: float, Dp: np.ndarray,
+                 prior: np.ndarray, friction: bool, mass: bool,
+                 bounds: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray | None, str]:
+    """The conic program of the module doc in cvxpy, solved by Clarabel; returns (π or None, status)."""
+    import cvxpy as cp
+
+    P = model.n_params
+    R, d = _square_root(H, h)
+    scale = 1.0 / max(n, 1)  # objective per sample: keeps the solver's numbers O(τ²)
+    pi = cp.Variable(P, name="pi")
+    objective = cp.sum_squares(R @ pi - d) * scale
+    if np.any(Dp > 0):
+        objective += cp.sum_squares(cp.multiply(np.sqrt(Dp), pi - prior)) * scale
+    if np.linalg.matrix_rank(R) < P:
+        # Data leave directions free: a tiny pull to 0 makes the minimiser unique (like OLS's least norm).
+        objective += 1e-10 * np.trace(H) / P * cp.sum_squares(pi) * scale
+    constraints = []
+    if mass:
+        A0, A1 = model.mass_matrix_maps
+        M0 = sum(pi[p] * A0[p] for p in range(P))
+        M1 = sum(pi[p] * A1[p] for p in range(P))
+        constraints += [M0 + M1 >> margin * np.eye(2), M0 - M1 >> margin * np.eye(2)]
+    if friction:
+        idx = [model.names.index(name) for name in friction_names(model)]
+        constraints.append(pi[idx] >= 0)
+    if bounds is not None:
+        lb, ub = (np.broadcast_to(np.asarray(v, dtype=float), (P,)) for v in bounds)
+        lo, hi = np.flatnonzero(np.isfinite(lb)), np.flatnonzero(np.isfinite(ub))
+        if lo.size:
+            constraints.append(pi[lo] >= lb[lo])
+        if hi.size:
+            constraints.append(pi[hi] <= ub[hi])
+    problem = cp.Problem(cp.Minimize(objective), constraints)
+    status = "not solved"
+    # Tight tolerances first (the answer should match OLS to 1e-8 when nothing binds); Clarabel's defaults
+    # if a badly conditioned (e.g. rank-deficient) problem cannot reach them.
+    for tol in (1e-11, 1e-8):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "may be inaccurate": judged by status below
+                problem.solve(solver="CLARABEL", tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, max_iter=500)
+        except cp.error.SolverError as exc:
+            status = f"solver error: {exc}"
+            continue
+        status = str(problem.status)
+        if pi.value is not None and status == "optimal":
+            break
+    if pi.value is None or status not in ("optimal", "optimal_inaccurate"):
+        return None, status
+    return np.asarray(pi.value, dtype=float), status

@@ -1,0 +1,97 @@
+"""The physically consistent fit: OLS when nothing binds, always consistent, optimal among feasible points."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ident_opt.compare import multisine_trial
+from ident_opt.datasheet import datasheet_pi
+from ident_opt.identify.constrained import constraint_slacks, fit_bounded, fit_constrained
+from ident_opt.identify.fit import fit_ols
+from ident_opt.identify.stats import Stats
+from ident_opt.robot import ArmModel
+
+RIGID = ArmModel()
+ARM = ArmModel(("armature",))
+
+
+def _stats(trial, model):
+    return Stats.from_data(model, trial.q, trial.dq, trial.ddq, trial.tau)
+
+
+@pytest.fixture(scope="module")
+def truth(physical_problem):
+    return ARM.vector(datasheet_pi(physical_problem.robot, "physical"))
+
+
+def test_equals_ols_when_no_constraint_is_active(truth):
+    st = _stats(multisine_trial(ARM, truth, duration=30.0, seed=1), ARM)
+    ols = fit_ols(st, ARM)
+    assert ols.consistent
+    for shortcut in (True, False):  # False: the conic solver itself must land on OLS
+        con = fit_constrained(st, ARM, margin=1e-6, shortcut=shortcut)
+        assert con.active == []
+        np.testing.assert_allclose(con.pi, ols.pi, rtol=1e-8, atol=1e-8)
+
+
+def test_rich_data_ols_and_constrained_agree_within_standard_errors(truth):
+    st = _stats(multisine_trial(ARM, truth, duration=30.0, seed=2), ARM)
+    ols, con = fit_ols(st, ARM), fit_constrained(st, ARM, shortcut=False)
+    assert np.all(np.abs(con.pi - ols.pi) <= ols.se)
+
+
+def test_consistent_on_real_data_where_ols_is_not(exp1):
+    st = _stats(exp1, RIGID)
+    ols = fit_ols(st, RIGID)
+    assert ols.as_dict()["a3"] < 0 and not ols.consistent
+    margin = 1e-4
+    con = fit_constrained(st, RIGID, margin=margin)
+    assert con.min_mass_eigenvalue >= margin * (1 - 1e-6)
+    assert con.friction_ok and con.consistent
+    assert {"mass_pd_q2_0", "mass_pd_q2_pi"} & set(con.active)
+    # Optimal among feasible points: no worse than OLS's projection-free alternatives that are feasible.
+    datasheet = RIGID.vector(datasheet_pi(exp1_robot(), "physical"))
+    assert st.rss(con.pi).sum() <= st.rss(datasheet).sum()
+    assert st.rss(con.pi).sum() >= st.rss(ols.pi).sum()
+
+
+def exp1_robot():
+    from pathlib import Path
+
+    from ident_opt.problem import load_problem
+
+    return load_problem(Path(__file__).resolve().parents[1] / "problems" / "tudor_2dof.toml").robot
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_always_consistent_on_short_poor_trials(truth, seed):
+    amp = (0.8, 0.0) if seed % 2 else (0.0, 0.8)
+    trial = multisine_trial(ARM, truth, duration=2.0 + 0.4 * seed, seed=500 + seed, amplitude=amp)
+    st = _stats(trial, ARM)
+    margin = 1e-5
+    con = fit_constrained(st, ARM, margin=margin)
+    slacks = constraint_slacks(ARM, con.pi, margin)
+    assert min(slacks.values()) >= -1e-8, slacks
+    # Local optimality: no small feasible move along a random direction lowers the objective.
+    rng = np.random.default_rng(seed)
+    base = st.rss(con.pi).sum()
+    for _ in range(200):
+        trial_pi = con.pi + 1e-4 * rng.normal(size=ARM.n_params) * np.maximum(np.abs(con.pi), 1e-2)
+        if min(constraint_slacks(ARM, trial_pi, margin).values()) >= 0:
+            assert st.rss(trial_pi).sum() >= base * (1 - 1e-9)
+
+
+def test_prior_and_bounds(truth):
+    st = _stats(multisine_trial(ARM, truth, duration=4.0, seed=9, amplitude=(0.8, 0.0)), ARM)
+    strong = fit_constrained(st, ARM, prior=truth, prior_weight=1e6)
+    np.testing.assert_allclose(strong.pi, truth, rtol=1e-3, atol=1e-6)
+    lb = np.full(ARM.n_params, -np.inf)
+    ub = np.full(ARM.n_params, np.inf)
+    ub[ARM.names.index("b1")] = 3.0  # below the truth 3.72: must bind
+    fit = fit_constrained(st, ARM, bounds=(lb, ub))
+    assert "upper_b1" in fit.active and fit.as_dict()["b1"] == pytest.approx(3.0, abs=1e-6)
+    box = fit_bounded(st, ARM, lb, ub)
+    assert box.as_dict()["b1"] <= 3.0 + 1e-7 and box.method == "bounded"
+    with pytest.raises(ValueError):
+        fit_constrained(st, ARM, prior_weight=1.0)
