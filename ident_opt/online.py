@@ -1,0 +1,214 @@
+"""Online adaptation: after every sample, the parameters an offline re-fit on all data so far would give.
+
+The parametric part of each of the paper's models is linear in its parameters θ: τ = D(q, dq, ddq) θ with
+a design D (2, P) per sample — the rigid-body regressor Y for DM/PBR/CPBR, block-diagonal kinematic
+features for RR. So each model keeps the sufficient statistics of its design (`Stats`): a new sample is a
+rank-2 update, and the re-solve on them is exactly the batch solve on all data seen so far:
+
+| model | estimator on the statistics                                  | per-sample cost             |
+|-------|--------------------------------------------------------------|-----------------------------|
+| RR    | ridge: (Σ_j G_j + λ diag(penalty)) θ = Σ_j b_j               | one P×P solve               |
+| DM    | fixed (the datasheet π, as in the paper)                      | none                        |
+| PBR   | box-bounded LS, warm-started active set (`identify.bounded`) | one P×P solve, usually      |
+| CPBR  | M(q) ≻ 0 ∀q + friction ≥ 0 (`identify.bounded.WarmConsistentLS`) | one solve, or a few Newton steps |
+
+The GMR residual model r = τ − Dθ was trained offline with θ0. When θ moves by Δθ = θ − θ0 the residual
+it should model moves by −D(x)Δθ; the paper's mean-only consistency transform shifts each component's
+output mean by −D(μx_k)Δθ (recomputed from the offline means every step, so it never drifts). With
+`cross_covariance=True` the first-order terms are updated too: with J_k = ∂(D(x)Δθ)/∂x at μx_k,
+Σrx_k ← Σrx_k − J_k Σxx_k and Σrr_k ← Σrr_k − J_k Σxr_k − Σrx_k J_kᵀ + J_k Σxx_k J_kᵀ (the covariance of
+r − D(x)Δθ linearised at μx_k), which makes each component's conditional mean follow −D(x)Δθ to first
+order in x − μx_k instead of only at μx_k.
+
+`update(sample)` first predicts the sample's torque with the current model (an honest one-step-ahead
+prediction: the sample's torque is not used), then folds the sample in and re-solves.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ident_opt.identify.bounded import Bounds, WarmBoundedLS
+from ident_opt.identify.stats import Stats
+
+#: z-value of the central 95 % interval of a Gaussian.
+Z95 = 1.959963984540054
+
+#: (q (N, 2), dq (N, 2), ddq (N, 2)) -> design (N, 2, P): τ = D θ per sample.
+Design = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass
+class Prediction:
+    """One sample's predicted torque [N m] (2,), its parametric part, and the predictive standard
+    deviation [N m] (2,) (GMR's Cov[r | x], or the residual RMS of the fit when there is no GMR)."""
+
+    tau: np.ndarray
+    parametric: np.ndarray
+    std: np.ndarray
+
+    @property
+    def lower(self) -> np.ndarray:
+        """Lower end of the 95 % interval [N m]."""
+        return self.tau - Z95 * self.std
+
+    @property
+    def upper(self) -> np.ndarray:
+        """Upper end of the 95 % interval [N m]."""
+        return self.tau + Z95 * self.std
+
+
+@dataclass
+class Estimator:
+    """How θ follows from the statistics: ``fixed``, ``ridge`` (with `penalty` (P,) = λ per column, 0 for
+    an unpenalised intercept), ``bounded`` (with `bounds`) or ``consistent`` (with `solver`, an object
+    with `.solve(H, h) -> θ`, e.g. `WarmConsistentLS`)."""
+
+    kind: str
+    penalty: np.ndarray | None = None
+    bounds: Bounds | None = None
+    solver: object | None = None
+
+    def make_solver(self) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+        """A callable (H, h) -> θ keeping whatever warm-start state the estimator needs."""
+        if self.kind == "fixed":
+            return None
+        if self.kind == "ridge":
+            D = np.diag(self.penalty)
+            return lambda H, h: np.linalg.solve(H + D, h)
+        if self.kind == "bounded":
+            return WarmBoundedLS(self.bounds).solve
+        if self.kind == "consistent":
+            return self.solver.solve
+        raise ValueError(f"unknown estimator {self.kind!r}")
+
+
+class OnlineIdentifier:
+    """One model (parametric part + optional GMR residual) adapted sample by sample.
+
+    design: D(q, dq, ddq) (N, 2, P); theta0: the offline parameters; stats0: the offline statistics
+    of the design (the data θ0 was fitted on); gmr: a fitted `ident_opt.gmr.GMR` on x = [q dq ddq],
+    r = τ − Dθ0, or None; cross_covariance: also apply the first-order covariance update (module doc);
+    design_jacobian: x (6,) -> ∂D/∂x (2, 6, P), needed only for `cross_covariance`.
+    """
+
+    def __init__(self, design: Design, estimator: Estimator, theta0: np.ndarray, stats0: Stats,
+                 gmr=None, cross_covariance: bool = False,
+                 design_jacobian: Callable[[np.ndarray], np.ndarray] | None = None):
+        self.design = design
+        self.estimator = estimator
+        self.theta0 = np.asarray(theta0, dtype=float).copy()
+        self.theta = self.theta0.copy()
+        self.stats = stats0.copy()
+        self._H, self._h, _ = self.stats.combined()
+        self._solve = estimator.make_solver()
+        self.n_updates = 0
+        self._gmr0 = gmr
+        self._gmr = copy.deepcopy(gmr) if gmr is not None else None
+        if gmr is not None:
+            d = gmr.n_inputs
+            mu_x = gmr.means_[:, :d]
+            # D at each component's input mean, (K, 2, P): the consistency transform's only data need.
+            self._design_at_means = design(mu_x[:, 0:2], mu_x[:, 2:4], mu_x[:, 4:6])
+            self._jac_at_means = None
+            if cross_covariance:
+                if design_jacobian is None:
+                    raise ValueError("cross_covariance needs design_jacobian")
+                self._jac_at_means = np.stack([design_jacobian(m) for m in mu_x])  # (K, 2, 6, P)
+        if self._solve is not None:
+            self.theta = self._solve(self._H, self._h)  # the offline solution, by this estimator
+
+    # ------------------------------------------------------------------ state
+    @property
+    def parameters(self) -> np.ndarray:
+        """The current θ (a copy)."""
+        return self.theta.copy()
+
+    @property
+    def gmr(self):
+        """The current (consistency-transformed) GMR, or None."""
+        return self._gmr
+
+    def residual_std(self) -> np.ndarray:
+        """RMS residual of the current θ on all data seen, per joint [N m] (from the statistics)."""
+        return np.sqrt(np.maximum(self.stats.rss(self.theta), 0.0) / max(self.stats.n, 1))
+
+    # ------------------------------------------------------------------ prediction and update
+    def predict(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
+                design: np.ndarray | None = None) -> Prediction:
+        """The current model's torque for one sample (each (2,)); `design` (2, P) if already computed."""
+        D = self.design(q[None], dq[None], ddq[None])[0] if design is None else design
+        parametric = D @ self.theta
+        if self._gmr is None:
+            return Prediction(parametric, parametric, self.residual_std())
+        x = np.concatenate([q, dq, ddq])[None]
+        mean, cov = self._gmr.predict(x)
+        return Prediction(parametric + mean[0], parametric, np.sqrt(np.diagonal(cov[0])))
+
+    def update(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, tau: np.ndarray,
+               design: np.ndarray | None = None) -> Prediction:
+        """Predict the sample (before seeing τ), then fold it in and re-solve; returns the prediction.
+        q, dq, ddq [rad, rad/s, rad/s²], τ [N m], each (2,)."""
+        D = self.design(q[None], dq[None], ddq[None])[0] if design is None else design
+        prediction = self.predict(q, dq, ddq, D)
+        self.add(D, tau)
+        return prediction
+
+    def add(self, D: np.ndarray, tau: np.ndarray) -> None:
+        """Fold one sample (design D (2, P), τ (2,)) into the statistics and re-solve θ exactly."""
+        self.stats.add_sample(D, tau)
+        self.n_updates += 1
+        if self._solve is None:
+            return
+        # The combined normal equations, updated in place (the same rank-2 term as the per-joint Stats).
+        self._H += D.T @ D
+        self._h += D.T @ tau
+        self.theta = self._solve(self._H, self._h)
+        if self._gmr is not None:
+            self._transform(self.theta - self.theta0)
+
+    def _transform(self, delta: np.ndarray) -> None:
+        """Consistency transform for θ = θ0 + Δθ, from the offline GMR (module doc)."""
+        d = self._gmr0.n_inputs
+        self._gmr.means_[:, d:] = self._gmr0.means_[:, d:] - self._design_at_means @ delta
+        if self._jac_at_means is None:
+            return
+        J = self._jac_at_means @ delta  # (K, 2, 6): ∂(D(x)Δθ)/∂x at μx_k
+        S0 = self._gmr0.covariances_
+        Sxx, Srx, Srr = S0[:, :d, :d], S0[:, d:, :d], S0[:, d:, d:]
+        JSxx = J @ Sxx
+        Jt = np.swapaxes(J, 1, 2)
+        self._gmr.covariances_[:, d:, :d] = Srx - JSxx
+        self._gmr.covariances_[:, :d, d:] = np.swapaxes(Srx - JSxx, 1, 2)
+        self._gmr.covariances_[:, d:, d:] = Srr - J @ np.swapaxes(Srx, 1, 2) - Srx @ Jt + JSxx @ Jt
+
+
+def batch_theta(estimator: Estimator, stats: Stats, theta_fixed: np.ndarray | None = None) -> np.ndarray:
+    """The from-scratch (cold-started) solution on `stats`: what the online θ must equal."""
+    if estimator.kind == "fixed":
+        return np.asarray(theta_fixed, dtype=float)
+    H, h, _ = stats.combined()
+    fresh = Estimator(estimator.kind, estimator.penalty, estimator.bounds,
+                      estimator.solver.cold() if estimator.kind == "consistent" else None)
+    return fresh.make_solver()(H, h)
+
+
+def arm_design_jacobian(model) -> Callable[[np.ndarray], np.ndarray]:
+    """x = [q dq ddq] (6,) -> ∂Y/∂x (2, 6, P) of an `ArmModel`'s regressor, from its CasADi expressions
+    (exact; sign(dq) columns have derivative 0, where a finite difference would blow up at dq = 0)."""
+    import casadi as ca
+
+    s = model.symbols
+    x = ca.vertcat(s["q"], s["dq"], s["ddq"])
+    # τ = Y(x) π is linear in π, so ∂τ/∂x evaluated at π = e_p is column p of ∂Y/∂x.
+    f = ca.Function("dtau_dx", [x, s["pi"]], [ca.jacobian(s["tau"], x)])
+    eye = np.eye(model.n_params)
+
+    def jacobian(xv: np.ndarray) -> np.ndarray:
+        return np.stack([np.array(f(xv, eye[p])) for p in range(model.n_params)], axis=-1)
+
+    return jacobian
