@@ -1,0 +1,62 @@
+"""Simulated trials for a problem file's `[simulate]` section: generated on first use, then cached.
+
+Two trials (seeds s and s + 1) so that the unseen-trial protocol works. The cache lives in `.cache/sim/`
+of the project that holds the problem file (the nearest folder above it with a `pyproject.toml`, else the
+problem's own folder), or in `$IDENT_OPT_CACHE` when set; files are keyed by a hash of the robot, the
+settings and the simulator's version, so a changed setting never reuses a stale trial.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict
+from pathlib import Path
+
+from ident_opt.simulate.trial import simulate_trial
+
+SIMULATOR_VERSION = 1  # bump when the simulator's output changes for the same settings
+
+
+def cache_dir(problem_path: Path) -> Path:
+    """Where simulated trials of this problem are cached."""
+    env = os.environ.get("IDENT_OPT_CACHE")
+    if env:
+        return Path(env) / "sim"
+    here = Path(problem_path).resolve().parent
+    for folder in (here, *here.parents):
+        if (folder / "pyproject.toml").is_file():
+            return folder / ".cache" / "sim"
+    return here / ".cache" / "sim"
+
+
+def settings_key(robot, spec, seed: int) -> str:
+    """A short hash of everything that determines the trial."""
+    payload = {"robot": asdict(robot), "simulate": asdict(spec), "seed": seed, "version": SIMULATOR_VERSION}
+    text = json.dumps(payload, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def problem_trials(problem) -> list[Path]:
+    """The problem's two simulated trials (seeds s and s + 1) as CSV paths, simulating any not yet cached."""
+    spec = problem.simulate
+    if spec is None:
+        raise ValueError(f"{problem.path}: the problem has no [simulate] section")
+    folder = cache_dir(problem.path)
+    paths = []
+    for seed in (spec.seed, spec.seed + 1):
+        path = folder / f"{problem.name}-seed{seed}-{settings_key(problem.robot, spec, seed)}.csv"
+        if not path.is_file():
+            trial = simulate_trial(
+                problem.robot,
+                trajectory=spec.trajectory,
+                duration=spec.duration,
+                rate_hz=spec.rate_hz,
+                seed=seed,
+                effects=list(spec.effects),
+                output=spec.output,
+            )
+            trial.write(path)
+        paths.append(path)
+    return paths

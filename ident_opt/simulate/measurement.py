@@ -1,0 +1,90 @@
+"""From the simulated 1 kHz loop to a logged trial, the way a real robot's logger would record it.
+
+- logging at `rate_hz` (a divisor of the 1 kHz control rate: 1000, 500, 250, 200, 100 ... Hz);
+- encoders quantised to `ENCODER_COUNTS` counts per motor revolution (joint-side step 2π/(counts·N));
+- torque (or current) noise: white Gaussian, σ per joint as measured on the real exp1 at rest;
+- a torque-channel delay d: the logged torque at t is the applied torque at t − d (linear interpolation);
+- dq, ddq estimated from the logged angles with the project's zero-phase estimator (`estimate_derivatives`),
+  unless exact derivatives are asked for (then the true encoder-side rates and the accelerations the
+  dynamics produce, so that the rigid model holds exactly at every logged sample).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from ident_opt.data import estimate_derivatives
+from ident_opt.errors import InputError
+from ident_opt.problem import DataSpec, Robot
+from ident_opt.simulate.closed_loop import CONTROL_HZ
+
+ENCODER_COUNTS = 4096  # counts per motor revolution (a 1024-line encoder, quadrature)
+TORQUE_NOISE = (0.57, 0.055)  # N m, std of the real exp1's torque over its first 15 s at rest
+DERIVATIVE_CUTOFF_HZ = DataSpec.derivative_cutoff_hz  # the data loader's default
+
+
+def decimation(rate_hz: float) -> int:
+    """Control ticks per logged sample; the rate must divide the 1 kHz control rate."""
+    ratio = CONTROL_HZ / rate_hz
+    if rate_hz <= 0 or rate_hz > CONTROL_HZ or abs(ratio - round(ratio)) > 1e-9:
+        raise InputError(
+            f"rate {rate_hz:g} Hz: the logging rate must divide the {CONTROL_HZ:g} Hz control rate "
+            "(e.g. 1000, 500, 250, 200, 100, 50 Hz)"
+        )
+    return round(ratio)
+
+
+def log(
+    out: np.ndarray,
+    q_ref: np.ndarray,
+    robot: Robot,
+    *,
+    rate_hz: float,
+    delay: float,
+    noise: bool,
+    exact_derivatives: bool,
+    output: str,
+    rng: np.random.Generator,
+    elastic_joint: int | None,
+) -> pd.DataFrame:
+    """The logged trial as a data-format frame, from the per-tick loop output (N, 9) (see closed_loop.run)."""
+    every = decimation(rate_hz)
+    n_ticks = out.shape[0]
+    t_tick = np.arange(n_ticks) / CONTROL_HZ
+    idx = np.arange(0, n_ticks, every)
+    t = t_tick[idx]
+    tau_tick, q_enc, dq_enc, ddq_enc, deflection = (
+        out[:, :2],
+        out[:, 2:4],
+        out[:, 4:6],
+        out[:, 6:8],
+        out[:, 8],
+    )
+    if delay > 0:
+        # The torque channel lags: what is logged at t was applied at t − d (held at the start before that).
+        tau = np.column_stack([np.interp(t - delay, t_tick, tau_tick[:, j]) for j in range(2)])
+    else:
+        tau = tau_tick[idx].copy()
+    q = q_enc[idx].copy()
+    if noise:
+        step = 2 * np.pi / (ENCODER_COUNTS * np.array([j.gear_ratio for j in robot.joints]))
+        q = np.round(q / step) * step
+        tau = tau + rng.normal(size=tau.shape) * np.asarray(TORQUE_NOISE)
+    if exact_derivatives:
+        dq, ddq = dq_enc[idx], ddq_enc[idx]
+    else:
+        dq, ddq, _ = estimate_derivatives(t, q, DERIVATIVE_CUTOFF_HZ)
+    cols = {"t": t}
+    for name, arr in (("q", q), ("dq", dq), ("ddq", ddq)):
+        cols[name + "1"], cols[name + "2"] = arr[:, 0], arr[:, 1]
+    if output == "current":
+        k = np.array([j.current_to_torque for j in robot.joints])
+        cols["i1"], cols["i2"] = tau[:, 0] / k[0], tau[:, 1] / k[1]
+    else:
+        cols["tau1"], cols["tau2"] = tau[:, 0], tau[:, 1]
+    # Extra columns a real logger has: the commanded angles, and a strain-like deflection at an elastic joint.
+    cols["q1_ref"], cols["q2_ref"] = q_ref[idx, 0], q_ref[idx, 1]
+    if elastic_joint is not None:
+        cols[f"deflection{elastic_joint}"] = deflection[idx]
+    return pd.DataFrame(cols)

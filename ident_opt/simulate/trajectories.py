@@ -1,0 +1,131 @@
+"""Reference trajectories q_r(t), dq_r(t), ddq_r(t) for the closed-loop simulator [rad, rad/s, rad/s²].
+
+- ``tud01``: like the MERIt/TUDOR trial TUD01 — a rest, then point-to-point moves with trapezoidal
+  velocity profiles (velocity plateaus at about 1.1 / 1.3 rad/s as in the real trial), separated by rests
+  of 0.2–2 s, many of them moving a single joint.
+- ``fourier``: a Swevers-style excitation, q_i(t) = q0_i + Σ_l a_il/(l ω_f) sin(l ω_f t) − b_il/(l ω_f)
+  cos(l ω_f t), faded in smoothly from rest and scaled to the joint, speed and acceleration limits.
+
+Limits are those measured on the real exp1 trial (q1 in [0.23, 3.17], q2 in [−1.43, 1.40] rad,
+|dq| up to about 1.2 / 1.35 rad/s, |ddq| up to about 4.5 / 6.6 rad/s²).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ident_opt.errors import InputError
+
+Q_MIN = np.array([0.25, -1.40])  # rad
+Q_MAX = np.array([3.15, 1.40])  # rad
+V_MAX = np.array([1.12, 1.33])  # rad/s, the velocity plateaus of the real trial
+A_MAX = np.array([4.0, 5.0])  # rad/s²
+
+TRAJECTORIES = ("tud01", "fourier")
+
+
+@dataclass(frozen=True)
+class Reference:
+    """A reference sampled at times t (N,), with q, dq, ddq (N, 2)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+
+
+def reference(name: str, duration: float, seed: int, dt: float) -> Reference:
+    """The reference `name` ("tud01" or "fourier") over [0, duration] s sampled every dt s."""
+    if name not in TRAJECTORIES:
+        raise InputError(f"trajectory {name!r}: unknown; known: {', '.join(TRAJECTORIES)}")
+    t = np.arange(round(duration / dt)) * dt
+    rng = np.random.default_rng([seed, 7])  # the trajectory's own stream, independent of the noise
+    return (tud01 if name == "tud01" else fourier)(t, rng)
+
+
+def _trapezoid(tau: np.ndarray, distance: float, vmax: float, amax: float) -> tuple[np.ndarray, ...]:
+    """Rest-to-rest move of `distance` rad with a trapezoidal velocity profile, at local times `tau` ≥ 0.
+
+    Returns (position, velocity, acceleration, duration); a triangle when the plateau is not reached.
+    """
+    d, s = abs(distance), np.sign(distance)
+    ta = vmax / amax
+    if d < vmax * ta:  # never reaches vmax: triangle
+        ta = np.sqrt(d / amax)
+        vmax = amax * ta
+    tc = d / vmax - ta  # cruise time
+    T = 2 * ta + tc
+    tt = np.clip(tau, 0.0, T)
+    x = np.where(
+        tt < ta,
+        0.5 * amax * tt**2,
+        np.where(tt < ta + tc, 0.5 * amax * ta**2 + vmax * (tt - ta), d - 0.5 * amax * (T - tt) ** 2),
+    )
+    v = np.where(tt < ta, amax * tt, np.where(tt < ta + tc, vmax, amax * (T - tt)))
+    a = np.where(tt < ta, amax, np.where(tt < ta + tc, 0.0, -amax))
+    done = tau >= T
+    v, a = np.where(done, 0.0, v), np.where(done, 0.0, a)
+    return s * x, s * v, s * a, T
+
+
+def tud01(t: np.ndarray, rng: np.random.Generator) -> Reference:
+    """Point-to-point moves with rests (see the module docstring); deterministic for the generator."""
+    n = len(t)
+    q, dq, ddq = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
+    pose = rng.uniform(Q_MIN + 0.2, Q_MAX - 0.2)
+    q[:] = pose
+    duration = t[-1] if n else 0.0
+    start = min(0.15 * duration, 12.0)  # the real trial starts with a long rest (15 s of 80)
+    while start < duration:
+        kind = rng.choice(3, p=[0.6, 0.15, 0.25])  # both joints, joint 1 only, joint 2 only
+        moving = [kind in (0, 1), kind in (0, 2)]
+        end = start
+        for j in range(2):
+            if not moving[j]:
+                continue
+            target = pose[j]
+            while abs(target - pose[j]) < 0.3:
+                target = rng.uniform(Q_MIN[j], Q_MAX[j])
+            after = t >= start
+            x, v, a, T = _trapezoid(t[after] - start, target - pose[j], V_MAX[j], A_MAX[j])
+            q[after, j] = pose[j] + x
+            dq[after, j], ddq[after, j] = v, a
+            pose[j] = target
+            end = max(end, start + T)
+        start = end + rng.uniform(0.2, 2.0)
+    return Reference(t, q, dq, ddq)
+
+
+def fourier(
+    t: np.ndarray, rng: np.random.Generator, harmonics: int = 5, base_hz: float = 0.1, fade: float = 2.0
+) -> Reference:
+    """A Swevers-style Fourier excitation (5 harmonics of 0.1 Hz), faded in over `fade` s from rest."""
+    w = 2 * np.pi * base_hz
+    l = np.arange(1, harmonics + 1)
+    a, b = rng.normal(size=(2, 2, harmonics)) / l  # decaying harmonics: smooth, mostly low frequency
+    arg = np.outer(t, l * w)
+    s, c = np.sin(arg), np.cos(arg)
+    # Per joint: deviation x = Σ a/(lω) sin − b/(lω) cos, and its two derivatives.
+    x = s @ (a / (l * w)).T - c @ (b / (l * w)).T
+    v = c @ a.T + s @ b.T
+    acc = -(s @ (a * l * w).T) + c @ (b * l * w).T
+    x = x - x[:1]  # start at the centre pose
+    # Scale each joint to the limits (position half-range with margin, speed, acceleration).
+    half = 0.45 * (Q_MAX - Q_MIN)
+    ratio = np.max(
+        [np.abs(x).max(0) / half, np.abs(v).max(0) / (0.9 * V_MAX), np.abs(acc).max(0) / (0.6 * A_MAX)],
+        axis=0,
+    )
+    x, v, acc = x / ratio, v / ratio, acc / ratio
+    # Smooth fade-in from rest: e(τ) = 10τ³ − 15τ⁴ + 6τ⁵ (zero speed and acceleration at both ends).
+    u = np.clip(t / fade, 0.0, 1.0)[:, None]
+    e = 10 * u**3 - 15 * u**4 + 6 * u**5
+    de = (30 * u**2 - 60 * u**3 + 30 * u**4) / fade * (u < 1)
+    dde = (60 * u - 180 * u**2 + 120 * u**3) / fade**2 * (u < 1)
+    centre = 0.5 * (Q_MIN + Q_MAX)
+    q = centre + e * x
+    dq = de * x + e * v
+    ddq = dde * x + 2 * de * v + e * acc
+    return Reference(t, q, dq, ddq)

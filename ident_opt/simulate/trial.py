@@ -1,0 +1,215 @@
+"""`simulate_trial`: one measured-style trial from the built-in simulator, with its ground truth."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ident_opt.data import Dataset
+from ident_opt.datasheet import datasheet_pi, rigid_body
+from ident_opt.errors import InputError
+from ident_opt.problem import Robot
+from ident_opt.simulate import closed_loop, measurement
+from ident_opt.simulate.effects import is_active, normalise
+from ident_opt.simulate.trajectories import reference
+from ident_opt.simulate.truth import TRUTH_MODEL, Truth, build_truth, coulomb_levels
+
+
+@dataclass
+class SimTrial:
+    """A simulated trial: `frame` in the data format (plus extra columns), `truth` a JSON-able dict."""
+
+    frame: pd.DataFrame
+    truth: dict
+    robot: Robot
+
+    def dataset(self) -> Dataset:
+        """The trial as the data loader would return it (currents converted to joint torques)."""
+        f = self.frame
+        pair = lambda p: f[[p + "1", p + "2"]].to_numpy(dtype=float)  # noqa: E731
+        if "tau1" in f:
+            tau = pair("tau")
+        else:
+            tau = pair("i") * np.array([j.current_to_torque for j in self.robot.joints])
+        used = {"t", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2", "tau1", "tau2", "i1", "i2"}
+        extra = f[[c for c in f.columns if c not in used]].reset_index(drop=True)
+        return Dataset(
+            "simulated",
+            f["t"].to_numpy(dtype=float),
+            pair("q"),
+            pair("dq"),
+            pair("ddq"),
+            tau,
+            extra,
+            "given",
+            0,
+            ["simulated by ident_opt.simulate"],
+        )
+
+    def write(self, csv_path: str | Path) -> Path:
+        """Write the CSV (full float precision) and the sidecar `<stem>.truth.json`; returns the CSV path.
+
+        Both are written to temporary files and renamed into place, so a reader never sees half a file.
+        """
+        path = Path(csv_path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            _atomic(path, lambda fh: self.frame.to_csv(fh, index=False))
+            _atomic(truth_path(path), lambda fh: (json.dump(self.truth, fh, indent=2), fh.write("\n")))
+        except OSError as exc:
+            raise InputError(f"{path}: cannot write the simulated trial ({exc.strerror})") from None
+        return path
+
+
+def truth_path(csv_path: str | Path) -> Path:
+    """The sidecar truth file of a trial CSV: `<stem>.truth.json` beside it."""
+    path = Path(csv_path)
+    return path.with_name(path.name.removesuffix(".gz").removesuffix(".csv") + ".truth.json")
+
+
+def _atomic(path: Path, write) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            write(fh)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def simulate_trial(
+    robot: Robot,
+    *,
+    trajectory: str = "tud01",
+    duration: float = 80.0,
+    rate_hz: float = 100.0,
+    seed: int = 0,
+    effects: Mapping[str, Mapping] | Sequence[str] = (),
+    output: str = "torque",
+    noise: bool = True,
+    exact_derivatives: bool = False,
+    progress: bool = True,
+) -> SimTrial:
+    """Simulate one trial of `robot` (datasheet read physically) with hidden `effects`; deterministic.
+
+    `effects`: name -> keys (e.g. {"elasticity": {"joint": 2, "frequency_hz": 8}}) or effect strings
+    ("elasticity:joint=2,frequency_hz=8"); see `effects.CATALOGUE`. `duration` [s], `rate_hz` [Hz] (a divisor
+    of 1 kHz), `output` "torque" (tau1, tau2 [N m]) or "current" (i1, i2 [A]). With `noise=False` the angles
+    are not quantised and no noise is added; `exact_derivatives=True` logs the true dq and the ddq the
+    dynamics produce instead of estimating them from the logged angles.
+    """
+    if output not in ("torque", "current"):
+        raise InputError(f'output {output!r}: must be "torque" or "current"')
+    if not (np.isfinite(duration) and duration >= 1.0):
+        raise InputError(f"duration {duration!r}: must be at least 1 s")
+    measurement.decimation(rate_hz)
+    coulomb = coulomb_levels(robot)
+    wanted = normalise(effects, coulomb)
+    active = {name: p for name, p in wanted.items() if is_active(name, p, coulomb)}
+    truth = build_truth(robot, active)
+    ref = reference(trajectory, duration, seed, 1.0 / closed_loop.CONTROL_HZ)
+    out = closed_loop.run(truth, robot, ref, progress=progress)
+    rng = np.random.default_rng([seed, 11])  # the measurement noise's own stream
+    elastic_joint = truth.elastic.index + 1 if truth.elastic else None
+    frame = measurement.log(
+        out,
+        ref.q,
+        robot,
+        rate_hz=rate_hz,
+        delay=truth.delay,
+        noise=noise,
+        exact_derivatives=exact_derivatives,
+        output=output,
+        rng=rng,
+        elastic_joint=elastic_joint,
+    )
+    settings = {
+        "trajectory": trajectory,
+        "duration": float(duration),
+        "rate_hz": float(rate_hz),
+        "seed": int(seed),
+        "output": output,
+        "noise": bool(noise),
+        "exact_derivatives": bool(exact_derivatives),
+        "effects_requested": {k: _plain(v) for k, v in wanted.items()},
+    }
+    return SimTrial(frame, _truth_dict(robot, truth, out, ref.q, settings), robot)
+
+
+def _plain(value):
+    """JSON-able copy (tuples to lists, NumPy scalars to floats)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, settings: dict) -> dict:
+    """The ground truth, with effects in the estimate keys of `spec/diagnose.md`."""
+    effects = {}
+    for name, p in truth.effects.items():
+        if name == "elasticity":
+            e = truth.elastic
+            effects[name] = {
+                "joint": e.index + 1,
+                "frequency_hz": e.frequency_hz,
+                "damping": e.damping,
+                "stiffness": e.k,
+                "damper": e.d,
+                "motor_inertia": e.B,
+                "link_inertia": e.J_link,
+            }
+        elif name == "stribeck":
+            levels = [0.5 * (a + b) for a, b in zip(*coulomb_levels(robot))]
+            if "asymmetric_coulomb" in truth.effects:
+                ac = truth.effects["asymmetric_coulomb"]
+                levels = [0.5 * (a + b) for a, b in zip(ac["positive"], ac["negative"])]
+            effects[name] = {**p, "static_level": [c + s for c, s in zip(levels, p["static"])]}
+        else:
+            effects[name] = dict(p)
+    g = closed_loop.gains(robot)
+    error = out[:, 2:4] - q_ref  # encoder angle minus reference, at every control tick
+    return _plain(
+        {
+            "model": list(TRUTH_MODEL.names),
+            "pi": truth.pi_rigid,
+            "pi_datasheet": datasheet_pi(robot, "physical"),
+            "plant_model": {
+                "extensions": list(truth.model.extensions),
+                "stribeck_velocity": list(truth.model.stribeck_velocity),
+                "pi": truth.model.as_dict(truth.pi),
+            },
+            "effects": effects,
+            "physical": asdict(rigid_body(truth.robot, "physical")),
+            "settings": settings,
+            "measurement": {
+                "torque_noise_std": list(measurement.TORQUE_NOISE) if settings["noise"] else [0.0, 0.0],
+                "encoder_counts_per_motor_rev": measurement.ENCODER_COUNTS if settings["noise"] else None,
+                "derivatives": "exact"
+                if settings["exact_derivatives"]
+                else f"estimated, zero-phase Butterworth at {measurement.DERIVATIVE_CUTOFF_HZ:g} Hz",
+            },
+            "controller": {
+                "control_hz": closed_loop.CONTROL_HZ,
+                "bandwidth_hz": closed_loop.BANDWIDTH_HZ,
+                "kp": list(g.kp),
+                "kd": list(g.kd),
+                "rk4_substeps": closed_loop.substeps(truth, g, robot),
+            },
+            "tracking": {
+                "rms_error": np.sqrt((error**2).mean(0)).tolist(),
+                "max_error": np.abs(error).max(0).tolist(),
+            },
+        }
+    )

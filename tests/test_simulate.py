@@ -1,0 +1,142 @@
+"""The simulator: known truth recovered exactly, the API, the effect syntax and the CLI."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ident_opt.cli import main
+from ident_opt.data import load_dataset
+from ident_opt.datasheet import datasheet_pi
+from ident_opt.errors import InputError
+from ident_opt.identify.ols import solve_ols
+from ident_opt.identify.stats import Stats
+from ident_opt.problem import DataSpec, load_problem
+from ident_opt.robot import ArmModel
+from ident_opt.simulate import parse_effect, simulate_trial
+
+ROOT = Path(__file__).resolve().parents[1]
+PROBLEM = ROOT / "problems" / "tudor_2dof.toml"
+MODEL = ArmModel(("armature",))
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_problem(PROBLEM).robot
+
+
+def ols(trial):
+    d = trial.dataset()
+    return solve_ols(Stats.from_data(MODEL, d.q, d.dq, d.ddq, d.tau))
+
+
+@pytest.mark.parametrize("trajectory", ["tud01", "fourier"])
+def test_rigid_noise_free_trial_gives_back_the_datasheet_pi(robot, trajectory):
+    trial = simulate_trial(
+        robot, trajectory=trajectory, duration=8.0, noise=False, exact_derivatives=True, progress=False
+    )
+    truth = MODEL.vector(trial.truth["pi"])
+    np.testing.assert_allclose(truth, MODEL.vector(datasheet_pi(robot, "physical")), rtol=0, atol=0)
+    np.testing.assert_allclose(ols(trial), truth, rtol=1e-6)
+
+
+def test_same_seed_same_trial_other_seed_other_trial(robot):
+    a = simulate_trial(robot, duration=3.0, seed=4, progress=False)
+    b = simulate_trial(robot, duration=3.0, seed=4, progress=False)
+    c = simulate_trial(robot, duration=3.0, seed=5, progress=False)
+    pd.testing.assert_frame_equal(a.frame, b.frame)
+    assert not np.allclose(a.frame["tau1"], c.frame["tau1"])
+
+
+def test_frame_has_the_data_format_columns_and_rate(robot):
+    trial = simulate_trial(robot, duration=2.0, rate_hz=1000.0, output="current", progress=False)
+    f = trial.frame
+    for col in ("t", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2", "i1", "i2"):
+        assert col in f
+    assert "tau1" not in f
+    assert len(f) == 2000 and np.allclose(np.diff(f["t"]), 1e-3)
+    k = np.array([j.current_to_torque for j in robot.joints])
+    torque = simulate_trial(robot, duration=2.0, rate_hz=1000.0, progress=False)
+    np.testing.assert_allclose(trial.dataset().tau, torque.frame[["tau1", "tau2"]].to_numpy(), rtol=1e-12)
+    np.testing.assert_allclose(f[["i1", "i2"]].to_numpy() * k, trial.dataset().tau, rtol=1e-12)
+
+
+def test_parse_effect_reads_scalars_and_pairs():
+    assert parse_effect("elasticity:joint=2,frequency_hz=8") == (
+        "elasticity",
+        {"joint": 2, "frequency_hz": 8.0},
+    )
+    assert parse_effect("asymmetric_coulomb:positive=[0.8,0.4],negative=[0.2, 0.6]") == (
+        "asymmetric_coulomb",
+        {"positive": (0.8, 0.4), "negative": (0.2, 0.6)},
+    )
+    assert parse_effect("payload") == ("payload", {})
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("wind", "unknown effect 'wind'"),
+        ("payload:mas=1", "unknown key 'mas'"),
+        ("payload:mass=heavy", "must be a number"),
+        ("payload:mass=-1", "must be >= 0"),
+        ("elasticity:joint=3", "must be 1 or 2"),
+        ("elasticity:frequency_hz=0", "must be > 0"),
+        ("armature:inertia=[0.1]", "pair"),
+        ("delay:seconds", "key=value"),
+    ],
+)
+def test_bad_effect_text_is_an_input_error_naming_it(robot, text, words):
+    with pytest.raises(InputError, match=None) as info:
+        simulate_trial(robot, duration=1.0, effects=[text], progress=False)
+    assert words in str(info.value) and text in str(info.value)
+
+
+def test_bad_settings_are_input_errors(robot):
+    for kwargs in ({"rate_hz": 300.0}, {"output": "volts"}, {"trajectory": "zigzag"}, {"duration": 0.1}):
+        with pytest.raises(InputError):
+            simulate_trial(robot, progress=False, **{"duration": 1.0, **kwargs})
+
+
+def test_cli_writes_a_trial_the_loader_reads_back(tmp_path, robot):
+    out = tmp_path / "trial.csv"
+    rc = main(
+        [
+            "simulate",
+            "--problem",
+            str(PROBLEM),
+            "--out",
+            str(out),
+            "--duration",
+            "3",
+            "--seed",
+            "2",
+            "--effect",
+            "elasticity:joint=2,frequency_hz=8",
+            "--effect",
+            "payload:mass=0.1",
+        ]
+    )
+    assert rc == 0
+    truth = json.loads(out.with_name("trial.truth.json").read_text())
+    assert (
+        truth["effects"]["elasticity"]["joint"] == 2 and truth["effects"]["elasticity"]["frequency_hz"] == 8.0
+    )
+    assert truth["effects"]["payload"] == {"mass": 0.1}
+    data = load_dataset(out, DataSpec(), robot)
+    assert data.n == 300 and data.derivatives == "given"
+    np.testing.assert_allclose(data.tau, pd.read_csv(out)[["tau1", "tau2"]].to_numpy())
+
+
+def test_cli_bad_effect_exits_2_without_traceback(tmp_path, capsys):
+    rc = main(
+        ["simulate", "--problem", str(PROBLEM), "--out", str(tmp_path / "x.csv"), "--effect", "warp:x=1"]
+    )
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "unknown effect 'warp'" in err and "Traceback" not in err
+    assert not (tmp_path / "x.csv").exists()
