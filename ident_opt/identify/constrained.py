@@ -23,6 +23,7 @@ is the answer: it is returned exactly, with no constraint active.
 
 from __future__ import annotations
 
+import functools
 import time
 import warnings
 
@@ -90,13 +91,15 @@ def fit_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prio
     if shortcut and all(v >= 0 for v in slacks.values()):
         return finish(stats, model, free, w, method, "optimal (unconstrained minimiser feasible)", [],
                       time.perf_counter() - t0)
-    pi, status = _solve_conic(model, H, h, stats.n, margin, Dp, prior, friction, mass, bounds)
+    pi, status, solver_seconds = _solve_conic(model, H, h, stats.n, margin, Dp, prior, friction, mass, bounds)
     elapsed = time.perf_counter() - t0
     if pi is None:
         raise RuntimeError(f"constrained fit failed: solver status {status}")
     slacks = constraint_slacks(model, pi, margin, friction, mass, bounds)
     active = [name for name, v in slacks.items() if v < ACTIVE_TOL]
-    return finish(stats, model, pi, w, method, status, active, elapsed)
+    fit = finish(stats, model, pi, w, method, status, active, elapsed)
+    fit.details["clarabel_seconds"] = solver_seconds  # the solver alone, without cvxpy's parameter update
+    return fit
 
 
 def joint_weights_energy(stats: Stats, w: np.ndarray) -> float:
@@ -119,42 +122,70 @@ def _square_root(H: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return R, d
 
 
-def _solve_conic(model: ArmModel, H: np.ndarray, h: np.ndarray, n: int, margin: float, Dp: np.ndarray,
-                 prior: np.ndarray, friction: bool, mass: bool,
-                 bounds: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray | None, str]:
-    """The conic program of the module doc in cvxpy, solved by Clarabel; returns (π or None, status)."""
+@functools.lru_cache(maxsize=32)
+def _program(model: ArmModel, friction: bool, mass: bool, lower: tuple[int, ...], upper: tuple[int, ...]):
+    """The conic program of the module doc as a parametrised cvxpy problem, compiled once per structure.
+
+    Data enter only through cvxpy Parameters (R, d, prior, its weights, margin, bounds), so re-solving
+    with new statistics skips cvxpy's canonicalisation (DPP) and costs little more than Clarabel itself.
+    """
     import cvxpy as cp
 
     P = model.n_params
-    R, d = _square_root(H, h)
-    scale = 1.0 / max(n, 1)  # objective per sample: keeps the solver's numbers O(τ²)
     pi = cp.Variable(P, name="pi")
-    objective = cp.sum_squares(R @ pi - d) * scale
-    if np.any(Dp > 0):
-        objective += cp.sum_squares(cp.multiply(np.sqrt(Dp), pi - prior)) * scale
-    if np.linalg.matrix_rank(R) < P:
-        # Data leave directions free: a tiny pull to 0 makes the minimiser unique (like OLS's least norm).
-        objective += 1e-10 * np.trace(H) / P * cp.sum_squares(pi) * scale
+    par = {"R": cp.Parameter((P, P), name="R"), "d": cp.Parameter(P, name="d"),
+           "prior_term": cp.Parameter(P, name="prior_term"), "sqrt_dp": cp.Parameter(P, nonneg=True, name="sqrt_dp"),
+           "sqrt_ridge": cp.Parameter(nonneg=True, name="sqrt_ridge"), "margin": cp.Parameter(name="margin")}
+    objective = (cp.sum_squares(par["R"] @ pi - par["d"])
+                 + cp.sum_squares(cp.multiply(par["sqrt_dp"], pi) - par["prior_term"])
+                 + cp.sum_squares(par["sqrt_ridge"] * pi))  # parameter inside: keeps it DPP
     constraints = []
     if mass:
         A0, A1 = model.mass_matrix_maps
         M0 = sum(pi[p] * A0[p] for p in range(P))
         M1 = sum(pi[p] * A1[p] for p in range(P))
-        constraints += [M0 + M1 >> margin * np.eye(2), M0 - M1 >> margin * np.eye(2)]
+        constraints += [M0 + M1 >> par["margin"] * np.eye(2), M0 - M1 >> par["margin"] * np.eye(2)]
     if friction:
-        idx = [model.names.index(name) for name in friction_names(model)]
-        constraints.append(pi[idx] >= 0)
-    if bounds is not None:
-        lb, ub = (np.broadcast_to(np.asarray(v, dtype=float), (P,)) for v in bounds)
-        lo, hi = np.flatnonzero(np.isfinite(lb)), np.flatnonzero(np.isfinite(ub))
-        if lo.size:
-            constraints.append(pi[lo] >= lb[lo])
-        if hi.size:
-            constraints.append(pi[hi] <= ub[hi])
+        constraints.append(pi[[model.names.index(name) for name in friction_names(model)]] >= 0)
+    if lower:
+        par["lb"] = cp.Parameter(len(lower), name="lb")
+        constraints.append(pi[list(lower)] >= par["lb"])
+    if upper:
+        par["ub"] = cp.Parameter(len(upper), name="ub")
+        constraints.append(pi[list(upper)] <= par["ub"])
     problem = cp.Problem(cp.Minimize(objective), constraints)
+    assert problem.is_dpp()  # otherwise every solve would recompile (tens of ms)
+    return problem, pi, par
+
+
+def _solve_conic(model: ArmModel, H: np.ndarray, h: np.ndarray, n: int, margin: float, Dp: np.ndarray,
+                 prior: np.ndarray, friction: bool, mass: bool,
+                 bounds: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray | None, str, float]:
+    """Fill the cached program's parameters and solve it with Clarabel: (π or None, status, solver s)."""
+    import cvxpy as cp
+
+    P = model.n_params
+    lb, ub = ((np.full(P, -np.inf), np.full(P, np.inf)) if bounds is None else
+              (np.broadcast_to(np.asarray(v, dtype=float), (P,)) for v in bounds))
+    lower = tuple(int(i) for i in np.flatnonzero(np.isfinite(lb)))
+    upper = tuple(int(i) for i in np.flatnonzero(np.isfinite(ub)))
+    problem, pi, par = _program(model, friction, mass, lower, upper)
+    R, d = _square_root(H, h)
+    scale = 1.0 / max(n, 1)  # objective per sample: keeps the solver's numbers O(τ²)
+    par["R"].value = np.vstack([R, np.zeros((P - R.shape[0], P))]) * np.sqrt(scale)
+    par["d"].value = np.concatenate([d, np.zeros(P - d.size)]) * np.sqrt(scale)
+    par["sqrt_dp"].value = np.sqrt(Dp * scale)
+    par["prior_term"].value = par["sqrt_dp"].value * prior  # √D (π − π0) = √D π − √D π0 stays DPP
+    # Data that leave directions free: a tiny pull to 0 makes the minimiser unique (like OLS's least norm).
+    par["sqrt_ridge"].value = np.sqrt(1e-10 * np.trace(H) / P * scale) if R.shape[0] < P else 0.0
+    par["margin"].value = margin
+    if lower:
+        par["lb"].value = lb[list(lower)]
+    if upper:
+        par["ub"].value = ub[list(upper)]
     status = "not solved"
-    # Tight tolerances first (the answer should match OLS to 1e-8 when nothing binds); Clarabel's defaults
-    # if a badly conditioned (e.g. rank-deficient) problem cannot reach them.
+    # Tight tolerances first (the answer should match OLS to 1e-8 when nothing binds); looser ones if a
+    # badly conditioned (e.g. rank-deficient) problem cannot reach them.
     for tol in (1e-11, 1e-8):
         try:
             with warnings.catch_warnings():
@@ -167,5 +198,5 @@ def _solve_conic(model: ArmModel, H: np.ndarray, h: np.ndarray, n: int, margin: 
         if pi.value is not None and status == "optimal":
             break
     if pi.value is None or status not in ("optimal", "optimal_inaccurate"):
-        return None, status
-    return np.asarray(pi.value, dtype=float), status
+        return None, status, float("nan")
+    return np.asarray(pi.value, dtype=float), status, float(problem.solver_stats.solve_time or np.nan)
