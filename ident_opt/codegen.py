@@ -1,0 +1,273 @@
+"""Generated C for embedded torque prediction: CasADi expressions → C sources → a shared library.
+
+Three functions, each in CasADi's calling convention (`f(arg, res, iw, w, mem)` plus `f_work`,
+`f_incref`, `f_checkout`, ...), all with the identified π baked in as literal constants:
+
+    tau_hat(q, dq, ddq)     -> tau       τ = M(q) ddq + C(q, dq) dq + G(q) + F(dq)        [N m]
+    tau_hat_gmr(q, dq, ddq) -> tau       the same + E[r | x], x = [q; dq; ddq]            [N m]
+    ddq_hat(q, dq, tau)     -> ddq       M(q)⁻¹ (τ − C(q, dq) dq − G(q) − F(dq))          [rad/s²]
+
+The rigid part is `ArmModel.tau_expression` (and `ArmModel.function` for M), never re-typed here, so
+the extensions the user chose flow through unchanged. The GMR term is a fixed sum of K Gaussians, written
+with precomputed constants per component k (Σxx_k = L_k L_kᵀ):
+
+    l_k(x) = log w_k − Σ log diag L_k − ½ ‖L_k⁻¹ (x − μx_k)‖²        (log weight × density, up to a constant)
+    m_k(x) = μr_k + A_k (x − μx_k),   A_k = Σrx_k Σxx_k⁻¹            (component conditional mean)
+    E[r|x] = Σ_k exp(l_k − l_max) m_k / Σ_k exp(l_k − l_max)         (log-sum-exp: never 0/0 far from data)
+
+Constants are printed by CasADi with 17 significant digits, so they round-trip exactly.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ident_opt.errors import InputError
+from ident_opt.robot import ArmModel
+
+#: Base name of the generated files: <NAME>.c, <NAME>.h and lib<NAME>.so (.dylib on macOS).
+NAME = "ident_opt_model"
+#: Flags used to build the shared library (the README repeats them). No -ffast-math: it would change
+#: results (and NaN/inf handling) relative to the Python model.
+CFLAGS = ("-O2", "-std=c99", "-fPIC")
+#: The GMR inputs x, in order.
+GMR_INPUTS = ("q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
+#: Smallest accepted GMR input standard deviation, relative to max(1, |mean|) of that input (rad, rad/s,
+#: rad/s²). Below it the component is a near-delta in that input (a column that was constant up to rounding in
+#: the training data): its log-density then changes by ~|x|·eps/σ² per ulp of x, so no two implementations
+#: (C or Python) agree on it, and a micro-radian is below any encoder's resolution anyway.
+MIN_INPUT_STD = 1e-6
+#: Non-Python files shipped with the package (README template, example program).
+FILES = Path(__file__).with_name("codegen_files")
+
+
+# ---------------------------------------------------------------------------------------------- GMR term
+@dataclass(frozen=True)
+class GmrConstants:
+    """What the generated GMR mean needs, per component k (d inputs, o outputs).
+
+    mu_x (K, d), mu_r (K, o), L_inv (K, d, d) lower-triangular, A (K, o, d), log_c (K,) = log w_k − ½ log det Σxx_k.
+    Units: those of x (rad, rad/s, rad/s²) and r (N m).
+    """
+
+    mu_x: np.ndarray
+    mu_r: np.ndarray
+    L_inv: np.ndarray
+    A: np.ndarray
+    log_c: np.ndarray
+
+    @property
+    def n_components(self) -> int:
+        return len(self.log_c)
+
+
+def gmr_constants(gmr) -> GmrConstants:
+    """Precompute the per-component constants from a fitted GMR (`weights_`, `means_`, `covariances_`,
+    `n_inputs`, in original units). Raises `InputError` when it cannot be generated (non-finite values,
+    a zero weight, an input covariance that is not positive definite)."""
+    w = np.asarray(gmr.weights_, dtype=float)
+    means = np.asarray(gmr.means_, dtype=float)
+    covs = np.asarray(gmr.covariances_, dtype=float)
+    d = int(gmr.n_inputs)
+    if not (np.isfinite(w).all() and np.isfinite(means).all() and np.isfinite(covs).all()):
+        raise InputError("the GMR residual model has non-finite parameters: it cannot be generated")
+    if np.any(w <= 0):
+        raise InputError("the GMR residual model has a component with zero weight: it cannot be generated")
+    std = np.sqrt(np.maximum(np.einsum("kii->ki", covs[:, :d, :d]), 0.0))
+    tiny = std < MIN_INPUT_STD * np.maximum(1.0, np.abs(means[:, :d]))
+    if tiny.any():
+        k, i = np.argwhere(tiny)[0]
+        label = GMR_INPUTS[i] if d == len(GMR_INPUTS) else f"x{i}"
+        raise InputError(f"GMR component {k}: input {label} has a standard deviation of {std[k, i]:.3g} "
+                         f"(mean {means[k, i]:.6g}): the training data barely vary there (a joint at rest?), "
+                         "so the mixture cannot be evaluated reproducibly; train it on data with motion")
+    L_inv, A, log_c = [], [], []
+    for k in range(len(w)):
+        Sxx, Srx = covs[k, :d, :d], covs[k, d:, :d]
+        try:
+            L = np.linalg.cholesky(Sxx)
+        except np.linalg.LinAlgError:
+            raise InputError(f"GMR component {k}: input covariance is not positive definite; "
+                             "it cannot be generated") from None
+        Li = np.linalg.solve(L, np.eye(d))
+        L_inv.append(np.tril(Li))  # exactly lower-triangular: the zeros are dropped from the C code
+        A.append(Srx @ Li.T @ Li)  # Σrx Σxx⁻¹ with Σxx⁻¹ = L⁻ᵀ L⁻¹
+        log_c.append(np.log(w[k]) - np.log(np.diag(L)).sum())
+    return GmrConstants(means[:, :d], means[:, d:], np.array(L_inv), np.array(A), np.array(log_c))
+
+
+def gmr_mean_expression(x: ca.SX, c: GmrConstants) -> ca.SX:
+    """E[r | x] (o×1) as a CasADi expression of the inputs x (d×1): the module doc's formula."""
+    logs, means = [], []
+    for k in range(c.n_components):
+        dx = x - ca.DM(c.mu_x[k])
+        z = ca.mtimes(ca.sparsify(ca.DM(c.L_inv[k])), dx)
+        logs.append(c.log_c[k] - 0.5 * ca.sumsqr(z))
+        means.append(ca.DM(c.mu_r[k]) + ca.mtimes(ca.DM(c.A[k]), dx))
+    top = logs[0]
+    for lk in logs[1:]:
+        top = ca.fmax(top, lk)
+    weights = [ca.exp(lk - top) for lk in logs]  # the largest is exactly 1: the sum is never 0
+    total = weights[0]
+    for wk in weights[1:]:
+        total = total + wk
+    mean = weights[0] * means[0]
+    for wk, mk in zip(weights[1:], means[1:]):
+        mean = mean + wk * mk
+    return mean / total
+
+
+# ---------------------------------------------------------------------------------------------- functions
+def build_functions(model: ArmModel, pi: np.ndarray, gmr=None, forward: bool = True) -> list[ca.Function]:
+    """The CasADi Functions to generate: tau_hat, tau_hat_gmr (when `gmr` is given), ddq_hat (when
+    `forward`). π (model.n_params,) is baked in as constants."""
+    pi = np.asarray(pi, dtype=float).ravel()
+    if pi.shape != (model.n_params,):
+        raise InputError(f"{pi.size} parameters given, the model {list(model.names)} needs {model.n_params}")
+    if not np.isfinite(pi).all():
+        raise InputError("the parameters are not all finite: the model cannot be generated")
+    q, dq, ddq, tau = (ca.SX.sym(name, 2) for name in ("q", "dq", "ddq", "tau"))
+    pi_dm = ca.DM(pi)
+    tau_rigid = model.tau_expression(q, dq, ddq, pi_dm)
+    out = [ca.Function("tau_hat", [q, dq, ddq], [tau_rigid], ["q", "dq", "ddq"], ["tau"])]
+    if gmr is not None:
+        c = gmr_constants(gmr)
+        if c.mu_x.shape[1] != 6 or c.mu_r.shape[1] != 2:
+            raise InputError(f"the GMR must map 6 inputs [q dq ddq] to 2 outputs, got {c.mu_x.shape[1]} → "
+                             f"{c.mu_r.shape[1]}")
+        r = gmr_mean_expression(ca.vertcat(q, dq, ddq), c)
+        out.append(ca.Function("tau_hat_gmr", [q, dq, ddq], [tau_rigid + r], ["q", "dq", "ddq"], ["tau"]))
+    if forward:
+        # τ − M ddq = C dq + G + F: the bias is τ̂ at ddq = 0, so M⁻¹ (τ − bias) reuses the one model.
+        M = model.function("M")(q, dq, ddq, pi_dm)
+        bias = model.tau_expression(q, dq, ca.DM.zeros(2), pi_dm)
+        out.append(ca.Function("ddq_hat", [q, dq, tau], [_solve2(M, tau - bias)], ["q", "dq", "tau"], ["ddq"]))
+    return out
+
+
+def _solve2(M: ca.SX, b: ca.SX) -> ca.SX:
+    """M⁻¹ b for a symmetric 2×2 M by LDLᵀ (M = [1 0; l 1] diag(d1, d2) [1 l; 0 1]): branch-free, a few
+    flops, no work arrays, and backward stable for M ≻ 0 even when it is ill-conditioned (Cramer's rule
+    is not). M11 = a1 + 2 a2 cos q2 + ... is the large, well-separated pivot of an arm's mass matrix."""
+    d1 = M[0, 0]
+    l = M[1, 0] / d1
+    d2 = M[1, 1] - l * M[1, 0]
+    x2 = (b[1] - l * b[0]) / d2
+    x1 = b[0] / d1 - l * x2
+    return ca.vertcat(x1, x2)
+
+
+# ---------------------------------------------------------------------------------------------- C files
+def generate_sources(functions: list[ca.Function], out_dir: Path, name: str = NAME) -> tuple[Path, Path]:
+    """Write <name>.c and <name>.h (CasADi's code generator) into `out_dir`; returns their paths."""
+    out_dir = Path(out_dir)
+    cg = ca.CodeGenerator(f"{name}.c", {"with_header": True, "with_export": True, "verbose": False})
+    for f in functions:
+        cg.add(f)
+    try:
+        cg.generate(str(out_dir) + os.sep)
+    except RuntimeError as exc:
+        raise InputError(f"{out_dir}: CasADi could not write the C code ({exc})") from None
+    return out_dir / f"{name}.c", out_dir / f"{name}.h"
+
+
+def library_name(name: str = NAME) -> str:
+    """lib<name>.so, or .dylib on macOS, .dll on Windows."""
+    suffix = {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
+    return f"lib{name}{suffix}"
+
+
+def find_compiler() -> str:
+    """The C compiler: $CC if set (it must exist), else gcc, else cc. `InputError` when there is none."""
+    cc = os.environ.get("CC")
+    if cc:
+        found = shutil.which(cc)
+        if not found:
+            raise InputError(f"the C compiler CC={cc!r} was not found; install one or set CC to a C compiler")
+        return found
+    for candidate in ("gcc", "cc"):
+        found = shutil.which(candidate)
+        if found:
+            return found
+    raise InputError("no C compiler found (tried gcc and cc on PATH); install one (e.g. apt install gcc) "
+                     "or set CC")
+
+
+def compile_library(source: Path, out_dir: Path, compiler: str | None = None, name: str = NAME) -> Path:
+    """Compile `source` into the shared library `out_dir`/lib<name>.so with `CFLAGS`; returns its path."""
+    compiler = compiler or find_compiler()
+    lib = Path(out_dir) / library_name(name)
+    cmd = [compiler, *CFLAGS, "-shared", str(source), "-o", str(lib), "-lm"]
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    except OSError as exc:
+        raise InputError(f"cannot run the C compiler {compiler!r} ({exc.strerror})") from None
+    if done.returncode != 0:
+        raise InputError(f"the C compiler failed on {source} (exit {done.returncode}):\n{done.stderr.strip()}")
+    return lib
+
+
+def write_readme(out_dir: Path, functions: list[ca.Function], name: str = NAME) -> Path:
+    """The embedding README (template in `codegen_files/README.md`) filled with this build's names."""
+    from string import Template
+
+    rows = "\n".join(f"| `{f.name()}` | {_signature(f)} |" for f in functions)
+    text = Template((FILES / "README.md").read_text(encoding="utf-8")).substitute(
+        name=name, library=library_name(name), cflags=" ".join(CFLAGS), functions=rows)
+    path = Path(out_dir) / "README.md"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _signature(f: ca.Function) -> str:
+    ins = ", ".join(f"{f.name_in(i)}[{f.numel_in(i)}]" for i in range(f.n_in()))
+    outs = ", ".join(f"{f.name_out(i)}[{f.numel_out(i)}]" for i in range(f.n_out()))
+    return f"`({ins}) -> ({outs})`"
+
+
+def copy_example(out_dir: Path) -> Path:
+    """Copy the minimal example program `main.c` next to the generated code."""
+    return Path(shutil.copyfile(FILES / "main.c", Path(out_dir) / "main.c"))
+
+
+# ---------------------------------------------------------------------------------------------- check
+def load_external(lib: Path, fname: str) -> ca.Function:
+    """A compiled entry point back as a CasADi Function (`casadi.external`), for checks and timing."""
+    return ca.external(fname, str(Path(lib).resolve()))
+
+
+def evaluate(f: ca.Function, *inputs: np.ndarray) -> np.ndarray:
+    """Evaluate a (2×1, 2×1, 2×1) -> 2×1 Function on N states at once: inputs (N, 2), output (N, 2)."""
+    n = len(inputs[0])
+    return np.asarray(f.map(n)(*(np.asarray(a, dtype=float).T for a in inputs))).T
+
+
+def relative_error(got: np.ndarray, ref: np.ndarray) -> float:
+    """max over samples of ‖got − ref‖∞ / ‖ref‖∞ (per sample, so a small τ is judged on its own scale)."""
+    got, ref = np.atleast_2d(got), np.atleast_2d(ref)
+    scale = np.max(np.abs(ref), axis=1)
+    scale[scale == 0] = 1.0
+    return float(np.max(np.max(np.abs(got - ref), axis=1) / scale))
+
+
+def forward_backward_error(model: ArmModel, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, tau: np.ndarray,
+                           ddq: np.ndarray) -> float:
+    """How well `ddq` (N, 2) solves M(q) ddq = τ − b, b = C dq + G + F, as a normwise backward error:
+    max over samples of ‖M ddq − (τ − b)‖∞ / (‖M‖∞ ‖ddq‖∞ + ‖τ‖∞ + ‖b‖∞). It is small for a correct solve
+    however ill-conditioned M is (a forward error would be amplified by cond M), and τ − b is judged on the
+    scale of τ and b, since it cancels at rest. M and b come from NumPy."""
+    M = model.mass_matrix(pi, q[:, 1])
+    bias = model.predict(pi, q, dq, np.zeros_like(q))
+    residual = np.einsum("nij,nj->ni", M, ddq) - (tau - bias)
+    scale = (np.abs(M).sum(axis=2).max(axis=1) * np.abs(ddq).max(axis=1) + np.abs(tau).max(axis=1)
+             + np.abs(bias).max(axis=1))
+    scale[scale == 0] = 1.0
+    return float(np.max(np.abs(residual).max(axis=1) / scale))

@@ -1,0 +1,58 @@
+/* Minimal example: predict the joint torques of the identified arm from C, without Python.
+ *
+ * Build (from the folder that `ident-opt codegen` wrote), against the shared library:
+ *   cc -O2 -std=c99 -Wall -Wextra -Werror main.c -L. -lident_opt_model -Wl,-rpath,. -o example -lm
+ * or with the generated source compiled in (its CasADi signatures have unused parameters):
+ *   cc -O2 -std=c99 -Wall -Wextra -Werror -Wno-unused-parameter main.c ident_opt_model.c -o example -lm
+ *
+ * Every buffer is static: no dynamic allocation anywhere. The CasADi calling convention is
+ * f(arg, res, iw, w, mem): arg[i] points to input i, res[i] to output i, iw/w are work arrays whose sizes
+ * the header gives as <f>_SZ_IW / <f>_SZ_W (also at run time via <f>_work), mem is from <f>_checkout.
+ */
+#include <math.h>
+#include <stdio.h>
+
+#include "ident_opt_model.h"
+
+/* One evaluation of a (q, dq, ddq) -> tau entry point; the sizes come from the generated header. */
+#define EVALUATE(f, q, dq, ddq, tau, status)                                  \
+  do {                                                                        \
+    const casadi_real *arg_[f##_SZ_ARG + 1];                                  \
+    casadi_real *res_[f##_SZ_RES + 1];                                        \
+    casadi_int iw_[f##_SZ_IW + 1]; /* +1: a zero-sized array is not C99 */    \
+    casadi_real w_[f##_SZ_W + 1];                                             \
+    int mem_;                                                                 \
+    arg_[0] = (q);                                                            \
+    arg_[1] = (dq);                                                           \
+    arg_[2] = (ddq);                                                          \
+    res_[0] = (tau);                                                          \
+    f##_incref();                                                             \
+    mem_ = f##_checkout();                                                    \
+    (status) = f(arg_, res_, iw_, w_, mem_);                                  \
+    f##_release(mem_);                                                        \
+    f##_decref();                                                             \
+  } while (0)
+
+int main(void) {
+  /* A state: joint angles [rad], velocities [rad/s], accelerations [rad/s^2]. */
+  const casadi_real q[2] = {0.3, -0.5};
+  const casadi_real dq[2] = {0.8, -0.2};
+  const casadi_real ddq[2] = {1.5, 2.0};
+  casadi_real tau[2] = {0.0, 0.0};
+  casadi_real tau_gmr[2] = {0.0, 0.0};
+  int status = 0;
+
+  EVALUATE(tau_hat, q, dq, ddq, tau, status);
+  if (status != 0) {
+    fprintf(stderr, "tau_hat failed (%d)\n", status);
+    return 1;
+  }
+  EVALUATE(tau_hat_gmr, q, dq, ddq, tau_gmr, status);
+  if (status != 0) {
+    fprintf(stderr, "tau_hat_gmr failed (%d)\n", status);
+    return 1;
+  }
+  printf("tau_hat     = [%.17g, %.17g] N m\n", tau[0], tau[1]);
+  printf("tau_hat_gmr = [%.17g, %.17g] N m\n", tau_gmr[0], tau_gmr[1]);
+  return (isfinite(tau[0]) && isfinite(tau[1]) && isfinite(tau_gmr[0]) && isfinite(tau_gmr[1])) ? 0 : 1;
+}
