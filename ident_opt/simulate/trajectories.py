@@ -22,6 +22,9 @@ Q_MIN = np.array([0.25, -1.40])  # rad
 Q_MAX = np.array([3.15, 1.40])  # rad
 V_MAX = np.array([1.12, 1.33])  # rad/s, the velocity plateaus of the real trial
 A_MAX = np.array([4.0, 5.0])  # rad/s²
+#: Joint torque range the trajectories are designed to stay within [N m]. The problem file carries no torque
+#: limit; these are the real trials' extremes (13.1 and 2.6 N m on exp1) with a margin.
+TAU_MAX = np.array([15.0, 4.0])
 
 TRAJECTORIES = ("tud01", "fourier")
 

@@ -1,0 +1,148 @@
+"""Each hidden effect leaves its own signature (and nothing else), and magnitude 0 is the clean trial."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import signal
+
+from ident_opt.identify.ols import solve_ols
+from ident_opt.identify.stats import Stats
+from ident_opt.problem import load_problem
+from ident_opt.robot import ArmModel
+from ident_opt.simulate import simulate_trial
+
+ROOT = Path(__file__).resolve().parents[1]
+MODEL = ArmModel(("armature",))
+SHORT = {"duration": 6.0, "trajectory": "fourier", "progress": False}
+EXACT = {**SHORT, "noise": False, "exact_derivatives": True}
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
+
+
+@pytest.fixture(scope="module")
+def clean(robot):
+    return simulate_trial(robot, **EXACT)
+
+
+def fit(trial, model=MODEL):
+    d = trial.dataset()
+    return model.as_dict(solve_ols(Stats.from_data(model, d.q, d.dq, d.ddq, d.tau)))
+
+
+@pytest.mark.parametrize(
+    "effect",
+    [
+        "armature:scale=0",
+        "armature:inertia=[0,0]",
+        "asymmetric_coulomb:scale=0",
+        "stribeck:static=[0,0]",
+        "elasticity:scale=0",
+        "payload:mass=0",
+        "delay:seconds=0",
+        "joint_offset:offset=[0,0]",
+    ],
+)
+def test_magnitude_zero_reproduces_the_clean_trial_exactly(robot, effect):
+    base = simulate_trial(robot, duration=3.0, seed=2, progress=False)
+    trial = simulate_trial(robot, duration=3.0, seed=2, effects=[effect], progress=False)
+    pd.testing.assert_frame_equal(trial.frame, base.frame, check_exact=True)
+    assert trial.truth["effects"] == {} and trial.truth["pi"] == base.truth["pi"]
+
+
+def test_payload_moves_pi_along_the_payload_direction_only(robot, clean):
+    m = 0.3
+    trial = simulate_trial(robot, effects={"payload": {"mass": m}}, **EXACT)
+    l1, l2, g = robot.link1.length, robot.link2.length, robot.gravity
+    # A point mass m at the tip of link 2 adds m (l1² + l2²), m l1 l2, m l2², m l1 g, m l2 g to a1..b2.
+    direction = {"a1": l1**2 + l2**2, "a2": l1 * l2, "a3": l2**2, "b1": l1 * g, "b2": l2 * g}
+    before, after = fit(clean), fit(trial)
+    for name in MODEL.names:
+        expected = before[name] + m * direction.get(name, 0.0)
+        assert after[name] == pytest.approx(expected, rel=1e-6, abs=1e-9), name
+        assert after[name] == pytest.approx(trial.truth["pi"][name], rel=1e-6, abs=1e-9)
+    assert trial.truth["effects"]["payload"] == {"mass": m}
+
+
+def test_armature_adds_inertia_on_the_diagonal_only(robot, clean):
+    J = (0.1, 0.02)
+    trial = simulate_trial(robot, effects=[f"armature:inertia=[{J[0]},{J[1]}]"], **EXACT)
+    before, after = fit(clean), fit(trial)
+    for name in MODEL.names:
+        extra = {"a1": J[0], "ia2": J[1]}.get(name, 0.0)
+        assert after[name] == pytest.approx(before[name] + extra, rel=1e-6, abs=1e-9), name
+    assert trial.truth["effects"]["armature"] == {"inertia": list(J)}
+
+
+def test_asymmetric_coulomb_is_recovered_by_the_asymmetric_model(robot):
+    trial = simulate_trial(
+        robot, effects=["asymmetric_coulomb:positive=[0.9,0.3],negative=[0.4,0.6]"], **EXACT
+    )
+    got = fit(trial, ArmModel(("armature", "asymmetric_coulomb")))
+    assert [got["fc1p"], got["fc2p"]] == pytest.approx([0.9, 0.3], rel=1e-6)
+    assert [got["fc1n"], got["fc2n"]] == pytest.approx([0.4, 0.6], rel=1e-6)
+    assert trial.truth["effects"]["asymmetric_coulomb"] == {"positive": [0.9, 0.3], "negative": [0.4, 0.6]}
+    assert trial.truth["pi"]["fc1"] == pytest.approx(0.65) and trial.truth["pi"]["fc2"] == pytest.approx(0.45)
+
+
+def test_stribeck_is_recovered_by_the_stribeck_model(robot):
+    trial = simulate_trial(robot, effects=["stribeck:static=[0.4,0.15],velocity=[0.1,0.08]"], **EXACT)
+    got = fit(trial, ArmModel(("armature", "stribeck"), stribeck_velocity=(0.1, 0.08)))
+    assert [got["fs1"], got["fs2"]] == pytest.approx([0.4, 0.15], rel=1e-6)
+    assert trial.truth["effects"]["stribeck"]["static"] == [0.4, 0.15]
+    assert trial.truth["effects"]["stribeck"]["velocity"] == [0.1, 0.08]
+
+
+def test_joint_offset_rotates_gravity_by_the_offset(robot, clean):
+    delta = 0.03
+    trial = simulate_trial(robot, effects=[f"joint_offset:offset=[{delta},0]"], **EXACT)
+    got = fit(trial, ArmModel(("armature", "offset")))
+    # Gravity at the true angle q + δ: b1 cos(q1 + δ) = b1 cos δ cos q1 − b1 sin δ sin q1 (same for b2).
+    assert np.arctan2(-got["b1s"], got["b1"]) == pytest.approx(delta, rel=1e-6)
+    assert np.arctan2(-got["b2s"], got["b2"]) == pytest.approx(delta, rel=1e-6)
+    assert np.hypot(got["b1"], got["b1s"]) == pytest.approx(clean.truth["pi"]["b1"], rel=1e-6)
+    assert trial.truth["effects"]["joint_offset"] == {"offset": [delta, 0.0]}
+
+
+def test_delay_is_recovered_by_cross_correlation(robot):
+    seconds = 0.023
+    kwargs = {**EXACT, "rate_hz": 1000.0, "duration": 8.0}
+    trial = simulate_trial(robot, effects={"delay": {"seconds": seconds}}, **kwargs)
+    d = trial.dataset()
+    predicted = MODEL.predict(MODEL.vector(trial.truth["pi"]), d.q, d.dq, d.ddq)
+    lags = np.arange(0, 60)
+    for j in range(2):
+        # Differences whiten the (mostly slow) torques, so the correlation peak is sharp.
+        x, y = np.diff(predicted[:, j]), np.diff(d.tau[:, j])
+        score = [np.corrcoef(x[: len(x) - k], y[k:])[0, 1] for k in lags]
+        assert lags[int(np.argmax(score))] / 1000.0 == pytest.approx(seconds, abs=1.5e-3)
+    assert trial.truth["effects"]["delay"] == {"seconds": seconds}
+
+
+@pytest.mark.parametrize("joint, frequency", [(2, 8.0), (1, 5.0)])
+def test_elasticity_puts_residual_power_at_the_stated_frequency(robot, joint, frequency):
+    kwargs = {"duration": 20.0, "seed": 1, "noise": False, "progress": False}
+    clean = simulate_trial(robot, **kwargs)
+    trial = simulate_trial(
+        robot, effects={"elasticity": {"joint": joint, "frequency_hz": frequency}}, **kwargs
+    )
+    spectra = []
+    for t in (clean, trial):
+        d = t.dataset()
+        residual = d.tau - MODEL.predict(MODEL.vector(t.truth["pi"]), d.q, d.dq, d.ddq)
+        f, P = signal.welch(residual[:, joint - 1], fs=100.0, nperseg=512)
+        spectra.append(P)
+    band = (f > 1.0) & (f < 30.0)
+    peak = f[band][np.argmax(spectra[1][band])]
+    assert peak == pytest.approx(frequency, rel=0.1)
+    near = np.abs(f - frequency) < 0.5
+    assert spectra[1][near].sum() > 10 * spectra[0][near].sum()
+    e = trial.truth["effects"]["elasticity"]
+    assert e["joint"] == joint and e["frequency_hz"] == frequency
+    assert f"deflection{joint}" in trial.frame

@@ -1,0 +1,91 @@
+"""Physics sanity of the simulator: energy balance, tracking, torque range, and noise statistics."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from ident_opt.identify.ols import solve_ols
+from ident_opt.identify.stats import Stats
+from ident_opt.problem import Friction, load_problem
+from ident_opt.robot import ArmModel
+from ident_opt.simulate import simulate_trial
+from ident_opt.simulate.closed_loop import MAX_TRACKING_ERROR
+from ident_opt.simulate.trajectories import TAU_MAX
+
+ROOT = Path(__file__).resolve().parents[1]
+MODEL = ArmModel(("armature",))
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
+
+
+def test_energy_balance_without_friction(robot):
+    still = Friction(0.0, 0.0)
+    frictionless = replace(
+        robot,
+        joint1=replace(robot.joint1, viscous_friction=still, coulomb_friction=still),
+        joint2=replace(robot.joint2, viscous_friction=still, coulomb_friction=still),
+    )
+    trial = simulate_trial(
+        frictionless,
+        trajectory="fourier",
+        duration=6.0,
+        rate_hz=1000.0,
+        noise=False,
+        exact_derivatives=True,
+        progress=False,
+    )
+    d, p = trial.dataset(), trial.truth["pi"]
+    M = MODEL.mass_matrix(MODEL.vector(p), d.q[:, 1])
+    # E = ½ dqᵀ M(q) dq + V(q), with V = b1 sin q1 + b2 sin(q1 + q2) (so that G = ∂V/∂q).
+    energy = (
+        0.5 * np.einsum("ki,kij,kj->k", d.dq, M, d.dq)
+        + p["b1"] * np.sin(d.q[:, 0])
+        + p["b2"] * np.sin(d.q.sum(1))
+    )
+    # The torque is held over each 1 ms tick, so the work over a tick is exactly τ_k · (q_{k+1} − q_k).
+    work = np.concatenate([[0.0], np.cumsum(np.einsum("kj,kj->k", d.tau[:-1], np.diff(d.q, axis=0)))])
+    assert np.ptp(energy) > 1.0  # J: a real exchange of energy took place
+    assert np.abs((energy - energy[0]) - work).max() < 1e-8 * np.ptp(energy)
+
+
+@pytest.mark.parametrize(
+    "effects", [(), ("elasticity", "asymmetric_coulomb", "stribeck", "payload", "armature")]
+)
+@pytest.mark.parametrize("trajectory", ["tud01", "fourier"])
+def test_tracking_error_and_torques_within_stated_limits(robot, effects, trajectory):
+    trial = simulate_trial(robot, trajectory=trajectory, duration=30.0, effects=list(effects), progress=False)
+    limit = MAX_TRACKING_ERROR["effects" if effects else "clean"]
+    assert max(trial.truth["tracking"]["max_error"]) < limit
+    tau = trial.dataset().tau
+    assert np.all(np.abs(tau).max(0) < TAU_MAX)
+    q = trial.dataset().q
+    assert q[:, 0].min() > 0.2 and q[:, 0].max() < 3.2 and np.abs(q[:, 1]).max() < 1.45
+
+
+def test_noisy_ols_scatters_as_its_standard_errors_say(robot):
+    """Over several seeds, Σ_s (π̂_s − π)ᵀ Cov⁻¹ (π̂_s − π) follows χ² with S·P degrees of freedom."""
+    total, dof = 0.0, 0
+    for seed in range(16):
+        trial = simulate_trial(
+            robot, trajectory="fourier", duration=6.0, seed=seed, exact_derivatives=True, progress=False
+        )
+        d = trial.dataset()
+        s = Stats.from_data(MODEL, d.q, d.dq, d.ddq, d.tau)
+        pi_hat = solve_ols(s)
+        # Per-joint noise variance from the residuals; OLS covariance (sandwich, the joints' σ differ):
+        # Cov = G⁻¹ (Σ_j σ_j² G_j) G⁻¹ with G = Σ_j G_j = Σ_j Y_jᵀ Y_j.
+        sigma2 = s.rss(pi_hat) / (s.n - MODEL.n_params / 2)
+        G_inv = np.linalg.inv(s.G.sum(0))
+        cov = G_inv @ np.tensordot(sigma2, s.G, 1) @ G_inv
+        e = pi_hat - MODEL.vector(trial.truth["pi"])
+        total += e @ np.linalg.solve(cov, e)
+        dof += MODEL.n_params
+    assert stats.chi2.ppf(0.001, dof) < total < stats.chi2.ppf(0.999, dof)
