@@ -25,6 +25,7 @@ from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import LinearFit, fit_ols
 from ident_opt.identify.nlp import fit_physical
 from ident_opt.identify.stats import Stats
+from ident_opt.metrics import all_metrics
 from ident_opt.robot import ArmModel
 
 METRICS = ("rmse", "nmse", "nmse_range")
@@ -183,3 +184,242 @@ def study_markdown(result: StudyResult) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------- comparison
+PROTOCOLS = {
+    "paper": "shuffled 70/30, mean over the paper's seeds (flattering: test samples have near-copies in training)",
+    "chronological": "first 70 % of the trial in time trains, the rest tests (honest within one trial)",
+    "cross_trial": "identify on the whole first trial, test on the second, unseen trial",
+}
+
+
+@dataclass
+class Comparison:
+    """Everything `ident-opt compare` reports. `fits` are on the whole identification trial; `metrics` is
+    {protocol: {metric: {estimator: [joint 1, joint 2]}}}; `seeds` is the paper's seed study."""
+
+    model: ArmModel
+    fits: dict[str, LinearFit]
+    datasheets: dict[str, tuple[ArmModel, np.ndarray]]
+    metrics: dict[str, dict[str, dict[str, list[float]]]]
+    seeds: object
+    convention: str
+    sources: dict[str, str] = field(default_factory=dict)
+
+    def parameters(self) -> dict[str, dict[str, float]]:
+        """π by estimator: "datasheet" (the problem's convention), both datasheets, and every fit."""
+        out = {key: model.as_dict(pi) for key, (model, pi) in self.datasheets.items()}
+        out = {"datasheet": out[f"datasheet_{self.convention}"], **out}
+        out.update({key: fit.as_dict() for key, fit in self.fits.items()})
+        return out
+
+    def consistency(self) -> dict[str, dict]:
+        """Physical consistency of each parameter set: M(q) margin [kg m²], friction signs, verdict."""
+        out = {}
+        for key, (model, pi) in self.datasheets.items():
+            friction = all(v >= 0 for n, v in model.as_dict(pi).items() if n.startswith("f"))
+            eig = model.min_mass_eigenvalue(pi)
+            out[key] = {"min_mass_eigenvalue": eig, "friction_nonnegative": friction,
+                        "consistent": bool(eig > 0 and friction), "active_constraints": []}
+        for key, fit in self.fits.items():
+            out[key] = {"min_mass_eigenvalue": fit.min_mass_eigenvalue, "friction_nonnegative": fit.friction_ok,
+                        "consistent": fit.consistent, "active_constraints": fit.active}
+        return out
+
+
+def _scores(datasets: list[tuple[Dataset, np.ndarray]], model: ArmModel, pi: np.ndarray) -> dict[str, list]:
+    """Metrics of a fixed π on (dataset, test index) pairs, averaged over the pairs."""
+    per = [all_metrics(d.tau[idx], model.predict(pi, d.q[idx], d.dq[idx], d.ddq[idx])) for d, idx in datasets]
+    return {m: [float(np.mean([p[m][j] for p in per])) for j in range(2)] for m in METRICS}
+
+
+def compare_estimators(train: Dataset, robot, split, unseen: Dataset | None = None, *,
+                       model: ArmModel | None = None, margin: float = 1e-6, progress: bool = True) -> Comparison:
+    """Fit every estimator, score it on the paper's shuffled protocol, the chronological split and (when
+    `unseen` is given) the unseen trial; score both datasheets on the same test samples."""
+    from ident_opt.data import chronological_split, shuffled_split
+    from ident_opt.identify.seeds import seed_study, split_fits
+
+    model = model or ArmModel()
+    fitters = estimators(robot, margin)
+    whole = Stats.from_data(model, train.q, train.dq, train.ddq, train.tau)
+    fits = {key: fn(whole, model) for key, fn in fitters.items()}
+    seeds = seed_study(train, model, split, fitters, progress=progress)
+    metrics: dict[str, dict[str, dict[str, list[float]]]] = {p: {m: {} for m in METRICS} for p in PROTOCOLS}
+    for m in METRICS:
+        metrics["paper"][m].update(seeds.mean(m))
+    chrono = chronological_split(train.n, split.train_fraction)
+    chrono_res = split_fits(train, model, [chrono], fitters)
+    for m in METRICS:
+        metrics["chronological"][m].update(chrono_res.mean(m))
+    test_sets = {
+        "paper": [(train, shuffled_split(train.n, split.train_fraction, s)[1]) for s in split.seeds],
+        "chronological": [(train, chrono[1])],
+    }
+    if unseen is not None:
+        for key, fit in fits.items():
+            Y = model.regressor(unseen.q, unseen.dq, unseen.ddq)
+            for m, v in all_metrics(unseen.tau, Y @ fit.pi).items():
+                metrics["cross_trial"][m][key] = v
+        test_sets["cross_trial"] = [(unseen, np.arange(unseen.n))]
+    else:
+        metrics.pop("cross_trial")
+    sheets = datasheet_models(robot)
+    for protocol, pairs in test_sets.items():
+        for key, (sheet_model, pi) in sheets.items():
+            for m, v in _scores(pairs, sheet_model, pi).items():
+                metrics[protocol][m][key] = v
+    sources = {"train": train.source, **({"unseen": unseen.source} if unseen is not None else {})}
+    return Comparison(model, fits, sheets, metrics, seeds, robot.convention, sources)
+
+
+# ---------------------------------------------------------------------------------------------- rendering
+LABELS = {"datasheet_paper": "datasheet (paper)", "datasheet_physical": "datasheet (physical)", "ols": "OLS",
+          "constrained": "constrained", "nlp_physical": "NLP-physical"}
+
+
+def parameter_table(c: Comparison) -> pd.DataFrame:
+    """Parameters (rows) × estimators, with standard errors (`<key> se`) for the fits: numbers only."""
+    params = c.parameters()
+    params.pop("datasheet")
+    names = list(dict.fromkeys(n for p in params.values() for n in p))
+    cols = {}
+    for key, values in params.items():
+        cols[key] = [values.get(n, np.nan) for n in names]
+        if key in c.fits:
+            se = c.fits[key].se_dict()
+            cols[f"{key} se"] = [se.get(n, np.nan) for n in names]
+    return pd.DataFrame(cols, index=pd.Index(names, name="parameter"))
+
+
+def consistency_table(c: Comparison) -> pd.DataFrame:
+    """Per estimator: min over q of λ_min(M(q)) [kg m²], friction ≥ 0, consistent, active constraints."""
+    rows = {key: {"min eig M(q) [kg m²]": v["min_mass_eigenvalue"], "friction ≥ 0": v["friction_nonnegative"],
+                  "consistent": v["consistent"], "active constraints": " ".join(v["active_constraints"]) or "–"}
+            for key, v in c.consistency().items()}
+    return pd.DataFrame(rows).T.rename_axis("estimator")
+
+
+def metrics_table(c: Comparison, metric: str = "nmse") -> pd.DataFrame:
+    """Held-out `metric` per estimator (rows) × protocol and joint (columns)."""
+    rows: dict[str, dict[str, float]] = {}
+    for protocol, per_metric in c.metrics.items():
+        for key, values in per_metric[metric].items():
+            for j in range(2):
+                rows.setdefault(key, {})[f"{protocol} j{j + 1}"] = values[j]
+    return pd.DataFrame(rows).T.rename_axis("estimator")
+
+
+def _with_se(c: Comparison) -> pd.DataFrame:
+    """The parameter table with "value ± se" strings, for people."""
+    from ident_opt.tables import fmt
+
+    table = parameter_table(c)
+    out = {}
+    for key in [k for k in table.columns if not k.endswith(" se")]:
+        se = table.get(f"{key} se")
+        cells = []
+        for i, v in enumerate(table[key]):
+            if np.isnan(v):
+                cells.append("–")
+            elif se is None or np.isnan(se.iloc[i]):
+                cells.append(fmt(v))
+            else:
+                cells.append(f"{fmt(v)} ± {fmt(se.iloc[i], 2)}")
+        out[LABELS.get(key, key)] = cells
+    return pd.DataFrame(out, index=table.index)
+
+
+def findings(c: Comparison) -> list[str]:
+    """Plain sentences: consistency of OLS, what the constraints did, their held-out cost or gain."""
+    ols, con = c.fits["ols"], c.fits["constrained"]
+    lines = []
+    if ols.consistent:
+        lines.append("OLS is physically consistent on this trial; the constrained fit equals it.")
+    else:
+        lines.append("OLS is " + "; ".join(w for w in ols.warnings if w.startswith("physically")) + ".")
+    if con.active:
+        lines.append(f"Constrained fit: active constraints {', '.join(con.active)}; "
+                     f"min eig M(q) = {con.min_mass_eigenvalue:.3g} kg m².")
+    for protocol in c.metrics:
+        n_ols, n_con = c.metrics[protocol]["nmse"]["ols"], c.metrics[protocol]["nmse"]["constrained"]
+        change = [100 * (b - a) / a for a, b in zip(n_ols, n_con)]
+        verdict = ", ".join(f"joint {j + 1} " + ("costs" if d > 0.05 else "gains" if d < -0.05 else "no change")
+                            for j, d in enumerate(change))
+        lines.append(f"{protocol}: held-out nmse OLS {n_ols[0]:.4g} / {n_ols[1]:.4g}, constrained {n_con[0]:.4g} / "
+                     f"{n_con[1]:.4g} ({change[0]:+.1f} % / {change[1]:+.1f} %; consistency {verdict}).")
+    for w in ols.warnings:
+        if not w.startswith("physically"):
+            lines.append("OLS: " + w + ".")
+    return lines
+
+
+def to_markdown(c: Comparison, figure: str | None = None) -> str:
+    """The comparison as a Markdown report (parameters ± SE, consistency, held-out metrics, seed study)."""
+    from ident_opt.identify.seeds import rmse_table
+    from ident_opt.tables import markdown_table
+
+    parts = [
+        "# Identification: datasheet vs OLS vs constrained vs NLP-physical",
+        "",
+        f"Identification trial: `{c.sources.get('train')}`" +
+        (f"; unseen trial: `{c.sources['unseen']}`" if "unseen" in c.sources else "") +
+        f". Fitted model: {', '.join(c.model.names)} (β in N·m). Standard errors use a per-joint residual "
+        "variance and assume independent residuals (optimistic on densely sampled real data).",
+        "",
+        "## Findings",
+        "",
+        *[f"- {line}" for line in findings(c)],
+        "",
+        "## Parameters (± standard error)",
+        "",
+        markdown_table(_with_se(c)),
+        "",
+        "## Physical consistency",
+        "",
+        markdown_table(consistency_table(c)),
+        "",
+    ]
+    for metric in ("nmse", "nmse_range", "rmse"):
+        parts += [f"## Held-out {metric} per joint", "",
+                  "Protocols: " + "; ".join(f"**{p}** = {PROTOCOLS[p]}" for p in c.metrics) + ".", "",
+                  markdown_table(metrics_table(c, metric)), ""]
+    parts += ["## The paper's seed study (shuffled 70/30)", "", markdown_table(rmse_table(c.seeds)), ""]
+    if figure:
+        parts += [f"![grouped parameters across seeds]({figure})", ""]
+    return "\n".join(parts)
+
+
+def to_terminal(c: Comparison) -> str:
+    """A compact text summary for the terminal."""
+    with pd.option_context("display.width", 160, "display.max_columns", 20):
+        return "\n\n".join([
+            "Parameters (± SE):\n" + _with_se(c).to_string(),
+            "Consistency:\n" + consistency_table(c).to_string(),
+            "Held-out nmse per joint:\n" + metrics_table(c, "nmse").to_string(float_format=lambda v: f"{v:.4g}"),
+            "\n".join(f"- {line}" for line in findings(c)),
+        ])
+
+
+def to_json(c: Comparison) -> dict:
+    """The `compare --json` payload (`spec/cli.md`): parameters, standard errors, consistency, metrics."""
+    from ident_opt.identify.seeds import deviation_from_mean
+
+    return {
+        "parameters": c.parameters(),
+        "standard_errors": {key: fit.se_dict() for key, fit in c.fits.items()},
+        "consistency": c.consistency(),
+        "metrics": c.metrics,
+        "protocols": {p: PROTOCOLS[p] for p in c.metrics},
+        "fits": {key: fit.summary() for key, fit in c.fits.items()},
+        "seed_study": {
+            "seeds": c.seeds.labels,
+            "parameters": {key: v.tolist() for key, v in c.seeds.pi.items()},
+            "deviation_from_mean_percent": {key: deviation_from_mean(c.seeds, key).to_numpy().tolist()
+                                            for key in c.seeds.pi},
+            "rmse_mean": c.seeds.mean("rmse"), "rmse_std": c.seeds.std("rmse"),
+        },
+        "model": list(c.model.names),
+        "sources": c.sources,
+    }

@@ -1,4 +1,11 @@
-"""`ident-opt compare` (being built; see the open issue)."""
+"""`ident-opt compare`: datasheet (both conventions) vs OLS vs physically constrained vs NLP-physical.
+
+Writes to the output folder: compare.md (the report), compare_parameters.csv (values and standard
+errors), compare_consistency.csv, compare_metrics.csv (held-out rmse / nmse / nmse_range per joint and
+protocol), compare_seeds.csv + compare_seeds.png (the paper's seed study) and, with --json, the
+machine-readable result. `--constraints-study N` instead runs the study of where the constraints matter
+(N short simulated trials) and writes constraints_study.md and constraints_study.csv.
+"""
 
 from __future__ import annotations
 
@@ -8,10 +15,70 @@ from ident_opt.commands.common import add_problem_arguments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """--problem/--data/--json plus --out, --margin, --extension and --constraints-study."""
     add_problem_arguments(parser)
-    parser.add_argument("--out", metavar="DIR", help="output folder")
+    parser.add_argument("--out", metavar="DIR", help="output folder (default: the problem's [output] dir)")
+    parser.add_argument("--margin", type=float, default=1e-6, metavar="KGM2",
+                        help="required margin of M(q) ⪰ margin·I in the constrained fit [kg m²] (default 1e-6)")
+    parser.add_argument("--extension", action="append", default=[], metavar="NAME",
+                        help="fit an extended model (armature, asymmetric_coulomb, stribeck, offset); repeatable")
+    parser.add_argument("--constraints-study", type=int, metavar="N",
+                        help="run the constraints study on N short simulated trials instead of the comparison")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def run(args: argparse.Namespace) -> int:
-    print("ident-opt compare: not built yet", flush=True)
-    return 1
+    """Run the comparison (or the constraints study), print a summary, write the files."""
+    import pandas as pd
+
+    from ident_opt import compare
+    from ident_opt.commands.common import load, output_dir, write_json
+    from ident_opt.errors import InputError
+    from ident_opt.identify.seeds import rmse_table, seed_heatmap
+    from ident_opt.robot import ArmModel
+    from ident_opt.tables import write_table
+
+    if args.margin < 0:
+        raise InputError(f"--margin must be ≥ 0 (got {args.margin})")
+    try:
+        model = ArmModel(tuple(args.extension))
+    except ValueError as exc:
+        raise InputError(f"--extension: {exc}") from None
+
+    if args.constraints_study is not None:
+        if args.constraints_study < 1:
+            raise InputError("--constraints-study needs a positive number of trials")
+        from ident_opt.problem import load_problem
+
+        problem = load_problem(args.problem)
+        out = output_dir(args, problem)
+        result = compare.constraints_study(problem.robot, args.constraints_study, margin=args.margin,
+                                           progress=not args.no_progress)
+        (out / "constraints_study.md").write_text(compare.study_markdown(result))
+        write_table(result.rows.set_index("trial"), out / "constraints_study.csv")
+        print("\n".join(f"{k}: {v}" for k, v in result.summary.items()))
+        print(f"wrote {out / 'constraints_study.md'}")
+        write_json(args.json, {"summary": result.summary, "settings": result.settings,
+                               "trials": result.rows.to_dict(orient="records")})
+        return 0
+
+    loaded = load(args, min_samples=2 * model.n_params)
+    problem = loaded.problem
+    out = output_dir(args, problem)
+    result = compare.compare_estimators(loaded.train, problem.robot, problem.split, loaded.unseen, model=model,
+                                        margin=args.margin, progress=not args.no_progress)
+    figure = seed_heatmap(result.seeds, out / "compare_seeds.png", "ols")
+    write_table(compare.parameter_table(result), out / "compare_parameters.csv")
+    write_table(compare.consistency_table(result), out / "compare_consistency.csv")
+    metrics = pd.concat({m: compare.metrics_table(result, m) for m in compare.METRICS}, names=["metric"])
+    write_table(metrics, out / "compare_metrics.csv")
+    write_table(rmse_table(result.seeds), out / "compare_seeds.csv")
+    (out / "compare.md").write_text(compare.to_markdown(result, figure.name))
+    print(compare.to_terminal(result))
+    files = [str(out / f) for f in ("compare.md", "compare_parameters.csv", "compare_consistency.csv",
+                                    "compare_metrics.csv", "compare_seeds.csv", "compare_seeds.png")]
+    print("wrote " + ", ".join(files))
+    payload = compare.to_json(result)
+    payload["files"] = files
+    write_json(args.json, payload)
+    return 0

@@ -1,0 +1,93 @@
+"""`ident-opt compare` end to end on the real trials, its JSON shape, bad input, and the constraints study."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ident_opt.cli import main
+from ident_opt.compare import constraints_study, study_markdown
+
+PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
+PI = ["a1", "a2", "a3", "b1", "b2", "fv1", "fv2", "fc1", "fc2"]
+
+
+@pytest.fixture(scope="module")
+def compare_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("compare")
+    status = main(["compare", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--out", str(out),
+                   "--json", str(out / "compare.json"), "--no-progress"])
+    return status, out, json.loads((out / "compare.json").read_text())
+
+
+def test_compare_writes_its_files(compare_run):
+    status, out, _ = compare_run
+    assert status == 0
+    for name in ("compare.md", "compare_parameters.csv", "compare_consistency.csv", "compare_metrics.csv",
+                 "compare_seeds.csv", "compare_seeds.png"):
+        assert (out / name).stat().st_size > 0, name
+    text = (out / "compare.md").read_text()
+    assert "mass_pd_q2_0" in text and "chronological" in text and "cross_trial" in text
+
+
+def test_compare_json_shape(compare_run):
+    _, _, payload = compare_run
+    params = payload["parameters"]
+    for key in ("datasheet", "ols", "constrained", "nlp_physical", "datasheet_paper", "datasheet_physical"):
+        assert set(PI) <= set(params[key]), key
+    assert "ia2" in params["datasheet"]  # the physical convention reports the joint-2 armature
+    for protocol in ("paper", "chronological", "cross_trial"):
+        for metric in ("rmse", "nmse", "nmse_range"):
+            for key in ("ols", "constrained", "nlp_physical", "datasheet_physical"):
+                values = payload["metrics"][protocol][metric][key]
+                assert len(values) == 2 and all(np.isfinite(values))
+    assert set(payload["standard_errors"]["ols"]) == set(PI)
+    assert len(payload["seed_study"]["parameters"]["ols"]) == 10
+
+
+def test_compare_on_real_data_ols_inconsistent_constrained_consistent(compare_run):
+    _, _, payload = compare_run
+    assert payload["parameters"]["ols"]["a3"] < 0
+    assert not payload["consistency"]["ols"]["consistent"]
+    for key in ("constrained", "nlp_physical"):
+        assert payload["consistency"][key]["consistent"], key
+    assert payload["consistency"]["constrained"]["active_constraints"]
+    # The paper-protocol OLS on exp1, as measured independently: nmse ≈ 0.095 / 0.92.
+    assert payload["metrics"]["paper"]["nmse"]["ols"] == pytest.approx([0.095, 0.92], abs=0.01)
+
+
+@pytest.mark.parametrize("argv", [
+    ["--data", "/nonexistent/trial.csv"],
+    ["--margin", "-1"],
+    ["--extension", "magic"],
+    ["--constraints-study", "0"],
+])
+def test_compare_bad_input_exits_2(argv, tmp_path, capsys):
+    status = main(["compare", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--out", str(tmp_path), *argv])
+    assert status == 2
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_constraints_study_small(physical_problem):
+    result = constraints_study(physical_problem.robot, 8, seed=1, progress=False)
+    s = result.summary
+    assert s["trials"] == 8 and s["constrained_inconsistent"] == 0
+    rows = result.rows
+    # With full rank and no active constraint the two fits coincide (rank-deficient data leave free
+    # directions, along which the constrained fit may move off OLS's least-norm point at equal RSS).
+    same = (rows["active"] == "") & (rows["rank"] == 10)
+    assert same.any()
+    assert (rows["err_ols"][same] == rows["err_constrained"][same]).all()
+    assert (rows["constrained_min_eig"] >= 1e-6 * (1 - 1e-6)).all()
+    assert "| OLS physically inconsistent |" in study_markdown(result)
+
+
+def test_constraints_study_cli(tmp_path):
+    status = main(["compare", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--out", str(tmp_path),
+                   "--constraints-study", "4", "--no-progress", "--json", str(tmp_path / "s.json")])
+    assert status == 0
+    assert (tmp_path / "constraints_study.md").exists()
+    assert json.loads((tmp_path / "s.json").read_text())["summary"]["trials"] == 4
