@@ -31,7 +31,9 @@ is what the physically constrained fit (CPBR) is for.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -170,3 +172,208 @@ class WarmBoundedLS:
         self.iterations += sol.iterations
         self.last = sol
         return sol.pi
+
+
+# ---------------------------------------------------------------------------------------------- CPBR
+@dataclass(frozen=True)
+class _Cone:
+    """One 2×2 LMI N(π) = Σ_p π_p B_p ⪰ margin·I, written as p ≥ m, s ≥ m, c(π) = (p − m)(s − m) − r² ≥ 0
+    with p = N11, s = N22, r = N12 affine in π (gradients gp, gs, gr) — a rotated second-order cone."""
+
+    gp: np.ndarray
+    gs: np.ndarray
+    gr: np.ndarray
+    margin: float
+
+    def value(self, x: np.ndarray) -> tuple[float, float, float, float]:
+        """(p − m, s − m, r, c) at x."""
+        p, s, r = self.gp @ x - self.margin, self.gs @ x - self.margin, self.gr @ x
+        return p, s, r, p * s - r * r
+
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        p, s, r, _ = self.value(x)
+        return s * self.gp + p * self.gs - 2 * r * self.gr
+
+    @cached_property
+    def hessian(self) -> np.ndarray:
+        return np.outer(self.gp, self.gs) + np.outer(self.gs, self.gp) - 2 * np.outer(self.gr, self.gr)
+
+    def slack(self, x: np.ndarray) -> float:
+        """λ_min(N(x)) − margin [kg m²]: ≥ 0 feasible."""
+        p, s, r, _ = self.value(x)
+        return float(0.5 * (p + s) - np.sqrt(0.25 * (p - s) ** 2 + r * r))
+
+
+class WarmConsistentLS:
+    """Physically consistent LS (CPBR) re-solved from statistics that change a little between calls.
+
+        minimise ½πᵀHπ − hᵀπ  subject to  lower ≤ π ≤ upper,  M0(π) ± M1(π) ⪰ margin·I
+
+    (M(q) = M0 + M1 cos q2 ⪰ margin·I for every q; the same problem as `constrained.fit_constrained`).
+    Each call: (1) the box-only solution (`WarmBoundedLS`); if M is positive definite there it is the
+    answer (the cone constraints are inactive). (2) Otherwise Newton's method on the KKT equations of
+    the previous call's active set (box parameters fixed, active cones as equalities c(π) = 0),
+    warm-started at the previous (π, μ): typically 2–3 solves of a (P + 1)-sized system. The result is
+    accepted only if the KKT conditions hold (stationarity and c = 0 to 1e-12 relative, μ ≥ 0, the other
+    constraints satisfied, box multipliers of the right sign). (3) If not (the active set changed),
+    Clarabel (`fit_constrained`) finds the new active set and Newton polishes its answer to the same
+    exactness. `fallbacks` counts the calls that needed (3); `inexact` those where even the polish failed
+    (the Clarabel answer is returned then).
+    """
+
+    def __init__(self, model: ArmModel, bounds: Bounds, margin: float = 1e-6):
+        self.model, self.bounds, self.margin = model, bounds, margin
+        A0, A1 = model.mass_matrix_maps
+        self.cones = [_Cone(B[:, 0, 0], B[:, 1, 1], B[:, 0, 1], margin) for B in (A0 + A1, A0 - A1)]
+        self.box = WarmBoundedLS(bounds)
+        self.pi: np.ndarray | None = None
+        self.state = np.zeros(model.n_params, dtype=np.int8)
+        self.mu = np.zeros(len(self.cones))
+        self.fallbacks = 0
+        self.inexact = 0
+
+    def cold(self) -> WarmConsistentLS:
+        """A fresh solver with the same problem (for from-scratch reference solves)."""
+        return WarmConsistentLS(self.model, self.bounds, self.margin)
+
+    def solve(self, H: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """π̂ for the statistics (H, h); exact to the KKT check's tolerance."""
+        x = self.box.solve(H, h)
+        if all(cone.slack(x) >= 0 for cone in self.cones):
+            self._accept(x, self.box.last.state, np.zeros(len(self.cones)))
+            return x
+        if self.pi is not None and self.mu.any():
+            result = self._active_set(H, h, self.pi, self.state, self.mu)
+            if result is not None:
+                return result
+        self.fallbacks += 1
+        return self._clarabel(H, h)
+
+    def _accept(self, x: np.ndarray, state: np.ndarray, mu: np.ndarray) -> None:
+        self.pi, self.state, self.mu = x.copy(), state.copy(), mu.copy()
+
+    def _active_set(self, H: np.ndarray, h: np.ndarray, x: np.ndarray, state: np.ndarray, mu: np.ndarray,
+                    rounds: int = 8) -> np.ndarray | None:
+        """Newton on an active set, then one change of the set where the KKT check fails, a few times:
+        the small active-set changes of consecutive online steps are handled without the conic solver."""
+        state, mu = state.astype(np.int8).copy(), mu.astype(float).copy()
+        for _ in range(rounds):
+            out = self._newton(H, h, x, state, mu)
+            if out is None:
+                return None
+            x, mu = out
+            change = self._kkt_change(H, h, x, state, mu)
+            if change is None:
+                self._accept(x, state, mu)
+                return x
+            state, mu = change
+        return None
+
+    def _newton(self, H: np.ndarray, h: np.ndarray, x0: np.ndarray, state: np.ndarray,
+                mu0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """Newton on the KKT equations of one active set (box `state`, cones with μ > 0):
+        ∇f − Σ μ_i ∇c_i = 0 on the free parameters, c_i = 0; converged (x, μ) or None."""
+        lo, hi = self.bounds.lower, self.bounds.upper
+        x = x0.copy()
+        x[state < 0], x[state > 0] = lo[state < 0], hi[state > 0]
+        active = np.flatnonzero(mu0 > 0)
+        m = mu0[active].copy()
+        F = np.flatnonzero(state == 0)
+        scale = np.abs(H) @ np.maximum(np.abs(x), 1.0) + np.abs(h)
+        cones = [self.cones[i] for i in active]
+        for _ in range(30):
+            grads = np.array([cone.gradient(x) for cone in cones]).reshape(len(cones), -1)
+            r1 = (H @ x - h - m @ grads)[F]
+            vals = [cone.value(x) for cone in cones]
+            r2 = np.array([v[3] for v in vals])
+            cscale = np.array([abs(v[0] * v[1]) + v[2] ** 2 + 1e-300 for v in vals])
+            if np.all(np.abs(r1) <= 1e-13 * scale[F]) and np.all(np.abs(r2) <= 1e-13 * cscale):
+                out = np.zeros(len(self.cones))
+                out[active] = m
+                return x, out
+            K = H - sum(mi * cone.hessian for mi, cone in zip(m, cones))
+            A = grads[:, F]
+            nF = F.size
+            kkt = np.zeros((nF + len(cones), nF + len(cones)))
+            kkt[:nF, :nF], kkt[:nF, nF:], kkt[nF:, :nF] = K[np.ix_(F, F)], -A.T, A
+            try:
+                step = np.linalg.solve(kkt, -np.concatenate([r1, r2]))
+            except np.linalg.LinAlgError:
+                return None
+            x[F] += step[:F.size]
+            m += step[F.size:]
+        return None
+
+    def _kkt_change(self, H: np.ndarray, h: np.ndarray, x: np.ndarray, state: np.ndarray,
+                    mu: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """None when (x, μ) satisfies the KKT conditions; else the active set with its worst violation
+        changed: a negative μ dropped, a violated cone or bound added, a wrong-signed box multiplier
+        released; a cone whose point is on the wrong branch of c = 0 (p or s ≤ 0) is dropped."""
+        lo, hi = self.bounds.lower, self.bounds.upper
+        scale = np.abs(H) @ np.maximum(np.abs(x), 1.0) + np.abs(h)
+        tol = 1e-10
+        state, mu = state.copy(), mu.copy()
+        for i, cone in enumerate(self.cones):
+            p, s, _, _ = cone.value(x)
+            if mu[i] > 0 and (p <= 0 or s <= 0):  # the other branch of c = 0: not the cone; restart
+                mu[i] = 0.0
+                return state, mu
+        negative = mu < -tol * np.max(scale)
+        if negative.any():
+            mu[int(np.argmin(mu))] = 0.0
+            return state, mu
+        below, above = lo - x, x - hi
+        size = np.maximum(np.where(np.isfinite(lo), np.abs(lo), 0.0), np.where(np.isfinite(hi), np.abs(hi), 0.0))
+        worst = np.maximum(below, above) / np.maximum(size, 1.0)
+        if np.max(worst) > tol:
+            p = int(np.argmax(worst))
+            state[p] = -1 if below[p] > above[p] else 1
+            return state, mu
+        for i, cone in enumerate(self.cones):
+            p, s, _, _ = cone.value(x)
+            if mu[i] == 0 and cone.slack(x) < -1e-12 * max(abs(p), abs(s), 1e-300):
+                mu[i] = 1e-6 * np.max(scale)  # a small positive start; Newton finds its value
+                return state, mu
+        grads = np.array([cone.gradient(x) for cone in self.cones])
+        g = H @ x - h - mu @ grads  # the box multipliers at fixed parameters
+        wrong = np.where(state < 0, -g, np.where(state > 0, g, -np.inf)) - tol * scale
+        if np.max(wrong) > 0:
+            state[int(np.argmax(wrong))] = 0
+            return state, mu
+        return None
+
+    def _clarabel(self, H: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """The conic solver for a new active set, then Newton polishes its answer on the active set it
+        shows (exact KKT); if no polish passes the check, the conic answer is returned (`inexact`)."""
+        from ident_opt.identify.constrained import fit_constrained
+        from ident_opt.identify.stats import Stats
+
+        c = 1.0 / np.max(np.diag(H))  # the minimiser does not depend on a common scale of (H, h)
+        P = h.shape[0]
+        stats = Stats(np.stack([H * c, np.zeros((P, P))]), np.stack([h * c, np.zeros(P)]), np.zeros(2), 1)
+        fit = fit_constrained(stats, self.model, margin=self.margin, friction=False,
+                              bounds=(self.bounds.lower, self.bounds.upper))
+        x = np.asarray(fit.pi, dtype=float)
+        lo, hi = self.bounds.lower, self.bounds.upper
+        near = 1e-7 * np.maximum(np.abs(x), 1.0)
+        state = np.where(x - lo <= near, -1, np.where(hi - x <= near, 1, 0)).astype(np.int8)
+        near_cone = [cone.slack(x) <= 1e-6 * max(1.0, np.max(np.abs(x))) for cone in self.cones]
+        F = state == 0
+        grads = np.array([cone.gradient(x) for cone in self.cones])
+        # Which cones are active is not always clear from Clarabel's point (a slack of 1e-8 may be either):
+        # try the likely active sets, the one it shows first; keep the first that passes the KKT check.
+        subsets = sorted((s for s in itertools.product((False, True), repeat=len(self.cones)) if any(s)),
+                         key=lambda s: sum(a != b for a, b in zip(s, near_cone)))
+        for subset in subsets:
+            on = np.array(subset)
+            mu = np.zeros(len(self.cones))
+            # Multipliers from stationarity on the free parameters (least squares): Newton's start.
+            mu[on] = np.linalg.lstsq(grads[on][:, F].T, (H @ x - h)[F], rcond=None)[0]
+            if np.any(mu[on] <= 0):
+                continue
+            result = self._active_set(H, h, x, state, mu)
+            if result is not None:
+                return result
+        self.inexact += 1
+        self._accept(x, state, np.zeros(len(self.cones)))
+        return x
