@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         (out / "constraints_study.md").write_text(compare.study_markdown(result))
         write_table(result.rows.set_index("trial"), out / "constraints_study.csv")
         print("\n".join(f"{k}: {v}" for k, v in result.summary.items()))
-        print(f"wrote {out / 'constraints_study.md'}")
+        print(f"wrote constraints_study.md and constraints_study.csv to {out.resolve()}")
         write_json(args.json, {"summary": result.summary, "settings": result.settings,
                                "trials": result.rows.to_dict(orient="records")})
         return 0
@@ -75,10 +75,10 @@ def run(args: argparse.Namespace) -> int:
     write_table(rmse_table(result.seeds), out / "compare_seeds.csv")
     (out / "compare.md").write_text(compare.to_markdown(result, figure.name))
     print(compare.to_terminal(result))
-    files = [str(out / f) for f in ("compare.md", "compare_parameters.csv", "compare_consistency.csv",
-                                    "compare_metrics.csv", "compare_seeds.csv", "compare_seeds.png")]
-    print("wrote " + ", ".join(files))
+    files = ["compare.md", "compare_parameters.csv", "compare_consistency.csv", "compare_metrics.csv",
+             "compare_seeds.csv", "compare_seeds.png"]
+    print(f"wrote {', '.join(files)} to {out.resolve()}")
     payload = compare.to_json(result)
-    payload["files"] = files
+    payload["files"] = files  # in the output folder
     write_json(args.json, payload)
     return 0
