@@ -212,6 +212,8 @@ def compile_library(source: Path, out_dir: Path, compiler: str | None = None, na
         raise InputError(f"cannot run the C compiler {compiler!r} ({exc.strerror})") from None
     if done.returncode != 0:
         raise InputError(f"the C compiler failed on {source} (exit {done.returncode}):\n{done.stderr.strip()}")
+    if not lib.is_file():
+        raise InputError(f"the C compiler {compiler!r} reported success but wrote no {lib.name}: is it a C compiler?")
     return lib
 
 

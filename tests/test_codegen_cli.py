@@ -46,7 +46,9 @@ def test_cli_writes_the_contract_files(run_dir):
     assert saved["estimator"] == "constrained"  # the spec's default: the physically consistent fit
     assert list(saved["parameters"]) == list(ArmModel().names)
     assert saved["gmr"]["n_components"] == 3
-    assert all(v <= 1e-12 for k, v in saved["check_max_relative_error"].items() if k != "tau_hat_gmr")
+    check = saved["check"]
+    assert check["tau_hat"]["max_relative_error"] <= 1e-12 and check["ddq_hat"]["max_backward_error"] <= 1e-12
+    assert check["tau_hat_gmr"]["max_relative_error"] <= 1e-10
     header = (run_dir / "ident_opt_model.h").read_text()
     for entry in ("tau_hat(", "tau_hat_gmr(", "tau_hat_work(", "tau_hat_incref(", "tau_hat_gmr_checkout("):
         assert entry in header
@@ -93,6 +95,14 @@ def test_unwritable_output_folder_exits_2(tmp_path, capsys):
     blocker.write_text("")
     assert main(["codegen", "--problem", PROBLEM, "--out", str(blocker / "sub")]) == 2
     assert "output folder" in capsys.readouterr().err
+
+
+def test_a_compiler_that_writes_nothing_exits_2(tmp_path, monkeypatch, capsys, real_slice):
+    monkeypatch.setenv("CC", "true")  # exits 0, compiles nothing
+    out = tmp_path / "o"
+    assert main(["codegen", "--problem", PROBLEM, "--data", str(real_slice), "--components", "1",
+                 "--estimator", "ols", "--out", str(out)]) == 2
+    assert "wrote no" in capsys.readouterr().err
 
 
 def test_missing_compiler_exits_2(tmp_path, monkeypatch, capsys):

@@ -20,6 +20,8 @@ from ident_opt.errors import InputError
 
 #: Largest accepted relative difference between the compiled library and the Python model.
 TOLERANCE = {"tau_hat": 1e-12, "tau_hat_gmr": 1e-10, "ddq_hat": 1e-12}
+#: What is compared: τ with the NumPy model (+ GMR), ddq by how well it solves M ddq = τ − C dq − G − F.
+MEASURE = {"tau_hat": "max_relative_error", "tau_hat_gmr": "max_relative_error", "ddq_hat": "max_backward_error"}
 #: Random states for the check, in addition to the training states.
 N_RANDOM = 4000
 
@@ -60,8 +62,9 @@ def run(args: argparse.Namespace) -> int:
 
     if saved is not None:
         pi, estimator = _saved_vector(saved, model), f"{saved['estimator']} (loaded from {args.parameters})"
+        status = saved.get("estimator_status", "")
     else:
-        pi, estimator = _identify(model, train, args.estimator)
+        pi, estimator, status = _identify(model, train, args.estimator)
     gmr = _gmr_from_saved(saved["gmr"]) if saved and saved.get("gmr") else _fit_gmr(model, pi, train, problem,
                                                                                      args.components)
 
@@ -77,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
                     np.random.default_rng(0))
     payload = {
         "estimator": estimator,
+        "estimator_status": status,
         "model": {"extensions": list(model.extensions), "gravity": model.gravity,
                   "stribeck_velocity": list(model.stribeck_velocity)},
         "parameters": model.as_dict(pi),
@@ -88,12 +92,12 @@ def run(args: argparse.Namespace) -> int:
         "data": [t.source for t in trials] if trials else [],
         "functions": [f.name() for f in functions],
         "library": library.name,
-        "check_max_relative_error": errors,
+        "check": {name: {MEASURE[name]: err, "limit": TOLERANCE[name]} for name, err in errors.items()},
     }
     write_json(out / "parameters.json", payload)
     for name, err in errors.items():
-        what = "backward error of the solve" if name == "ddq_hat" else "relative error"
-        print(f"  {name}: compiled vs Python, max {what} {err:.2e} (limit {TOLERANCE[name]:.0e})")
+        print(f"  {name}: compiled vs Python, {MEASURE[name].replace('_', ' ')} {err:.2e} "
+              f"(limit {TOLERANCE[name]:.0e})")
     print(f"  wrote {', '.join(p.name for p in (source, header, library, example, readme))}, parameters.json")
     write_json(getattr(args, "json", None), payload)
     bad = {name: err for name, err in errors.items() if not err <= TOLERANCE[name]}
@@ -114,21 +118,22 @@ def _model(extensions):
 
 
 def _identify(model, train, estimator: str):
-    """π from the training trial: the physically consistent fit (default) or OLS."""
+    """(π, estimator name, solver status) from the training trial: the physically consistent fit (default)
+    or OLS."""
     from ident_opt.identify.stats import Stats
 
     stats = Stats.from_data(model, train.q, train.dq, train.ddq, train.tau)
     if estimator == "ols":
         from ident_opt.identify.ols import solve_ols
 
-        return solve_ols(stats), "ols"
+        return solve_ols(stats), "ols", "least squares (no constraints)"
     from ident_opt.identify.constrained import fit_constrained
 
     try:
         fit = fit_constrained(stats, model)
     except RuntimeError as exc:  # the solver failed: nothing consistent to generate
         raise InputError(f"codegen: the physically consistent fit failed ({exc}); try --estimator ols") from None
-    return fit.pi, fit.method
+    return fit.pi, fit.method, fit.status
 
 
 def _fit_gmr(model, pi, train, problem, components: int | None):
@@ -158,6 +163,7 @@ def _read_parameters(path: str) -> dict:
     if not isinstance(raw, dict) or not isinstance(raw.get("parameters"), dict):
         raise InputError(f"{path}: not a parameters file (expected an object with a 'parameters' object)")
     return {"parameters": raw["parameters"], "estimator": str(raw.get("estimator", "unknown")),
+            "estimator_status": str(raw.get("estimator_status", "")),
             "extensions": list((raw.get("model") or {}).get("extensions", [])), "gmr": raw.get("gmr"),
             "path": path}
 
