@@ -140,3 +140,41 @@ def test_cli_bad_effect_exits_2_without_traceback(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "unknown effect 'warp'" in err and "Traceback" not in err
     assert not (tmp_path / "x.csv").exists()
+
+
+def short_sim_problem(tmp_path, duration=3.0):
+    text = (ROOT / "problems" / "tudor_sim.toml").read_text()
+    path = tmp_path / "sim.toml"
+    path.write_text(text.replace("duration = 80.0", f"duration = {duration}"))
+    return load_problem(path)
+
+
+def test_problem_trials_are_two_seeds_generated_once_and_cached(tmp_path, monkeypatch):
+    from ident_opt.simulate import problem_trials
+
+    monkeypatch.setenv("IDENT_OPT_CACHE", str(tmp_path / "cache"))
+    problem = short_sim_problem(tmp_path)
+    paths = problem_trials(problem)
+    assert len(paths) == 2 and all(p.is_file() and p.parent == tmp_path / "cache" / "sim" for p in paths)
+    truths = [json.loads(p.with_name(p.stem + ".truth.json").read_text()) for p in paths]
+    assert [t["settings"]["seed"] for t in truths] == [problem.simulate.seed, problem.simulate.seed + 1]
+    assert set(truths[0]["effects"]) == {"elasticity", "asymmetric_coulomb", "stribeck"}
+    stamps = [p.stat().st_mtime_ns for p in paths]
+    assert problem_trials(problem) == paths and [p.stat().st_mtime_ns for p in paths] == stamps
+    (tmp_path / "other").mkdir()
+    longer = problem_trials(short_sim_problem(tmp_path / "other", duration=4.0))
+    assert set(longer).isdisjoint(paths)  # a changed setting never reuses a cached trial
+
+
+def test_common_load_reads_the_simulated_trials_of_a_sim_problem(tmp_path, monkeypatch):
+    from argparse import Namespace
+
+    from ident_opt.commands.common import load
+
+    monkeypatch.setenv("IDENT_OPT_CACHE", str(tmp_path / "cache"))
+    problem = short_sim_problem(tmp_path)
+    loaded = load(
+        Namespace(problem=str(problem.path), data=None, allow_implausible=False, drop_invalid=False)
+    )
+    assert len(loaded.trials) == 2 and loaded.train.n == 300
+    assert not np.allclose(loaded.train.tau[:50], loaded.unseen.tau[:50])

@@ -20,7 +20,10 @@ from ident_opt.problem import DataSpec, Robot
 from ident_opt.simulate.closed_loop import CONTROL_HZ
 
 ENCODER_COUNTS = 4096  # counts per motor revolution (a 1024-line encoder, quadrature)
-TORQUE_NOISE = (0.57, 0.055)  # N m, std of the real exp1's torque over its first 15 s at rest
+TORQUE_NOISE = (
+    0.16,
+    0.054,
+)  # N m, white part of the real exp1 torque at rest (first 15 s, std of Δτ over √2)
 DERIVATIVE_CUTOFF_HZ = DataSpec.derivative_cutoff_hz  # the data loader's default
 
 
