@@ -1,0 +1,49 @@
+"""Benchmark: time to simulate the 80 s default trial, as a ratio against real time (target ≥ 5×).
+
+Run: .venv/bin/python benchmarks/bench_simulate.py [--repeat 3]
+Times, side by side in one run: the clean rigid trial, the calibrated default of problems/tudor_sim.toml
+(elastic joint, asymmetric Coulomb, Stribeck), and every catalogue effect at its default magnitude; the
+first call of each also pays for building the CasADi functions, so the best of `--repeat` runs is reported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+from ident_opt.problem import load_problem
+from ident_opt.simulate import CATALOGUE, simulate_trial
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def best_time(robot, effects, duration: float, repeat: int) -> float:
+    """Best wall time [s] of `repeat` simulations of the default trial with `effects`."""
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        simulate_trial(robot, duration=duration, effects=effects, progress=False)
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--duration", type=float, default=80.0)
+    args = parser.parse_args()
+    sim = load_problem(ROOT / "problems" / "tudor_sim.toml")
+    cases = {"clean (rigid truth)": [], "tudor_sim default": list(sim.simulate.effects), "all catalogue effects":
+             list(CATALOGUE)}
+    print(f"simulating {args.duration:g} s at 1 kHz control, 100 Hz logging; cores available: {os.cpu_count()}")
+    print(f"{'case':28s} {'seconds':>8s} {'x real time':>12s}")
+    for name, effects in cases.items():
+        t = best_time(sim.robot, effects, args.duration, args.repeat)
+        print(f"{name:28s} {t:8.3f} {args.duration / t:12.1f}")
+    print("target: >= 5x real time")
+
+
+if __name__ == "__main__":
+    main()
