@@ -61,13 +61,13 @@ def python_costs(pi: np.ndarray, gmr: GMR, q: np.ndarray, dq: np.ndarray, ddq: n
     }
 
 
-def c_costs(pi: np.ndarray, gmr: GMR, compiler: str, calls: int) -> dict[str, float]:
+def c_costs(pi: np.ndarray, gmr: GMR, compiler: list[str], calls: int) -> dict[str, float]:
     """Generate, compile with the timing loop (-O2, as firmware would), run: ns per call per function."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
         source, _ = codegen.generate_sources(codegen.build_functions(RIGID, pi, gmr), out)
         exe = out / "bench"
-        cmd = [compiler, "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{out}", str(TIMING_LOOP),
+        cmd = [*compiler, "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{out}", str(TIMING_LOOP),
                "-x", "c", "-Wno-unused-parameter", str(source), "-o", str(exe), "-lm"]
         subprocess.run(cmd, check=True)
         done = subprocess.run([str(exe), str(calls)], check=True, capture_output=True, text=True)
@@ -88,7 +88,8 @@ def main(argv: list[str] | None = None) -> int:
     pi = fit_constrained(Stats.from_data(RIGID, q, dq, ddq, tau), RIGID).pi
     X, R = np.hstack([q, dq, ddq]), tau - RIGID.predict(pi, q, dq, ddq)
     compiler = codegen.find_compiler()
-    print(f"{trial.source}: {trial.n} samples; compiler {compiler}; {args.calls} C calls x 7 repetitions (best)")
+    print(f"{trial.source}: {trial.n} samples; compiler {' '.join(compiler)}; "
+          f"{args.calls} C calls x 7 repetitions (best)")
 
     rows = []
     for k in args.components:

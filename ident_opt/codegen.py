@@ -21,6 +21,7 @@ Constants are printed by CasADi with 17 significant digits, so they round-trip e
 from __future__ import annotations
 
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -185,35 +186,39 @@ def library_name(name: str = NAME) -> str:
     return f"lib{name}{suffix}"
 
 
-def find_compiler() -> str:
-    """The C compiler: $CC if set (it must exist), else gcc, else cc. `InputError` when there is none."""
-    cc = os.environ.get("CC")
+def find_compiler() -> list[str]:
+    """The C compiler command: $CC if set (split like a shell would, e.g. "ccache gcc"; its program must
+    exist), else gcc, else cc on PATH. `InputError` when there is none."""
+    cc = os.environ.get("CC", "").strip()
     if cc:
-        found = shutil.which(cc)
+        words = shlex.split(cc)
+        found = shutil.which(words[0])
         if not found:
             raise InputError(f"the C compiler CC={cc!r} was not found; install one or set CC to a C compiler")
-        return found
+        return [found, *words[1:]]
     for candidate in ("gcc", "cc"):
         found = shutil.which(candidate)
         if found:
-            return found
+            return [found]
     raise InputError("no C compiler found (tried gcc and cc on PATH); install one (e.g. apt install gcc) "
                      "or set CC")
 
 
-def compile_library(source: Path, out_dir: Path, compiler: str | None = None, name: str = NAME) -> Path:
-    """Compile `source` into the shared library `out_dir`/lib<name>.so with `CFLAGS`; returns its path."""
-    compiler = compiler or find_compiler()
+def compile_library(source: Path, out_dir: Path, compiler: list[str] | None = None, name: str = NAME) -> Path:
+    """Compile `source` into the shared library `out_dir`/lib<name>.so with `CFLAGS`; returns its path.
+    `compiler` is a command (program and leading arguments), by default `find_compiler()`."""
+    compiler = list(compiler or find_compiler())
     lib = Path(out_dir) / library_name(name)
-    cmd = [compiler, *CFLAGS, "-shared", str(source), "-o", str(lib), "-lm"]
+    cmd = [*compiler, *CFLAGS, "-shared", str(source), "-o", str(lib), "-lm"]
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     except OSError as exc:
-        raise InputError(f"cannot run the C compiler {compiler!r} ({exc.strerror})") from None
+        raise InputError(f"cannot run the C compiler {compiler[0]!r} ({exc.strerror})") from None
     if done.returncode != 0:
         raise InputError(f"the C compiler failed on {source} (exit {done.returncode}):\n{done.stderr.strip()}")
     if not lib.is_file():
-        raise InputError(f"the C compiler {compiler!r} reported success but wrote no {lib.name}: is it a C compiler?")
+        raise InputError(f"the C compiler {compiler[0]!r} reported success but wrote no {lib.name}: "
+                         "is it a C compiler?")
     return lib
 
 

@@ -51,7 +51,7 @@ def built(tmp_path_factory, gmr):
     out = tmp_path_factory.mktemp("codegen")
     functions = codegen.build_functions(MODEL, PI, gmr)
     source, _ = codegen.generate_sources(functions, out)
-    lib = codegen.compile_library(source, out, shutil.which("gcc"))
+    lib = codegen.compile_library(source, out, [shutil.which("gcc")])
     codegen.copy_example(out)
     codegen.write_readme(out, functions)
     return out, lib, ctypes.CDLL(str(lib))
@@ -244,6 +244,8 @@ def test_missing_compiler(monkeypatch):
     monkeypatch.setenv("CC", "no-such-compiler-xyz")
     with pytest.raises(InputError, match="no-such-compiler-xyz"):
         codegen.find_compiler()
+    monkeypatch.setenv("CC", "gcc -m64")  # a command with arguments, as make would pass it
+    assert codegen.find_compiler() == [shutil.which("gcc"), "-m64"]
     monkeypatch.delenv("CC")
     monkeypatch.setenv("PATH", "/nonexistent")
     with pytest.raises(InputError, match="no C compiler"):
