@@ -84,8 +84,9 @@ def test_cli_reuses_a_parameters_file_with_extensions(run_dir, tmp_path):
     (tmp_path / "p.json").write_text(json.dumps(params))
     out = tmp_path / "y"
     assert main(["codegen", "--problem", PROBLEM, "--parameters", str(tmp_path / "p.json"),
-                 "--extension", "armature", "--out", str(out)]) == 0
+                 "--extension", "armature", "--no-forward", "--out", str(out)]) == 0
     saved = json.loads((out / "parameters.json").read_text())
+    assert saved["functions"] == ["tau_hat", "tau_hat_gmr"] and "ddq_hat" not in (out / "ident_opt_model.h").read_text()
     assert saved["model"]["extensions"] == ["armature"] and saved["parameters"]["ia2"] == 0.004
     assert saved["estimator"].startswith("constrained (loaded from")
 
