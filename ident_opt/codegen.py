@@ -67,13 +67,15 @@ class GmrConstants:
 
     @property
     def n_components(self) -> int:
+        """K, the number of Gaussians."""
         return len(self.log_c)
 
 
 def gmr_constants(gmr) -> GmrConstants:
     """Precompute the per-component constants from a fitted GMR (`weights_`, `means_`, `covariances_`,
     `n_inputs`, in original units). Raises `InputError` when it cannot be generated (non-finite values,
-    a zero weight, an input covariance that is not positive definite)."""
+    a zero weight, an input that barely varies (`MIN_INPUT_STD`), an input covariance that is not
+    positive definite)."""
     w = np.asarray(gmr.weights_, dtype=float)
     means = np.asarray(gmr.means_, dtype=float)
     covs = np.asarray(gmr.covariances_, dtype=float)

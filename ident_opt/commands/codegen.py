@@ -27,6 +27,7 @@ N_RANDOM = 4000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The standard problem flags, --out (required) and the model/estimator/GMR choices."""
     add_problem_arguments(parser)
     parser.add_argument("--out", metavar="DIR", required=True, help="output folder for the C code and library")
     parser.add_argument("--extension", metavar="NAME", action="append", default=None,
@@ -43,6 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Identify (or load), generate, compile, check; 0 when the library agrees with Python, 1 when not."""
     import numpy as np
 
     from ident_opt import codegen
@@ -183,30 +185,23 @@ def _saved_vector(saved: dict, model):
     return pi
 
 
-class _SavedGMR:
-    """A fitted GMR read back from parameters.json (the attributes the generator and checks use)."""
-
-    def __init__(self, weights, means, covariances, n_inputs: int):
-        self.weights_, self.means_, self.covariances_, self.n_inputs = weights, means, covariances, n_inputs
-
-    def predict_mean(self, X):
-        from ident_opt.gmr import conditional_mean
-
-        return conditional_mean(self.weights_, self.means_, self.covariances_, self.n_inputs, X)
-
-
-def _gmr_from_saved(raw: dict) -> _SavedGMR:
+def _gmr_from_saved(raw: dict):
+    """The 'gmr' object of a parameters.json (6 inputs, 2 outputs) back as a fitted `GMR`."""
     import numpy as np
+
+    from ident_opt.gmr import GMR
 
     try:
         w, m, c = (np.asarray(raw[key], dtype=float) for key in ("weights", "means", "covariances"))
     except (KeyError, TypeError, ValueError):
         raise InputError("parameters file: 'gmr' needs numeric weights, means and covariances") from None
-    K = len(w)
-    if w.ndim != 1 or m.shape != (K, 8) or c.shape != (K, 8, 8):
+    K = w.shape[0] if w.ndim == 1 else 0
+    if K == 0 or w.ndim != 1 or m.shape != (K, 8) or c.shape != (K, 8, 8):
         raise InputError(f"parameters file: GMR shapes {w.shape}, {m.shape}, {c.shape}; expected (K,), (K, 8), "
                          "(K, 8, 8)")
-    return _SavedGMR(w, m, c, 6)
+    gmr = GMR(n_components=K)
+    gmr.weights_, gmr.means_, gmr.covariances_, gmr.n_inputs = w, m, c, 6
+    return gmr
 
 
 def _check(codegen, library: Path, model, pi, gmr, train, names: list[str], rng) -> dict[str, float]:
