@@ -178,3 +178,17 @@ def test_common_load_reads_the_simulated_trials_of_a_sim_problem(tmp_path, monke
     )
     assert len(loaded.trials) == 2 and loaded.train.n == 300
     assert not np.allclose(loaded.train.tau[:50], loaded.unseen.tau[:50])
+
+
+def test_bad_simulate_settings_in_a_problem_file_name_the_file(tmp_path, monkeypatch):
+    from ident_opt.simulate import problem_trials
+
+    monkeypatch.setenv("IDENT_OPT_CACHE", str(tmp_path / "cache"))
+    text = (
+        (ROOT / "problems" / "tudor_sim.toml").read_text().replace('"asymmetric_coulomb",', '"friction:x=1",')
+    )
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(InputError) as info:
+        problem_trials(load_problem(path))
+    assert str(path) in str(info.value) and "unknown effect 'friction'" in str(info.value)

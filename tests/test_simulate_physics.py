@@ -15,7 +15,9 @@ from ident_opt.problem import Friction, load_problem
 from ident_opt.robot import ArmModel
 from ident_opt.simulate import simulate_trial
 from ident_opt.simulate.closed_loop import MAX_TRACKING_ERROR
+from ident_opt.simulate.effects import normalise
 from ident_opt.simulate.trajectories import TAU_MAX
+from ident_opt.simulate.truth import build_truth, coulomb_levels, plant
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ArmModel(("armature",))
@@ -26,13 +28,17 @@ def robot():
     return load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
 
 
-def test_energy_balance_without_friction(robot):
+def without_friction(robot):
     still = Friction(0.0, 0.0)
-    frictionless = replace(
+    return replace(
         robot,
         joint1=replace(robot.joint1, viscous_friction=still, coulomb_friction=still),
         joint2=replace(robot.joint2, viscous_friction=still, coulomb_friction=still),
     )
+
+
+def test_energy_balance_without_friction(robot):
+    frictionless = without_friction(robot)
     trial = simulate_trial(
         frictionless,
         trajectory="fourier",
@@ -89,3 +95,34 @@ def test_noisy_ols_scatters_as_its_standard_errors_say(robot):
         total += e @ np.linalg.solve(cov, e)
         dof += MODEL.n_params
     assert stats.chi2.ppf(0.001, dof) < total < stats.chi2.ppf(0.999, dof)
+
+
+@pytest.mark.parametrize("joint", [1, 2])
+def test_elastic_joint_exchanges_energy_only_through_the_motor_torque(robot, joint):
+    """Without friction and damping, dE/dt = τ_j dθ + τ_i dq_i for the two-mass model, at any state."""
+    frictionless = without_friction(robot)
+    effects = normalise(
+        {"elasticity": {"joint": joint, "frequency_hz": 6.0, "damping": 0.0}}, coulomb_levels(frictionless)
+    )
+    truth = build_truth(frictionless, effects)
+    e, f = truth.elastic, plant(truth)
+    p = truth.pi_rigid
+    j = joint - 1
+
+    def energy(x):
+        q, theta, dq, dtheta = x[:2], x[2], x[3:5], x[5]
+        M_link = MODEL.mass_matrix(MODEL.vector(p), q[1])
+        M_link[j, j] -= e.B  # the motor's inertia moves with θ, not with the link
+        potential = p["b1"] * np.sin(q[0]) + p["b2"] * np.sin(q[0] + q[1]) + 0.5 * e.k * (theta - q[j]) ** 2
+        return 0.5 * dq @ M_link @ dq + 0.5 * e.B * dtheta**2 + potential
+
+    rng = np.random.default_rng(joint)
+    for _ in range(5):
+        q = rng.uniform([0.3, -1.3], [3.0, 1.3])
+        x = np.concatenate([q, [q[j] + rng.normal(scale=0.02)], rng.normal(size=3)])
+        tau = rng.normal(size=2)
+        xdot = np.asarray(f(x, tau)[0]).ravel()
+        eps = 1e-6
+        rate = (energy(x + eps * xdot) - energy(x - eps * xdot)) / (2 * eps)
+        velocities = [x[5], x[4]] if j == 0 else [x[3], x[5]]
+        assert rate == pytest.approx(tau @ velocities, rel=1e-6, abs=1e-8)

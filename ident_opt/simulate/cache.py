@@ -14,9 +14,10 @@ import os
 from dataclasses import asdict
 from pathlib import Path
 
+from ident_opt.errors import InputError
 from ident_opt.simulate.trial import simulate_trial
 
-SIMULATOR_VERSION = 1  # bump when the simulator's output changes for the same settings
+SIMULATOR_VERSION = 2  # bump when the simulator's output changes for the same settings
 
 
 def cache_dir(problem_path: Path) -> Path:
@@ -48,15 +49,18 @@ def problem_trials(problem) -> list[Path]:
     for seed in (spec.seed, spec.seed + 1):
         path = folder / f"{problem.name}-seed{seed}-{settings_key(problem.robot, spec, seed)}.csv"
         if not path.is_file():
-            trial = simulate_trial(
-                problem.robot,
-                trajectory=spec.trajectory,
-                duration=spec.duration,
-                rate_hz=spec.rate_hz,
-                seed=seed,
-                effects=list(spec.effects),
-                output=spec.output,
-            )
+            try:
+                trial = simulate_trial(
+                    problem.robot,
+                    trajectory=spec.trajectory,
+                    duration=spec.duration,
+                    rate_hz=spec.rate_hz,
+                    seed=seed,
+                    effects=list(spec.effects),
+                    output=spec.output,
+                )
+            except InputError as exc:  # name the file and section the bad setting came from
+                raise InputError(f"{problem.path}: [simulate]: {exc}") from None
             trial.write(path)
         paths.append(path)
     return paths

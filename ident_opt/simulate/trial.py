@@ -163,6 +163,7 @@ def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, 
             e = truth.elastic
             effects[name] = {
                 "joint": e.index + 1,
+                "frequency_range_hz": list(e.frequency_range_hz),
                 "frequency_hz": e.frequency_hz,
                 "damping": e.damping,
                 "stiffness": e.k,
@@ -178,6 +179,15 @@ def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, 
             effects[name] = {**p, "static_level": [c + s for c, s in zip(levels, p["static"])]}
         else:
             effects[name] = dict(p)
+    physical = asdict(rigid_body(truth.robot, "physical"))  # the true plant's, not the datasheet's
+    if "armature" in truth.effects:
+        physical["armature"] = [
+            a + J for a, J in zip(physical["armature"], truth.effects["armature"]["inertia"])
+        ]
+    if "asymmetric_coulomb" in truth.effects:
+        ac = truth.effects["asymmetric_coulomb"]
+        physical["fc_positive"], physical["fc_negative"] = list(ac["positive"]), list(ac["negative"])
+        physical["fc"] = [0.5 * (a + b) for a, b in zip(ac["positive"], ac["negative"])]
     g = closed_loop.gains(robot)
     error = out[:, 2:4] - q_ref  # encoder angle minus reference, at every control tick
     return _plain(
@@ -191,7 +201,7 @@ def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, 
                 "pi": truth.model.as_dict(truth.pi),
             },
             "effects": effects,
-            "physical": asdict(rigid_body(truth.robot, "physical")),
+            "physical": physical,
             "settings": settings,
             "measurement": {
                 "torque_noise_std": list(measurement.TORQUE_NOISE) if settings["noise"] else [0.0, 0.0],

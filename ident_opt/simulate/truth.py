@@ -43,6 +43,7 @@ class Elastic:
     J_link: float
     frequency_hz: float
     damping: float
+    frequency_range_hz: tuple[float, float]  # over the workspace (joint 1: J_l depends on q2)
 
 
 @dataclass(frozen=True)
@@ -113,7 +114,12 @@ def _elastic(robot: Robot, effects: dict, pi: dict, j: int, f: float, zeta: floa
     B = body.armature[j] + extra  # the motor side: reflected rotor inertia
     J_link = (pi["a1"] - B + 2 * pi["a2"]) if j == 0 else pi["a3"]
     k = J_link * (2 * math.pi * f) ** 2
-    return Elastic(j, k, 2 * zeta * math.sqrt(k * J_link), B, J_link, f, zeta)
+    if j == 0:  # J_l(q2) = a1 − B + 2 a2 cos q2 over |q2| ≤ 1.4 rad (the trajectories' range)
+        inertias = [pi["a1"] - B + 2 * pi["a2"] * math.cos(q2) for q2 in (0.0, 1.4)]
+    else:
+        inertias = [J_link, J_link]
+    band = tuple(math.sqrt(k / J) / (2 * math.pi) for J in inertias)
+    return Elastic(j, k, 2 * zeta * math.sqrt(k * J_link), B, J_link, f, zeta, band)
 
 
 # ---------------------------------------------------------------------------------------------- dynamics
