@@ -103,8 +103,9 @@ class OnlineIdentifier:
         self.estimator = estimator
         self.theta0 = np.asarray(theta0, dtype=float).copy()
         self.theta = self.theta0.copy()
-        self.stats = stats0.copy()
-        self._H, self._h, _ = self.stats.combined()
+        self._stats = stats0.copy()
+        self._pending: list[tuple[np.ndarray, np.ndarray]] = []  # samples not yet in `_stats`
+        self._H, self._h, _ = self._stats.combined()
         self._solve = estimator.make_solver()
         self.n_updates = 0
         self._gmr0 = gmr
@@ -123,6 +124,17 @@ class OnlineIdentifier:
             self.theta = self._solve(self._H, self._h)  # the offline solution, by this estimator
 
     # ------------------------------------------------------------------ state
+    @property
+    def stats(self) -> Stats:
+        """The per-joint statistics of all data seen (offline + online). Samples are folded in lazily, in
+        one vectorised batch when asked for: the per-sample path only updates the combined (H, h)."""
+        if self._pending:
+            D = np.stack([d for d, _ in self._pending])
+            tau = np.stack([t for _, t in self._pending])
+            self._stats = self._stats + Stats.from_regressor(D, tau)
+            self._pending.clear()
+        return self._stats
+
     @property
     def parameters(self) -> np.ndarray:
         """The current θ (a copy)."""
@@ -160,10 +172,14 @@ class OnlineIdentifier:
 
     def add(self, D: np.ndarray, tau: np.ndarray) -> None:
         """Fold one sample (design D (2, P), τ (2,)) into the statistics and re-solve θ exactly."""
-        self.stats.add_sample(D, tau)
+        self._pending.append((D, tau))
         self.n_updates += 1
         if self._solve is None:
+            if len(self._pending) >= 4096:  # bounded memory for fixed models too
+                _ = self.stats
             return
+        if len(self._pending) >= 4096:
+            _ = self.stats
         # The combined normal equations, updated in place (the same rank-2 term as the per-joint Stats).
         self._H += D.T @ D
         self._h += D.T @ tau
@@ -212,3 +228,87 @@ def arm_design_jacobian(model) -> Callable[[np.ndarray], np.ndarray]:
         return np.stack([np.array(f(xv, eye[p])) for p in range(model.n_params)], axis=-1)
 
     return jacobian
+
+
+# ---------------------------------------------------------------------------------------------- the paper's models
+#: Online model keys, in report order: the paper's three (rr, dm, pbr), ours (cpbr), the physical datasheet.
+MODEL_KEYS = ("rr", "dm", "dm_physical", "pbr", "cpbr")
+
+
+def kinematic_design(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+    """RR's design (N, 2, 14): joint j's row holds [1, q1 q2 dq1 dq2 ddq1 ddq2] in block j (its own
+    intercept and weights), so θ = [c1, w1, c2, w2] and the ridge on the statistics is two ridges."""
+    F = np.hstack([np.ones((len(q), 1)), q, dq, ddq])
+    D = np.zeros((len(q), 2, 2 * F.shape[1]))
+    D[:, 0, :F.shape[1]], D[:, 1, F.shape[1]:] = F, F
+    return D
+
+
+def _kinematic_jacobian(_x: np.ndarray) -> np.ndarray:
+    """∂D/∂x of `kinematic_design` (2, 6, 14): constant, the design is linear in x."""
+    J = np.zeros((2, 6, 14))
+    for i in range(6):
+        J[0, i, 1 + i] = J[1, i, 8 + i] = 1.0
+    return J
+
+
+@dataclass
+class Start:
+    """What one online model starts from: its design, estimator, offline θ0 and parameter names."""
+
+    key: str
+    design: Design
+    estimator: Estimator
+    theta0: np.ndarray
+    names: tuple[str, ...]
+    jacobian: Callable[[np.ndarray], np.ndarray]
+
+
+def offline_start(key: str, problem, train, bounds: Bounds | None = None, margin: float = 1e-6) -> Start:
+    """The offline fit of one model on the training trial (`ident_opt.models` for RR's penalty and the
+    datasheet π): rr — ridge with the per-joint penalty RidgeCV picks; dm, dm_physical — the datasheet
+    (fixed); pbr — bounded LS (`identify.bounded.default_bounds` unless `bounds`); cpbr — M(q) ⪰ margin·I
+    for all q [kg m²] with the same box."""
+    from ident_opt.identify.bounded import WarmConsistentLS, default_bounds
+    from ident_opt.models import RidgeModel, datasheet_model
+    from ident_opt.robot import RIGID
+
+    if key == "rr":
+        ridge = RidgeModel().fit(train)
+        alpha = np.broadcast_to(ridge.alpha_, (2,))
+        penalty = np.concatenate([np.r_[0.0, np.full(6, a)] for a in alpha])  # intercepts unpenalised
+        theta0 = np.concatenate([np.r_[ridge.intercept_[j], ridge.coef_[j]] for j in range(2)])
+        names = tuple(f"{w}_{j}" for j in (1, 2) for w in ("c", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2"))
+        return Start(key, kinematic_design, Estimator("ridge", penalty=penalty), theta0, names,
+                     _kinematic_jacobian)
+    if key in ("dm", "dm_physical"):
+        dm = datasheet_model(problem.robot, "paper" if key == "dm" else "physical")
+        return Start(key, dm.arm.regressor, Estimator("fixed"), dm.pi, dm.arm.names,
+                     arm_design_jacobian(dm.arm))
+    box = bounds or default_bounds(RIGID)
+    if key == "pbr":
+        estimator = Estimator("bounded", bounds=box)
+    elif key == "cpbr":
+        estimator = Estimator("consistent", solver=WarmConsistentLS(RIGID, box, margin))
+    else:
+        raise ValueError(f"unknown online model {key!r}; known: {', '.join(MODEL_KEYS)}")
+    stats = Stats.from_data(RIGID, train.q, train.dq, train.ddq, train.tau)
+    theta0 = batch_theta(estimator, stats)
+    return Start(key, RIGID.regressor, estimator, theta0, RIGID.names, arm_design_jacobian(RIGID))
+
+
+def start_identifier(start: Start, train, gmr=None, cross_covariance: bool = False) -> OnlineIdentifier:
+    """The online identifier of `start` with the statistics of the training trial; `gmr` (unfitted, e.g.
+    `models.make_gmr(problem.residual)`) is fitted here on x = [q dq ddq] → r = τ − Dθ0."""
+    D = start.design(train.q, train.dq, train.ddq)
+    stats0 = Stats.from_regressor(D, train.tau)
+    if gmr is not None:
+        gmr.fit(np.hstack([train.q, train.dq, train.ddq]), train.tau - D @ start.theta0)
+    online = OnlineIdentifier(start.design, start.estimator, start.theta0, stats0, gmr=gmr,
+                              cross_covariance=cross_covariance,
+                              design_jacobian=start.jacobian if cross_covariance else None)
+    if start.estimator.kind == "ridge":
+        # The recursive ridge reproduces the offline ridge on the same data exactly (a check, not a fit).
+        if not np.allclose(online.theta, start.theta0, rtol=1e-8, atol=1e-10 * np.abs(start.theta0).max()):
+            raise RuntimeError("ridge on the statistics differs from the offline RidgeCV fit")
+    return online
