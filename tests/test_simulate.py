@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ident_opt.cli import main
 from ident_opt.data import load_dataset
@@ -17,7 +19,7 @@ from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import DataSpec, load_problem
 from ident_opt.robot import ArmModel
-from ident_opt.simulate import parse_effect, simulate_trial
+from ident_opt.simulate import CATALOGUE, parse_effect, simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "tudor_2dof.toml"
@@ -97,7 +99,19 @@ def test_bad_effect_text_is_an_input_error_naming_it(robot, text, words):
 
 
 def test_bad_settings_are_input_errors(robot):
-    for kwargs in ({"rate_hz": 300.0}, {"output": "volts"}, {"trajectory": "zigzag"}, {"duration": 0.1}):
+    bad = (
+        {"rate_hz": 300.0},
+        {"rate_hz": float("nan")},
+        {"rate_hz": 0.0},
+        {"rate_hz": 2000.0},
+        {"output": "volts"},
+        {"trajectory": "zigzag"},
+        {"duration": 0.1},
+        {"duration": float("inf")},
+        {"seed": -1},
+        {"seed": 1.5},
+    )
+    for kwargs in bad:
         with pytest.raises(InputError):
             simulate_trial(robot, progress=False, **{"duration": 1.0, **kwargs})
 
@@ -192,3 +206,22 @@ def test_bad_simulate_settings_in_a_problem_file_name_the_file(tmp_path, monkeyp
     with pytest.raises(InputError) as info:
         problem_trials(load_problem(path))
     assert str(path) in str(info.value) and "unknown effect 'friction'" in str(info.value)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(max_size=60))
+def test_parse_effect_never_fails_with_anything_but_an_input_error(text):
+    try:
+        name, params = parse_effect(text)
+    except InputError:
+        return
+    assert name in CATALOGUE and isinstance(params, dict)
+
+
+def test_gzipped_output_is_written_compressed_and_read_back(tmp_path, robot):
+    trial = simulate_trial(robot, duration=1.0, progress=False)
+    path = trial.write(tmp_path / "t.csv.gz")
+    assert path.read_bytes()[:2] == b"\x1f\x8b" and (tmp_path / "t.truth.json").is_file()
+    assert load_dataset(path, DataSpec(), robot).n == 100
+    with pytest.raises(InputError, match="name it"):
+        trial.write(tmp_path / "t.txt")

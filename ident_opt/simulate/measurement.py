@@ -29,8 +29,8 @@ DERIVATIVE_CUTOFF_HZ = DataSpec.derivative_cutoff_hz  # the data loader's defaul
 
 def decimation(rate_hz: float) -> int:
     """Control ticks per logged sample; the rate must divide the 1 kHz control rate."""
-    ratio = CONTROL_HZ / rate_hz
-    if rate_hz <= 0 or rate_hz > CONTROL_HZ or abs(ratio - round(ratio)) > 1e-9:
+    ratio = CONTROL_HZ / rate_hz if np.isfinite(rate_hz) and rate_hz > 0 else np.nan
+    if not (np.isfinite(ratio) and rate_hz <= CONTROL_HZ and abs(ratio - round(ratio)) <= 1e-9):
         raise InputError(
             f"rate {rate_hz:g} Hz: the logging rate must divide the {CONTROL_HZ:g} Hz control rate "
             "(e.g. 1000, 500, 250, 200, 100, 50 Hz)"

@@ -21,6 +21,8 @@ from ident_opt.simulate.effects import is_active, normalise
 from ident_opt.simulate.trajectories import reference
 from ident_opt.simulate.truth import TRUTH_MODEL, Truth, build_truth, coulomb_levels
 
+MIN_DURATION, MAX_DURATION = 1.0, 3600.0  # s: enough samples for the derivative filter; memory stays bounded
+
 
 @dataclass
 class SimTrial:
@@ -59,10 +61,13 @@ class SimTrial:
         Both are written to temporary files and renamed into place, so a reader never sees half a file.
         """
         path = Path(csv_path)
+        if not path.name.lower().endswith((".csv", ".csv.gz")):
+            raise InputError(f"{path}: the simulated trial is written as CSV; name it *.csv or *.csv.gz")
+        gz = path.name.lower().endswith(".gz")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            _atomic(path, lambda fh: self.frame.to_csv(fh, index=False))
-            _atomic(truth_path(path), lambda fh: (json.dump(self.truth, fh, indent=2), fh.write("\n")))
+            _atomic(path, lambda tmp: self.frame.to_csv(tmp, index=False, compression="gzip" if gz else None))
+            _atomic(truth_path(path), lambda tmp: tmp.write_text(json.dumps(self.truth, indent=2) + "\n"))
         except OSError as exc:
             raise InputError(f"{path}: cannot write the simulated trial ({exc.strerror})") from None
         return path
@@ -75,10 +80,11 @@ def truth_path(csv_path: str | Path) -> Path:
 
 
 def _atomic(path: Path, write) -> None:
+    """`write(tmp_path)` to a temporary file beside `path`, then rename it into place."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
     try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            write(fh)
+        write(Path(tmp))
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -108,8 +114,10 @@ def simulate_trial(
     """
     if output not in ("torque", "current"):
         raise InputError(f'output {output!r}: must be "torque" or "current"')
-    if not (np.isfinite(duration) and duration >= 1.0):
-        raise InputError(f"duration {duration!r}: must be at least 1 s")
+    if not (np.isfinite(duration) and MIN_DURATION <= duration <= MAX_DURATION):
+        raise InputError(f"duration {duration!r}: must be between {MIN_DURATION:g} and {MAX_DURATION:g} s")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise InputError(f"seed {seed!r}: must be an integer >= 0")
     measurement.decimation(rate_hz)
     coulomb = coulomb_levels(robot)
     wanted = normalise(effects, coulomb)
