@@ -26,6 +26,10 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check ident_opt tests benchmarks
 
+## Generated C for the default problem: C sources, shared library, parameters.json, README.
+codegen: $(STAMP)
+	$(BIN)/ident-opt codegen --problem $(PROBLEM) --out build/codegen
+
 audit: $(STAMP)
 	$(BIN)/ident-opt audit --problem problems/tudor_2dof_paper.toml --out results
 
