@@ -115,34 +115,61 @@ class StudyResult:
         }
 
 
-def constraints_study(robot, n_trials: int = 50, *, seed: int = 0, durations: tuple[float, float] = (2.0, 5.0),
-                      noise: tuple[float, float] = (0.5, 0.3), rate_hz: float = 100.0, margin: float = 1e-6,
-                      progress: bool = True) -> StudyResult:
-    """OLS vs constrained on `n_trials` short, poorly exciting rigid trials with known truth.
+STUDY_SOURCES = {
+    "multisine": "a local rigid generator: one joint moves (multisine, alternating), the other is held still or "
+                 "moves ±0.05 rad; exact dq, ddq; Gaussian torque noise",
+    "simulator": "the built-in simulator (`ident_opt.simulate`, no hidden effect): the first seconds of a "
+                 "tud01 point-to-point trial under closed-loop control, with its measurement noise, "
+                 "quantisation and estimated derivatives",
+}
 
-    Truth: the physical-convention datasheet π with joint-2 armature (`ArmModel(("armature",))`, the
-    model fitted too). Trial i: duration uniform in `durations` [s]; one joint moves (alternating), the
-    other is held still (even i // 2) or moves a little (±0.05 rad); Gaussian torque noise `noise` [N m].
+
+def _study_trial(source: str, robot, model: ArmModel, pi_sheet: np.ndarray, i: int, duration: float, seed: int,
+                 noise: tuple[float, float], rate_hz: float) -> tuple[Dataset, np.ndarray, dict]:
+    """Trial i of the constraints study: (data, true π, description columns)."""
+    if source == "simulator":
+        from ident_opt.simulate import simulate_trial
+
+        sim = simulate_trial(robot, trajectory="tud01", duration=duration, rate_hz=rate_hz, seed=seed * 100003 + i,
+                             progress=False)
+        data = sim.dataset()
+        moved = np.ptp(data.q, axis=0) > 0.05
+        return data, model.vector(sim.truth["pi"]), {"moving_joints": "".join(
+            str(j + 1) for j in range(2) if moved[j]) or "none"}
+    moving = i % 2
+    small = 0.0 if (i // 2) % 2 == 0 else 0.05
+    amp = (0.8, small) if moving == 0 else (small, 0.8)
+    data = multisine_trial(model, pi_sheet, duration=duration, rate_hz=rate_hz, seed=seed * 100003 + i,
+                           amplitude=amp, noise=noise)
+    return data, pi_sheet, {"moving_joints": str(moving + 1), "other_amplitude": small}
+
+
+def constraints_study(robot, n_trials: int = 50, *, source: str = "multisine", seed: int = 0,
+                      durations: tuple[float, float] = (2.0, 5.0), noise: tuple[float, float] = (0.5, 0.3),
+                      rate_hz: float = 100.0, margin: float = 1e-6, progress: bool = True) -> StudyResult:
+    """OLS vs constrained on `n_trials` short, poorly exciting trials with known truth.
+
+    `source`: "multisine" or "simulator" (see `STUDY_SOURCES`). Truth: the physical-convention datasheet
+    π with joint-2 armature; the fitted model is `ArmModel(("armature",))`, which contains the truth.
+    Trial i lasts a duration uniform in `durations` [s]; `noise` [N m] is the multisine source's.
     """
     from tqdm import tqdm
 
+    if source not in STUDY_SOURCES:
+        raise ValueError(f"source must be one of {sorted(STUDY_SOURCES)}, not {source!r}")
     model = ArmModel(("armature",))
-    pi_true = model.vector(datasheet_pi(robot, "physical"))
+    pi_sheet = model.vector(datasheet_pi(robot, "physical"))
     rng = np.random.default_rng(seed)
     rows = []
-    for i in tqdm(range(n_trials), desc="constraints study", disable=not progress, file=None):
+    for i in tqdm(range(n_trials), desc=f"constraints study ({source})", disable=not progress):
         duration = float(rng.uniform(*durations))
-        moving = i % 2
-        small = 0.0 if (i // 2) % 2 == 0 else 0.05
-        amp = (0.8, small) if moving == 0 else (small, 0.8)
-        trial = multisine_trial(model, pi_true, duration=duration, rate_hz=rate_hz, seed=seed * 100003 + i,
-                                amplitude=amp, noise=noise)
+        trial, pi_true, described = _study_trial(source, robot, model, pi_sheet, i, duration, seed, noise, rate_hz)
         st = Stats.from_data(model, trial.q, trial.dq, trial.ddq, trial.tau)
         ols = fit_ols(st, model)
         con = fit_constrained(st, model, margin=margin)
         excited = np.array([name not in ols.unexcited for name in model.names])
         rows.append({
-            "trial": i, "duration_s": duration, "moving_joint": moving + 1, "other_amplitude": small,
+            "trial": i, "duration_s": duration, **described,
             "rank": ols.rank, "ols_consistent": ols.consistent, "ols_min_eig": ols.min_mass_eigenvalue,
             "constrained_consistent": bool(con.min_mass_eigenvalue >= margin * (1 - 1e-6) and con.friction_ok),
             "constrained_min_eig": con.min_mass_eigenvalue, "active": " ".join(con.active),
@@ -151,52 +178,60 @@ def constraints_study(robot, n_trials: int = 50, *, seed: int = 0, durations: tu
             "err_ols_excited": relative_error(ols.pi[excited], pi_true[excited]),
             "err_constrained_excited": relative_error(con.pi[excited], pi_true[excited]),
         })
-    settings = {"n_trials": n_trials, "seed": seed, "durations_s": list(durations), "noise_nm": list(noise),
-                "rate_hz": rate_hz, "margin": margin, "model": list(model.names),
-                "truth": "physical-convention datasheet (with joint-2 armature), rigid, local multisine generator"}
+    settings = {"n_trials": n_trials, "source": source, "seed": seed, "durations_s": list(durations),
+                "noise_nm": list(noise) if source == "multisine" else "the simulator's", "rate_hz": rate_hz,
+                "margin": margin, "model": list(model.names),
+                "truth": "physical-convention datasheet π with joint-2 armature"}
     return StudyResult(pd.DataFrame(rows), settings)
 
 
-def study_markdown(result: StudyResult) -> str:
-    """`results/constraints_study.md`: what was run, the summary in numbers, and the per-trial table."""
+def study_markdown(results: StudyResult | list[StudyResult]) -> str:
+    """`results/constraints_study.md`: what was run, the summary in numbers per trial source, per-trial tables."""
     from ident_opt.tables import markdown_table
 
-    s, cfg = result.summary, result.settings
+    results = [results] if isinstance(results, StudyResult) else list(results)
+    cfg = results[0].settings
     lines = [
         "# Where the physical-consistency constraints matter",
         "",
-        f"{s['trials']} short rigid trials ({cfg['durations_s'][0]:g}–{cfg['durations_s'][1]:g} s at "
-        f"{cfg['rate_hz']:g} Hz), each moving one joint (alternating) while the other is held still or moves "
-        f"±0.05 rad; torque noise σ = {cfg['noise_nm'][0]:g} / {cfg['noise_nm'][1]:g} N·m. Truth: "
-        f"{cfg['truth']}; fitted model: {', '.join(cfg['model'])}. Constrained = M(q) ⪰ {cfg['margin']:g}·I ∀q "
-        "and friction ≥ 0 (cvxpy + Clarabel, from the statistics). Parameter error = RMS over parameters of "
-        "(π̂ − π)/|π|.",
+        f"Short trials ({cfg['durations_s'][0]:g}–{cfg['durations_s'][1]:g} s at {cfg['rate_hz']:g} Hz) with a "
+        f"known truth ({cfg['truth']}); fitted model: {', '.join(cfg['model'])}. OLS vs constrained = "
+        f"M(q) ⪰ {cfg['margin']:g}·I ∀q and friction ≥ 0 (from the sufficient statistics; Clarabel). "
+        "Parameter error = RMS over parameters of (π̂ − π)/|π|. Trial sources:",
         "",
-        "| quantity | value |",
-        "|---|---|",
-        f"| OLS physically inconsistent | {s['ols_inconsistent']} / {s['trials']} |",
-        f"| constrained inconsistent | {s['constrained_inconsistent']} / {s['trials']} |",
-        f"| trials where the fits differ (some constraint active) | {s['fits_differ']} |",
-        f"| constrained closer to truth | {s['constrained_wins']} / {s['trials']} "
-        f"(win rate where they differ: {s['win_rate_where_differ']:.2f}) |",
-        f"| median parameter error, OLS | {s['median_error_ols']:.3g} |",
-        f"| median parameter error, constrained | {s['median_error_constrained']:.3g} |",
-        f"| median error ratio constrained / OLS (all; where they differ) | {s['median_error_ratio']:.3g}; "
-        f"{s['median_error_ratio_where_differ']:.3g} |",
-        f"| median error over excited parameters only, OLS / constrained | {s['median_error_ols_excited']:.3g} / "
-        f"{s['median_error_constrained_excited']:.3g} |",
+        *[f"- **{r.settings['source']}**: {STUDY_SOURCES[r.settings['source']]}"
+          + (f" (σ = {r.settings['noise_nm'][0]:g} / {r.settings['noise_nm'][1]:g} N·m)"
+             if r.settings["source"] == "multisine" else "") + "." for r in results],
         "",
-        "Reading: short single-joint trials leave some columns unexcited (e.g. the still joint's friction) and "
-        "others barely excited; OLS then trades physically impossible inertias for a slightly smaller "
-        "training residual. The constrained fit cannot, and lands closer to the truth in most such trials. "
-        "Trials where the fits differ with no constraint listed as active are rank-deficient: the data "
-        "leave a direction free and the two solvers pick different points of equal residual.",
+        "| quantity | " + " | ".join(r.settings["source"] for r in results) + " |",
+        "|---|" + "---|" * len(results),
+    ]
+    rows = [
+        ("trials", lambda s: f"{s['trials']}"),
+        ("OLS physically inconsistent", lambda s: f"{s['ols_inconsistent']} / {s['trials']}"),
+        ("constrained inconsistent", lambda s: f"{s['constrained_inconsistent']} / {s['trials']}"),
+        ("trials where the two fits differ", lambda s: f"{s['fits_differ']}"),
+        ("constrained closer to the truth", lambda s: f"{s['constrained_wins']} / {s['trials']}"),
+        ("win rate where the fits differ", lambda s: f"{s['win_rate_where_differ']:.2f}"),
+        ("median parameter error, OLS", lambda s: f"{s['median_error_ols']:.3g}"),
+        ("median parameter error, constrained", lambda s: f"{s['median_error_constrained']:.3g}"),
+        ("median error ratio constrained / OLS, all trials", lambda s: f"{s['median_error_ratio']:.3g}"),
+        ("median error ratio where the fits differ", lambda s: f"{s['median_error_ratio_where_differ']:.3g}"),
+        ("median error over excited parameters, OLS / constrained",
+         lambda s: f"{s['median_error_ols_excited']:.3g} / {s['median_error_constrained_excited']:.3g}"),
+    ]
+    for label, cell in rows:
+        lines.append(f"| {label} | " + " | ".join(cell(r.summary) for r in results) + " |")
+    lines += [
         "",
-        "## Per trial",
-        "",
-        markdown_table(result.rows.set_index("trial"), digits=3),
+        "Reading: short trials leave some columns unexcited (e.g. a still joint's friction) and others barely "
+        "excited; OLS then trades physically impossible inertias for a slightly smaller training residual. "
+        "The constrained fit cannot. Where the fits differ but no constraint is listed as active, the data "
+        "leave a direction free (rank-deficient) and the two solvers pick different points of equal residual.",
         "",
     ]
+    for r in results:
+        lines += [f"## Per trial: {r.settings['source']}", "", markdown_table(r.rows.set_index("trial"), digits=3), ""]
     return "\n".join(lines)
 
 

@@ -90,4 +90,6 @@ def test_constraints_study_cli(tmp_path):
                    "--constraints-study", "4", "--no-progress", "--json", str(tmp_path / "s.json")])
     assert status == 0
     assert (tmp_path / "constraints_study.md").exists()
-    assert json.loads((tmp_path / "s.json").read_text())["summary"]["trials"] == 4
+    payload = json.loads((tmp_path / "s.json").read_text())
+    assert payload["multisine"]["summary"]["trials"] == 4 and payload["simulator"]["summary"]["trials"] == 4
+    assert payload["simulator"]["summary"]["constrained_inconsistent"] == 0

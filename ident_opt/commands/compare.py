@@ -24,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fit an extended model (armature, asymmetric_coulomb, stribeck, offset); repeatable")
     parser.add_argument("--constraints-study", type=int, metavar="N",
                         help="run the constraints study on N short simulated trials instead of the comparison")
+    parser.add_argument("--study-source", choices=("multisine", "simulator", "both"), default="both",
+                        help="trials of the constraints study: the local rigid multisine generator, the built-in "
+                             "simulator (short tud01 trials), or both (default)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -52,14 +55,20 @@ def run(args: argparse.Namespace) -> int:
 
         problem = load_problem(args.problem)
         out = output_dir(args, problem)
-        result = compare.constraints_study(problem.robot, args.constraints_study, margin=args.margin,
-                                           progress=not args.no_progress)
-        (out / "constraints_study.md").write_text(compare.study_markdown(result))
-        write_table(result.rows.set_index("trial"), out / "constraints_study.csv")
-        print("\n".join(f"{k}: {v}" for k, v in result.summary.items()))
+        sources = ("multisine", "simulator") if args.study_source == "both" else (args.study_source,)
+        results = [compare.constraints_study(problem.robot, args.constraints_study, source=source,
+                                             margin=args.margin, progress=not args.no_progress)
+                   for source in sources]
+        (out / "constraints_study.md").write_text(compare.study_markdown(results))
+        rows = pd.concat([r.rows.assign(source=r.settings["source"]) for r in results], ignore_index=True)
+        write_table(rows.set_index(["source", "trial"]), out / "constraints_study.csv")
+        for r in results:
+            print(f"[{r.settings['source']}] " + ", ".join(f"{k}: {v:.3g}" if isinstance(v, float) else f"{k}: {v}"
+                                                          for k, v in r.summary.items()))
         print(f"wrote constraints_study.md and constraints_study.csv to {out.resolve()}")
-        write_json(args.json, {"summary": result.summary, "settings": result.settings,
-                               "trials": result.rows.to_dict(orient="records")})
+        write_json(args.json, {r.settings["source"]: {"summary": r.summary, "settings": r.settings,
+                                                      "trials": r.rows.to_dict(orient="records")}
+                               for r in results})
         return 0
 
     loaded = load(args, min_samples=2 * model.n_params)

@@ -124,6 +124,24 @@ def fit_bounded(stats: Stats, model: ArmModel, lb: np.ndarray, ub: np.ndarray,
     return fit_constrained(stats, model, bounds=(lb, ub), weights=weights, friction=False, mass=False)
 
 
+#: Relative size of the tie-break on rank-deficient data (far below any standard error).
+TIE_BREAK = 1e-7
+
+
+def tie_break(H: np.ndarray) -> np.ndarray:
+    """ρ (P,): a tiny penalty Σ_p ρ_p π_p², only when H is singular, so the constrained minimiser is unique.
+
+    It mirrors OLS's least-norm choice (in column-equilibrated units): ρ_p = ε H_pp, and ε × the mean
+    excited H_pp for columns the data do not excite. Without it an interior-point solver returns the
+    analytic centre of the optimal face, an arbitrary point along directions the data cannot see.
+    """
+    d = np.diag(H)
+    excited = d > 1e-12 * max(d.max(), np.finfo(float).tiny)
+    if np.linalg.matrix_rank(H, hermitian=True) == len(d) or not excited.any():
+        return np.zeros(len(d))
+    return TIE_BREAK * np.where(excited, d, d[excited].mean())
+
+
 @dataclass(frozen=True)
 class Block:
     """One named constraint as numbers: A π + s = b with s in `cone` ("psd2": 2×2 PSD in Clarabel's
@@ -174,16 +192,14 @@ def _solve_clarabel(model: ArmModel, H: np.ndarray, h: np.ndarray, n: int, margi
                     bounds: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray | None, str, float]:
     """min ½ πᵀQπ + cᵀπ s.t. the named blocks, by Clarabel directly: (π or None, status, solver s).
 
-    Q = 2(H + diag D + ρI)/n and c = −2(h + D π0)/n: the module doc's objective per sample (ρ: a tiny
-    pull to 0 when the data leave directions free, so the minimiser is unique, like OLS's least norm).
+    Q = 2(H + diag(D + ρ))/n and c = −2(h + D π0)/n: the module doc's objective per sample, with the
+    tie-break ρ of `tie_break` when the data leave directions free.
     """
     import clarabel
     from scipy import sparse
 
     P = model.n_params
-    rank_deficient = np.linalg.matrix_rank(H, hermitian=True) < P
-    ridge = 1e-10 * np.trace(H) / P if rank_deficient else 0.0
-    Q = 2.0 * (H + np.diag(Dp) + ridge * np.eye(P)) / max(n, 1)
+    Q = 2.0 * (H + np.diag(Dp + tie_break(H))) / max(n, 1)
     c = -2.0 * (h + Dp * prior) / max(n, 1)
     blocks = constraint_blocks(model, margin, friction, mass, bounds)
     A = np.vstack([blk.A for blk in blocks]) if blocks else np.zeros((0, P))
@@ -229,10 +245,10 @@ def _program(model: ArmModel, friction: bool, mass: bool, lower: tuple[int, ...]
     pi = cp.Variable(P, name="pi")
     par = {"R": cp.Parameter((P, P), name="R"), "d": cp.Parameter(P, name="d"),
            "prior_term": cp.Parameter(P, name="prior_term"), "sqrt_dp": cp.Parameter(P, nonneg=True, name="sqrt_dp"),
-           "sqrt_ridge": cp.Parameter(nonneg=True, name="sqrt_ridge"), "margin": cp.Parameter(name="margin")}
+           "sqrt_ridge": cp.Parameter(P, nonneg=True, name="sqrt_ridge"), "margin": cp.Parameter(name="margin")}
     objective = (cp.sum_squares(par["R"] @ pi - par["d"])
                  + cp.sum_squares(cp.multiply(par["sqrt_dp"], pi) - par["prior_term"])
-                 + cp.sum_squares(par["sqrt_ridge"] * pi))  # parameter inside: keeps it DPP
+                 + cp.sum_squares(cp.multiply(par["sqrt_ridge"], pi)))  # parameter inside: keeps it DPP
     constraints = []
     if mass:
         A0, A1 = model.mass_matrix_maps
@@ -270,8 +286,8 @@ def _solve_conic(model: ArmModel, H: np.ndarray, h: np.ndarray, n: int, margin: 
     par["d"].value = np.concatenate([d, np.zeros(P - d.size)]) * np.sqrt(scale)
     par["sqrt_dp"].value = np.sqrt(Dp * scale)
     par["prior_term"].value = par["sqrt_dp"].value * prior  # √D (π − π0) = √D π − √D π0 stays DPP
-    # Data that leave directions free: a tiny pull to 0 makes the minimiser unique (like OLS's least norm).
-    par["sqrt_ridge"].value = np.sqrt(1e-10 * np.trace(H) / P * scale) if R.shape[0] < P else 0.0
+    # Data that leave directions free: the tie-break makes the minimiser unique (see `tie_break`).
+    par["sqrt_ridge"].value = np.sqrt(tie_break(H) * scale)
     par["margin"].value = margin
     if lower:
         par["lb"].value = lb[list(lower)]
