@@ -108,7 +108,7 @@ class OnlineIdentifier:
         self._H, self._h, _ = self._stats.combined()
         self._solve = estimator.make_solver()
         self.n_updates = 0
-        self._gmr0 = gmr
+        self.gmr0 = gmr  # the offline GMR, never modified (the transform starts from it every step)
         self._gmr = copy.deepcopy(gmr) if gmr is not None else None
         if gmr is not None:
             d = gmr.n_inputs
@@ -189,12 +189,12 @@ class OnlineIdentifier:
 
     def _transform(self, delta: np.ndarray) -> None:
         """Consistency transform for θ = θ0 + Δθ, from the offline GMR (module doc)."""
-        d = self._gmr0.n_inputs
-        self._gmr.means_[:, d:] = self._gmr0.means_[:, d:] - self._design_at_means @ delta
+        d = self.gmr0.n_inputs
+        self._gmr.means_[:, d:] = self.gmr0.means_[:, d:] - self._design_at_means @ delta
         if self._jac_at_means is None:
             return
         J = self._jac_at_means @ delta  # (K, 2, 6): ∂(D(x)Δθ)/∂x at μx_k
-        S0 = self._gmr0.covariances_
+        S0 = self.gmr0.covariances_
         Sxx, Srx, Srr = S0[:, :d, :d], S0[:, d:, :d], S0[:, d:, d:]
         JSxx = J @ Sxx
         Jt = np.swapaxes(J, 1, 2)
