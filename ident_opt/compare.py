@@ -32,12 +32,13 @@ METRICS = ("rmse", "nmse", "nmse_range")
 
 
 # ---------------------------------------------------------------------------------------------- estimators
-def estimators(robot, margin: float = 1e-6) -> dict[str, Callable[[Stats, ArmModel], LinearFit]]:
-    """The fitted estimators by key: statistics + model → LinearFit."""
+def estimators(robot, margin: float = 1e-6, weights: str | None = None
+               ) -> dict[str, Callable[[Stats, ArmModel], LinearFit]]:
+    """The fitted estimators by key: statistics + model → LinearFit (`weights`: None or "wls")."""
     return {
-        "ols": lambda st, m: fit_ols(st, m),
-        "constrained": lambda st, m: fit_constrained(st, m, margin=margin),
-        "nlp_physical": lambda st, m: fit_physical(st, robot, m),
+        "ols": lambda st, m: fit_ols(st, m, weights),
+        "constrained": lambda st, m: fit_constrained(st, m, margin=margin, weights=weights),
+        "nlp_physical": lambda st, m: fit_physical(st, robot, m, weights=weights),
     }
 
 
@@ -284,14 +285,16 @@ def _scores(datasets: list[tuple[Dataset, np.ndarray]], model: ArmModel, pi: np.
 
 
 def compare_estimators(train: Dataset, robot, split, unseen: Dataset | None = None, *,
-                       model: ArmModel | None = None, margin: float = 1e-6, progress: bool = True) -> Comparison:
+                       model: ArmModel | None = None, margin: float = 1e-6, weights: str | None = None,
+                       progress: bool = True) -> Comparison:
     """Fit every estimator, score it on the paper's shuffled protocol, the chronological split and (when
-    `unseen` is given) the unseen trial; score both datasheets on the same test samples."""
+    `unseen` is given) the unseen trial; score both datasheets on the same test samples. `weights`:
+    None (plain least squares) or "wls" (joints weighted by 1/σ_j², estimated per fit)."""
     from ident_opt.data import chronological_split, shuffled_split
     from ident_opt.identify.seeds import seed_study, split_fits
 
     model = model or ArmModel()
-    fitters = estimators(robot, margin)
+    fitters = estimators(robot, margin, weights)
     whole = Stats.from_data(model, train.q, train.dq, train.ddq, train.tau)
     fits = {key: fn(whole, model) for key, fn in fitters.items()}
     seeds = seed_study(train, model, split, fitters, progress=progress)
@@ -377,7 +380,17 @@ def _with_se(c: Comparison) -> pd.DataFrame:
             else:
                 cells.append(f"{fmt(v)} ± {fmt(se.iloc[i], 2)}")
         out[LABELS.get(key, key)] = cells
-    return pd.DataFrame(out, index=table.index)
+    human = pd.DataFrame(out, index=table.index)
+    # The consistency column of the issue, as rows under the parameters: one verdict per estimator.
+    consistency = c.consistency()
+    extra = {
+        "min eig M(q) [kg m²]": {LABELS.get(k, k): fmt(v["min_mass_eigenvalue"]) for k, v in consistency.items()},
+        "friction ≥ 0": {LABELS.get(k, k): "yes" if v["friction_nonnegative"] else "NO"
+                         for k, v in consistency.items()},
+        "physically consistent": {LABELS.get(k, k): "yes" if v["consistent"] else "NO"
+                                  for k, v in consistency.items()},
+    }
+    return pd.concat([human, pd.DataFrame(extra).T.reindex(columns=human.columns)])
 
 
 def findings(c: Comparison) -> list[str]:
@@ -434,6 +447,16 @@ def to_markdown(c: Comparison, figure: str | None = None) -> str:
         parts += [f"## Held-out {metric} per joint", "",
                   "Protocols: " + "; ".join(f"**{p}** = {PROTOCOLS[p]}" for p in c.metrics) + ".", "",
                   markdown_table(metrics_table(c, metric)), ""]
+    physical = c.fits.get("nlp_physical")
+    if physical is not None and "physical" in physical.details:
+        theta = pd.DataFrame({"value": physical.details["physical"]}).rename_axis("physical parameter")
+        theta["at a physical bound"] = ["yes" if k in physical.details.get("at_bound", []) else ""
+                                        for k in theta.index]
+        parts += ["## NLP-physical: the physical parameters behind its π", "",
+                  "Masses [kg], centres of mass [m], inertias and armature [kg m²], friction [N m s/rad, N m]. "
+                  "The grouped π do not determine all of them: a weak pull toward the datasheet picks one of "
+                  "the equivalent sets, so read the individual values with care; π is what the data fix.", "",
+                  markdown_table(theta), ""]
     parts += ["## The paper's seed study (shuffled 70/30)", "", markdown_table(rmse_table(c.seeds)), ""]
     if figure:
         parts += [f"![grouped parameters across seeds]({figure})", ""]
@@ -462,6 +485,8 @@ def to_json(c: Comparison) -> dict:
         "metrics": c.metrics,
         "protocols": {p: PROTOCOLS[p] for p in c.metrics},
         "fits": {key: fit.summary() for key, fit in c.fits.items()},
+        "physical_parameters": c.fits["nlp_physical"].details.get("physical", {}) if "nlp_physical" in c.fits
+        else {},
         "seed_study": {
             "seeds": c.seeds.labels,
             "parameters": {key: v.tolist() for key, v in c.seeds.pi.items()},

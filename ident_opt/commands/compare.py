@@ -20,6 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="DIR", help="output folder (default: the problem's [output] dir)")
     parser.add_argument("--margin", type=float, default=1e-6, metavar="KGM2",
                         help="required margin of M(q) ⪰ margin·I in the constrained fit [kg m²] (default 1e-6)")
+    parser.add_argument("--weights", choices=("ols", "wls"), default="ols",
+                        help="ols: both joints weigh the same; wls: each joint by 1/σ² of its residual (default ols)")
     parser.add_argument("--extension", action="append", default=[], metavar="NAME",
                         help="fit an extended model (armature, asymmetric_coulomb, stribeck, offset); repeatable")
     parser.add_argument("--constraints-study", type=int, metavar="N",
@@ -75,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     problem = loaded.problem
     out = output_dir(args, problem)
     result = compare.compare_estimators(loaded.train, problem.robot, problem.split, loaded.unseen, model=model,
-                                        margin=args.margin, progress=not args.no_progress)
+                                        margin=args.margin, weights=None if args.weights == "ols" else "wls",
+                                        progress=not args.no_progress)
     figure = seed_heatmap(result.seeds, out / "compare_seeds.png", "ols")
     write_table(compare.parameter_table(result), out / "compare_parameters.csv")
     write_table(compare.consistency_table(result), out / "compare_consistency.csv")
