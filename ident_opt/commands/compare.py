@@ -61,16 +61,23 @@ def run(args: argparse.Namespace) -> int:
         results = [compare.constraints_study(problem.robot, args.constraints_study, source=source,
                                              margin=args.margin, progress=not args.no_progress)
                    for source in sources]
-        (out / "constraints_study.md").write_text(compare.study_markdown(results))
+        rich = None
+        if "simulator" in sources:
+            rich = compare.rich_agreement(problem.robot, margin=args.margin, progress=not args.no_progress)
+            print("[rich trials] " + ", ".join(f"{k}: {v:.3g}" if isinstance(v, float) else f"{k}: {v}"
+                                               for k, v in rich.items()))
+        (out / "constraints_study.md").write_text(compare.study_markdown(results, rich))
         rows = pd.concat([r.rows.assign(source=r.settings["source"]) for r in results], ignore_index=True)
         write_table(rows.set_index(["source", "trial"]), out / "constraints_study.csv")
         for r in results:
             print(f"[{r.settings['source']}] " + ", ".join(f"{k}: {v:.3g}" if isinstance(v, float) else f"{k}: {v}"
                                                           for k, v in r.summary.items()))
         print(f"wrote constraints_study.md and constraints_study.csv to {out.resolve()}")
-        write_json(args.json, {r.settings["source"]: {"summary": r.summary, "settings": r.settings,
-                                                      "trials": r.rows.to_dict(orient="records")}
-                               for r in results})
+        payload = {r.settings["source"]: {"summary": r.summary, "settings": r.settings,
+                                          "trials": r.rows.to_dict(orient="records")} for r in results}
+        if rich is not None:
+            payload["rich_trials"] = rich
+        write_json(args.json, payload)
         return 0
 
     loaded = load(args, min_samples=2 * model.n_params)
