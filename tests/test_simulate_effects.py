@@ -125,13 +125,14 @@ def test_delay_is_recovered_by_cross_correlation(robot):
     assert trial.truth["effects"]["delay"] == {"seconds": seconds}
 
 
-@pytest.mark.parametrize("joint, frequency", [(2, 8.0), (1, 5.0)])
-def test_elasticity_puts_residual_power_at_the_stated_frequency(robot, joint, frequency):
+@pytest.mark.parametrize(
+    "kind, joint, frequency", [("joint", 2, 8.0), ("joint", 1, 5.0), ("link", 2, 8.0), ("link", 1, 3.0)]
+)
+def test_elasticity_puts_residual_power_at_the_stated_frequency(robot, kind, joint, frequency):
     kwargs = {"duration": 20.0, "seed": 1, "noise": False, "progress": False}
     clean = simulate_trial(robot, **kwargs)
-    trial = simulate_trial(
-        robot, effects={"elasticity": {"joint": joint, "frequency_hz": frequency}}, **kwargs
-    )
+    effect = {"elasticity": {"joint": joint, "frequency_hz": frequency, "kind": kind}}
+    trial = simulate_trial(robot, effects=effect, **kwargs)
     spectra = []
     for t in (clean, trial):
         d = t.dataset()
@@ -144,5 +145,5 @@ def test_elasticity_puts_residual_power_at_the_stated_frequency(robot, joint, fr
     near = np.abs(f - frequency) < 0.5
     assert spectra[1][near].sum() > 10 * spectra[0][near].sum()
     e = trial.truth["effects"]["elasticity"]
-    assert e["joint"] == joint and e["frequency_hz"] == frequency
+    assert e["joint"] == joint and e["frequency_hz"] == frequency and e["kind"] == kind
     assert f"deflection{joint}" in trial.frame

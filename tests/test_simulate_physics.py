@@ -5,10 +5,12 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 import pytest
 from scipy import stats
 
+from ident_opt.datasheet import datasheet_pi
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import Friction, load_problem
@@ -16,11 +18,13 @@ from ident_opt.robot import ArmModel
 from ident_opt.simulate import simulate_trial
 from ident_opt.simulate.closed_loop import MAX_TRACKING_ERROR
 from ident_opt.simulate.effects import normalise
+from ident_opt.simulate.flexible_link import datasheet_armature, lagrangian_terms
 from ident_opt.simulate.trajectories import TAU_MAX
 from ident_opt.simulate.truth import build_truth, coulomb_levels, plant
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ArmModel(("armature",))
+FRICTION_MASK = np.array([name.startswith(("fv", "fc")) for name in MODEL.names], dtype=float)
 
 
 @pytest.fixture(scope="module")
@@ -126,3 +130,23 @@ def test_elastic_joint_exchanges_energy_only_through_the_motor_torque(robot, joi
         rate = (energy(x + eps * xdot) - energy(x - eps * xdot)) / (2 * eps)
         velocities = [x[5], x[4]] if j == 0 else [x[3], x[5]]
         assert rate == pytest.approx(tau @ velocities, rel=1e-6, abs=1e-8)
+
+
+@pytest.mark.parametrize("flexible", [0, 1])
+def test_flexible_link_chain_unbent_is_the_datasheet_rigid_arm(robot, flexible):
+    """The Lagrangian of the three-segment chain at φ = 0, dφ = 0 gives the rigid model's M and C dq + G."""
+    armature = datasheet_armature(robot)
+    z, dz, M, h = lagrangian_terms(robot, flexible, armature)
+    f = ca.Function("f", [z, dz], [M, h])
+    pi = MODEL.vector(datasheet_pi(robot, "physical"))
+    rng = np.random.default_rng(flexible)
+    for _ in range(5):
+        q, dq = rng.uniform(-3, 3, 2), rng.normal(size=2)
+        M_chain, h_chain = (np.array(v) for v in f([*q, 0.0], [*dq, 0.0]))
+        M_rigid = MODEL.mass_matrix(pi, q[1])
+        h_rigid = (
+            MODEL.predict(pi, q[None], dq[None], np.zeros((1, 2)))[0]
+            - MODEL.predict(pi * FRICTION_MASK, q[None], dq[None], np.zeros((1, 2)))[0]
+        )
+        np.testing.assert_allclose(M_chain[:2, :2], M_rigid, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(h_chain[:2, 0], h_rigid, rtol=1e-12, atol=1e-12)

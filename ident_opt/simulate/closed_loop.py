@@ -66,8 +66,7 @@ def substeps(truth: Truth, g: Gains, robot: Robot) -> int:
     rates = [math.sqrt(max(g.kp[i] / J[i], 0.0)) + g.kd[i] / J[i] for i in range(2)]
     e = truth.elastic
     if e is not None:
-        w_free = math.sqrt(e.k * (1 / e.B + 1 / e.J_link))
-        rates.append(w_free + e.d * (1 / e.B + 1 / e.J_link) + g.kd[e.index] / e.B)
+        rates.append(e.fastest_rate + g.kd[e.index] / e.B)
     return max(2, math.ceil(max(rates) / CONTROL_HZ / 0.25))
 
 

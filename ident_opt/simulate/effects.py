@@ -25,6 +25,7 @@ class Key:
     doc: str
     minimum: float | None = 0.0
     strict: bool = False  # minimum excluded
+    choices: tuple[str, ...] = ()  # for kind "choice"
 
 
 #: name -> (one-line meaning, keys). Defaults of `asymmetric_coulomb` are the datasheet's own per-direction
@@ -51,13 +52,20 @@ CATALOGUE: dict[str, tuple[str, dict[str, Key]]] = {
         },
     ),
     "elasticity": (
-        "a lumped compliance between motor and link (two-mass model; motor-side angle logged)",
+        "a lightly damped mode: an elastic joint (two-mass, motor angle logged) or a flexible link",
         {
             "joint": Key("joint", 2, "1 or 2"),
             "frequency_hz": Key(
-                "float", 3.0, "Hz, the link's natural frequency on the spring, motor held", 0.0, True
+                "float", 3.0, "Hz, the mode's natural frequency with the joints held", 0.0, True
             ),
             "damping": Key("float", 0.02, "damping ratio of that mode"),
+            "kind": Key(
+                "choice",
+                "joint",
+                "joint: two-mass elastic joint; link: link `joint` cut in two halves joined by a spring",
+                None,
+                choices=("joint", "link"),
+            ),
         },
     ),
     "payload": (
@@ -135,6 +143,8 @@ def _parse_value(text: str, name: str, key: str, value: str) -> object:
             return tuple(float(v) for v in inner.split(","))
         if spec.kind == "joint":
             return int(value)
+        if spec.kind == "choice":
+            return value
         return float(value)
     except ValueError:
         shape = "[v1,v2]" if spec.kind == "pair" else ("1 or 2" if spec.kind == "joint" else "a number")
@@ -157,6 +167,13 @@ def _check(name: str, key: str, value: object, where: str) -> object:
         if isinstance(value, bool) or value not in (1, 2):
             raise InputError(f"effect {where!r}: key 'joint' of {name} must be 1 or 2, got {value!r}")
         return int(value)
+    if spec.kind == "choice":
+        if value not in spec.choices:
+            raise InputError(
+                f"effect {where!r}: key {key!r} of {name} must be one of {', '.join(spec.choices)}, "
+                f"got {value!r}"
+            )
+        return value
     values = value if spec.kind == "pair" else (value,)
     if (
         isinstance(values, str)

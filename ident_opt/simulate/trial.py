@@ -171,6 +171,7 @@ def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, 
             e = truth.elastic
             effects[name] = {
                 "joint": e.index + 1,
+                "kind": e.kind,
                 "frequency_range_hz": list(e.frequency_range_hz),
                 "frequency_hz": e.frequency_hz,
                 "damping": e.damping,

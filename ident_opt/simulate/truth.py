@@ -11,6 +11,8 @@ M(q) ddq + C(q, dq) dq + G(q) + F(dq) = τ. Effects change it as follows (values
   B ddθ + F_j(dθ) = τ_j − τ_s, and the link side is the rigid model without that armature and friction,
   driven by τ_s at joint j. k = J_l (2π f)², d = 2 ζ √(k J_l), with J_l the link-side inertia at joint j
   (joint 1: at q2 = 0 with joint 2 held). The logged angle of joint j is the motor's θ.
+- ``elasticity`` with ``kind=link``: link j is cut at mid-length into two rigid halves joined by a
+  torsional spring (see flexible_link.py); the joints stay rigid and their angles are logged.
 - ``joint_offset`` and ``delay`` act on the measurements (see measurement.py); the true angle is the logged
   (encoder) angle + δ.
 """
@@ -26,6 +28,7 @@ import numpy as np
 from ident_opt.datasheet import datasheet_pi, rigid_body
 from ident_opt.problem import Robot
 from ident_opt.robot import ArmModel
+from ident_opt.simulate import flexible_link
 
 #: The structure of `SimTrial.truth["pi"]`.
 TRUTH_MODEL = ArmModel(("armature",))
@@ -33,8 +36,8 @@ TRUTH_MODEL = ArmModel(("armature",))
 
 @dataclass(frozen=True)
 class Elastic:
-    """An elastic joint: which (0-based), stiffness k [N m/rad], damping d [N m s/rad], motor inertia B
-    [kg m²], link-side inertia J_l [kg m²] used for k, and the natural frequency f [Hz]."""
+    """An elastic joint or flexible link: which (0-based), stiffness k [N m/rad], damping d [N m s/rad],
+    motor inertia B [kg m²], the inertia J [kg m²] used for k, and the natural frequency f [Hz]."""
 
     index: int
     k: float
@@ -44,6 +47,8 @@ class Elastic:
     frequency_hz: float
     damping: float
     frequency_range_hz: tuple[float, float]  # over the workspace (joint 1: J_l depends on q2)
+    kind: str = "joint"  # "joint" (two-mass) or "link" (flexible link, see flexible_link.py)
+    fastest_rate: float = 0.0  # rad/s, a bound of the mode's rate with free joints (sizes the RK4 step)
 
 
 @dataclass(frozen=True)
@@ -102,16 +107,15 @@ def build_truth(robot: Robot, effects: dict[str, dict]) -> Truth:
     elastic = None
     if "elasticity" in effects:
         e = effects["elasticity"]
-        elastic = _elastic(robot, effects, pi, e["joint"] - 1, e["frequency_hz"], e["damping"])
+        make = _elastic if e["kind"] == "joint" else _flexible_link
+        elastic = make(true_robot, effects, pi, e["joint"] - 1, e["frequency_hz"], e["damping"])
     offset = tuple(effects["joint_offset"]["offset"]) if "joint_offset" in effects else (0.0, 0.0)
     delay = effects["delay"]["seconds"] if "delay" in effects else 0.0
     return Truth(true_robot, model, vector, elastic, offset, delay, effects)
 
 
 def _elastic(robot: Robot, effects: dict, pi: dict, j: int, f: float, zeta: float) -> Elastic:
-    body = rigid_body(robot, "physical")
-    extra = effects["armature"]["inertia"][j] if "armature" in effects else 0.0
-    B = body.armature[j] + extra  # the motor side: reflected rotor inertia
+    B = _armature(robot, effects)[j]  # the motor side: reflected rotor inertia
     J_link = (pi["a1"] - B + 2 * pi["a2"]) if j == 0 else pi["a3"]
     k = J_link * (2 * math.pi * f) ** 2
     if j == 0:  # J_l(q2) = a1 − B + 2 a2 cos q2 over |q2| ≤ 1.4 rad (the trajectories' range)
@@ -119,7 +123,28 @@ def _elastic(robot: Robot, effects: dict, pi: dict, j: int, f: float, zeta: floa
     else:
         inertias = [J_link, J_link]
     band = tuple(math.sqrt(k / J) / (2 * math.pi) for J in inertias)
-    return Elastic(j, k, 2 * zeta * math.sqrt(k * J_link), B, J_link, f, zeta, band)
+    d = 2 * zeta * math.sqrt(k * J_link)
+    w_free = math.sqrt(k * (1 / B + 1 / min(inertias)))
+    rate = w_free + d * (1 / B + 1 / min(inertias))
+    return Elastic(j, k, d, B, J_link, f, zeta, band, "joint", rate)
+
+
+def _flexible_link(robot: Robot, effects: dict, pi: dict, j: int, f: float, zeta: float) -> Elastic:
+    armature = _armature(robot, effects)
+    J = flexible_link.mode_inertia(robot, j, armature, 0.0)
+    k = J * (2 * math.pi * f) ** 2
+    inertias = [flexible_link.mode_inertia(robot, j, armature, q2) for q2 in (0.0, 1.4)]
+    band = tuple(math.sqrt(k / Jq) / (2 * math.pi) for Jq in inertias)
+    d = 2 * zeta * math.sqrt(k * J)
+    w_free = flexible_link.free_rate(robot, j, armature, k)
+    rate = w_free + d * w_free**2 / k  # d (M⁻¹)_φφ, with (M⁻¹)_φφ = ω²/k
+    return Elastic(j, k, d, armature[j], J, f, zeta, band, "link", rate)
+
+
+def _armature(robot: Robot, effects: dict) -> tuple[float, float]:
+    """Reflected rotor inertia per joint, datasheet plus any hidden extra [kg m²]."""
+    extra = effects["armature"]["inertia"] if "armature" in effects else (0.0, 0.0)
+    return tuple(a + x for a, x in zip(rigid_body(robot, "physical").armature, extra))
 
 
 # ---------------------------------------------------------------------------------------------- dynamics
@@ -139,7 +164,8 @@ def _friction_only(model: ArmModel, pi: np.ndarray, joint: int) -> np.ndarray:
 
 
 def state_size(truth: Truth) -> int:
-    """Length of the state x: [q (2), dq (2)], or [q (2), θ, dq (2), dθ] with an elastic joint."""
+    """Length of the state x: [q (2), dq (2)], or [q (2), θ, dq (2), dθ] with an elastic joint, or
+    [q (2), φ, dq (2), dφ] with a flexible link."""
     return 4 if truth.elastic is None else 6
 
 
@@ -151,6 +177,8 @@ def plant(truth: Truth) -> ca.Function:
     x, tau = ca.SX.sym("x", nx), ca.SX.sym("tau", 2)
     model, pi, e = truth.model, truth.pi, truth.elastic
     delta = ca.DM(truth.offset)
+    if e is not None and e.kind == "link":
+        return _link_plant(truth, x, tau, delta)
     if e is None:
         q, dq = x[:2], x[2:]
         ddq = _solve_forward(model, ca.DM(pi), q, dq, tau)
@@ -180,12 +208,39 @@ def plant(truth: Truth) -> ca.Function:
     return ca.Function("plant", [x, tau], [xdot, y], ["x", "tau"], ["xdot", "y"])
 
 
+def _link_plant(truth: Truth, x, tau, delta) -> ca.Function:
+    """The flexible-link plant (see flexible_link.py): x = [q1, q2, φ, dq1, dq2, dφ]."""
+    e, model, pi = truth.elastic, truth.model, truth.pi
+    z, dz, M, h = flexible_link.lagrangian_terms(truth.robot, e.index, _armature_of(truth))
+    friction_pi = _friction_only(model, pi, 0) + _friction_only(model, pi, 1)
+    F = model.tau_expression(z[:2], dz[:2], ca.DM.zeros(2), ca.DM(friction_pi))
+    Q = ca.vertcat(tau - F, -e.k * z[2] - e.d * dz[2])
+    ddz = ca.solve(M, Q - h)
+    motion = ca.Function("motion", [z, dz, tau], [ddz])
+    ddz_x = motion(x[:3], x[3:], tau)
+    xdot = ca.vertcat(x[3:], ddz_x)
+    y = ca.vertcat(x[:2] - delta, x[3:5], ddz_x[:2], x[2])
+    return ca.Function("plant", [x, tau], [xdot, y], ["x", "tau"], ["xdot", "y"])
+
+
+def _armature_of(truth: Truth) -> tuple[float, float]:
+    """The true plant's reflected rotor inertia per joint [kg m²] (a1 holds joint 1's; ia2 is joint 2's)."""
+    return _armature(truth.robot, truth.effects)
+
+
 def initial_state(truth: Truth, q_enc: np.ndarray) -> np.ndarray:
     """A state at rest whose encoders read `q_enc` [rad]; an elastic joint starts at its static deflection."""
     q = np.asarray(q_enc, dtype=float) + np.asarray(truth.offset)
     if truth.elastic is None:
         return np.concatenate([q, [0.0, 0.0]])
     e = truth.elastic
+    if e.kind == "link":  # the static bend: k φ = −∂V/∂φ
+        z, dz, _, h = flexible_link.lagrangian_terms(truth.robot, e.index, _armature_of(truth))
+        dV = ca.Function("dV", [z], [ca.substitute(h, dz, ca.DM.zeros(3))[2]])
+        phi = 0.0
+        for _ in range(20):
+            phi = -float(dV([q[0], q[1], phi])) / e.k
+        return np.array([q[0], q[1], phi, 0.0, 0.0, 0.0])
     theta = q[e.index]
     gravity = TRUTH_MODEL.function("G")
     link_pi = TRUTH_MODEL.vector(truth.pi_rigid)
