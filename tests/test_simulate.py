@@ -225,3 +225,40 @@ def test_gzipped_output_is_written_compressed_and_read_back(tmp_path, robot):
     assert load_dataset(path, DataSpec(), robot).n == 100
     with pytest.raises(InputError, match="name it"):
         trial.write(tmp_path / "t.txt")
+
+
+def test_cli_current_output_is_read_back_as_the_same_torques(tmp_path, robot):
+    out = tmp_path / "cur.csv"
+    args = [
+        "simulate",
+        "--problem",
+        str(PROBLEM),
+        "--out",
+        str(out),
+        "--duration",
+        "2",
+        "--current",
+        "--rate",
+        "1000",
+        "--no-noise",
+        "--exact-derivatives",
+        "--trajectory",
+        "fourier",
+        "--seed",
+        "3",
+    ]
+    assert main(args) == 0
+    data = load_dataset(out, DataSpec(), robot)
+    same = simulate_trial(
+        robot,
+        duration=2.0,
+        rate_hz=1000.0,
+        noise=False,
+        exact_derivatives=True,
+        trajectory="fourier",
+        seed=3,
+        progress=False,
+    )
+    assert "i1" in pd.read_csv(out).columns and data.n == 2000
+    np.testing.assert_allclose(data.tau, same.dataset().tau, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(data.ddq, same.dataset().ddq, rtol=1e-12, atol=1e-12)
