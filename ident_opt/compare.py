@@ -172,7 +172,7 @@ def constraints_study(robot, n_trials: int = 50, *, source: str = "multisine", s
         rows.append({
             "trial": i, "duration_s": duration, **described,
             "rank": ols.rank, "ols_consistent": ols.consistent, "ols_min_eig": ols.min_mass_eigenvalue,
-            "constrained_consistent": bool(con.min_mass_eigenvalue >= margin * (1 - 1e-6) and con.friction_ok),
+            "constrained_consistent": bool(con.min_mass_eigenvalue >= margin * (1 - 1e-6) and con.consistent),
             "constrained_min_eig": con.min_mass_eigenvalue, "active": " ".join(con.active),
             "err_ols": relative_error(ols.pi, pi_true), "err_constrained": relative_error(con.pi, pi_true),
             # the same over the parameters whose columns the trial excites at all
@@ -221,7 +221,7 @@ def study_markdown(results: StudyResult | list[StudyResult], rich: dict | None =
         "",
         f"Short trials ({cfg['durations_s'][0]:g}–{cfg['durations_s'][1]:g} s at {cfg['rate_hz']:g} Hz) with a "
         f"known truth ({cfg['truth']}); fitted model: {', '.join(cfg['model'])}. OLS vs constrained = "
-        f"M(q) ⪰ {cfg['margin']:g}·I ∀q and friction ≥ 0 (from the sufficient statistics; Clarabel). "
+        f"M(q) ⪰ {cfg['margin']:g}·I ∀q, friction ≥ 0 and armature ≥ 0 (from the sufficient statistics; Clarabel). "
         "Parameter error = RMS over parameters of (π̂ − π)/|π|. Trial sources:",
         "",
         *[f"- **{r.settings['source']}**: {STUDY_SOURCES[r.settings['source']]}"
@@ -300,13 +300,16 @@ class Comparison:
         return out
 
     def consistency(self) -> dict[str, dict]:
-        """Physical consistency of each parameter set: M(q) margin [kg m²], friction signs, verdict."""
+        """Physical consistency of each parameter set: M(q) margin [kg m²], friction signs, verdict (which
+        also requires armature ≥ 0)."""
         out = {}
         for key, (model, pi) in self.datasheets.items():
-            friction = all(v >= 0 for n, v in model.as_dict(pi).items() if n.startswith("f"))
+            values = model.as_dict(pi)
+            friction = all(v >= 0 for n, v in values.items() if n.startswith("f"))
+            armature = all(v >= 0 for n, v in values.items() if n.startswith("ia"))
             eig = model.min_mass_eigenvalue(pi)
             out[key] = {"min_mass_eigenvalue": eig, "friction_nonnegative": friction,
-                        "consistent": bool(eig > 0 and friction), "active_constraints": []}
+                        "consistent": bool(eig > 0 and friction and armature), "active_constraints": []}
         for key, fit in self.fits.items():
             out[key] = {"min_mass_eigenvalue": fit.min_mass_eigenvalue, "friction_nonnegative": fit.friction_ok,
                         "consistent": fit.consistent, "active_constraints": fit.active}

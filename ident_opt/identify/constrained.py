@@ -4,6 +4,7 @@
     subject to  M0(π) + M1(π) ⪰ margin·I     "mass_pd_q2_0"    M(q) at cos q2 = +1
                 M0(π) − M1(π) ⪰ margin·I     "mass_pd_q2_pi"   M(q) at cos q2 = −1
                 π_p ≥ 0 for every friction parameter p    "friction_<p>"
+                π_p ≥ 0 for every armature parameter p    "armature_<p>"    (rotor inertia N² J)
                 lb ≤ π ≤ ub (optional)                    "lower_<p>", "upper_<p>"
 
 M(q) = M0 + M1 cos q2 with M0, M1 affine in π (`ArmModel.mass_matrix_maps`), and λ_min(M0 + c M1) is
@@ -49,6 +50,15 @@ def friction_names(model: ArmModel) -> list[str]:
     return [n for n in model.names if n[:2] in ("fv", "fc", "fs")]
 
 
+def sign_constraints(model: ArmModel) -> dict[str, str]:
+    """Constraint name → parameter for every parameter that must be ≥ 0: friction ("friction_<p>", it
+    dissipates) and reflected rotor inertia ("armature_<p>", N² J_rotor ≥ 0; M ≻ 0 alone would allow a
+    negative armature offset by the link inertias)."""
+    out = {f"friction_{n}": n for n in friction_names(model)}
+    out.update({f"armature_{n}": n for n in model.names if n.startswith("ia")})
+    return out
+
+
 def constraint_slacks(model: ArmModel, pi: np.ndarray, margin: float = 0.0, friction: bool = True,
                       mass: bool = True, bounds: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, float]:
     """Each named constraint's slack at π (≥ 0 feasible, ≈ 0 active); PSD slack = λ_min − margin."""
@@ -59,8 +69,8 @@ def constraint_slacks(model: ArmModel, pi: np.ndarray, margin: float = 0.0, fric
         out["mass_pd_q2_0"] = float(np.linalg.eigvalsh(M0 + M1)[0] - margin)
         out["mass_pd_q2_pi"] = float(np.linalg.eigvalsh(M0 - M1)[0] - margin)
     if friction:
-        for name in friction_names(model):
-            out[f"friction_{name}"] = float(pi[model.names.index(name)])
+        for label, name in sign_constraints(model).items():
+            out[label] = float(pi[model.names.index(name)])
     if bounds is not None:
         lb, ub = (np.broadcast_to(np.asarray(v, dtype=float), pi.shape) for v in bounds)
         for p, name in enumerate(model.names):
@@ -75,7 +85,8 @@ def fit_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prio
                     prior_weight: float = 0.0, bounds: tuple[np.ndarray, np.ndarray] | None = None,
                     weights: str | np.ndarray | None = None, friction: bool = True, mass: bool = True,
                     shortcut: bool = True, backend: str = "clarabel") -> LinearFit:
-    """Physically consistent π (see module doc): M(q) ⪰ margin·I ∀q [kg m²], friction ≥ 0, optional
+    """Physically consistent π (see module doc): M(q) ⪰ margin·I ∀q [kg m²], friction and armature ≥ 0
+    (`friction=False` drops both sign constraints), optional
     bounds (lb, ub) and prior π0 with weight λ. `weights` as in `fit_ols`. `shortcut=False` always runs
     the conic solver (tests use it to check the solver against OLS). `backend`: "clarabel" (direct,
     fast) or "cvxpy" (same program through cvxpy). `status` is the solver's.
@@ -163,7 +174,7 @@ def constraint_blocks(model: ArmModel, margin: float = 1e-6, friction: bool = Tr
     """The constraints of the module doc as named numeric blocks (same names as `constraint_slacks`).
 
     mass_pd_q2_0 / _pi:  s = svec(M0 ± M1 − margin·I) ∈ PSD:  A = −svec(A0 ± A1) per column, b = −margin svec I
-    friction_<p>:        s = π_p ≥ 0:                         A = −e_pᵀ, b = 0
+    friction_<p>, armature_<p>:  s = π_p ≥ 0:                 A = −e_pᵀ, b = 0
     lower_<p> / upper_<p>: s = π_p − lb_p ≥ 0 / ub_p − π_p ≥ 0
     """
     P = model.n_params
@@ -174,9 +185,9 @@ def constraint_blocks(model: ArmModel, margin: float = 1e-6, friction: bool = Tr
         for name, sign in (("mass_pd_q2_0", 1.0), ("mass_pd_q2_pi", -1.0)):
             blocks.append(Block(name, -_svec(A0 + sign * A1).T, -margin * _svec(np.eye(2)), "psd2"))
     if friction:
-        for name in friction_names(model):
+        for label, name in sign_constraints(model).items():
             p = model.names.index(name)
-            blocks.append(Block(f"friction_{name}", -eye[p:p + 1], np.zeros(1), "nonneg"))
+            blocks.append(Block(label, -eye[p:p + 1], np.zeros(1), "nonneg"))
     if bounds is not None:
         lb, ub = (np.broadcast_to(np.asarray(v, dtype=float), (P,)) for v in bounds)
         for p, name in enumerate(model.names):
@@ -256,7 +267,7 @@ def _program(model: ArmModel, friction: bool, mass: bool, lower: tuple[int, ...]
         M1 = sum(pi[p] * A1[p] for p in range(P))
         constraints += [M0 + M1 >> par["margin"] * np.eye(2), M0 - M1 >> par["margin"] * np.eye(2)]
     if friction:
-        constraints.append(pi[[model.names.index(name) for name in friction_names(model)]] >= 0)
+        constraints.append(pi[[model.names.index(name) for name in sign_constraints(model).values()]] >= 0)
     if lower:
         par["lb"] = cp.Parameter(len(lower), name="lb")
         constraints.append(pi[list(lower)] >= par["lb"])

@@ -71,9 +71,14 @@ class LinearFit:
         return all(v >= 0 for name, v in self.as_dict().items() if name.startswith("f"))
 
     @property
+    def armature_ok(self) -> bool:
+        """All reflected rotor inertias (ia*) ≥ 0."""
+        return all(v >= 0 for name, v in self.as_dict().items() if name.startswith("ia"))
+
+    @property
     def consistent(self) -> bool:
-        """Physically consistent: M(q) ≻ 0 for every q and friction ≥ 0."""
-        return bool(self.min_mass_eigenvalue > 0 and self.friction_ok)
+        """Physically consistent: M(q) ≻ 0 for every q, friction ≥ 0 and armature ≥ 0."""
+        return bool(self.min_mass_eigenvalue > 0 and self.friction_ok and self.armature_ok)
 
     def summary(self) -> dict:
         """A JSON-friendly dict of everything (arrays as lists, π and SE by name)."""
@@ -204,9 +209,10 @@ def finish(stats: Stats, model: ArmModel, pi: np.ndarray, w: np.ndarray, method:
         what = []
         if fit.min_mass_eigenvalue <= 0:
             what.append(f"M(q) is not positive definite (min eigenvalue {fit.min_mass_eigenvalue:.3g} kg m²)")
-        if not fit.friction_ok:
-            what.append("negative friction: " + ", ".join(
-                n for n, v in fit.as_dict().items() if n.startswith("f") and v < 0))
+        for ok, kind, prefix in ((fit.friction_ok, "friction", "f"), (fit.armature_ok, "armature", "ia")):
+            if not ok:
+                what.append(f"negative {kind}: " + ", ".join(
+                    n for n, v in fit.as_dict().items() if n.startswith(prefix) and v < 0))
         fit.warnings.append("physically inconsistent: " + "; ".join(what))
     return fit
 
