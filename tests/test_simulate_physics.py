@@ -66,8 +66,11 @@ def test_energy_balance_without_friction(robot):
     assert np.abs((energy - energy[0]) - work).max() < 1e-8 * np.ptp(energy)
 
 
+SIM_DEFAULT = load_problem(ROOT / "problems" / "tudor_sim.toml").simulate.effects
+
+
 @pytest.mark.parametrize(
-    "effects", [(), ("elasticity", "asymmetric_coulomb", "stribeck", "payload", "armature")]
+    "effects", [(), ("elasticity", "asymmetric_coulomb", "stribeck", "payload", "armature"), SIM_DEFAULT]
 )
 @pytest.mark.parametrize("trajectory", ["tud01", "fourier"])
 def test_tracking_error_and_torques_within_stated_limits(robot, effects, trajectory):
