@@ -107,7 +107,7 @@ def prediction_record(n: int, sample: dict[str, float], p: Prediction) -> dict:
 
 
 class _Stop(Exception):
-    """SIGTERM while waiting for input."""
+    """SIGTERM or SIGINT while waiting for input."""
 
 
 def serve(identifier: OnlineIdentifier, names: tuple[str, ...], instream: TextIO, outstream: TextIO,
@@ -122,12 +122,13 @@ def serve(identifier: OnlineIdentifier, names: tuple[str, ...], instream: TextIO
     state = {"reading": False, "stop": False}
 
     def on_term(signum, frame):
-        # Interrupt a blocking read at once; during an update, finish it and stop after (never half a step).
+        # SIGTERM/SIGINT: interrupt a blocking read at once; during an update, finish it and stop after it
+        # (never half a step: the statistics and θ always describe the same samples).
         state["stop"] = True
         if state["reading"]:
             raise _Stop
 
-    previous = _install(signal.SIGTERM, on_term)
+    previous = {sig: _install(sig, on_term) for sig in (signal.SIGTERM, signal.SIGINT)}
     lineno = 0
     try:
         while not state["stop"]:
@@ -159,7 +160,8 @@ def serve(identifier: OnlineIdentifier, names: tuple[str, ...], instream: TextIO
     except (KeyboardInterrupt, _Stop):
         pass
     finally:
-        _install(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+        for sig, handler in previous.items():
+            _install(sig, signal.SIG_DFL if handler is None else handler)
     final = {"final": _parameters(identifier, names)}
     _emit(outstream, final)
     if on_final is not None:

@@ -327,7 +327,7 @@ class WarmConsistentLS:
         scale = np.abs(H) @ np.maximum(np.abs(x), 1.0) + np.abs(h)
         cones = [self.cones[i] for i in active]
         for _ in range(30):
-            grads = np.array([cone.gradient(x) for cone in cones]).reshape(len(cones), -1)
+            grads = np.array([cone.gradient(x) for cone in cones]).reshape(len(cones), x.size)
             r1 = (H @ x - h - m @ grads)[F]
             vals = [cone.value(x) for cone in cones]
             r2 = np.array([v[3] for v in vals])
