@@ -360,8 +360,20 @@ def compare_estimators(train: Dataset, robot, split, unseen: Dataset | None = No
         for key, (sheet_model, pi) in sheets.items():
             for m, v in _scores(pairs, sheet_model, pi).items():
                 metrics[protocol][m][key] = v
-    sources = {"train": train.source, **({"unseen": unseen.source} if unseen is not None else {})}
+    sources = {"train": _shown(train.source), **({"unseen": _shown(unseen.source)} if unseen is not None else {})}
     return Comparison(model, fits, sheets, metrics, seeds, robot.convention, sources)
+
+
+def _shown(path: str) -> str:
+    """A data path as people read it: relative to the working folder when inside it."""
+    import os
+    from pathlib import Path
+
+    resolved = Path(path).resolve()
+    try:
+        return os.path.relpath(resolved) if resolved.is_relative_to(Path.cwd()) else str(resolved)
+    except ValueError:
+        return str(resolved)
 
 
 # ---------------------------------------------------------------------------------------------- rendering
@@ -428,7 +440,7 @@ def _with_se(c: Comparison) -> pd.DataFrame:
         "physically consistent": {LABELS.get(k, k): "yes" if v["consistent"] else "NO"
                                   for k, v in consistency.items()},
     }
-    return pd.concat([human, pd.DataFrame(extra).T.reindex(columns=human.columns)])
+    return pd.concat([human, pd.DataFrame(extra).T.reindex(columns=human.columns)]).rename_axis("parameter")
 
 
 def findings(c: Comparison) -> list[str]:
@@ -449,6 +461,13 @@ def findings(c: Comparison) -> list[str]:
                             for j, d in enumerate(change))
         lines.append(f"{protocol}: held-out nmse OLS {n_ols[0]:.4g} / {n_ols[1]:.4g}, constrained {n_con[0]:.4g} / "
                      f"{n_con[1]:.4g} ({change[0]:+.1f} % / {change[1]:+.1f} %; consistency {verdict}).")
+    costs = [c.metrics[p]["nmse"]["constrained"][j] > c.metrics[p]["nmse"]["ols"][j] * 1.0005
+             for p in c.metrics for j in range(2)]
+    if not ols.consistent and any(costs):
+        lines.append("Where consistency costs held-out accuracy, OLS was using a physically impossible inertia to "
+                     "absorb something the rigid model lacks (on a real flexible arm: elasticity, friction shape, "
+                     "delay); `ident-opt diagnose` looks for it. Only the consistent fit has an M(q) that is invertible at every "
+                     "pose, as forward simulation and model-based control need.")
     for w in ols.warnings:
         if not w.startswith("physically"):
             lines.append("OLS: " + w + ".")
