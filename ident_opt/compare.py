@@ -466,8 +466,8 @@ def findings(c: Comparison) -> list[str]:
     if not ols.consistent and any(costs):
         lines.append("Where consistency costs held-out accuracy, OLS was using a physically impossible inertia to "
                      "absorb something the rigid model lacks (on a real flexible arm: elasticity, friction shape, "
-                     "delay); `ident-opt diagnose` looks for it. Only the consistent fit has an M(q) that is invertible at every "
-                     "pose, as forward simulation and model-based control need.")
+                     "delay); `ident-opt diagnose` looks for it. Only the consistent fit has an M(q) that is "
+                     "invertible at every pose, as forward simulation and model-based control need.")
     for w in ols.warnings:
         if not w.startswith("physically"):
             lines.append("OLS: " + w + ".")
