@@ -198,6 +198,20 @@ def constraint_blocks(model: ArmModel, margin: float = 1e-6, friction: bool = Tr
     return blocks
 
 
+@functools.lru_cache(maxsize=64)
+def _assembled(model: ArmModel, margin: float, friction: bool, mass: bool, bounds: tuple | None) -> tuple:
+    """(A as CSC, b, Clarabel cones) of the stacked named blocks; depends on the structure only, so cached."""
+    import clarabel
+    from scipy import sparse
+
+    blocks = constraint_blocks(model, margin, friction, mass, bounds)
+    A = np.vstack([blk.A for blk in blocks]) if blocks else np.zeros((0, model.n_params))
+    b = np.concatenate([blk.b for blk in blocks]) if blocks else np.zeros(0)
+    cones = [clarabel.PSDTriangleConeT(2) if blk.cone == "psd2" else clarabel.NonnegativeConeT(len(blk.b))
+             for blk in blocks]
+    return sparse.csc_matrix(A), b, cones
+
+
 def _solve_clarabel(model: ArmModel, H: np.ndarray, h: np.ndarray, n: int, margin: float, Dp: np.ndarray,
                     prior: np.ndarray, friction: bool, mass: bool,
                     bounds: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray | None, str, float]:
@@ -212,12 +226,11 @@ def _solve_clarabel(model: ArmModel, H: np.ndarray, h: np.ndarray, n: int, margi
     P = model.n_params
     Q = 2.0 * (H + np.diag(Dp + tie_break(H))) / max(n, 1)
     c = -2.0 * (h + Dp * prior) / max(n, 1)
-    blocks = constraint_blocks(model, margin, friction, mass, bounds)
-    A = np.vstack([blk.A for blk in blocks]) if blocks else np.zeros((0, P))
-    b = np.concatenate([blk.b for blk in blocks]) if blocks else np.zeros(0)
-    cones = [clarabel.PSDTriangleConeT(2) if blk.cone == "psd2" else clarabel.NonnegativeConeT(len(blk.b))
-             for blk in blocks]
-    Qs, As = sparse.csc_matrix(np.triu(Q)), sparse.csc_matrix(A)
+    key = None if bounds is None else tuple(tuple(np.broadcast_to(np.asarray(v, float), (P,))) for v in bounds)
+    As, b, cones = _assembled(model, float(margin), friction, mass, key)
+    rows, cols = np.triu_indices(P)
+    order = np.lexsort((rows, cols))  # column-major: the CSC layout of the upper triangle
+    Qs = sparse.csc_matrix((Q[rows[order], cols[order]], (rows[order], cols[order])), shape=(P, P))
     status, total = "not solved", 0.0
     for tol in (1e-11, 1e-8):  # tight first (OLS to 1e-8 when nothing binds), looser if ill-conditioned
         settings = clarabel.DefaultSettings()
