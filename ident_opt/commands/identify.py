@@ -63,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
         params, ses, eig = _parameters(problem, trial, constrained)
         tick()
         result = report.IdentifyResult(problem.name, _rel(trial.source), _rel(unseen.source) if unseen else None,
-                                       protocols, params, ses, eig, diag)
+                                       protocols, params, ses, eig, diag,
+                                       gmr_candidates=tuple(problem.residual.candidates))
         bar.set_postfix_str("figures")
         result.figures = _figures(figures, result, trial, problem, fig_dir, tick)
         result.seconds = time.perf_counter() - start
