@@ -21,6 +21,10 @@ not excite, which is where a prior is needed.
 Because the problem is convex, if the unconstrained minimiser (OLS, or OLS with the prior) is feasible it
 is the answer: it is returned exactly, with no constraint active.
 
+Standard errors are the unconstrained problem's sandwich evaluated with the constrained fit's residuals
+(`fit.finish`). Along a binding constraint the estimator's true distribution is one-sided, so read the SE
+of a parameter involved in an active constraint as approximate.
+
 Two backends solve the same program. `backend="clarabel"` (default) assembles the constraints as plain
 numeric blocks A π + s = b, s ∈ cone, one named block per constraint (`constraint_blocks`), and calls
 Clarabel directly: a fraction of a millisecond. `backend="cvxpy"` writes it in cvxpy (compiled once per
