@@ -33,16 +33,14 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field
-from functools import cached_property
 
 import numpy as np
 
-from ident_opt.robot import ArmModel
+# Plain LAPACK calls: a few µs each instead of numpy.linalg.solve's ~10 µs of wrapping (P is 9 here).
+from scipy.linalg.lapack import dgesv as _dgesv
+from scipy.linalg.lapack import dposv as _dposv
 
-try:  # the plain LAPACK call: a few µs instead of numpy.linalg.solve's ~10 µs of wrapping
-    from scipy.linalg.lapack import dposv as _dposv
-except ImportError:  # pragma: no cover - scipy is a dependency
-    _dposv = None
+from ident_opt.robot import ArmModel
 
 #: Parameters that are sums of inertias (kg m²) or friction coefficients: never negative.
 NON_NEGATIVE_PREFIXES = ("fv", "fc", "fs")
@@ -220,33 +218,35 @@ class WarmBoundedLS:
 
 
 # ---------------------------------------------------------------------------------------------- CPBR
-@dataclass(frozen=True)
-class _Cone:
-    """One 2×2 LMI N(π) = Σ_p π_p B_p ⪰ margin·I, written as p ≥ m, s ≥ m, c(π) = (p − m)(s − m) − r² ≥ 0
-    with p = N11, s = N22, r = N12 affine in π (gradients gp, gs, gr) — a rotated second-order cone."""
+class _Cones:
+    """The 2×2 LMIs N_i(π) = Σ_p π_p B_ip ⪰ margin·I (i = 0: cos q2 = +1, 1: cos q2 = −1), each written as
+    p_i ≥ 0, s_i ≥ 0, c_i(π) = p_i s_i − r_i² ≥ 0 with p = N11 − m, s = N22 − m, r = N12 affine in π
+    (rows of GP, GS, GR): rotated second-order cones. All cones are evaluated at once (vectorised)."""
 
-    gp: np.ndarray
-    gs: np.ndarray
-    gr: np.ndarray
-    margin: float
+    def __init__(self, model: ArmModel, margin: float):
+        A0, A1 = model.mass_matrix_maps
+        B = np.stack([A0 + A1, A0 - A1])  # (2, P, 2, 2)
+        self.GP, self.GS, self.GR = B[:, :, 0, 0], B[:, :, 1, 1], B[:, :, 0, 1]  # (2, P) each
+        self.margin = margin
+        # ∇²c_i = gp gsᵀ + gs gpᵀ − 2 gr grᵀ: constant, (2, P, P).
+        self.hessian = (np.einsum("ip,iq->ipq", self.GP, self.GS) + np.einsum("ip,iq->ipq", self.GS, self.GP)
+                        - 2 * np.einsum("ip,iq->ipq", self.GR, self.GR))
+        self.n = 2
 
-    def value(self, x: np.ndarray) -> tuple[float, float, float, float]:
-        """(p − m, s − m, r, c) at x."""
-        p, s, r = self.gp @ x - self.margin, self.gs @ x - self.margin, self.gr @ x
+    def values(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(p, s, r, c) of every cone at x, each (2,)."""
+        p, s, r = self.GP @ x - self.margin, self.GS @ x - self.margin, self.GR @ x
         return p, s, r, p * s - r * r
 
-    def gradient(self, x: np.ndarray) -> np.ndarray:
-        p, s, r, _ = self.value(x)
-        return s * self.gp + p * self.gs - 2 * r * self.gr
+    def gradients(self, x: np.ndarray) -> np.ndarray:
+        """∇c_i at x, (2, P)."""
+        p, s, r, _ = self.values(x)
+        return s[:, None] * self.GP + p[:, None] * self.GS - 2 * r[:, None] * self.GR
 
-    @cached_property
-    def hessian(self) -> np.ndarray:
-        return np.outer(self.gp, self.gs) + np.outer(self.gs, self.gp) - 2 * np.outer(self.gr, self.gr)
-
-    def slack(self, x: np.ndarray) -> float:
-        """λ_min(N(x)) − margin [kg m²]: ≥ 0 feasible."""
-        p, s, r, _ = self.value(x)
-        return float(0.5 * (p + s) - np.sqrt(0.25 * (p - s) ** 2 + r * r))
+    def slacks(self, x: np.ndarray) -> np.ndarray:
+        """λ_min(N_i(x)) − margin [kg m²] per cone: ≥ 0 feasible."""
+        p, s, r, _ = self.values(x)
+        return 0.5 * (p + s) - np.sqrt(0.25 * (p - s) ** 2 + r * r)
 
 
 class WarmConsistentLS:
@@ -258,22 +258,21 @@ class WarmConsistentLS:
     Each call: (1) the box-only solution (`WarmBoundedLS`); if M is positive definite there it is the
     answer (the cone constraints are inactive). (2) Otherwise Newton's method on the KKT equations of
     the previous call's active set (box parameters fixed, active cones as equalities c(π) = 0),
-    warm-started at the previous (π, μ): typically 2–3 solves of a (P + 1)-sized system. The result is
-    accepted only if the KKT conditions hold (stationarity and c = 0 to 1e-12 relative, μ ≥ 0, the other
-    constraints satisfied, box multipliers of the right sign). (3) If not (the active set changed),
-    Clarabel (`fit_constrained`) finds the new active set and Newton polishes its answer to the same
-    exactness. `fallbacks` counts the calls that needed (3); `inexact` those where even the polish failed
-    (the Clarabel answer is returned then).
+    warm-started at the previous (π, μ) — typically 1–2 solves of a (P + 1)-sized system — then the KKT
+    check: stationarity and c = 0 to 1e-13 relative, μ ≥ 0, the other constraints satisfied, box
+    multipliers of the right sign; a failed check changes the active set by one constraint and repeats.
+    (3) Only if that does not settle (a large change, or the first call), Clarabel (`fit_constrained`)
+    finds the active set and Newton polishes its answer to the same exactness. `fallbacks` counts the
+    calls that needed (3); `inexact` those where even the polish failed (Clarabel's answer is returned).
     """
 
     def __init__(self, model: ArmModel, bounds: Bounds, margin: float = 1e-6):
         self.model, self.bounds, self.margin = model, bounds, margin
-        A0, A1 = model.mass_matrix_maps
-        self.cones = [_Cone(B[:, 0, 0], B[:, 1, 1], B[:, 0, 1], margin) for B in (A0 + A1, A0 - A1)]
+        self.cones = _Cones(model, margin)
         self.box = WarmBoundedLS(bounds)
         self.pi: np.ndarray | None = None
         self.state = np.zeros(model.n_params, dtype=np.int8)
-        self.mu = np.zeros(len(self.cones))
+        self.mu = np.zeros(self.cones.n)
         self.fallbacks = 0
         self.inexact = 0
 
@@ -284,8 +283,8 @@ class WarmConsistentLS:
     def solve(self, H: np.ndarray, h: np.ndarray) -> np.ndarray:
         """π̂ for the statistics (H, h); exact to the KKT check's tolerance."""
         x = self.box.solve(H, h)
-        if all(cone.slack(x) >= 0 for cone in self.cones):
-            self._accept(x, self.box.last.state, np.zeros(len(self.cones)))
+        if np.all(self.cones.slacks(x) >= 0):
+            self._accept(x, self.box.last.state, np.zeros(self.cones.n))
             return x
         if self.pi is not None and self.mu.any():
             result = self._active_set(H, h, self.pi, self.state, self.mu)
@@ -324,63 +323,62 @@ class WarmConsistentLS:
         active = np.flatnonzero(mu0 > 0)
         m = mu0[active].copy()
         F = np.flatnonzero(state == 0)
-        scale = np.abs(H) @ np.maximum(np.abs(x), 1.0) + np.abs(h)
-        cones = [self.cones[i] for i in active]
+        FF = np.ix_(F, F)
+        nF, nA = F.size, active.size
+        tol1 = 1e-13 * (np.abs(H[F]) @ np.maximum(np.abs(x), 1.0) + np.abs(h[F]))
+        hess = self.cones.hessian[active].reshape(nA, -1)
+        P = x.size
+        kkt = np.zeros((nF + nA, nF + nA))
         for _ in range(30):
-            grads = np.array([cone.gradient(x) for cone in cones]).reshape(len(cones), x.size)
+            p, s, r, c = self.cones.values(x)
+            grads = (s[:, None] * self.cones.GP + p[:, None] * self.cones.GS - 2 * r[:, None] * self.cones.GR)[active]
             r1 = (H @ x - h - m @ grads)[F]
-            vals = [cone.value(x) for cone in cones]
-            r2 = np.array([v[3] for v in vals])
-            cscale = np.array([abs(v[0] * v[1]) + v[2] ** 2 + 1e-300 for v in vals])
-            if np.all(np.abs(r1) <= 1e-13 * scale[F]) and np.all(np.abs(r2) <= 1e-13 * cscale):
-                out = np.zeros(len(self.cones))
+            r2 = c[active]
+            cscale = (np.abs(p * s) + r * r)[active] + 1e-300
+            if np.all(np.abs(r1) <= tol1) and np.all(np.abs(r2) <= 1e-13 * cscale):
+                out = np.zeros(self.cones.n)
                 out[active] = m
                 return x, out
-            K = H - sum(mi * cone.hessian for mi, cone in zip(m, cones))
+            K = H - (m @ hess).reshape(P, P) if nA else H
             A = grads[:, F]
-            nF = F.size
-            kkt = np.zeros((nF + len(cones), nF + len(cones)))
-            kkt[:nF, :nF], kkt[:nF, nF:], kkt[nF:, :nF] = K[np.ix_(F, F)], -A.T, A
-            try:
-                step = np.linalg.solve(kkt, -np.concatenate([r1, r2]))
-            except np.linalg.LinAlgError:
+            kkt[:nF, :nF], kkt[:nF, nF:], kkt[nF:, :nF] = K[FF], -A.T, A
+            _, _, step, info = _dgesv(kkt, -np.concatenate([r1, r2]))
+            if info != 0:  # singular KKT matrix: this active set cannot be solved here
                 return None
-            x[F] += step[:F.size]
-            m += step[F.size:]
+            x[F] += step[:nF]
+            m += step[nF:]
         return None
 
     def _kkt_change(self, H: np.ndarray, h: np.ndarray, x: np.ndarray, state: np.ndarray,
                     mu: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """None when (x, μ) satisfies the KKT conditions; else the active set with its worst violation
-        changed: a negative μ dropped, a violated cone or bound added, a wrong-signed box multiplier
-        released; a cone whose point is on the wrong branch of c = 0 (p or s ≤ 0) is dropped."""
+        changed: a cone on the wrong branch of c = 0 (p or s ≤ 0) or with μ < 0 dropped, a violated
+        bound or cone added, a wrong-signed box multiplier released."""
         lo, hi = self.bounds.lower, self.bounds.upper
         scale = np.abs(H) @ np.maximum(np.abs(x), 1.0) + np.abs(h)
         tol = 1e-10
         state, mu = state.copy(), mu.copy()
-        for i, cone in enumerate(self.cones):
-            p, s, _, _ = cone.value(x)
-            if mu[i] > 0 and (p <= 0 or s <= 0):  # the other branch of c = 0: not the cone; restart
-                mu[i] = 0.0
-                return state, mu
-        negative = mu < -tol * np.max(scale)
-        if negative.any():
+        p, s, r, _ = self.cones.values(x)
+        wrong_branch = (mu > 0) & ((p <= 0) | (s <= 0))
+        if wrong_branch.any():
+            mu[int(np.argmax(wrong_branch))] = 0.0
+            return state, mu
+        if np.any(mu < -tol * np.max(scale)):
             mu[int(np.argmin(mu))] = 0.0
             return state, mu
         below, above = lo - x, x - hi
         size = np.maximum(np.where(np.isfinite(lo), np.abs(lo), 0.0), np.where(np.isfinite(hi), np.abs(hi), 0.0))
         worst = np.maximum(below, above) / np.maximum(size, 1.0)
         if np.max(worst) > tol:
-            p = int(np.argmax(worst))
-            state[p] = -1 if below[p] > above[p] else 1
+            k = int(np.argmax(worst))
+            state[k] = -1 if below[k] > above[k] else 1
             return state, mu
-        for i, cone in enumerate(self.cones):
-            p, s, _, _ = cone.value(x)
-            if mu[i] == 0 and cone.slack(x) < -1e-12 * max(abs(p), abs(s), 1e-300):
-                mu[i] = 1e-6 * np.max(scale)  # a small positive start; Newton finds its value
-                return state, mu
-        grads = np.array([cone.gradient(x) for cone in self.cones])
-        g = H @ x - h - mu @ grads  # the box multipliers at fixed parameters
+        slack = 0.5 * (p + s) - np.sqrt(0.25 * (p - s) ** 2 + r * r)
+        violated = (mu == 0) & (slack < -1e-12 * np.maximum(np.maximum(np.abs(p), np.abs(s)), 1e-300))
+        if violated.any():
+            mu[int(np.argmax(violated))] = 1e-6 * np.max(scale)  # a small positive start; Newton finds it
+            return state, mu
+        g = H @ x - h - mu @ self.cones.gradients(x)  # the box multipliers at fixed parameters
         wrong = np.where(state < 0, -g, np.where(state > 0, g, -np.inf)) - tol * scale
         if np.max(wrong) > 0:
             state[int(np.argmax(wrong))] = 0
@@ -402,16 +400,16 @@ class WarmConsistentLS:
         lo, hi = self.bounds.lower, self.bounds.upper
         near = 1e-7 * np.maximum(np.abs(x), 1.0)
         state = np.where(x - lo <= near, -1, np.where(hi - x <= near, 1, 0)).astype(np.int8)
-        near_cone = [cone.slack(x) <= 1e-6 * max(1.0, np.max(np.abs(x))) for cone in self.cones]
+        near_cone = self.cones.slacks(x) <= 1e-6 * max(1.0, np.max(np.abs(x)))
         F = state == 0
-        grads = np.array([cone.gradient(x) for cone in self.cones])
+        grads = self.cones.gradients(x)
         # Which cones are active is not always clear from Clarabel's point (a slack of 1e-8 may be either):
         # try the likely active sets, the one it shows first; keep the first that passes the KKT check.
-        subsets = sorted((s for s in itertools.product((False, True), repeat=len(self.cones)) if any(s)),
+        subsets = sorted((s for s in itertools.product((False, True), repeat=self.cones.n) if any(s)),
                          key=lambda s: sum(a != b for a, b in zip(s, near_cone)))
         for subset in subsets:
             on = np.array(subset)
-            mu = np.zeros(len(self.cones))
+            mu = np.zeros(self.cones.n)
             # Multipliers from stationarity on the free parameters (least squares): Newton's start.
             mu[on] = np.linalg.lstsq(grads[on][:, F].T, (H @ x - h)[F], rcond=None)[0]
             if np.any(mu[on] <= 0):
@@ -420,5 +418,5 @@ class WarmConsistentLS:
             if result is not None:
                 return result
         self.inexact += 1
-        self._accept(x, state, np.zeros(len(self.cones)))
+        self._accept(x, state, np.zeros(self.cones.n))
         return x
