@@ -324,11 +324,21 @@ def _simulate(table: _Table) -> SimulateSpec:
     effects = table.take("effects", list, [])
     if not all(isinstance(e, str) for e in effects):
         raise InputError(f"{table.path}: key 'effects' in [simulate] must be a list of strings")
+    from ident_opt.simulate.effects import parse_effect  # the catalogue's home; imported only when needed
+
+    for effect in effects:
+        try:
+            parse_effect(effect)
+        except InputError as exc:
+            raise InputError(f"{table.path}: key 'effects' in [simulate]: {exc}") from None
     output = table.take("output", str, SimulateSpec.output)
     if output not in ("torque", "current"):
         raise InputError(f"{table.path}: key 'output' in [simulate] must be \"torque\" or \"current\"")
+    trajectory = table.take("trajectory", str, SimulateSpec.trajectory)
+    if trajectory not in ("tud01", "fourier"):
+        raise InputError(f"{table.path}: key 'trajectory' in [simulate] must be \"tud01\" or \"fourier\"")
     spec = SimulateSpec(
-        trajectory=table.take("trajectory", str, SimulateSpec.trajectory),
+        trajectory=trajectory,
         duration=table.positive("duration", SimulateSpec.duration),
         rate_hz=table.positive("rate_hz", SimulateSpec.rate_hz),
         seed=table.take("seed", int, SimulateSpec.seed),

@@ -79,3 +79,14 @@ def test_missing_and_malformed_problem_files(tmp_path, capsys):
     bad.write_text("name = [unclosed")
     assert main(["check", "--problem", str(bad)]) == 2
     assert "not a valid TOML" in capsys.readouterr().err
+
+
+def test_simulate_section_is_checked_when_the_file_loads(tmp_path):
+    text = (PROBLEMS / "tudor_sim.toml").read_text()
+    path = tmp_path / "sim.toml"
+    path.write_text(text.replace("[simulate]", '[simulate]\neffects = ["springs:k=3"]', 1)
+                    if "effects" not in text else
+                    text.replace("effects = [", 'effects = ["springs:k=3", ', 1))
+    with pytest.raises(InputError) as err:
+        load_problem(path)
+    assert str(path) in str(err.value) and "springs" in str(err.value) and "effects" in str(err.value)
