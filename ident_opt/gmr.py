@@ -38,6 +38,9 @@ class GMR:
     n_components: a fixed K, or None to choose among `candidates` by `selection`:
     ``"validation"`` (mean squared error of E[r | x] on a held-out `validation_fraction` of the training
     data, outputs weighted by 1/variance, then refit on all of it) or ``"bic"`` (scikit-learn's BIC).
+    validation: which samples are held out for that choice: ``"random"`` or ``"blocked"`` (the last
+    `validation_fraction` of the rows as given, i.e. the latest in time for a trial in time order — the
+    honest choice when the model will predict later motions).
     covariance: ``"full"`` (the default; linear regression inside each component) or ``"diag"`` (each
     component predicts its constant mean: a piecewise-constant GMR).
     After `fit`: `n_components_`, `selection_scores_` {K: score}, `n_train_` (samples used).
@@ -50,6 +53,7 @@ class GMR:
     max_train_samples: int = 20000
     selection: str = "validation"
     validation_fraction: float = 0.25
+    validation: str = "random"
     random_state: int = 0
     weights_: np.ndarray = field(init=False, repr=False, default=None)
     means_: np.ndarray = field(init=False, repr=False, default=None)
@@ -75,6 +79,8 @@ class GMR:
             raise InputError(f"GMR covariance must be 'full' or 'diag', got {self.covariance!r}")
         if self.selection not in ("validation", "bic"):
             raise InputError(f"GMR selection must be 'validation' or 'bic', got {self.selection!r}")
+        if self.validation not in ("random", "blocked"):
+            raise InputError(f"GMR validation must be 'random' or 'blocked', got {self.validation!r}")
         rng = np.random.default_rng(self.random_state)
         Z = np.hstack([X, R])
         if len(Z) > self.max_train_samples:  # bounded cost: a random subsample, reproducible
@@ -114,8 +120,11 @@ class GMR:
                 scores[k] = float(self._mixture(k).fit(Zs).bic(Zs))
         else:
             n_val = max(1, round(self.validation_fraction * len(Zs)))
-            perm = rng.permutation(len(Zs))
-            val, train = Zs[perm[:n_val]], Zs[perm[n_val:]]
+            if self.validation == "blocked":
+                val, train = Zs[-n_val:], Zs[:-n_val]
+            else:
+                perm = rng.permutation(len(Zs))
+                val, train = Zs[perm[:n_val]], Zs[perm[n_val:]]
             d = self.n_inputs
             for k in candidates:
                 if k > len(train):

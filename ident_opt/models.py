@@ -178,11 +178,13 @@ class HybridModel:
 
 
 def make_gmr(spec: ResidualSpec, components: int | None = None, covariance: str | None = None,
-             random_state: int = 0) -> GMR:
-    """A GMR with the problem's `[residual]` settings (components: a fixed K overrides the spec's)."""
+             random_state: int = 0, validation: str = "random") -> GMR:
+    """A GMR with the problem's `[residual]` settings (components: a fixed K overrides the spec's;
+    validation: how the components are chosen, see `GMR`)."""
     return GMR(n_components=components if components is not None else spec.components,
                candidates=spec.candidates, covariance=covariance or spec.covariance,
-               reg_covar=spec.reg_covar, max_train_samples=spec.max_train_samples, random_state=random_state)
+               reg_covar=spec.reg_covar, max_train_samples=spec.max_train_samples, random_state=random_state,
+               validation=validation)
 
 
 def parametric_models(robot: Robot, constrained: bool = True) -> list:

@@ -223,7 +223,9 @@ def write_readme(result: IdentifyResult, out: Path, tables: dict[str, Path]) -> 
         "",
         "The paper's protocol shuffles samples before splitting: at 100 Hz every test sample has near-copies "
         "in training, which flatters local models such as GMR. The chronological and cross-trial protocols are "
-        "the honest numbers.",
+        "the honest numbers. When the number of GMR components is \"auto\", it is chosen on held-out training "
+        "data that mirror the protocol: a random quarter under the paper's, the latest quarter in time under the "
+        "honest ones.",
         "",
         "## Reproduction of the paper (paper's protocol)",
         "",

@@ -132,6 +132,20 @@ def test_bic_selection_and_diag_covariance():
     np.testing.assert_allclose(est[:, 0], [1.0, -1.0], atol=0.1)
 
 
+def test_blocked_validation_holds_out_the_last_rows():
+    # Validation MSE does not depend on the order of the validation rows, and the training rows are
+    # unchanged: permuting only the last quarter must leave blocked scores exactly as they were.
+    rng = np.random.default_rng(9)
+    X = rng.uniform(-2, 2, size=(800, 2))
+    R = np.sin(2 * X[:, :1]) + rng.normal(scale=0.1, size=(800, 1))
+    perm = np.r_[np.arange(600), 600 + rng.permutation(200)]
+    a = GMR(candidates=(1, 3), validation="blocked").fit(X, R)
+    b = GMR(candidates=(1, 3), validation="blocked").fit(X[perm], R[perm])
+    assert a.selection_scores_ == pytest.approx(b.selection_scores_, rel=1e-9)
+    with pytest.raises(InputError):
+        GMR(validation="sideways").fit(X, R)
+
+
 def test_mean_shift_moves_prediction_exactly():
     # The online consistency transform edits means_[k, n_inputs:]; predict must see it (no stale cache).
     rng = np.random.default_rng(6)
