@@ -1,0 +1,268 @@
+"""One candidate model extension per catalogue cause, fitted on the training part.
+
+Each cause is a *family* of models τ̂ = o(θ) + X(θ) β (see `linear.py`) built from the `ArmModel`
+extensions where the effect is linear in its parameters, plus a few nonlinear parameters θ searched by
+variable projection. It is fitted against one or both nominal models:
+
+- ``datasheet``: the problem file's π held fixed; only the effect's own parameters are fitted (this is
+  where parameter-level causes show: armature, payload, mis-scaled or asymmetric friction).
+- ``rigid_fit``: every π of the nominal structure refitted together with the effect (structural causes
+  that no choice of π absorbs: friction shape, elasticity, delay, offsets).
+
+| cause | columns (linear β) | nonlinear θ |
+|---|---|---|
+| armature | J1·ddq1, J2·ddq2 on the diagonal (the a1, ia2 directions), J ≥ 0 | — |
+| payload | Y·∂π/∂m (π is affine in a tip mass m), m ≥ 0 | — |
+| asymmetric_coulomb | fc1p fc1n fc2p fc2n (`asymmetric_coulomb` extension) | — |
+| stribeck | fs1 fs2 ≥ 0 (`stribeck` extension) | vs1, vs2 [rad/s] |
+| joint_offset | b1s b2s (`offset` extension): δ1 = atan2(−b1s, b1), δ1+δ2 = atan2(−b2s, b2) | — |
+| delay | the whole prediction delayed by d | d [s] |
+| elasticity | ë_j on joint j's row, ë_j and ë_j·cos q2 on the other row (see below) | f [Hz], ζ |
+
+ë_j is the deflection acceleration of an elastic joint j driven by the measured motor-side acceleration
+(`signals.deflection_acceleration`): an elastic-joint model driven by the logged motor-side angle.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ident_opt.data import Dataset
+from ident_opt.datasheet import datasheet_pi
+from ident_opt.diagnose import linear, signals
+from ident_opt.problem import Robot
+from ident_opt.robot import ArmModel
+
+#: The nominal structure under the physical convention (the datasheet has the joint-2 armature ia2).
+NOMINAL = ArmModel(("armature",))
+#: Rows used by the nonlinear search: longer trials are strided down to about this many samples
+#: (the final linear solve always uses every sample).
+SEARCH_ROWS = 12000
+#: Where an elastic mode is searched [Hz]: the first modes of flexible-link arms lie at a few Hz; above
+#: ~12 Hz a mode is no longer observable in accelerations estimated with the usual 15 Hz low-pass, and a
+#: "mode" there only fits filter transients at starts and stops.
+ELASTIC_BAND_HZ = (1.5, 12.0)
+
+
+@dataclass
+class Context:
+    """What every candidate needs: the robot, the training and held-out parts, joint weights 1/σ_j²."""
+
+    robot: Robot
+    train: Dataset
+    test: Dataset
+    weights: np.ndarray
+    datasheet: dict[str, float]
+    dt: float
+
+
+@dataclass
+class Candidate:
+    """A fitted extension: its catalogue estimate, parameters (with standard errors) and a predictor."""
+
+    cause: str
+    baseline: str
+    estimate: dict
+    parameters: dict[str, float]
+    se: dict[str, float]
+    n_added: int
+    predict: Callable[[Dataset], np.ndarray]
+    detail: dict = field(default_factory=dict)
+
+
+@dataclass
+class Family:
+    """How to build one cause's model: the ArmModel for θ, which π are freed from the datasheet, extra
+    columns, whether the prediction is delayed, the θ axes and how to read the estimate."""
+
+    cause: str
+    model: Callable[[dict], ArmModel]
+    free: tuple[str, ...] | None  # names freed against the datasheet (None: the effect adds no π names)
+    extra: Callable[[Dataset, dict, float], tuple[np.ndarray, list[str]]] | None = None
+    shifted: bool = False
+    axes: Callable[[float], list[linear.Axis]] = lambda rate: []
+    baselines: tuple[str, ...] = ("datasheet", "rigid_fit")
+    nonnegative: tuple[str, ...] = ()  # coefficients with a physical sign (held at 0 rather than negative)
+    estimate: Callable[[dict, dict, Context], tuple[dict, dict]] = lambda p, se, ctx: ({}, {})
+
+
+_CACHE: dict = {}
+
+
+def _regressor(model: ArmModel, ds: Dataset, rows: slice) -> np.ndarray:
+    """model.regressor on ds[rows], remembered for the last few (model, data) pairs: the searches over a
+    delay or a mode re-use the same regressor hundreds of times."""
+    key = (model, id(ds), ds.n, rows.start, rows.stop, rows.step)
+    if key not in _CACHE:
+        if len(_CACHE) > 8:
+            _CACHE.pop(next(iter(_CACHE)))
+        _CACHE[key] = (ds, model.regressor(ds.q[rows], ds.dq[rows], ds.ddq[rows]))
+    return _CACHE[key][1]
+
+
+def design(family: Family, ds: Dataset, theta: dict, baseline: str, ctx: Context,
+           rows: slice = slice(None)) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """(o, X, names) of `family` at θ on `ds` (rows `rows`), against `baseline` (see the module docstring)."""
+    model = family.model(theta)
+    Y = _regressor(model, ds, rows)
+    n = Y.shape[0]
+    if baseline == "datasheet":
+        pi = model.vector(ctx.datasheet)
+        free = [i for i, n in enumerate(model.names) if n in (family.free or ())]
+        fixed = [i for i in range(model.n_params) if i not in free]
+        offset = Y[:, :, fixed] @ pi[fixed]
+        X, names = Y[:, :, free], [model.names[i] for i in free]
+    else:
+        offset, X, names = np.zeros((n, 2)), Y, list(model.names)
+    if family.extra is not None:
+        cols, extra_names = family.extra(ds, theta, ctx.dt)
+        X = np.concatenate([X, cols[rows]], axis=2)
+        names = names + extra_names
+    if family.shifted:
+        d = theta["delay"]
+        step = ctx.dt * (rows.step or 1)
+        offset, X = signals.delayed(offset, d, step), signals.delayed(X, d, step)
+    return offset, X, names
+
+
+def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
+    """Fit one family against one baseline on the training part (θ by variable projection, β by WLS)."""
+    rate = 1.0 / ctx.dt
+    stride = max(1, ctx.train.n // SEARCH_ROWS)
+    # A delay needs a uniform grid: stride by whole samples and delay on the strided grid.
+    rows = slice(None, None, stride)
+    train_sub = ctx.train.tau[rows]
+
+    def solve(o, X, names, tau, with_se):
+        signed = [i for i, n in enumerate(names) if n in family.nonnegative]
+        return linear.solve_nonnegative(o, X, tau, ctx.weights, signed, with_se)
+
+    def cost(theta: dict) -> float:
+        o, X, names = design(family, ctx.train, theta, baseline, ctx, rows)
+        return solve(o, X, names, train_sub, False).cost
+
+    axes = family.axes(rate)
+    theta = linear.search(cost, axes) if axes else {}
+    o, X, names = design(family, ctx.train, theta, baseline, ctx)
+    ls = solve(o, X, names, ctx.train.tau, True)
+    params = dict(zip(names, map(float, ls.beta)))
+    se = dict(zip(names, map(float, ls.se)))
+    params.update(theta)
+    estimate, detail = family.estimate(params, se, ctx)
+    nominal_free = len(NOMINAL.names) if baseline == "rigid_fit" else 0
+    n_added = len(names) - nominal_free + len(theta)
+    beta = ls.beta.copy()
+
+    def predict(ds: Dataset) -> np.ndarray:
+        o, X, _ = design(family, ds, theta, baseline, ctx)
+        return o + np.einsum("njk,k->nj", X, beta)
+
+    return Candidate(family.cause, baseline, estimate, params, se, n_added, predict, detail)
+
+
+# ---------------------------------------------------------------------------------------------- families
+def _nominal(theta: dict) -> ArmModel:
+    return NOMINAL
+
+
+def _armature_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
+    inertia = [p["j1"], p["j2"]]
+    return {"inertia": inertia}, {"se": [se["j1"], se["j2"]]}
+
+
+def _armature_columns(ds: Dataset, theta: dict, dt: float) -> tuple[np.ndarray, list[str]]:
+    """Extra reflected inertia J_j on the diagonal of M: J1·ddq1 on joint 1's row, J2·ddq2 on joint 2's
+    (the a1 and ia2 columns of the nominal structure)."""
+    X = np.zeros((ds.n, 2, 2))
+    X[:, 0, 0], X[:, 1, 1] = ds.ddq[:, 0], ds.ddq[:, 1]
+    return X, ["j1", "j2"]
+
+
+def _payload_column(ds: Dataset, theta: dict, dt: float, robot: Robot) -> np.ndarray:
+    """Y·∂π/∂m: π is affine in a tip mass m (the combined link-2 inertia about joint 2 and its first
+    moment are both linear in m), so the difference quotient at m = 1 kg is exact."""
+    d = NOMINAL.vector(datasheet_pi(replace(robot, payload_mass=robot.payload_mass + 1.0))) \
+        - NOMINAL.vector(datasheet_pi(robot))
+    return (NOMINAL.regressor(ds.q, ds.dq, ds.ddq) @ d)[:, :, None]
+
+
+def _asym_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
+    return ({"positive": [p["fc1p"], p["fc2p"]], "negative": [p["fc1n"], p["fc2n"]]},
+            {"se_positive": [se["fc1p"], se["fc2p"]], "se_negative": [se["fc1n"], se["fc2n"]]})
+
+
+def _stribeck_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
+    static, velocity = [], []
+    for j in ("1", "2"):
+        fs, s = p["fs" + j], se["fs" + j]
+        # A joint whose excess is not resolved from zero is "untouched": report 0 for both keys.
+        resolved = fs > 3.0 * s
+        static.append(fs if resolved else 0.0)
+        velocity.append(p["vs" + j] if resolved else 0.0)
+    return {"static": static, "velocity": velocity}, {"se_static": [se["fs1"], se["fs2"]]}
+
+
+def _offset_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
+    b1 = p.get("b1", ctx.datasheet["b1"])
+    b2 = p.get("b2", ctx.datasheet["b2"])
+    d1 = math.atan2(-p["b1s"], b1)
+    d12 = math.atan2(-p["b2s"], b2)
+    return {"offset": [d1, d12 - d1]}, {}
+
+
+def _elastic_columns(joint: int) -> Callable:
+    def columns(ds: Dataset, theta: dict, dt: float) -> tuple[np.ndarray, list[str]]:
+        e = signals.deflection_acceleration(ds.ddq[:, joint - 1], theta["frequency_hz"], theta["damping"], dt)
+        c2 = np.cos(ds.q[:, 1])
+        # The spring carries link j's inertia on its own row; the other row feels the coupling
+        # M12 = a3 + a2 cos q2, which varies with the pose (M11's cos q2 part is small next to a1).
+        X = np.zeros((ds.n, 2, 3))
+        other = 2 - joint
+        X[:, joint - 1, 0], X[:, other, 1], X[:, other, 2] = e, e, e * c2
+        return X, ["m_own", "m_cross", "m_cross_c2"]
+
+    return columns
+
+
+def _elastic_estimate(joint: int) -> Callable:
+    def estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
+        m_eff = p["m_own"]  # the link inertia the spring carries [kg m²]
+        w = 2 * math.pi * p["frequency_hz"]
+        return ({"joint": joint, "frequency_hz": p["frequency_hz"]},
+                {"damping_ratio": p["damping"], "inertia": m_eff, "stiffness": m_eff * w * w,
+                 "damping_coefficient": 2 * p["damping"] * w * m_eff})
+
+    return estimate
+
+
+def families(robot: Robot) -> list[Family]:
+    """Every catalogue cause (elasticity once per joint) as a `Family`."""
+    out = [
+        Family("armature", _nominal, (), extra=_armature_columns, baselines=("datasheet",),
+               nonnegative=("j1", "j2"), estimate=_armature_estimate),
+        Family("payload", _nominal, (), extra=lambda ds, th, dt: (_payload_column(ds, th, dt, robot), ["mass"]),
+               baselines=("datasheet",), nonnegative=("mass",),
+               estimate=lambda p, se, ctx: ({"mass": p["mass"]}, {"se": se["mass"]})),
+        Family("asymmetric_coulomb", lambda th: ArmModel(("armature", "asymmetric_coulomb")),
+               ("fc1p", "fc1n", "fc2p", "fc2n"), estimate=_asym_estimate),
+        Family("stribeck", lambda th: ArmModel(("armature", "stribeck"), stribeck_velocity=(th["vs1"], th["vs2"])),
+               ("fs1", "fs2"), nonnegative=("fs1", "fs2"), axes=lambda rate: [linear.Axis("vs1", 0.005, 0.5, 11, True),
+                                                  linear.Axis("vs2", 0.005, 0.5, 11, True)],
+               estimate=_stribeck_estimate),
+        Family("joint_offset", lambda th: ArmModel(("armature", "offset")), ("b1s", "b2s"),
+               estimate=_offset_estimate),
+        Family("delay", _nominal, (), shifted=True,
+               axes=lambda rate: [linear.Axis("delay", 0.0, 0.15, 31)],
+               estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {})),
+    ]
+    for joint in (1, 2):
+        out.append(Family(
+            "elasticity", _nominal, (), extra=_elastic_columns(joint),
+            axes=lambda rate: [linear.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
+                               linear.Axis("damping", 0.005, 0.3, 6, True)],
+            estimate=_elastic_estimate(joint)))
+    return out

@@ -1,0 +1,219 @@
+"""The diagnosis in words and figures: a terminal summary, a Markdown report, two PNG figures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ident_opt.diagnose import signals
+from ident_opt.diagnose.diagnosis import Diagnosis
+
+
+def _v(x: float, unit: str = "", digits: int = 3) -> str:
+    return f"{x:.{digits}g}{(' ' + unit) if unit else ''}"
+
+
+def _pair(xs, unit: str = "") -> str:
+    return "[" + ", ".join(_v(float(x)) for x in xs) + "]" + (f" {unit}" if unit else "")
+
+
+def _gain(d: Diagnosis) -> str:
+    return "; ".join(f"joint {j + 1} {_v(b)} → {_v(a)}" for j, (b, a) in enumerate(zip(d.nmse_before, d.nmse_after)))
+
+
+def cause_sentence(d: Diagnosis) -> str:
+    """One or two sentences that say what was found, with its held-out gain."""
+    e, base = d.estimate, ("datasheet" if d.baseline == "datasheet" else "best rigid fit")
+    ev = d.evidence[d.baseline]
+    gain = f"held-out nMSE {_gain(d)}."
+    if d.cause == "none":
+        best = d.candidates[0]
+        return (f"No catalogue effect beats the nominal models by the stated margin: the best candidate, "
+                f"{best['cause']}, scores {best['score']:.1f} against the {best['baseline']} model. "
+                f"The {base} model stands (held-out nMSE {_pair(d.nmse_before)}).")
+    if d.cause == "armature":
+        return (f"The {base} model lacks inertia on the diagonal of M: reflected rotor inertia of "
+                f"J = {_pair(e['inertia'], 'kg m²')} (joint side) explains the residual; {gain}")
+    if d.cause == "payload":
+        return (f"Gravity and inertia are both off along the direction of a point mass at the tip of link 2: "
+                f"an unmodelled payload of {_v(e['mass'], 'kg')} explains it; {gain}")
+    if d.cause == "asymmetric_coulomb":
+        mm = ev["moving_mean"]
+        return (f"The residual of the {base} model differs by direction of motion (mean while moving "
+                f"positive / negative: " + ", ".join(f"joint {j + 1} {_v(m['positive'])} / {_v(m['negative'])} N m"
+                                                    for j, m in enumerate(mm)) +
+                f"): Coulomb friction is asymmetric, fc+ = {_pair(e['positive'], 'N m')}, "
+                f"fc− = {_pair(e['negative'], 'N m')}; {gain}")
+    if d.cause == "stribeck":
+        return (f"Friction rises at low speed beyond the Coulomb level (low-speed excess of the residual "
+                f"{_pair(ev['low_speed_excess'], 'N m')}): a Stribeck excess fs = {_pair(e['static'], 'N m')} "
+                f"falling off over vs = {_pair(e['velocity'], 'rad/s')} explains it; {gain}")
+    if d.cause == "elasticity":
+        det = d.named.detail if d.named else {}
+        return (f"Joint {e['joint']} shows a lightly damped {_v(e['frequency_hz'], 'Hz')} oscillation that the rigid "
+                f"model cannot produce; an elastic joint with k = {_v(det.get('stiffness', float('nan')), 'N m/rad')} "
+                f"(link inertia {_v(det.get('inertia', float('nan')), 'kg m²')}, damping ratio "
+                f"{_v(det.get('damping_ratio', float('nan')))}) driven by the measured motor-side angle explains it; "
+                f"{gain}")
+    if d.cause == "delay":
+        return (f"The measured torque lags the encoder channel: a delay of {_v(1e3 * e['seconds'], 'ms')} "
+                f"(cross-correlation lag of the {base} model: {_pair(np.array(ev['lag_s']) * 1e3, 'ms')}); {gain}")
+    if d.cause == "joint_offset":
+        return (f"Gravity looks rotated (pose-correlated share of the residual {_pair(ev['pose_r2'])}): encoder "
+                f"zero offsets δ = {_pair(e['offset'], 'rad')} explain it; {gain}")
+    return gain
+
+
+def summary(d: Diagnosis) -> str:
+    """The terminal summary: the four questions, briefly."""
+    nom = d.nominal
+    lines = [
+        f"diagnosis ({d.split}; {d.rate_hz:.4g} Hz)",
+        "1. nominal models, held-out nMSE per joint: datasheet " + _pair(nom["datasheet"]["nmse"]) +
+        ", rigid fit " + _pair(nom["rigid_fit"]["nmse"]),
+        f"2. cause: {d.cause}" + (f" (against the {d.baseline} model)" if d.cause != "none" else ""),
+        "   " + cause_sentence(d),
+        "3. candidates (score = penalised held-out log-likelihood gain):",
+    ]
+    for c in d.candidates:
+        lines.append(f"   {c['cause']:20s} {c['score']:10.1f}  vs {c['baseline']:9s} "
+                     f"nMSE after {_pair(c['nmse_after'])}")
+    lines.append(f"4. held-out nMSE before → after: {_gain(d)}")
+    return "\n".join(lines)
+
+
+def figures(d: Diagnosis, out: Path) -> list[str]:
+    """residual_before_after.png and spectrum_before_after.png in `out`; returns their file names."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t, tau = d.test.t, d.test.tau
+    before, after = tau - d.predictions["before"], tau - d.predictions["after"]
+    label_after = "after" if d.cause != "none" else "after (no extension)"
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    for j, ax in enumerate(axes):
+        ax.plot(t, before[:, j], lw=0.7, label=f"before ({d.baseline})")
+        ax.plot(t, after[:, j], lw=0.7, label=f"{label_after} ({d.cause})", alpha=0.8)
+        ax.set_ylabel(f"joint {j + 1} residual [N m]")
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time [s] (held-out part)")
+    fig.suptitle("Torque residual τ − τ̂ on held-out data")
+    fig.tight_layout()
+    fig.savefig(out / "residual_before_after.png", dpi=120)
+    plt.close(fig)
+
+    dt = 1.0 / d.rate_hz
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for j, ax in enumerate(axes):
+        for r, lab in ((before, "before"), (after, label_after)):
+            f, p = signals.spectrum(r[:, j], dt)
+            ax.semilogy(f[1:], p[1:], lw=0.8, label=lab)
+        if d.cause == "elasticity" and d.estimate["joint"] == j + 1:
+            ax.axvline(d.estimate["frequency_hz"], color="k", ls=":", lw=0.8, label="identified mode")
+        ax.set_xlabel("frequency [Hz]")
+        ax.set_ylabel(f"joint {j + 1} residual PSD [(N m)²/Hz]")
+        ax.legend(fontsize=8)
+    fig.suptitle("Residual spectrum on held-out data")
+    fig.tight_layout()
+    fig.savefig(out / "spectrum_before_after.png", dpi=120)
+    plt.close(fig)
+    return ["residual_before_after.png", "spectrum_before_after.png"]
+
+
+def _evidence_table(d: Diagnosis) -> list[str]:
+    rows = ["| evidence (held-out) | datasheet j1 | datasheet j2 | rigid fit j1 | rigid fit j2 |",
+            "|---|---|---|---|---|"]
+
+    def row(name, fn):
+        vals = [fn(d.evidence[b], j) for b in ("datasheet", "rigid_fit") for j in range(2)]
+        rows.append(f"| {name} | " + " | ".join(vals) + " |")
+
+    row("residual RMS [N m]", lambda e, j: _v(e["rms"][j]))
+    row("nMSE", lambda e, j: _v(e["nmse"][j]))
+    row("strongest residual peak [Hz] (ζ)",
+        lambda e, j: f"{_v(e['peaks'][j][0]['frequency_hz'])} ({_v(e['peaks'][j][0]['damping'], digits=2)})"
+        if e["peaks"][j] else "—")
+    row(f"power share below {0.6} Hz", lambda e, j: _v(e["low_band_fraction"][j]))
+    row("mean residual moving +/− [N m]",
+        lambda e, j: f"{_v(e['moving_mean'][j]['positive'])} / {_v(e['moving_mean'][j]['negative'])}")
+    row("reversal jump −→+ / +→− [N m]",
+        lambda e, j: f"{_v(e['reversal_steps'][j]['negative_to_positive'])} / "
+                     f"{_v(e['reversal_steps'][j]['positive_to_negative'])}")
+    row("low-speed excess [N m]", lambda e, j: _v(e["low_speed_excess"][j]))
+    row("pose-explained share (gravity-like)", lambda e, j: _v(e["pose_r2"][j]))
+    row("lag of measured vs predicted [ms]", lambda e, j: _v(1e3 * e["lag_s"][j]))
+    fe = d.evidence["forward_error_rad"]
+    rows.append("| forward simulation, 0.5 s windows, RMS angle error [rad] | " +
+                " | ".join(_v(fe[b][j]) for b in ("datasheet", "rigid_fit") for j in range(2)) + " |")
+    return rows
+
+
+def channels_paragraph(d: Diagnosis) -> list[str]:
+    """What the file's other channels (e.g. strain gauges) say, as independent evidence."""
+    ch = d.evidence.get("other_channels") or {}
+    if not ch:
+        return []
+    lines = ["## Independent channels", "",
+             "Other numeric columns of the data file (not model inputs; on the MERIt trials col10–col13 are the "
+             "links' strain gauges). Their most prominent spectral peaks above 0.7 Hz:", ""]
+    for name, peaks in ch.items():
+        if peaks:
+            lines.append(f"- `{name}`: " + ", ".join(
+                f"{_v(p['frequency_hz'])} Hz ({_v(p['prominence_db'], digits=2)} dB)" for p in peaks))
+    if d.cause == "elasticity":
+        f = d.estimate["frequency_hz"]
+        near = [n for n, ps in ch.items() if any(abs(p["frequency_hz"] - f) <= 0.2 * f for p in ps)]
+        lines += ["", f"The identified mode is at {_v(f, 'Hz')}; channels with a peak within 20 % of it: "
+                  + (", ".join(f"`{n}`" for n in near) if near else "none") + "."]
+    return [*lines, ""]
+
+
+def markdown(d: Diagnosis, figure_files: list[str]) -> str:
+    """The Markdown report."""
+    nom = d.nominal
+    lines = [
+        "# Diagnosis", "",
+        f"Data: {d.split} ({d.rate_hz:.4g} Hz). All numbers are on the held-out part.", "",
+        "## 1. What the nominal models get wrong", "",
+        f"Held-out nMSE (MSE ÷ variance) per joint: datasheet {_pair(nom['datasheet']['nmse'])}, best rigid fit "
+        f"{_pair(nom['rigid_fit']['nmse'])}.", "",
+        *_evidence_table(d), "",
+        "## 2. The cause", "",
+        f"**{d.cause}**" + (f" (found against the {d.baseline} model)" if d.cause != "none" else "") + ". "
+        + cause_sentence(d), "",
+        "Every catalogue effect was fitted on the training part (against the datasheet with its π held, and/or "
+        "against the rigid fit with π refitted) and scored on the held-out part: score = (n/2) Σ_j ln(MSE_before,j / "
+        "MSE_after,j) − (k/2) ln n for k added parameters. A cause is named when its score is positive and it removes "
+        "at least 5 % of its baseline's held-out MSE on some joint.", "",
+        "| cause | score | baseline | added parameters | held-out nMSE after | estimate |", "|---|---|---|---|---|---|",
+    ]
+    for c in d.candidates:
+        est = {k: (np.round(v, 4).tolist() if not isinstance(v, int) else v) for k, v in c["estimate"].items()}
+        lines.append(f"| {c['cause']} | {c['score']:.1f} | {c['baseline']} | {c['added_parameters']} | "
+                     f"{_pair(c['nmse_after'])} | `{est}` |")
+    lines += ["", "## 3. The extended model", ""]
+    if d.named is not None:
+        lines += ["| parameter | value | standard error |", "|---|---|---|"]
+        for name, value in d.named.parameters.items():
+            se = d.named.se.get(name)
+            shown = f"{se:.2g}" if se is not None else "(searched)"
+            lines.append(f"| {name} | {value:.5g} | {shown} |")
+        lines += ["", "Standard errors assume independent residuals; consecutive samples are correlated, so read them "
+                  "as lower bounds.", ""]
+    else:
+        lines += ["No extension: the nominal model is kept.", ""]
+    lines += ["## 4. The gain", "", f"Held-out nMSE before → after: {_gain(d)}.", ""]
+    lines += [f"![{f}]({f})" for f in figure_files] + [""]
+    lines += channels_paragraph(d)
+    return "\n".join(lines)
+
+
+def write(d: Diagnosis, out: Path) -> list[str]:
+    """Write the figures and `diagnosis.md` to `out`; returns the files written."""
+    out.mkdir(parents=True, exist_ok=True)
+    files = figures(d, out)
+    (out / "diagnosis.md").write_text(markdown(d, files))
+    return [*files, "diagnosis.md"]

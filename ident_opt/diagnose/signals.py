@@ -1,0 +1,114 @@
+"""Signal tools the evidence and the candidates share: a fractional delay, the elastic-mode filter, spectra.
+
+All assume (near-)uniform sampling with step dt [s]; time runs along axis 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+
+def delayed(x: np.ndarray, seconds: float, dt: float) -> np.ndarray:
+    """x(t − d) on the same grid, by linear interpolation between samples (d ≥ 0; the first samples repeat
+    x[0]). Linear in x, so delaying each regressor column delays the whole prediction."""
+    steps = max(seconds, 0.0) / dt
+    m = int(np.floor(steps))
+    frac = steps - m
+    n = x.shape[0]
+    idx = np.arange(n)
+    a = x[np.clip(idx - m, 0, n - 1)]
+    b = x[np.clip(idx - m - 1, 0, n - 1)]
+    return (1.0 - frac) * a + frac * b
+
+
+def deflection_acceleration(ddq: np.ndarray, frequency_hz: float, damping: float, dt: float) -> np.ndarray:
+    """Acceleration ë [rad/s²] of an elastic link's deflection e = q_link − θ_motor, driven by the measured
+    motor-side acceleration θ̈ (motor held on its measured path):
+
+        ë + 2ζω ė + ω² e = −θ̈     ⇒     ë = −s² / (s² + 2ζω s + ω²) · θ̈,     ω = 2π f.
+
+    The link then adds m_eff·ë to the torque the rigid model predicts from θ (its stiffness is k = m_eff ω²).
+    Discretised by the bilinear transform pre-warped at ω, so the mode sits at f exactly.
+    """
+    fs = 1.0 / dt
+    w = 2.0 * fs * np.tan(np.pi * frequency_hz / fs)  # pre-warped ω [rad/s]
+    K = 2.0 * fs  # s = K (z − 1) / (z + 1)
+    den = np.array([K * K + 2 * damping * w * K + w * w, 2 * (w * w - K * K), K * K - 2 * damping * w * K + w * w])
+    num = np.array([-K * K, 2 * K * K, -K * K])
+    return signal.lfilter(num / den[0], den / den[0], ddq, axis=0)
+
+
+@dataclass
+class Peak:
+    """A spectral peak: frequency [Hz], damping ratio from the half-power bandwidth, prominence [dB]."""
+
+    frequency_hz: float
+    damping: float
+    prominence_db: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {"frequency_hz": self.frequency_hz, "damping": self.damping, "prominence_db": self.prominence_db}
+
+
+def spectrum(x: np.ndarray, dt: float, window_s: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """Welch power spectral density of a 1-D signal (mean removed): (frequencies [Hz], PSD [unit²/Hz])."""
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    nperseg = int(min(len(x), max(16, round(window_s / dt))))
+    return signal.welch(x, fs=1.0 / dt, nperseg=nperseg)
+
+
+def peaks(x: np.ndarray, dt: float, low_hz: float = 0.7, count: int = 3, min_prominence_db: float = 6.0,
+          window_s: float = 10.0) -> list[Peak]:
+    """The most prominent spectral peaks of x above `low_hz` (the motion band lies below), strongest first.
+
+    Damping comes from the half-power (−3 dB) bandwidth: ζ ≈ (f₂ − f₁) / (2 f₀), a lower bound on the
+    resolution (window_s) — a lightly damped mode reads as narrow as the window allows.
+    """
+    f, p = spectrum(x, dt, window_s)
+    band = (f >= low_hz) & (f <= 0.45 / dt)
+    if band.sum() < 5 or not np.any(p[band] > 0):
+        return []
+    db = 10 * np.log10(np.maximum(p, 1e-300))
+    fb, dbb = f[band], db[band]
+    idx, props = signal.find_peaks(dbb, prominence=min_prominence_db)
+    order = np.argsort(props["prominences"])[::-1][:count]
+    out = []
+    for i in idx[order]:
+        half = dbb[i] - 3.0
+        lo = i
+        while lo > 0 and dbb[lo] > half:
+            lo -= 1
+        hi = i
+        while hi < len(dbb) - 1 and dbb[hi] > half:
+            hi += 1
+        f1 = np.interp(half, [dbb[lo], dbb[lo + 1]], [fb[lo], fb[lo + 1]]) if lo < i else fb[i]
+        f2 = np.interp(half, [dbb[hi], dbb[hi - 1]], [fb[hi], fb[hi - 1]]) if hi > i else fb[i]
+        out.append(Peak(float(fb[i]), float((f2 - f1) / (2 * fb[i])),
+                        float(props["prominences"][list(idx).index(i)])))
+    return out
+
+
+def band_fraction(x: np.ndarray, dt: float, below_hz: float) -> float:
+    """Fraction of x's power (mean removed) below `below_hz`."""
+    f, p = spectrum(x, dt)
+    total = float(np.sum(p))
+    return float(np.sum(p[f < below_hz]) / total) if total > 0 else float("nan")
+
+
+def lag(reference: np.ndarray, x: np.ndarray, dt: float, max_s: float = 0.2) -> float:
+    """The delay d [s] (positive: x lags reference) maximising the cross-correlation of x with reference,
+    refined between samples by a parabola through the peak."""
+    a = np.asarray(reference, dtype=float) - np.mean(reference)
+    b = np.asarray(x, dtype=float) - np.mean(x)
+    m = int(min(len(a) - 1, max(1, round(max_s / dt))))
+    shifts = np.arange(-m, m + 1)
+    c = np.array([np.dot(a[max(0, -s):len(a) - max(0, s)], b[max(0, s):len(b) - max(0, -s)]) for s in shifts])
+    i = int(np.argmax(c))
+    offset = 0.0
+    if 0 < i < len(c) - 1:
+        den = c[i - 1] - 2 * c[i] + c[i + 1]
+        offset = 0.5 * (c[i - 1] - c[i + 1]) / den if den != 0 else 0.0
+    return float((shifts[i] + offset) * dt)
