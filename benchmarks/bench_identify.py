@@ -56,6 +56,7 @@ def measure(fn) -> tuple[float, float, object]:
 
 
 def median_time(fn, repeats: int) -> float:
+    """Median wall time of `repeats` calls [s]."""
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -65,6 +66,7 @@ def median_time(fn, repeats: int) -> float:
 
 
 def main() -> None:
+    """Run both parts and print the tables."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=float, nargs="+", default=[1e4, 1e5, 1e6])
     parser.add_argument("--repeats", type=int, default=30)
@@ -80,10 +82,12 @@ def main() -> None:
         q, dq, ddq, tau = trial(n)
 
         def by_stats(q=q, dq=dq, ddq=ddq, tau=tau):
+            """One chunked pass into (G, b, s, n), then OLS from them."""
             st = Stats.from_data(model, q, dq, ddq, tau)
             return st, solve_ols(st)
 
         def by_lstsq(q=q, dq=dq, ddq=ddq, tau=tau):
+            """The full 2N×P regressor and numpy.linalg.lstsq."""
             Y = model.regressor(q, dq, ddq).reshape(-1, P)
             return np.linalg.lstsq(Y, tau.reshape(-1), rcond=None)[0]
 
