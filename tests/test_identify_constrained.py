@@ -135,3 +135,15 @@ def test_armature_is_kept_nonnegative(truth):
         if ols.as_dict()["ia2"] < 0 and ols.min_mass_eigenvalue > 0 and ols.friction_ok:
             assert "armature_ia2" in con.active
     assert negatives > 0  # the test exercises the constraint
+
+
+def test_bad_arguments_are_named(truth):
+    st = _stats(multisine_trial(ARM, truth, duration=3.0, seed=31), ARM)
+    with pytest.raises(ValueError, match="shape"):
+        fit_constrained(st, ARM, prior=np.ones(3), prior_weight=1.0)
+    lb, ub = np.zeros(ARM.n_params), np.ones(ARM.n_params)
+    lb[0] = 2.0
+    with pytest.raises(ValueError, match="a1"):
+        fit_constrained(st, ARM, bounds=(lb, ub))
+    with pytest.raises(ValueError, match="backend"):
+        fit_constrained(st, ARM, backend="mosek")

@@ -106,6 +106,13 @@ def fit_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prio
     H, h = _normal(stats, w)
     P = model.n_params
     prior = np.zeros(P) if prior is None else np.asarray(prior, dtype=float)
+    if prior.shape != (P,):
+        raise ValueError(f"prior has shape {prior.shape}, the model {model.names} needs ({P},)")
+    if bounds is not None:
+        lb, ub = (np.broadcast_to(np.asarray(v, dtype=float), (P,)) for v in bounds)
+        if np.any(lb > ub):
+            bad = [n for n, lo, hi in zip(model.names, lb, ub) if lo > hi]
+            raise ValueError(f"lower bound above upper bound for {', '.join(bad)}")
     scale = np.maximum(np.abs(prior), 1e-3 * max(np.abs(prior).max(), 1e-12))
     Dp = prior_weight * joint_weights_energy(stats, w) / scale**2  # prior curvature per parameter
     method = "constrained" if (friction or mass) else "bounded"
