@@ -285,7 +285,7 @@ def _figure(result, path: Path) -> None:
         ax.set_visible(False)
     axes.flat[0].legend(fontsize=7)
     fig.supxlabel("online samples")
-    fig.suptitle("Online parameter trajectories (dotted: offline fit); a SI units, b N·m, fv N·m·s/rad, fc N·m")
+    fig.suptitle("Online parameter trajectories (dotted: offline fit); a kg·m², b N·m, fv N·m·s/rad, fc N·m")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
