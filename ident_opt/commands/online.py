@@ -198,7 +198,7 @@ def _payload(result, problem, trial, train, test, cross_covariance: bool) -> dic
     rate = {k: (result["n"] / s if s > 0 else None) for k, s in result["seconds"].items()}
     return {
         "problem": problem.name,
-        "data": str(trial.source),
+        "data": _shown(trial.source),
         "protocol": (f"offline fit on the first {train.n} samples in time ({problem.split.train_fraction:.0%}), "
                      f"online replay of the remaining {test.n}; one-step-ahead predictions"),
         "parameters": {
@@ -219,6 +219,15 @@ def _payload(result, problem, trial, train, test, cross_covariance: bool) -> dic
         "cross_covariance": cross_covariance,
         "cpbr_solver": _solver_counts(online.get("cpbr")),
     }
+
+
+def _shown(source) -> str:
+    """A data path as the user would write it: relative to the working folder when inside it."""
+    path = Path(str(source)).resolve()
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
 
 
 def _solver_counts(ident) -> dict | None:
