@@ -151,3 +151,29 @@ def test_signal_shuts_down_cleanly_with_final_parameters(small, sig):
     final = json.loads(rest.splitlines()[-1])
     assert final["final"]["n"] == 5 and set(final["final"]["parameters"]) >= {"a1", "fc2"}
     assert "Traceback" not in err
+
+
+def test_random_garbage_never_stops_the_stream(physical_problem, small):
+    """Fuzz: arbitrary text lines between valid samples are reported and skipped, never fatal."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    _, train, test = small
+    start = offline_start("dm_physical", physical_problem, train)
+    rows = _rows(test, 3)
+    valid = [json.dumps({k: float(v) for k, v in row.items()}) for row in rows]
+
+    @settings(max_examples=60, deadline=None)
+    @given(st.lists(st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=40), max_size=6))
+    def check(garbage):
+        garbage = [g.replace("\n", " ").replace("\r", " ") for g in garbage]
+        lines = [valid[0], *garbage, valid[1], *garbage[::-1], valid[2]]
+        ident = start_identifier(start, train)
+        out, err = io.StringIO(), io.StringIO()
+        serve(ident, start.names, io.StringIO("\n".join(lines) + "\n"), out, err)
+        records = [json.loads(x) for x in out.getvalue().splitlines()]
+        assert sum("tau" in r for r in records) == 3  # every valid sample answered, nothing else
+        assert records[-1]["final"]["n"] == 3
+        assert all("error" in json.loads(e) for e in err.getvalue().splitlines())
+
+    check()
