@@ -4,8 +4,10 @@ Input on a text stream (standard input), one sample per line, either
 - CSV with a header line naming the columns (any order, extra columns ignored), or
 - JSON lines: one object per line, e.g. {"t": 0.01, "q1": 0.1, "q2": 0.2, "dq1": 0, ..., "tau2": 0.3}.
 The format is detected from the first non-empty line ("{" starts JSON). Needed: q1 q2 dq1 dq2 ddq1 ddq2
-[rad, rad/s, rad/s²]; tau1 tau2 [N m] when present make the sample update the model (without them the
-line is a pure prediction request); t [s] is echoed when present.
+[rad, rad/s, rad/s²] (no derivative estimation here: the data format's zero-phase filter needs future
+samples); tau1 tau2 [N m] — or motor currents i1 i2 [A], converted with the problem's torque constant ×
+gear ratio — when present make the sample update the model (without them the line is a pure prediction
+request); t [s] is echoed when present.
 
 Output, one JSON line per sample (flushed at once):
     {"n": 17, "t": 0.17, "tau": [τ1, τ2], "lower": [..], "upper": [..], "std": [..], "parametric": [..]}
@@ -31,6 +33,7 @@ from ident_opt.online import OnlineIdentifier, Prediction
 #: Columns every sample needs, and the torque columns that make it an update.
 INPUTS = ("q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
 TORQUES = ("tau1", "tau2")
+CURRENTS = ("i1", "i2")
 
 
 class BadLine(ValueError):
@@ -43,6 +46,7 @@ class LineParser:
 
     format: str | None = None  # "csv" or "json", decided by the first non-empty line
     header: list[str] = field(default_factory=list)
+    current_to_torque: tuple[float, float] | None = None  # N m / A per joint, for i1 i2 samples
 
     def parse(self, line: str) -> dict[str, float] | None:
         """The sample on `line`, or None for a blank line or the CSV header; raises BadLine."""
@@ -70,19 +74,25 @@ class LineParser:
             if len(cells) != len(self.header):
                 raise BadLine(f"{len(cells)} fields, the header has {len(self.header)}")
             raw = dict(zip(self.header, cells))
-        return _sample(raw)
+        return _sample(raw, self.current_to_torque)
 
 
-def _sample(raw: dict) -> dict[str, float]:
-    """The numeric fields of a sample, checked: inputs present, every used value a finite number."""
+def _sample(raw: dict, current_to_torque: tuple[float, float] | None = None) -> dict[str, float]:
+    """The numeric fields of a sample, checked: inputs present, every used value a finite number;
+    currents i1 i2 become torques tau1 tau2 [N m]."""
     missing = [c for c in INPUTS if c not in raw]
     if missing:
         raise BadLine(f"missing field(s) {', '.join(missing)}")
-    present = [c for c in TORQUES if c in raw and raw[c] not in ("", None)]
-    if len(present) == 1:
-        raise BadLine("give both tau1 and tau2, or neither")
+    torques = [c for c in TORQUES if c in raw and raw[c] not in ("", None)]
+    currents = [c for c in CURRENTS if c in raw and raw[c] not in ("", None)]
+    if len(torques) == 1 or len(currents) == 1:
+        raise BadLine("give both tau1 and tau2 (or both i1 and i2), or neither")
+    if torques and currents:
+        raise BadLine("give torques tau1 tau2 or currents i1 i2, not both")
+    if currents and current_to_torque is None:
+        raise BadLine("currents i1 i2 need the problem's torque constants and gear ratios")
     out = {}
-    for name in (*INPUTS, *present, *(["t"] if raw.get("t") not in (None, "") else [])):
+    for name in (*INPUTS, *torques, *currents, *(["t"] if raw.get("t") not in (None, "") else [])):
         value = raw[name]
         if isinstance(value, bool):
             raise BadLine(f"{name} is not a number")
@@ -93,6 +103,9 @@ def _sample(raw: dict) -> dict[str, float]:
         if not math.isfinite(number):
             raise BadLine(f"{name} is not finite: {value!r}")
         out[name] = number
+    if currents:
+        out["tau1"] = out.pop("i1") * current_to_torque[0]
+        out["tau2"] = out.pop("i2") * current_to_torque[1]
     return out
 
 
@@ -112,13 +125,15 @@ class _Stop(Exception):
 
 def serve(identifier: OnlineIdentifier, names: tuple[str, ...], instream: TextIO, outstream: TextIO,
           errstream: TextIO, snapshot_every: int = 1000,
-          on_final: Callable[[dict], None] | None = None) -> dict:
+          on_final: Callable[[dict], None] | None = None,
+          current_to_torque: tuple[float, float] | None = None) -> dict:
     """Run the stream until end of input, SIGINT or SIGTERM; returns (and writes) the final record.
 
     names: the parameter names of `identifier` (for the snapshots); on_final: called with the final
-    record (e.g. to write it to a file) after it has been printed.
+    record (e.g. to write it to a file) after it has been printed; current_to_torque: N m / A per joint
+    (torque constant × gear ratio) for samples that give motor currents.
     """
-    parser = LineParser()
+    parser = LineParser(current_to_torque=current_to_torque)
     state = {"reading": False, "stop": False}
 
     def on_term(signum, frame):

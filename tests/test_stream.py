@@ -177,3 +177,15 @@ def test_random_garbage_never_stops_the_stream(physical_problem, small):
         assert all("error" in json.loads(e) for e in err.getvalue().splitlines())
 
     check()
+
+
+def test_currents_become_torques():
+    p = LineParser(current_to_torque=(10.0, 2.0))
+    p.parse("q1,q2,dq1,dq2,ddq1,ddq2,i1,i2\n")
+    s = p.parse("0,0,0,0,0,0,0.5,-1.5\n")
+    assert s["tau1"] == 5.0 and s["tau2"] == -3.0 and "i1" not in s
+    with pytest.raises(BadLine):
+        LineParser().parse('{"q1": 0, "q2": 0, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": 0, "i1": 1, "i2": 1}')
+    with pytest.raises(BadLine):
+        LineParser(current_to_torque=(1.0, 1.0)).parse(
+            '{"q1": 0, "q2": 0, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": 0, "i1": 1, "i2": 1, "tau1": 0, "tau2": 0}')

@@ -340,5 +340,6 @@ def _stream(args, problem, train) -> int:
     print(f"ident-opt online --stream: {args.model} ready (offline fit on {train.n} samples); reading samples",
           file=sys.stderr, flush=True)
     serve(ident, start.names, sys.stdin, sys.stdout, sys.stderr, args.snapshot_every,
-          on_final=(lambda record: write_json(args.final, record)) if args.final else None)
+          on_final=(lambda record: write_json(args.final, record)) if args.final else None,
+          current_to_torque=tuple(j.current_to_torque for j in problem.robot.joints))
     return 0
