@@ -121,11 +121,11 @@ def _params(result: SplitResult) -> dict[str, dict[str, float]]:
 
 
 def paper_protocol(trial: Dataset, problem: Problem, *, constrained: bool = True, covariance: str | None = None,
+                   components: dict[str, int] | None = None,
                    progress: Callable[[], None] | None = None) -> ProtocolResult:
-    """Shuffled 70/30 splits over the problem's seeds; the GMR components are chosen on the first seed
-    (when "auto") and kept for the others, so every seed fits the same model."""
+    """Shuffled 70/30 splits over the problem's seeds; the GMR components (`+gmr` key -> K, or chosen on the
+    first seed when the problem says "auto") are kept for the other seeds, so every seed fits the same model."""
     results: list[SplitResult] = []
-    components: dict[str, int] | None = None
     for seed in problem.split.seeds:
         train, test = shuffled_split(trial.n, problem.split.train_fraction, seed)
         r = evaluate_split(trial.subset(train), trial.subset(test), problem, constrained=constrained,
