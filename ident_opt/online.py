@@ -181,12 +181,10 @@ class OnlineIdentifier:
         """Fold one sample (design D (2, P), τ (2,)) into the statistics and re-solve θ exactly."""
         self._pending.append((D, tau))
         self.n_updates += 1
-        if self._solve is None:
-            if len(self._pending) >= 4096:  # bounded memory for fixed models too
-                _ = self.stats
-            return
-        if len(self._pending) >= 4096:
+        if len(self._pending) >= 4096:  # bounded memory: fold the pending samples into the statistics
             _ = self.stats
+        if self._solve is None:
+            return
         # The combined normal equations, updated in place (the same rank-2 term as the per-joint Stats).
         self._H += D.T @ D
         self._h += D.T @ tau

@@ -167,3 +167,20 @@ def test_cross_covariance_transform_is_first_order_exact():
         online._transform(delta)
         errors[cross] = np.max(np.abs(online.predict(x[0:2], x[2:4], x[4:6]).tau - before))
     assert errors[True] < 0.1 * errors[False]
+
+
+def test_lazy_statistics_equal_batch_statistics_across_flushes():
+    """Per-joint statistics folded in lazily (in batches of 4096) equal the batch statistics."""
+    q, dq, ddq, tau = _trial(9000, 11, PI_CLEAR)
+    Y = RIGID.regressor(q, dq, ddq)
+    online = OnlineIdentifier(RIGID.regressor, Estimator("bounded", bounds=default_bounds(RIGID)), np.zeros(9),
+                              Stats.from_regressor(Y[:100], tau[:100]))
+    for k in range(100, 9000):
+        online.add(Y[k], tau[k])
+    ref = Stats.from_regressor(Y, tau)
+    got = online.stats
+    assert got.n == ref.n == 9000
+    np.testing.assert_allclose(got.G, ref.G, rtol=1e-12)
+    np.testing.assert_allclose(got.b, ref.b, rtol=1e-12)
+    np.testing.assert_allclose(got.s, ref.s, rtol=1e-12)
+    np.testing.assert_allclose(online.residual_std(), np.sqrt(ref.rss(online.theta) / 9000), rtol=1e-9)
