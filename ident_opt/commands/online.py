@@ -90,8 +90,9 @@ def replay(problem, train, test, *, keys=None, cross_covariance: bool = False, c
     starts, online = {}, {}
     for key in tqdm(keys, desc="offline fits (+GMR)", file=sys.stderr, disable=not progress):
         starts[key] = offline_start(key, problem, train)
-        online[key] = start_identifier(starts[key], train, make_gmr(problem.residual, components=components),
-                                       cross_covariance=cross_covariance)
+        # Blocked validation for the number of components: the model will predict later motions.
+        gmr = make_gmr(problem.residual, components=components, validation="blocked")
+        online[key] = start_identifier(starts[key], train, gmr, cross_covariance=cross_covariance)
     X_test = np.hstack([test.q, test.dq, test.ddq])
     frozen, frozen_std = {}, {}
     for key, ident in online.items():
@@ -335,7 +336,7 @@ def _stream(args, problem, train) -> int:
     if key not in MODEL_KEYS or extra not in ("", "gmr"):
         raise InputError(f"--model must be one of {', '.join(MODEL_KEYS)}, optionally with +gmr; got {args.model!r}")
     start = offline_start(key, problem, train)
-    gmr = make_gmr(problem.residual, components=args.components) if extra else None
+    gmr = make_gmr(problem.residual, components=args.components, validation="blocked") if extra else None
     ident = start_identifier(start, train, gmr, cross_covariance=args.cross_covariance)
     print(f"ident-opt online --stream: {args.model} ready (offline fit on {train.n} samples); reading samples",
           file=sys.stderr, flush=True)
