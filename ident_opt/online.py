@@ -20,9 +20,10 @@ output mean by −D(μx_k)Δθ (recomputed from the offline means every step, so
 r − D(x)Δθ linearised at μx_k), which makes each component's conditional mean follow −D(x)Δθ to first
 order in x − μx_k instead of only at μx_k.
 
-Measured on exp1 (first 70 % offline, the rest replayed; nMSE per joint, K = 4 / auto = 10 components):
-the cross-covariance update does not help — pbr+gmr 0.0821/0.7209 with it vs 0.0818/0.7186 without
-(K = 4), 0.0917/0.8120 vs 0.0907/0.8094 (K = 10). The reason is structural: the better the transform
+Measured on exp1 (first 70 % offline, the rest replayed; nMSE per joint j1/j2): the cross-covariance
+update does not measurably help — pbr+gmr 0.0868/0.6205 with it vs 0.0880/0.6187 without (K = 2, chosen
+on blocked validation), 0.0821/0.7209 vs 0.0818/0.7186 (K = 4), 0.0917/0.8120 vs 0.0907/0.8094 (K = 10):
+mixed signs, about 1 %, against 0.0876/0.6313 frozen. The reason is structural: the better the transform
 keeps the hybrid prediction unchanged, the more it cancels the adaptation itself (for RR, whose design
 is linear in x, the first-order update is exact and rr+gmr online equals frozen to the last digit). So
 it is off by default (`cross_covariance=False`, CLI `--cross-covariance`), kept only to reproduce this.
