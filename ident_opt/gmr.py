@@ -113,7 +113,11 @@ class GMR:
 
     def _select(self, Zs: np.ndarray, rng: np.random.Generator) -> int:
         """The number of components with the best validation error (or BIC) among `candidates`."""
-        candidates = sorted({_checked_k(int(k), len(Zs)) for k in self.candidates})
+        # candidates larger than the data allow are skipped (a short trial), not an error
+        candidates = sorted({int(k) for k in self.candidates if 1 <= int(k) <= len(Zs) // 2})
+        if not candidates:
+            raise InputError(f"GMR: no candidate number of components in {list(self.candidates)} fits "
+                             f"{len(Zs)} training samples")
         scores: dict[int, float] = {}
         if self.selection == "bic":
             for k in candidates:

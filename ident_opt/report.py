@@ -62,6 +62,7 @@ class IdentifyResult:
     figures: dict[str, Path] = field(default_factory=dict)
     seconds: float = float("nan")
     gmr_candidates: tuple[int, ...] = ()  # the problem's candidate numbers of components
+    command: str = ""  # the command line that produced it
 
 
 # ---------------------------------------------------------------------------------------------- tables
@@ -214,8 +215,7 @@ def write_readme(result: IdentifyResult, out: Path, tables: dict[str, Path]) -> 
     lines = [
         f"# Results for `{result.problem_name}`",
         "",
-        "Written by `ident-opt identify --problem problems/tudor_2dof.toml --out results --json "
-        f"results/identify.json` (`make identify`) in {result.seconds:.0f} s. Identification trial: "
+        f"Written by `{result.command}` in {result.seconds:.0f} s. Identification trial: "
         f"`{result.trial}`" + (f"; unseen trial: `{result.unseen}`." if result.unseen else "."),
         "",
         "Protocols (every table says which one it uses):",

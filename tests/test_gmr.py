@@ -175,6 +175,14 @@ def test_bad_input_is_input_error(X, R):
         GMR(n_components=1).fit(X, R)
 
 
+def test_candidates_too_large_for_the_data_are_skipped():
+    X = np.random.default_rng(10).normal(size=(40, 2))
+    g = GMR(candidates=(1, 2, 100)).fit(X, X[:, :1] ** 2)
+    assert set(g.selection_scores_) == {1, 2} and g.n_components_ in (1, 2)
+    with pytest.raises(InputError):
+        GMR(candidates=(100,)).fit(X, X[:, :1])
+
+
 def test_bad_settings_and_predict_shape():
     X = np.random.default_rng(8).normal(size=(50, 2))
     with pytest.raises(InputError):

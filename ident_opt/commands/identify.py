@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         tick()
         result = report.IdentifyResult(problem.name, _rel(trial.source), _rel(unseen.source) if unseen else None,
                                        protocols, params, ses, eig, variants,
-                                       gmr_candidates=tuple(problem.residual.candidates))
+                                       gmr_candidates=tuple(problem.residual.candidates), command=_command(args))
         bar.set_postfix_str("figures")
         result.figures = _figures(figures, result, trial, problem, fig_dir, tick)
         result.seconds = time.perf_counter() - start
@@ -78,6 +78,16 @@ def run(args: argparse.Namespace) -> int:
     write_json(args.json, report.json_payload(result))
     _summary(result, out, args.json)
     return 0
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command line, rebuilt from the parsed flags (for the README)."""
+    parts = ["ident-opt identify", f"--problem {args.problem}"]
+    parts += [f"--data {d}" for d in (args.data or [])]
+    parts += [f"--out {args.out}"] if args.out else []
+    parts += [f"--json {args.json}"] if args.json else []
+    parts += ["--no-variants"] if args.no_variants else []
+    return " ".join(parts)
 
 
 def _rel(path: str) -> str:
