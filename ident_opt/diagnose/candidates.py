@@ -17,7 +17,7 @@ variable projection. It is fitted against one or both nominal models:
 | stribeck | fs1 fs2 ≥ 0 (`stribeck` extension) | vs1, vs2 [rad/s] |
 | joint_offset | b1s b2s (`offset` extension): δ1 = atan2(−b1s, b1), δ1+δ2 = atan2(−b2s, b2) | — |
 | delay | the whole prediction delayed by d | d [s] |
-| elasticity | ë_j on joint j's row, ë_j and ë_j·cos q2 on the other row (see below) | f [Hz], ζ |
+| elasticity | s·(m_link,j ë_j on joint j's row + M_oj(q2) ë_j on the other), datasheet inertias (below) | f [Hz], ζ |
 
 ë_j is the deflection acceleration of an elastic joint j driven by the measured motor-side acceleration
 (`signals.deflection_acceleration`): an elastic-joint model driven by the logged motor-side angle.
@@ -58,6 +58,8 @@ class Context:
     weights: np.ndarray
     datasheet: dict[str, float]
     dt: float
+    rest: np.ndarray  # rest-stretch labels of the training part (`signals.rest_runs`)
+    armature: tuple[float, float] = (0.0, 0.0)  # the datasheet's reflected rotor inertia per joint [kg m²]
 
 
 @dataclass
@@ -82,7 +84,7 @@ class Family:
     cause: str
     model: Callable[[dict], ArmModel]
     free: tuple[str, ...] | None  # names freed against the datasheet (None: the effect adds no π names)
-    extra: Callable[[Dataset, dict, float], tuple[np.ndarray, list[str]]] | None = None
+    extra: Callable[[Dataset, dict, float, Context], tuple[np.ndarray, list[str]]] | None = None
     shifted: bool = False
     axes: Callable[[float], list[linear.Axis]] = lambda rate: []
     baselines: tuple[str, ...] = ("datasheet", "rigid_fit")
@@ -119,7 +121,7 @@ def design(family: Family, ds: Dataset, theta: dict, baseline: str, ctx: Context
     else:
         offset, X, names = np.zeros((n, 2)), Y, list(model.names)
     if family.extra is not None:
-        cols, extra_names = family.extra(ds, theta, ctx.dt)
+        cols, extra_names = family.extra(ds, theta, ctx.dt, ctx)
         X = np.concatenate([X, cols[rows]], axis=2)
         names = names + extra_names
     if family.shifted:
@@ -135,20 +137,23 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     stride = max(1, ctx.train.n // SEARCH_ROWS)
     # A delay needs a uniform grid: stride by whole samples and delay on the strided grid.
     rows = slice(None, None, stride)
-    train_sub = ctx.train.tau[rows]
+    train_sub, rest_sub = ctx.train.tau[rows], ctx.rest[rows]
 
-    def solve(o, X, names, tau, with_se):
+    def solve(o, X, names, tau, labels, with_se):
+        # Within rest stretches only variations count (see `signals.demean_runs`): project data and columns.
         signed = [i for i, n in enumerate(names) if n in family.nonnegative]
-        return linear.solve_nonnegative(o, X, tau, ctx.weights, signed, with_se)
+        target = signals.demean_runs(tau - o, labels)
+        return linear.solve_nonnegative(np.zeros_like(target), signals.demean_runs(X, labels), target,
+                                        ctx.weights, signed, with_se)
 
     def cost(theta: dict) -> float:
         o, X, names = design(family, ctx.train, theta, baseline, ctx, rows)
-        return solve(o, X, names, train_sub, False).cost
+        return solve(o, X, names, train_sub, rest_sub, False).cost
 
     axes = family.axes(rate)
     theta = linear.search(cost, axes) if axes else {}
     o, X, names = design(family, ctx.train, theta, baseline, ctx)
-    ls = solve(o, X, names, ctx.train.tau, True)
+    ls = solve(o, X, names, ctx.train.tau, ctx.rest, True)
     params = dict(zip(names, map(float, ls.beta)))
     se = dict(zip(names, map(float, ls.se)))
     params.update(theta)
@@ -174,7 +179,7 @@ def _armature_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
     return {"inertia": inertia}, {"se": [se["j1"], se["j2"]]}
 
 
-def _armature_columns(ds: Dataset, theta: dict, dt: float) -> tuple[np.ndarray, list[str]]:
+def _armature_columns(ds: Dataset, theta: dict, dt: float, ctx: Context) -> tuple[np.ndarray, list[str]]:
     """Extra reflected inertia J_j on the diagonal of M: J1·ddq1 on joint 1's row, J2·ddq2 on joint 2's
     (the a1 and ia2 columns of the nominal structure)."""
     X = np.zeros((ds.n, 2, 2))
@@ -215,22 +220,33 @@ def _offset_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
 
 
 def _elastic_columns(joint: int) -> Callable:
-    def columns(ds: Dataset, theta: dict, dt: float) -> tuple[np.ndarray, list[str]]:
-        e = signals.deflection_acceleration(ds.ddq[:, joint - 1], theta["frequency_hz"], theta["damping"], dt)
+    def columns(ds: Dataset, theta: dict, dt: float, ctx: Context) -> tuple[np.ndarray, list[str]]:
+        # The link behind an elastic joint j is driven by its motor's acceleration and, through the
+        # off-diagonal inertia, by the other joint's: u = θ̈_j + (M_jo(q2) / M_jj,link(q2)) q̈_o, with the
+        # inertias from the datasheet (link side: without joint j's armature).
+        p, arm = ctx.datasheet, ctx.armature
         c2 = np.cos(ds.q[:, 1])
-        # The spring carries link j's inertia on its own row; the other row feels the coupling
-        # M12 = a3 + a2 cos q2, which varies with the pose (M11's cos q2 part is small next to a1).
-        X = np.zeros((ds.n, 2, 3))
+        m_cross = p["a3"] + p["a2"] * c2
+        m_link = (p["a1"] - arm[0] + 2 * p["a2"] * c2) if joint == 1 else np.full(ds.n, p["a3"])
         other = 2 - joint
-        X[:, joint - 1, 0], X[:, other, 1], X[:, other, 2] = e, e, e * c2
-        return X, ["m_own", "m_cross", "m_cross_c2"]
+        u = ds.ddq[:, joint - 1] + m_cross / m_link * ds.ddq[:, other]
+        e = signals.deflection_acceleration(u, theta["frequency_hz"], theta["damping"], dt)
+        # The spring carries link j's inertia on its own row, m_link·ë; the other row feels the coupling
+        # M_oj·ë. One free scale s on that physical pattern: the pattern (which row rings how much) is what
+        # tells an elastic joint 1 from an elastic joint 2, so it is not left free.
+        X = np.zeros((ds.n, 2, 1))
+        X[:, joint - 1, 0], X[:, other, 0] = m_link * e, m_cross * e
+        return X, ["scale"]
 
     return columns
 
 
 def _elastic_estimate(joint: int) -> Callable:
     def estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
-        m_eff = p["m_own"]  # the link inertia the spring carries [kg m²]
+        c2 = np.cos(ctx.train.q[:, 1])
+        p0, arm = ctx.datasheet, ctx.armature
+        m_link = float(np.mean(p0["a1"] - arm[0] + 2 * p0["a2"] * c2)) if joint == 1 else p0["a3"]
+        m_eff = p["scale"] * m_link  # the link inertia the spring carries [kg m²]
         w = 2 * math.pi * p["frequency_hz"]
         return ({"joint": joint, "frequency_hz": p["frequency_hz"]},
                 {"damping_ratio": p["damping"], "inertia": m_eff, "stiffness": m_eff * w * w,
@@ -244,7 +260,7 @@ def families(robot: Robot) -> list[Family]:
     out = [
         Family("armature", _nominal, (), extra=_armature_columns, baselines=("datasheet",),
                nonnegative=("j1", "j2"), estimate=_armature_estimate),
-        Family("payload", _nominal, (), extra=lambda ds, th, dt: (_payload_column(ds, th, dt, robot), ["mass"]),
+        Family("payload", _nominal, (), extra=lambda ds, th, dt, ctx: (_payload_column(ds, th, dt, robot), ["mass"]),
                baselines=("datasheet",), nonnegative=("mass",),
                estimate=lambda p, se, ctx: ({"mass": p["mass"]}, {"se": se["mass"]})),
         Family("asymmetric_coulomb", lambda th: ArmModel(("armature", "asymmetric_coulomb")),

@@ -13,12 +13,13 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy import signal
 from tqdm import tqdm
 
 from ident_opt.data import Dataset, chronological_split
-from ident_opt.datasheet import datasheet_pi
+from ident_opt.datasheet import datasheet_pi, rigid_body
 from ident_opt.diagnose import candidates as cands
-from ident_opt.diagnose import evidence, linear, scoring
+from ident_opt.diagnose import evidence, linear, scoring, signals
 from ident_opt.errors import InputError
 from ident_opt.metrics import nmse
 from ident_opt.problem import Robot
@@ -48,6 +49,7 @@ class Diagnosis:
     nominal: dict[str, dict]  # "datasheet" / "rigid_fit" -> {"pi": {...}, "nmse": [...]}
     test: Dataset
     predictions: dict[str, np.ndarray]  # held-out torque predictions: "before", "after"
+    nmse_raw: list[list[float]] = field(default_factory=list)  # before, after: without the rest projection
     timings: dict[str, float] = field(default_factory=dict)
 
     def as_json(self) -> dict:
@@ -64,8 +66,13 @@ class Diagnosis:
             "nmse_after": self.nmse_after,
             "candidates": self.candidates,
             "score": "held-out log-likelihood gain over the candidate's baseline minus (k/2) ln n; a cause is "
-                     f"named when its score > 0 and it removes >= {scoring.MARGIN:.0%} of the baseline's "
-                     "held-out MSE on some joint",
+                     f"named when its score > 0 and, on some joint, it removes >= {scoring.MARGIN:.0%} of the "
+                     f"baseline's held-out MSE and >= {scoring.MARGIN_VARIANCE:.1%} of the torque variance",
+            "nmse_definition": "MSE ÷ variance of the measured torque, per joint, on the held-out part; within "
+                               "each stretch where a joint rests, its residual's mean is removed first (stiction "
+                               "holds a level no model predicts); nmse_raw_before/after: without that",
+            "nmse_raw_before": self.nmse_raw[0] if self.nmse_raw else None,
+            "nmse_raw_after": self.nmse_raw[1] if self.nmse_raw else None,
             "split": self.split,
             "rate_hz": self.rate_hz,
             "nominal": self.nominal,
@@ -118,12 +125,33 @@ def rigid_fit(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
     return linear.solve(zero, Y, ds.tau, weights).beta, weights
 
 
-def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_fraction: float = 0.7,
-             progress: bool = True) -> Diagnosis:
-    """Diagnose `trial` (and `unseen`, if given, as the held-out data); see the module docstring."""
-    t0 = time.perf_counter()
+def prepare(trial: Dataset, torque_filter_hz: float | None) -> Dataset:
+    """`at_rest`, then the torque low-passed by the zero-phase filter the derivatives are estimated with
+    (4th-order Butterworth at `torque_filter_hz`, forward-backward; None: no filter).
+
+    Estimated accelerations are a smoothed version of the true ones (a step in acceleration becomes a ramp
+    over tens of ms); the measured torque steps. Filtering τ the same way puts both sides of τ = Y π in the
+    same bandwidth, so the smoothing mismatch at every start and stop does not pose as a delay or a mode,
+    and noise above the cut-off goes too. Modes and delays inside the band are untouched (the filter is
+    zero-phase and linear).
+    """
     trial = at_rest(trial)
-    unseen = at_rest(unseen) if unseen is not None else None
+    if torque_filter_hz is None:
+        return trial
+    dt = float(np.median(np.diff(trial.t)))
+    if torque_filter_hz >= 0.45 / dt or trial.n <= 30:
+        return trial
+    b, a = signal.butter(4, torque_filter_hz * 2 * dt)
+    return replace(trial, tau=signal.filtfilt(b, a, trial.tau, axis=0))
+
+
+def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_fraction: float = 0.7,
+             progress: bool = True, torque_filter_hz: float | None = 15.0) -> Diagnosis:
+    """Diagnose `trial` (and `unseen`, if given, as the held-out data); see the module docstring.
+    `torque_filter_hz`: see `prepare` (the problem's derivative cut-off is the natural choice)."""
+    t0 = time.perf_counter()
+    trial = prepare(trial, torque_filter_hz)
+    unseen = prepare(unseen, torque_filter_hz) if unseen is not None else None
     train, test, how = split(trial, unseen, train_fraction)
     if train.n < MIN_SAMPLES or test.n < MIN_SAMPLES:
         raise InputError(f"{trial.source}: too little data to diagnose ({train.n} training and {test.n} held-out "
@@ -134,16 +162,20 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
     dt = float(np.median(np.diff(trial.t)))
     ds_pi = datasheet_pi(robot, "physical")
     pi_rigid, weights = rigid_fit(train)
-    ctx = cands.Context(robot, train, test, weights, ds_pi, dt)
+    rest_test = signals.rest_runs(test.dq)
+    ctx = cands.Context(robot, train, test, weights, ds_pi, dt, signals.rest_runs(train.dq),
+                        rigid_body(robot, "physical").armature)
 
     nominal_pred = {"datasheet": cands.NOMINAL.predict(cands.NOMINAL.vector(ds_pi), test.q, test.dq, test.ddq),
                     "rigid_fit": cands.NOMINAL.predict(pi_rigid, test.q, test.dq, test.ddq)}
-    nominal_mse = {b: scoring.mse(test.tau, p) for b, p in nominal_pred.items()}
+    nominal_mse = {b: scoring.mse(test.tau, p, rest_test) for b, p in nominal_pred.items()}
     nominal = {
         "datasheet": {"pi": cands.NOMINAL.as_dict(cands.NOMINAL.vector(ds_pi)),
-                      "nmse": nmse(test.tau, nominal_pred["datasheet"]).tolist()},
+                      "nmse": scoring.nmse(test.tau, nominal_pred["datasheet"], rest_test),
+                      "nmse_raw": nmse(test.tau, nominal_pred["datasheet"]).tolist()},
         "rigid_fit": {"pi": cands.NOMINAL.as_dict(pi_rigid),
-                      "nmse": nmse(test.tau, nominal_pred["rigid_fit"]).tolist()},
+                      "nmse": scoring.nmse(test.tau, nominal_pred["rigid_fit"], rest_test),
+                      "nmse_raw": nmse(test.tau, nominal_pred["rigid_fit"]).tolist()},
     }
     t_nominal = time.perf_counter()
 
@@ -153,7 +185,7 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
                                  leave=False):
         cand = cands.fit(family, baseline, ctx)
         pred = cand.predict(test)
-        after = scoring.mse(test.tau, pred)
+        after = scoring.mse(test.tau, pred, rest_test)
         fitted.append((cand, scoring.score(nominal_mse[baseline], after, test.n, cand.n_added), after, pred))
     t_fit = time.perf_counter()
 
@@ -162,10 +194,11 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
         if item[0].cause not in best or item[1] > best[item[0].cause][1]:
             best[item[0].cause] = item
     ranked = sorted(best.values(), key=lambda it: it[1], reverse=True)
-    candidates = [{"cause": c.cause, "score": s, "nmse_after": nmse(test.tau, pred).tolist(), "baseline": c.baseline,
-                   "estimate": c.estimate, "added_parameters": c.n_added} for c, s, _, pred in ranked]
+    candidates = [{"cause": c.cause, "score": s, "nmse_after": scoring.nmse(test.tau, pred, rest_test),
+                   "baseline": c.baseline, "estimate": c.estimate, "added_parameters": c.n_added}
+                  for c, s, _, pred in ranked]
     top, top_score, top_mse, top_pred = ranked[0]
-    if scoring.clears_margin(nominal_mse[top.baseline], top_mse, top_score):
+    if scoring.clears_margin(nominal_mse[top.baseline], top_mse, top_score, np.var(test.tau, axis=0)):
         named, cause, estimate, baseline, after_pred = top, top.cause, top.estimate, top.baseline, top_pred
     else:
         baseline = min(nominal_mse, key=lambda b: float(np.sum(nominal_mse[b] / np.var(test.tau, axis=0))))
@@ -182,7 +215,9 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
     t_end = time.perf_counter()
     return Diagnosis(
         cause=cause, estimate=estimate, baseline=baseline,
-        nmse_before=nmse(test.tau, before_pred).tolist(), nmse_after=nmse(test.tau, after_pred).tolist(),
+        nmse_before=scoring.nmse(test.tau, before_pred, rest_test),
+        nmse_after=scoring.nmse(test.tau, after_pred, rest_test),
+        nmse_raw=[nmse(test.tau, before_pred).tolist(), nmse(test.tau, after_pred).tolist()],
         candidates=candidates, evidence=ev, split=how, rate_hz=1.0 / dt, named=named, nominal=nominal, test=test,
         predictions={"before": before_pred, "after": after_pred},
         timings={"nominal": t_nominal - t0, "candidates": t_fit - t_nominal, "evidence": t_end - t_fit,

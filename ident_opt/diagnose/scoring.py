@@ -6,22 +6,38 @@ Score (higher is better), for a candidate fitted against baseline b and evaluate
 
 the held-out Gaussian log-likelihood gain over its own baseline (per joint variance) minus a BIC-style
 penalty for its k added parameters (linear and nonlinear). A cause is named only when the best score is
-positive *and* the extension removes at least `MARGIN` (5 %) of the baseline's held-out MSE on some joint:
-the log-likelihood alone counts correlated residual samples as independent and would accept tiny gains on
-long trials; 5 % of the MSE is a practical-significance floor that noise fitting does not reach.
+positive *and*, on some joint, the extension removes at least `MARGIN` (5 %) of the baseline's held-out
+MSE and at least `MARGIN_VARIANCE` (0.2 %) of the measured torque's variance (an nMSE drop of 0.002). The
+log-likelihood alone counts correlated residual samples as independent and would accept tiny gains on long
+trials; the two floors ask for a gain that matters both relative to what the baseline gets wrong and
+relative to the torque itself, so sub-millisecond timing or filter mismatches on an almost perfect model
+are not named.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ident_opt.diagnose import signals
+
 #: Least fraction of the baseline's held-out MSE (on some joint) the named extension must remove.
 MARGIN = 0.05
+#: Least fraction of the measured torque's variance (on the same joint) it must remove.
+MARGIN_VARIANCE = 0.002
 
 
-def mse(tau: np.ndarray, tau_hat: np.ndarray) -> np.ndarray:
-    """Mean squared error per joint [N² m²]."""
-    return np.mean((tau - tau_hat) ** 2, axis=0)
+def mse(tau: np.ndarray, tau_hat: np.ndarray, rest: np.ndarray | None = None) -> np.ndarray:
+    """Mean squared error per joint [N² m²]; with rest-stretch labels, each stretch's mean residual is
+    removed first (`signals.demean_runs`: the torque stiction holds at rest is not scored)."""
+    r = tau - tau_hat
+    if rest is not None:
+        r = signals.demean_runs(r, rest)
+    return np.mean(r**2, axis=0)
+
+
+def nmse(tau: np.ndarray, tau_hat: np.ndarray, rest: np.ndarray | None = None) -> list[float]:
+    """`mse` ÷ variance of the measured torque, per joint."""
+    return (mse(tau, tau_hat, rest) / np.var(tau, axis=0)).tolist()
 
 
 def score(mse_before: np.ndarray, mse_after: np.ndarray, n: int, k: int) -> float:
@@ -30,7 +46,10 @@ def score(mse_before: np.ndarray, mse_after: np.ndarray, n: int, k: int) -> floa
     return gain - 0.5 * k * float(np.log(n))
 
 
-def clears_margin(mse_before: np.ndarray, mse_after: np.ndarray, score_value: float) -> bool:
-    """Whether a candidate beats its baseline clearly enough to be named."""
-    reduction = 1.0 - np.asarray(mse_after) / np.asarray(mse_before)
-    return bool(score_value > 0 and np.max(reduction) >= MARGIN)
+def clears_margin(mse_before: np.ndarray, mse_after: np.ndarray, score_value: float,
+                  variance: np.ndarray) -> bool:
+    """Whether a candidate beats its baseline clearly enough to be named (`variance`: of the measured
+    held-out torque per joint [N² m²])."""
+    before, after = np.asarray(mse_before), np.asarray(mse_after)
+    clear = ((before - after) >= MARGIN * before) & ((before - after) >= MARGIN_VARIANCE * np.asarray(variance))
+    return bool(score_value > 0 and np.any(clear))

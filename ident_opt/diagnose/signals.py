@@ -112,3 +112,35 @@ def lag(reference: np.ndarray, x: np.ndarray, dt: float, max_s: float = 0.2) -> 
         den = c[i - 1] - 2 * c[i] + c[i + 1]
         offset = 0.5 * (c[i - 1] - c[i + 1]) / den if den != 0 else 0.0
     return float((shifts[i] + offset) * dt)
+
+
+def rest_runs(dq: np.ndarray) -> np.ndarray:
+    """Labels (N, 2): for each joint, the index of the rest stretch a sample belongs to (a run of dq = 0
+    exactly, as `diagnosis.at_rest` leaves it), −1 where the joint moves."""
+    labels = np.full(dq.shape, -1, dtype=int)
+    for j in range(dq.shape[1]):
+        rest = dq[:, j] == 0
+        run = np.cumsum(rest & ~np.concatenate([[False], rest[:-1]])) - 1  # +1 at each stretch's start
+        labels[rest, j] = run[rest]
+    return labels
+
+
+def demean_runs(x: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """x (N, 2, ...) with, for each joint, the mean over each of its rest stretches removed (a copy).
+
+    While a joint rests, stiction holds whatever torque the controller leaves on it, a per-stretch constant no
+    model here predicts; removing each stretch's mean from data and prediction alike compares only the
+    variation within it (ringing after a stop survives; the held level does not count)."""
+    out = np.array(x, dtype=float, copy=True)
+    for j in range(labels.shape[1]):
+        rest = labels[:, j] >= 0
+        if not rest.any():
+            continue
+        lab = labels[rest, j]
+        counts = np.bincount(lab)
+        block = out[rest, j]
+        flat = block.reshape(len(lab), -1)
+        for c in range(flat.shape[1]):
+            flat[:, c] -= (np.bincount(lab, weights=flat[:, c]) / counts)[lab]
+        out[rest, j] = flat.reshape(block.shape)
+    return out
