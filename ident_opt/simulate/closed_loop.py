@@ -10,6 +10,9 @@ Integration: the torque is constant over each 1 ms tick; the plant is integrated
 `substeps` sub-steps sized from the fastest mode of the loop (|λ| h ≤ 0.25, well inside RK4's stability
 limit of 2.8), so stiff springs and high gains stay stable and accurate. The step is one CasADi function,
 run tick after tick by `mapaccum` in chunks (fast: no Python per step).
+
+Background terms (background.py) enter here: the ripple is added to the commanded torque (the actual motor
+current, held over the tick and logged), the drift is an extra input per tick, and stiction adds states.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from tqdm import tqdm
 
 from ident_opt.datasheet import datasheet_pi
 from ident_opt.problem import Robot
+from ident_opt.simulate import background
 from ident_opt.simulate.trajectories import Reference
 from ident_opt.simulate.truth import TRUTH_MODEL, Truth, initial_state, plant, state_size
 
@@ -67,37 +71,50 @@ def substeps(truth: Truth, g: Gains, robot: Robot) -> int:
     e = truth.elastic
     if e is not None:
         rates.append(e.fastest_rate + g.kd[e.index] / e.B)
+    # Joint 1's inertia drops to a1 + 2 a2 cos(1.4) at the trajectories' widest q2; halve for margin.
+    rates += background.rates(truth.background, 0.5 * np.array([p["a1"] + 2 * p["a2"] * math.cos(1.4), J[1]]))
     return max(2, math.ceil(max(rates) / CONTROL_HZ / 0.25))
 
 
 def tick(truth: Truth, robot: Robot, g: Gains) -> ca.Function:
-    """One control tick: (x, ref) -> (x_next, out) with out = [τ (2), y (7)] at the tick's start."""
-    f = plant(truth)
-    ctrl = controller(robot, g)
+    """One control tick: (x, ref) -> (x_next, out) with out = [τ (2), y (7)] at the tick's start.
+
+    ref = [q_r, dq_r, ddq_r, d]: the reference and the drift disturbance d [N m] over the tick."""
     nx = state_size(truth)
-    x, ref = ca.SX.sym("x", nx), ca.SX.sym("ref", 6)
-    _, y = f(x, ca.DM.zeros(2))
-    tau = ctrl(ref, y[:2], y[2:4])
-    _, y = f(x, tau)  # y's accelerations are those the dynamics produce under the applied torque
+    bg = truth.background
+    f = background.with_background(plant(truth), nx, bg)
+    ctrl = controller(robot, g)
+    x, ref = ca.SX.sym("x", nx + (2 if background.has_states(bg) else 0)), ca.SX.sym("ref", 8)
+    d = ref[6:]
+    _, y = f(x, ca.DM.zeros(2), d)
+    tau = ctrl(ref[:6], y[:2], y[2:4])
+    r = background.ripple(bg, robot, y[:2], y[2:4])
+    if r is not None:
+        tau = tau + r  # the actual motor current: commanded plus ripple
+    _, y = f(x, tau, d)  # y's accelerations are those the dynamics produce under the applied torque
     n = substeps(truth, g, robot)
     h = 1.0 / CONTROL_HZ / n
     xk = x
     for _ in range(n):
-        k1 = f(xk, tau)[0]
-        k2 = f(xk + h / 2 * k1, tau)[0]
-        k3 = f(xk + h / 2 * k2, tau)[0]
-        k4 = f(xk + h * k3, tau)[0]
+        k1 = f(xk, tau, d)[0]
+        k2 = f(xk + h / 2 * k1, tau, d)[0]
+        k3 = f(xk + h / 2 * k2, tau, d)[0]
+        k4 = f(xk + h * k3, tau, d)[0]
         xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     return ca.Function("tick", [x, ref], [xk, ca.vertcat(tau, y)], ["x", "ref"], ["x_next", "out"])
 
 
-def run(truth: Truth, robot: Robot, ref: Reference, progress: bool = True) -> np.ndarray:
+def run(truth: Truth, robot: Robot, ref: Reference, progress: bool = True, seed: int = 0) -> np.ndarray:
     """Simulate the loop over the reference (sampled at CONTROL_HZ); returns out (N, 9): τ, q_enc, dq_enc,
-    ddq_enc, deflection at each tick."""
+    ddq_enc, deflection at each tick. `seed` drives the background terms' randomness (drift, initial
+    bristle state), on streams of their own."""
     g = gains(robot)
     step = tick(truth, robot, g)
-    x = ca.DM(initial_state(truth, ref.q[0]))
-    refs = np.hstack([ref.q, ref.dq, ref.ddq]).T
+    bg = truth.background
+    z0 = background.initial_bristles(bg, np.random.default_rng([seed, 17]))
+    x = ca.DM(np.concatenate([initial_state(truth, ref.q[0]), z0]))
+    d = background.drift(bg, len(ref.t), 1.0 / CONTROL_HZ, np.random.default_rng([seed, 13]))
+    refs = np.hstack([ref.q, ref.dq, ref.ddq, d]).T
     n = refs.shape[1]
     out = np.empty((9, n))
     chunked = {}

@@ -1,9 +1,14 @@
 """The catalogue of hidden effects (names and estimate keys from `spec/diagnose.md`) and their text syntax.
 
 An effect is written ``NAME`` or ``NAME:key=value,key=value``; a per-joint value is a bracketed pair
-``key=[v1,v2]``. Every effect also takes ``scale`` (default 1): it multiplies the effect's magnitude (its
+``key=[v1,v2]``. Two lists share that syntax: `CATALOGUE`, the effects the diagnosis names (exactly those of
+`spec/diagnose.md`), and `BACKGROUND`, what else a real flexible arm does that no diagnosis is asked to name
+(stiction with presliding hysteresis, a slow torque disturbance, a motor-angle-locked current ripple): they
+make the default trial resemble the real one, and their values go to the truth's ``background``, not its
+``effects``. Every effect also takes ``scale`` (default 1): it multiplies the effect's magnitude (its
 departure from the clean trial), so ``scale=0`` reproduces the clean trial exactly. Omitted keys take the
-defaults below (chosen to be clearly visible on a TUDOR-like arm, and resembling the real MERIt trial).
+defaults below (chosen to be clearly visible on a TUDOR-like arm, and resembling the real MERIt trial; the
+background terms' defaults are the calibrated ones of problems/tudor_sim.toml).
 """
 
 from __future__ import annotations
@@ -88,6 +93,35 @@ CATALOGUE: dict[str, tuple[str, dict[str, Key]]] = {
     ),
 }
 
+#: Background realism terms (see background.py for their equations): not part of the diagnosis catalogue.
+BACKGROUND: dict[str, tuple[str, dict[str, Key]]] = {
+    "stiction": (
+        "presliding (Dahl) friction: F = σ0 z, dz/dt = v − σ0 |v| z / Fb; a resting joint holds a torque that "
+        "depends on how it came to rest; adds Fb to the sliding friction",
+        {
+            "breakaway": Key("pair", (0.6, 0.6), "N m, Fb: the friction the bristles carry, per joint"),
+            "stiffness": Key("pair", (300.0, 150.0), "N m/rad, σ0: presliding stiffness, per joint", 0.0, True),
+        },
+    ),
+    "drift": (
+        "a slow torque disturbance on the joints (cable drag, thermal): an Ornstein-Uhlenbeck process",
+        {
+            "std": Key("pair", (0.7, 0.2), "N m, its standard deviation, per joint"),
+            "time": Key("float", 4.0, "s, its correlation time", 0.0, True),
+        },
+    ),
+    "ripple": (
+        "current (torque) ripple locked to the motor angle, amplitude ∝ joint speed: a v sin(c N q)",
+        {
+            "amplitude": Key("pair", (1.3, 0.75), "N m per rad/s of joint speed, a, per joint"),
+            "cycles": Key("pair", (1.0, 1.0), "c: cycles per motor revolution, per joint", 0.0, True),
+        },
+    ),
+}
+
+#: Every name the syntax accepts: the diagnosis catalogue, then the background terms.
+ALL_EFFECTS = {**CATALOGUE, **BACKGROUND}
+
 _SCALE = Key("float", 1.0, "multiplies the effect's magnitude; 0 gives the clean trial")
 
 
@@ -100,6 +134,12 @@ def describe() -> str:
             default = "datasheet" if spec.default is None else _show(spec.default)
             lines.append(f"      {key}={default}  ({spec.doc})")
     lines.append("  every effect also takes scale=1 (0 = effect off, the clean trial)")
+    lines.append("background realism terms (not named by the diagnosis; off unless asked for):")
+    for name, (meaning, keys) in BACKGROUND.items():
+        lines.append(f"  {name}: {meaning}")
+        for key, spec in keys.items():
+            lines.append(f"      {key}={_show(spec.default)}  ({spec.doc})")
+    lines.append("  they also take scale=1 (0 = off)")
     return "\n".join(lines)
 
 
@@ -117,8 +157,8 @@ def parse_effect(text: str) -> tuple[str, dict]:
     """
     name, _, body = text.strip().partition(":")
     name = name.strip()
-    if name not in CATALOGUE:
-        raise InputError(f"effect {text!r}: unknown effect {name!r}; known: {', '.join(CATALOGUE)}")
+    if name not in ALL_EFFECTS:
+        raise InputError(f"effect {text!r}: unknown effect {name!r}; known: {', '.join(ALL_EFFECTS)}")
     params: dict[str, object] = {}
     if body.strip():
         # Split on commas that are not inside brackets, so that key=[v1,v2] stays whole.
@@ -152,7 +192,7 @@ def _parse_value(text: str, name: str, key: str, value: str) -> object:
 
 
 def _key(name: str, key: str, where: str) -> Key:
-    keys = CATALOGUE[name][1]
+    keys = ALL_EFFECTS[name][1]
     if key == "scale":
         return _SCALE
     if key not in keys:
@@ -209,12 +249,12 @@ def normalise(
         items = [(*parse_effect(e), e) if isinstance(e, str) else _bad(e) for e in effects]
     out: dict[str, dict] = {}
     for name, params, where in items:
-        if name not in CATALOGUE:
-            raise InputError(f"effect {where!r}: unknown effect {name!r}; known: {', '.join(CATALOGUE)}")
+        if name not in ALL_EFFECTS:
+            raise InputError(f"effect {where!r}: unknown effect {name!r}; known: {', '.join(ALL_EFFECTS)}")
         if name in out:
             raise InputError(f"effect {where!r}: {name} given twice")
         full = {k: _check(name, k, v, where) for k, v in params.items()}
-        for key, spec in CATALOGUE[name][1].items():
+        for key, spec in ALL_EFFECTS[name][1].items():
             if key not in full:
                 default = spec.default
                 if default is None:  # asymmetric Coulomb levels: the datasheet's
@@ -250,6 +290,12 @@ def _scaled(name: str, p: dict, s: float, coulomb: tuple[tuple, tuple]) -> dict:
         p["seconds"] *= s
     elif name == "joint_offset":
         p["offset"] = pair(p["offset"])
+    elif name == "stiction":
+        p["breakaway"] = pair(p["breakaway"])
+    elif name == "drift":
+        p["std"] = pair(p["std"])
+    elif name == "ripple":
+        p["amplitude"] = pair(p["amplitude"])
     return p
 
 
@@ -272,4 +318,10 @@ def is_active(name: str, p: Mapping, coulomb: tuple[tuple, tuple]) -> bool:
         return p["seconds"] > 0
     if name == "joint_offset":
         return any(p["offset"])
+    if name == "stiction":
+        return any(p["breakaway"])
+    if name == "drift":
+        return any(p["std"])
+    if name == "ripple":
+        return any(p["amplitude"])
     return False

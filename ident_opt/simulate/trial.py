@@ -124,7 +124,7 @@ def simulate_trial(
     active = {name: p for name, p in wanted.items() if is_active(name, p, coulomb)}
     truth = build_truth(robot, active)
     ref = reference(trajectory, duration, seed, 1.0 / closed_loop.CONTROL_HZ)
-    out = closed_loop.run(truth, robot, ref, progress=progress)
+    out = closed_loop.run(truth, robot, ref, progress=progress, seed=int(seed))
     rng = np.random.default_rng([seed, 11])  # the measurement noise's own stream
     elastic_joint = truth.elastic.index + 1 if truth.elastic else None
     frame = measurement.log(
@@ -210,6 +210,7 @@ def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, 
                 "pi": truth.model.as_dict(truth.pi),
             },
             "effects": effects,
+            "background": dict(truth.background),  # realism terms outside the diagnosis catalogue
             "physical": physical,
             "settings": settings,
             "measurement": {

@@ -15,12 +15,15 @@ M(q) ddq + C(q, dq) dq + G(q) + F(dq) = τ. Effects change it as follows (values
   torsional spring (see flexible_link.py); the joints stay rigid and their angles are logged.
 - ``joint_offset`` and ``delay`` act on the measurements (see measurement.py); the true angle is the logged
   (encoder) angle + δ.
+
+Background terms (effects.BACKGROUND: stiction, drift, ripple) are kept apart in `Truth.background` and
+wrapped around this plant by background.py.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
@@ -29,6 +32,7 @@ from ident_opt.datasheet import datasheet_pi, rigid_body
 from ident_opt.problem import Robot
 from ident_opt.robot import ArmModel
 from ident_opt.simulate import flexible_link
+from ident_opt.simulate.effects import BACKGROUND
 
 #: The structure of `SimTrial.truth["pi"]`.
 TRUTH_MODEL = ArmModel(("armature",))
@@ -62,6 +66,7 @@ class Truth:
     offset: tuple[float, float]
     delay: float
     effects: dict
+    background: dict = field(default_factory=dict)  # background realism terms (effects.BACKGROUND)
 
     @property
     def pi_rigid(self) -> dict[str, float]:
@@ -81,7 +86,9 @@ def coulomb_levels(robot: Robot) -> tuple[tuple, tuple]:
 
 
 def build_truth(robot: Robot, effects: dict[str, dict]) -> Truth:
-    """The true plant for the (normalised, active) `effects`."""
+    """The true plant for the (normalised, active) `effects`; background terms go to `Truth.background`."""
+    background = {name: p for name, p in effects.items() if name in BACKGROUND}
+    effects = {name: p for name, p in effects.items() if name not in BACKGROUND}
     true_robot = robot
     if "payload" in effects:
         true_robot = replace(robot, payload_mass=robot.payload_mass + effects["payload"]["mass"])
@@ -111,7 +118,7 @@ def build_truth(robot: Robot, effects: dict[str, dict]) -> Truth:
         elastic = make(true_robot, effects, pi, e["joint"] - 1, e["frequency_hz"], e["damping"])
     offset = tuple(effects["joint_offset"]["offset"]) if "joint_offset" in effects else (0.0, 0.0)
     delay = effects["delay"]["seconds"] if "delay" in effects else 0.0
-    return Truth(true_robot, model, vector, elastic, offset, delay, effects)
+    return Truth(true_robot, model, vector, elastic, offset, delay, effects, background)
 
 
 def _elastic(robot: Robot, effects: dict, pi: dict, j: int, f: float, zeta: float) -> Elastic:
