@@ -15,7 +15,8 @@ from ident_opt.simulate.trial import simulate_trial
 
 REPO = Path(__file__).resolve().parents[1]
 MODELS = {"rr", "dm", "dm_physical", "pbr", "cpbr"}
-TABLES = ("identify_reproduction", "identify_seeds", "identify_parameters", "identify_coverage", "identify_metrics")
+TABLES = ("identify_reproduction", "identify_seeds", "identify_parameters", "identify_coverage", "identify_metrics",
+          "identify_ridge")
 FIGURES = ("torque_j1", "torque_j2", "error_j1", "error_j2", "parity", "interval_pbr", "seeds", "cross_trial_j1",
            "cross_trial_j2", "cross_trial_interval_pbr")
 

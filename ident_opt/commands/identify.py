@@ -66,10 +66,12 @@ def run(args: argparse.Namespace) -> int:
                                                             progress=tick)
         bar.set_postfix_str("parameters")
         params, ses, eig = _parameters(problem, trial, constrained)
+        ridge = _ridge(trial)
         tick()
         result = report.IdentifyResult(problem.name, _rel(trial.source), _rel(unseen.source) if unseen else None,
                                        protocols, params, ses, eig, variants,
-                                       gmr_candidates=tuple(problem.residual.candidates), command=_command(args))
+                                       gmr_candidates=tuple(problem.residual.candidates), command=_command(args),
+                                       ridge=ridge)
         bar.set_postfix_str("figures")
         result.figures = _figures(figures, result, trial, problem, fig_dir, tick)
         result.seconds = time.perf_counter() - start
@@ -119,6 +121,16 @@ def _parameters(problem, trial, constrained: bool):
     arm = ArmModel(("armature",)) if conv == "physical" else RIGID
     eig["datasheet"] = arm.min_mass_eigenvalue(arm.vector(params["datasheet"]))
     return params, ses, {k: float(np.round(v, 12)) for k, v in eig.items()}
+
+
+def _ridge(trial) -> dict:
+    """Model 1 fitted on the whole first trial: penalty (chosen by leave-one-out CV), weights, intercept."""
+    from ident_opt.models import RidgeModel
+
+    rr = RidgeModel().fit(trial)
+    features = ("q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
+    return {"alpha": rr.alpha_.tolist(), "intercept": rr.intercept_.tolist(),
+            "coef": {f: rr.coef_[:, i].tolist() for i, f in enumerate(features)}}
 
 
 def _figures(figures, result, trial, problem, fig_dir: Path, tick) -> dict[str, Path]:
