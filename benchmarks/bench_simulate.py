@@ -2,7 +2,8 @@
 
 Run: .venv/bin/python benchmarks/bench_simulate.py [--repeat 3]
 Times, side by side in one run: the clean rigid trial, the calibrated default of problems/tudor_sim.toml
-(elastic joint, asymmetric Coulomb, Stribeck), and every catalogue effect at its default magnitude; the
+(flexible link, asymmetric Coulomb, Stribeck, and the background terms stiction, drift, ripple), the background
+terms alone, and every catalogue effect at its default magnitude; the
 first call of each also pays for building the CasADi functions, so the best of `--repeat` runs is reported.
 """
 
@@ -15,6 +16,7 @@ from pathlib import Path
 
 from ident_opt.problem import load_problem
 from ident_opt.simulate import CATALOGUE, simulate_trial
+from ident_opt.simulate.effects import BACKGROUND
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -35,8 +37,12 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=80.0)
     args = parser.parse_args()
     sim = load_problem(ROOT / "problems" / "tudor_sim.toml")
-    cases = {"clean (rigid truth)": [], "tudor_sim default": list(sim.simulate.effects), "all catalogue effects":
-             list(CATALOGUE)}
+    cases = {
+        "clean (rigid truth)": [],
+        "tudor_sim default": list(sim.simulate.effects),
+        "background terms only": list(BACKGROUND),
+        "all catalogue effects": list(CATALOGUE),
+    }
     print(f"simulating {args.duration:g} s at 1 kHz control, 100 Hz logging; cores available: {os.cpu_count()}")
     print(f"{'case':28s} {'seconds':>8s} {'x real time':>12s}")
     for name, effects in cases.items():
