@@ -7,8 +7,11 @@ OUT.truth.json (π in the names of the armature model, effects in the diagnosis'
 
 Effect syntax: --effect NAME or --effect NAME:key=value,key=value (repeatable); per-joint values are
 bracketed pairs, key=[v1,v2] (quote the argument in the shell). Every effect takes scale=S (default 1),
-which multiplies its magnitude; scale=0 gives the clean trial. Without --effect, the problem's [simulate]
-effects are used (none if it has no [simulate] section); with --effect, exactly the ones given.
+which multiplies its magnitude; scale=0 gives the clean trial. Besides the catalogue, background terms of
+a real arm that the diagnosis does not name (stiction, drift, ripple) take the same syntax; the default
+simulated problem uses them so that its residuals resemble the real MERIt trial's.
+Without --effect, the problem's [simulate] effects are used (none if it has no [simulate] section);
+with --effect, exactly the ones given.
 Examples:
   ident-opt simulate --problem P --out trial.csv --effect elasticity:joint=2,frequency_hz=8 --seed 3
   ident-opt simulate --problem P --out t.csv --effect 'asymmetric_coulomb:positive=[0.8,0.4]'
@@ -91,6 +94,9 @@ def run(args: argparse.Namespace) -> int:
         f"and {truth_path(path)}"
     )
     print(f"hidden effects: {hidden}")
+    background = trial.truth.get("background") or {}
+    if background:
+        print("background terms: " + ", ".join(f"{name} {values}" for name, values in background.items()))
     print(f"max tracking error: {track[0]:.2e} / {track[1]:.2e} rad")
     write_json(args.json, {"csv": str(path), "truth_json": str(truth_path(path)), "truth": trial.truth})
     return 0
