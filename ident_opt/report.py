@@ -70,6 +70,7 @@ class IdentifyResult:
     gmr_candidates: tuple[int, ...] = ()  # the problem's candidate numbers of components
     command: str = ""  # the command line that produced it
     ridge: dict = field(default_factory=dict)  # Model 1 on the whole first trial: alpha, intercept, coef
+    reg_covar: float = float("nan")  # the GMR's covariance regulariser (standardised units)
 
 
 # ---------------------------------------------------------------------------------------------- tables
@@ -259,6 +260,12 @@ def write_readme(result: IdentifyResult, out: Path, tables: dict[str, Path]) -> 
         "the honest numbers. When the number of GMR components is \"auto\", it is chosen on held-out training "
         "data that mirror the protocol: a random quarter under the paper's, the latest quarter in time under the "
         "honest ones.",
+        "",
+        "GMR: one Gaussian mixture on [q1 q2 dq1 dq2 ddq1 ddq2, r1 r2] (both joints' torque residuals in one "
+        "mixture), fitted by scikit-learn on standardised columns with `reg_covar` from the problem file "
+        f"({result.reg_covar:g}, relative to unit variance), full covariances unless a table says otherwise; "
+        "predictions are the conditional mean, intervals use the conditional mixture variance (within- plus "
+        "between-component).",
         "",
         "## Reproduction of the paper (paper's protocol)",
         "",

@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         result = report.IdentifyResult(problem.name, _rel(trial.source), _rel(unseen.source) if unseen else None,
                                        protocols, params, ses, eig, variants,
                                        gmr_candidates=tuple(problem.residual.candidates), command=_command(args),
-                                       ridge=ridge)
+                                       ridge=ridge, reg_covar=problem.residual.reg_covar)
         bar.set_postfix_str("figures")
         result.figures = _figures(figures, result, trial, problem, fig_dir, tick)
         result.seconds = time.perf_counter() - start
