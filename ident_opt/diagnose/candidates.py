@@ -15,7 +15,7 @@ variable projection. It is fitted against one or both nominal models:
 | payload | Y·∂π/∂m (π is affine in a tip mass m), m ≥ 0 | — |
 | asymmetric_coulomb | fc1p fc1n fc2p fc2n (`asymmetric_coulomb` extension) | — |
 | stribeck | fs1 fs2 ≥ 0 (`stribeck` extension) | vs1, vs2 [rad/s] |
-| joint_offset | b1s b2s (`offset` extension): δ1 = atan2(−b1s, b1), δ1+δ2 = atan2(−b2s, b2) | — |
+| joint_offset | the nominal model at q + δ (gravity and inertia both see the true angle) | δ1, δ2 [rad] |
 | delay | the whole prediction delayed by d | d [s] |
 | elasticity | s·(m_link,j ë_j on joint j's row + M_oj(q2) ë_j on the other), datasheet inertias (below) | f [Hz], ζ |
 
@@ -86,6 +86,7 @@ class Family:
     free: tuple[str, ...] | None  # names freed against the datasheet (None: the effect adds no π names)
     extra: Callable[[Dataset, dict, float, Context], tuple[np.ndarray, list[str]]] | None = None
     shifted: bool = False
+    angle_offset: bool = False  # the model is evaluated at q + (δ1, δ2)
     axes: Callable[[float], list[linear.Axis]] = lambda rate: []
     baselines: tuple[str, ...] = ("datasheet", "rigid_fit")
     nonnegative: tuple[str, ...] = ()  # coefficients with a physical sign (held at 0 rather than negative)
@@ -110,7 +111,11 @@ def design(family: Family, ds: Dataset, theta: dict, baseline: str, ctx: Context
            rows: slice = slice(None)) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """(o, X, names) of `family` at θ on `ds` (rows `rows`), against `baseline` (see the module docstring)."""
     model = family.model(theta)
-    Y = _regressor(model, ds, rows)
+    if family.angle_offset:  # the true angle is the logged one + δ: evaluate the model there (no cache)
+        shift = np.array([theta["delta1"], theta["delta2"]])
+        Y = model.regressor(ds.q[rows] + shift, ds.dq[rows], ds.ddq[rows])
+    else:
+        Y = _regressor(model, ds, rows)
     n = Y.shape[0]
     if baseline == "datasheet":
         pi = model.vector(ctx.datasheet)
@@ -211,14 +216,6 @@ def _stribeck_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
     return {"static": static, "velocity": velocity}, {"se_static": [se["fs1"], se["fs2"]]}
 
 
-def _offset_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
-    b1 = p.get("b1", ctx.datasheet["b1"])
-    b2 = p.get("b2", ctx.datasheet["b2"])
-    d1 = math.atan2(-p["b1s"], b1)
-    d12 = math.atan2(-p["b2s"], b2)
-    return {"offset": [d1, d12 - d1]}, {}
-
-
 def _elastic_columns(joint: int) -> Callable:
     def columns(ds: Dataset, theta: dict, dt: float, ctx: Context) -> tuple[np.ndarray, list[str]]:
         # The link behind an elastic joint j is driven by its motor's acceleration and, through the
@@ -269,8 +266,9 @@ def families(robot: Robot) -> list[Family]:
                ("fs1", "fs2"), nonnegative=("fs1", "fs2"), axes=lambda rate: [linear.Axis("vs1", 0.005, 0.5, 11, True),
                                                   linear.Axis("vs2", 0.005, 0.5, 11, True)],
                estimate=_stribeck_estimate),
-        Family("joint_offset", lambda th: ArmModel(("armature", "offset")), ("b1s", "b2s"),
-               estimate=_offset_estimate),
+        Family("joint_offset", _nominal, (), angle_offset=True,
+               axes=lambda rate: [linear.Axis("delta1", -0.1, 0.1, 21), linear.Axis("delta2", -0.1, 0.1, 21)],
+               estimate=lambda p, se, ctx: ({"offset": [p["delta1"], p["delta2"]]}, {})),
         Family("delay", _nominal, (), shifted=True,
                axes=lambda rate: [linear.Axis("delay", 0.0, 0.15, 31)],
                estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {})),

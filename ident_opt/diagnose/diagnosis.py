@@ -27,7 +27,7 @@ from ident_opt.problem import Robot
 #: A joint moving slower than this fraction of its speed scale (95th percentile of |dq|) is at rest.
 REST_FRACTION = 0.01
 #: How long [s] a joint must stay slow, before or after a sample, for it to count as at rest.
-REST_WINDOW_S = 0.05
+REST_WINDOW_S = 0.01
 #: Fewest held-out / training samples that make a diagnosis meaningful.
 MIN_SAMPLES = 200
 
@@ -67,7 +67,8 @@ class Diagnosis:
             "candidates": self.candidates,
             "score": "held-out log-likelihood gain over the candidate's baseline minus (k/2) ln n; a cause is "
                      f"named when its score > 0 and, on some joint, it removes >= {scoring.MARGIN:.0%} of the "
-                     f"baseline's held-out MSE and >= {scoring.MARGIN_VARIANCE:.1%} of the torque variance",
+                     f"baseline's held-out MSE and >= {scoring.MARGIN_VARIANCE:.2%} of the torque variance (delays "
+                     f"shorter than {1e3 * scoring.MIN_DELAY_S:g} ms are not named)",
             "nmse_definition": "MSE ÷ variance of the measured torque, per joint, on the held-out part; within "
                                "each stretch where a joint rests, its residual's mean is removed first (stiction "
                                "holds a level no model predicts); nmse_raw_before/after: without that",
@@ -195,11 +196,15 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
             best[item[0].cause] = item
     ranked = sorted(best.values(), key=lambda it: it[1], reverse=True)
     candidates = [{"cause": c.cause, "score": s, "nmse_after": scoring.nmse(test.tau, pred, rest_test),
-                   "baseline": c.baseline, "estimate": c.estimate, "added_parameters": c.n_added}
+                   "baseline": c.baseline, "estimate": c.estimate, "added_parameters": c.n_added,
+                   "resolved": scoring.resolved(c.cause, c.estimate, dt)}
                   for c, s, _, pred in ranked]
-    top, top_score, top_mse, top_pred = ranked[0]
-    if scoring.clears_margin(nominal_mse[top.baseline], top_mse, top_score, np.var(test.tau, axis=0)):
-        named, cause, estimate, baseline, after_pred = top, top.cause, top.estimate, top.baseline, top_pred
+    nameable = [it for it in ranked if scoring.resolved(it[0].cause, it[0].estimate, dt)]
+    top = nameable[0] if nameable else None
+    if top is not None and scoring.clears_margin(nominal_mse[top[0].baseline], top[2], top[1],
+                                                 np.var(test.tau, axis=0)):
+        named, after_pred = top[0], top[3]
+        cause, estimate, baseline = named.cause, named.estimate, named.baseline
     else:
         baseline = min(nominal_mse, key=lambda b: float(np.sum(nominal_mse[b] / np.var(test.tau, axis=0))))
         named, cause, estimate, after_pred = None, "none", {}, nominal_pred[baseline]

@@ -187,7 +187,8 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "Every catalogue effect was fitted on the training part (against the datasheet with its π held, and/or "
         "against the rigid fit with π refitted) and scored on the held-out part: score = (n/2) Σ_j ln(MSE_before,j / "
         "MSE_after,j) − (k/2) ln n for k added parameters. A cause is named when its score is positive and, on some "
-        "joint, it removes at least 5 % of its baseline's held-out MSE and at least 0.2 % of the torque's variance.",
+        "joint, it removes at least 5 % of its baseline's held-out MSE and at least 0.01 % of the torque's variance; "
+        "delays shorter than 2 ms are not named (sample-and-hold timing and filter mismatch produce them).",
         "",
         "| cause | score | baseline | added parameters | held-out nMSE after | estimate |", "|---|---|---|---|---|---|",
     ]

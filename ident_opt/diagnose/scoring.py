@@ -7,11 +7,11 @@ Score (higher is better), for a candidate fitted against baseline b and evaluate
 the held-out Gaussian log-likelihood gain over its own baseline (per joint variance) minus a BIC-style
 penalty for its k added parameters (linear and nonlinear). A cause is named only when the best score is
 positive *and*, on some joint, the extension removes at least `MARGIN` (5 %) of the baseline's held-out
-MSE and at least `MARGIN_VARIANCE` (0.2 %) of the measured torque's variance (an nMSE drop of 0.002). The
+MSE and at least `MARGIN_VARIANCE` (0.01 %) of the measured torque's variance (an nMSE drop of 1e-4). The
 log-likelihood alone counts correlated residual samples as independent and would accept tiny gains on long
-trials; the two floors ask for a gain that matters both relative to what the baseline gets wrong and
-relative to the torque itself, so sub-millisecond timing or filter mismatches on an almost perfect model
-are not named.
+trials; the two floors ask for a gain that matters relative to what the baseline gets wrong and is not
+numerically nil. A candidate must also be *resolved* (`resolved`): a delay shorter than `MIN_DELAY_S`
+(2 ms) is what sample-and-hold timing and filter mismatch produce on a perfect model, not a cause.
 """
 
 from __future__ import annotations
@@ -23,7 +23,9 @@ from ident_opt.diagnose import signals
 #: Least fraction of the baseline's held-out MSE (on some joint) the named extension must remove.
 MARGIN = 0.05
 #: Least fraction of the measured torque's variance (on the same joint) it must remove.
-MARGIN_VARIANCE = 0.002
+MARGIN_VARIANCE = 1e-4
+#: Shortest delay [s] that counts as a cause (the issue's tolerance on delays is 2 ms, too).
+MIN_DELAY_S = 0.002
 
 
 def mse(tau: np.ndarray, tau_hat: np.ndarray, rest: np.ndarray | None = None) -> np.ndarray:
@@ -44,6 +46,13 @@ def score(mse_before: np.ndarray, mse_after: np.ndarray, n: int, k: int) -> floa
     """Penalised held-out log-likelihood gain (see the module docstring)."""
     gain = 0.5 * n * float(np.sum(np.log(np.asarray(mse_before) / np.asarray(mse_after))))
     return gain - 0.5 * k * float(np.log(n))
+
+
+def resolved(cause: str, estimate: dict, dt: float) -> bool:
+    """Whether a fitted candidate describes an effect at all (see the module docstring)."""
+    if cause == "delay":
+        return estimate["seconds"] >= max(MIN_DELAY_S, 0.5 * dt)
+    return True
 
 
 def clears_margin(mse_before: np.ndarray, mse_after: np.ndarray, score_value: float,

@@ -1,0 +1,100 @@
+"""Unit tests of the diagnosis tools: signals, linear solves, the naming rule, rest handling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ident_opt.data import Dataset
+from ident_opt.diagnose import linear, scoring, signals
+from ident_opt.diagnose.diagnosis import at_rest
+
+
+def test_delayed_shifts_a_ramp_by_a_fraction_of_a_sample():
+    dt = 0.01
+    x = np.arange(100, dtype=float)[:, None] * np.array([[1.0, -2.0]])
+    y = signals.delayed(x, 0.0237, dt)  # 2.37 samples
+    assert np.allclose(y[10:], x[10:] - 2.37 * np.array([1.0, -2.0]))
+
+
+def test_deflection_filter_resonates_at_the_mode():
+    dt, f0 = 0.001, 6.0
+    n = 20000
+    impulse = np.zeros(n)
+    impulse[0] = 1.0
+    h = signals.deflection_acceleration(impulse, f0, 0.02, dt)
+    freqs = np.fft.rfftfreq(n, dt)
+    peak = freqs[np.argmax(np.abs(np.fft.rfft(h)))]
+    assert abs(peak - f0) < 0.1
+    # High-pass: a constant acceleration leaves no deflection acceleration in steady state.
+    step = signals.deflection_acceleration(np.ones(n), f0, 0.5, dt)
+    assert abs(step[-1]) < 1e-6
+
+
+def test_spectral_peak_frequency_and_damping():
+    dt = 0.01
+    rng = np.random.default_rng(0)
+    white = rng.normal(size=60000)
+    x = signals.deflection_acceleration(white, 4.0, 0.03, dt)
+    peak = signals.peaks(x, dt, window_s=40.0)[0]
+    assert abs(peak.frequency_hz - 4.0) < 0.15
+    assert 0.01 < peak.damping < 0.08
+
+
+def test_lag_sign_convention():
+    dt = 0.01
+    t = np.arange(3000) * dt
+    ref = np.sin(2 * np.pi * 0.7 * t) + 0.5 * np.sin(2 * np.pi * 1.9 * t)
+    lagged = signals.delayed(ref[:, None], 0.034, dt)[:, 0]
+    assert signals.lag(ref, lagged, dt) == pytest.approx(0.034, abs=0.002)
+
+
+def test_rest_stretches_are_compared_about_their_mean():
+    dq = np.array([[0, 1.0], [0, 1.0], [1.0, 0], [0, 0], [0, 0]])
+    labels = signals.rest_runs(dq)
+    assert labels[:, 0].tolist() == [0, 0, -1, 1, 1]
+    assert labels[:, 1].tolist() == [-1, -1, 0, 0, 0]
+    x = np.array([[1.0, 5.0], [3.0, 6.0], [7.0, 1.0], [2.0, 2.0], [4.0, 3.0]])
+    y = signals.demean_runs(x, labels)
+    assert y[:, 0].tolist() == [-1.0, 1.0, 7.0, -1.0, 1.0]
+    assert y[:, 1].tolist() == [5.0, 6.0, -1.0, 0.0, 1.0]
+
+
+def test_least_squares_recovers_known_coefficients_and_respects_signs():
+    rng = np.random.default_rng(1)
+    X = rng.normal(size=(500, 2, 3))
+    beta = np.array([0.5, -0.2, 1.5])
+    offset = rng.normal(size=(500, 2))
+    tau = offset + X @ beta + 1e-3 * rng.normal(size=(500, 2))
+    ls = linear.solve(offset, X, tau, np.ones(2))
+    assert np.allclose(ls.beta, beta, atol=1e-3)
+    assert np.all(ls.se > 0) and np.all(ls.se < 1e-3)
+    signed = linear.solve_nonnegative(offset, X, tau, np.ones(2), [1])
+    assert signed.beta[1] == 0.0 and signed.beta[0] > 0
+
+
+def test_search_finds_a_one_dimensional_minimum():
+    theta = linear.search(lambda th: (np.log(th["v"]) - np.log(0.037)) ** 2, [linear.Axis("v", 0.005, 0.5, 9, True)])
+    assert theta["v"] == pytest.approx(0.037, rel=1e-2)
+
+
+def test_naming_rule_needs_score_and_both_margins():
+    before, var = np.array([1.0, 1.0]), np.array([100.0, 100.0])
+    assert scoring.clears_margin(before, np.array([0.9, 1.0]), 5.0, var)
+    assert not scoring.clears_margin(before, np.array([0.97, 0.99]), 5.0, var)  # < 5 % of the MSE
+    assert not scoring.clears_margin(before, np.array([0.9, 1.0]), -1.0, var)  # penalty wins
+    assert not scoring.clears_margin(np.array([1e-3, 1.0]), np.array([0.5e-3, 1.0]), 5.0, var)  # nil vs torque
+    assert scoring.score(before, before, 1000, 2) < 0
+    assert not scoring.resolved("delay", {"seconds": 0.001}, 0.01)
+    assert scoring.resolved("delay", {"seconds": 0.02}, 0.01)
+
+
+def test_at_rest_zeroes_filter_ringing_but_not_a_smooth_reversal():
+    t = np.arange(20) * 0.01
+    dq = np.zeros((20, 2))
+    dq[:, 0] = [0, 0.001, -0.001, 0, 0, 0, 0, 0.002, 0.5, 1, 1, 1, 0.5, 0.003, 0, 0, 0, 0, 0, 0]
+    dq[:, 1] = np.linspace(-1, 1, 20)
+    ds = Dataset("x", t, np.zeros((20, 2)), dq, np.zeros((20, 2)), np.zeros((20, 2)))
+    out = at_rest(ds).dq
+    assert np.all(out[:8, 0] == 0) and np.all(out[13:, 0] == 0) and np.all(out[8:13, 0] == dq[8:13, 0])
+    assert np.array_equal(out[:, 1], dq[:, 1])
