@@ -14,10 +14,12 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test]'
 	touch $(STAMP)
 
-## The main job: every model on the real MERIt/TUDOR trials; tables and figures into results/.
+## The main job: every step on the real MERIt/TUDOR trials; tables, figures and reports into results/.
 identify: $(STAMP)
-	$(BIN)/ident-opt audit --problem problems/tudor_2dof_paper.toml --out results
+	$(BIN)/ident-opt audit    --problem problems/tudor_2dof_paper.toml --out results
 	$(BIN)/ident-opt identify --problem $(PROBLEM) --out results --json results/identify.json
+	$(BIN)/ident-opt compare  --problem $(PROBLEM) --out results --json results/compare.json
+	$(BIN)/ident-opt online   --problem $(PROBLEM) --out results --json results/online.json
 
 ## The whole test suite (2 workers).
 test: $(STAMP)
@@ -33,9 +35,12 @@ codegen: $(STAMP)
 audit: $(STAMP)
 	$(BIN)/ident-opt audit --problem problems/tudor_2dof_paper.toml --out results
 
+## Benchmarks: each prints ratios measured side by side in one run; the output is kept in results/benchmarks/.
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test,bench]'
-	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+	mkdir -p results/benchmarks
+	@set -e; for b in benchmarks/bench_*.py; do \
+	  echo "== $$b"; $(BIN)/python $$b | tee results/benchmarks/$$(basename $$b .py).txt; done
 
 clean-venv:
 	rm -rf $(VENV)
