@@ -197,8 +197,10 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
     ranked = sorted(best.values(), key=lambda it: it[1], reverse=True)
     candidates = [{"cause": c.cause, "score": s, "nmse_after": scoring.nmse(test.tau, pred, rest_test),
                    "baseline": c.baseline, "estimate": c.estimate, "added_parameters": c.n_added,
-                   "resolved": scoring.resolved(c.cause, c.estimate, dt)}
-                  for c, s, _, pred in ranked]
+                   "resolved": scoring.resolved(c.cause, c.estimate, dt),
+                   "clears_margin": scoring.resolved(c.cause, c.estimate, dt) and scoring.clears_margin(
+                       nominal_mse[c.baseline], after, s, np.var(test.tau, axis=0))}
+                  for c, s, after, pred in ranked]
     nameable = [it for it in ranked if scoring.resolved(it[0].cause, it[0].estimate, dt)]
     top = nameable[0] if nameable else None
     if top is not None and scoring.clears_margin(nominal_mse[top[0].baseline], top[2], top[1],

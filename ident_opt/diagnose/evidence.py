@@ -106,13 +106,22 @@ def forward_error(model: ArmModel, pi: np.ndarray, ds: Dataset, dt: float, windo
     return [float(v) if np.isfinite(v) else float("nan") for v in rms]
 
 
-def channel_peaks(ds: Dataset, dt: float) -> dict[str, list[dict]]:
-    """Spectral peaks of the file's other numeric channels (e.g. strain gauges): independent evidence of a
-    mode, never a model input. Constant or non-finite channels are skipped."""
+#: Where the first modes of flexible-link arms lie [Hz]: the band searched in independent channels.
+MODE_BAND_HZ = (1.0, 10.0)
+
+
+def channel_peaks(ds: Dataset, dt: float) -> dict[str, dict]:
+    """Spectra of the file's other numeric channels (e.g. strain gauges): independent evidence of a mode,
+    never a model input. Per channel: its most prominent peaks above 0.7 Hz, and the frequency of its
+    strongest power within MODE_BAND_HZ (a broad mode on a sloping spectrum is not "prominent" but is still
+    the band's maximum). Constant or non-finite channels are skipped."""
     out = {}
     for name in ds.extra.columns:
         x = np.asarray(ds.extra[name], dtype=float)
         if not np.all(np.isfinite(x)) or np.std(x) <= 1e-12 * max(1.0, float(np.max(np.abs(x)))):
             continue
-        out[str(name)] = [p.as_dict() for p in signals.peaks(x, dt)]
+        f, p = signals.spectrum(x, dt, window_s=20.0)
+        band = (f >= MODE_BAND_HZ[0]) & (f <= min(MODE_BAND_HZ[1], 0.45 / dt))
+        out[str(name)] = {"peaks": [pk.as_dict() for pk in signals.peaks(x, dt)],
+                          "mode_band_max_hz": float(f[band][np.argmax(p[band])]) if band.any() else float("nan")}
     return out

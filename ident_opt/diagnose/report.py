@@ -151,24 +151,47 @@ def _evidence_table(d: Diagnosis) -> list[str]:
     return rows
 
 
+def _elastic_candidate(d: Diagnosis) -> dict | None:
+    return next((c for c in d.candidates if c["cause"] == "elasticity"), None)
+
+
 def channels_paragraph(d: Diagnosis) -> list[str]:
-    """What the file's other channels (e.g. strain gauges) say, as independent evidence."""
+    """What the file's other channels (e.g. strain gauges) say, as independent evidence of a mode."""
     ch = d.evidence.get("other_channels") or {}
     if not ch:
         return []
     lines = ["## Independent channels", "",
-             "Other numeric columns of the data file (not model inputs; on the MERIt trials col10–col13 are the "
-             "links' strain gauges). Their most prominent spectral peaks above 0.7 Hz:", ""]
-    for name, peaks in ch.items():
-        if peaks:
-            lines.append(f"- `{name}`: " + ", ".join(
-                f"{_v(p['frequency_hz'])} Hz ({_v(p['prominence_db'], digits=2)} dB)" for p in peaks))
-    if d.cause == "elasticity":
-        f = d.estimate["frequency_hz"]
-        near = [n for n, ps in ch.items() if any(abs(p["frequency_hz"] - f) <= 0.2 * f for p in ps)]
-        lines += ["", f"The identified mode is at {_v(f, 'Hz')}; channels with a peak within 20 % of it: "
+             "Other numeric columns of the data file, never model inputs (on the MERIt trials col10–col13 are the "
+             "links' strain gauges): the strongest power in the 1–10 Hz band of first link modes, and the most "
+             "prominent peaks above 0.7 Hz.", "", "| channel | strongest in 1–10 Hz | prominent peaks [Hz] |",
+             "|---|---|---|"]
+    for name, info in ch.items():
+        peaks = ", ".join(f"{_v(p['frequency_hz'])} ({_v(p['prominence_db'], digits=2)} dB)" for p in info["peaks"])
+        lines.append(f"| `{name}` | {_v(info['mode_band_max_hz'])} Hz | {peaks or '—'} |")
+    el = _elastic_candidate(d)
+    if el is not None:
+        f = el["estimate"]["frequency_hz"]
+        near = [n for n, info in ch.items() if abs(info["mode_band_max_hz"] - f) <= 0.2 * f]
+        status = "the named cause" if d.cause == "elasticity" else f"not named; score {el['score']:.1f}"
+        lines += ["", f"The elastic-joint candidate ({status}) puts a mode at {_v(f, 'Hz')} on joint "
+                  f"{el['estimate']['joint']}; channels whose 1–10 Hz maximum lies within 20 % of it: "
                   + (", ".join(f"`{n}`" for n in near) if near else "none") + "."]
     return [*lines, ""]
+
+
+def also_clear(d: Diagnosis) -> list[str]:
+    """Runner-up candidates that would also clear the naming margin (a second effect may be present)."""
+    others = [c for c in d.candidates if c["cause"] != d.cause and c.get("clears_margin")]
+    if not others:
+        return []
+    return ["Other candidates that also clear the margin on their own (effects need not come alone): "
+            + "; ".join(f"{c['cause']} against the {c['baseline']} model (score {c['score']:.1f}, estimate "
+                        f"`{_rounded(c['estimate'])}`, held-out nMSE after {_pair(c['nmse_after'])})" for c in others)
+            + ".", ""]
+
+
+def _rounded(estimate: dict) -> dict:
+    return {k: (np.round(v, 4).tolist() if not isinstance(v, int) else v) for k, v in estimate.items()}
 
 
 def markdown(d: Diagnosis, figure_files: list[str]) -> str:
@@ -176,7 +199,10 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
     nom = d.nominal
     lines = [
         "# Diagnosis", "",
-        f"Data: {d.split} ({d.rate_hz:.4g} Hz). All numbers are on the held-out part.", "",
+        f"Data: {d.split} ({d.rate_hz:.4g} Hz). All numbers are on the held-out part. The torque is low-passed "
+        "by the same zero-phase filter the derivatives are estimated with, and where a joint rests its residual is "
+        "compared about its mean over the rest (stiction holds a level no model predicts); `nmse_raw_*` in the "
+        "JSON are without that.", "",
         "## 1. What the nominal models get wrong", "",
         f"Held-out nMSE (MSE ÷ variance) per joint: datasheet {_pair(nom['datasheet']['nmse'])}, best rigid fit "
         f"{_pair(nom['rigid_fit']['nmse'])}.", "",
@@ -193,10 +219,9 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "| cause | score | baseline | added parameters | held-out nMSE after | estimate |", "|---|---|---|---|---|---|",
     ]
     for c in d.candidates:
-        est = {k: (np.round(v, 4).tolist() if not isinstance(v, int) else v) for k, v in c["estimate"].items()}
         lines.append(f"| {c['cause']} | {c['score']:.1f} | {c['baseline']} | {c['added_parameters']} | "
-                     f"{_pair(c['nmse_after'])} | `{est}` |")
-    lines += ["", "## 3. The extended model", ""]
+                     f"{_pair(c['nmse_after'])} | `{_rounded(c['estimate'])}` |")
+    lines += ["", *also_clear(d), "## 3. The extended model", ""]
     if d.named is not None:
         lines += ["| parameter | value | standard error |", "|---|---|---|"]
         for name, value in d.named.parameters.items():
