@@ -190,12 +190,19 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
         fitted.append((cand, scoring.score(nominal_mse[baseline], after, test.n, cand.n_added), after, pred))
     t_fit = time.perf_counter()
 
+    # One version per cause: the datasheet-based or the refitted extension, whichever is better on a common
+    # footing (its gain over the datasheet, every fitted parameter penalised: the refit's π counts too).
+    def common(item) -> float:
+        refit = len(cands.NOMINAL.names) if item[0].baseline == "rigid_fit" else 0
+        return scoring.score(nominal_mse["datasheet"], item[2], test.n, item[0].n_added + refit)
+
     best: dict[str, tuple] = {}
     for item in fitted:
-        if item[0].cause not in best or item[1] > best[item[0].cause][1]:
+        if item[0].cause not in best or common(item) > common(best[item[0].cause]):
             best[item[0].cause] = item
     ranked = sorted(best.values(), key=lambda it: it[1], reverse=True)
-    candidates = [{"cause": c.cause, "score": s, "nmse_after": scoring.nmse(test.tau, pred, rest_test),
+    candidates = [{"cause": c.cause, "score": s, "score_vs_datasheet": common((c, s, after, pred)),
+                   "nmse_after": scoring.nmse(test.tau, pred, rest_test),
                    "baseline": c.baseline, "estimate": c.estimate, "added_parameters": c.n_added,
                    "resolved": scoring.resolved(c.cause, c.estimate, dt),
                    "clears_margin": scoring.resolved(c.cause, c.estimate, dt) and scoring.clears_margin(

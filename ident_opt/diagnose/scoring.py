@@ -5,7 +5,10 @@ Score (higher is better), for a candidate fitted against baseline b and evaluate
     score = (n/2) Σ_j ln(MSE_b,j / MSE_cand,j)  −  (k/2) ln n
 
 the held-out Gaussian log-likelihood gain over its own baseline (per joint variance) minus a BIC-style
-penalty for its k added parameters (linear and nonlinear). A cause is named only when the best score is
+penalty for its k added parameters (linear and nonlinear). Candidates are ranked by it. When a cause was
+fitted against both nominal models, the version kept is the one with the better score against the
+datasheet with every fitted parameter counted (the refit's π too), so a refit must earn its 10 parameters.
+A cause is named only when the best score is
 positive *and*, on some joint, the extension removes at least `MARGIN` (5 %) of the baseline's held-out
 MSE and at least `MARGIN_VARIANCE` (0.01 %) of the measured torque's variance (an nMSE drop of 1e-4). The
 log-likelihood alone counts correlated residual samples as independent and would accept tiny gains on long
