@@ -117,13 +117,16 @@ def at_rest(trial: Dataset) -> Dataset:
 
 
 def rigid_fit(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
-    """(π̂ of the nominal structure, joint weights 1/σ_j²): OLS, then WLS with the OLS residual variances."""
-    Y = cands.NOMINAL.regressor(ds.q, ds.dq, ds.ddq)
+    """(π̂ of the nominal structure, joint weights 1/σ_j²): OLS, then WLS with the OLS residual variances,
+    on the same objective as every candidate (rest stretches compared about their mean)."""
+    rest = signals.rest_runs(ds.dq)
+    Y = signals.demean_runs(cands.NOMINAL.regressor(ds.q, ds.dq, ds.ddq), rest)
+    tau = signals.demean_runs(ds.tau, rest)
     zero = np.zeros((ds.n, 2))
-    first = linear.solve(zero, Y, ds.tau, np.ones(2))
+    first = linear.solve(zero, Y, tau, np.ones(2))
     var = np.maximum(first.rss / ds.n, 1e-12 * np.maximum(np.var(ds.tau, axis=0), 1e-30))
     weights = 1.0 / var
-    return linear.solve(zero, Y, ds.tau, weights).beta, weights
+    return linear.solve(zero, Y, tau, weights).beta, weights
 
 
 def prepare(trial: Dataset, torque_filter_hz: float | None) -> Dataset:

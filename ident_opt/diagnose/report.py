@@ -132,7 +132,7 @@ def _evidence_table(d: Diagnosis) -> list[str]:
         rows.append(f"| {name} | " + " | ".join(vals) + " |")
 
     row("residual RMS [N m]", lambda e, j: _v(e["rms"][j]))
-    row("nMSE", lambda e, j: _v(e["nmse"][j]))
+    row("nMSE of the raw residual (rest levels included)", lambda e, j: _v(e["nmse"][j]))
     row("strongest residual peak [Hz] (ζ)",
         lambda e, j: f"{_v(e['peaks'][j][0]['frequency_hz'])} ({_v(e['peaks'][j][0]['damping'], digits=2)})"
         if e["peaks"][j] else "—")
