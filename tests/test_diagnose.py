@@ -121,7 +121,9 @@ def test_cli_writes_the_contract_json_and_report(physical_problem, tmp_path):
     status = main(["diagnose", "--problem", str(problem), "--data", str(csv), "--out", str(out),
                    "--json", str(out / "d.json"), "--no-progress"])
     assert status == 0
-    payload = json.loads((out / "d.json").read_text())
+    text = (out / "d.json").read_text()
+    assert "NaN" not in text and "Infinity" not in text  # strict JSON
+    payload = json.loads(text)
     for key in ("cause", "estimate", "baseline", "nmse_before", "nmse_after", "candidates"):
         assert key in payload
     assert payload["cause"] == "payload" and set(payload["estimate"]) == {"mass"}

@@ -33,7 +33,7 @@ import numpy as np
 
 from ident_opt.data import Dataset
 from ident_opt.datasheet import datasheet_pi
-from ident_opt.diagnose import linear, signals
+from ident_opt.diagnose import linear, polish, signals
 from ident_opt.problem import Robot
 from ident_opt.robot import ArmModel
 
@@ -159,13 +159,17 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     theta = linear.search(cost, axes) if axes else {}
     o, X, names = design(family, ctx.train, theta, baseline, ctx)
     ls = solve(o, X, names, ctx.train.tau, ctx.rest, True)
-    params = dict(zip(names, map(float, ls.beta)))
+    beta, polished = ls.beta.copy(), []
+    if family.cause == "stribeck":  # the nonlinear vs: IPOPT polish from the search's start
+        beta, theta, polished = polish.stribeck(ctx.rest, ctx.train.dq, ctx.train.tau, o, X, names, beta, theta)
+    params = dict(zip(names, map(float, beta)))
     se = dict(zip(names, map(float, ls.se)))
     params.update(theta)
     estimate, detail = family.estimate(params, se, ctx)
+    if polished:
+        detail["ipopt"] = polished
     nominal_free = len(NOMINAL.names) if baseline == "rigid_fit" else 0
     n_added = len(names) - nominal_free + len(theta)
-    beta = ls.beta.copy()
 
     def predict(ds: Dataset) -> np.ndarray:
         o, X, _ = design(family, ds, theta, baseline, ctx)

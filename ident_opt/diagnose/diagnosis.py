@@ -53,7 +53,10 @@ class Diagnosis:
     timings: dict[str, float] = field(default_factory=dict)
 
     def as_json(self) -> dict:
-        """The `--json` payload of `spec/diagnose.md`, plus extra keys."""
+        """The `--json` payload of `spec/diagnose.md`, plus extra keys (NaN, e.g. no reversal seen, as null)."""
+        return _finite(self._payload())
+
+    def _payload(self) -> dict:
         extended = None
         if self.named is not None:
             extended = {"parameters": self.named.parameters, "standard_errors": self.named.se,
@@ -81,6 +84,21 @@ class Diagnosis:
             "evidence": self.evidence,
             "timings_s": self.timings,
         }
+
+
+def _finite(value):
+    """A JSON-safe copy: NumPy scalars as Python numbers, NaN and ±inf as None (strict JSON has neither)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _finite(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
 
 
 def split(train: Dataset, test: Dataset | None, train_fraction: float) -> tuple[Dataset, Dataset, str]:
