@@ -20,6 +20,8 @@ identify: $(STAMP)
 	$(BIN)/ident-opt identify --problem $(PROBLEM) --out results --json results/identify.json
 	$(BIN)/ident-opt compare  --problem $(PROBLEM) --out results --json results/compare.json
 	$(BIN)/ident-opt online   --problem $(PROBLEM) --out results --json results/online.json
+	$(BIN)/ident-opt diagnose --problem $(PROBLEM) --data data/merit/exp1.csv --data data/merit/exp2.csv \
+	    --out results/diagnosis --json results/diagnosis/diagnosis.json
 
 ## The whole test suite (2 workers).
 test: $(STAMP)
