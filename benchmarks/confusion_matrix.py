@@ -22,7 +22,16 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-CAUSES = ("none", "armature", "asymmetric_coulomb", "stribeck", "elasticity", "payload", "delay", "joint_offset")
+CAUSES = (
+    "none",
+    "armature",
+    "asymmetric_coulomb",
+    "stribeck",
+    "elasticity",
+    "payload",
+    "delay",
+    "joint_offset",
+)
 
 
 def one(job: tuple[str, int, float, str]) -> dict:
@@ -37,14 +46,23 @@ def one(job: tuple[str, int, float, str]) -> dict:
     robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
     rng = np.random.default_rng([seed, CAUSES.index(cause)])
     effects = {} if cause == "none" else {cause: hidden.draw(cause, rng, robot)}
-    trial = simulate_trial(robot, trajectory=trajectory, duration=duration, seed=seed, effects=effects,
-                           progress=False)
+    trial = simulate_trial(
+        robot, trajectory=trajectory, duration=duration, seed=seed, effects=effects, progress=False
+    )
     t0 = time.perf_counter()
     d = diagnose(robot, trial.dataset(), progress=False)
     seconds = time.perf_counter() - t0
-    out = {"cause": cause, "seed": seed, "named": d.cause, "estimate": d.estimate, "seconds": seconds,
-           "gain": [b - a for b, a in zip(d.nmse_before, d.nmse_after)], "ok": None, "error": None,
-           "truth": trial.truth["effects"].get(cause)}
+    out = {
+        "cause": cause,
+        "seed": seed,
+        "named": d.cause,
+        "estimate": d.estimate,
+        "seconds": seconds,
+        "gain": [b - a for b, a in zip(d.nmse_before, d.nmse_after)],
+        "ok": None,
+        "error": None,
+        "truth": trial.truth["effects"].get(cause),
+    }
     if cause != "none" and d.cause == cause:
         out["ok"], out["error"] = hidden.errors(cause, d.estimate, trial.truth["effects"][cause])
     elif cause == "none":
@@ -55,11 +73,17 @@ def one(job: tuple[str, int, float, str]) -> dict:
 def table(results: list[dict], command: str) -> str:
     """The Markdown report: confusion matrix, success and median errors, runtimes."""
     named = [c for c in CAUSES]
-    lines = ["# Diagnosis on hidden-effect trials", "", f"Regenerate: `{command}`", "",
-             "Rows: the hidden (true) cause; columns: the cause `diagnose` named. Each trial hides one effect "
-             "at a random realistic magnitude (`ident_opt/diagnose/hidden.py`).", "",
-             "| true \\ named | " + " | ".join(named) + " | within tolerance | median rel. error |",
-             "|---|" + "---|" * (len(named) + 2)]
+    lines = [
+        "# Diagnosis on hidden-effect trials",
+        "",
+        f"Regenerate: `{command}`",
+        "",
+        "Rows: the hidden (true) cause; columns: the cause `diagnose` named. Each trial hides one effect "
+        "at a random realistic magnitude (`ident_opt/diagnose/hidden.py`).",
+        "",
+        "| true \\ named | " + " | ".join(named) + " | within tolerance | median rel. error |",
+        "|---|" + "---|" * (len(named) + 2),
+    ]
     for cause in CAUSES:
         rows = [r for r in results if r["cause"] == cause]
         counts = [sum(r["named"] == n for r in rows) for n in named]
@@ -68,17 +92,41 @@ def table(results: list[dict], command: str) -> str:
         med = f"{np.median(errs):.3f}" if errs else "—"
         lines.append(f"| {cause} | " + " | ".join(str(c) for c in counts) + f" | {ok}/{len(rows)} | {med} |")
     secs = [r["seconds"] for r in results]
-    lines += ["", f"Trials: {len(results)}; diagnose runtime per trial: median {np.median(secs):.1f} s, "
-              f"max {np.max(secs):.1f} s.", "", "## Trials", "",
-              "| true | seed | named | within tolerance | rel. error | estimate | truth |",
-              "|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        f"Trials: {len(results)}; diagnose runtime per trial: median {np.median(secs):.1f} s, "
+        f"max {np.max(secs):.1f} s.",
+        "",
+        "## Trials",
+        "",
+        "| true | seed | named | within tolerance | rel. error | estimate | truth |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for r in results:
         err = f"{r['error']:.3f}" if r["error"] is not None else "—"
-        est = {k: (np.round(v, 4).tolist() if not isinstance(v, int) else v) for k, v in r["estimate"].items()}
-        truth = {k: (np.round(v, 4).tolist() if not isinstance(v, int) else v) for k, v in (r["truth"] or {}).items()
-                 if k in ("inertia", "positive", "negative", "static", "velocity", "joint", "frequency_hz", "mass",
-                          "seconds", "offset")}
-        lines.append(f"| {r['cause']} | {r['seed']} | {r['named']} | {r['ok']} | {err} | `{est}` | `{truth}` |")
+        est = {
+            k: (np.round(v, 4).tolist() if not isinstance(v, int) else v) for k, v in r["estimate"].items()
+        }
+        truth = {
+            k: (np.round(v, 4).tolist() if not isinstance(v, int) else v)
+            for k, v in (r["truth"] or {}).items()
+            if k
+            in (
+                "inertia",
+                "positive",
+                "negative",
+                "static",
+                "velocity",
+                "joint",
+                "frequency_hz",
+                "mass",
+                "seconds",
+                "offset",
+            )
+        }
+        lines.append(
+            f"| {r['cause']} | {r['seed']} | {r['named']} | {r['ok']} | {err} | `{est}` | `{truth}` |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -88,18 +136,25 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--duration", type=float, default=80.0)
-    parser.add_argument("--trajectory", default="auto",
-                        help="tud01, fourier, or auto: tud01 except fourier for stribeck (as the tests)")
+    parser.add_argument(
+        "--trajectory",
+        default="auto",
+        help="tud01, fourier, or auto: tud01 except fourier for stribeck (as the tests)",
+    )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--causes", nargs="*", default=list(CAUSES))
     parser.add_argument("--out", default=str(ROOT / "results" / "diagnosis" / "confusion.md"))
     args = parser.parse_args(argv)
     jobs = [(c, s, args.duration, args.trajectory) for c in args.causes for s in range(args.seeds)]
     with ProcessPoolExecutor(args.jobs) as pool:
-        results = list(tqdm(pool.map(one, jobs), total=len(jobs), desc="hidden-effect trials", file=sys.stderr))
+        results = list(
+            tqdm(pool.map(one, jobs), total=len(jobs), desc="hidden-effect trials", file=sys.stderr)
+        )
     for r in results:
-        print(f"{r['cause']:20s} seed {r['seed']}: named {r['named']:20s} ok={r['ok']} err={r['error']} "
-              f"{r['estimate']} truth={r['truth']}")
+        print(
+            f"{r['cause']:20s} seed {r['seed']}: named {r['named']:20s} ok={r['ok']} err={r['error']} "
+            f"{r['estimate']} truth={r['truth']}"
+        )
     command = "python benchmarks/confusion_matrix.py " + " ".join(argv if argv is not None else sys.argv[1:])
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(table(results, command.strip()))

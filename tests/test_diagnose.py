@@ -31,7 +31,9 @@ def _trial(robot, cause: str, seed: int, **kwargs):
 
 
 def _check_found(d, cause: str, truth: dict) -> None:
-    assert d.cause == cause, f"named {d.cause}, candidates {[(c['cause'], round(c['score'], 1)) for c in d.candidates]}"
+    assert d.cause == cause, (
+        f"named {d.cause}, candidates {[(c['cause'], round(c['score'], 1)) for c in d.candidates]}"
+    )
     ok, err = hidden.errors(cause, d.estimate, truth)
     assert ok, f"estimate {d.estimate} vs truth {truth} (worst relative error {err:.3f})"
     # A positive held-out gain: the summed nMSE drops and the penalised held-out likelihood rises.
@@ -105,7 +107,7 @@ def test_robust_to_how_the_data_arrive(physical_problem, tmp_path, how):
 def _problem_for_data_format(physical_problem, tmp_path):
     """The default problem's robot with the data format's own columns (headered CSV, no [data] mapping)."""
     text = physical_problem.path.read_text()
-    robot = text[:text.index("[data]")]
+    robot = text[: text.index("[data]")]
     path = tmp_path / "sim.toml"
     path.write_text(robot)
     return path
@@ -118,8 +120,20 @@ def test_cli_writes_the_contract_json_and_report(physical_problem, tmp_path):
     csv = trial.write(tmp_path / "trial.csv")
     out = tmp_path / "out"
     problem = _problem_for_data_format(physical_problem, tmp_path)
-    status = main(["diagnose", "--problem", str(problem), "--data", str(csv), "--out", str(out),
-                   "--json", str(out / "d.json"), "--no-progress"])
+    status = main(
+        [
+            "diagnose",
+            "--problem",
+            str(problem),
+            "--data",
+            str(csv),
+            "--out",
+            str(out),
+            "--json",
+            str(out / "d.json"),
+            "--no-progress",
+        ]
+    )
     assert status == 0
     text = (out / "d.json").read_text()
     assert "NaN" not in text and "Infinity" not in text  # strict JSON
@@ -135,7 +149,9 @@ def test_cli_writes_the_contract_json_and_report(physical_problem, tmp_path):
     assert all(set(c) >= {"cause", "score", "nmse_after"} for c in payload["candidates"])
     report = (out / "diagnosis.md").read_text()
     assert "payload" in report and "held-out nMSE" in report
-    assert (out / "residual_before_after.png").stat().st_size > 0 and (out / "spectrum_before_after.png").exists()
+    assert (out / "residual_before_after.png").stat().st_size > 0 and (
+        out / "spectrum_before_after.png"
+    ).exists()
 
 
 def test_cli_bad_input_exits_2(physical_problem, tmp_path, capsys):
@@ -146,6 +162,8 @@ def test_cli_bad_input_exits_2(physical_problem, tmp_path, capsys):
     assert status == 2
     assert "not found" in capsys.readouterr().err
     tiny = tmp_path / "tiny.csv"
-    tiny.write_text("t,q1,q2,tau1,tau2\n" + "".join(f"{k * 0.01},0.1,0.2,{k % 3},{k % 5}\n" for k in range(50)))
+    tiny.write_text(
+        "t,q1,q2,tau1,tau2\n" + "".join(f"{k * 0.01},0.1,0.2,{k % 3},{k % 5}\n" for k in range(50))
+    )
     assert main(["diagnose", "--problem", str(problem), "--data", str(tiny), "--no-progress"]) == 2
     assert "too little data" in capsys.readouterr().err

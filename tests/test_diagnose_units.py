@@ -74,7 +74,9 @@ def test_least_squares_recovers_known_coefficients_and_respects_signs():
 
 
 def test_search_finds_a_one_dimensional_minimum():
-    theta = linear.search(lambda th: (np.log(th["v"]) - np.log(0.037)) ** 2, [linear.Axis("v", 0.005, 0.5, 9, True)])
+    theta = linear.search(
+        lambda th: (np.log(th["v"]) - np.log(0.037)) ** 2, [linear.Axis("v", 0.005, 0.5, 9, True)]
+    )
     assert theta["v"] == pytest.approx(0.037, rel=1e-2)
 
 
@@ -83,7 +85,9 @@ def test_naming_rule_needs_score_and_both_margins():
     assert scoring.clears_margin(before, np.array([0.9, 1.0]), 5.0, var)
     assert not scoring.clears_margin(before, np.array([0.97, 0.99]), 5.0, var)  # < 5 % of the MSE
     assert not scoring.clears_margin(before, np.array([0.9, 1.0]), -1.0, var)  # penalty wins
-    assert not scoring.clears_margin(np.array([1e-3, 1.0]), np.array([0.5e-3, 1.0]), 5.0, var)  # nil vs torque
+    assert not scoring.clears_margin(
+        np.array([1e-3, 1.0]), np.array([0.5e-3, 1.0]), 5.0, var
+    )  # nil vs torque
     assert scoring.score(before, before, 1000, 2) < 0
     assert not scoring.resolved("delay", {"seconds": 0.001}, 0.01)
     assert scoring.resolved("delay", {"seconds": 0.02}, 0.01)
@@ -129,8 +133,16 @@ def test_forward_simulation_error_separates_right_from_wrong_parameters(physical
     from ident_opt.simulate import simulate_trial
 
     robot = physical_problem.robot
-    trial = simulate_trial(robot, trajectory="fourier", duration=20.0, seed=0, noise=False, rate_hz=1000.0,
-                           exact_derivatives=True, progress=False)
+    trial = simulate_trial(
+        robot,
+        trajectory="fourier",
+        duration=20.0,
+        seed=0,
+        noise=False,
+        rate_hz=1000.0,
+        exact_derivatives=True,
+        progress=False,
+    )
     ds = trial.dataset()
     pi = NOMINAL.vector(datasheet_pi(robot))
     wrong = pi.copy()

@@ -26,9 +26,14 @@ def run(args: argparse.Namespace) -> int:
     from ident_opt.diagnose import diagnose, report
 
     loaded = load(args)
-    result = diagnose(loaded.problem.robot, loaded.train, loaded.unseen,
-                      train_fraction=loaded.problem.split.train_fraction, progress=not args.no_progress,
-                      torque_filter_hz=loaded.problem.data.derivative_cutoff_hz)
+    result = diagnose(
+        loaded.problem.robot,
+        loaded.train,
+        loaded.unseen,
+        train_fraction=loaded.problem.split.train_fraction,
+        progress=not args.no_progress,
+        torque_filter_hz=loaded.problem.data.derivative_cutoff_hz,
+    )
     out = output_dir(args, loaded.problem)
     files = report.write(result, out)
     print(report.summary(result))

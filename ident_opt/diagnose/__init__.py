@@ -6,6 +6,15 @@ order), `report` (Markdown, figures, terminal summary); `linear` and `signals` a
 from ident_opt.diagnose.diagnosis import Diagnosis, diagnose
 
 #: The catalogue's cause names (`spec/diagnose.md`), `none` first.
-CAUSES = ("none", "armature", "asymmetric_coulomb", "stribeck", "elasticity", "payload", "delay", "joint_offset")
+CAUSES = (
+    "none",
+    "armature",
+    "asymmetric_coulomb",
+    "stribeck",
+    "elasticity",
+    "payload",
+    "delay",
+    "joint_offset",
+)
 
 __all__ = ["CAUSES", "Diagnosis", "diagnose"]

@@ -17,7 +17,7 @@ variable projection. It is fitted against one or both nominal models:
 | stribeck | fs1 fs2 ≥ 0 (`stribeck` extension) | vs1, vs2 [rad/s] |
 | joint_offset | the nominal model at q + δ (gravity and inertia both see the true angle) | δ1, δ2 [rad] |
 | delay | the whole prediction delayed by d | d [s] |
-| elasticity | s·(m_link,j ë_j on joint j's row + M_oj(q2) ë_j on the other), datasheet inertias (below) | f [Hz], ζ |
+| elasticity | s·(m_link,j ë_j on row j + M_oj(q2) ë_j on the other), datasheet inertias (below) | f, ζ |
 
 ë_j is the deflection acceleration of an elastic joint j driven by the measured motor-side acceleration
 (`signals.deflection_acceleration`): an elastic-joint model driven by the logged motor-side angle.
@@ -107,8 +107,9 @@ def _regressor(model: ArmModel, ds: Dataset, rows: slice) -> np.ndarray:
     return _CACHE[key][1]
 
 
-def design(family: Family, ds: Dataset, theta: dict, baseline: str, ctx: Context,
-           rows: slice = slice(None)) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def design(
+    family: Family, ds: Dataset, theta: dict, baseline: str, ctx: Context, rows: slice = slice(None)
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """(o, X, names) of `family` at θ on `ds` (rows `rows`), against `baseline` (see the module docstring)."""
     model = family.model(theta)
     if family.angle_offset:  # the true angle is the logged one + δ: evaluate the model there (no cache)
@@ -148,8 +149,9 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
         # Within rest stretches only variations count (see `signals.demean_runs`): project data and columns.
         signed = [i for i, n in enumerate(names) if n in family.nonnegative]
         target = signals.demean_runs(tau - o, labels)
-        return linear.solve_nonnegative(np.zeros_like(target), signals.demean_runs(X, labels), target,
-                                        ctx.weights, signed, with_se)
+        return linear.solve_nonnegative(
+            np.zeros_like(target), signals.demean_runs(X, labels), target, ctx.weights, signed, with_se
+        )
 
     def cost(theta: dict) -> float:
         o, X, names = design(family, ctx.train, theta, baseline, ctx, rows)
@@ -161,7 +163,9 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     ls = solve(o, X, names, ctx.train.tau, ctx.rest, True)
     beta, polished = ls.beta.copy(), []
     if family.cause == "stribeck":  # the nonlinear vs: IPOPT polish from the search's start
-        beta, theta, polished = polish.stribeck(ctx.rest, ctx.train.dq, ctx.train.tau, o, X, names, beta, theta)
+        beta, theta, polished = polish.stribeck(
+            ctx.rest, ctx.train.dq, ctx.train.tau, o, X, names, beta, theta
+        )
     params = dict(zip(names, map(float, beta)))
     se = dict(zip(names, map(float, ls.se)))
     params.update(theta)
@@ -199,14 +203,17 @@ def _armature_columns(ds: Dataset, theta: dict, dt: float, ctx: Context) -> tupl
 def _payload_column(ds: Dataset, theta: dict, dt: float, robot: Robot) -> np.ndarray:
     """Y·∂π/∂m: π is affine in a tip mass m (the combined link-2 inertia about joint 2 and its first
     moment are both linear in m), so the difference quotient at m = 1 kg is exact."""
-    d = NOMINAL.vector(datasheet_pi(replace(robot, payload_mass=robot.payload_mass + 1.0))) \
-        - NOMINAL.vector(datasheet_pi(robot))
+    d = NOMINAL.vector(datasheet_pi(replace(robot, payload_mass=robot.payload_mass + 1.0))) - NOMINAL.vector(
+        datasheet_pi(robot)
+    )
     return (NOMINAL.regressor(ds.q, ds.dq, ds.ddq) @ d)[:, :, None]
 
 
 def _asym_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
-    return ({"positive": [p["fc1p"], p["fc2p"]], "negative": [p["fc1n"], p["fc2n"]]},
-            {"se_positive": [se["fc1p"], se["fc2p"]], "se_negative": [se["fc1n"], se["fc2n"]]})
+    return (
+        {"positive": [p["fc1p"], p["fc2p"]], "negative": [p["fc1n"], p["fc2n"]]},
+        {"se_positive": [se["fc1p"], se["fc2p"]], "se_negative": [se["fc1n"], se["fc2n"]]},
+    )
 
 
 def _stribeck_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
@@ -249,9 +256,15 @@ def _elastic_estimate(joint: int) -> Callable:
         m_link = float(np.mean(p0["a1"] - arm[0] + 2 * p0["a2"] * c2)) if joint == 1 else p0["a3"]
         m_eff = p["scale"] * m_link  # the link inertia the spring carries [kg m²]
         w = 2 * math.pi * p["frequency_hz"]
-        return ({"joint": joint, "frequency_hz": p["frequency_hz"]},
-                {"damping_ratio": p["damping"], "inertia": m_eff, "stiffness": m_eff * w * w,
-                 "damping_coefficient": 2 * p["damping"] * w * m_eff})
+        return (
+            {"joint": joint, "frequency_hz": p["frequency_hz"]},
+            {
+                "damping_ratio": p["damping"],
+                "inertia": m_eff,
+                "stiffness": m_eff * w * w,
+                "damping_coefficient": 2 * p["damping"] * w * m_eff,
+            },
+        )
 
     return estimate
 
@@ -259,28 +272,70 @@ def _elastic_estimate(joint: int) -> Callable:
 def families(robot: Robot) -> list[Family]:
     """Every catalogue cause (elasticity once per joint) as a `Family`."""
     out = [
-        Family("armature", _nominal, (), extra=_armature_columns, baselines=("datasheet",),
-               nonnegative=("j1", "j2"), estimate=_armature_estimate),
-        Family("payload", _nominal, (), extra=lambda ds, th, dt, ctx: (_payload_column(ds, th, dt, robot), ["mass"]),
-               baselines=("datasheet",), nonnegative=("mass",),
-               estimate=lambda p, se, ctx: ({"mass": p["mass"]}, {"se": se["mass"]})),
-        Family("asymmetric_coulomb", lambda th: ArmModel(("armature", "asymmetric_coulomb")),
-               ("fc1p", "fc1n", "fc2p", "fc2n"), estimate=_asym_estimate),
-        Family("stribeck", lambda th: ArmModel(("armature", "stribeck"), stribeck_velocity=(th["vs1"], th["vs2"])),
-               ("fs1", "fs2"), nonnegative=("fs1", "fs2"), axes=lambda rate: [linear.Axis("vs1", 0.005, 0.5, 11, True),
-                                                  linear.Axis("vs2", 0.005, 0.5, 11, True)],
-               estimate=_stribeck_estimate),
-        Family("joint_offset", _nominal, (), angle_offset=True,
-               axes=lambda rate: [linear.Axis("delta1", -0.1, 0.1, 21), linear.Axis("delta2", -0.1, 0.1, 21)],
-               estimate=lambda p, se, ctx: ({"offset": [p["delta1"], p["delta2"]]}, {})),
-        Family("delay", _nominal, (), shifted=True,
-               axes=lambda rate: [linear.Axis("delay", 0.0, 0.15, 31)],
-               estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {})),
+        Family(
+            "armature",
+            _nominal,
+            (),
+            extra=_armature_columns,
+            baselines=("datasheet",),
+            nonnegative=("j1", "j2"),
+            estimate=_armature_estimate,
+        ),
+        Family(
+            "payload",
+            _nominal,
+            (),
+            extra=lambda ds, th, dt, ctx: (_payload_column(ds, th, dt, robot), ["mass"]),
+            baselines=("datasheet",),
+            nonnegative=("mass",),
+            estimate=lambda p, se, ctx: ({"mass": p["mass"]}, {"se": se["mass"]}),
+        ),
+        Family(
+            "asymmetric_coulomb",
+            lambda th: ArmModel(("armature", "asymmetric_coulomb")),
+            ("fc1p", "fc1n", "fc2p", "fc2n"),
+            estimate=_asym_estimate,
+        ),
+        Family(
+            "stribeck",
+            lambda th: ArmModel(("armature", "stribeck"), stribeck_velocity=(th["vs1"], th["vs2"])),
+            ("fs1", "fs2"),
+            nonnegative=("fs1", "fs2"),
+            axes=lambda rate: [
+                linear.Axis("vs1", 0.005, 0.5, 11, True),
+                linear.Axis("vs2", 0.005, 0.5, 11, True),
+            ],
+            estimate=_stribeck_estimate,
+        ),
+        Family(
+            "joint_offset",
+            _nominal,
+            (),
+            angle_offset=True,
+            axes=lambda rate: [linear.Axis("delta1", -0.1, 0.1, 21), linear.Axis("delta2", -0.1, 0.1, 21)],
+            estimate=lambda p, se, ctx: ({"offset": [p["delta1"], p["delta2"]]}, {}),
+        ),
+        Family(
+            "delay",
+            _nominal,
+            (),
+            shifted=True,
+            axes=lambda rate: [linear.Axis("delay", 0.0, 0.15, 31)],
+            estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {}),
+        ),
     ]
     for joint in (1, 2):
-        out.append(Family(
-            "elasticity", _nominal, (), extra=_elastic_columns(joint),
-            axes=lambda rate: [linear.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
-                               linear.Axis("damping", 0.005, 0.3, 6, True)],
-            estimate=_elastic_estimate(joint)))
+        out.append(
+            Family(
+                "elasticity",
+                _nominal,
+                (),
+                extra=_elastic_columns(joint),
+                axes=lambda rate: [
+                    linear.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
+                    linear.Axis("damping", 0.005, 0.3, 6, True),
+                ],
+                estimate=_elastic_estimate(joint),
+            )
+        )
     return out

@@ -53,14 +53,18 @@ class Diagnosis:
     timings: dict[str, float] = field(default_factory=dict)
 
     def as_json(self) -> dict:
-        """The `--json` payload of `spec/diagnose.md`, plus extra keys (NaN, e.g. no reversal seen, as null)."""
+        """The `--json` payload of `spec/diagnose.md`, plus extra keys (NaN, e.g. no reversal, as null)."""
         return _finite(self._payload())
 
     def _payload(self) -> dict:
         extended = None
         if self.named is not None:
-            extended = {"parameters": self.named.parameters, "standard_errors": self.named.se,
-                        "detail": self.named.detail, "added_parameters": self.named.n_added}
+            extended = {
+                "parameters": self.named.parameters,
+                "standard_errors": self.named.se,
+                "detail": self.named.detail,
+                "added_parameters": self.named.n_added,
+            }
         return {
             "cause": self.cause,
             "estimate": self.estimate,
@@ -68,13 +72,15 @@ class Diagnosis:
             "nmse_before": self.nmse_before,
             "nmse_after": self.nmse_after,
             "candidates": self.candidates,
-            "score": "held-out log-likelihood gain over the candidate's baseline minus (k/2) ln n; a cause is "
-                     f"named when its score > 0 and, on some joint, it removes >= {scoring.MARGIN:.0%} of the "
-                     f"baseline's held-out MSE and >= {scoring.MARGIN_VARIANCE:.2%} of the torque variance (delays "
-                     f"shorter than {1e3 * scoring.MIN_DELAY_S:g} ms are not named)",
-            "nmse_definition": "MSE ÷ variance of the measured torque, per joint, on the held-out part; within "
-                               "each stretch where a joint rests, its residual's mean is removed first (stiction "
-                               "holds a level no model predicts); nmse_raw_before/after: without that",
+            "score": "held-out log-likelihood gain over the candidate's baseline minus (k/2) ln n; a cause "
+            f"is named when its score > 0 and, on some joint, it removes >= {scoring.MARGIN:.0%} of the "
+            f"baseline's held-out MSE and >= {scoring.MARGIN_VARIANCE:.2%} of the torque variance "
+            "(delays "
+            f"shorter than {1e3 * scoring.MIN_DELAY_S:g} ms are not named)",
+            "nmse_definition": "MSE ÷ variance of the measured torque, per joint, on the held-out part; "
+            "within "
+            "each stretch where a joint rests, its residual's mean is removed first (stiction "
+            "holds a level no model predicts); nmse_raw_before/after: without that",
             "nmse_raw_before": self.nmse_raw[0] if self.nmse_raw else None,
             "nmse_raw_after": self.nmse_raw[1] if self.nmse_raw else None,
             "split": self.split,
@@ -106,8 +112,11 @@ def split(train: Dataset, test: Dataset | None, train_fraction: float) -> tuple[
     if test is not None:
         return train, test, f"train on {train.source}, held out: {test.source}"
     tr, te = chronological_split(train.n, train_fraction)
-    return (train.subset(tr), train.subset(te),
-            f"chronological: first {train_fraction:.0%} of {train.source} trains, the rest is held out")
+    return (
+        train.subset(tr),
+        train.subset(te),
+        f"chronological: first {train_fraction:.0%} of {train.source} trains, the rest is held out",
+    )
 
 
 def at_rest(trial: Dataset) -> Dataset:
@@ -129,7 +138,7 @@ def at_rest(trial: Dataset) -> Dataset:
     padded = np.pad(slow, ((w, w), (0, 0)), mode="edge").astype(float)
     windows = np.lib.stride_tricks.sliding_window_view(padded, w + 1, axis=0)  # (N + w, 2, w + 1)
     quiet = windows.min(axis=-1) > 0  # slow throughout the w + 1 samples starting at each index
-    before, after = quiet[:trial.n], quiet[w:w + trial.n]
+    before, after = quiet[: trial.n], quiet[w : w + trial.n]
     dq = np.where(slow & (before | after), 0.0, trial.dq)
     return replace(trial, dq=dq)
 
@@ -167,8 +176,14 @@ def prepare(trial: Dataset, torque_filter_hz: float | None) -> Dataset:
     return replace(trial, tau=signal.filtfilt(b, a, trial.tau, axis=0))
 
 
-def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_fraction: float = 0.7,
-             progress: bool = True, torque_filter_hz: float | None = 15.0) -> Diagnosis:
+def diagnose(
+    robot: Robot,
+    trial: Dataset,
+    unseen: Dataset | None = None,
+    train_fraction: float = 0.7,
+    progress: bool = True,
+    torque_filter_hz: float | None = 15.0,
+) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data); see the module docstring.
     `torque_filter_hz`: see `prepare` (the problem's derivative cut-off is the natural choice)."""
     t0 = time.perf_counter()
@@ -176,8 +191,10 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
     unseen = prepare(unseen, torque_filter_hz) if unseen is not None else None
     train, test, how = split(trial, unseen, train_fraction)
     if train.n < MIN_SAMPLES or test.n < MIN_SAMPLES:
-        raise InputError(f"{trial.source}: too little data to diagnose ({train.n} training and {test.n} held-out "
-                         f"samples; at least {MIN_SAMPLES} each)")
+        raise InputError(
+            f"{trial.source}: too little data to diagnose ({train.n} training and {test.n} held-out "
+            f"samples; at least {MIN_SAMPLES} each)"
+        )
     for ds in (train, test):
         if np.any(np.var(ds.tau, axis=0) <= 0):
             raise InputError(f"{ds.source}: a torque channel is constant; nothing to diagnose")
@@ -185,26 +202,41 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
     ds_pi = datasheet_pi(robot, "physical")
     pi_rigid, weights = rigid_fit(train)
     rest_test = signals.rest_runs(test.dq)
-    ctx = cands.Context(robot, train, test, weights, ds_pi, dt, signals.rest_runs(train.dq),
-                        rigid_body(robot, "physical").armature)
+    ctx = cands.Context(
+        robot,
+        train,
+        test,
+        weights,
+        ds_pi,
+        dt,
+        signals.rest_runs(train.dq),
+        rigid_body(robot, "physical").armature,
+    )
 
-    nominal_pred = {"datasheet": cands.NOMINAL.predict(cands.NOMINAL.vector(ds_pi), test.q, test.dq, test.ddq),
-                    "rigid_fit": cands.NOMINAL.predict(pi_rigid, test.q, test.dq, test.ddq)}
+    nominal_pred = {
+        "datasheet": cands.NOMINAL.predict(cands.NOMINAL.vector(ds_pi), test.q, test.dq, test.ddq),
+        "rigid_fit": cands.NOMINAL.predict(pi_rigid, test.q, test.dq, test.ddq),
+    }
     nominal_mse = {b: scoring.mse(test.tau, p, rest_test) for b, p in nominal_pred.items()}
     nominal = {
-        "datasheet": {"pi": cands.NOMINAL.as_dict(cands.NOMINAL.vector(ds_pi)),
-                      "nmse": scoring.nmse(test.tau, nominal_pred["datasheet"], rest_test),
-                      "nmse_raw": nmse(test.tau, nominal_pred["datasheet"]).tolist()},
-        "rigid_fit": {"pi": cands.NOMINAL.as_dict(pi_rigid),
-                      "nmse": scoring.nmse(test.tau, nominal_pred["rigid_fit"], rest_test),
-                      "nmse_raw": nmse(test.tau, nominal_pred["rigid_fit"]).tolist()},
+        "datasheet": {
+            "pi": cands.NOMINAL.as_dict(cands.NOMINAL.vector(ds_pi)),
+            "nmse": scoring.nmse(test.tau, nominal_pred["datasheet"], rest_test),
+            "nmse_raw": nmse(test.tau, nominal_pred["datasheet"]).tolist(),
+        },
+        "rigid_fit": {
+            "pi": cands.NOMINAL.as_dict(pi_rigid),
+            "nmse": scoring.nmse(test.tau, nominal_pred["rigid_fit"], rest_test),
+            "nmse_raw": nmse(test.tau, nominal_pred["rigid_fit"]).tolist(),
+        },
     }
     t_nominal = time.perf_counter()
 
     jobs = [(f, b) for f in cands.families(robot) for b in f.baselines]
     fitted: list[tuple[cands.Candidate, float, np.ndarray, np.ndarray]] = []
-    for family, baseline in tqdm(jobs, desc="diagnose: fitting candidates", unit="fit", disable=not progress,
-                                 leave=False):
+    for family, baseline in tqdm(
+        jobs, desc="diagnose: fitting candidates", unit="fit", disable=not progress, leave=False
+    ):
         cand = cands.fit(family, baseline, ctx)
         pred = cand.predict(test)
         after = scoring.mse(test.tau, pred, rest_test)
@@ -222,17 +254,26 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
         if item[0].cause not in best or common(item) > common(best[item[0].cause]):
             best[item[0].cause] = item
     ranked = sorted(best.values(), key=lambda it: it[1], reverse=True)
-    candidates = [{"cause": c.cause, "score": s, "score_vs_datasheet": common((c, s, after, pred)),
-                   "nmse_after": scoring.nmse(test.tau, pred, rest_test),
-                   "baseline": c.baseline, "estimate": c.estimate, "added_parameters": c.n_added,
-                   "resolved": scoring.resolved(c.cause, c.estimate, dt),
-                   "clears_margin": scoring.resolved(c.cause, c.estimate, dt) and scoring.clears_margin(
-                       nominal_mse[c.baseline], after, s, np.var(test.tau, axis=0))}
-                  for c, s, after, pred in ranked]
+    candidates = [
+        {
+            "cause": c.cause,
+            "score": s,
+            "score_vs_datasheet": common((c, s, after, pred)),
+            "nmse_after": scoring.nmse(test.tau, pred, rest_test),
+            "baseline": c.baseline,
+            "estimate": c.estimate,
+            "added_parameters": c.n_added,
+            "resolved": scoring.resolved(c.cause, c.estimate, dt),
+            "clears_margin": scoring.resolved(c.cause, c.estimate, dt)
+            and scoring.clears_margin(nominal_mse[c.baseline], after, s, np.var(test.tau, axis=0)),
+        }
+        for c, s, after, pred in ranked
+    ]
     nameable = [it for it in ranked if scoring.resolved(it[0].cause, it[0].estimate, dt)]
     top = nameable[0] if nameable else None
-    if top is not None and scoring.clears_margin(nominal_mse[top[0].baseline], top[2], top[1],
-                                                 np.var(test.tau, axis=0)):
+    if top is not None and scoring.clears_margin(
+        nominal_mse[top[0].baseline], top[2], top[1], np.var(test.tau, axis=0)
+    ):
         named, after_pred = top[0], top[3]
         cause, estimate, baseline = named.cause, named.estimate, named.baseline
     else:
@@ -249,12 +290,24 @@ def diagnose(robot: Robot, trial: Dataset, unseen: Dataset | None = None, train_
     ev["other_channels"] = evidence.channel_peaks(test if unseen is None else trial, dt)
     t_end = time.perf_counter()
     return Diagnosis(
-        cause=cause, estimate=estimate, baseline=baseline,
+        cause=cause,
+        estimate=estimate,
+        baseline=baseline,
         nmse_before=scoring.nmse(test.tau, before_pred, rest_test),
         nmse_after=scoring.nmse(test.tau, after_pred, rest_test),
         nmse_raw=[nmse(test.tau, before_pred).tolist(), nmse(test.tau, after_pred).tolist()],
-        candidates=candidates, evidence=ev, split=how, rate_hz=1.0 / dt, named=named, nominal=nominal, test=test,
+        candidates=candidates,
+        evidence=ev,
+        split=how,
+        rate_hz=1.0 / dt,
+        named=named,
+        nominal=nominal,
+        test=test,
         predictions={"before": before_pred, "after": after_pred},
-        timings={"nominal": t_nominal - t0, "candidates": t_fit - t_nominal, "evidence": t_end - t_fit,
-                 "total": t_end - t0},
+        timings={
+            "nominal": t_nominal - t0,
+            "candidates": t_fit - t_nominal,
+            "evidence": t_end - t_fit,
+            "total": t_end - t0,
+        },
     )

@@ -38,13 +38,15 @@ def reversal_steps(r: np.ndarray, dq: np.ndarray, dt: float, window_s: float = 0
     for k in ks:
         if k < W or k + W > len(dq):
             continue
-        if np.max(np.abs(dq[k - W:k])) < 0.1 * v_ref or np.max(np.abs(dq[k:k + W])) < 0.1 * v_ref:
+        if np.max(np.abs(dq[k - W : k])) < 0.1 * v_ref or np.max(np.abs(dq[k : k + W])) < 0.1 * v_ref:
             continue
-        step = float(np.mean(r[k:k + w]) - np.mean(r[k - w:k]))
+        step = float(np.mean(r[k : k + w]) - np.mean(r[k - w : k]))
         (up if dq[k] > 0 else down).append(step)
-    return {"negative_to_positive": float(np.mean(up)) if up else float("nan"),
-            "positive_to_negative": float(np.mean(down)) if down else float("nan"),
-            "count": len(up) + len(down)}
+    return {
+        "negative_to_positive": float(np.mean(up)) if up else float("nan"),
+        "positive_to_negative": float(np.mean(down)) if down else float("nan"),
+        "count": len(up) + len(down),
+    }
 
 
 def pose_r2(r: np.ndarray, q: np.ndarray) -> float:
@@ -59,8 +61,17 @@ def pose_r2(r: np.ndarray, q: np.ndarray) -> float:
 def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float) -> dict:
     """Residual features per joint (see the module docstring), plus the torque-channel lag."""
     r = ds.tau - tau_hat
-    out: dict = {"rms": [], "nmse": [], "peaks": [], "low_band_fraction": [], "moving_mean": [],
-                 "reversal_steps": [], "low_speed_excess": [], "pose_r2": [], "lag_s": []}
+    out: dict = {
+        "rms": [],
+        "nmse": [],
+        "peaks": [],
+        "low_band_fraction": [],
+        "moving_mean": [],
+        "reversal_steps": [],
+        "low_speed_excess": [],
+        "pose_r2": [],
+        "lag_s": [],
+    }
     for j in range(2):
         rj, dqj = r[:, j], ds.dq[:, j]
         _, rest, slow, fast = _speed_classes(dqj)
@@ -70,20 +81,30 @@ def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float) -> dict:
         out["nmse"].append(float(np.mean(rj**2) / np.var(ds.tau[:, j])))
         out["peaks"].append([p.as_dict() for p in signals.peaks(rj, dt)])
         out["low_band_fraction"].append(signals.band_fraction(rj, dt, LOW_BAND_HZ))
-        out["moving_mean"].append({"positive": float(np.mean(rj[pos])) if pos.any() else float("nan"),
-                                   "negative": float(np.mean(rj[neg])) if neg.any() else float("nan")})
+        out["moving_mean"].append(
+            {
+                "positive": float(np.mean(rj[pos])) if pos.any() else float("nan"),
+                "negative": float(np.mean(rj[neg])) if neg.any() else float("nan"),
+            }
+        )
         out["reversal_steps"].append(reversal_steps(rj, dqj, dt))
         signed = rj * np.sign(dqj)
         out["low_speed_excess"].append(
-            float(np.mean(signed[slow]) - np.mean(signed[fast])) if slow.any() and fast.any() else float("nan"))
+            float(np.mean(signed[slow]) - np.mean(signed[fast]))
+            if slow.any() and fast.any()
+            else float("nan")
+        )
         out["pose_r2"].append(pose_r2(rj, ds.q))
         out["lag_s"].append(signals.lag(tau_hat[:, j], ds.tau[:, j], dt))
-    out["rest_fraction"] = float(np.mean(np.all(np.abs(ds.dq) < 0.01 * np.quantile(np.abs(ds.dq), 0.95, axis=0),
-                                                axis=1)))
+    out["rest_fraction"] = float(
+        np.mean(np.all(np.abs(ds.dq) < 0.01 * np.quantile(np.abs(ds.dq), 0.95, axis=0), axis=1))
+    )
     return out
 
 
-def forward_error(model: ArmModel, pi: np.ndarray, ds: Dataset, dt: float, window_s: float = 0.5) -> list[float]:
+def forward_error(
+    model: ArmModel, pi: np.ndarray, ds: Dataset, dt: float, window_s: float = 0.5
+) -> list[float]:
     """RMS joint-angle error [rad] at the end of short windows of forward simulation driven by the measured
     torque: M(q) q̈ = τ − C(q, q̇)q̇ − G(q) − F(q̇), semi-implicit Euler at the data rate, each window
     restarted from the measured state (so drift does not swamp the comparison). All windows run at once."""
@@ -122,6 +143,8 @@ def channel_peaks(ds: Dataset, dt: float) -> dict[str, dict]:
             continue
         f, p = signals.spectrum(x, dt, window_s=20.0)
         band = (f >= MODE_BAND_HZ[0]) & (f <= min(MODE_BAND_HZ[1], 0.45 / dt))
-        out[str(name)] = {"peaks": [pk.as_dict() for pk in signals.peaks(x, dt)],
-                          "mode_band_max_hz": float(f[band][np.argmax(p[band])]) if band.any() else float("nan")}
+        out[str(name)] = {
+            "peaks": [pk.as_dict() for pk in signals.peaks(x, dt)],
+            "mode_band_max_hz": float(f[band][np.argmax(p[band])]) if band.any() else float("nan"),
+        }
     return out

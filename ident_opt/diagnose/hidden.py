@@ -56,7 +56,9 @@ def errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
     checks: list[tuple[bool, float]] = []
     if cause == "elasticity":
         rel = _rel(estimate["frequency_hz"], truth["frequency_hz"])
-        checks.append((estimate["joint"] == truth["joint"], 0.0 if estimate["joint"] == truth["joint"] else 1.0))
+        checks.append(
+            (estimate["joint"] == truth["joint"], 0.0 if estimate["joint"] == truth["joint"] else 1.0)
+        )
         checks.append((rel <= FREQUENCY_TOL, rel))
     elif cause == "delay":
         d, t = estimate["seconds"], truth["seconds"]
@@ -65,8 +67,12 @@ def errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
         for e, t in zip(estimate["offset"], truth["offset"]):
             checks.append((abs(e - t) <= OFFSET_TOL[0] or _rel(e, t) <= OFFSET_TOL[1], _rel(e, t)))
     else:
-        keys = {"armature": ["inertia"], "asymmetric_coulomb": ["positive", "negative"],
-                "stribeck": ["static", "velocity"], "payload": ["mass"]}[cause]
+        keys = {
+            "armature": ["inertia"],
+            "asymmetric_coulomb": ["positive", "negative"],
+            "stribeck": ["static", "velocity"],
+            "payload": ["mass"],
+        }[cause]
         for key in keys:
             for e, t in zip(np.atleast_1d(estimate[key]), np.atleast_1d(truth[key])):
                 rel = _rel(float(e), float(t))

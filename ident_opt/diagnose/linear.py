@@ -30,8 +30,9 @@ class LinearSolve:
     rss: np.ndarray
 
 
-def solve(offset: np.ndarray, X: np.ndarray, tau: np.ndarray, weights: np.ndarray,
-          with_se: bool = True) -> LinearSolve:
+def solve(
+    offset: np.ndarray, X: np.ndarray, tau: np.ndarray, weights: np.ndarray, with_se: bool = True
+) -> LinearSolve:
     """Weighted least squares of τ − o on the columns X (see the module docstring). k = 0 is allowed;
     `with_se=False` skips the standard errors (inside searches)."""
     target = tau - offset
@@ -63,10 +64,16 @@ def solve(offset: np.ndarray, X: np.ndarray, tau: np.ndarray, weights: np.ndarra
     return LinearSolve(beta, np.sqrt(np.clip(np.diag(cov), 0, None)), float(weights @ rss), rss)
 
 
-def solve_nonnegative(offset: np.ndarray, X: np.ndarray, tau: np.ndarray, weights: np.ndarray,
-                      nonnegative: Sequence[int], with_se: bool = True) -> LinearSolve:
+def solve_nonnegative(
+    offset: np.ndarray,
+    X: np.ndarray,
+    tau: np.ndarray,
+    weights: np.ndarray,
+    nonnegative: Sequence[int],
+    with_se: bool = True,
+) -> LinearSolve:
     """`solve` with β_i ≥ 0 for i in `nonnegative` (a physical sign: a mass, an inertia, a static friction
-    excess), by an active set: a column whose coefficient comes out negative is held at 0 and the rest refit."""
+    excess), by an active set: a column whose coefficient comes out negative is held at 0, the rest refit."""
     active = list(range(X.shape[2]))
     while True:
         ls = solve(offset, X[:, :, active], tau, weights, with_se)
@@ -95,7 +102,9 @@ class Axis:
         return np.linspace(self.low, self.high, self.points)
 
 
-def search(cost: Callable[[dict[str, float]], float], axes: Sequence[Axis], sweeps: int = 2) -> dict[str, float]:
+def search(
+    cost: Callable[[dict[str, float]], float], axes: Sequence[Axis], sweeps: int = 2
+) -> dict[str, float]:
     """Minimise cost(θ) over the box of `axes`: coordinate-wise grid sweeps, then a bounded Brent refinement
     of each coordinate around its best grid point (on a log scale for `log` axes)."""
     theta = {a.name: float(a.grid()[len(a.grid()) // 2]) for a in axes}
@@ -110,12 +119,20 @@ def search(cost: Callable[[dict[str, float]], float], axes: Sequence[Axis], swee
         if hi <= lo:
             continue
         if a.log:
-            res = minimize_scalar(lambda u, a=a: cost({**theta, a.name: float(np.exp(u))}),
-                                  bounds=(np.log(lo), np.log(hi)), method="bounded", options={"xatol": 1e-3})
+            res = minimize_scalar(
+                lambda u, a=a: cost({**theta, a.name: float(np.exp(u))}),
+                bounds=(np.log(lo), np.log(hi)),
+                method="bounded",
+                options={"xatol": 1e-3},
+            )
             best = float(np.exp(res.x))
         else:
-            res = minimize_scalar(lambda u, a=a: cost({**theta, a.name: float(u)}), bounds=(lo, hi),
-                                  method="bounded", options={"xatol": 1e-4 * (a.high - a.low)})
+            res = minimize_scalar(
+                lambda u, a=a: cost({**theta, a.name: float(u)}),
+                bounds=(lo, hi),
+                method="bounded",
+                options={"xatol": 1e-4 * (a.high - a.low)},
+            )
             best = float(res.x)
         if res.fun <= cost(theta):
             theta[a.name] = best

@@ -13,8 +13,16 @@ from __future__ import annotations
 import numpy as np
 
 
-def stribeck(rest: np.ndarray, dq: np.ndarray, tau: np.ndarray, offset: np.ndarray, X: np.ndarray,
-             names: list[str], beta: np.ndarray, theta: dict) -> tuple[np.ndarray, dict, list[str]]:
+def stribeck(
+    rest: np.ndarray,
+    dq: np.ndarray,
+    tau: np.ndarray,
+    offset: np.ndarray,
+    X: np.ndarray,
+    names: list[str],
+    beta: np.ndarray,
+    theta: dict,
+) -> tuple[np.ndarray, dict, list[str]]:
     """(β, θ, IPOPT statuses) with (fs_j, vs_j) polished; inputs as in `candidates.fit` (training part)."""
     import casadi as ca
 
@@ -38,8 +46,18 @@ def stribeck(rest: np.ndarray, dq: np.ndarray, tau: np.ndarray, offset: np.ndarr
             pred = np.array(f(dq[moving, j][None, :], p[0], p[1])).ravel()
             return float(np.sum((target - pred) ** 2))
 
-        fit = fit_expression(expr, ca.vertcat(fs, vs), [v], [dq[moving, j]], target, x0=x0, lb=[0.0, 0.002],
-                             ub=[np.inf, 1.0], names=[f"fs{j + 1}", f"vs{j + 1}"], options={"ipopt.max_iter": 100})
+        fit = fit_expression(
+            expr,
+            ca.vertcat(fs, vs),
+            [v],
+            [dq[moving, j]],
+            target,
+            x0=x0,
+            lb=[0.0, 0.002],
+            ub=[np.inf, 1.0],
+            names=[f"fs{j + 1}", f"vs{j + 1}"],
+            options={"ipopt.max_iter": 100},
+        )
         statuses.append(f"joint {j + 1}: {fit.status}")
         if fit.success and cost(fit.values) < cost(x0):
             beta[k], theta[f"vs{j + 1}"] = float(fit.values[0]), float(fit.values[1])

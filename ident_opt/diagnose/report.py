@@ -19,7 +19,9 @@ def _pair(xs, unit: str = "") -> str:
 
 
 def _gain(d: Diagnosis) -> str:
-    return "; ".join(f"joint {j + 1} {_v(b)} → {_v(a)}" for j, (b, a) in enumerate(zip(d.nmse_before, d.nmse_after)))
+    return "; ".join(
+        f"joint {j + 1} {_v(b)} → {_v(a)}" for j, (b, a) in enumerate(zip(d.nmse_before, d.nmse_after))
+    )
 
 
 def cause_sentence(d: Diagnosis) -> str:
@@ -29,39 +31,59 @@ def cause_sentence(d: Diagnosis) -> str:
     gain = f"held-out nMSE {_gain(d)}."
     if d.cause == "none":
         best = d.candidates[0]
-        return (f"No catalogue effect beats the nominal models by the stated margin: the best candidate, "
-                f"{best['cause']}, scores {best['score']:.1f} against the {best['baseline']} model. "
-                f"The {base} model stands (held-out nMSE {_pair(d.nmse_before)}).")
+        return (
+            f"No catalogue effect beats the nominal models by the stated margin: the best candidate, "
+            f"{best['cause']}, scores {best['score']:.1f} against the {best['baseline']} model. "
+            f"The {base} model stands (held-out nMSE {_pair(d.nmse_before)})."
+        )
     if d.cause == "armature":
-        return (f"The {base} model lacks inertia on the diagonal of M: reflected rotor inertia of "
-                f"J = {_pair(e['inertia'], 'kg m²')} (joint side) explains the residual; {gain}")
+        return (
+            f"The {base} model lacks inertia on the diagonal of M: reflected rotor inertia of "
+            f"J = {_pair(e['inertia'], 'kg m²')} (joint side) explains the residual; {gain}"
+        )
     if d.cause == "payload":
-        return (f"Gravity and inertia are both off along the direction of a point mass at the tip of link 2: "
-                f"an unmodelled payload of {_v(e['mass'], 'kg')} explains it; {gain}")
+        return (
+            f"Gravity and inertia are both off along the direction of a point mass at the tip of link 2: "
+            f"an unmodelled payload of {_v(e['mass'], 'kg')} explains it; {gain}"
+        )
     if d.cause == "asymmetric_coulomb":
         mm = ev["moving_mean"]
-        return (f"The residual of the {base} model differs by direction of motion (mean while moving "
-                f"positive / negative: " + ", ".join(f"joint {j + 1} {_v(m['positive'])} / {_v(m['negative'])} N m"
-                                                    for j, m in enumerate(mm)) +
-                f"): Coulomb friction is asymmetric, fc+ = {_pair(e['positive'], 'N m')}, "
-                f"fc− = {_pair(e['negative'], 'N m')}; {gain}")
+        return (
+            f"The residual of the {base} model differs by direction of motion (mean while moving "
+            f"positive / negative: "
+            + ", ".join(
+                f"joint {j + 1} {_v(m['positive'])} / {_v(m['negative'])} N m" for j, m in enumerate(mm)
+            )
+            + f"): Coulomb friction is asymmetric, fc+ = {_pair(e['positive'], 'N m')}, "
+            f"fc− = {_pair(e['negative'], 'N m')}; {gain}"
+        )
     if d.cause == "stribeck":
-        return (f"Friction rises at low speed beyond the Coulomb level (low-speed excess of the residual "
-                f"{_pair(ev['low_speed_excess'], 'N m')}): a Stribeck excess fs = {_pair(e['static'], 'N m')} "
-                f"falling off over vs = {_pair(e['velocity'], 'rad/s')} explains it; {gain}")
+        return (
+            f"Friction rises at low speed beyond the Coulomb level (low-speed excess of the residual "
+            f"{_pair(ev['low_speed_excess'], 'N m')}): a Stribeck excess fs = {_pair(e['static'], 'N m')} "
+            f"falling off over vs = {_pair(e['velocity'], 'rad/s')} explains it; {gain}"
+        )
     if d.cause == "elasticity":
         det = d.named.detail if d.named else {}
-        return (f"Joint {e['joint']} shows a lightly damped {_v(e['frequency_hz'], 'Hz')} oscillation that the rigid "
-                f"model cannot produce; an elastic joint with k = {_v(det.get('stiffness', float('nan')), 'N m/rad')} "
-                f"(link inertia {_v(det.get('inertia', float('nan')), 'kg m²')}, damping ratio "
-                f"{_v(det.get('damping_ratio', float('nan')))}) driven by the measured motor-side angle explains it; "
-                f"{gain}")
+        return (
+            f"Joint {e['joint']} shows a lightly damped {_v(e['frequency_hz'], 'Hz')} oscillation that the "
+            f"rigid model cannot produce; an elastic joint with "
+            f"k = {_v(det.get('stiffness', float('nan')), 'N m/rad')} "
+            f"(link inertia {_v(det.get('inertia', float('nan')), 'kg m²')}, damping ratio "
+            f"{_v(det.get('damping_ratio', float('nan')))}) driven by the measured motor-side angle explains "
+            "it; "
+            f"{gain}"
+        )
     if d.cause == "delay":
-        return (f"The measured torque lags the encoder channel: a delay of {_v(1e3 * e['seconds'], 'ms')} "
-                f"(cross-correlation lag of the {base} model: {_pair(np.array(ev['lag_s']) * 1e3, 'ms')}); {gain}")
+        return (
+            f"The measured torque lags the encoder channel: a delay of {_v(1e3 * e['seconds'], 'ms')} "
+            f"(cross-correlation lag of the {base} model: {_pair(np.array(ev['lag_s']) * 1e3, 'ms')}); {gain}"
+        )
     if d.cause == "joint_offset":
-        return (f"Gravity looks rotated (pose-correlated share of the residual {_pair(ev['pose_r2'])}): encoder "
-                f"zero offsets δ = {_pair(e['offset'], 'rad')} explain it; {gain}")
+        return (
+            f"Gravity looks rotated (pose-correlated share of the residual {_pair(ev['pose_r2'])}): encoder "
+            f"zero offsets δ = {_pair(e['offset'], 'rad')} explain it; {gain}"
+        )
     return gain
 
 
@@ -70,15 +92,19 @@ def summary(d: Diagnosis) -> str:
     nom = d.nominal
     lines = [
         f"diagnosis ({d.split}; {d.rate_hz:.4g} Hz)",
-        "1. nominal models, held-out nMSE per joint: datasheet " + _pair(nom["datasheet"]["nmse"]) +
-        ", rigid fit " + _pair(nom["rigid_fit"]["nmse"]),
+        "1. nominal models, held-out nMSE per joint: datasheet "
+        + _pair(nom["datasheet"]["nmse"])
+        + ", rigid fit "
+        + _pair(nom["rigid_fit"]["nmse"]),
         f"2. cause: {d.cause}" + (f" (against the {d.baseline} model)" if d.cause != "none" else ""),
         "   " + cause_sentence(d),
         "3. candidates (score = penalised held-out log-likelihood gain):",
     ]
     for c in d.candidates:
-        lines.append(f"   {c['cause']:20s} {c['score']:10.1f}  vs {c['baseline']:9s} "
-                     f"nMSE after {_pair(c['nmse_after'])}")
+        lines.append(
+            f"   {c['cause']:20s} {c['score']:10.1f}  vs {c['baseline']:9s} "
+            f"nMSE after {_pair(c['nmse_after'])}"
+        )
     lines.append(f"4. held-out nMSE before → after: {_gain(d)}")
     return "\n".join(lines)
 
@@ -124,8 +150,10 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
 
 
 def _evidence_table(d: Diagnosis) -> list[str]:
-    rows = ["| evidence (held-out) | datasheet j1 | datasheet j2 | rigid fit j1 | rigid fit j2 |",
-            "|---|---|---|---|---|"]
+    rows = [
+        "| evidence (held-out) | datasheet j1 | datasheet j2 | rigid fit j1 | rigid fit j2 |",
+        "|---|---|---|---|---|",
+    ]
 
     def row(name, fn):
         vals = [fn(d.evidence[b], j) for b in ("datasheet", "rigid_fit") for j in range(2)]
@@ -133,21 +161,35 @@ def _evidence_table(d: Diagnosis) -> list[str]:
 
     row("residual RMS [N m]", lambda e, j: _v(e["rms"][j]))
     row("nMSE of the raw residual (rest levels included)", lambda e, j: _v(e["nmse"][j]))
-    row("strongest residual peak [Hz] (ζ)",
-        lambda e, j: f"{_v(e['peaks'][j][0]['frequency_hz'])} ({_v(e['peaks'][j][0]['damping'], digits=2)})"
-        if e["peaks"][j] else "—")
+    row(
+        "strongest residual peak [Hz] (ζ)",
+        lambda e, j: (
+            f"{_v(e['peaks'][j][0]['frequency_hz'])} ({_v(e['peaks'][j][0]['damping'], digits=2)})"
+            if e["peaks"][j]
+            else "—"
+        ),
+    )
     row(f"power share below {0.6} Hz", lambda e, j: _v(e["low_band_fraction"][j]))
-    row("mean residual moving +/− [N m]",
-        lambda e, j: f"{_v(e['moving_mean'][j]['positive'])} / {_v(e['moving_mean'][j]['negative'])}")
-    row("reversal jump −→+ / +→− [N m]",
-        lambda e, j: f"{_v(e['reversal_steps'][j]['negative_to_positive'])} / "
-                     f"{_v(e['reversal_steps'][j]['positive_to_negative'])}")
+    row(
+        "mean residual moving +/− [N m]",
+        lambda e, j: f"{_v(e['moving_mean'][j]['positive'])} / {_v(e['moving_mean'][j]['negative'])}",
+    )
+    row(
+        "reversal jump −→+ / +→− [N m]",
+        lambda e, j: (
+            f"{_v(e['reversal_steps'][j]['negative_to_positive'])} / "
+            f"{_v(e['reversal_steps'][j]['positive_to_negative'])}"
+        ),
+    )
     row("low-speed excess [N m]", lambda e, j: _v(e["low_speed_excess"][j]))
     row("pose-explained share (gravity-like)", lambda e, j: _v(e["pose_r2"][j]))
     row("lag of measured vs predicted [ms]", lambda e, j: _v(1e3 * e["lag_s"][j]))
     fe = d.evidence["forward_error_rad"]
-    rows.append("| forward simulation, 0.5 s windows, RMS angle error [rad] | " +
-                " | ".join(_v(fe[b][j]) for b in ("datasheet", "rigid_fit") for j in range(2)) + " |")
+    rows.append(
+        "| forward simulation, 0.5 s windows, RMS angle error [rad] | "
+        + " | ".join(_v(fe[b][j]) for b in ("datasheet", "rigid_fit") for j in range(2))
+        + " |"
+    )
     return rows
 
 
@@ -160,22 +202,33 @@ def channels_paragraph(d: Diagnosis) -> list[str]:
     ch = d.evidence.get("other_channels") or {}
     if not ch:
         return []
-    lines = ["## Independent channels", "",
-             "Other numeric columns of the data file, never model inputs (on the MERIt trials col10–col13 are the "
-             "links' strain gauges): the strongest power in the 1–10 Hz band of first link modes, and the most "
-             "prominent peaks above 0.7 Hz.", "", "| channel | strongest in 1–10 Hz | prominent peaks [Hz] |",
-             "|---|---|---|"]
+    lines = [
+        "## Independent channels",
+        "",
+        "Other numeric columns of the data file, never model inputs (on the MERIt trials col10–col13 are the "
+        "links' strain gauges): the strongest power in the 1–10 Hz band of first link modes, and the most "
+        "prominent peaks above 0.7 Hz.",
+        "",
+        "| channel | strongest in 1–10 Hz | prominent peaks [Hz] |",
+        "|---|---|---|",
+    ]
     for name, info in ch.items():
-        peaks = ", ".join(f"{_v(p['frequency_hz'])} ({_v(p['prominence_db'], digits=2)} dB)" for p in info["peaks"])
+        peaks = ", ".join(
+            f"{_v(p['frequency_hz'])} ({_v(p['prominence_db'], digits=2)} dB)" for p in info["peaks"]
+        )
         lines.append(f"| `{name}` | {_v(info['mode_band_max_hz'])} Hz | {peaks or '—'} |")
     el = _elastic_candidate(d)
     if el is not None:
         f = el["estimate"]["frequency_hz"]
         near = [n for n, info in ch.items() if abs(info["mode_band_max_hz"] - f) <= 0.2 * f]
         status = "the named cause" if d.cause == "elasticity" else f"not named; score {el['score']:.1f}"
-        lines += ["", f"The elastic-joint candidate ({status}) puts a mode at {_v(f, 'Hz')} on joint "
-                  f"{el['estimate']['joint']}; channels whose 1–10 Hz maximum lies within 20 % of it: "
-                  + (", ".join(f"`{n}`" for n in near) if near else "none") + "."]
+        lines += [
+            "",
+            f"The elastic-joint candidate ({status}) puts a mode at {_v(f, 'Hz')} on joint "
+            f"{el['estimate']['joint']}; channels whose 1–10 Hz maximum lies within 20 % of it: "
+            + (", ".join(f"`{n}`" for n in near) if near else "none")
+            + ".",
+        ]
     return [*lines, ""]
 
 
@@ -184,10 +237,16 @@ def also_clear(d: Diagnosis) -> list[str]:
     others = [c for c in d.candidates if c["cause"] != d.cause and c.get("clears_margin")]
     if not others:
         return []
-    return ["Other candidates that also clear the margin on their own (effects need not come alone): "
-            + "; ".join(f"{c['cause']} against the {c['baseline']} model (score {c['score']:.1f}, estimate "
-                        f"`{_rounded(c['estimate'])}`, held-out nMSE after {_pair(c['nmse_after'])})" for c in others)
-            + ".", ""]
+    return [
+        "Other candidates that also clear the margin on their own (effects need not come alone): "
+        + "; ".join(
+            f"{c['cause']} against the {c['baseline']} model (score {c['score']:.1f}, estimate "
+            f"`{_rounded(c['estimate'])}`, held-out nMSE after {_pair(c['nmse_after'])})"
+            for c in others
+        )
+        + ".",
+        "",
+    ]
 
 
 def _rounded(estimate: dict) -> dict:
@@ -198,29 +257,43 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
     """The Markdown report."""
     nom = d.nominal
     lines = [
-        "# Diagnosis", "",
-        f"Data: {d.split} ({d.rate_hz:.4g} Hz). All numbers are on the held-out part. The torque is low-passed "
-        "by the same zero-phase filter the derivatives are estimated with, and where a joint rests its residual is "
-        "compared about its mean over the rest (stiction holds a level no model predicts); `nmse_raw_*` in the "
-        "JSON are without that.", "",
-        "## 1. What the nominal models get wrong", "",
-        f"Held-out nMSE (MSE ÷ variance) per joint: datasheet {_pair(nom['datasheet']['nmse'])}, best rigid fit "
-        f"{_pair(nom['rigid_fit']['nmse'])}.", "",
-        *_evidence_table(d), "",
-        "## 2. The cause", "",
-        f"**{d.cause}**" + (f" (found against the {d.baseline} model)" if d.cause != "none" else "") + ". "
-        + cause_sentence(d), "",
-        "Every catalogue effect was fitted on the training part (against the datasheet with its π held, and/or "
-        "against the rigid fit with π refitted) and scored on the held-out part: score = (n/2) Σ_j ln(MSE_before,j / "
-        "MSE_after,j) − (k/2) ln n for k added parameters. A cause is named when its score is positive and, on some "
-        "joint, it removes at least 5 % of its baseline's held-out MSE and at least 0.01 % of the torque's variance; "
-        "delays shorter than 2 ms are not named (sample-and-hold timing and filter mismatch produce them).",
+        "# Diagnosis",
         "",
-        "| cause | score | baseline | added parameters | held-out nMSE after | estimate |", "|---|---|---|---|---|---|",
+        f"Data: {d.split} ({d.rate_hz:.4g} Hz). All numbers are on the held-out part. The torque is "
+        "low-passed by the same zero-phase filter the derivatives are estimated with, and where a joint "
+        "rests its residual is compared about its mean over the rest (stiction holds a level no model "
+        "predicts); `nmse_raw_*` in the JSON are without that.",
+        "",
+        "## 1. What the nominal models get wrong",
+        "",
+        f"Held-out nMSE (MSE ÷ variance) per joint: datasheet {_pair(nom['datasheet']['nmse'])}, "
+        "best rigid fit "
+        f"{_pair(nom['rigid_fit']['nmse'])}.",
+        "",
+        *_evidence_table(d),
+        "",
+        "## 2. The cause",
+        "",
+        f"**{d.cause}**"
+        + (f" (found against the {d.baseline} model)" if d.cause != "none" else "")
+        + ". "
+        + cause_sentence(d),
+        "",
+        "Every catalogue effect was fitted on the training part (against the datasheet with its π held, "
+        "and/or against the rigid fit with π refitted) and scored on the held-out part: score = (n/2) Σ_j "
+        "ln(MSE_before,j / MSE_after,j) − (k/2) ln n for k added parameters. A cause is named when its score "
+        "is positive and, on some joint, it removes at least 5 % of its baseline's held-out MSE and at least "
+        "0.01 % of the torque's variance; delays shorter than 2 ms are not named (sample-and-hold timing and "
+        "filter mismatch produce them).",
+        "",
+        "| cause | score | baseline | added parameters | held-out nMSE after | estimate |",
+        "|---|---|---|---|---|---|",
     ]
     for c in d.candidates:
-        lines.append(f"| {c['cause']} | {c['score']:.1f} | {c['baseline']} | {c['added_parameters']} | "
-                     f"{_pair(c['nmse_after'])} | `{_rounded(c['estimate'])}` |")
+        lines.append(
+            f"| {c['cause']} | {c['score']:.1f} | {c['baseline']} | {c['added_parameters']} | "
+            f"{_pair(c['nmse_after'])} | `{_rounded(c['estimate'])}` |"
+        )
     lines += ["", *also_clear(d), "## 3. The extended model", ""]
     if d.named is not None:
         lines += ["| parameter | value | standard error |", "|---|---|---|"]
@@ -228,8 +301,12 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
             se = d.named.se.get(name)
             shown = f"{se:.2g}" if se is not None else "(searched)"
             lines.append(f"| {name} | {value:.5g} | {shown} |")
-        lines += ["", "Standard errors assume independent residuals; consecutive samples are correlated, so read them "
-                  "as lower bounds.", ""]
+        lines += [
+            "",
+            "Standard errors assume independent residuals; consecutive samples are correlated, so read them "
+            "as lower bounds.",
+            "",
+        ]
     else:
         lines += ["No extension: the nominal model is kept.", ""]
     lines += ["## 4. The gain", "", f"Held-out nMSE before → after: {_gain(d)}.", ""]

@@ -36,7 +36,9 @@ def deflection_acceleration(ddq: np.ndarray, frequency_hz: float, damping: float
     fs = 1.0 / dt
     w = 2.0 * fs * np.tan(np.pi * frequency_hz / fs)  # pre-warped ω [rad/s]
     K = 2.0 * fs  # s = K (z − 1) / (z + 1)
-    den = np.array([K * K + 2 * damping * w * K + w * w, 2 * (w * w - K * K), K * K - 2 * damping * w * K + w * w])
+    den = np.array(
+        [K * K + 2 * damping * w * K + w * w, 2 * (w * w - K * K), K * K - 2 * damping * w * K + w * w]
+    )
     num = np.array([-K * K, 2 * K * K, -K * K])
     return signal.lfilter(num / den[0], den / den[0], ddq, axis=0)
 
@@ -50,7 +52,11 @@ class Peak:
     prominence_db: float
 
     def as_dict(self) -> dict[str, float]:
-        return {"frequency_hz": self.frequency_hz, "damping": self.damping, "prominence_db": self.prominence_db}
+        return {
+            "frequency_hz": self.frequency_hz,
+            "damping": self.damping,
+            "prominence_db": self.prominence_db,
+        }
 
 
 def spectrum(x: np.ndarray, dt: float, window_s: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
@@ -60,8 +66,14 @@ def spectrum(x: np.ndarray, dt: float, window_s: float = 10.0) -> tuple[np.ndarr
     return signal.welch(x, fs=1.0 / dt, nperseg=nperseg)
 
 
-def peaks(x: np.ndarray, dt: float, low_hz: float = 0.7, count: int = 3, min_prominence_db: float = 6.0,
-          window_s: float = 10.0) -> list[Peak]:
+def peaks(
+    x: np.ndarray,
+    dt: float,
+    low_hz: float = 0.7,
+    count: int = 3,
+    min_prominence_db: float = 6.0,
+    window_s: float = 10.0,
+) -> list[Peak]:
     """The most prominent spectral peaks of x above `low_hz` (the motion band lies below), strongest first.
 
     Damping comes from the half-power (−3 dB) bandwidth: ζ ≈ (f₂ − f₁) / (2 f₀), a lower bound on the
@@ -86,8 +98,11 @@ def peaks(x: np.ndarray, dt: float, low_hz: float = 0.7, count: int = 3, min_pro
             hi += 1
         f1 = np.interp(half, [dbb[lo], dbb[lo + 1]], [fb[lo], fb[lo + 1]]) if lo < i else fb[i]
         f2 = np.interp(half, [dbb[hi], dbb[hi - 1]], [fb[hi], fb[hi - 1]]) if hi > i else fb[i]
-        out.append(Peak(float(fb[i]), float((f2 - f1) / (2 * fb[i])),
-                        float(props["prominences"][list(idx).index(i)])))
+        out.append(
+            Peak(
+                float(fb[i]), float((f2 - f1) / (2 * fb[i])), float(props["prominences"][list(idx).index(i)])
+            )
+        )
     return out
 
 
@@ -105,7 +120,9 @@ def lag(reference: np.ndarray, x: np.ndarray, dt: float, max_s: float = 0.2) -> 
     b = np.asarray(x, dtype=float) - np.mean(x)
     m = int(min(len(a) - 1, max(1, round(max_s / dt))))
     shifts = np.arange(-m, m + 1)
-    c = np.array([np.dot(a[max(0, -s):len(a) - max(0, s)], b[max(0, s):len(b) - max(0, -s)]) for s in shifts])
+    c = np.array(
+        [np.dot(a[max(0, -s) : len(a) - max(0, s)], b[max(0, s) : len(b) - max(0, -s)]) for s in shifts]
+    )
     i = int(np.argmax(c))
     offset = 0.0
     if 0 < i < len(c) - 1:
