@@ -89,7 +89,9 @@ class GMR:
             Z = Z[np.sort(rng.choice(len(Z), self.max_train_samples, replace=False))]
         self.n_inputs, self.n_train_ = X.shape[1], len(Z)
         shift, scale = Z.mean(axis=0), Z.std(axis=0)
-        scale[scale == 0] = 1.0  # a constant column: keep it, reg_covar keeps Σ invertible
+        # A column constant up to rounding (e.g. a joint at rest for the whole window) must not be blown up
+        # by a 1e-16 standard deviation: treat it as constant and keep unit scale; reg_covar keeps Σ invertible.
+        scale[scale <= 1e-12 * np.maximum(1.0, np.abs(shift))] = 1.0
         Zs = (Z - shift) / scale
 
         if self.n_components is not None:

@@ -194,3 +194,19 @@ def test_bad_settings_and_predict_shape():
         g.predict(np.ones((3, 3)))
     with pytest.raises(RuntimeError):
         GMR().predict(X)
+
+
+def test_column_constant_up_to_rounding_is_not_blown_up():
+    """A joint at rest for the whole window (std ~1e-16 from rounding) behaves like an exactly constant one."""
+    rng = np.random.default_rng(5)
+    X = rng.normal(size=(400, 2))
+    R = (X[:, :1] ** 2) + 0.1 * rng.normal(size=(400, 1))
+    X_round = X.copy()
+    X_round[:, 1] = 0.3 + 1e-16 * rng.choice([-1.0, 1.0], 400)  # constant up to rounding
+    X_const = X.copy()
+    X_const[:, 1] = 0.3
+    a = GMR(n_components=2, random_state=0).fit(X_round, R)
+    b = GMR(n_components=2, random_state=0).fit(X_const, R)
+    assert np.allclose(a.means_, b.means_, atol=1e-8)
+    assert np.allclose(a.covariances_, b.covariances_, atol=1e-8)
+    assert np.min(np.linalg.eigvalsh(a.covariances_)) > 1e-6
