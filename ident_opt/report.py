@@ -289,7 +289,10 @@ def write_readme(result: IdentifyResult, out: Path, tables: dict[str, Path]) -> 
     others = [("paper_audit.md", "the paper audit: its datasheet model under both conventions"),
               ("compare.md", "constrained vs OLS vs datasheet parameters"),
               ("constraints_study.md", "when the physical constraints matter"),
-              ("diagnose.md", "what the rigid model gets wrong and why"),
+              ("diagnosis/diagnosis.md", "what the rigid model gets wrong, why, and the held-out gain of the fix"),
+              ("diagnosis/confusion.md", "the diagnosis on simulated trials with hidden effects (confusion matrix)"),
+              ("online.md", "online adaptation: exact re-solves after every sample, online vs frozen"),
+              ("online_benchmark.md", "online update cost against the paper's re-solve"),
               ("simulator_calibration.md", "the simulator against the real trial")]
     present = [(f, d) for f, d in others if (out / f).exists()]
     if present:
