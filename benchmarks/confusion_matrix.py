@@ -79,7 +79,10 @@ def table(results: list[dict], command: str) -> str:
         f"Regenerate: `{command}`",
         "",
         "Rows: the hidden (true) cause; columns: the cause `diagnose` named. Each trial hides one effect "
-        "at a random realistic magnitude (`ident_opt/diagnose/hidden.py`).",
+        "at a random realistic magnitude (`ident_opt/diagnose/hidden.py`) in a simulated trial that follows "
+        "the point-to-point `tud01` reference (like the real trials), except Stribeck friction, which is "
+        "invisible there (joints cross low speeds in a few ms at 100 Hz) and gets the smooth `fourier` "
+        "reference; the simulator's background terms (stiction, drift, ripple) are off.",
         "",
         "| true \\ named | " + " | ".join(named) + " | within tolerance | median rel. error |",
         "|---|" + "---|" * (len(named) + 2),
