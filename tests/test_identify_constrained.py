@@ -7,7 +7,8 @@ import pytest
 
 from ident_opt.compare import multisine_trial
 from ident_opt.datasheet import datasheet_pi
-from ident_opt.identify.constrained import constraint_slacks, fit_bounded, fit_constrained
+from ident_opt.identify import constrained
+from ident_opt.identify.constrained import constraint_slacks, fit_bounded, fit_constrained, solve_constrained
 from ident_opt.identify.fit import fit_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.robot import ArmModel
@@ -147,3 +148,68 @@ def test_bad_arguments_are_named(truth):
         fit_constrained(st, ARM, bounds=(lb, ub))
     with pytest.raises(ValueError, match="backend"):
         fit_constrained(st, ARM, backend="mosek")
+
+
+def _active_and_inactive(truth):
+    """(statistics, model) pairs: a short one-joint trial where OLS is inconsistent, and a rich trial where
+    it is consistent (nothing binds)."""
+    short = _stats(multisine_trial(ARM, truth, duration=2.0, seed=702, amplitude=(0.05, 0.8)), ARM)
+    rich = _stats(multisine_trial(ARM, truth, duration=30.0, seed=1), ARM)
+    assert not fit_ols(short, ARM).consistent and fit_ols(rich, ARM).consistent
+    return {"active": short, "inactive": rich}
+
+
+@pytest.mark.parametrize("case", ["active", "inactive"])
+@pytest.mark.parametrize("options", [{}, {"margin": 1e-3}, {"weights": "wls"}, {"shortcut": False},
+                                     {"prior_weight": 1e-6}, {"bounds": "b1<=3"}])
+def test_solve_constrained_is_fit_constrained_pi(truth, case, options):
+    """The lean solve returns the π of the full fit (one implementation), active constraints or not."""
+    st = _active_and_inactive(truth)[case]
+    options = dict(options)
+    if options.pop("bounds", None):
+        ub = np.full(ARM.n_params, np.inf)
+        ub[ARM.names.index("b1")] = 3.0  # below the truth 3.72
+        options["bounds"] = (np.full(ARM.n_params, -np.inf), ub)
+    if "prior_weight" in options:
+        options["prior"] = truth
+    fit = fit_constrained(st, ARM, **options)
+    pi = solve_constrained(st, ARM, **options)
+    np.testing.assert_allclose(pi, fit.pi, rtol=1e-10, atol=0)
+    # The two cases are what they claim: the solver ran with constraints binding, or OLS was returned.
+    if case == "active" or "bounds" in options:
+        assert fit.active
+    elif not options.get("shortcut", True) or options.get("prior_weight"):
+        assert fit.active == []
+    else:
+        assert fit.active == [] and fit.status.startswith("optimal (unconstrained")
+        np.testing.assert_array_equal(pi, fit_ols(st, ARM, weights=options.get("weights")).pi)
+
+
+def test_structure_cache_keeps_models_and_options_apart(truth, exp1):
+    """Alternating models (rigid / with armature), margins, sign constraints and bounds through the cached
+    structure gives exactly what a fresh cache gives, and each option still has its own effect."""
+    arm = _stats(multisine_trial(ARM, truth, duration=2.0, seed=702, amplitude=(0.05, 0.8)), ARM)
+    rigid = _stats(exp1, RIGID)
+    ub = np.full(ARM.n_params, np.inf)
+    ub[ARM.names.index("b1")] = 3.0
+    configs = [(rigid, RIGID, {"margin": 1e-6}), (arm, ARM, {"margin": 1e-6}), (rigid, RIGID, {"margin": 1e-3}),
+               (arm, ARM, {"margin": 1e-3}), (arm, ARM, {"margin": 1e-3, "friction": False}),
+               (arm, ARM, {"bounds": (np.full(ARM.n_params, -np.inf), ub)}), (arm, ARM, {})]
+    fresh = []
+    for st, model, options in configs:
+        constrained._structure.cache_clear()
+        fresh.append(solve_constrained(st, model, **options))
+    for order in (range(len(configs)), reversed(range(len(configs))), [0, 3, 1, 5, 2, 6, 4, 0, 1]):
+        for i in order:
+            st, model, options = configs[i]
+            np.testing.assert_array_equal(solve_constrained(st, model, **options), fresh[i])
+    # The options reach the solution: the mass constraint binds at each margin, signs ≥ 0 only when
+    # asked for (friction, armature), the bound only when given.
+    for i in (0, 1, 2, 3):
+        st, model, options = configs[i]
+        # binding to the solver's accuracy (tolerance 1e-11 on a problem scaled per sample), far below 1e-3
+        assert model.min_mass_eigenvalue(fresh[i]) == pytest.approx(options["margin"], abs=1e-8)
+    assert not np.allclose(fresh[1], fresh[3]) and not np.allclose(fresh[0], fresh[2])
+    signed = [ARM.names.index(n) for n in constrained.sign_constraints(ARM).values()]
+    assert fresh[4][signed].min() < 0 <= fresh[3][signed].min() + 1e-9
+    assert fresh[5][ARM.names.index("b1")] == pytest.approx(3.0, abs=1e-6) != fresh[6][ARM.names.index("b1")]

@@ -25,6 +25,11 @@ Standard errors are the unconstrained problem's sandwich evaluated with the cons
 (`fit.finish`). Along a binding constraint the estimator's true distribution is one-sided, so read the SE
 of a parameter involved in an active constraint as approximate.
 
+`solve_constrained` returns π alone (the counterpart of `ols.solve_ols`); `fit_constrained` is the same call
+plus standard errors, diagnostics and the active set. What depends only on the model and the options
+(constraint matrix, sparsity pattern, cones, solver settings) is assembled once and cached (`_structure`);
+a call then costs a few tenths of a millisecond whatever the number of samples, most of it Clarabel's.
+
 Two backends solve the same program. `backend="clarabel"` (default) assembles the constraints as plain
 numeric blocks A π + s = b, s ∈ cone, one named block per constraint (`constraint_blocks`), and calls
 Clarabel directly: a fraction of a millisecond. `backend="cvxpy"` writes it in cvxpy (compiled once per
@@ -38,6 +43,7 @@ import functools
 import time
 import warnings
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -94,7 +100,51 @@ def fit_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prio
     bounds (lb, ub) and prior π0 with weight λ. `weights` as in `fit_ols`. `shortcut=False` always runs
     the conic solver (tests use it to check the solver against OLS). `backend`: "clarabel" (direct,
     fast) or "cvxpy" (same program through cvxpy). `status` is the solver's.
+
+    π is `solve_constrained`'s (the same call); this adds standard errors, diagnostics and the active set.
     """
+    sol = _solution(stats, model, margin=margin, prior=prior, prior_weight=prior_weight, bounds=bounds,
+                    weights=weights, friction=friction, mass=mass, shortcut=shortcut, backend=backend)
+    method = "constrained" if (friction or mass) else "bounded"
+    if sol.unconstrained:
+        return finish(stats, model, sol.pi, sol.weights, method, sol.status, [], sol.seconds)
+    slacks = constraint_slacks(model, sol.pi, margin, friction, mass, bounds)
+    active = [name for name, v in slacks.items() if v < ACTIVE_TOL]
+    fit = finish(stats, model, sol.pi, sol.weights, method, sol.status, active, sol.seconds)
+    fit.details["clarabel_seconds"] = sol.solver_seconds  # the solver alone, without cvxpy's parameter update
+    return fit
+
+
+def solve_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prior: np.ndarray | None = None,
+                      prior_weight: float = 0.0, bounds: tuple[np.ndarray, np.ndarray] | None = None,
+                      weights: str | np.ndarray | None = None, friction: bool = True, mass: bool = True,
+                      shortcut: bool = True, backend: str = "clarabel") -> np.ndarray:
+    """π only (no standard errors, no diagnostics): the constrained counterpart of `ols.solve_ols`.
+
+    Arguments and units as in `fit_constrained`, whose π this is (one implementation). Everything that
+    depends only on (model, margin, friction, mass, bounds) — constraint matrix, sparsity patterns, cones,
+    solver settings — is built once and cached (`_structure`), so a call is: the P×P normal matrix H, the
+    unconstrained minimiser and its feasibility (returned exactly if feasible), else one Clarabel solve.
+    """
+    return _solution(stats, model, margin=margin, prior=prior, prior_weight=prior_weight, bounds=bounds,
+                     weights=weights, friction=friction, mass=mass, shortcut=shortcut, backend=backend).pi
+
+
+class _Solution(NamedTuple):
+    """What `fit_constrained` needs beyond π: joint weights, solver status, timings [s]."""
+
+    pi: np.ndarray
+    weights: np.ndarray
+    status: str
+    unconstrained: bool  # the unconstrained minimiser was feasible and is returned as is
+    seconds: float  # the solve (unconstrained minimiser, feasibility, conic solver), not the set-up
+    solver_seconds: float  # Clarabel's own solve time (nan when it did not run or is not reported)
+
+
+def _solution(stats: Stats, model: ArmModel, *, margin: float, prior: np.ndarray | None, prior_weight: float,
+              bounds: tuple[np.ndarray, np.ndarray] | None, weights: str | np.ndarray | None, friction: bool,
+              mass: bool, shortcut: bool, backend: str) -> _Solution:
+    """The one implementation behind `solve_constrained` and `fit_constrained` (arguments as there)."""
     if backend not in ("clarabel", "cvxpy"):
         raise ValueError(f"backend must be 'clarabel' or 'cvxpy', not {backend!r}")
     _check(stats, model)
@@ -108,31 +158,36 @@ def fit_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prio
     prior = np.zeros(P) if prior is None else np.asarray(prior, dtype=float)
     if prior.shape != (P,):
         raise ValueError(f"prior has shape {prior.shape}, the model {model.names} needs ({P},)")
+    key = None
     if bounds is not None:
         lb, ub = (np.broadcast_to(np.asarray(v, dtype=float), (P,)) for v in bounds)
         if np.any(lb > ub):
             bad = [n for n, lo, hi in zip(model.names, lb, ub) if lo > hi]
             raise ValueError(f"lower bound above upper bound for {', '.join(bad)}")
-    scale = np.maximum(np.abs(prior), 1e-3 * max(np.abs(prior).max(), 1e-12))
-    Dp = prior_weight * joint_weights_energy(stats, w) / scale**2  # prior curvature per parameter
-    method = "constrained" if (friction or mass) else "bounded"
+        # A non-finite bound is no bound (as in `constraint_blocks`): ±inf in the hashable cache key.
+        key = (tuple(np.where(np.isfinite(lb), lb, -np.inf).tolist()),
+               tuple(np.where(np.isfinite(ub), ub, np.inf).tolist()))
+    structure = _structure(model, float(margin), bool(friction), bool(mass), key)
+    if prior_weight > 0:
+        scale = np.maximum(np.abs(prior), 1e-3 * max(np.abs(prior).max(), 1e-12))
+        Dp = prior_weight * joint_weights_energy(stats, w) / scale**2  # prior curvature per parameter
+    else:
+        Dp = np.zeros(P)  # what the formula gives at λ = 0, without its arithmetic
 
     t0 = time.perf_counter()
-    free = _solve(H + np.diag(Dp), h + Dp * prior)
-    slacks = constraint_slacks(model, free, margin, friction, mass, bounds)
-    if shortcut and all(v >= 0 for v in slacks.values()):
-        return finish(stats, model, free, w, method, "optimal (unconstrained minimiser feasible)", [],
-                      time.perf_counter() - t0)
-    solve = _solve_clarabel if backend == "clarabel" else _solve_conic
-    pi, status, solver_seconds = solve(model, H, h, stats.n, margin, Dp, prior, friction, mass, bounds)
-    elapsed = time.perf_counter() - t0
+    if shortcut:
+        # Convex problem: a feasible unconstrained minimiser is the answer (returned exactly, like OLS).
+        free = _solve(H + np.diag(Dp), h + Dp * prior)
+        if structure.feasible(free):
+            return _Solution(free, w, "optimal (unconstrained minimiser feasible)", True,
+                             time.perf_counter() - t0, float("nan"))
+    if backend == "clarabel":
+        pi, status, solver_seconds = _solve_clarabel(structure, H, h, stats.n, Dp, prior)
+    else:
+        pi, status, solver_seconds = _solve_conic(model, H, h, stats.n, margin, Dp, prior, friction, mass, bounds)
     if pi is None:
         raise RuntimeError(f"constrained fit failed: solver status {status}")
-    slacks = constraint_slacks(model, pi, margin, friction, mass, bounds)
-    active = [name for name, v in slacks.items() if v < ACTIVE_TOL]
-    fit = finish(stats, model, pi, w, method, status, active, elapsed)
-    fit.details["clarabel_seconds"] = solver_seconds  # the solver alone, without cvxpy's parameter update
-    return fit
+    return _Solution(pi, w, status, False, time.perf_counter() - t0, solver_seconds)
 
 
 def joint_weights_energy(stats: Stats, w: np.ndarray) -> float:
@@ -159,7 +214,10 @@ def tie_break(H: np.ndarray) -> np.ndarray:
     """
     d = np.diag(H)
     excited = d > 1e-12 * max(d.max(), np.finfo(float).tiny)
-    if np.linalg.matrix_rank(H, hermitian=True) == len(d) or not excited.any():
+    # Full rank by numpy.linalg.matrix_rank's test (|λ| > max|λ| · P · eps), on eigvalsh directly: the same
+    # numbers without its SVD wrapper, which costs as much again on a 9×9.
+    lam = np.abs(np.linalg.eigvalsh(H))
+    if np.all(lam > lam.max() * len(d) * np.finfo(float).eps) or not excited.any():
         return np.zeros(len(d))
     return TIE_BREAK * np.where(excited, d, d[excited].mean())
 
@@ -209,46 +267,92 @@ def constraint_blocks(model: ArmModel, margin: float = 1e-6, friction: bool = Tr
     return blocks
 
 
-@functools.lru_cache(maxsize=64)
-def _assembled(model: ArmModel, margin: float, friction: bool, mass: bool, bounds: tuple | None) -> tuple:
-    """(A as CSC, b, Clarabel cones) of the stacked named blocks; depends on the structure only, so cached."""
-    import clarabel
-    from scipy import sparse
+@dataclass(frozen=True)
+class _Structure:
+    """Everything of the conic program that depends on (model, margin, friction, mass, bounds) only.
 
-    blocks = constraint_blocks(model, margin, friction, mass, bounds)
-    A = np.vstack([blk.A for blk in blocks]) if blocks else np.zeros((0, model.n_params))
-    b = np.concatenate([blk.b for blk in blocks]) if blocks else np.zeros(0)
-    cones = [clarabel.PSDTriangleConeT(2) if blk.cone == "psd2" else clarabel.NonnegativeConeT(len(blk.b))
-             for blk in blocks]
-    return sparse.csc_matrix(A), b, cones
-
-
-def _solve_clarabel(model: ArmModel, H: np.ndarray, h: np.ndarray, n: int, margin: float, Dp: np.ndarray,
-                    prior: np.ndarray, friction: bool, mass: bool,
-                    bounds: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray | None, str, float]:
-    """min ½ πᵀQπ + cᵀπ s.t. the named blocks, by Clarabel directly: (π or None, status, solver s).
-
-    Q = 2(H + diag(D + ρ))/n and c = −2(h + D π0)/n: the module doc's objective per sample, with the
-    tie-break ρ of `tie_break` when the data leave directions free.
+    Constraints A π + s = b, s ∈ cones (the stacked named blocks of `constraint_blocks`); Clarabel's
+    settings per tolerance; the CSC pattern of the upper triangle of the P×P quadratic term (Clarabel reads
+    only that triangle); and what the feasibility test of the unconstrained minimiser needs.
     """
+
+    A: object  # scipy.sparse.csc_matrix (m, P)
+    b: np.ndarray  # (m,)
+    cones: tuple  # Clarabel cone objects, one per block
+    settings: tuple  # (tolerance, clarabel.DefaultSettings), tightest first
+    q_rows: np.ndarray  # upper-triangle entries (rows, cols) of Q in CSC (column-major) order
+    q_cols: np.ndarray
+    q_indices: np.ndarray  # CSC row indices and column pointers of that triangle
+    q_indptr: np.ndarray
+    margin: float  # [kg m²]
+    mass: bool
+    maps: tuple[np.ndarray, np.ndarray]  # (A0, A1) of `ArmModel.mass_matrix_maps`, each as (P, 4)
+    sign: np.ndarray  # indices of the parameters that must be ≥ 0
+    lb: np.ndarray  # (P,) lower/upper bounds, ±inf where none
+    ub: np.ndarray
+
+    def feasible(self, pi: np.ndarray) -> bool:
+        """Every slack of `constraint_slacks` ≥ 0 at π (the same arithmetic, without building the dict)."""
+        if self.mass:
+            # M0 = Σ_p π_p A0[p]: the product np.tensordot(π, A0, 1) computes, without its bookkeeping.
+            M0, M1 = (np.dot(pi[None, :], a).reshape(2, 2) for a in self.maps)
+            if np.linalg.eigvalsh(np.stack([M0 + M1, M0 - M1]))[:, 0].min() - self.margin < 0:
+                return False
+        # π_p − lb_p ≥ 0 ⇔ π_p ≥ lb_p exactly in IEEE arithmetic (and holds against −inf, as no bound).
+        return bool(np.all(pi[self.sign] >= 0) and np.all(pi >= self.lb) and np.all(pi <= self.ub))
+
+
+@functools.lru_cache(maxsize=64)
+def _structure(model: ArmModel, margin: float, friction: bool, mass: bool,
+               bounds: tuple[tuple[float, ...], tuple[float, ...]] | None) -> _Structure:
+    """The cached `_Structure` (keyed on the frozen model and the options; bounds as tuples)."""
     import clarabel
     from scipy import sparse
 
     P = model.n_params
-    Q = 2.0 * (H + np.diag(Dp + tie_break(H))) / max(n, 1)
-    c = -2.0 * (h + Dp * prior) / max(n, 1)
-    key = None if bounds is None else tuple(tuple(np.broadcast_to(np.asarray(v, float), (P,))) for v in bounds)
-    As, b, cones = _assembled(model, float(margin), friction, mass, key)
+    blocks = constraint_blocks(model, margin, friction, mass, bounds)
+    A = np.vstack([blk.A for blk in blocks]) if blocks else np.zeros((0, P))
+    b = np.concatenate([blk.b for blk in blocks]) if blocks else np.zeros(0)
+    cones = tuple(clarabel.PSDTriangleConeT(2) if blk.cone == "psd2" else clarabel.NonnegativeConeT(len(blk.b))
+                  for blk in blocks)
+    settings = []
+    for tol in (1e-11, 1e-8):  # tight first (OLS to 1e-8 when nothing binds), looser if ill-conditioned
+        s = clarabel.DefaultSettings()
+        s.verbose = False
+        s.tol_gap_abs = s.tol_gap_rel = s.tol_feas = tol
+        s.max_iter = 500
+        settings.append((tol, s))
     rows, cols = np.triu_indices(P)
     order = np.lexsort((rows, cols))  # column-major: the CSC layout of the upper triangle
-    Qs = sparse.csc_matrix((Q[rows[order], cols[order]], (rows[order], cols[order])), shape=(P, P))
+    rows, cols = rows[order], cols[order]
+    pattern = sparse.csc_matrix((np.ones(rows.size), (rows, cols)), shape=(P, P))
+    lb, ub = (np.full(P, -np.inf), np.full(P, np.inf)) if bounds is None else (np.array(v) for v in bounds)
+    sign = [model.names.index(n) for n in sign_constraints(model).values()] if friction else []
+    return _Structure(sparse.csc_matrix(A), b, cones, tuple(settings), rows, cols, pattern.indices,
+                      pattern.indptr, margin, mass, tuple(a.reshape(P, 4) for a in model.mass_matrix_maps),
+                      np.array(sign, dtype=int), lb, ub)
+
+
+def _solve_clarabel(structure: _Structure, H: np.ndarray, h: np.ndarray, n: int, Dp: np.ndarray,
+                    prior: np.ndarray) -> tuple[np.ndarray | None, str, float]:
+    """min ½ πᵀQπ + cᵀπ s.t. the named blocks, by Clarabel directly: (π or None, status, solver s).
+
+    Q = 2(H + diag(D + ρ))/n and c = −2(h + D π0)/n: the module doc's objective per sample, with the
+    tie-break ρ of `tie_break` when the data leave directions free. Clarabel takes the quadratic term as
+    it is, so no square root of H is needed here (the cvxpy statement uses one).
+    """
+    import clarabel
+    from scipy import sparse
+
+    st = structure
+    P = H.shape[0]
+    Q = 2.0 * (H + np.diag(Dp + tie_break(H))) / max(n, 1)
+    c = -2.0 * (h + Dp * prior) / max(n, 1)
+    # A new matrix on the cached pattern each call (cheap): nothing data-dependent outlives the call.
+    Qs = sparse.csc_matrix((Q[st.q_rows, st.q_cols], st.q_indices, st.q_indptr), shape=(P, P))
     status, total = "not solved", 0.0
-    for tol in (1e-11, 1e-8):  # tight first (OLS to 1e-8 when nothing binds), looser if ill-conditioned
-        settings = clarabel.DefaultSettings()
-        settings.verbose = False
-        settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = tol
-        settings.max_iter = 500
-        solution = clarabel.DefaultSolver(Qs, c, As, b, cones, settings).solve()
+    for _, settings in st.settings:
+        solution = clarabel.DefaultSolver(Qs, c, st.A, st.b, list(st.cones), settings).solve()
         total += solution.solve_time
         status = str(solution.status)
         if status == "Solved":
