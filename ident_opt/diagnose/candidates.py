@@ -140,7 +140,7 @@ def design(
 def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     """Fit one family against one baseline on the training part (θ by variable projection, β by WLS)."""
     rate = 1.0 / ctx.dt
-    stride = max(1, ctx.train.n // SEARCH_ROWS)
+    stride = max(1, -(-ctx.train.n // SEARCH_ROWS))  # ceil: at most SEARCH_ROWS rows
     # A delay needs a uniform grid: stride by whole samples and delay on the strided grid.
     rows = slice(None, None, stride)
     train_sub, rest_sub = ctx.train.tau[rows], ctx.rest[rows]

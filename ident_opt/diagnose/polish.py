@@ -4,13 +4,17 @@ The Stribeck velocity vs enters nonlinearly. The search (`linear.search`) finds 
 scalar refinement, holding the static excess fs at its least-squares value for each vs; IPOPT then moves
 (fs_j, vs_j) jointly, per joint, with every other coefficient held. Only samples where joint j moves are
 used: at rest the Stribeck term is zero (dq = 0) and the rest stretches' projection does not touch them, so
-this is exactly the candidate's objective restricted to (fs_j, vs_j). The polish is kept only if it lowers
-that objective.
+this is exactly the candidate's objective restricted to (fs_j, vs_j). IPOPT sees at most `POLISH_ROWS` of
+those samples (evenly strided: CasADi builds the expression graph per sample, so a 2 kHz trial would
+otherwise cost seconds just to set up); the polish is kept only if it lowers the objective on all of them.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+#: Most samples an IPOPT polish is set up on (per joint for Stribeck).
+POLISH_ROWS = 12000
 
 
 def stribeck(
@@ -41,6 +45,7 @@ def stribeck(
         others[k] = 0.0
         target = (tau[:, j] - offset[:, j] - X[:, j, :] @ others)[moving]
         x0 = [beta[k], theta[f"vs{j + 1}"]]
+        every = max(1, int(moving.sum()) // POLISH_ROWS)
 
         def cost(p, target=target, moving=moving, j=j):
             pred = np.array(f(dq[moving, j][None, :], p[0], p[1])).ravel()
@@ -50,8 +55,8 @@ def stribeck(
             expr,
             ca.vertcat(fs, vs),
             [v],
-            [dq[moving, j]],
-            target,
+            [dq[moving, j][::every]],
+            target[::every],
             x0=x0,
             lb=[0.0, 0.002],
             ub=[np.inf, 1.0],

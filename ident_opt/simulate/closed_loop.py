@@ -1,4 +1,8 @@
-"""The closed loop: a 1 kHz digital controller (zero-order hold) on the truth plant, integrated with RK4.
+"""The closed loop: a digital controller (zero-order hold) on the truth plant, integrated with RK4.
+
+The controller runs at `CONTROL_HZ` = 1 kHz, or at the logging rate when that is faster (`control_hz`), so
+that a 2 kHz log is a genuine 2 kHz trial rather than an interpolated 1 kHz one. The gains are the same at
+every rate (they are set from the bandwidth, not from the tick), and trials logged at ≤ 1 kHz are unchanged.
 
 Controller (what a real drive does, knowing only the datasheet): inverse-dynamics feedforward of the
 nominal model at the reference plus a PD on the encoder angle,
@@ -6,7 +10,7 @@ nominal model at the reference plus a PD on the encoder angle,
 with Kp = J ω_c², Kd = 2 J ω_c (critically damped at `BANDWIDTH_HZ` on the nominal diagonal inertia J).
 The PD acts on the motor-side angle, so it stays collocated (and passive) with an elastic joint.
 
-Integration: the torque is constant over each 1 ms tick; the plant is integrated with classical RK4 over
+Integration: the torque is constant over each tick (1 ms at 1 kHz); the plant is integrated with classical RK4 over
 `substeps` sub-steps sized from the fastest mode of the loop (|λ| h ≤ 0.25, well inside RK4's stability
 limit of 2.8), so stiff springs and high gains stay stable and accurate. The step is one CasADi function,
 run tick after tick by `mapaccum` in chunks (fast: no Python per step).
@@ -30,7 +34,8 @@ from ident_opt.simulate import background
 from ident_opt.simulate.trajectories import Reference
 from ident_opt.simulate.truth import TRUTH_MODEL, Truth, initial_state, plant, state_size
 
-CONTROL_HZ = 1000.0
+CONTROL_HZ = 1000.0  # the controller's rate [Hz] for logging rates up to it
+MAX_CONTROL_HZ = 5000.0  # fastest loop [Hz]: memory grows with the tick count (9 floats per tick)
 BANDWIDTH_HZ = 6.0  # closed-loop bandwidth of the PD [Hz]
 CHUNK = 2000  # ticks per mapaccum call (progress granularity)
 #: Stated tracking limits [rad], max |encoder angle − reference| over a trial: the exact feedforward keeps the
@@ -63,8 +68,14 @@ def controller(robot: Robot, g: Gains) -> ca.Function:
     return ca.Function("controller", [ref, q, dq], [tau])
 
 
-def substeps(truth: Truth, g: Gains, robot: Robot) -> int:
-    """RK4 sub-steps per tick so that the fastest closed-loop rate |λ| satisfies |λ| h ≤ 0.25."""
+def control_hz(rate_hz: float) -> float:
+    """The controller's rate [Hz] for a logging rate [Hz]: 1 kHz, or the logging rate when it is faster."""
+    return max(CONTROL_HZ, float(rate_hz))
+
+
+def substeps(truth: Truth, g: Gains, robot: Robot, control: float = CONTROL_HZ) -> int:
+    """RK4 sub-steps per tick of a `control` [Hz] loop so that the fastest closed-loop rate |λ| satisfies
+    |λ| h ≤ 0.25."""
     p = datasheet_pi(robot, "physical")
     J = np.array([p["a1"] + 2 * p["a2"], p["a3"] + p["ia2"]])
     rates = [math.sqrt(max(g.kp[i] / J[i], 0.0)) + g.kd[i] / J[i] for i in range(2)]
@@ -73,11 +84,11 @@ def substeps(truth: Truth, g: Gains, robot: Robot) -> int:
         rates.append(e.fastest_rate + g.kd[e.index] / e.B)
     # Joint 1's inertia drops to a1 + 2 a2 cos(1.4) at the trajectories' widest q2; halve for margin.
     rates += background.rates(truth.background, 0.5 * np.array([p["a1"] + 2 * p["a2"] * math.cos(1.4), J[1]]))
-    return max(2, math.ceil(max(rates) / CONTROL_HZ / 0.25))
+    return max(2, math.ceil(max(rates) / control / 0.25))
 
 
-def tick(truth: Truth, robot: Robot, g: Gains) -> ca.Function:
-    """One control tick: (x, ref) -> (x_next, out) with out = [τ (2), y (7)] at the tick's start.
+def tick(truth: Truth, robot: Robot, g: Gains, control: float = CONTROL_HZ) -> ca.Function:
+    """One tick of a `control` [Hz] loop: (x, ref) -> (x_next, out) with out = [τ (2), y (7)] at its start.
 
     ref = [q_r, dq_r, ddq_r, d]: the reference and the drift disturbance d [N m] over the tick."""
     nx = state_size(truth)
@@ -92,8 +103,8 @@ def tick(truth: Truth, robot: Robot, g: Gains) -> ca.Function:
     if r is not None:
         tau = tau + r  # the actual motor current: commanded plus ripple
     _, y = f(x, tau, d)  # y's accelerations are those the dynamics produce under the applied torque
-    n = substeps(truth, g, robot)
-    h = 1.0 / CONTROL_HZ / n
+    n = substeps(truth, g, robot, control)
+    h = 1.0 / control / n
     xk = x
     for _ in range(n):
         k1 = f(xk, tau, d)[0]
@@ -104,16 +115,23 @@ def tick(truth: Truth, robot: Robot, g: Gains) -> ca.Function:
     return ca.Function("tick", [x, ref], [xk, ca.vertcat(tau, y)], ["x", "ref"], ["x_next", "out"])
 
 
-def run(truth: Truth, robot: Robot, ref: Reference, progress: bool = True, seed: int = 0) -> np.ndarray:
-    """Simulate the loop over the reference (sampled at CONTROL_HZ); returns out (N, 9): τ, q_enc, dq_enc,
-    ddq_enc, deflection at each tick. `seed` drives the background terms' randomness (drift, initial
-    bristle state), on streams of their own."""
+def run(
+    truth: Truth,
+    robot: Robot,
+    ref: Reference,
+    progress: bool = True,
+    seed: int = 0,
+    control: float = CONTROL_HZ,
+) -> np.ndarray:
+    """Simulate the loop over the reference (sampled at the control rate `control` [Hz]); returns out (N, 9):
+    τ, q_enc, dq_enc, ddq_enc, deflection at each tick. `seed` drives the background terms' randomness
+    (drift, initial bristle state), on streams of their own."""
     g = gains(robot)
-    step = tick(truth, robot, g)
+    step = tick(truth, robot, g, control)
     bg = truth.background
     z0 = background.initial_bristles(bg, np.random.default_rng([seed, 17]))
     x = ca.DM(np.concatenate([initial_state(truth, ref.q[0]), z0]))
-    d = background.drift(bg, len(ref.t), 1.0 / CONTROL_HZ, np.random.default_rng([seed, 13]))
+    d = background.drift(bg, len(ref.t), 1.0 / control, np.random.default_rng([seed, 13]))
     refs = np.hstack([ref.q, ref.dq, ref.ddq, d]).T
     n = refs.shape[1]
     out = np.empty((9, n))

@@ -1,6 +1,7 @@
-"""From the simulated 1 kHz loop to a logged trial, the way a real robot's logger would record it.
+"""From the simulated control loop to a logged trial, the way a real robot's logger would record it.
 
-- logging at `rate_hz` (a divisor of the 1 kHz control rate: 1000, 500, 250, 200, 100 ... Hz);
+- logging at `rate_hz`: a divisor of the 1 kHz control rate (1000, 500, 250, 200, 100 ... Hz), or a faster
+  rate up to 5 kHz, at which the controller then runs too (one logged sample per tick, see `closed_loop`);
 - encoders quantised to `ENCODER_COUNTS` counts per motor revolution (joint-side step 2π/(counts·N));
 - torque (or current) noise: white Gaussian, σ per joint as measured on the real exp1 at rest;
 - a torque-channel delay d: the logged torque at t is the applied torque at t − d (linear interpolation);
@@ -17,7 +18,7 @@ import pandas as pd
 from ident_opt.data import estimate_derivatives
 from ident_opt.errors import InputError
 from ident_opt.problem import DataSpec, Robot
-from ident_opt.simulate.closed_loop import CONTROL_HZ
+from ident_opt.simulate.closed_loop import CONTROL_HZ, MAX_CONTROL_HZ, control_hz
 
 ENCODER_COUNTS = 4096  # counts per motor revolution (a 1024-line encoder, quadrature)
 TORQUE_NOISE = (
@@ -28,12 +29,14 @@ DERIVATIVE_CUTOFF_HZ = DataSpec.derivative_cutoff_hz  # the data loader's defaul
 
 
 def decimation(rate_hz: float) -> int:
-    """Control ticks per logged sample; the rate must divide the 1 kHz control rate."""
-    ratio = CONTROL_HZ / rate_hz if np.isfinite(rate_hz) and rate_hz > 0 else np.nan
-    if not (np.isfinite(ratio) and rate_hz <= CONTROL_HZ and abs(ratio - round(ratio)) <= 1e-9):
+    """Control ticks per logged sample: the rate must divide the 1 kHz control rate, or be faster than it
+    (up to `MAX_CONTROL_HZ`), in which case the loop runs at the logging rate and every tick is logged."""
+    ok = np.isfinite(rate_hz) and 0 < rate_hz <= MAX_CONTROL_HZ
+    ratio = control_hz(rate_hz) / rate_hz if ok else np.nan
+    if not (np.isfinite(ratio) and abs(ratio - round(ratio)) <= 1e-9):
         raise InputError(
             f"rate {rate_hz:g} Hz: the logging rate must divide the {CONTROL_HZ:g} Hz control rate "
-            "(e.g. 1000, 500, 250, 200, 100, 50 Hz)"
+            f"(e.g. 1000, 500, 250, 200, 100, 50 Hz) or be faster, up to {MAX_CONTROL_HZ:g} Hz"
         )
     return round(ratio)
 
@@ -54,7 +57,7 @@ def log(
     """The logged trial as a data-format frame, from the per-tick loop output (N, 9) (see closed_loop.run)."""
     every = decimation(rate_hz)
     n_ticks = out.shape[0]
-    t_tick = np.arange(n_ticks) / CONTROL_HZ
+    t_tick = np.arange(n_ticks) / control_hz(rate_hz)
     idx = np.arange(0, n_ticks, every)
     t = t_tick[idx]
     tau_tick, q_enc, dq_enc, ddq_enc, deflection = (
