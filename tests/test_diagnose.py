@@ -17,6 +17,7 @@ import pytest
 from ident_opt.diagnose import CAUSES, diagnose, hidden
 
 DURATION = 60.0
+FAST_DURATION = 30.0  # fast-sampled trials: 5-20x the samples per second, so half the length keeps the signal
 SEEDS = (10, 11)
 TRAJECTORY = {"stribeck": "fourier"}
 
@@ -27,7 +28,8 @@ def _trial(robot, cause: str, seed: int, **kwargs):
     rng = np.random.default_rng([seed, CAUSES.index(cause)])
     effects = {} if cause == "none" else {cause: hidden.draw(cause, rng, robot)}
     kwargs.setdefault("trajectory", TRAJECTORY.get(cause, "tud01"))
-    return simulate_trial(robot, duration=DURATION, seed=seed, effects=effects, progress=False, **kwargs)
+    kwargs.setdefault("duration", DURATION)
+    return simulate_trial(robot, seed=seed, effects=effects, progress=False, **kwargs)
 
 
 def _check_found(d, cause: str, truth: dict) -> None:
@@ -84,10 +86,10 @@ def test_robust_to_how_the_data_arrive(physical_problem, tmp_path, how):
         trial.frame.to_csv(tmp_path / "t.csv", index=False)
         ds = load_dataset(tmp_path / "t.csv", spec, robot)
     elif how == "500hz":
-        trial = _trial(robot, "delay", seed, rate_hz=500.0)
+        trial = _trial(robot, "delay", seed, rate_hz=500.0, duration=FAST_DURATION)
         ds = trial.dataset()
     else:  # 2 kHz: a genuine 2 kHz trial (the simulator's loop runs at the logging rate), as q and τ only
-        trial = _trial(robot, "delay", seed, rate_hz=2000.0)
+        trial = _trial(robot, "delay", seed, rate_hz=2000.0, duration=FAST_DURATION)
         assert trial.truth["controller"]["control_hz"] == 2000.0
         ds = load_dataset(_write_without_derivatives(trial, tmp_path / "t.csv"), spec, robot)
         assert abs(ds.rate_hz - 2000.0) < 1e-6 and ds.derivatives.startswith("estimated")
@@ -138,6 +140,10 @@ def test_cli_writes_the_contract_json_and_report(physical_problem, tmp_path):
     scores = [c["score"] for c in payload["candidates"]]
     assert scores == sorted(scores, reverse=True)
     assert all(set(c) >= {"cause", "score", "nmse_after"} for c in payload["candidates"])
+    # Extra keys: the IPOPT polish of the searched mode / offsets, with the estimates before and after it.
+    for c in payload["candidates"]:
+        if c["cause"] in ("elasticity", "joint_offset"):
+            assert set(c["polish"]) >= {"before", "after", "kept", "status", "cost_before"}
     report = (out / "diagnosis.md").read_text()
     assert "payload" in report and "held-out nMSE" in report
     assert (out / "residual_before_after.png").stat().st_size > 0 and (

@@ -150,3 +150,71 @@ def test_forward_simulation_error_separates_right_from_wrong_parameters(physical
     good = forward_error(NOMINAL, pi, ds, 0.001, window_s=0.3)
     bad = forward_error(NOMINAL, wrong, ds, 0.001, window_s=0.3)
     assert good[0] < 0.2 * bad[0]
+
+
+def test_trapezoid_step_is_the_deflection_filter_exactly():
+    """The NLP's recursion (trapezoidal rule, pre-warped ω) is the bilinear filter the search uses, sample
+    for sample, from the filter's zero-history initial state."""
+    import math
+
+    from ident_opt.diagnose.elastic_nlp import trapezoid_step
+
+    dt, f, zeta = 0.01, 4.3, 0.03
+    u = np.random.default_rng(1).normal(size=600)
+    step = trapezoid_step(dt, math.tan)
+    a, w = dt / 2, 2 / dt * math.tan(math.pi * f * dt)
+    det = 1 + zeta * w * dt + a * w * w * dt / 2
+    e, ed = a * (-a * u[0]) / det, -a * u[0] / det
+    out = []
+    for k in range(len(u) - 1):
+        e, ed, y = step(e, ed, u[k], u[k + 1], f, zeta)
+        out.append(y)
+    expected = signals.deflection_acceleration(u, f, zeta, dt)[:-1]
+    np.testing.assert_allclose(out, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+
+
+def _elastic_problem(n=3000, dt=0.01, f=5.0, zeta=0.04, seed=2):
+    """Synthetic elastic-candidate data: a rigid column plus s·P·ë of a known mode, rest stretches included."""
+    rng = np.random.default_rng(seed)
+    u = np.convolve(rng.normal(size=n), np.ones(15) / 15, mode="same") * 20  # smooth drive [rad/s²]
+    u[1000:1200] = 0.0
+    P = np.column_stack([np.full(n, 0.05), 0.02 + 0.01 * np.cos(np.arange(n) * dt)])
+    X_rigid = rng.normal(size=(n, 2, 2))
+    beta = np.array([0.7, -0.3, 1.8])  # rigid coefficients, then the scale s
+    edd = signals.deflection_acceleration(u, f, zeta, dt)
+    target = X_rigid @ beta[:2] + beta[2] * P * edd[:, None]
+    dq = np.ones((n, 2))
+    dq[1050:1200, 0] = 0.0  # joint 1 rests for 1.5 s: compared about its mean there
+    return u, P, target, X_rigid, signals.rest_runs(dq), beta, dt
+
+
+def test_elastic_polish_recovers_the_mode_from_a_wrong_start():
+    from ident_opt.diagnose.elastic_nlp import polish
+
+    u, P, target, X_rigid, labels, beta, dt = _elastic_problem()
+    start = {"frequency_hz": 5.3, "damping": 0.07}  # 6 % and 75 % off: where a coarse grid could leave it
+    bounds = {"frequency_hz": (1.5, 12.0), "damping": (0.005, 0.3)}
+    theta, info = polish(u, P, target, X_rigid, labels, np.ones(2), dt, start, beta * 1.2, bounds)
+    assert theta is not None, info
+    assert theta["frequency_hz"] == pytest.approx(5.0, rel=1e-4)
+    assert theta["damping"] == pytest.approx(0.04, rel=1e-3)
+    assert info["max_gap"] < 1e-6  # the shooting segments join up
+
+
+def test_offset_polish_recovers_both_offsets_jointly_with_pi(physical_problem):
+    from ident_opt.datasheet import datasheet_pi
+    from ident_opt.diagnose import polish
+    from ident_opt.diagnose.candidates import NOMINAL
+
+    rng = np.random.default_rng(3)
+    n = 2000
+    q = np.column_stack([1.5 + np.sin(np.linspace(0, 9, n)), 0.8 * np.sin(np.linspace(0, 13, n))])
+    dq, ddq = rng.normal(size=(n, 2)), rng.normal(size=(n, 2))
+    pi = NOMINAL.vector(datasheet_pi(physical_problem.robot, "physical"))
+    delta = np.array([0.031, -0.047])
+    tau = NOMINAL.predict(pi, q + delta, dq, ddq)
+    labels = signals.rest_runs(np.ones((n, 2)))
+    start = {"delta1": 0.02, "delta2": -0.03}
+    theta, info = polish.offsets(NOMINAL, q, dq, ddq, tau, labels, np.ones(2), None, pi * 0.9, start, (-0.1, 0.1))
+    assert theta is not None, info
+    np.testing.assert_allclose([theta["delta1"], theta["delta2"]], delta, atol=1e-6)

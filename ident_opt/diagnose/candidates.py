@@ -21,6 +21,10 @@ variable projection. It is fitted against one or both nominal models:
 
 ë_j is the deflection acceleration of an elastic joint j driven by the measured motor-side acceleration
 (`signals.deflection_acceleration`): an elastic-joint model driven by the logged motor-side angle.
+
+After the search, IPOPT polishes θ (`polish.py`): Stribeck (fs, vs) per joint, the elastic mode (f, ζ)
+jointly with every β by multiple shooting (`elastic_nlp.py`), the offsets (δ1, δ2) jointly with π; the
+estimates before and after land in the candidate's `detail["polish"]` (the JSON's extra keys).
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ import numpy as np
 
 from ident_opt.data import Dataset
 from ident_opt.datasheet import datasheet_pi
-from ident_opt.diagnose import linear, polish, signals
+from ident_opt.diagnose import elastic_nlp, linear, polish, signals
 from ident_opt.problem import Robot
 from ident_opt.robot import ArmModel
 
@@ -91,6 +95,7 @@ class Family:
     baselines: tuple[str, ...] = ("datasheet", "rigid_fit")
     nonnegative: tuple[str, ...] = ()  # coefficients with a physical sign (held at 0 rather than negative)
     estimate: Callable[[dict, dict, Context], tuple[dict, dict]] = lambda p, se, ctx: ({}, {})
+    joint: int = 0  # the elastic joint (elasticity only)
 
 
 _CACHE: dict = {}
@@ -161,6 +166,28 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     theta = linear.search(cost, axes) if axes else {}
     o, X, names = design(family, ctx.train, theta, baseline, ctx)
     ls = solve(o, X, names, ctx.train.tau, ctx.rest, True)
+    proposal, nlp, tr = None, None, ctx.train
+    bounds = {a.name: (a.low, a.high) for a in axes}
+    if family.cause == "elasticity":  # (f, ζ) with every β by IPOPT, multiple shooting (elastic_nlp.py)
+        u, P = elastic_drive(family.joint, tr, ctx)
+        proposal, nlp = elastic_nlp.polish(
+            u, P, tr.tau - o, X[:, :, :-1], ctx.rest, ctx.weights, ctx.dt, theta, ls.beta, bounds
+        )
+    elif family.cause == "joint_offset":  # (δ1, δ2) jointly, with π when it is refitted
+        held = NOMINAL.vector(ctx.datasheet) if baseline == "datasheet" else None
+        proposal, nlp = polish.offsets(
+            NOMINAL, tr.q, tr.dq, tr.ddq, tr.tau, ctx.rest, ctx.weights, held, ls.beta, theta, bounds["delta1"]
+        )
+    if nlp is not None:
+        searched = {**dict(zip(names, map(float, ls.beta))), **theta}
+        nlp["before"] = family.estimate(searched, dict.fromkeys(searched, 0.0), ctx)
+        nlp["cost_before"], nlp["kept"] = ls.cost, False
+        if proposal is not None:
+            o2, X2, _ = design(family, ctx.train, proposal, baseline, ctx)
+            ls2 = solve(o2, X2, names, ctx.train.tau, ctx.rest, True)
+            nlp["cost_after"] = ls2.cost
+            if ls2.cost < ls.cost:  # β re-solved exactly at the polished θ; kept only if it fits better
+                theta, o, X, ls, nlp["kept"] = proposal, o2, X2, ls2, True
     beta, polished = ls.beta.copy(), []
     if family.cause == "stribeck":  # the nonlinear vs: IPOPT polish from the search's start
         beta, theta, polished = polish.stribeck(
@@ -172,6 +199,12 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     estimate, detail = family.estimate(params, se, ctx)
     if polished:
         detail["ipopt"] = polished
+    if nlp is not None:
+        nlp["after"] = family.estimate(params, se, ctx)
+        for key in ("before", "after"):  # (estimate, detail) -> one flat dict: f, ζ, k, c, inertia
+            est, det = nlp[key]
+            nlp[key] = {**est, **{k: v for k, v in det.items() if k != "se"}}
+        detail["polish"] = nlp
     nominal_free = len(NOMINAL.names) if baseline == "rigid_fit" else 0
     n_added = len(names) - nominal_free + len(theta)
 
@@ -227,24 +260,30 @@ def _stribeck_estimate(p: dict, se: dict, ctx: Context) -> tuple[dict, dict]:
     return {"static": static, "velocity": velocity}, {"se_static": [se["fs1"], se["fs2"]]}
 
 
+def elastic_drive(joint: int, ds: Dataset, ctx: Context) -> tuple[np.ndarray, np.ndarray]:
+    """(u (N,) [rad/s²], P (N, 2) [kg m²]): the drive of elastic joint j's link and its inertia pattern.
+
+    The link behind an elastic joint j is driven by its motor's acceleration and, through the off-diagonal
+    inertia, by the other joint's: u = θ̈_j + (M_jo(q2) / M_jj,link(q2)) q̈_o, with the inertias from the
+    datasheet (link side: without joint j's armature). The spring carries link j's inertia on its own row,
+    m_link·ë; the other row feels the coupling M_oj·ë. One free scale s on that physical pattern: the pattern
+    (which row rings how much) is what tells an elastic joint 1 from an elastic joint 2, so it is not free."""
+    p, arm = ctx.datasheet, ctx.armature
+    c2 = np.cos(ds.q[:, 1])
+    m_cross = p["a3"] + p["a2"] * c2
+    m_link = (p["a1"] - arm[0] + 2 * p["a2"] * c2) if joint == 1 else np.full(ds.n, p["a3"])
+    other = 2 - joint
+    u = ds.ddq[:, joint - 1] + m_cross / m_link * ds.ddq[:, other]
+    P = np.zeros((ds.n, 2))
+    P[:, joint - 1], P[:, other] = m_link, m_cross
+    return u, P
+
+
 def _elastic_columns(joint: int) -> Callable:
     def columns(ds: Dataset, theta: dict, dt: float, ctx: Context) -> tuple[np.ndarray, list[str]]:
-        # The link behind an elastic joint j is driven by its motor's acceleration and, through the
-        # off-diagonal inertia, by the other joint's: u = θ̈_j + (M_jo(q2) / M_jj,link(q2)) q̈_o, with the
-        # inertias from the datasheet (link side: without joint j's armature).
-        p, arm = ctx.datasheet, ctx.armature
-        c2 = np.cos(ds.q[:, 1])
-        m_cross = p["a3"] + p["a2"] * c2
-        m_link = (p["a1"] - arm[0] + 2 * p["a2"] * c2) if joint == 1 else np.full(ds.n, p["a3"])
-        other = 2 - joint
-        u = ds.ddq[:, joint - 1] + m_cross / m_link * ds.ddq[:, other]
+        u, P = elastic_drive(joint, ds, ctx)
         e = signals.deflection_acceleration(u, theta["frequency_hz"], theta["damping"], dt)
-        # The spring carries link j's inertia on its own row, m_link·ë; the other row feels the coupling
-        # M_oj·ë. One free scale s on that physical pattern: the pattern (which row rings how much) is what
-        # tells an elastic joint 1 from an elastic joint 2, so it is not left free.
-        X = np.zeros((ds.n, 2, 1))
-        X[:, joint - 1, 0], X[:, other, 0] = m_link * e, m_cross * e
-        return X, ["scale"]
+        return (P * e[:, None])[:, :, None], ["scale"]
 
     return columns
 
@@ -336,6 +375,7 @@ def families(robot: Robot) -> list[Family]:
                     linear.Axis("damping", 0.005, 0.3, 6, True),
                 ],
                 estimate=_elastic_estimate(joint),
+                joint=joint,
             )
         )
     return out

@@ -266,6 +266,8 @@ def diagnose(
             "resolved": scoring.resolved(c.cause, c.estimate, dt),
             "clears_margin": scoring.resolved(c.cause, c.estimate, dt)
             and scoring.clears_margin(nominal_mse[c.baseline], after, s, np.var(test.tau, axis=0)),
+            # The IPOPT polish (elasticity, joint offsets): estimates before/after it, whether it was kept.
+            **({"polish": c.detail["polish"]} if "polish" in c.detail else {}),
         }
         for c, s, after, pred in ranked
     ]

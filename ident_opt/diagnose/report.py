@@ -71,8 +71,8 @@ def cause_sentence(d: Diagnosis) -> str:
             f"k = {_v(det.get('stiffness', float('nan')), 'N m/rad')} "
             f"(link inertia {_v(det.get('inertia', float('nan')), 'kg m²')}, damping ratio "
             f"{_v(det.get('damping_ratio', float('nan')))}) driven by the measured motor-side angle explains "
-            "it; "
-            f"{gain}"
+            "it"
+            f"{_polish_note(d, 'frequency_hz', 'Hz')}; {gain}"
         )
     if d.cause == "delay":
         return (
@@ -82,9 +82,20 @@ def cause_sentence(d: Diagnosis) -> str:
     if d.cause == "joint_offset":
         return (
             f"Gravity looks rotated (pose-correlated share of the residual {_pair(ev['pose_r2'])}): encoder "
-            f"zero offsets δ = {_pair(e['offset'], 'rad')} explain it; {gain}"
+            f"zero offsets δ = {_pair(e['offset'], 'rad')} explain it{_polish_note(d, 'offset', 'rad')}; {gain}"
         )
     return gain
+
+
+def _polish_note(d: Diagnosis, key: str, unit: str) -> str:
+    """' (IPOPT polish of the grid search's answer: a → b unit)', or '' when there was no polish."""
+    nlp = d.named.detail.get("polish") if d.named else None
+    if not nlp:
+        return ""
+    show = _pair if isinstance(nlp["before"][key], list | tuple) else _v
+    verdict = "kept" if nlp["kept"] else "not kept: it did not lower the training objective"
+    before, after = show(nlp["before"][key]), show(nlp["after"][key], unit)
+    return f" (IPOPT polish of the grid search's {key}: {before} → {after}, {verdict})"
 
 
 def summary(d: Diagnosis) -> str:
