@@ -48,8 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--duration", type=float, metavar="S", help="trial length in seconds (default 80)")
     parser.add_argument(
-        "--rate", type=float, metavar="HZ", help="logging rate: a divisor of the 1 kHz control rate, or faster up to 5 kHz (the loop then runs at "
-             "the logging rate); default 100"
+        "--rate", type=float, metavar="HZ",
+        help="logging rate: a divisor of the 1 kHz control rate, or faster up to 5 kHz (the loop then runs at "
+             "the logging rate); default 100",
     )
     parser.add_argument(
         "--trajectory",
