@@ -21,17 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt.diagnose import CAUSES
+
 ROOT = Path(__file__).resolve().parents[1]
-CAUSES = (
-    "none",
-    "armature",
-    "asymmetric_coulomb",
-    "stribeck",
-    "elasticity",
-    "payload",
-    "delay",
-    "joint_offset",
-)
 
 
 def one(job: tuple[str, int, float, str]) -> dict:
