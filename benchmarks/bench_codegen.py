@@ -15,13 +15,14 @@ import argparse
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from timing import best_time  # noqa: E402
 
 from ident_opt import codegen  # noqa: E402
 from ident_opt.commands.common import write_json  # noqa: E402
@@ -34,16 +35,6 @@ from ident_opt.robot import RIGID  # noqa: E402
 
 TIMING_LOOP = ROOT / "benchmarks" / "c" / "bench_codegen.c"
 TARGET_NS = {"tau_hat": 100.0, "tau_hat_gmr@10": 2000.0}
-
-
-def best_time(fn, repeats: int = 5) -> float:
-    """Fastest of `repeats` runs of fn() [s]: the least disturbed by other processes."""
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def python_costs(pi: np.ndarray, gmr: GMR, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> dict[str, float]:

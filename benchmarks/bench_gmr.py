@@ -9,9 +9,8 @@ Targets: ≥ 2× the `gmr` package, and ≥ 1e6 samples/s at K = 10. Run: .venv/
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
+from timing import best_time
 
 from ident_opt.gmr import GMR
 
@@ -30,15 +29,6 @@ def _problem(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     return X, R + 0.05 * rng.normal(size=R.shape)
 
 
-def _best_time(fn, repeats: int = 5) -> float:
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
-
-
 def main() -> int:
     from gmr import GMM
 
@@ -53,8 +43,8 @@ def main() -> int:
         idx = np.arange(ours.n_inputs)
         a, b = ours.predict_mean(X), ref.predict(idx, X)
         diff = float(np.max(np.abs(a - b)) / np.max(np.abs(b)))
-        t_ours = _best_time(lambda ours=ours: ours.predict_mean(X))
-        t_ref = _best_time(lambda ref=ref, idx=idx: ref.predict(idx, X), repeats=2)
+        t_ours = best_time(lambda ours=ours: ours.predict_mean(X))
+        t_ref = best_time(lambda ref=ref, idx=idx: ref.predict(idx, X), repeats=2)
         rate_ours, rate_ref = len(X) / t_ours, len(X) / t_ref
         ratio = rate_ours / rate_ref
         print(f"{K:>3} {rate_ours:>22.3e} {rate_ref:>16.3e} {ratio:>6.1f} {diff:>9.1e}")

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 from pathlib import Path
+
+from timing import best_time
 
 from ident_opt.problem import load_problem
 from ident_opt.simulate import CATALOGUE, simulate_trial
@@ -21,14 +22,9 @@ from ident_opt.simulate.effects import BACKGROUND
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def best_time(robot, effects, duration: float, repeat: int) -> float:
+def simulation_time(robot, effects, duration: float, repeat: int) -> float:
     """Best wall time [s] of `repeat` simulations of the default trial with `effects`."""
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        simulate_trial(robot, duration=duration, effects=effects, progress=False)
-        times.append(time.perf_counter() - start)
-    return min(times)
+    return best_time(lambda: simulate_trial(robot, duration=duration, effects=effects, progress=False), repeat)
 
 
 def main() -> None:
@@ -46,7 +42,7 @@ def main() -> None:
     print(f"simulating {args.duration:g} s at 1 kHz control, 100 Hz logging; cores available: {os.cpu_count()}")
     print(f"{'case':28s} {'seconds':>8s} {'x real time':>12s}")
     for name, effects in cases.items():
-        t = best_time(sim.robot, effects, args.duration, args.repeat)
+        t = simulation_time(sim.robot, effects, args.duration, args.repeat)
         print(f"{name:28s} {t:8.3f} {args.duration / t:12.1f}")
     print("target: >= 5x real time")
 
