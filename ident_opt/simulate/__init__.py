@@ -7,8 +7,18 @@ fourier), `truth` (the true plant), `background` (stiction, drift, ripple: reali
 `cache` (`problem_trials` for a problem's `[simulate]` section), `calibration` (default vs the real exp1).
 """
 
-from ident_opt.simulate.cache import problem_trials
+from importlib import import_module
+
 from ident_opt.simulate.effects import CATALOGUE, parse_effect
-from ident_opt.simulate.trial import SimTrial, simulate_trial, truth_path
+
+# The integrator side (CasADi, SciPy) is imported on first use only: the CLI's --help and problem-file
+# loading need just the catalogue in `effects`, and must not pay for the whole simulator.
+_LAZY = {"SimTrial": "trial", "simulate_trial": "trial", "truth_path": "trial", "problem_trials": "cache"}
 
 __all__ = ["CATALOGUE", "SimTrial", "parse_effect", "problem_trials", "simulate_trial", "truth_path"]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(import_module(f"ident_opt.simulate.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
