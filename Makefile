@@ -28,8 +28,10 @@ identify: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
 
+## Style: ruff's lint rules (with complexity limits, see pyproject.toml) and its formatter, checked not applied.
 lint: $(STAMP)
 	$(BIN)/ruff check ident_opt tests benchmarks
+	$(BIN)/ruff format --check ident_opt tests benchmarks
 
 ## Generated C for the default problem: C sources, shared library, parameters.json, README.
 codegen: $(STAMP)

@@ -45,10 +45,12 @@ def python_costs(pi: np.ndarray, gmr: GMR, q: np.ndarray, dq: np.ndarray, ddq: n
     return {
         "tau_hat per sample (vectorised)": best_time(lambda: RIGID.predict(pi, q, dq, ddq)) / n * 1e9,
         "tau_hat per call (1 sample)": best_time(lambda: [RIGID.predict(pi, *one) for _ in range(single)])
-        / single * 1e9,
+        / single
+        * 1e9,
         "gmr mean per sample (vectorised)": best_time(lambda: gmr.predict_mean(X)) / n * 1e9,
         "gmr mean per call (1 sample)": best_time(lambda: [gmr.predict_mean(X[:1]) for _ in range(single)])
-        / single * 1e9,
+        / single
+        * 1e9,
     }
 
 
@@ -58,8 +60,23 @@ def c_costs(pi: np.ndarray, gmr: GMR, compiler: list[str], calls: int) -> dict[s
         out = Path(tmp)
         source, _ = codegen.generate_sources(codegen.build_functions(RIGID, pi, gmr), out)
         exe = out / "bench"
-        cmd = [*compiler, "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{out}", str(TIMING_LOOP),
-               "-x", "c", "-Wno-unused-parameter", str(source), "-o", str(exe), "-lm"]
+        cmd = [
+            *compiler,
+            "-O2",
+            "-std=c99",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            f"-I{out}",
+            str(TIMING_LOOP),
+            "-x",
+            "c",
+            "-Wno-unused-parameter",
+            str(source),
+            "-o",
+            str(exe),
+            "-lm",
+        ]
         subprocess.run(cmd, check=True)
         done = subprocess.run([str(exe), str(calls)], check=True, capture_output=True, text=True)
     return {line.split()[0]: float(line.split()[1]) for line in done.stdout.splitlines()}
@@ -79,8 +96,9 @@ def main(argv: list[str] | None = None) -> int:
     pi = fit_constrained(Stats.from_data(RIGID, q, dq, ddq, tau), RIGID).pi
     X, R = np.hstack([q, dq, ddq]), tau - RIGID.predict(pi, q, dq, ddq)
     compiler = codegen.find_compiler()
-    print(f"{trial.source}: {trial.n} samples; compiler {' '.join(compiler)}; "
-          f"{args.calls} C calls x 7 repetitions (best)")
+    print(
+        f"{trial.source}: {trial.n} samples; compiler {' '.join(compiler)}; {args.calls} C calls x 7 repetitions (best)"
+    )
 
     rows = []
     for k in args.components:
@@ -89,22 +107,30 @@ def main(argv: list[str] | None = None) -> int:
         py = python_costs(pi, gmr, q, dq, ddq)
         rows.append({"K": k, "c_ns": c, "python_ns": py})
         print(f"\nK = {k}")
-        print(f"  C      tau_hat {c['tau_hat']:9.1f} ns/call   tau_hat_gmr {c['tau_hat_gmr']:9.1f} ns/call   "
-              f"ddq_hat {c['ddq_hat']:7.1f} ns/call")
+        print(
+            f"  C      tau_hat {c['tau_hat']:9.1f} ns/call   tau_hat_gmr {c['tau_hat_gmr']:9.1f} ns/call   "
+            f"ddq_hat {c['ddq_hat']:7.1f} ns/call"
+        )
         for name, ns in py.items():
             print(f"  Python {name:34s} {ns:12.1f} ns")
         py_gmr = py["tau_hat per call (1 sample)"] + py["gmr mean per call (1 sample)"]
-        print(f"  ratio  Python per call / C: tau_hat {py['tau_hat per call (1 sample)'] / c['tau_hat']:.0f}x, "
-              f"tau_hat_gmr {py_gmr / c['tau_hat_gmr']:.0f}x")
+        print(
+            f"  ratio  Python per call / C: tau_hat {py['tau_hat per call (1 sample)'] / c['tau_hat']:.0f}x, "
+            f"tau_hat_gmr {py_gmr / c['tau_hat_gmr']:.0f}x"
+        )
 
     tau_ns = min(r["c_ns"]["tau_hat"] for r in rows)
     gmr10 = [r["c_ns"]["tau_hat_gmr"] for r in rows if r["K"] == 10]
-    print(f"\ntargets: tau_hat {tau_ns:.1f} ns (<= {TARGET_NS['tau_hat']:.0f}: "
-          f"{'met' if tau_ns <= TARGET_NS['tau_hat'] else 'NOT met'})", end="")
+    print(
+        f"\ntargets: tau_hat {tau_ns:.1f} ns (<= {TARGET_NS['tau_hat']:.0f}: "
+        f"{'met' if tau_ns <= TARGET_NS['tau_hat'] else 'NOT met'})",
+        end="",
+    )
     if gmr10:
         ok = gmr10[0] <= TARGET_NS["tau_hat_gmr@10"]
-        print(f"; tau_hat_gmr K=10 {gmr10[0]:.1f} ns (<= {TARGET_NS['tau_hat_gmr@10']:.0f}: "
-              f"{'met' if ok else 'NOT met'})")
+        print(
+            f"; tau_hat_gmr K=10 {gmr10[0]:.1f} ns (<= {TARGET_NS['tau_hat_gmr@10']:.0f}: {'met' if ok else 'NOT met'})"
+        )
     else:
         print()
     write_json(args.json, {"samples": trial.n, "calls": args.calls, "rows": rows, "targets_ns": TARGET_NS})

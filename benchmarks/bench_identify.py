@@ -95,14 +95,19 @@ def exp1_stats(model: ArmModel) -> Stats | None:
 def solve_table(cases: dict[str, Stats], model: ArmModel, repeats: int, interleaved: bool) -> None:
     """Part 2: per statistics, constrained vs OLS (lean solves and full fits) and Clarabel's own time."""
     print(f"   {'interleaved' if interleaved else 'back to back'}, median of {repeats} calls each")
-    print(f"{'statistics':>12} {'active constraints':>30} | {'solve_ols':>9} {'solve_con':>9} {'ratio':>6} | "
-          f"{'Clarabel':>8} {'ratio':>6} | {'fit_ols':>8} {'fit_con':>8} {'ratio':>6} | max rel Δπ")
+    print(
+        f"{'statistics':>12} {'active constraints':>30} | {'solve_ols':>9} {'solve_con':>9} {'ratio':>6} | "
+        f"{'Clarabel':>8} {'ratio':>6} | {'fit_ols':>8} {'fit_con':>8} {'ratio':>6} | max rel Δπ"
+    )
     worst = 0.0
     for label, st in cases.items():
         fits: list = []
-        fns = {"ols": lambda st=st: solve_ols(st), "con": lambda st=st: solve_constrained(st, model),
-               "fit_ols": lambda st=st: fit_ols(st, model),
-               "fit_con": lambda st=st, fits=fits: fits.append(fit_constrained(st, model))}
+        fns = {
+            "ols": lambda st=st: solve_ols(st),
+            "con": lambda st=st: solve_constrained(st, model),
+            "fit_ols": lambda st=st: fit_ols(st, model),
+            "fit_con": lambda st=st, fits=fits: fits.append(fit_constrained(st, model)),
+        }
         for fn in fns.values():
             fn()  # warm-up: imports, the cached constraint structure
         t = medians(fns, repeats, interleaved)
@@ -111,12 +116,17 @@ def solve_table(cases: dict[str, Stats], model: ArmModel, repeats: int, interlea
         assert not fit_ols(st, model).consistent and fit.active, "the benchmark must exercise the conic solve"
         rel = np.max(np.abs(solve_constrained(st, model) - fit.pi) / np.abs(fit.pi))  # one implementation
         worst = max(worst, t["con"] / t["ols"])
-        print(f"{label:>12} {','.join(a.replace('mass_pd_', '') for a in fit.active):>30} | "
-              f"{1e3 * t['ols']:6.3f} ms {1e3 * t['con']:6.3f} ms {t['con'] / t['ols']:5.1f}x | "
-              f"{1e3 * clarabel_s:5.3f} ms {clarabel_s / t['ols']:5.1f}x | {1e3 * t['fit_ols']:5.3f} ms "
-              f"{1e3 * t['fit_con']:5.3f} ms {t['fit_con'] / t['fit_ols']:5.1f}x | {rel:.1e}")
-    print(f"   target (issue 4) solve_constrained < 10x solve_ols and < 50 ms: worst ratio {worst:.1f}x -> "
-          + ("met" if worst < 10 else "NOT met") + ("" if interleaved else " (back to back)"))
+        print(
+            f"{label:>12} {','.join(a.replace('mass_pd_', '') for a in fit.active):>30} | "
+            f"{1e3 * t['ols']:6.3f} ms {1e3 * t['con']:6.3f} ms {t['con'] / t['ols']:5.1f}x | "
+            f"{1e3 * clarabel_s:5.3f} ms {clarabel_s / t['ols']:5.1f}x | {1e3 * t['fit_ols']:5.3f} ms "
+            f"{1e3 * t['fit_con']:5.3f} ms {t['fit_con'] / t['fit_ols']:5.1f}x | {rel:.1e}"
+        )
+    print(
+        f"   target (issue 4) solve_constrained < 10x solve_ols and < 50 ms: worst ratio {worst:.1f}x -> "
+        + ("met" if worst < 10 else "NOT met")
+        + ("" if interleaved else " (back to back)")
+    )
 
 
 def main() -> None:
@@ -129,8 +139,10 @@ def main() -> None:
     P = model.n_params
 
     print("1) statistics pass + OLS vs full regressor + numpy.linalg.lstsq")
-    print(f"{'N':>9} | {'stats s':>8} {'Msamp/s':>8} {'peak MB':>8} | {'lstsq s':>8} {'Msamp/s':>8} {'peak MB':>8} | "
-          f"{'speed ratio':>11} {'mem ratio':>9} | max |Δπ|")
+    print(
+        f"{'N':>9} | {'stats s':>8} {'Msamp/s':>8} {'peak MB':>8} | {'lstsq s':>8} {'Msamp/s':>8} {'peak MB':>8} | "
+        f"{'speed ratio':>11} {'mem ratio':>9} | max |Δπ|"
+    )
     solve_cases: dict[str, Stats] = {}
     for n in (int(s) for s in args.sizes):
         q, dq, ddq, tau = trial(n)
@@ -148,8 +160,10 @@ def main() -> None:
         by_stats()  # warm-up (imports, CasADi-free NumPy paths)
         ts, ms, (st, pi_s) = measure(by_stats)
         tl, ml, pi_l = measure(by_lstsq)
-        print(f"{n:>9} | {ts:8.3f} {n / ts / 1e6:8.2f} {ms:8.1f} | {tl:8.3f} {n / tl / 1e6:8.2f} {ml:8.1f} | "
-              f"{tl / ts:10.2f}x {ml / ms:8.1f}x | {np.max(np.abs(pi_s - pi_l)):.1e}")
+        print(
+            f"{n:>9} | {ts:8.3f} {n / ts / 1e6:8.2f} {ms:8.1f} | {tl:8.3f} {n / tl / 1e6:8.2f} {ml:8.1f} | "
+            f"{tl / ts:10.2f}x {ml / ms:8.1f}x | {np.max(np.abs(pi_s - pi_l)):.1e}"
+        )
         solve_cases[f"N={n:.0e}"] = st
 
     print("\n2) solve from the same statistics, constrained (active constraints: OLS infeasible) vs OLS")

@@ -57,8 +57,9 @@ def ours(Y, tau, N: int, steps: int, repeats: int, estimator_factory) -> tuple[f
     """Best-of-repeats seconds per `add`, with the θ after each step of the last repeat."""
     best, thetas, ident = np.inf, None, None
     for _ in range(repeats):
-        ident = OnlineIdentifier(RIGID.regressor, estimator_factory(), np.zeros(9),
-                                 Stats.from_regressor(Y[:N], tau[:N]))
+        ident = OnlineIdentifier(
+            RIGID.regressor, estimator_factory(), np.zeros(9), Stats.from_regressor(Y[:N], tau[:N])
+        )
         add = ident.add
         out = np.empty((steps, 9))
         t0 = time.perf_counter()
@@ -121,8 +122,9 @@ def main(argv: list[str] | None = None) -> int:
         t_rr, _, _ = ours(Y, tau, N, steps, args.repeats, lambda: Estimator("ridge", penalty=ridge_penalty))
         row["rr_us"] = t_rr * 1e6
         cp_steps = max(50, steps // 10)
-        t_cp, th_cp, ident_cp = ours(Y, tau, N, cp_steps, 1,
-                                     lambda: Estimator("consistent", solver=WarmConsistentLS(RIGID, bounds)))
+        t_cp, th_cp, ident_cp = ours(
+            Y, tau, N, cp_steps, 1, lambda: Estimator("consistent", solver=WarmConsistentLS(RIGID, bounds))
+        )
         row["cpbr_us"] = t_cp * 1e6
         row["cpbr_conic_fallbacks"] = ident_cp.estimator.solver.fallbacks
         # The paper's re-solve: a few steps suffice (its cost per step is what grows with N).
@@ -138,8 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         row["speedup_pbr_vs_trf"] = row["paper_trf_us"] / row["pbr_us"]
         row["speedup_cpbr_vs_clarabel"] = row["cpbr_clarabel_us"] / row["cpbr_us"]
         rows.append(row)
-        print(json.dumps({k: (float(f"{v:.4g}") if isinstance(v, float) else v) for k, v in row.items()}),
-              flush=True)
+        print(json.dumps({k: (float(f"{v:.4g}") if isinstance(v, float) else v) for k, v in row.items()}), flush=True)
     flat = rows[-1]["pbr_us"] / rows[0]["pbr_us"]
     at_2e4 = next(r for r in rows if r["N"] == 20_000)
     summary = {
@@ -151,26 +152,37 @@ def main(argv: list[str] | None = None) -> int:
         "pbr_updates_per_second": 1e6 / np.median([r["pbr_us"] for r in rows]),
         "max_disagreement_bvls": max(r["agree_bvls"] for r in rows),
         "max_disagreement_trf": max(r["agree_trf"] for r in rows),
-        "steps": steps, "repeats": args.repeats,
+        "steps": steps,
+        "repeats": args.repeats,
     }
     print(json.dumps(summary, indent=1))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "online_benchmark.json").write_text(json.dumps({"rows": rows, "summary": summary}, indent=1) + "\n")
-    lines = ["# Online update cost vs the paper's re-solve (`benchmarks/bench_online.py`)", "",
-             "Per-sample cost in µs (best of repeats); the paper's = `scipy.optimize.lsq_linear` on all stacked "
-             "rows after each sample; agreement = max |Δπ| / max |π| between the two.", "",
-             "| N | PBR ours | RR ours | CPBR ours | paper BVLS | paper TRF | CPBR Clarabel | ×BVLS | ×TRF | "
-             "agree BVLS | agree TRF | agree CPBR |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "# Online update cost vs the paper's re-solve (`benchmarks/bench_online.py`)",
+        "",
+        "Per-sample cost in µs (best of repeats); the paper's = `scipy.optimize.lsq_linear` on all stacked "
+        "rows after each sample; agreement = max |Δπ| / max |π| between the two.",
+        "",
+        "| N | PBR ours | RR ours | CPBR ours | paper BVLS | paper TRF | CPBR Clarabel | ×BVLS | ×TRF | "
+        "agree BVLS | agree TRF | agree CPBR |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
-        lines.append(f"| {r['N']:,} | {r['pbr_us']:.1f} | {r['rr_us']:.1f} | {r['cpbr_us']:.0f} | "
-                     f"{r['paper_bvls_us']:.0f} | {r['paper_trf_us']:.0f} | {r['cpbr_clarabel_us']:.0f} | "
-                     f"{r['speedup_pbr_vs_bvls']:.0f} | {r['speedup_pbr_vs_trf']:.0f} | {r['agree_bvls']:.1e} | "
-                     f"{r['agree_trf']:.1e} | {r['agree_cpbr_clarabel']:.1e} |")
-    lines += ["", f"PBR flatness (µs at 10⁵ ÷ µs at 10³): {flat:.2f}; PBR updates/s (median over N): "
-              f"{summary['pbr_updates_per_second']:.0f}; speed-up at N = 2·10⁴: "
-              f"{summary['speedup_at_2e4_vs_bvls']:.0f}× vs BVLS, {summary['speedup_at_2e4_vs_trf']:.0f}× vs TRF.", ""]
+        lines.append(
+            f"| {r['N']:,} | {r['pbr_us']:.1f} | {r['rr_us']:.1f} | {r['cpbr_us']:.0f} | "
+            f"{r['paper_bvls_us']:.0f} | {r['paper_trf_us']:.0f} | {r['cpbr_clarabel_us']:.0f} | "
+            f"{r['speedup_pbr_vs_bvls']:.0f} | {r['speedup_pbr_vs_trf']:.0f} | {r['agree_bvls']:.1e} | "
+            f"{r['agree_trf']:.1e} | {r['agree_cpbr_clarabel']:.1e} |"
+        )
+    lines += [
+        "",
+        f"PBR flatness (µs at 10⁵ ÷ µs at 10³): {flat:.2f}; PBR updates/s (median over N): "
+        f"{summary['pbr_updates_per_second']:.0f}; speed-up at N = 2·10⁴: "
+        f"{summary['speedup_at_2e4_vs_bvls']:.0f}× vs BVLS, {summary['speedup_at_2e4_vs_trf']:.0f}× vs TRF.",
+        "",
+    ]
     (out / "online_benchmark.md").write_text("\n".join(lines), encoding="utf-8")
     return 0
 

@@ -38,9 +38,7 @@ def one(job: tuple[str, int, float, str]) -> dict:
     robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
     rng = np.random.default_rng([seed, CAUSES.index(cause)])
     effects = {} if cause == "none" else {cause: hidden.draw(cause, rng, robot)}
-    trial = simulate_trial(
-        robot, trajectory=trajectory, duration=duration, seed=seed, effects=effects, progress=False
-    )
+    trial = simulate_trial(robot, trajectory=trajectory, duration=duration, seed=seed, effects=effects, progress=False)
     t0 = time.perf_counter()
     d = diagnose(robot, trial.dataset(), progress=False)
     seconds = time.perf_counter() - t0
@@ -125,9 +123,7 @@ def table(results: list[dict], command: str) -> str:
     ]
     for r in results:
         err = f"{r['error']:.3f}" if r["error"] is not None else "—"
-        est = {
-            k: (np.round(v, 4).tolist() if not isinstance(v, int) else v) for k, v in r["estimate"].items()
-        }
+        est = {k: (np.round(v, 4).tolist() if not isinstance(v, int) else v) for k, v in r["estimate"].items()}
         truth = {
             k: (np.round(v, 4).tolist() if not isinstance(v, int) else v)
             for k, v in (r["truth"] or {}).items()
@@ -145,9 +141,7 @@ def table(results: list[dict], command: str) -> str:
                 "offset",
             )
         }
-        lines.append(
-            f"| {r['cause']} | {r['seed']} | {r['named']} | {r['ok']} | {err} | `{est}` | `{truth}` |"
-        )
+        lines.append(f"| {r['cause']} | {r['seed']} | {r['named']} | {r['ok']} | {err} | `{est}` | `{truth}` |")
     return "\n".join(lines) + "\n"
 
 
@@ -168,9 +162,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     jobs = [(c, s, args.duration, args.trajectory) for c in args.causes for s in range(args.seeds)]
     with ProcessPoolExecutor(args.jobs) as pool:
-        results = list(
-            tqdm(pool.map(one, jobs), total=len(jobs), desc="hidden-effect trials", file=sys.stderr)
-        )
+        results = list(tqdm(pool.map(one, jobs), total=len(jobs), desc="hidden-effect trials", file=sys.stderr))
     for r in results:
         print(
             f"{r['cause']:20s} seed {r['seed']}: named {r['named']:20s} ok={r['ok']} err={r['error']} "

@@ -22,29 +22,59 @@ from ident_opt.problem import Robot, SplitSpec
 from ident_opt.robot import RIGID, ArmModel
 
 #: The paper's Table "Linear Least Squares Solution for π̂" (fitted with its printed regressor).
-PAPER_FIT = {"a1": 0.76283, "a2": 0.052071, "a3": 0.040211, "b1": 3.6403, "b2": 0.36291,
-             "fv1": 1.1537, "fv2": 0.097576, "fc1": 0.99977, "fc2": 0.29952}
+PAPER_FIT = {
+    "a1": 0.76283,
+    "a2": 0.052071,
+    "a3": 0.040211,
+    "b1": 3.6403,
+    "b2": 0.36291,
+    "fv1": 1.1537,
+    "fv2": 0.097576,
+    "fc1": 0.99977,
+    "fc2": 0.29952,
+}
 #: The same table's π_True column (the paper's datasheet values).
-PAPER_TRUE = {"a1": 0.36571, "a2": 0.016914, "a3": 0.010752, "b1": 8.2331, "b2": 0.38588,
-              "fv1": 1.86e-5, "fv2": 2.45e-6, "fc1": 2.25e-3, "fc2": 1.95e-3}
+PAPER_TRUE = {
+    "a1": 0.36571,
+    "a2": 0.016914,
+    "a3": 0.010752,
+    "b1": 8.2331,
+    "b2": 0.38588,
+    "fv1": 1.86e-5,
+    "fv2": 2.45e-6,
+    "fc1": 2.25e-3,
+    "fc2": 1.95e-3,
+}
 
 #: The causes, in plain words, each with the parameters it moves.
 CAUSES = [
-    ("Actuator mass on the wrong link",
-     "The paper lumps joint 1's actuator (1.668 kg) at the distal end of link 1, but joint 1's motor sits on the "
-     "fixed base; the motor that rides on link 1 is joint 2's (0.589 kg). This inflates m1 (1.869 vs 0.790 kg) and "
-     "so β1 and α1.", "a1, b1"),
-    ("Friction not reflected through the gear ratio",
-     "The datasheet's friction is motor-side. At the joint, viscous friction is N² times and Coulomb friction N "
-     "times larger (N = 230 and 246): the paper uses the motor-side values, 10⁴–10⁵ too small.", "fv1, fv2, fc1, fc2"),
-    ("Reflected rotor inertia omitted",
-     "Each rotor's inertia appears at the joint as N²·J (0.498 and 0.050 kg·m²), larger than the links' own "
-     "inertia at joint 1. The paper leaves it out; the physical convention adds it to the diagonal of M "
-     "(folded into α1 for joint 1, a separate ia2 for joint 2).", "a1 (and a3 through ia2)"),
-    ("Gravity vector counts β2 cos q1 twice",
-     "The printed G1 = (β1 + β2) cos q1 + β2 cos(q1 + q2) has one β2 cos q1 more than the potential energy gives "
-     "(G1 = β1 cos q1 + β2 cos(q1 + q2)). Its regressor has the same extra term, so its fitted β̂1 means β1 − β2 "
-     "physically: compare β̂1 + β̂2 with a datasheet β1.", "b1"),
+    (
+        "Actuator mass on the wrong link",
+        "The paper lumps joint 1's actuator (1.668 kg) at the distal end of link 1, but joint 1's motor sits on the "
+        "fixed base; the motor that rides on link 1 is joint 2's (0.589 kg). This inflates m1 (1.869 vs 0.790 kg) and "
+        "so β1 and α1.",
+        "a1, b1",
+    ),
+    (
+        "Friction not reflected through the gear ratio",
+        "The datasheet's friction is motor-side. At the joint, viscous friction is N² times and Coulomb friction N "
+        "times larger (N = 230 and 246): the paper uses the motor-side values, 10⁴–10⁵ too small.",
+        "fv1, fv2, fc1, fc2",
+    ),
+    (
+        "Reflected rotor inertia omitted",
+        "Each rotor's inertia appears at the joint as N²·J (0.498 and 0.050 kg·m²), larger than the links' own "
+        "inertia at joint 1. The paper leaves it out; the physical convention adds it to the diagonal of M "
+        "(folded into α1 for joint 1, a separate ia2 for joint 2).",
+        "a1 (and a3 through ia2)",
+    ),
+    (
+        "Gravity vector counts β2 cos q1 twice",
+        "The printed G1 = (β1 + β2) cos q1 + β2 cos(q1 + q2) has one β2 cos q1 more than the potential energy gives "
+        "(G1 = β1 cos q1 + β2 cos(q1 + q2)). Its regressor has the same extra term, so its fitted β̂1 means β1 − β2 "
+        "physically: compare β̂1 + β̂2 with a datasheet β1.",
+        "b1",
+    ),
 ]
 
 
@@ -60,16 +90,18 @@ def parameter_table(robot: Robot) -> pd.DataFrame:
     physical = datasheet_pi(robot, "physical")
     rows = []
     for name in PI_NAMES:
-        rows.append({
-            "parameter": name,
-            "paper_fit": PAPER_FIT[name],
-            "paper_fit_physical": fit[name],
-            "paper_printed_true": PAPER_TRUE[name],
-            "datasheet_paper": paper[name],
-            "datasheet_physical": physical[name],
-            "rel_diff_paper": (paper[name] - fit[name]) / fit[name],
-            "rel_diff_physical": (physical[name] - fit[name]) / fit[name],
-        })
+        rows.append(
+            {
+                "parameter": name,
+                "paper_fit": PAPER_FIT[name],
+                "paper_fit_physical": fit[name],
+                "paper_printed_true": PAPER_TRUE[name],
+                "datasheet_paper": paper[name],
+                "datasheet_physical": physical[name],
+                "rel_diff_paper": (paper[name] - fit[name]) / fit[name],
+                "rel_diff_physical": (physical[name] - fit[name]) / fit[name],
+            }
+        )
     return pd.DataFrame(rows).set_index("parameter")
 
 
@@ -107,8 +139,12 @@ def audit_data(robot: Robot, train: Dataset, unseen: Dataset | None, split: Spli
         for name, (model, pi) in candidates.items():
             tau_hat = model.predict(pi, test.q, test.dq, test.ddq)
             per_seed.setdefault(name, []).append(
-                {"nmse": metrics.nmse(test.tau, tau_hat), "nmse_range": metrics.nmse_range(test.tau, tau_hat),
-                 "rmse": metrics.rmse(test.tau, tau_hat)})
+                {
+                    "nmse": metrics.nmse(test.tau, tau_hat),
+                    "nmse_range": metrics.nmse_range(test.tau, tau_hat),
+                    "rmse": metrics.rmse(test.tau, tau_hat),
+                }
+            )
     for name, results in per_seed.items():
         row = {}
         for metric in ("nmse", "nmse_range", "rmse"):
@@ -140,9 +176,18 @@ def rigid_body_table(robot: Robot) -> pd.DataFrame:
     rows = {}
     for convention in ("paper", "physical"):
         body = rigid_body(robot, convention)
-        rows[convention] = {"m1 [kg]": body.m1, "m2 [kg]": body.m2, "lc1 [m]": body.lc1, "lc2 [m]": body.lc2,
-                            "Ic1 [kg m²]": body.Ic1, "Ic2 [kg m²]": body.Ic2,
-                            "armature1 [kg m²]": body.armature[0], "armature2 [kg m²]": body.armature[1],
-                            "fv1 [N m s/rad]": body.fv[0], "fv2 [N m s/rad]": body.fv[1],
-                            "fc1 [N m]": body.fc[0], "fc2 [N m]": body.fc[1]}
+        rows[convention] = {
+            "m1 [kg]": body.m1,
+            "m2 [kg]": body.m2,
+            "lc1 [m]": body.lc1,
+            "lc2 [m]": body.lc2,
+            "Ic1 [kg m²]": body.Ic1,
+            "Ic2 [kg m²]": body.Ic2,
+            "armature1 [kg m²]": body.armature[0],
+            "armature2 [kg m²]": body.armature[1],
+            "fv1 [N m s/rad]": body.fv[0],
+            "fv2 [N m s/rad]": body.fv[1],
+            "fc1 [N m]": body.fc[0],
+            "fc2 [N m]": body.fc[1],
+        }
     return pd.DataFrame(rows)

@@ -89,17 +89,20 @@ def gmr_constants(gmr) -> GmrConstants:
     if tiny.any():
         k, i = np.argwhere(tiny)[0]
         label = GMR_INPUTS[i] if d == len(GMR_INPUTS) else f"x{i}"
-        raise InputError(f"GMR component {k}: input {label} has a standard deviation of {std[k, i]:.3g} "
-                         f"(mean {means[k, i]:.6g}): the training data barely vary there (a joint at rest?), "
-                         "so the mixture cannot be evaluated reproducibly; train it on data with motion")
+        raise InputError(
+            f"GMR component {k}: input {label} has a standard deviation of {std[k, i]:.3g} "
+            f"(mean {means[k, i]:.6g}): the training data barely vary there (a joint at rest?), "
+            "so the mixture cannot be evaluated reproducibly; train it on data with motion"
+        )
     L_inv, A, log_c = [], [], []
     for k in range(len(w)):
         Sxx, Srx = covs[k, :d, :d], covs[k, d:, :d]
         try:
             L = np.linalg.cholesky(Sxx)
         except np.linalg.LinAlgError:
-            raise InputError(f"GMR component {k}: input covariance is not positive definite; "
-                             "it cannot be generated") from None
+            raise InputError(
+                f"GMR component {k}: input covariance is not positive definite; it cannot be generated"
+            ) from None
         Li = np.linalg.solve(L, np.eye(d))
         L_inv.append(np.tril(Li))  # exactly lower-triangular: the zeros are dropped from the C code
         A.append(Srx @ Li.T @ Li)  # Σrx Σxx⁻¹ with Σxx⁻¹ = L⁻ᵀ L⁻¹
@@ -144,8 +147,9 @@ def build_functions(model: ArmModel, pi: np.ndarray, gmr=None, forward: bool = T
     if gmr is not None:
         c = gmr_constants(gmr)
         if c.mu_x.shape[1] != 6 or c.mu_r.shape[1] != 2:
-            raise InputError(f"the GMR must map 6 inputs [q dq ddq] to 2 outputs, got {c.mu_x.shape[1]} → "
-                             f"{c.mu_r.shape[1]}")
+            raise InputError(
+                f"the GMR must map 6 inputs [q dq ddq] to 2 outputs, got {c.mu_x.shape[1]} → {c.mu_r.shape[1]}"
+            )
         r = gmr_mean_expression(ca.vertcat(q, dq, ddq), c)
         out.append(ca.Function("tau_hat_gmr", [q, dq, ddq], [tau_rigid + r], ["q", "dq", "ddq"], ["tau"]))
     if forward:
@@ -202,8 +206,7 @@ def find_compiler() -> list[str]:
         found = shutil.which(candidate)
         if found:
             return [found]
-    raise InputError("no C compiler found (tried gcc and cc on PATH); install one (e.g. apt install gcc) "
-                     "or set CC")
+    raise InputError("no C compiler found (tried gcc and cc on PATH); install one (e.g. apt install gcc) or set CC")
 
 
 def compile_library(source: Path, out_dir: Path, compiler: list[str] | None = None, name: str = NAME) -> Path:
@@ -219,8 +222,9 @@ def compile_library(source: Path, out_dir: Path, compiler: list[str] | None = No
     if done.returncode != 0:
         raise InputError(f"the C compiler failed on {source} (exit {done.returncode}):\n{done.stderr.strip()}")
     if not lib.is_file():
-        raise InputError(f"the C compiler {compiler[0]!r} reported success but wrote no {lib.name}: "
-                         "is it a C compiler?")
+        raise InputError(
+            f"the C compiler {compiler[0]!r} reported success but wrote no {lib.name}: is it a C compiler?"
+        )
     return lib
 
 
@@ -230,7 +234,8 @@ def write_readme(out_dir: Path, functions: list[ca.Function], name: str = NAME) 
 
     rows = "\n".join(f"| `{f.name()}` | {_signature(f)} |" for f in functions)
     text = Template((FILES / "README.md").read_text(encoding="utf-8")).substitute(
-        name=name, library=library_name(name), cflags=" ".join(CFLAGS), functions=rows)
+        name=name, library=library_name(name), cflags=" ".join(CFLAGS), functions=rows
+    )
     path = Path(out_dir) / "README.md"
     path.write_text(text, encoding="utf-8")
     return path
@@ -267,8 +272,9 @@ def relative_error(got: np.ndarray, ref: np.ndarray) -> float:
     return float(np.max(np.max(np.abs(got - ref), axis=1) / scale))
 
 
-def forward_backward_error(model: ArmModel, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, tau: np.ndarray,
-                           ddq: np.ndarray) -> float:
+def forward_backward_error(
+    model: ArmModel, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, ddq: np.ndarray
+) -> float:
     """How well `ddq` (N, 2) solves M(q) ddq = τ − b, b = C dq + G + F, as a normwise backward error:
     max over samples of ‖M ddq − (τ − b)‖∞ / (‖M‖∞ ‖ddq‖∞ + ‖τ‖∞ + ‖b‖∞). It is small for a correct solve
     however ill-conditioned M is (a forward error would be amplified by cond M), and τ − b is judged on the
@@ -276,7 +282,8 @@ def forward_backward_error(model: ArmModel, pi: np.ndarray, q: np.ndarray, dq: n
     M = model.mass_matrix(pi, q[:, 1])
     bias = model.predict(pi, q, dq, np.zeros_like(q))
     residual = np.einsum("nij,nj->ni", M, ddq) - (tau - bias)
-    scale = (np.abs(M).sum(axis=2).max(axis=1) * np.abs(ddq).max(axis=1) + np.abs(tau).max(axis=1)
-             + np.abs(bias).max(axis=1))
+    scale = (
+        np.abs(M).sum(axis=2).max(axis=1) * np.abs(ddq).max(axis=1) + np.abs(tau).max(axis=1) + np.abs(bias).max(axis=1)
+    )
     scale[scale == 0] = 1.0
     return float(np.max(np.abs(residual).max(axis=1) / scale))

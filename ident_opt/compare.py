@@ -32,8 +32,9 @@ METRICS = ("rmse", "nmse", "nmse_range")
 
 
 # ---------------------------------------------------------------------------------------------- estimators
-def estimators(robot, margin: float = 1e-6, weights: str | None = None
-               ) -> dict[str, Callable[[Stats, ArmModel], LinearFit]]:
+def estimators(
+    robot, margin: float = 1e-6, weights: str | None = None
+) -> dict[str, Callable[[Stats, ArmModel], LinearFit]]:
     """The fitted estimators by key: statistics + model → LinearFit (`weights`: None or "wls")."""
     return {
         "ols": lambda st, m: fit_ols(st, m, weights),
@@ -55,10 +56,18 @@ def datasheet_models(robot) -> dict[str, tuple[ArmModel, np.ndarray]]:
 
 
 # ---------------------------------------------------------------------------------------------- synthetic trials
-def multisine_trial(model: ArmModel, pi_true: np.ndarray, *, duration: float, rate_hz: float = 100.0,
-                    seed: int = 0, amplitude: tuple[float, float] = (0.6, 0.6),
-                    noise: tuple[float, float] = (0.5, 0.3), n_sines: int = 4,
-                    band_hz: tuple[float, float] = (0.1, 1.0)) -> Dataset:
+def multisine_trial(
+    model: ArmModel,
+    pi_true: np.ndarray,
+    *,
+    duration: float,
+    rate_hz: float = 100.0,
+    seed: int = 0,
+    amplitude: tuple[float, float] = (0.6, 0.6),
+    noise: tuple[float, float] = (0.5, 0.3),
+    n_sines: int = 4,
+    band_hz: tuple[float, float] = (0.1, 1.0),
+) -> Dataset:
     """A rigid trial with known truth: q_j(t) = q0_j + Σ_k A_jk sin(2π f_k t + φ_jk) [rad], exact dq and ddq,
     τ = Y(q, dq, ddq) π_true + N(0, noise_j²) [N m]. Deterministic for a seed. A joint with amplitude 0
     stays still (its friction and inertia columns are then not excited)."""
@@ -106,7 +115,8 @@ class StudyResult:
             "fits_differ": int(differ.sum()),
             "constrained_wins": int((r["err_constrained"] < r["err_ols"]).sum()),
             "win_rate_where_differ": float((r["err_constrained"] < r["err_ols"])[differ].mean())
-            if differ.any() else float("nan"),
+            if differ.any()
+            else float("nan"),
             "median_error_ols": float(r["err_ols"].median()),
             "median_error_constrained": float(r["err_constrained"].median()),
             "median_error_ratio": float(ratio.median()),
@@ -118,36 +128,59 @@ class StudyResult:
 
 STUDY_SOURCES = {
     "multisine": "a local rigid generator: one joint moves (multisine, alternating), the other is held still or "
-                 "moves ±0.05 rad; exact dq, ddq; Gaussian torque noise",
+    "moves ±0.05 rad; exact dq, ddq; Gaussian torque noise",
     "simulator": "the built-in simulator (`ident_opt.simulate`, no hidden effect): the first seconds of a "
-                 "tud01 point-to-point trial under closed-loop control, with its measurement noise, "
-                 "quantisation and estimated derivatives",
+    "tud01 point-to-point trial under closed-loop control, with its measurement noise, "
+    "quantisation and estimated derivatives",
 }
 
 
-def _study_trial(source: str, robot, model: ArmModel, pi_sheet: np.ndarray, i: int, duration: float, seed: int,
-                 noise: tuple[float, float], rate_hz: float) -> tuple[Dataset, np.ndarray, dict]:
+def _study_trial(
+    source: str,
+    robot,
+    model: ArmModel,
+    pi_sheet: np.ndarray,
+    i: int,
+    duration: float,
+    seed: int,
+    noise: tuple[float, float],
+    rate_hz: float,
+) -> tuple[Dataset, np.ndarray, dict]:
     """Trial i of the constraints study: (data, true π, description columns)."""
     if source == "simulator":
         from ident_opt.simulate import simulate_trial
 
-        sim = simulate_trial(robot, trajectory="tud01", duration=duration, rate_hz=rate_hz, seed=seed * 100003 + i,
-                             progress=False)
+        sim = simulate_trial(
+            robot, trajectory="tud01", duration=duration, rate_hz=rate_hz, seed=seed * 100003 + i, progress=False
+        )
         data = sim.dataset()
         moved = np.ptp(data.q, axis=0) > 0.05
-        return data, model.vector(sim.truth["pi"]), {"moving_joints": "".join(
-            str(j + 1) for j in range(2) if moved[j]) or "none"}
+        return (
+            data,
+            model.vector(sim.truth["pi"]),
+            {"moving_joints": "".join(str(j + 1) for j in range(2) if moved[j]) or "none"},
+        )
     moving = i % 2
     small = 0.0 if (i // 2) % 2 == 0 else 0.05
     amp = (0.8, small) if moving == 0 else (small, 0.8)
-    data = multisine_trial(model, pi_sheet, duration=duration, rate_hz=rate_hz, seed=seed * 100003 + i,
-                           amplitude=amp, noise=noise)
+    data = multisine_trial(
+        model, pi_sheet, duration=duration, rate_hz=rate_hz, seed=seed * 100003 + i, amplitude=amp, noise=noise
+    )
     return data, pi_sheet, {"moving_joints": str(moving + 1), "other_amplitude": small}
 
 
-def constraints_study(robot, n_trials: int = 50, *, source: str = "multisine", seed: int = 0,
-                      durations: tuple[float, float] = (2.0, 5.0), noise: tuple[float, float] = (0.5, 0.3),
-                      rate_hz: float = 100.0, margin: float = 1e-6, progress: bool = True) -> StudyResult:
+def constraints_study(
+    robot,
+    n_trials: int = 50,
+    *,
+    source: str = "multisine",
+    seed: int = 0,
+    durations: tuple[float, float] = (2.0, 5.0),
+    noise: tuple[float, float] = (0.5, 0.3),
+    rate_hz: float = 100.0,
+    margin: float = 1e-6,
+    progress: bool = True,
+) -> StudyResult:
     """OLS vs constrained on `n_trials` short, poorly exciting trials with known truth.
 
     `source`: "multisine" or "simulator" (see `STUDY_SOURCES`). Truth: the physical-convention datasheet
@@ -169,25 +202,41 @@ def constraints_study(robot, n_trials: int = 50, *, source: str = "multisine", s
         ols = fit_ols(st, model)
         con = fit_constrained(st, model, margin=margin)
         excited = np.array([name not in ols.unexcited for name in model.names])
-        rows.append({
-            "trial": i, "duration_s": duration, **described,
-            "rank": ols.rank, "ols_consistent": ols.consistent, "ols_min_eig": ols.min_mass_eigenvalue,
-            "constrained_consistent": bool(con.min_mass_eigenvalue >= margin * (1 - 1e-6) and con.consistent),
-            "constrained_min_eig": con.min_mass_eigenvalue, "active": " ".join(con.active),
-            "err_ols": relative_error(ols.pi, pi_true), "err_constrained": relative_error(con.pi, pi_true),
-            # the same over the parameters whose columns the trial excites at all
-            "err_ols_excited": relative_error(ols.pi[excited], pi_true[excited]),
-            "err_constrained_excited": relative_error(con.pi[excited], pi_true[excited]),
-        })
-    settings = {"n_trials": n_trials, "source": source, "seed": seed, "durations_s": list(durations),
-                "noise_nm": list(noise) if source == "multisine" else "the simulator's", "rate_hz": rate_hz,
-                "margin": margin, "model": list(model.names),
-                "truth": "physical-convention datasheet π with joint-2 armature"}
+        rows.append(
+            {
+                "trial": i,
+                "duration_s": duration,
+                **described,
+                "rank": ols.rank,
+                "ols_consistent": ols.consistent,
+                "ols_min_eig": ols.min_mass_eigenvalue,
+                "constrained_consistent": bool(con.min_mass_eigenvalue >= margin * (1 - 1e-6) and con.consistent),
+                "constrained_min_eig": con.min_mass_eigenvalue,
+                "active": " ".join(con.active),
+                "err_ols": relative_error(ols.pi, pi_true),
+                "err_constrained": relative_error(con.pi, pi_true),
+                # the same over the parameters whose columns the trial excites at all
+                "err_ols_excited": relative_error(ols.pi[excited], pi_true[excited]),
+                "err_constrained_excited": relative_error(con.pi[excited], pi_true[excited]),
+            }
+        )
+    settings = {
+        "n_trials": n_trials,
+        "source": source,
+        "seed": seed,
+        "durations_s": list(durations),
+        "noise_nm": list(noise) if source == "multisine" else "the simulator's",
+        "rate_hz": rate_hz,
+        "margin": margin,
+        "model": list(model.names),
+        "truth": "physical-convention datasheet π with joint-2 armature",
+    }
     return StudyResult(pd.DataFrame(rows), settings)
 
 
-def rich_agreement(robot, n_trials: int = 10, *, duration: float = 30.0, seed: int = 0, margin: float = 1e-6,
-                   progress: bool = True) -> dict:
+def rich_agreement(
+    robot, n_trials: int = 10, *, duration: float = 30.0, seed: int = 0, margin: float = 1e-6, progress: bool = True
+) -> dict:
     """On exciting simulated trials (the simulator's `fourier` reference, both joints, `duration` s): is
     OLS consistent, how far is the constrained fit from it in OLS standard errors, and how often is the
     truth within ±2 SE. Returns a summary dict."""
@@ -205,9 +254,13 @@ def rich_agreement(robot, n_trials: int = 10, *, duration: float = 30.0, seed: i
         consistent += ols.consistent
         distance.append(float(np.max(np.abs(con.pi - ols.pi) / ols.se)))
         inside.append(np.abs(ols.pi - model.vector(sim.truth["pi"])) <= 2 * ols.se)
-    return {"trials": n_trials, "duration_s": duration, "ols_consistent": int(consistent),
-            "max_constrained_minus_ols_in_se": float(max(distance)),
-            "truth_within_2se": float(np.mean(inside))}
+    return {
+        "trials": n_trials,
+        "duration_s": duration,
+        "ols_consistent": int(consistent),
+        "max_constrained_minus_ols_in_se": float(max(distance)),
+        "truth_within_2se": float(np.mean(inside)),
+    }
 
 
 def study_markdown(results: StudyResult | list[StudyResult], rich: dict | None = None) -> str:
@@ -224,9 +277,16 @@ def study_markdown(results: StudyResult | list[StudyResult], rich: dict | None =
         f"M(q) ⪰ {cfg['margin']:g}·I ∀q, friction ≥ 0 and armature ≥ 0 (from the sufficient statistics; Clarabel). "
         "Parameter error = RMS over parameters of (π̂ − π)/|π|. Trial sources:",
         "",
-        *[f"- **{r.settings['source']}**: {STUDY_SOURCES[r.settings['source']]}"
-          + (f" (σ = {r.settings['noise_nm'][0]:g} / {r.settings['noise_nm'][1]:g} N·m)"
-             if r.settings["source"] == "multisine" else "") + "." for r in results],
+        *[
+            f"- **{r.settings['source']}**: {STUDY_SOURCES[r.settings['source']]}"
+            + (
+                f" (σ = {r.settings['noise_nm'][0]:g} / {r.settings['noise_nm'][1]:g} N·m)"
+                if r.settings["source"] == "multisine"
+                else ""
+            )
+            + "."
+            for r in results
+        ],
         "",
         "| quantity | " + " | ".join(r.settings["source"] for r in results) + " |",
         "|---|" + "---|" * len(results),
@@ -242,8 +302,10 @@ def study_markdown(results: StudyResult | list[StudyResult], rich: dict | None =
         ("median parameter error, constrained", lambda s: f"{s['median_error_constrained']:.3g}"),
         ("median error ratio constrained / OLS, all trials", lambda s: f"{s['median_error_ratio']:.3g}"),
         ("median error ratio where the fits differ", lambda s: f"{s['median_error_ratio_where_differ']:.3g}"),
-        ("median error over excited parameters, OLS / constrained",
-         lambda s: f"{s['median_error_ols_excited']:.3g} / {s['median_error_constrained_excited']:.3g}"),
+        (
+            "median error over excited parameters, OLS / constrained",
+            lambda s: f"{s['median_error_ols_excited']:.3g} / {s['median_error_constrained_excited']:.3g}",
+        ),
     ]
     for label, cell in rows:
         lines.append(f"| {label} | " + " | ".join(cell(r.summary) for r in results) + " |")
@@ -308,11 +370,19 @@ class Comparison:
             friction = all(v >= 0 for n, v in values.items() if n.startswith("f"))
             armature = all(v >= 0 for n, v in values.items() if n.startswith("ia"))
             eig = model.min_mass_eigenvalue(pi)
-            out[key] = {"min_mass_eigenvalue": eig, "friction_nonnegative": friction,
-                        "consistent": bool(eig > 0 and friction and armature), "active_constraints": []}
+            out[key] = {
+                "min_mass_eigenvalue": eig,
+                "friction_nonnegative": friction,
+                "consistent": bool(eig > 0 and friction and armature),
+                "active_constraints": [],
+            }
         for key, fit in self.fits.items():
-            out[key] = {"min_mass_eigenvalue": fit.min_mass_eigenvalue, "friction_nonnegative": fit.friction_ok,
-                        "consistent": fit.consistent, "active_constraints": fit.active}
+            out[key] = {
+                "min_mass_eigenvalue": fit.min_mass_eigenvalue,
+                "friction_nonnegative": fit.friction_ok,
+                "consistent": fit.consistent,
+                "active_constraints": fit.active,
+            }
         return out
 
 
@@ -322,9 +392,17 @@ def _scores(datasets: list[tuple[Dataset, np.ndarray]], model: ArmModel, pi: np.
     return {m: [float(np.mean([p[m][j] for p in per])) for j in range(2)] for m in METRICS}
 
 
-def compare_estimators(train: Dataset, robot, split, unseen: Dataset | None = None, *,
-                       model: ArmModel | None = None, margin: float = 1e-6, weights: str | None = None,
-                       progress: bool = True) -> Comparison:
+def compare_estimators(
+    train: Dataset,
+    robot,
+    split,
+    unseen: Dataset | None = None,
+    *,
+    model: ArmModel | None = None,
+    margin: float = 1e-6,
+    weights: str | None = None,
+    progress: bool = True,
+) -> Comparison:
     """Fit every estimator, score it on the paper's shuffled protocol, the chronological split and (when
     `unseen` is given) the unseen trial; score both datasheets on the same test samples. `weights`:
     None (plain least squares) or "wls" (joints weighted by 1/σ_j², estimated per fit)."""
@@ -377,8 +455,13 @@ def _shown(path: str) -> str:
 
 
 # ---------------------------------------------------------------------------------------------- rendering
-LABELS = {"datasheet_paper": "datasheet (paper)", "datasheet_physical": "datasheet (physical)", "ols": "OLS",
-          "constrained": "constrained", "nlp_physical": "NLP-physical"}
+LABELS = {
+    "datasheet_paper": "datasheet (paper)",
+    "datasheet_physical": "datasheet (physical)",
+    "ols": "OLS",
+    "constrained": "constrained",
+    "nlp_physical": "NLP-physical",
+}
 
 
 def parameter_table(c: Comparison) -> pd.DataFrame:
@@ -397,9 +480,15 @@ def parameter_table(c: Comparison) -> pd.DataFrame:
 
 def consistency_table(c: Comparison) -> pd.DataFrame:
     """Per estimator: min over q of λ_min(M(q)) [kg m²], friction ≥ 0, consistent, active constraints."""
-    rows = {key: {"min eig M(q) [kg m²]": v["min_mass_eigenvalue"], "friction ≥ 0": v["friction_nonnegative"],
-                  "consistent": v["consistent"], "active constraints": " ".join(v["active_constraints"]) or "–"}
-            for key, v in c.consistency().items()}
+    rows = {
+        key: {
+            "min eig M(q) [kg m²]": v["min_mass_eigenvalue"],
+            "friction ≥ 0": v["friction_nonnegative"],
+            "consistent": v["consistent"],
+            "active constraints": " ".join(v["active_constraints"]) or "–",
+        }
+        for key, v in c.consistency().items()
+    }
     return pd.DataFrame(rows).T.rename_axis("estimator")
 
 
@@ -435,10 +524,10 @@ def _with_se(c: Comparison) -> pd.DataFrame:
     consistency = c.consistency()
     extra = {
         "min eig M(q) [kg m²]": {LABELS.get(k, k): fmt(v["min_mass_eigenvalue"]) for k, v in consistency.items()},
-        "friction ≥ 0": {LABELS.get(k, k): "yes" if v["friction_nonnegative"] else "NO"
-                         for k, v in consistency.items()},
-        "physically consistent": {LABELS.get(k, k): "yes" if v["consistent"] else "NO"
-                                  for k, v in consistency.items()},
+        "friction ≥ 0": {
+            LABELS.get(k, k): "yes" if v["friction_nonnegative"] else "NO" for k, v in consistency.items()
+        },
+        "physically consistent": {LABELS.get(k, k): "yes" if v["consistent"] else "NO" for k, v in consistency.items()},
     }
     return pd.concat([human, pd.DataFrame(extra).T.reindex(columns=human.columns)]).rename_axis("parameter")
 
@@ -452,22 +541,33 @@ def findings(c: Comparison) -> list[str]:
     else:
         lines.append("OLS is " + "; ".join(w for w in ols.warnings if w.startswith("physically")) + ".")
     if con.active:
-        lines.append(f"Constrained fit: active constraints {', '.join(con.active)}; "
-                     f"min eig M(q) = {con.min_mass_eigenvalue:.3g} kg m².")
+        lines.append(
+            f"Constrained fit: active constraints {', '.join(con.active)}; "
+            f"min eig M(q) = {con.min_mass_eigenvalue:.3g} kg m²."
+        )
     for protocol in c.metrics:
         n_ols, n_con = c.metrics[protocol]["nmse"]["ols"], c.metrics[protocol]["nmse"]["constrained"]
         change = [100 * (b - a) / a for a, b in zip(n_ols, n_con)]
-        verdict = ", ".join(f"joint {j + 1} " + ("costs" if d > 0.05 else "gains" if d < -0.05 else "no change")
-                            for j, d in enumerate(change))
-        lines.append(f"{protocol}: held-out nmse OLS {n_ols[0]:.4g} / {n_ols[1]:.4g}, constrained {n_con[0]:.4g} / "
-                     f"{n_con[1]:.4g} ({change[0]:+.1f} % / {change[1]:+.1f} %; consistency {verdict}).")
-    costs = [c.metrics[p]["nmse"]["constrained"][j] > c.metrics[p]["nmse"]["ols"][j] * 1.0005
-             for p in c.metrics for j in range(2)]
+        verdict = ", ".join(
+            f"joint {j + 1} " + ("costs" if d > 0.05 else "gains" if d < -0.05 else "no change")
+            for j, d in enumerate(change)
+        )
+        lines.append(
+            f"{protocol}: held-out nmse OLS {n_ols[0]:.4g} / {n_ols[1]:.4g}, constrained {n_con[0]:.4g} / "
+            f"{n_con[1]:.4g} ({change[0]:+.1f} % / {change[1]:+.1f} %; consistency {verdict})."
+        )
+    costs = [
+        c.metrics[p]["nmse"]["constrained"][j] > c.metrics[p]["nmse"]["ols"][j] * 1.0005
+        for p in c.metrics
+        for j in range(2)
+    ]
     if not ols.consistent and any(costs):
-        lines.append("Where consistency costs held-out accuracy, OLS was using a physically impossible inertia to "
-                     "absorb something the rigid model lacks (on a real flexible arm: elasticity, friction shape, "
-                     "delay); `ident-opt diagnose` looks for it. Only the consistent fit has an M(q) that is "
-                     "invertible at every pose, as forward simulation and model-based control need.")
+        lines.append(
+            "Where consistency costs held-out accuracy, OLS was using a physically impossible inertia to "
+            "absorb something the rigid model lacks (on a real flexible arm: elasticity, friction shape, "
+            "delay); `ident-opt diagnose` looks for it. Only the consistent fit has an M(q) that is "
+            "invertible at every pose, as forward simulation and model-based control need."
+        )
     for w in ols.warnings:
         if not w.startswith("physically"):
             lines.append("OLS: " + w + ".")
@@ -482,9 +582,9 @@ def to_markdown(c: Comparison, figure: str | None = None) -> str:
     parts = [
         "# Identification: datasheet vs OLS vs constrained vs NLP-physical",
         "",
-        f"Identification trial: `{c.sources.get('train')}`" +
-        (f"; unseen trial: `{c.sources['unseen']}`" if "unseen" in c.sources else "") +
-        f". Fitted model: {', '.join(c.model.names)} (β in N·m). Standard errors use a per-joint residual "
+        f"Identification trial: `{c.sources.get('train')}`"
+        + (f"; unseen trial: `{c.sources['unseen']}`" if "unseen" in c.sources else "")
+        + f". Fitted model: {', '.join(c.model.names)} (β in N·m). Standard errors use a per-joint residual "
         "variance and assume independent residuals (optimistic on densely sampled real data).",
         "",
         "## Findings",
@@ -501,19 +601,28 @@ def to_markdown(c: Comparison, figure: str | None = None) -> str:
         "",
     ]
     for metric in ("nmse", "nmse_range", "rmse"):
-        parts += [f"## Held-out {metric} per joint", "",
-                  "Protocols: " + "; ".join(f"**{p}** = {PROTOCOLS[p]}" for p in c.metrics) + ".", "",
-                  markdown_table(metrics_table(c, metric)), ""]
+        parts += [
+            f"## Held-out {metric} per joint",
+            "",
+            "Protocols: " + "; ".join(f"**{p}** = {PROTOCOLS[p]}" for p in c.metrics) + ".",
+            "",
+            markdown_table(metrics_table(c, metric)),
+            "",
+        ]
     physical = c.fits.get("nlp_physical")
     if physical is not None and "physical" in physical.details:
         theta = pd.DataFrame({"value": physical.details["physical"]}).rename_axis("physical parameter")
-        theta["at a physical bound"] = ["yes" if k in physical.details.get("at_bound", []) else ""
-                                        for k in theta.index]
-        parts += ["## NLP-physical: the physical parameters behind its π", "",
-                  "Masses [kg], centres of mass [m], inertias and armature [kg m²], friction [N m s/rad, N m]. "
-                  "The grouped π do not determine all of them: a weak pull toward the datasheet picks one of "
-                  "the equivalent sets, so read the individual values with care; π is what the data fix.", "",
-                  markdown_table(theta), ""]
+        theta["at a physical bound"] = ["yes" if k in physical.details.get("at_bound", []) else "" for k in theta.index]
+        parts += [
+            "## NLP-physical: the physical parameters behind its π",
+            "",
+            "Masses [kg], centres of mass [m], inertias and armature [kg m²], friction [N m s/rad, N m]. "
+            "The grouped π do not determine all of them: a weak pull toward the datasheet picks one of "
+            "the equivalent sets, so read the individual values with care; π is what the data fix.",
+            "",
+            markdown_table(theta),
+            "",
+        ]
     parts += ["## The paper's seed study (shuffled 70/30)", "", markdown_table(rmse_table(c.seeds)), ""]
     if figure:
         parts += [f"![grouped parameters across seeds]({figure})", ""]
@@ -523,12 +632,14 @@ def to_markdown(c: Comparison, figure: str | None = None) -> str:
 def to_terminal(c: Comparison) -> str:
     """A compact text summary for the terminal."""
     with pd.option_context("display.width", 160, "display.max_columns", 20):
-        return "\n\n".join([
-            "Parameters (± SE):\n" + _with_se(c).to_string(),
-            "Consistency:\n" + consistency_table(c).to_string(),
-            "Held-out nmse per joint:\n" + metrics_table(c, "nmse").to_string(float_format=lambda v: f"{v:.4g}"),
-            "\n".join(f"- {line}" for line in findings(c)),
-        ])
+        return "\n\n".join(
+            [
+                "Parameters (± SE):\n" + _with_se(c).to_string(),
+                "Consistency:\n" + consistency_table(c).to_string(),
+                "Held-out nmse per joint:\n" + metrics_table(c, "nmse").to_string(float_format=lambda v: f"{v:.4g}"),
+                "\n".join(f"- {line}" for line in findings(c)),
+            ]
+        )
 
 
 def to_json(c: Comparison) -> dict:
@@ -542,14 +653,15 @@ def to_json(c: Comparison) -> dict:
         "metrics": c.metrics,
         "protocols": {p: PROTOCOLS[p] for p in c.metrics},
         "fits": {key: fit.summary() for key, fit in c.fits.items()},
-        "physical_parameters": c.fits["nlp_physical"].details.get("physical", {}) if "nlp_physical" in c.fits
-        else {},
+        "physical_parameters": c.fits["nlp_physical"].details.get("physical", {}) if "nlp_physical" in c.fits else {},
         "seed_study": {
             "seeds": c.seeds.labels,
             "parameters": {key: v.tolist() for key, v in c.seeds.pi.items()},
-            "deviation_from_mean_percent": {key: deviation_from_mean(c.seeds, key).to_numpy().tolist()
-                                            for key in c.seeds.pi},
-            "rmse_mean": c.seeds.mean("rmse"), "rmse_std": c.seeds.std("rmse"),
+            "deviation_from_mean_percent": {
+                key: deviation_from_mean(c.seeds, key).to_numpy().tolist() for key in c.seeds.pi
+            },
+            "rmse_mean": c.seeds.mean("rmse"),
+            "rmse_std": c.seeds.std("rmse"),
         },
         "model": list(c.model.names),
         "sources": c.sources,

@@ -78,8 +78,7 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
     header = 0 if spec.header else None
     try:
         if name.endswith(".csv") or name.endswith(".csv.gz"):
-            frame = pd.read_csv(path, header=header, sep=",", dtype=str,
-                                keep_default_na=False, skipinitialspace=True)
+            frame = pd.read_csv(path, header=header, sep=",", dtype=str, keep_default_na=False, skipinitialspace=True)
         elif name.endswith(".parquet"):
             frame = pd.read_parquet(path)
             if not spec.header:
@@ -87,9 +86,7 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
         elif name.endswith(".xlsx"):
             frame = pd.read_excel(path, sheet_name=spec.sheet or 0, header=header)
         else:
-            raise InputError(
-                f"{path}: unsupported file type; ident-opt reads .csv, .csv.gz, .parquet and .xlsx"
-            )
+            raise InputError(f"{path}: unsupported file type; ident-opt reads .csv, .csv.gz, .parquet and .xlsx")
     except InputError:
         raise
     except pd.errors.EmptyDataError:
@@ -113,15 +110,17 @@ def _locate(frame: pd.DataFrame, spec: DataSpec, path: Path) -> dict[str, object
             continue
         if isinstance(source, int) and spec.header:
             if source >= frame.shape[1]:
-                raise InputError(f"{path}: column index {source} for '{name}' is beyond the file's "
-                                 f"{frame.shape[1]} columns")
+                raise InputError(
+                    f"{path}: column index {source} for '{name}' is beyond the file's {frame.shape[1]} columns"
+                )
             found[name] = frame.columns[source]
         elif source in frame.columns:
             found[name] = source
         elif name in spec.columns:
             have = ", ".join(map(str, frame.columns[:30]))
-            raise InputError(f"{path}: column '{source}' (mapped to '{name}' by [data.columns]) not found; "
-                             f"the file has: {have}")
+            raise InputError(
+                f"{path}: column '{source}' (mapped to '{name}' by [data.columns]) not found; the file has: {have}"
+            )
     return found
 
 
@@ -131,8 +130,9 @@ def _row_label(path: Path, row: int, spec: DataSpec) -> str:
     return f"data row {row + 1}"
 
 
-def _numeric(frame: pd.DataFrame, label: object, name: str, path: Path, spec: DataSpec,
-             drop_invalid: bool, bad: np.ndarray) -> np.ndarray:
+def _numeric(
+    frame: pd.DataFrame, label: object, name: str, path: Path, spec: DataSpec, drop_invalid: bool, bad: np.ndarray
+) -> np.ndarray:
     """Column `label` as floats; non-numeric or non-finite cells are an error or (drop_invalid) marked."""
     raw = frame[label]
     values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
@@ -143,15 +143,27 @@ def _numeric(frame: pd.DataFrame, label: object, name: str, path: Path, spec: Da
         else:
             row = int(np.argmax(invalid))
             cell = raw.iloc[row]
-            what = "an empty cell" if (isinstance(cell, str) and not cell.strip()) or pd.isna(cell) \
+            what = (
+                "an empty cell"
+                if (isinstance(cell, str) and not cell.strip()) or pd.isna(cell)
                 else f"the value {cell!r}"
-            raise InputError(f"{path}: column '{name}' has {what} at {_row_label(path, row, spec)}; "
-                             "every used cell must be a finite number (use --drop-invalid to skip such rows)")
+            )
+            raise InputError(
+                f"{path}: column '{name}' has {what} at {_row_label(path, row, spec)}; "
+                "every used cell must be a finite number (use --drop-invalid to skip such rows)"
+            )
     return values
 
 
-def load_dataset(path: str | Path, spec: DataSpec, robot: Robot, *, allow_implausible: bool = False,
-                 drop_invalid: bool = False, min_samples: int = len(PI_NAMES)) -> Dataset:
+def load_dataset(
+    path: str | Path,
+    spec: DataSpec,
+    robot: Robot,
+    *,
+    allow_implausible: bool = False,
+    drop_invalid: bool = False,
+    min_samples: int = len(PI_NAMES),
+) -> Dataset:
     """Read, validate and complete one trial (see the module docstring); never modifies the file."""
     path = Path(path)
     frame = _read_table(path, spec)
@@ -159,24 +171,34 @@ def load_dataset(path: str | Path, spec: DataSpec, robot: Robot, *, allow_implau
     have = ", ".join(map(str, frame.columns[:30]))
     for required in ("t", "q1", "q2"):
         if required not in cols:
-            raise InputError(f"{path}: required column '{required}' is missing; the file has: {have}. "
-                             "Map foreign names with [data.columns] in the problem file.")
+            raise InputError(
+                f"{path}: required column '{required}' is missing; the file has: {have}. "
+                "Map foreign names with [data.columns] in the problem file."
+            )
     torque = [c for c in ("tau1", "tau2") if c in cols]
     current = [c for c in ("i1", "i2") if c in cols]
     if len(torque) == 1 or len(current) == 1:
         missing = ({"tau1", "tau2"} - set(torque)) if len(torque) == 1 else ({"i1", "i2"} - set(current))
-        raise InputError(f"{path}: column '{missing.pop()}' is missing; torques (tau1, tau2) or currents "
-                         f"(i1, i2) come in pairs; the file has: {have}")
+        raise InputError(
+            f"{path}: column '{missing.pop()}' is missing; torques (tau1, tau2) or currents "
+            f"(i1, i2) come in pairs; the file has: {have}"
+        )
     if torque and current:
-        raise InputError(f"{path}: the file has both torques (tau1, tau2) and currents (i1, i2); keep one pair "
-                         "or map only one of them with [data.columns]")
+        raise InputError(
+            f"{path}: the file has both torques (tau1, tau2) and currents (i1, i2); keep one pair "
+            "or map only one of them with [data.columns]"
+        )
     if not torque and not current:
-        raise InputError(f"{path}: neither torques (tau1, tau2) nor currents (i1, i2) found; the file has: "
-                         f"{have}. Map foreign names with [data.columns] in the problem file.")
+        raise InputError(
+            f"{path}: neither torques (tau1, tau2) nor currents (i1, i2) found; the file has: "
+            f"{have}. Map foreign names with [data.columns] in the problem file."
+        )
     for pair in (("dq1", "dq2"), ("ddq1", "ddq2")):
         if (pair[0] in cols) != (pair[1] in cols):
-            raise InputError(f"{path}: column '{pair[0] if pair[1] in cols else pair[1]}' is missing; "
-                             f"{pair[0]} and {pair[1]} come in pairs")
+            raise InputError(
+                f"{path}: column '{pair[0] if pair[1] in cols else pair[1]}' is missing; "
+                f"{pair[0]} and {pair[1]} come in pairs"
+            )
 
     bad = np.zeros(len(frame), dtype=bool)
     values = {name: _numeric(frame, label, name, path, spec, drop_invalid, bad) for name, label in cols.items()}
@@ -201,12 +223,13 @@ def load_dataset(path: str | Path, spec: DataSpec, robot: Robot, *, allow_implau
         if (steps <= 0).any():
             row = int(np.argmax(steps <= 0)) + 1
             kind = "repeats" if steps[row - 1] == 0 else "goes back"
-            raise InputError(f"{path}: column 't' is not strictly increasing: it {kind} at "
-                             f"{_row_label(path, row, spec)} ({t[row - 1]!r} then {t[row]!r})")
+            raise InputError(
+                f"{path}: column 't' is not strictly increasing: it {kind} at "
+                f"{_row_label(path, row, spec)} ({t[row - 1]!r} then {t[row]!r})"
+            )
     n = len(t)
     if n < max(min_samples, 2):
-        raise InputError(f"{path}: only {n} valid samples, fewer than the {max(min_samples, 2)} parameters "
-                         "to identify")
+        raise InputError(f"{path}: only {n} valid samples, fewer than the {max(min_samples, 2)} parameters to identify")
 
     def pair(prefix: str) -> np.ndarray:
         return np.column_stack([values[prefix + "1"], values[prefix + "2"]])
@@ -251,8 +274,9 @@ def load_dataset(path: str | Path, spec: DataSpec, robot: Robot, *, allow_implau
 
 
 # ---------------------------------------------------------------------------------------------- derivatives
-def estimate_derivatives(t: np.ndarray, q: np.ndarray, cutoff_hz: float,
-                         dq: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, str]:
+def estimate_derivatives(
+    t: np.ndarray, q: np.ndarray, cutoff_hz: float, dq: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, str]:
     """Zero-phase velocity and acceleration estimates from sampled angles (and velocities, if logged).
 
     A 4th-order Butterworth low-pass run forward and backward (no phase lag) at `cutoff_hz`, then central

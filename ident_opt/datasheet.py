@@ -115,8 +115,7 @@ def datasheet_pi(robot: Robot, convention: str | None = None) -> dict[str, float
     (it cannot be told apart from it) and the joint-2 armature is reported as ``ia2``."""
     convention = convention or robot.convention
     body = rigid_body(robot, convention)
-    a1, a2, a3, b1, b2 = grouped(body.m1, body.m2, body.l1, body.lc1, body.lc2, body.Ic1, body.Ic2,
-                                 body.gravity)
+    a1, a2, a3, b1, b2 = grouped(body.m1, body.m2, body.l1, body.lc1, body.lc2, body.Ic1, body.Ic2, body.gravity)
     pi = {
         "a1": a1 + body.armature[0],
         "a2": a2,

@@ -15,8 +15,11 @@ from ident_opt.protocols import SplitResult
 
 MEASURED, PARAMETRIC, CORRECTED = "black", "tab:red", "tab:green"
 #: The paper's three models, in its order, with its names.
-PAPER_MODELS = (("rr", "Model 1: ridge regression (RR)"), ("dm", "Model 2: datasheet dynamics (DM)"),
-                ("pbr", "Model 3: physics-based regression (PBR)"))
+PAPER_MODELS = (
+    ("rr", "Model 1: ridge regression (RR)"),
+    ("dm", "Model 2: datasheet dynamics (DM)"),
+    ("pbr", "Model 3: physics-based regression (PBR)"),
+)
 
 
 def _plt():
@@ -43,8 +46,7 @@ def torque_figure(split: SplitResult, joint: int, path: Path, models=PAPER_MODEL
     for ax, (key, name) in zip(axes[:, 0], models):
         ax.plot(t, tau, color=MEASURED, lw=0.8, label="measured")
         ax.plot(t, split.predictions[key][:, joint], color=PARAMETRIC, lw=0.8, label=f"{key.upper()} (parametric)")
-        ax.plot(t, split.predictions[key + "+gmr"][:, joint], color=CORRECTED, lw=0.8,
-                label=f"{key.upper()} + GMR")
+        ax.plot(t, split.predictions[key + "+gmr"][:, joint], color=CORRECTED, lw=0.8, label=f"{key.upper()} + GMR")
         ax.set_title(name, fontsize=10)
         ax.set_ylabel(f"τ{joint + 1} [N·m]")
         ax.legend(loc="upper right", fontsize=8, ncol=3)
@@ -58,12 +60,12 @@ def error_figure(split: SplitResult, joint: int, path: Path, models=PAPER_MODELS
     """Torque error (measured − predicted) of one joint over time: parametric red, with GMR green."""
     plt = _plt()
     t, tau = split.test.t, split.test.tau[:, joint]
-    fig, axes = plt.subplots(len(models), 1, figsize=(11, 2.4 * len(models)), sharex=True, sharey=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(len(models), 1, figsize=(11, 2.4 * len(models)), sharex=True, sharey=True, squeeze=False)
     for ax, (key, name) in zip(axes[:, 0], models):
         ax.plot(t, tau - split.predictions[key][:, joint], color=PARAMETRIC, lw=0.7, label=f"{key.upper()}")
-        ax.plot(t, tau - split.predictions[key + "+gmr"][:, joint], color=CORRECTED, lw=0.7,
-                label=f"{key.upper()} + GMR")
+        ax.plot(
+            t, tau - split.predictions[key + "+gmr"][:, joint], color=CORRECTED, lw=0.7, label=f"{key.upper()} + GMR"
+        )
         ax.axhline(0, color="gray", lw=0.5)
         ax.set_title(name, fontsize=10)
         ax.set_ylabel(f"error τ{joint + 1} [N·m]")
@@ -85,8 +87,14 @@ def parity_figure(split: SplitResult, path: Path, models=PAPER_MODELS, title: st
         for c, (key, name) in enumerate(models):
             ax = axes[j, c]
             ax.scatter(tau, split.predictions[key][:, j], s=3, color=PARAMETRIC, alpha=0.35, label=key.upper())
-            ax.scatter(tau, split.predictions[key + "+gmr"][:, j], s=3, color=CORRECTED, alpha=0.35,
-                       label=f"{key.upper()} + GMR")
+            ax.scatter(
+                tau,
+                split.predictions[key + "+gmr"][:, j],
+                s=3,
+                color=CORRECTED,
+                alpha=0.35,
+                label=f"{key.upper()} + GMR",
+            )
             ax.plot([lo - pad, hi + pad], [lo - pad, hi + pad], color=MEASURED, lw=0.8, label="ideal")
             ax.set_xlim(lo - pad, hi + pad)
             ax.set_xlabel(f"measured τ{j + 1} [N·m]")
@@ -98,8 +106,14 @@ def parity_figure(split: SplitResult, path: Path, models=PAPER_MODELS, title: st
     return _save(fig, path)
 
 
-def interval_figure(split: SplitResult, path: Path, key: str = "pbr", level: float = 0.95,
-                    window: tuple[float, float] | None = None, title: str = "") -> Path:
+def interval_figure(
+    split: SplitResult,
+    path: Path,
+    key: str = "pbr",
+    level: float = 0.95,
+    window: tuple[float, float] | None = None,
+    title: str = "",
+) -> Path:
     """The hybrid's prediction with its `level` predictive interval (GMR mixture variance) per joint."""
     from scipy.stats import norm
 
@@ -111,8 +125,15 @@ def interval_figure(split: SplitResult, path: Path, key: str = "pbr", level: flo
     cover = split.coverage[key + "+gmr"]
     fig, axes = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True)
     for j, ax in enumerate(axes):
-        ax.fill_between(t[sel], (mean - z * std)[sel, j], (mean + z * std)[sel, j], color=CORRECTED, alpha=0.25,
-                        lw=0, label=f"{level:.0%} interval (covers {cover[j]:.1%} of test samples)")
+        ax.fill_between(
+            t[sel],
+            (mean - z * std)[sel, j],
+            (mean + z * std)[sel, j],
+            color=CORRECTED,
+            alpha=0.25,
+            lw=0,
+            label=f"{level:.0%} interval (covers {cover[j]:.1%} of test samples)",
+        )
         ax.plot(t[sel], split.test.tau[sel, j], color=MEASURED, lw=0.8, label="measured")
         ax.plot(t[sel], mean[sel, j], color=CORRECTED, lw=0.8, label=f"{key.upper()} + GMR")
         ax.set_ylabel(f"τ{j + 1} [N·m]")

@@ -112,16 +112,22 @@ class GMR:
     def _mixture(self, k: int):
         from sklearn.mixture import GaussianMixture
 
-        return GaussianMixture(n_components=k, covariance_type=self.covariance, reg_covar=self.reg_covar,
-                               random_state=self.random_state, max_iter=200)
+        return GaussianMixture(
+            n_components=k,
+            covariance_type=self.covariance,
+            reg_covar=self.reg_covar,
+            random_state=self.random_state,
+            max_iter=200,
+        )
 
     def _select(self, Zs: np.ndarray, rng: np.random.Generator) -> int:
         """The number of components with the best validation error (or BIC) among `candidates`."""
         # candidates larger than the data allow are skipped (a short trial), not an error
         candidates = sorted({int(k) for k in self.candidates if 1 <= int(k) <= len(Zs) // 2})
         if not candidates:
-            raise InputError(f"GMR: no candidate number of components in {list(self.candidates)} fits "
-                             f"{len(Zs)} training samples")
+            raise InputError(
+                f"GMR: no candidate number of components in {list(self.candidates)} fits {len(Zs)} training samples"
+            )
         scores: dict[int, float] = {}
         if self.selection == "bic":
             for k in candidates:
@@ -220,29 +226,31 @@ def _responsibilities_and_means(c: Conditioning, X: np.ndarray) -> tuple[np.ndar
     return h, m
 
 
-def conditional_mean(weights: np.ndarray, means: np.ndarray, covariances: np.ndarray, d: int,
-                     X: np.ndarray, chunk: int = 16384) -> np.ndarray:
+def conditional_mean(
+    weights: np.ndarray, means: np.ndarray, covariances: np.ndarray, d: int, X: np.ndarray, chunk: int = 16384
+) -> np.ndarray:
     """E[r | x] (N, d_out) of the mixture (weights (K,), means (K, D), covariances (K, D, D))."""
     c = conditioning(weights, means, covariances, d)
     out = np.empty((len(X), means.shape[1] - d))
     for s in range(0, len(X), chunk):  # bounded memory: O(chunk · K · d)
-        h, m = _responsibilities_and_means(c, X[s:s + chunk])
-        out[s:s + chunk] = np.einsum("nk,nko->no", h, m)
+        h, m = _responsibilities_and_means(c, X[s : s + chunk])
+        out[s : s + chunk] = np.einsum("nk,nko->no", h, m)
     return out
 
 
-def conditional(weights: np.ndarray, means: np.ndarray, covariances: np.ndarray, d: int,
-                X: np.ndarray, chunk: int = 16384) -> tuple[np.ndarray, np.ndarray]:
+def conditional(
+    weights: np.ndarray, means: np.ndarray, covariances: np.ndarray, d: int, X: np.ndarray, chunk: int = 16384
+) -> tuple[np.ndarray, np.ndarray]:
     """E[r | x] (N, d_out) and Cov[r | x] (N, d_out, d_out) = Σ h_k (C_k + (m_k − E)(m_k − E)ᵀ)."""
     c = conditioning(weights, means, covariances, d)
     d_out = means.shape[1] - d
     mean, cov = np.empty((len(X), d_out)), np.empty((len(X), d_out, d_out))
     for s in range(0, len(X), chunk):
-        h, m = _responsibilities_and_means(c, X[s:s + chunk])
+        h, m = _responsibilities_and_means(c, X[s : s + chunk])
         e = np.einsum("nk,nko->no", h, m)
         dev = m - e[:, None, :]
-        mean[s:s + chunk] = e
-        cov[s:s + chunk] = np.einsum("nk,kij->nij", h, c.C) + np.einsum("nk,nki,nkj->nij", h, dev, dev)
+        mean[s : s + chunk] = e
+        cov[s : s + chunk] = np.einsum("nk,kij->nij", h, c.C) + np.einsum("nk,nki,nkj->nij", h, dev, dev)
     return mean, cov
 
 

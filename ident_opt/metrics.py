@@ -35,5 +35,7 @@ def coverage(tau: np.ndarray, mean: np.ndarray, std: np.ndarray, level: float = 
 
 def all_metrics(tau: np.ndarray, tau_hat: np.ndarray) -> dict[str, list[float]]:
     """{"rmse": [j1, j2], "nmse": [...], "nmse_range": [...]} as plain floats."""
-    return {name: [float(v) for v in fn(tau, tau_hat)]
-            for name, fn in (("rmse", rmse), ("nmse", nmse), ("nmse_range", nmse_range))}
+    return {
+        name: [float(v) for v in fn(tau, tau_hat)]
+        for name, fn in (("rmse", rmse), ("nmse", nmse), ("nmse_range", nmse_range))
+    }

@@ -177,20 +177,34 @@ class HybridModel:
         return self.base.predict(data) + mean, std
 
 
-def make_gmr(spec: ResidualSpec, components: int | None = None, covariance: str | None = None,
-             random_state: int = 0, validation: str = "random") -> GMR:
+def make_gmr(
+    spec: ResidualSpec,
+    components: int | None = None,
+    covariance: str | None = None,
+    random_state: int = 0,
+    validation: str = "random",
+) -> GMR:
     """A GMR with the problem's `[residual]` settings (components: a fixed K overrides the spec's;
     validation: how the components are chosen, see `GMR`)."""
-    return GMR(n_components=components if components is not None else spec.components,
-               candidates=spec.candidates, covariance=covariance or spec.covariance,
-               reg_covar=spec.reg_covar, max_train_samples=spec.max_train_samples, random_state=random_state,
-               validation=validation)
+    return GMR(
+        n_components=components if components is not None else spec.components,
+        candidates=spec.candidates,
+        covariance=covariance or spec.covariance,
+        reg_covar=spec.reg_covar,
+        max_train_samples=spec.max_train_samples,
+        random_state=random_state,
+        validation=validation,
+    )
 
 
 def parametric_models(robot: Robot, constrained: bool = True) -> list:
     """Fresh, unfitted parametric models in report order: rr, dm, dm_physical, pbr (, cpbr)."""
-    models = [RidgeModel(), datasheet_model(robot, "paper"), datasheet_model(robot, "physical"),
-              RigidModel("pbr", RIGID, estimator="ols")]
+    models = [
+        RidgeModel(),
+        datasheet_model(robot, "paper"),
+        datasheet_model(robot, "physical"),
+        RigidModel("pbr", RIGID, estimator="ols"),
+    ]
     if constrained:
         models.append(RigidModel("cpbr", RIGID, estimator="constrained"))
     return models

@@ -104,9 +104,16 @@ class OnlineIdentifier:
     design_jacobian: x (6,) -> ∂D/∂x (2, 6, P), needed only for `cross_covariance`.
     """
 
-    def __init__(self, design: Design, estimator: Estimator, theta0: np.ndarray, stats0: Stats,
-                 gmr=None, cross_covariance: bool = False,
-                 design_jacobian: Callable[[np.ndarray], np.ndarray] | None = None):
+    def __init__(
+        self,
+        design: Design,
+        estimator: Estimator,
+        theta0: np.ndarray,
+        stats0: Stats,
+        gmr=None,
+        cross_covariance: bool = False,
+        design_jacobian: Callable[[np.ndarray], np.ndarray] | None = None,
+    ):
         self.design = design
         self.estimator = estimator
         self.theta0 = np.asarray(theta0, dtype=float).copy()
@@ -158,8 +165,7 @@ class OnlineIdentifier:
         return np.sqrt(np.maximum(self.stats.rss(self.theta), 0.0) / max(self.stats.n, 1))
 
     # ------------------------------------------------------------------ prediction and update
-    def predict(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
-                design: np.ndarray | None = None) -> Prediction:
+    def predict(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, design: np.ndarray | None = None) -> Prediction:
         """The current model's torque for one sample (each (2,)); `design` (2, P) if already computed."""
         D = self.design(q[None], dq[None], ddq[None])[0] if design is None else design
         parametric = D @ self.theta
@@ -169,8 +175,9 @@ class OnlineIdentifier:
         mean, cov = self._gmr.predict(x)
         return Prediction(parametric + mean[0], parametric, np.sqrt(np.diagonal(cov[0])))
 
-    def update(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, tau: np.ndarray,
-               design: np.ndarray | None = None) -> Prediction:
+    def update(
+        self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, tau: np.ndarray, design: np.ndarray | None = None
+    ) -> Prediction:
         """Predict the sample (before seeing τ), then fold it in and re-solve; returns the prediction.
         q, dq, ddq [rad, rad/s, rad/s²], τ [N m], each (2,)."""
         D = self.design(q[None], dq[None], ddq[None])[0] if design is None else design
@@ -214,8 +221,12 @@ def batch_theta(estimator: Estimator, stats: Stats, theta_fixed: np.ndarray | No
     if estimator.kind == "fixed":
         return np.asarray(theta_fixed, dtype=float)
     H, h, _ = stats.combined()
-    fresh = Estimator(estimator.kind, estimator.penalty, estimator.bounds,
-                      estimator.solver.cold() if estimator.kind == "consistent" else None)
+    fresh = Estimator(
+        estimator.kind,
+        estimator.penalty,
+        estimator.bounds,
+        estimator.solver.cold() if estimator.kind == "consistent" else None,
+    )
     return fresh.make_solver()(H, h)
 
 
@@ -246,7 +257,7 @@ def kinematic_design(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarr
     intercept and weights), so θ = [c1, w1, c2, w2] and the ridge on the statistics is two ridges."""
     F = np.hstack([np.ones((len(q), 1)), q, dq, ddq])
     D = np.zeros((len(q), 2, 2 * F.shape[1]))
-    D[:, 0, :F.shape[1]], D[:, 1, F.shape[1]:] = F, F
+    D[:, 0, : F.shape[1]], D[:, 1, F.shape[1] :] = F, F
     return D
 
 
@@ -285,12 +296,10 @@ def offline_start(key: str, problem, train, bounds: Bounds | None = None, margin
         penalty = np.concatenate([np.r_[0.0, np.full(6, a)] for a in alpha])  # intercepts unpenalised
         theta0 = np.concatenate([np.r_[ridge.intercept_[j], ridge.coef_[j]] for j in range(2)])
         names = tuple(f"{w}_{j}" for j in (1, 2) for w in ("c", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2"))
-        return Start(key, kinematic_design, Estimator("ridge", penalty=penalty), theta0, names,
-                     _kinematic_jacobian)
+        return Start(key, kinematic_design, Estimator("ridge", penalty=penalty), theta0, names, _kinematic_jacobian)
     if key in ("dm", "dm_physical"):
         dm = datasheet_model(problem.robot, "paper" if key == "dm" else "physical")
-        return Start(key, dm.arm.regressor, Estimator("fixed"), dm.pi, dm.arm.names,
-                     arm_design_jacobian(dm.arm))
+        return Start(key, dm.arm.regressor, Estimator("fixed"), dm.pi, dm.arm.names, arm_design_jacobian(dm.arm))
     box = bounds or default_bounds(RIGID)
     if key == "pbr":
         estimator = Estimator("bounded", bounds=box)
@@ -310,9 +319,15 @@ def start_identifier(start: Start, train, gmr=None, cross_covariance: bool = Fal
     stats0 = Stats.from_regressor(D, train.tau)
     if gmr is not None:
         gmr.fit(np.hstack([train.q, train.dq, train.ddq]), train.tau - D @ start.theta0)
-    online = OnlineIdentifier(start.design, start.estimator, start.theta0, stats0, gmr=gmr,
-                              cross_covariance=cross_covariance,
-                              design_jacobian=start.jacobian if cross_covariance else None)
+    online = OnlineIdentifier(
+        start.design,
+        start.estimator,
+        start.theta0,
+        stats0,
+        gmr=gmr,
+        cross_covariance=cross_covariance,
+        design_jacobian=start.jacobian if cross_covariance else None,
+    )
     if start.estimator.kind == "ridge":
         # The recursive ridge reproduces the offline ridge on the same data exactly (a check, not a fit).
         if not np.allclose(online.theta, start.theta0, rtol=1e-8, atol=1e-10 * np.abs(start.theta0).max()):

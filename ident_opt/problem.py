@@ -240,7 +240,7 @@ def _robot(table: _Table) -> Robot:
     convention = table.take("convention", str)
     if convention not in ("physical", "paper"):
         raise InputError(
-            f"{table.path}: key 'convention' in [robot] must be \"physical\" or \"paper\", got {convention!r}"
+            f'{table.path}: key \'convention\' in [robot] must be "physical" or "paper", got {convention!r}'
         )
     gravity = table.positive("gravity")
     link1, link2 = _link(table.table("link1")), _link(table.table("link2"))
@@ -308,7 +308,7 @@ def _residual(table: _Table) -> ResidualSpec:
         raise InputError(f"{table.path}: key 'candidates' in [residual] must be a list of integers >= 1")
     covariance = table.take("covariance", str, ResidualSpec.covariance)
     if covariance not in ("full", "diag"):
-        raise InputError(f"{table.path}: key 'covariance' in [residual] must be \"full\" or \"diag\"")
+        raise InputError(f'{table.path}: key \'covariance\' in [residual] must be "full" or "diag"')
     spec = ResidualSpec(
         components=components,
         candidates=tuple(candidates),
@@ -333,10 +333,10 @@ def _simulate(table: _Table) -> SimulateSpec:
             raise InputError(f"{table.path}: key 'effects' in [simulate]: {exc}") from None
     output = table.take("output", str, SimulateSpec.output)
     if output not in ("torque", "current"):
-        raise InputError(f"{table.path}: key 'output' in [simulate] must be \"torque\" or \"current\"")
+        raise InputError(f'{table.path}: key \'output\' in [simulate] must be "torque" or "current"')
     trajectory = table.take("trajectory", str, SimulateSpec.trajectory)
     if trajectory not in ("tud01", "fourier"):
-        raise InputError(f"{table.path}: key 'trajectory' in [simulate] must be \"tud01\" or \"fourier\"")
+        raise InputError(f'{table.path}: key \'trajectory\' in [simulate] must be "tud01" or "fourier"')
     spec = SimulateSpec(
         trajectory=trajectory,
         duration=table.positive("duration", SimulateSpec.duration),

@@ -67,9 +67,18 @@ class ProtocolResult:
         return out
 
 
-def evaluate_split(train: Dataset, test: Dataset, problem: Problem, *, constrained: bool = True,
-                   components: dict[str, int] | None = None, covariance: str | None = None,
-                   random_state: int = 0, level: float = 0.95, validation: str = "random") -> SplitResult:
+def evaluate_split(
+    train: Dataset,
+    test: Dataset,
+    problem: Problem,
+    *,
+    constrained: bool = True,
+    components: dict[str, int] | None = None,
+    covariance: str | None = None,
+    random_state: int = 0,
+    level: float = 0.95,
+    validation: str = "random",
+) -> SplitResult:
     """Fit every parametric model and its `+gmr` hybrid on `train`; score all on `test`.
 
     components: `+gmr` key -> a fixed K (else the problem's `[residual]` setting, "auto" = chosen on
@@ -80,8 +89,9 @@ def evaluate_split(train: Dataset, test: Dataset, problem: Problem, *, constrain
     # The matrices here are small (N × 8, K ≤ 20): BLAS threads only add overhead, and on a busy machine
     # they oversubscribe the cores (measured: a 10-component fit 0.14 s single-threaded, 1–5 s threaded).
     with threadpool_limits(limits=1):
-        return _evaluate_split(train, test, problem, constrained, components, covariance, random_state, level,
-                               validation)
+        return _evaluate_split(
+            train, test, problem, constrained, components, covariance, random_state, level, validation
+        )
 
 
 def _evaluate_split(train, test, problem, constrained, components, covariance, random_state, level, validation):
@@ -110,8 +120,7 @@ def _evaluate_split(train, test, problem, constrained, components, covariance, r
 
 def _mean_of(results: list[SplitResult]) -> tuple[dict, dict]:
     keys = results[0].metrics["rmse"].keys()
-    metrics = {m: {k: np.mean([r.metrics[m][k] for r in results], axis=0).tolist() for k in keys}
-               for m in METRICS}
+    metrics = {m: {k: np.mean([r.metrics[m][k] for r in results], axis=0).tolist() for k in keys} for m in METRICS}
     cover = {k: np.mean([r.coverage[k] for r in results], axis=0).tolist() for k in results[0].coverage}
     return metrics, cover
 
@@ -120,16 +129,29 @@ def _params(result: SplitResult) -> dict[str, dict[str, float]]:
     return {k: m.params() for k, m in result.models.items() if hasattr(m, "params") and m.estimator}
 
 
-def paper_protocol(trial: Dataset, problem: Problem, *, constrained: bool = True, covariance: str | None = None,
-                   components: dict[str, int] | None = None,
-                   progress: Callable[[], None] | None = None) -> ProtocolResult:
+def paper_protocol(
+    trial: Dataset,
+    problem: Problem,
+    *,
+    constrained: bool = True,
+    covariance: str | None = None,
+    components: dict[str, int] | None = None,
+    progress: Callable[[], None] | None = None,
+) -> ProtocolResult:
     """Shuffled 70/30 splits over the problem's seeds; the GMR components (`+gmr` key -> K, or chosen on the
     first seed when the problem says "auto") are kept for the other seeds, so every seed fits the same model."""
     results: list[SplitResult] = []
     for seed in problem.split.seeds:
         train, test = shuffled_split(trial.n, problem.split.train_fraction, seed)
-        r = evaluate_split(trial.subset(train), trial.subset(test), problem, constrained=constrained,
-                           components=components, covariance=covariance, random_state=seed)
+        r = evaluate_split(
+            trial.subset(train),
+            trial.subset(test),
+            problem,
+            constrained=constrained,
+            components=components,
+            covariance=covariance,
+            random_state=seed,
+        )
         components = components or r.components
         results.append(r)
         if progress:
@@ -137,34 +159,53 @@ def paper_protocol(trial: Dataset, problem: Problem, *, constrained: bool = True
     metrics, cover = _mean_of(results)
     per_seed = {k: [r.metrics["rmse"][k] for r in results] for k in results[0].metrics["rmse"]}
     params = {k: [_params(r)[k] for r in results] for k in _params(results[0])}
-    desc = (f"shuffled {problem.split.train_fraction:.0%} / {1 - problem.split.train_fraction:.0%} split, "
-            f"mean over {len(results)} seeds (the paper's protocol)")
+    desc = (
+        f"shuffled {problem.split.train_fraction:.0%} / {1 - problem.split.train_fraction:.0%} split, "
+        f"mean over {len(results)} seeds (the paper's protocol)"
+    )
     return ProtocolResult("paper", desc, metrics, cover, components or {}, per_seed, params, results[0])
 
 
-def chronological_protocol(trial: Dataset, problem: Problem, *, constrained: bool = True,
-                           progress: Callable[[], None] | None = None) -> ProtocolResult:
+def chronological_protocol(
+    trial: Dataset, problem: Problem, *, constrained: bool = True, progress: Callable[[], None] | None = None
+) -> ProtocolResult:
     """The first `train_fraction` of the trial in time trains, the rest tests."""
     train, test = chronological_split(trial.n, problem.split.train_fraction)
-    r = evaluate_split(trial.subset(train), trial.subset(test), problem, constrained=constrained,
-                       validation="blocked")
+    r = evaluate_split(trial.subset(train), trial.subset(test), problem, constrained=constrained, validation="blocked")
     if progress:
         progress()
-    desc = (f"first {problem.split.train_fraction:.0%} of the trial in time trains, the last "
-            f"{1 - problem.split.train_fraction:.0%} tests")
-    return ProtocolResult("chronological", desc, r.metrics, r.coverage, r.components,
-                          {k: [v] for k, v in r.metrics["rmse"].items()}, {}, r)
+    desc = (
+        f"first {problem.split.train_fraction:.0%} of the trial in time trains, the last "
+        f"{1 - problem.split.train_fraction:.0%} tests"
+    )
+    return ProtocolResult(
+        "chronological",
+        desc,
+        r.metrics,
+        r.coverage,
+        r.components,
+        {k: [v] for k, v in r.metrics["rmse"].items()},
+        {},
+        r,
+    )
 
 
-def cross_trial_protocol(trial: Dataset, unseen: Dataset, problem: Problem, *, constrained: bool = True,
-                         progress: Callable[[], None] | None = None) -> ProtocolResult:
+def cross_trial_protocol(
+    trial: Dataset,
+    unseen: Dataset,
+    problem: Problem,
+    *,
+    constrained: bool = True,
+    progress: Callable[[], None] | None = None,
+) -> ProtocolResult:
     """Identify on all of `trial`, evaluate on all of `unseen`."""
     r = evaluate_split(trial, unseen, problem, constrained=constrained, validation="blocked")
     if progress:
         progress()
     desc = f"identified on all of {_name(trial)}, evaluated on all of {_name(unseen)} (unseen trial)"
-    return ProtocolResult("cross_trial", desc, r.metrics, r.coverage, r.components,
-                          {k: [v] for k, v in r.metrics["rmse"].items()}, {}, r)
+    return ProtocolResult(
+        "cross_trial", desc, r.metrics, r.coverage, r.components, {k: [v] for k, v in r.metrics["rmse"].items()}, {}, r
+    )
 
 
 def _name(d: Dataset) -> str:

@@ -17,17 +17,38 @@ from ident_opt.tables import fmt, markdown_table, write_table
 
 #: The paper's nMSE table (its nMSE is MSE ÷ range², our `nmse_range`), joints 1 and 2.
 PAPER_NMSE_RANGE = {
-    "rr": (0.002713, 0.01786), "rr+gmr": (0.001911, 0.01243),
-    "dm": (0.02326, 0.03240), "dm+gmr": (0.01810, 0.01256),
-    "pbr": (0.002139, 0.02711), "pbr+gmr": (0.001578, 0.01126),
+    "rr": (0.002713, 0.01786),
+    "rr+gmr": (0.001911, 0.01243),
+    "dm": (0.02326, 0.03240),
+    "dm+gmr": (0.01810, 0.01256),
+    "pbr": (0.002139, 0.02711),
+    "pbr+gmr": (0.001578, 0.01126),
 }
 #: The paper's "torque error statistics across 10 seeds": (mean, std) of the test RMSE [N m] per joint.
 PAPER_RMSE = {"rr": ((1.26026, 0.01802), (0.58937, 0.00618)), "pbr": ((1.11702, 0.02005), (0.71573, 0.00518))}
 #: The paper's least-squares π̂ (its printed regressor: its b1 reads as b1 − b2 physically) and π_True.
-PAPER_PI_HAT = {"a1": 0.76283, "a2": 0.052071, "a3": 0.040211, "b1": 3.6403, "b2": 0.36291, "fv1": 1.1537,
-                "fv2": 0.097576, "fc1": 0.99977, "fc2": 0.29952}
-PAPER_PI_TRUE = {"a1": 0.36571, "a2": 0.016914, "a3": 0.010752, "b1": 8.2331, "b2": 0.38588, "fv1": 1.86e-5,
-                 "fv2": 2.45e-6, "fc1": 2.25e-3, "fc2": 1.95e-3}
+PAPER_PI_HAT = {
+    "a1": 0.76283,
+    "a2": 0.052071,
+    "a3": 0.040211,
+    "b1": 3.6403,
+    "b2": 0.36291,
+    "fv1": 1.1537,
+    "fv2": 0.097576,
+    "fc1": 0.99977,
+    "fc2": 0.29952,
+}
+PAPER_PI_TRUE = {
+    "a1": 0.36571,
+    "a2": 0.016914,
+    "a3": 0.010752,
+    "b1": 8.2331,
+    "b2": 0.38588,
+    "fv1": 1.86e-5,
+    "fv2": 2.45e-6,
+    "fc1": 2.25e-3,
+    "fc2": 1.95e-3,
+}
 PARAMETER_NOTE = (
     "Units: a [kg·m²], b [N·m], fv [N·m·s/rad], fc [N·m]; `se` = standard errors (assuming independent residuals: "
     "a lower bound on densely sampled trials). The physical datasheet folds joint 1's armature into a1 and "
@@ -38,12 +59,13 @@ PARAMETER_NOTE = (
 RMSE_TOLERANCE, NMSE_RANGE_TOLERANCE = 0.10, 0.25
 
 MODEL_NAMES = {
-    "rr": "RR (ridge, black box)", "dm": "DM (datasheet, paper's convention)",
-    "dm_physical": "DM (datasheet, physical convention)", "pbr": "PBR (OLS rigid body)",
+    "rr": "RR (ridge, black box)",
+    "dm": "DM (datasheet, paper's convention)",
+    "dm_physical": "DM (datasheet, physical convention)",
+    "pbr": "PBR (OLS rigid body)",
     "cpbr": "CPBR (constrained, consistent)",
 }
-PROTOCOL_TITLES = {"paper": "Paper's protocol", "chronological": "Chronological split",
-                   "cross_trial": "Cross-trial"}
+PROTOCOL_TITLES = {"paper": "Paper's protocol", "chronological": "Chronological split", "cross_trial": "Cross-trial"}
 
 
 def model_name(key: str) -> str:
@@ -123,8 +145,16 @@ def _repro_row(metric: str, key: str, j: int, ours: float, paper: float, tol: fl
     rel = ours / paper - 1
     target = "–" if tol is None else f"±{tol:.0%}"
     met = "reported" if tol is None else ("yes" if abs(rel) <= tol else "NO")
-    return {"metric": metric, "model": key, "joint": j + 1, "ours": ours, "paper": paper,
-            "difference": f"{rel:+.1%}", "target": target, "met": met}
+    return {
+        "metric": metric,
+        "model": key,
+        "joint": j + 1,
+        "ours": ours,
+        "paper": paper,
+        "difference": f"{rel:+.1%}",
+        "target": target,
+        "met": met,
+    }
 
 
 def seeds_frame(result: IdentifyResult) -> pd.DataFrame:
@@ -135,9 +165,16 @@ def seeds_frame(result: IdentifyResult) -> pd.DataFrame:
         arr = np.asarray(values)
         for j in range(2):
             ref = PAPER_RMSE.get(key)
-            rows.append({"model": key, "joint": j + 1, "mean RMSE [N·m]": arr[:, j].mean(),
-                         "std RMSE [N·m]": arr[:, j].std(ddof=1) if len(arr) > 1 else 0.0,
-                         "paper mean": ref[j][0] if ref else np.nan, "paper std": ref[j][1] if ref else np.nan})
+            rows.append(
+                {
+                    "model": key,
+                    "joint": j + 1,
+                    "mean RMSE [N·m]": arr[:, j].mean(),
+                    "std RMSE [N·m]": arr[:, j].std(ddof=1) if len(arr) > 1 else 0.0,
+                    "paper mean": ref[j][0] if ref else np.nan,
+                    "paper std": ref[j][1] if ref else np.nan,
+                }
+            )
     return pd.DataFrame(rows).set_index(["model", "joint"])
 
 
@@ -146,8 +183,11 @@ def parameters_frame(result: IdentifyResult) -> pd.DataFrame:
     names = list(dict.fromkeys(n for d in result.parameters.values() for n in d))
     frame = pd.DataFrame(index=pd.Index(names, name="parameter"))
     physical_first = "datasheet_paper" in result.parameters
-    labels = {"datasheet": f"datasheet ({'physical' if physical_first else 'paper'})",
-              "datasheet_paper": "datasheet (paper)", "datasheet_physical": "datasheet (physical)"}
+    labels = {
+        "datasheet": f"datasheet ({'physical' if physical_first else 'paper'})",
+        "datasheet_paper": "datasheet (paper)",
+        "datasheet_physical": "datasheet (physical)",
+    }
     for est, values in result.parameters.items():
         frame[labels.get(est, est)] = [values.get(n, np.nan) for n in names]
         if est in result.standard_errors:
@@ -168,8 +208,11 @@ def ridge_frame(result: IdentifyResult) -> pd.DataFrame:
 
 def coverage_frame(result: IdentifyResult) -> pd.DataFrame:
     """95 % interval coverage of every `+gmr` model on held-out data, per protocol and joint."""
-    rows = [{"protocol": name, "model": key, "joint1": v[0], "joint2": v[1]}
-            for name, p in result.protocols.items() for key, v in p.coverage.items()]
+    rows = [
+        {"protocol": name, "model": key, "joint1": v[0], "joint2": v[1]}
+        for name, p in result.protocols.items()
+        for key, v in p.coverage.items()
+    ]
     return pd.DataFrame(rows).set_index(["protocol", "model"])
 
 
@@ -177,18 +220,29 @@ def write_tables(result: IdentifyResult, out: Path) -> dict[str, Path]:
     """Every table as CSV (full precision) and Markdown; returns name -> Markdown path."""
     frames = {
         "identify_reproduction": (reproduction_frame(result), "Reproduction of the paper (paper's protocol)", ""),
-        "identify_seeds": (seeds_frame(result), "Test RMSE over the paper's seeds (paper's protocol)",
-                           "Mean and standard deviation (ddof = 1) of the test RMSE over the shuffled splits."),
-        "identify_parameters": (parameters_frame(result), "Parameters (identified on the whole first trial)",
-                                PARAMETER_NOTE + " Smallest eigenvalue of M(q) over all q (> 0: physically "
-                                "consistent): " + ", ".join(f"{k} {v:.3g} kg·m²" for k, v in result.consistency.items())
-                                + "."),
-        "identify_ridge": (ridge_frame(result), "Ridge regression (Model 1) on the whole first trial",
-                           "τ̂_j = Σ w_j · feature + intercept_j; the penalty alpha is chosen per joint by efficient "
-                           "leave-one-out cross-validation among 10⁻⁴ … 10⁴ (features unscaled)."),
-        "identify_coverage": (coverage_frame(result), "95 % interval coverage on held-out data",
-                              "Fraction of held-out torques inside the GMR's 95 % predictive interval "
-                              "(mixture variance, including the spread between components); 0.95 is ideal."),
+        "identify_seeds": (
+            seeds_frame(result),
+            "Test RMSE over the paper's seeds (paper's protocol)",
+            "Mean and standard deviation (ddof = 1) of the test RMSE over the shuffled splits.",
+        ),
+        "identify_parameters": (
+            parameters_frame(result),
+            "Parameters (identified on the whole first trial)",
+            PARAMETER_NOTE + " Smallest eigenvalue of M(q) over all q (> 0: physically "
+            "consistent): " + ", ".join(f"{k} {v:.3g} kg·m²" for k, v in result.consistency.items()) + ".",
+        ),
+        "identify_ridge": (
+            ridge_frame(result),
+            "Ridge regression (Model 1) on the whole first trial",
+            "τ̂_j = Σ w_j · feature + intercept_j; the penalty alpha is chosen per joint by efficient "
+            "leave-one-out cross-validation among 10⁻⁴ … 10⁴ (features unscaled).",
+        ),
+        "identify_coverage": (
+            coverage_frame(result),
+            "95 % interval coverage on held-out data",
+            "Fraction of held-out torques inside the GMR's 95 % predictive interval "
+            "(mixture variance, including the spread between components); 0.95 is ideal.",
+        ),
     }
     written = {}
     for name, (frame, title, note) in frames.items():
@@ -197,14 +251,18 @@ def write_tables(result: IdentifyResult, out: Path) -> dict[str, Path]:
         (out / f"{name}.md").write_text(text, encoding="utf-8")
         written[name] = out / f"{name}.md"
     write_table(metrics_frame(result), out / "identify_metrics.csv")
-    parts = ["# Metrics per model and protocol\n",
-             "`nmse` = MSE ÷ variance of the measured torque; `nmse_range` = MSE ÷ (max − min)² (the paper's); "
-             "coverage95 = fraction of test torques inside the 95 % GMR predictive interval; K = GMR components.\n"]
+    parts = [
+        "# Metrics per model and protocol\n",
+        "`nmse` = MSE ÷ variance of the measured torque; `nmse_range` = MSE ÷ (max − min)² (the paper's); "
+        "coverage95 = fraction of test torques inside the 95 % GMR predictive interval; K = GMR components.\n",
+    ]
     for name, p in result.protocols.items():
         parts.append(f"## {PROTOCOL_TITLES.get(name, name)}: {p.description}\n\n{markdown_table(protocol_frame(p))}\n")
     for label, variant in result.variants.values():
-        parts.append(f"## Paper's protocol, GMR variant ({label}): {variant.description}\n\n"
-                     f"{markdown_table(protocol_frame(variant))}\n")
+        parts.append(
+            f"## Paper's protocol, GMR variant ({label}): {variant.description}\n\n"
+            f"{markdown_table(protocol_frame(variant))}\n"
+        )
     (out / "identify_metrics.md").write_text("\n".join(parts), encoding="utf-8")
     written["identify_metrics"] = out / "identify_metrics.md"
     return written
@@ -226,8 +284,9 @@ def json_payload(result: IdentifyResult) -> dict:
         "seconds": result.seconds,
     }
     if result.variants:
-        payload["gmr_variants"] = {name: {"label": label, "paper": v.as_json()}
-                                   for name, (label, v) in result.variants.items()}
+        payload["gmr_variants"] = {
+            name: {"label": label, "paper": v.as_json()} for name, (label, v) in result.variants.items()
+        }
     return payload
 
 
@@ -257,7 +316,7 @@ def write_readme(result: IdentifyResult, out: Path, tables: dict[str, Path]) -> 
         "",
         "The paper's protocol shuffles samples before splitting: at 100 Hz every test sample has near-copies "
         "in training, which flatters local models such as GMR. The chronological and cross-trial protocols are "
-        "the honest numbers. When the number of GMR components is \"auto\", it is chosen on held-out training "
+        'the honest numbers. When the number of GMR components is "auto", it is chosen on held-out training '
         "data that mirror the protocol: a random quarter under the paper's, the latest quarter in time under the "
         "honest ones.",
         "",
@@ -276,8 +335,11 @@ def write_readme(result: IdentifyResult, out: Path, tables: dict[str, Path]) -> 
         "",
         markdown_table(repro),
         "",
-        ("All reproduction targets are met." if missed.empty else
-         f"**{len(missed)} target(s) missed:** " + ", ".join(f"{m} {k} J{j}" for m, k, j in missed.index) + "."),
+        (
+            "All reproduction targets are met."
+            if missed.empty
+            else f"**{len(missed)} target(s) missed:** " + ", ".join(f"{m} {k} J{j}" for m, k, j in missed.index) + "."
+        ),
         "",
         "## Findings",
         "",
@@ -286,14 +348,16 @@ def write_readme(result: IdentifyResult, out: Path, tables: dict[str, Path]) -> 
     lines += ["", "## Tables", ""]
     lines += [f"- [{path.name}]({path.name}) (CSV beside it)" for path in tables.values()]
     lines += ["- [identify.json](identify.json): the machine-readable result (`spec/cli.md`)"]
-    others = [("paper_audit.md", "the paper audit: its datasheet model under both conventions"),
-              ("compare.md", "constrained vs OLS vs datasheet parameters"),
-              ("constraints_study.md", "when the physical constraints matter"),
-              ("diagnosis/diagnosis.md", "what the rigid model gets wrong, why, and the held-out gain of the fix"),
-              ("diagnosis/confusion.md", "the diagnosis on simulated trials with hidden effects (confusion matrix)"),
-              ("online.md", "online adaptation: exact re-solves after every sample, online vs frozen"),
-              ("online_benchmark.md", "online update cost against the paper's re-solve"),
-              ("simulator_calibration.md", "the simulator against the real trial")]
+    others = [
+        ("paper_audit.md", "the paper audit: its datasheet model under both conventions"),
+        ("compare.md", "constrained vs OLS vs datasheet parameters"),
+        ("constraints_study.md", "when the physical constraints matter"),
+        ("diagnosis/diagnosis.md", "what the rigid model gets wrong, why, and the held-out gain of the fix"),
+        ("diagnosis/confusion.md", "the diagnosis on simulated trials with hidden effects (confusion matrix)"),
+        ("online.md", "online adaptation: exact re-solves after every sample, online vs frozen"),
+        ("online_benchmark.md", "online update cost against the paper's re-solve"),
+        ("simulator_calibration.md", "the simulator against the real trial"),
+    ]
     present = [(f, d) for f, d in others if (out / f).exists()]
     if present:
         lines += ["", "Other reports in this folder:", ""]
@@ -313,44 +377,74 @@ def _findings(result, paper, chrono, cross, has_c) -> list[str]:
     f = []
     top = max(result.gmr_candidates, default=None)
     at_top = bool(paper.components) and all(k == top for k in paper.components.values())
-    f.append(f"- GMR components chosen on validation data (first seed; candidates {list(result.gmr_candidates)}): "
-             f"{', '.join(f'{k}: {v}' for k, v in paper.components.items())}"
-             + (" — all the largest candidate: with shuffled samples the validation data have near-copies in "
-                "training, so more components always look better." if at_top else "."))
+    f.append(
+        f"- GMR components chosen on validation data (first seed; candidates {list(result.gmr_candidates)}): "
+        f"{', '.join(f'{k}: {v}' for k, v in paper.components.items())}"
+        + (
+            " — all the largest candidate: with shuffled samples the validation data have near-copies in "
+            "training, so more components always look better."
+            if at_top
+            else "."
+        )
+    )
     for name, p in (("chronological", chrono), ("cross-trial", cross)):
         if p is not None and p.components:
-            f.append(f"- Components chosen for the {name} protocol: "
-                     f"{', '.join(f'{k}: {v}' for k, v in p.components.items())}.")
-    f.append(f"- DM (paper's convention) vs DM (physical convention), no fitting at all: `nmse` "
-             f"{_v(paper, 'dm', 0)} / {_v(paper, 'dm', 1)} vs {_v(paper, 'dm_physical', 0)} / "
-             f"{_v(paper, 'dm_physical', 1)} (joint 1 / joint 2), against PBR's {_v(paper, 'pbr', 0)} / "
-             f"{_v(paper, 'pbr', 1)}: reading the datasheet physically removes most of Model 2's joint-1 error.")
+            f.append(
+                f"- Components chosen for the {name} protocol: "
+                f"{', '.join(f'{k}: {v}' for k, v in p.components.items())}."
+            )
+    f.append(
+        f"- DM (paper's convention) vs DM (physical convention), no fitting at all: `nmse` "
+        f"{_v(paper, 'dm', 0)} / {_v(paper, 'dm', 1)} vs {_v(paper, 'dm_physical', 0)} / "
+        f"{_v(paper, 'dm_physical', 1)} (joint 1 / joint 2), against PBR's {_v(paper, 'pbr', 0)} / "
+        f"{_v(paper, 'pbr', 1)}: reading the datasheet physically removes most of Model 2's joint-1 error."
+    )
     one, diag = result.variants.get("one_component"), result.variants.get("diagonal_covariance")
-    f.append(f"- A full-covariance GMR on DM's residual brings DM's joint-1 `nmse_range` from "
-             f"{_v(paper, 'dm', 0, 'nmse_range')} to {_v(paper, 'dm+gmr', 0, 'nmse_range')} (paper: 0.02326 → "
-             "0.01810)"
-             + (f"; with a single component (a linear correction) already {_v(one[1], 'dm+gmr', 0, 'nmse_range')}"
-                if one else "")
-             + (f"; with diagonal covariances {_v(diag[1], 'dm+gmr', 0, 'nmse_range')}, since each component then "
-                "predicts a constant — nearer the paper's 0.0181, whose GMR settings are not given (for the other GMR "
-                "rows diagonal covariances move away from the paper's numbers: see the table)" if diag
-                else "") + ".")
-    gains = [f"{p.metrics['nmse']['pbr+gmr'][1] / p.metrics['nmse']['pbr'][1] - 1:+.0%} under the {name} protocol"
-             for name, p in (("paper's", paper), ("chronological", chrono), ("cross-trial", cross)) if p is not None]
-    f.append("- The GMR's joint-2 effect on PBR (`nmse` change): " + ", ".join(gains)
-             + ": most of the gain on shuffled splits comes from near-copies of the test samples in training.")
+    f.append(
+        f"- A full-covariance GMR on DM's residual brings DM's joint-1 `nmse_range` from "
+        f"{_v(paper, 'dm', 0, 'nmse_range')} to {_v(paper, 'dm+gmr', 0, 'nmse_range')} (paper: 0.02326 → "
+        "0.01810)"
+        + (
+            f"; with a single component (a linear correction) already {_v(one[1], 'dm+gmr', 0, 'nmse_range')}"
+            if one
+            else ""
+        )
+        + (
+            f"; with diagonal covariances {_v(diag[1], 'dm+gmr', 0, 'nmse_range')}, since each component then "
+            "predicts a constant — nearer the paper's 0.0181, whose GMR settings are not given (for the other GMR "
+            "rows diagonal covariances move away from the paper's numbers: see the table)"
+            if diag
+            else ""
+        )
+        + "."
+    )
+    gains = [
+        f"{p.metrics['nmse']['pbr+gmr'][1] / p.metrics['nmse']['pbr'][1] - 1:+.0%} under the {name} protocol"
+        for name, p in (("paper's", paper), ("chronological", chrono), ("cross-trial", cross))
+        if p is not None
+    ]
+    f.append(
+        "- The GMR's joint-2 effect on PBR (`nmse` change): "
+        + ", ".join(gains)
+        + ": most of the gain on shuffled splits comes from near-copies of the test samples in training."
+    )
     for name, p in (("chronological", chrono), ("cross-trial", cross)):
         if p is None:
             continue
-        f.append(f"- {name.capitalize()}: PBR `nmse` {_v(p, 'pbr', 0)} / {_v(p, 'pbr', 1)} → PBR + GMR "
-                 f"{_v(p, 'pbr+gmr', 0)} / {_v(p, 'pbr+gmr', 1)}; RR {_v(p, 'rr', 0)} / {_v(p, 'rr', 1)} → "
-                 f"RR + GMR {_v(p, 'rr+gmr', 0)} / {_v(p, 'rr+gmr', 1)}; 95 % coverage of PBR + GMR "
-                 f"{p.coverage['pbr+gmr'][0]:.1%} / {p.coverage['pbr+gmr'][1]:.1%} "
-                 f"(paper's protocol: {paper.coverage['pbr+gmr'][0]:.1%} / {paper.coverage['pbr+gmr'][1]:.1%}).")
+        f.append(
+            f"- {name.capitalize()}: PBR `nmse` {_v(p, 'pbr', 0)} / {_v(p, 'pbr', 1)} → PBR + GMR "
+            f"{_v(p, 'pbr+gmr', 0)} / {_v(p, 'pbr+gmr', 1)}; RR {_v(p, 'rr', 0)} / {_v(p, 'rr', 1)} → "
+            f"RR + GMR {_v(p, 'rr+gmr', 0)} / {_v(p, 'rr+gmr', 1)}; 95 % coverage of PBR + GMR "
+            f"{p.coverage['pbr+gmr'][0]:.1%} / {p.coverage['pbr+gmr'][1]:.1%} "
+            f"(paper's protocol: {paper.coverage['pbr+gmr'][0]:.1%} / {paper.coverage['pbr+gmr'][1]:.1%})."
+        )
     if has_c:
-        f.append(f"- CPBR vs PBR on the paper's protocol: `nmse` {_v(paper, 'cpbr', 0)} / {_v(paper, 'cpbr', 1)} "
-                 f"vs {_v(paper, 'pbr', 0)} / {_v(paper, 'pbr', 1)}; min eigenvalue of M(q) over q: "
-                 + ", ".join(f"{k} {v:.3g} kg·m²" for k, v in result.consistency.items()) + ".")
+        f.append(
+            f"- CPBR vs PBR on the paper's protocol: `nmse` {_v(paper, 'cpbr', 0)} / {_v(paper, 'cpbr', 1)} "
+            f"vs {_v(paper, 'pbr', 0)} / {_v(paper, 'pbr', 1)}; min eigenvalue of M(q) over q: "
+            + ", ".join(f"{k} {v:.3g} kg·m²" for k, v in result.consistency.items())
+            + "."
+        )
     return f
 
 
@@ -364,10 +458,15 @@ def _error_sentence(split, j: int, rest_speed: float = 0.05) -> str:
         err = split.test.tau[mask, j] - split.predictions[key][mask, j]
         return fmt(float(np.sqrt(np.mean(err**2))), 2) if mask.any() else "–"
 
-    parts = [f"{k.upper()} {rms(k, ~rest)} → {rms(k + '+gmr', ~rest)} moving, {rms(k, rest)} → "
-             f"{rms(k + '+gmr', rest)} at rest" for k in ("rr", "dm", "pbr")]
-    return (f"RMS of the joint-{j + 1} error [N·m] without → with GMR on this split ({rest.mean():.0%} of the "
-            f"samples at rest): " + "; ".join(parts) + ".")
+    parts = [
+        f"{k.upper()} {rms(k, ~rest)} → {rms(k + '+gmr', ~rest)} moving, {rms(k, rest)} → "
+        f"{rms(k + '+gmr', rest)} at rest"
+        for k in ("rr", "dm", "pbr")
+    ]
+    return (
+        f"RMS of the joint-{j + 1} error [N·m] without → with GMR on this split ({rest.mean():.0%} of the "
+        f"samples at rest): " + "; ".join(parts) + "."
+    )
 
 
 def _seed_sentence(paper: ProtocolResult) -> str:
@@ -380,48 +479,90 @@ def _seed_sentence(paper: ProtocolResult) -> str:
     dev = np.max(np.abs(arr / arr.mean(axis=0) - 1), axis=0) * 100
     order = np.argsort(dev)
     worst = ", ".join(f"{names[i]} up to {dev[i]:.0f} %" for i in order[::-1][:2])
-    return (f"Over the shuffled splits most OLS parameters stay within {np.median(dev):.0f} % of their mean "
-            f"(median of the largest deviations); the least determined are {worst} (the paper: α2 and fv2 "
-            "within 15 %).")
+    return (
+        f"Over the shuffled splits most OLS parameters stay within {np.median(dev):.0f} % of their mean "
+        f"(median of the largest deviations); the least determined are {worst} (the paper: α2 and fv2 "
+        "within 15 %)."
+    )
 
 
 def _figure_sentences(result, paper, cross) -> dict[str, tuple[str, tuple[str, str]]]:
     """figure name -> (default relative path, (title, one sentence on what it shows))."""
     m = paper.metrics["nmse"]
     s = {
-        "torque_j1": ("figures/identify_torque_j1.png", ("Joint 1 torque predictions (paper's protocol)",
-                      f"RR and PBR follow the measured joint-1 torque closely (nmse {fmt(m['rr'][0], 2)}, "
-                      f"{fmt(m['pbr'][0], 2)}) while the paper's datasheet model is offset "
-                      f"(nmse {fmt(m['dm'][0], 2)}) until the GMR removes it.")),
-        "torque_j2": ("figures/identify_torque_j2.png", ("Joint 2 torque predictions (paper's protocol)",
-                      f"No rigid model explains joint 2 (nmse {fmt(m['pbr'][1], 2)} for PBR); GMR recovers part "
-                      f"of it on shuffled splits (PBR + GMR {fmt(m['pbr+gmr'][1], 2)}).")),
-        "error_j1": ("figures/identify_error_j1.png", ("Joint 1 torque error over time (paper's protocol)",
-                     _error_sentence(paper.example, 0))),
-        "error_j2": ("figures/identify_error_j2.png", ("Joint 2 torque error over time (paper's protocol)",
-                     _error_sentence(paper.example, 1))),
-        "parity": ("figures/identify_parity.png", ("Parity plots, 2 × 3 (paper's protocol)",
-                   "Points on the diagonal are perfect predictions: with GMR, joint 1's nmse is at most "
-                   f"{fmt(max(m[k + '+gmr'][0] for k in ('rr', 'dm', 'pbr')), 2)} for the three models, joint 2's "
-                   f"at least {fmt(min(m[k + '+gmr'][1] for k in ('rr', 'dm', 'pbr')), 2)} (a visibly wider "
-                   "cloud).")),
-        "interval": ("figures/identify_interval_pbr.png", ("PBR + GMR with 95 % intervals (paper's protocol)",
-                     f"The interval covers {paper.coverage['pbr+gmr'][0]:.0%} / "
-                     f"{paper.coverage['pbr+gmr'][1]:.0%} of held-out joint-1 / joint-2 torques.")),
-        "seeds": ("figures/identify_seeds.png", ("Grouped parameters over the paper's 10 seeds",
-                  _seed_sentence(paper))),
+        "torque_j1": (
+            "figures/identify_torque_j1.png",
+            (
+                "Joint 1 torque predictions (paper's protocol)",
+                f"RR and PBR follow the measured joint-1 torque closely (nmse {fmt(m['rr'][0], 2)}, "
+                f"{fmt(m['pbr'][0], 2)}) while the paper's datasheet model is offset "
+                f"(nmse {fmt(m['dm'][0], 2)}) until the GMR removes it.",
+            ),
+        ),
+        "torque_j2": (
+            "figures/identify_torque_j2.png",
+            (
+                "Joint 2 torque predictions (paper's protocol)",
+                f"No rigid model explains joint 2 (nmse {fmt(m['pbr'][1], 2)} for PBR); GMR recovers part "
+                f"of it on shuffled splits (PBR + GMR {fmt(m['pbr+gmr'][1], 2)}).",
+            ),
+        ),
+        "error_j1": (
+            "figures/identify_error_j1.png",
+            ("Joint 1 torque error over time (paper's protocol)", _error_sentence(paper.example, 0)),
+        ),
+        "error_j2": (
+            "figures/identify_error_j2.png",
+            ("Joint 2 torque error over time (paper's protocol)", _error_sentence(paper.example, 1)),
+        ),
+        "parity": (
+            "figures/identify_parity.png",
+            (
+                "Parity plots, 2 × 3 (paper's protocol)",
+                "Points on the diagonal are perfect predictions: with GMR, joint 1's nmse is at most "
+                f"{fmt(max(m[k + '+gmr'][0] for k in ('rr', 'dm', 'pbr')), 2)} for the three models, joint 2's "
+                f"at least {fmt(min(m[k + '+gmr'][1] for k in ('rr', 'dm', 'pbr')), 2)} (a visibly wider "
+                "cloud).",
+            ),
+        ),
+        "interval": (
+            "figures/identify_interval_pbr.png",
+            (
+                "PBR + GMR with 95 % intervals (paper's protocol)",
+                f"The interval covers {paper.coverage['pbr+gmr'][0]:.0%} / "
+                f"{paper.coverage['pbr+gmr'][1]:.0%} of held-out joint-1 / joint-2 torques.",
+            ),
+        ),
+        "seeds": (
+            "figures/identify_seeds.png",
+            ("Grouped parameters over the paper's 10 seeds", _seed_sentence(paper)),
+        ),
     }
     if cross is not None:
         mc = cross.metrics["nmse"]
-        s["cross_j1"] = ("figures/identify_cross_trial_j1.png", ("Joint 1 on the unseen trial (cross-trial)",
-                         f"Identified on exp1, predicted on exp2: PBR nmse {fmt(mc['pbr'][0], 2)}, "
-                         f"PBR + GMR {fmt(mc['pbr+gmr'][0], 2)}."))
-        s["cross_j2"] = ("figures/identify_cross_trial_j2.png", ("Joint 2 on the unseen trial (cross-trial)",
-                         f"Joint 2 on a new trial: PBR nmse {fmt(mc['pbr'][1], 2)} → PBR + GMR "
-                         f"{fmt(mc['pbr+gmr'][1], 2)}, against {fmt(m['pbr'][1], 2)} → {fmt(m['pbr+gmr'][1], 2)} "
-                         "on the paper's shuffled splits."))
-        s["cross_interval"] = ("figures/identify_cross_trial_interval_pbr.png",
-                               ("PBR + GMR with 95 % intervals on the unseen trial (cross-trial)",
-                                f"On the unseen trial the interval covers {cross.coverage['pbr+gmr'][0]:.0%} / "
-                                f"{cross.coverage['pbr+gmr'][1]:.0%} of the torques."))
+        s["cross_j1"] = (
+            "figures/identify_cross_trial_j1.png",
+            (
+                "Joint 1 on the unseen trial (cross-trial)",
+                f"Identified on exp1, predicted on exp2: PBR nmse {fmt(mc['pbr'][0], 2)}, "
+                f"PBR + GMR {fmt(mc['pbr+gmr'][0], 2)}.",
+            ),
+        )
+        s["cross_j2"] = (
+            "figures/identify_cross_trial_j2.png",
+            (
+                "Joint 2 on the unseen trial (cross-trial)",
+                f"Joint 2 on a new trial: PBR nmse {fmt(mc['pbr'][1], 2)} → PBR + GMR "
+                f"{fmt(mc['pbr+gmr'][1], 2)}, against {fmt(m['pbr'][1], 2)} → {fmt(m['pbr+gmr'][1], 2)} "
+                "on the paper's shuffled splits.",
+            ),
+        )
+        s["cross_interval"] = (
+            "figures/identify_cross_trial_interval_pbr.png",
+            (
+                "PBR + GMR with 95 % intervals on the unseen trial (cross-trial)",
+                f"On the unseen trial the interval covers {cross.coverage['pbr+gmr'][0]:.0%} / "
+                f"{cross.coverage['pbr+gmr'][1]:.0%} of the torques.",
+            ),
+        )
     return s

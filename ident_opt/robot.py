@@ -32,13 +32,41 @@ import casadi as ca
 import numpy as np
 
 from ident_opt.datasheet import PI_NAMES
+from ident_opt.parameters import Parameter
 
-EXTENSIONS = {
-    "armature": ("ia2",),
-    "asymmetric_coulomb": ("fc1p", "fc1n", "fc2p", "fc2n"),
-    "stribeck": ("fs1", "fs2"),
-    "offset": ("b1s", "b2s"),
+#: The paper's grouped parameters π, declared once (names in `PI_NAMES` order).
+RIGID_PARAMETERS = (
+    Parameter(
+        "a1", "kg m^2", "I1 + m1 lc1² + m2 l1² + a3 (+ joint-1 armature under the physical convention)", "inertia"
+    ),
+    Parameter("a2", "kg m^2", "m2 l1 lc2: the inertial coupling of the two links", "coupling"),
+    Parameter("a3", "kg m^2", "I2 + m2 lc2²", "inertia"),
+    Parameter("b1", "N m", "g (m1 lc1 + m2 l1)", "gravity"),
+    Parameter("b2", "N m", "g m2 lc2", "gravity"),
+    Parameter("fv1", "N m s/rad", "joint-1 viscous friction", "friction"),
+    Parameter("fv2", "N m s/rad", "joint-2 viscous friction", "friction"),
+    Parameter("fc1", "N m", "joint-1 Coulomb friction", "friction"),
+    Parameter("fc2", "N m", "joint-2 Coulomb friction", "friction"),
+)
+assert tuple(p.name for p in RIGID_PARAMETERS) == PI_NAMES
+
+#: Extension name -> the parameters it adds (in column order).
+EXTENSION_PARAMETERS = {
+    "armature": (Parameter("ia2", "kg m^2", "joint-2 reflected rotor inertia N² J", "armature"),),
+    "asymmetric_coulomb": tuple(
+        Parameter(f"fc{j}{s}", "N m", f"joint-{j} Coulomb level for {d} velocity", "friction")
+        for j in (1, 2)
+        for s, d in (("p", "positive"), ("n", "negative"))
+    ),
+    "stribeck": tuple(
+        Parameter(f"fs{j}", "N m", f"joint-{j} Stribeck excess over the Coulomb level", "friction") for j in (1, 2)
+    ),
+    "offset": (
+        Parameter("b1s", "N m", "sin q1 gravity column: an encoder zero offset rotates G", "gravity"),
+        Parameter("b2s", "N m", "sin(q1 + q2) gravity column", "gravity"),
+    ),
 }
+EXTENSIONS = {name: tuple(p.name for p in params) for name, params in EXTENSION_PARAMETERS.items()}
 
 
 @dataclass(frozen=True)
@@ -72,6 +100,14 @@ class ArmModel:
         for ext in self.extensions:
             names += EXTENSIONS[ext]
         return tuple(names)
+
+    @cached_property
+    def parameters(self) -> tuple[Parameter, ...]:
+        """Each parameter's declaration (unit, meaning, kind), in the order of π."""
+        declared = {p.name: p for p in RIGID_PARAMETERS}
+        for ext in self.extensions:
+            declared.update({p.name: p for p in EXTENSION_PARAMETERS[ext]})
+        return tuple(declared[n] for n in self.names)
 
     @property
     def n_params(self) -> int:
@@ -142,14 +178,23 @@ class ArmModel:
         pi = ca.SX.sym("pi", self.n_params)
         M, C, G, F = self._terms(q, dq, pi)
         tau = M @ ddq + C @ dq + G + F
-        return {"q": q, "dq": dq, "ddq": ddq, "pi": pi, "M": M, "C": C, "G": G, "F": F, "tau": tau,
-                "Y": ca.jacobian(tau, pi)}
+        return {
+            "q": q,
+            "dq": dq,
+            "ddq": ddq,
+            "pi": pi,
+            "M": M,
+            "C": C,
+            "G": G,
+            "F": F,
+            "tau": tau,
+            "Y": ca.jacobian(tau, pi),
+        }
 
     def function(self, what: str) -> ca.Function:
         """A CasADi Function for one of M, C, G, F, tau, Y, with inputs (q, dq, ddq, pi)."""
         s = self.symbols
-        return ca.Function(what, [s["q"], s["dq"], s["ddq"], s["pi"]], [s[what]],
-                           ["q", "dq", "ddq", "pi"], [what])
+        return ca.Function(what, [s["q"], s["dq"], s["ddq"], s["pi"]], [s[what]], ["q", "dq", "ddq", "pi"], [what])
 
     def tau_expression(self, q, dq, ddq, pi):
         """τ as a CasADi expression of any (symbolic or numeric) q, dq, ddq and π."""
@@ -246,3 +291,9 @@ class ArmModel:
 
 #: The paper's identification model (physically correct gravity vector).
 RIGID = ArmModel()
+#: The nominal physical-convention structure: the datasheet read physically has a joint-2 armature ia2
+#: (joint 1's is folded into a1). The simulator's truth, the physical datasheet model and the diagnosis'
+#: nominal model all use it.
+PHYSICAL = ArmModel(("armature",))
+#: The paper's printed gravity vector G1 = (β1 + β2) c1 + β2 c12, only to reproduce its Model 2.
+PAPER = ArmModel(gravity="paper")

@@ -114,8 +114,13 @@ def prediction_record(n: int, sample: dict[str, float], p: Prediction) -> dict:
     record: dict = {"n": n}
     if "t" in sample:
         record["t"] = sample["t"]
-    record.update(tau=p.tau.tolist(), lower=p.lower.tolist(), upper=p.upper.tolist(), std=p.std.tolist(),
-                  parametric=p.parametric.tolist())
+    record.update(
+        tau=p.tau.tolist(),
+        lower=p.lower.tolist(),
+        upper=p.upper.tolist(),
+        std=p.std.tolist(),
+        parametric=p.parametric.tolist(),
+    )
     return record
 
 
@@ -123,10 +128,16 @@ class _Stop(Exception):
     """SIGTERM or SIGINT while waiting for input."""
 
 
-def serve(identifier: OnlineIdentifier, names: tuple[str, ...], instream: TextIO, outstream: TextIO,
-          errstream: TextIO, snapshot_every: int = 1000,
-          on_final: Callable[[dict], None] | None = None,
-          current_to_torque: tuple[float, float] | None = None) -> dict:
+def serve(
+    identifier: OnlineIdentifier,
+    names: tuple[str, ...],
+    instream: TextIO,
+    outstream: TextIO,
+    errstream: TextIO,
+    snapshot_every: int = 1000,
+    on_final: Callable[[dict], None] | None = None,
+    current_to_torque: tuple[float, float] | None = None,
+) -> dict:
     """Run the stream until end of input, SIGINT or SIGTERM; returns (and writes) the final record.
 
     names: the parameter names of `identifier` (for the snapshots); on_final: called with the final

@@ -40,12 +40,26 @@ def test_audit_on_the_real_trial(paper_problem, exp1):
 
 def test_audit_command_writes_report(tmp_path):
     out = tmp_path / "res"
-    status = main(["audit", "--problem", str(PROBLEMS / "tudor_2dof_paper.toml"), "--out", str(out),
-                   "--json", str(out / "audit.json")])
+    status = main(
+        [
+            "audit",
+            "--problem",
+            str(PROBLEMS / "tudor_2dof_paper.toml"),
+            "--out",
+            str(out),
+            "--json",
+            str(out / "audit.json"),
+        ]
+    )
     assert status == 0
     text = (out / "paper_audit.md").read_text()
-    for phrase in ("Actuator mass on the wrong link", "not reflected through the gear ratio",
-                   "rotor inertia omitted", "β2 cos q1 twice", "cross-trial"):
+    for phrase in (
+        "Actuator mass on the wrong link",
+        "not reflected through the gear ratio",
+        "rotor inertia omitted",
+        "β2 cos q1 twice",
+        "cross-trial",
+    ):
         assert phrase in text
     assert (out / "figures" / "paper_audit_torque.png").stat().st_size > 10_000
     params = pd.read_csv(out / "paper_audit_parameters.csv", index_col=0)

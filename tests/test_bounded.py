@@ -28,8 +28,9 @@ PI_INACTIVE = np.array([0.8, 0.05, 0.1, 3.7, 0.3, 1.5, 0.2, 0.6, 0.4])
 
 def _reference(Y: np.ndarray, tau: np.ndarray, bounds: Bounds) -> np.ndarray:
     """The paper's way: bounded LS on all stacked rows (BVLS: an exact active-set method)."""
-    return lsq_linear(Y.reshape(-1, Y.shape[2]), tau.reshape(-1), bounds=(bounds.lower, bounds.upper),
-                      method="bvls", tol=1e-15).x
+    return lsq_linear(
+        Y.reshape(-1, Y.shape[2]), tau.reshape(-1), bounds=(bounds.lower, bounds.upper), method="bvls", tol=1e-15
+    ).x
 
 
 @pytest.mark.parametrize("pi_true, n_active", [(PI_INACTIVE, 0), (PI_ACTIVE, 1)])

@@ -51,7 +51,7 @@ def test_online_consistent_equals_cold_solve_on_every_checked_prefix():
         pi = online.solve(H, h)
         if k + 1 in checks:
             cold = online.cold()
-            ref = cold.solve(*Stats.from_regressor(Y[:k + 1], tau[:k + 1]).combined()[:2])
+            ref = cold.solve(*Stats.from_regressor(Y[: k + 1], tau[: k + 1]).combined()[:2])
             assert cold.inexact == 0
             assert np.max(np.abs(pi - ref)) <= 1e-9 * np.max(np.abs(ref)), k
     assert online.inexact == 0

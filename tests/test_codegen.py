@@ -22,8 +22,22 @@ pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 
 MODEL = ArmModel(extensions=("armature", "asymmetric_coulomb"))
 #: A physically plausible π for MODEL (a [kg m²], b [N m], friction ≥ 0), distinct per-direction Coulomb.
-PI = MODEL.vector({"a1": 0.81, "a2": 0.013, "a3": 0.011, "b1": 3.76, "b2": 0.30, "fv1": 1.56, "fv2": 0.015,
-                   "ia2": 0.004, "fc1p": 0.58, "fc1n": 0.41, "fc2p": 0.38, "fc2n": 0.52})
+PI = MODEL.vector(
+    {
+        "a1": 0.81,
+        "a2": 0.013,
+        "a3": 0.011,
+        "b1": 3.76,
+        "b2": 0.30,
+        "fv1": 1.56,
+        "fv2": 0.015,
+        "ia2": 0.004,
+        "fc1p": 0.58,
+        "fc1n": 0.41,
+        "fc2p": 0.38,
+        "fc2n": 0.52,
+    }
+)
 N = 5000
 
 
@@ -71,9 +85,11 @@ class CFunction:
         self.inputs = [(ctypes.c_double * 2)() for _ in range(3)]
         self.output = (ctypes.c_double * 2)()
         self.arg = (ctypes.POINTER(ctypes.c_double) * max(n_arg, 1))(
-            *(ctypes.cast(a, ctypes.POINTER(ctypes.c_double)) for a in self.inputs))
+            *(ctypes.cast(a, ctypes.POINTER(ctypes.c_double)) for a in self.inputs)
+        )
         self.res = (ctypes.POINTER(ctypes.c_double) * max(n_res, 1))(
-            ctypes.cast(self.output, ctypes.POINTER(ctypes.c_double)))
+            ctypes.cast(self.output, ctypes.POINTER(ctypes.c_double))
+        )
         self.iw = (ctypes.c_longlong * max(n_iw, 1))()
         self.w = (ctypes.c_double * max(n_w, 1))()
         getattr(handle, f"{name}_incref")()
@@ -173,23 +189,51 @@ def test_casadi_external_loads_the_library(built):
 def test_example_main_c_compiles_strictly_and_runs(built):
     out = built[0]
     exe = out / "example"
-    cmd = ["gcc", "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "main.c", "-L.", "-lident_opt_model",
-           "-Wl,-rpath,.", "-o", str(exe), "-lm"]
+    cmd = [
+        "gcc",
+        "-O2",
+        "-std=c99",
+        "-Wall",
+        "-Wextra",
+        "-Werror",
+        "main.c",
+        "-L.",
+        "-lident_opt_model",
+        "-Wl,-rpath,.",
+        "-o",
+        str(exe),
+        "-lm",
+    ]
     subprocess.run(cmd, cwd=out, check=True, capture_output=True)
     done = subprocess.run([str(exe)], cwd=out, check=True, capture_output=True, text=True)
-    printed = {m[0]: np.array([float(m[1]), float(m[2])])
-               for m in re.findall(r"(tau_hat\w*)\s*= \[([^,]+), ([^\]]+)\]", done.stdout)}
+    printed = {
+        m[0]: np.array([float(m[1]), float(m[2])])
+        for m in re.findall(r"(tau_hat\w*)\s*= \[([^,]+), ([^\]]+)\]", done.stdout)
+    }
     src = (out / "main.c").read_text()
-    state = [np.array([[float(v) for v in re.search(rf"{n}\[2\] = {{([^}}]+)}}", src)[1].split(",")]])
-             for n in ("q", "dq", "ddq")]
+    state = [
+        np.array([[float(v) for v in re.search(rf"{n}\[2\] = {{([^}}]+)}}", src)[1].split(",")]])
+        for n in ("q", "dq", "ddq")
+    ]
     assert codegen.relative_error(printed["tau_hat"], MODEL.predict(PI, *state)) <= 1e-12
     assert set(printed) == {"tau_hat", "tau_hat_gmr"}
 
 
 def test_generated_source_compiles_cleanly_as_the_readme_says(built):
     out = built[0]
-    cmd = ["gcc", "-std=c99", "-Wall", "-Wextra", "-Wno-unused-parameter", "-Werror", "-pedantic", "-c",
-           "ident_opt_model.c", "-o", "model.o"]
+    cmd = [
+        "gcc",
+        "-std=c99",
+        "-Wall",
+        "-Wextra",
+        "-Wno-unused-parameter",
+        "-Werror",
+        "-pedantic",
+        "-c",
+        "ident_opt_model.c",
+        "-o",
+        "model.o",
+    ]
     subprocess.run(cmd, cwd=out, check=True, capture_output=True)
     readme = (out / "README.md").read_text()
     assert "-Wno-unused-parameter" in readme and "`tau_hat_gmr`" in readme and "$" not in readme
@@ -199,9 +243,13 @@ def test_no_dynamic_allocation_and_no_mutable_state_in_the_generated_code(built)
     """What the README promises: no heap, and every file-scope variable is const (so calls are reentrant)."""
     source = (built[0] / "ident_opt_model.c").read_text()
     assert not re.search(r"\b(malloc|calloc|realloc|free)\s*\(", source)
-    file_scope = [line for line in source.splitlines()  # declarations at file scope, not functions
-                  if line.rstrip().endswith(";") and "(" not in line.split("=")[0]
-                  and not line.startswith((" ", "\t", "#", "/", "}", "*", "typedef"))]
+    file_scope = [
+        line
+        for line in source.splitlines()  # declarations at file scope, not functions
+        if line.rstrip().endswith(";")
+        and "(" not in line.split("=")[0]
+        and not line.startswith((" ", "\t", "#", "/", "}", "*", "typedef"))
+    ]
     assert file_scope  # the sparsity patterns, at least: the filter sees declarations
     assert all(" const " in f" {line} " for line in file_scope), file_scope
 
@@ -219,6 +267,7 @@ def test_wrong_number_of_parameters_is_an_input_error():
 
 def _gmr_like(gmr: GMR, covariances: np.ndarray):
     """A GMR-shaped object with the fitted weights and means and other covariances."""
+
     class Fake:
         weights_, means_, covariances_, n_inputs = gmr.weights_, gmr.means_, covariances, 6
 

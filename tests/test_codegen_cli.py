@@ -16,8 +16,7 @@ from ident_opt.robot import ArmModel
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = str(ROOT / "problems" / "tudor_2dof.toml")
-FILES = {"ident_opt_model.c", "ident_opt_model.h", codegen.library_name(), "parameters.json", "README.md",
-         "main.c"}
+FILES = {"ident_opt_model.c", "ident_opt_model.h", codegen.library_name(), "parameters.json", "README.md", "main.c"}
 
 needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 
@@ -34,8 +33,9 @@ def real_slice(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory, real_slice) -> Path:
     out = tmp_path_factory.mktemp("cg") / "c"
-    assert main(["codegen", "--problem", PROBLEM, "--data", str(real_slice), "--out", str(out),
-                 "--components", "3"]) == 0
+    assert (
+        main(["codegen", "--problem", PROBLEM, "--data", str(real_slice), "--out", str(out), "--components", "3"]) == 0
+    )
     return out
 
 
@@ -78,13 +78,42 @@ def test_cli_reuses_a_parameters_file_with_extensions(run_dir, tmp_path):
     """--parameters skips identification; an extension absent from the file is an input error, and an
     explicit --extension whose parameters the file has is generated with them."""
     params = json.loads((run_dir / "parameters.json").read_text())
-    assert main(["codegen", "--problem", PROBLEM, "--parameters", str(run_dir / "parameters.json"),
-                 "--extension", "armature", "--out", str(tmp_path / "x")]) == 2
+    assert (
+        main(
+            [
+                "codegen",
+                "--problem",
+                PROBLEM,
+                "--parameters",
+                str(run_dir / "parameters.json"),
+                "--extension",
+                "armature",
+                "--out",
+                str(tmp_path / "x"),
+            ]
+        )
+        == 2
+    )
     params["parameters"]["ia2"] = 0.004
     (tmp_path / "p.json").write_text(json.dumps(params))
     out = tmp_path / "y"
-    assert main(["codegen", "--problem", PROBLEM, "--parameters", str(tmp_path / "p.json"),
-                 "--extension", "armature", "--no-forward", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "codegen",
+                "--problem",
+                PROBLEM,
+                "--parameters",
+                str(tmp_path / "p.json"),
+                "--extension",
+                "armature",
+                "--no-forward",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     saved = json.loads((out / "parameters.json").read_text())
     assert saved["functions"] == ["tau_hat", "tau_hat_gmr"] and "ddq_hat" not in (out / "ident_opt_model.h").read_text()
     assert saved["model"]["extensions"] == ["armature"] and saved["parameters"]["ia2"] == 0.004
@@ -102,8 +131,24 @@ def test_unwritable_output_folder_exits_2(tmp_path, capsys):
 def test_a_compiler_that_writes_nothing_exits_2(tmp_path, monkeypatch, capsys, real_slice):
     monkeypatch.setenv("CC", "true")  # exits 0, compiles nothing
     out = tmp_path / "o"
-    assert main(["codegen", "--problem", PROBLEM, "--data", str(real_slice), "--components", "1",
-                 "--estimator", "ols", "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "codegen",
+                "--problem",
+                PROBLEM,
+                "--data",
+                str(real_slice),
+                "--components",
+                "1",
+                "--estimator",
+                "ols",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     assert "wrote no" in capsys.readouterr().err
 
 

@@ -18,16 +18,32 @@ PI = ["a1", "a2", "a3", "b1", "b2", "fv1", "fv2", "fc1", "fc2"]
 @pytest.fixture(scope="module")
 def compare_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("compare")
-    status = main(["compare", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--out", str(out),
-                   "--json", str(out / "compare.json"), "--no-progress"])
+    status = main(
+        [
+            "compare",
+            "--problem",
+            str(PROBLEMS / "tudor_2dof.toml"),
+            "--out",
+            str(out),
+            "--json",
+            str(out / "compare.json"),
+            "--no-progress",
+        ]
+    )
     return status, out, json.loads((out / "compare.json").read_text())
 
 
 def test_compare_writes_its_files(compare_run):
     status, out, _ = compare_run
     assert status == 0
-    for name in ("compare.md", "compare_parameters.csv", "compare_consistency.csv", "compare_metrics.csv",
-                 "compare_seeds.csv", "compare_seeds.png"):
+    for name in (
+        "compare.md",
+        "compare_parameters.csv",
+        "compare_consistency.csv",
+        "compare_metrics.csv",
+        "compare_seeds.csv",
+        "compare_seeds.png",
+    ):
         assert (out / name).stat().st_size > 0, name
     text = (out / "compare.md").read_text()
     assert "mass_pd_q2_0" in text and "chronological" in text and "cross_trial" in text
@@ -59,12 +75,15 @@ def test_compare_on_real_data_ols_inconsistent_constrained_consistent(compare_ru
     assert payload["metrics"]["paper"]["nmse"]["ols"] == pytest.approx([0.095, 0.92], abs=0.01)
 
 
-@pytest.mark.parametrize("argv", [
-    ["--data", "/nonexistent/trial.csv"],
-    ["--margin", "-1"],
-    ["--extension", "magic"],
-    ["--constraints-study", "0"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--data", "/nonexistent/trial.csv"],
+        ["--margin", "-1"],
+        ["--extension", "magic"],
+        ["--constraints-study", "0"],
+    ],
+)
 def test_compare_bad_input_exits_2(argv, tmp_path, capsys):
     status = main(["compare", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--out", str(tmp_path), *argv])
     assert status == 2
@@ -86,8 +105,20 @@ def test_constraints_study_small(physical_problem):
 
 
 def test_constraints_study_cli(tmp_path):
-    status = main(["compare", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--out", str(tmp_path),
-                   "--constraints-study", "4", "--no-progress", "--json", str(tmp_path / "s.json")])
+    status = main(
+        [
+            "compare",
+            "--problem",
+            str(PROBLEMS / "tudor_2dof.toml"),
+            "--out",
+            str(tmp_path),
+            "--constraints-study",
+            "4",
+            "--no-progress",
+            "--json",
+            str(tmp_path / "s.json"),
+        ]
+    )
     assert status == 0
     assert (tmp_path / "constraints_study.md").exists()
     payload = json.loads((tmp_path / "s.json").read_text())

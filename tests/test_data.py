@@ -23,7 +23,7 @@ from .conftest import PROBLEMS
 
 def minimal_problem(tmp_path: Path, extra: str = "") -> Path:
     base = (PROBLEMS / "tudor_2dof.toml").read_text()
-    robot = base[base.index("[robot]"):base.index("# The real MERIt")]
+    robot = base[base.index("[robot]") : base.index("# The real MERIt")]
     path = tmp_path / "p.toml"
     path.write_text('name = "t"\n' + robot + extra)
     return path
@@ -31,10 +31,16 @@ def minimal_problem(tmp_path: Path, extra: str = "") -> Path:
 
 def trial_frame(n: int = 200, rate: float = 100.0) -> pd.DataFrame:
     t = np.arange(n) / rate
-    return pd.DataFrame({
-        "t": t, "q1": 1.0 + 0.3 * np.sin(t), "q2": 0.2 * np.cos(2 * t),
-        "tau1": np.sin(3 * t), "tau2": 0.1 * np.cos(t), "strain": np.arange(n, dtype=float),
-    })
+    return pd.DataFrame(
+        {
+            "t": t,
+            "q1": 1.0 + 0.3 * np.sin(t),
+            "q2": 0.2 * np.cos(2 * t),
+            "tau1": np.sin(3 * t),
+            "tau2": 0.1 * np.cos(t),
+            "strain": np.arange(n, dtype=float),
+        }
+    )
 
 
 def test_real_trial_mapping_and_currents(exp1, physical_problem):
@@ -132,15 +138,19 @@ BAD = {
     "non-numeric": (with_cell(trial_frame(), 17, "q1", "abc"), ["'q1'", "'abc'", "data row 18", "line 19"]),
     "NaN": (with_cell(trial_frame(), 5, "tau2", float("nan")), ["'tau2'", "data row 6"]),
     "inf": (with_cell(trial_frame(), 9, "q2", float("inf")), ["'q2'", "data row 10"]),
-    "duplicate t": (with_cell(trial_frame(), 30, "t", 0.29), ["'t'", "not strictly increasing", "repeats",
-                                                              "data row 31"]),
+    "duplicate t": (
+        with_cell(trial_frame(), 30, "t", 0.29),
+        ["'t'", "not strictly increasing", "repeats", "data row 31"],
+    ),
     "t goes back": (with_cell(trial_frame(), 40, "t", 0.1), ["'t'", "goes back", "data row 41"]),
     "too few samples": (trial_frame(5), ["only 5", "parameters"]),
     "both pairs": (trial_frame().assign(i1=1.0, i2=1.0), ["both torques", "currents"]),
     "neither pair": (trial_frame().drop(columns=["tau1", "tau2"]), ["neither torques"]),
     "half a pair": (trial_frame().drop(columns=["tau2"]), ["'tau2'", "pairs"]),
-    "degrees": (trial_frame().assign(q1=lambda f: np.degrees(f.q1) * 200), ["'q1'", "implausible",
-                                                                              "--allow-implausible"]),
+    "degrees": (
+        trial_frame().assign(q1=lambda f: np.degrees(f.q1) * 200),
+        ["'q1'", "implausible", "--allow-implausible"],
+    ),
 }
 
 
@@ -186,8 +196,11 @@ def test_cli_process_exit_status_and_no_traceback(tmp_path):
     """The installed entry point as a separate process: exit 2 and a one-paragraph message."""
     problem = minimal_problem(tmp_path)
     path = write(tmp_path, with_cell(trial_frame(), 3, "q2", "x"))
-    proc = subprocess.run([sys.executable, "-m", "ident_opt", "check", "--problem", str(problem), "--data",
-                           str(path)], capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "ident_opt", "check", "--problem", str(problem), "--data", str(path)],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr and "'q2'" in proc.stderr
     proc = subprocess.run([sys.executable, "-m", "ident_opt", "check", "--bogus"], capture_output=True, text=True)
@@ -197,15 +210,16 @@ def test_cli_process_exit_status_and_no_traceback(tmp_path):
 cells = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True).map(repr),
     st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=6),
-    st.integers(-10**12, 10**12).map(str),
+    st.integers(-(10**12), 10**12).map(str),
     st.just(""),
 )
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
-    header=st.lists(st.sampled_from(["t", "q1", "q2", "dq1", "tau1", "tau2", "i1", "i2", "x", ""]),
-                    min_size=0, max_size=7),
+    header=st.lists(
+        st.sampled_from(["t", "q1", "q2", "dq1", "tau1", "tau2", "i1", "i2", "x", ""]), min_size=0, max_size=7
+    ),
     rows=st.lists(st.lists(cells, min_size=0, max_size=8), min_size=0, max_size=14),
     junk=st.binary(max_size=40),
 )

@@ -14,16 +14,33 @@ def rel(a: float, b: float) -> float:
 def test_paper_convention_reproduces_dynamic_parameter_table(paper_problem):
     body = rigid_body(paper_problem.robot, "paper")
     # The paper's "Dynamic Parameters Used in RBD Model" (rounded there to 3-4 digits).
-    for value, printed in ((body.m1, 1.869), (body.m2, 0.192), (body.lc1, 0.407), (body.lc2, 0.205),
-                           (body.Ic2, 2.69e-3), (body.fv[0], 1.86e-5), (body.fv[1], 2.45e-6),
-                           (body.fc[0], 2.25e-3), (body.fc[1], 1.95e-3)):
+    for value, printed in (
+        (body.m1, 1.869),
+        (body.m2, 0.192),
+        (body.lc1, 0.407),
+        (body.lc2, 0.205),
+        (body.Ic2, 2.69e-3),
+        (body.fv[0], 1.86e-5),
+        (body.fv[1], 2.45e-6),
+        (body.fc[0], 2.25e-3),
+        (body.fc[1], 1.95e-3),
+    ):
         assert rel(value, printed) < 0.01
 
 
 def test_paper_convention_reproduces_pi_true_column(paper_problem):
     pi = datasheet_pi(paper_problem.robot, "paper")
-    printed = {"a1": 0.36571, "a2": 0.016914, "a3": 0.010752, "b1": 8.2331, "b2": 0.38588,
-               "fv1": 1.86e-5, "fv2": 2.45e-6, "fc1": 2.25e-3, "fc2": 1.95e-3}
+    printed = {
+        "a1": 0.36571,
+        "a2": 0.016914,
+        "a3": 0.010752,
+        "b1": 8.2331,
+        "b2": 0.38588,
+        "fv1": 1.86e-5,
+        "fv2": 2.45e-6,
+        "fc1": 2.25e-3,
+        "fc2": 1.95e-3,
+    }
     for name, value in printed.items():
         assert rel(pi[name], value) < 0.01, name
     assert "ia2" not in pi
@@ -57,8 +74,18 @@ def test_physical_convention_against_hand_arithmetic(physical_problem):
     for name, value in expected.items():
         assert rel(pi[name], value) < 1e-12, name
     # The printed values (5 significant digits).
-    printed = {"a1": 0.66530, "a2": 0.016914, "a3": 0.010752, "b1": 3.7163, "b2": 0.38588, "fv1": 0.98394,
-               "fv2": 0.14826, "fc1": 0.51635, "fc2": 0.47847, "ia2": 0.049623}
+    printed = {
+        "a1": 0.66530,
+        "a2": 0.016914,
+        "a3": 0.010752,
+        "b1": 3.7163,
+        "b2": 0.38588,
+        "fv1": 0.98394,
+        "fv2": 0.14826,
+        "fc1": 0.51635,
+        "fc2": 0.47847,
+        "ia2": 0.049623,
+    }
     for name, value in printed.items():
         assert rel(pi[name], value) < 1e-4, name
     body = rigid_body(physical_problem.robot, "physical")

@@ -33,9 +33,7 @@ def _trial(robot, cause: str, seed: int, **kwargs):
 
 
 def _check_found(d, cause: str, truth: dict) -> None:
-    assert d.cause == cause, (
-        f"named {d.cause}, candidates {[(c['cause'], round(c['score'], 1)) for c in d.candidates]}"
-    )
+    assert d.cause == cause, f"named {d.cause}, candidates {[(c['cause'], round(c['score'], 1)) for c in d.candidates]}"
     ok, err = hidden.errors(cause, d.estimate, truth)
     assert ok, f"estimate {d.estimate} vs truth {truth} (worst relative error {err:.3f})"
     # A positive held-out gain: the summed nMSE drops and the penalised held-out likelihood rises.
@@ -146,9 +144,7 @@ def test_cli_writes_the_contract_json_and_report(physical_problem, tmp_path):
             assert set(c["polish"]) >= {"before", "after", "kept", "status", "cost_before"}
     report = (out / "diagnosis.md").read_text()
     assert "payload" in report and "held-out nMSE" in report
-    assert (out / "residual_before_after.png").stat().st_size > 0 and (
-        out / "spectrum_before_after.png"
-    ).exists()
+    assert (out / "residual_before_after.png").stat().st_size > 0 and (out / "spectrum_before_after.png").exists()
 
 
 def test_cli_bad_input_exits_2(physical_problem, tmp_path, capsys):
@@ -159,8 +155,6 @@ def test_cli_bad_input_exits_2(physical_problem, tmp_path, capsys):
     assert status == 2
     assert "not found" in capsys.readouterr().err
     tiny = tmp_path / "tiny.csv"
-    tiny.write_text(
-        "t,q1,q2,tau1,tau2\n" + "".join(f"{k * 0.01},0.1,0.2,{k % 3},{k % 5}\n" for k in range(50))
-    )
+    tiny.write_text("t,q1,q2,tau1,tau2\n" + "".join(f"{k * 0.01},0.1,0.2,{k % 3},{k % 5}\n" for k in range(50)))
     assert main(["diagnose", "--problem", str(problem), "--data", str(tiny), "--no-progress"]) == 2
     assert "too little data" in capsys.readouterr().err

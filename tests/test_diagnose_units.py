@@ -74,9 +74,7 @@ def test_least_squares_recovers_known_coefficients_and_respects_signs():
 
 
 def test_search_finds_a_one_dimensional_minimum():
-    theta = linear.search(
-        lambda th: (np.log(th["v"]) - np.log(0.037)) ** 2, [linear.Axis("v", 0.005, 0.5, 9, True)]
-    )
+    theta = linear.search(lambda th: (np.log(th["v"]) - np.log(0.037)) ** 2, [linear.Axis("v", 0.005, 0.5, 9, True)])
     assert theta["v"] == pytest.approx(0.037, rel=1e-2)
 
 
@@ -85,9 +83,7 @@ def test_naming_rule_needs_score_and_both_margins():
     assert scoring.clears_margin(before, np.array([0.9, 1.0]), 5.0, var)
     assert not scoring.clears_margin(before, np.array([0.97, 0.99]), 5.0, var)  # < 5 % of the MSE
     assert not scoring.clears_margin(before, np.array([0.9, 1.0]), -1.0, var)  # penalty wins
-    assert not scoring.clears_margin(
-        np.array([1e-3, 1.0]), np.array([0.5e-3, 1.0]), 5.0, var
-    )  # nil vs torque
+    assert not scoring.clears_margin(np.array([1e-3, 1.0]), np.array([0.5e-3, 1.0]), 5.0, var)  # nil vs torque
     assert scoring.score(before, before, 1000, 2) < 0
     assert not scoring.resolved("delay", {"seconds": 0.001}, 0.01)
     assert scoring.resolved("delay", {"seconds": 0.02}, 0.01)

@@ -53,10 +53,12 @@ def test_two_components_hand_built_match_direct_formula():
     # spread is a visible part of the variance.
     weights = np.array([0.3, 0.7])
     means = np.array([[-1.0, 0.5, 2.0, -1.0], [1.5, -0.5, -1.0, 3.0]])
-    covs = np.array([
-        [[1.0, 0.2, 0.5, 0.0], [0.2, 0.8, 0.0, 0.3], [0.5, 0.0, 1.2, 0.1], [0.0, 0.3, 0.1, 0.9]],
-        [[0.6, -0.1, -0.2, 0.1], [-0.1, 1.5, 0.4, 0.0], [-0.2, 0.4, 0.7, -0.2], [0.1, 0.0, -0.2, 1.1]],
-    ])
+    covs = np.array(
+        [
+            [[1.0, 0.2, 0.5, 0.0], [0.2, 0.8, 0.0, 0.3], [0.5, 0.0, 1.2, 0.1], [0.0, 0.3, 0.1, 0.9]],
+            [[0.6, -0.1, -0.2, 0.1], [-0.1, 1.5, 0.4, 0.0], [-0.2, 0.4, 0.7, -0.2], [0.1, 0.0, -0.2, 1.1]],
+        ]
+    )
     g = _with(weights, means, covs, 2)
     X = np.array([[0.0, 0.0], [-1.0, 0.5], [1.5, -0.5], [0.2, 0.1], [3.0, -2.0]])
     mean, cov = g.predict(X)
@@ -153,7 +155,7 @@ def test_mean_shift_moves_prediction_exactly():
     R = np.column_stack([X[:, 0] ** 2, X[:, 1]])
     g = GMR(n_components=3).fit(X, R)
     before = g.predict_mean(X[:10])
-    g.means_[:, g.n_inputs:] += np.array([0.25, -1.0])
+    g.means_[:, g.n_inputs :] += np.array([0.25, -1.0])
     np.testing.assert_allclose(g.predict_mean(X[:10]) - before, np.tile([0.25, -1.0], (10, 1)), atol=1e-12)
 
 
@@ -164,12 +166,15 @@ def test_subsamples_to_max_train_samples():
     assert g.n_train_ == 500
 
 
-@pytest.mark.parametrize("X, R", [
-    (np.ones((10, 2)), np.ones((9, 1))),
-    (np.ones(10), np.ones((10, 1))),
-    (np.full((10, 2), np.nan), np.ones((10, 1))),
-    (np.ones((1, 2)), np.ones((1, 1))),
-])
+@pytest.mark.parametrize(
+    "X, R",
+    [
+        (np.ones((10, 2)), np.ones((9, 1))),
+        (np.ones(10), np.ones((10, 1))),
+        (np.full((10, 2), np.nan), np.ones((10, 1))),
+        (np.ones((1, 2)), np.ones((1, 1))),
+    ],
+)
 def test_bad_input_is_input_error(X, R):
     with pytest.raises(InputError):
         GMR(n_components=1).fit(X, R)

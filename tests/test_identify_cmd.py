@@ -15,10 +15,26 @@ from ident_opt.simulate.trial import simulate_trial
 
 REPO = Path(__file__).resolve().parents[1]
 MODELS = {"rr", "dm", "dm_physical", "pbr", "cpbr"}
-TABLES = ("identify_reproduction", "identify_seeds", "identify_parameters", "identify_coverage", "identify_metrics",
-          "identify_ridge")
-FIGURES = ("torque_j1", "torque_j2", "error_j1", "error_j2", "parity", "interval_pbr", "seeds", "cross_trial_j1",
-           "cross_trial_j2", "cross_trial_interval_pbr")
+TABLES = (
+    "identify_reproduction",
+    "identify_seeds",
+    "identify_parameters",
+    "identify_coverage",
+    "identify_metrics",
+    "identify_ridge",
+)
+FIGURES = (
+    "torque_j1",
+    "torque_j2",
+    "error_j1",
+    "error_j2",
+    "parity",
+    "interval_pbr",
+    "seeds",
+    "cross_trial_j1",
+    "cross_trial_j2",
+    "cross_trial_interval_pbr",
+)
 
 
 @pytest.fixture(scope="module")
@@ -27,17 +43,31 @@ def run(tmp_path_factory):
     source = (REPO / "problems" / "tudor_2dof.toml").read_text(encoding="utf-8")
     robot_part = source.split("[data]")[0].split("# The real MERIt")[0]
     problem_file = tmp / "sim.toml"
-    problem_file.write_text(robot_part + "\n[split]\nseeds = [0, 1]\n\n[residual]\ncandidates = [1, 2, 4]\n"
-                            "max_train_samples = 1500\n", encoding="utf-8")
+    problem_file.write_text(
+        robot_part + "\n[split]\nseeds = [0, 1]\n\n[residual]\ncandidates = [1, 2, 4]\nmax_train_samples = 1500\n",
+        encoding="utf-8",
+    )
     robot = load_problem(problem_file).robot
     trials = []
     for seed in (1, 2):
-        sim = simulate_trial(robot, duration=15.0, seed=seed, progress=False,
-                             effects=["elasticity:joint=2,frequency_hz=3"])
+        sim = simulate_trial(
+            robot, duration=15.0, seed=seed, progress=False, effects=["elasticity:joint=2,frequency_hz=3"]
+        )
         trials.append(sim.write(tmp / f"trial{seed}.csv"))
     out = tmp / "results"
-    argv = ["identify", "--problem", str(problem_file), "--data", str(trials[0]), "--data", str(trials[1]),
-            "--out", str(out), "--json", str(out / "identify.json")]
+    argv = [
+        "identify",
+        "--problem",
+        str(problem_file),
+        "--data",
+        str(trials[0]),
+        "--data",
+        str(trials[1]),
+        "--out",
+        str(out),
+        "--json",
+        str(out / "identify.json"),
+    ]
     return main(argv), out
 
 

@@ -10,8 +10,10 @@ from ident_opt.report import PAPER_NMSE_RANGE, PAPER_RMSE, IdentifyResult, repro
 
 def _result(scale_rmse: float, scale_nmse: float) -> IdentifyResult:
     keys = list(PAPER_NMSE_RANGE)
-    rmse = {k: [PAPER_RMSE[k][0][0] * scale_rmse, PAPER_RMSE[k][1][0] * scale_rmse] if k in PAPER_RMSE
-            else [1.0, 1.0] for k in keys}
+    rmse = {
+        k: [PAPER_RMSE[k][0][0] * scale_rmse, PAPER_RMSE[k][1][0] * scale_rmse] if k in PAPER_RMSE else [1.0, 1.0]
+        for k in keys
+    }
     nmse_range = {k: [v * scale_nmse for v in PAPER_NMSE_RANGE[k]] for k in keys}
     metrics = {"rmse": rmse, "nmse": {k: [0.1, 0.1] for k in keys}, "nmse_range": nmse_range}
     paper = ProtocolResult("paper", "test", metrics, {}, {})

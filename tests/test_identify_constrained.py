@@ -127,8 +127,7 @@ def test_armature_is_kept_nonnegative(truth):
     seeds: the constrained fit must keep it ≥ 0 (its own named constraint)."""
     negatives = 0
     for seed in range(12):
-        trial = multisine_trial(ARM, truth, duration=2.0, seed=900 + seed, amplitude=(0.05, 0.8),
-                                noise=(1.0, 1.0))
+        trial = multisine_trial(ARM, truth, duration=2.0, seed=900 + seed, amplitude=(0.05, 0.8), noise=(1.0, 1.0))
         st = _stats(trial, ARM)
         ols, con = fit_ols(st, ARM), fit_constrained(st, ARM)
         negatives += ols.as_dict()["ia2"] < 0
@@ -160,8 +159,10 @@ def _active_and_inactive(truth):
 
 
 @pytest.mark.parametrize("case", ["active", "inactive"])
-@pytest.mark.parametrize("options", [{}, {"margin": 1e-3}, {"weights": "wls"}, {"shortcut": False},
-                                     {"prior_weight": 1e-6}, {"bounds": "b1<=3"}])
+@pytest.mark.parametrize(
+    "options",
+    [{}, {"margin": 1e-3}, {"weights": "wls"}, {"shortcut": False}, {"prior_weight": 1e-6}, {"bounds": "b1<=3"}],
+)
 def test_solve_constrained_is_fit_constrained_pi(truth, case, options):
     """The lean solve returns the π of the full fit (one implementation), active constraints or not."""
     st = _active_and_inactive(truth)[case]
@@ -192,9 +193,15 @@ def test_structure_cache_keeps_models_and_options_apart(truth, exp1):
     rigid = _stats(exp1, RIGID)
     ub = np.full(ARM.n_params, np.inf)
     ub[ARM.names.index("b1")] = 3.0
-    configs = [(rigid, RIGID, {"margin": 1e-6}), (arm, ARM, {"margin": 1e-6}), (rigid, RIGID, {"margin": 1e-3}),
-               (arm, ARM, {"margin": 1e-3}), (arm, ARM, {"margin": 1e-3, "friction": False}),
-               (arm, ARM, {"bounds": (np.full(ARM.n_params, -np.inf), ub)}), (arm, ARM, {})]
+    configs = [
+        (rigid, RIGID, {"margin": 1e-6}),
+        (arm, ARM, {"margin": 1e-6}),
+        (rigid, RIGID, {"margin": 1e-3}),
+        (arm, ARM, {"margin": 1e-3}),
+        (arm, ARM, {"margin": 1e-3, "friction": False}),
+        (arm, ARM, {"bounds": (np.full(ARM.n_params, -np.inf), ub)}),
+        (arm, ARM, {}),
+    ]
     fresh = []
     for st, model, options in configs:
         constrained._structure.cache_clear()

@@ -39,8 +39,7 @@ def test_weighted_ols_equals_lstsq_on_weighted_rows(truth):
     trial = multisine_trial(RIGID, truth, duration=10.0, seed=4, noise=(1.0, 0.1))
     w = np.array([0.25, 9.0])
     Y = RIGID.regressor(trial.q, trial.dq, trial.ddq) * np.sqrt(w)[None, :, None]
-    expected = np.linalg.lstsq(Y.reshape(-1, RIGID.n_params), (trial.tau * np.sqrt(w)).reshape(-1),
-                               rcond=None)[0]
+    expected = np.linalg.lstsq(Y.reshape(-1, RIGID.n_params), (trial.tau * np.sqrt(w)).reshape(-1), rcond=None)[0]
     np.testing.assert_allclose(fit_ols(_stats(trial), RIGID, weights=w).pi, expected, rtol=1e-9, atol=1e-12)
     wls = fit_ols(_stats(trial), RIGID, weights="wls")
     # WLS weights are 1/σ_j²: the noisier joint 1 gets the smaller weight, about (0.1/1.0)² of joint 2's.

@@ -22,8 +22,7 @@ def test_fit_expression_recovers_a_stribeck_velocity():
     y = fs_true * np.sign(dq) * np.exp(-((dq / vs_true) ** 2)) + 0.001 * rng.normal(size=dq.size)
     v, theta = ca.SX.sym("dq"), ca.SX.sym("theta", 2)
     expr = theta[0] * ca.sign(v) * ca.exp(-((v / theta[1]) ** 2))
-    fit = fit_expression(expr, theta, [v], [dq], y, x0=[0.1, 0.2], lb=[0.0, 1e-3], ub=[10.0, 1.0],
-                         names=["fs", "vs"])
+    fit = fit_expression(expr, theta, [v], [dq], y, x0=[0.1, 0.2], lb=[0.0, 1e-3], ub=[10.0, 1.0], names=["fs", "vs"])
     assert fit.success
     assert fit.as_dict()["vs"] == pytest.approx(vs_true, rel=0.02)
     assert fit.as_dict()["fs"] == pytest.approx(fs_true, rel=0.02)
@@ -54,8 +53,7 @@ def test_physical_fit_is_consistent_and_matches_the_truth_on_clean_data(physical
 def test_physical_fit_on_data_from_another_arm(physical_problem):
     """Truth = a heavier arm than the datasheet (so the start is wrong): π is still recovered."""
     robot = physical_problem.robot
-    truth = ARM.vector(datasheet_pi(robot, "physical")) * np.array([1.3, 1.2, 1.2, 1.25, 1.2, 0.7, 1.5, 1.2,
-                                                                     0.8, 1.1])
+    truth = ARM.vector(datasheet_pi(robot, "physical")) * np.array([1.3, 1.2, 1.2, 1.25, 1.2, 0.7, 1.5, 1.2, 0.8, 1.1])
     trial = multisine_trial(ARM, truth, duration=20.0, seed=12, noise=(0.0, 0.0))
     fit = fit_physical(trial, robot, ARM)  # a Dataset works too
     np.testing.assert_allclose(fit.pi, truth, rtol=1e-3, atol=1e-5)

@@ -21,8 +21,7 @@ PROBLEM = "problems/tudor_2dof.toml"
 def problem():
     p = load_problem(PROBLEM)
     # small candidate set and sample cap: same code paths, test-sized cost
-    return replace(p, residual=ResidualSpec(candidates=(1, 3, 6), max_train_samples=3000),
-                   split=SplitSpec(0.7, (0, 1)))
+    return replace(p, residual=ResidualSpec(candidates=(1, 3, 6), max_train_samples=3000), split=SplitSpec(0.7, (0, 1)))
 
 
 @pytest.fixture(scope="module")
@@ -32,16 +31,18 @@ def trial(problem):
 
 def _known_residual(x: np.ndarray) -> np.ndarray:
     """A smooth nonlinear torque error no rigid model has [N m]: position- and velocity-dependent."""
-    return np.column_stack([0.6 * np.sin(2 * x[:, 0]) + 0.3 * np.tanh(3 * x[:, 2]),
-                            0.4 * np.cos(x[:, 0] + x[:, 1]) * np.tanh(2 * x[:, 3])])
+    return np.column_stack(
+        [0.6 * np.sin(2 * x[:, 0]) + 0.3 * np.tanh(3 * x[:, 2]), 0.4 * np.cos(x[:, 0] + x[:, 1]) * np.tanh(2 * x[:, 3])]
+    )
 
 
 def test_gmr_recovers_a_known_residual_added_to_simulated_data(problem):
     # A noise-free rigid simulation (truth = the physical datasheet, exact derivatives), plus a known
     # nonlinear residual and white noise of 0.05 N m: the GMR on the datasheet model's residual must
     # recover the known residual on held-out samples (nMSE of the residual estimate < 0.1).
-    sim = simulate_trial(problem.robot, duration=30.0, seed=3, noise=False, exact_derivatives=True,
-                         progress=False).dataset()
+    sim = simulate_trial(
+        problem.robot, duration=30.0, seed=3, noise=False, exact_derivatives=True, progress=False
+    ).dataset()
     added = _known_residual(features(sim))
     noise = np.random.default_rng(0).normal(scale=0.05, size=added.shape)
     data = replace(sim, tau=sim.tau + added + noise)
@@ -58,11 +59,14 @@ def test_gmr_recovers_a_known_residual_added_to_simulated_data(problem):
     assert (hyb_err < 0.2 * base_err).all()
 
 
-@pytest.mark.parametrize("make_base", [
-    lambda robot: RidgeModel(),
-    lambda robot: datasheet_model(robot, "paper"),
-    lambda robot: RigidModel("pbr", RIGID, estimator="ols"),
-])
+@pytest.mark.parametrize(
+    "make_base",
+    [
+        lambda robot: RidgeModel(),
+        lambda robot: datasheet_model(robot, "paper"),
+        lambda robot: RigidModel("pbr", RIGID, estimator="ols"),
+    ],
+)
 def test_residual_correction_never_worse_on_training_data(trial, problem, make_base):
     data = replace(trial, tau=trial.tau + _known_residual(features(trial)))
     base = make_base(problem.robot)
@@ -104,8 +108,14 @@ def test_chronological_protocol_trains_on_the_past(trial, problem):
 
 def test_evaluate_split_with_fixed_diagonal_gmr(trial, problem):
     train, test = shuffled_split(trial.n, 0.7, 0)
-    r = evaluate_split(trial.subset(train), trial.subset(test), problem, constrained=False,
-                       components={"pbr+gmr": 2}, covariance="diag")
+    r = evaluate_split(
+        trial.subset(train),
+        trial.subset(test),
+        problem,
+        constrained=False,
+        components={"pbr+gmr": 2},
+        covariance="diag",
+    )
     assert r.components["pbr+gmr"] == 2
     g = r.models["pbr+gmr"].gmr
     assert np.all(g.covariances_ * (1 - np.eye(8)) == 0)

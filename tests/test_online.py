@@ -40,8 +40,9 @@ def _replay(pi_true, bounds, seed=0, n0=60, n=1500, checks=12):
         m = k + 1  # samples seen
         states.add(tuple(np.flatnonzero(online._solve.__self__.last.state)))
         if m in steps:
-            ref = lsq_linear(Y[:m].reshape(-1, 9), tau[:m].reshape(-1), bounds=(bounds.lower, bounds.upper),
-                             method="bvls", tol=1e-15).x
+            ref = lsq_linear(
+                Y[:m].reshape(-1, 9), tau[:m].reshape(-1), bounds=(bounds.lower, bounds.upper), method="bvls", tol=1e-15
+            ).x
             H, h, _ = Stats.from_regressor(Y[:m], tau[:m]).combined()
             cold = solve_bounded(H, h, bounds).pi
             scale = np.max(np.abs(ref))
@@ -83,12 +84,13 @@ def test_ridge_is_exact_recursive_ridge():
     alpha = 2.5
     penalty = np.r_[0.0, np.full(6, alpha), 0.0, np.full(6, alpha)]
     D = design(q, dq, ddq)
-    online = OnlineIdentifier(design, Estimator("ridge", penalty=penalty), np.zeros(14),
-                              Stats.from_regressor(D[:50], tau[:50]))
+    online = OnlineIdentifier(
+        design, Estimator("ridge", penalty=penalty), np.zeros(14), Stats.from_regressor(D[:50], tau[:50])
+    )
     for k in range(50, 400):
         online.update(q[k], dq[k], ddq[k], tau[k])
         if k + 1 in (51, 137, 400):
-            sk = Ridge(alpha=alpha).fit(X[:k + 1], tau[:k + 1])
+            sk = Ridge(alpha=alpha).fit(X[: k + 1], tau[: k + 1])
             ref = np.r_[sk.intercept_[0], sk.coef_[0], sk.intercept_[1], sk.coef_[1]]
             assert np.max(np.abs(online.parameters - ref)) <= 1e-9 * np.max(np.abs(ref))
 
@@ -98,7 +100,7 @@ def test_fixed_model_does_not_move():
     online = OnlineIdentifier(RIGID.regressor, Estimator("fixed"), PI_EDGE, Stats.zeros(9))
     for k in range(100):
         p = online.update(q[k], dq[k], ddq[k], tau[k])
-        np.testing.assert_allclose(p.tau, RIGID.predict(PI_EDGE, q[k:k + 1], dq[k:k + 1], ddq[k:k + 1])[0])
+        np.testing.assert_allclose(p.tau, RIGID.predict(PI_EDGE, q[k : k + 1], dq[k : k + 1], ddq[k : k + 1])[0])
     np.testing.assert_array_equal(online.parameters, PI_EDGE)
     assert online.stats.n == 100
 
@@ -114,8 +116,9 @@ def test_batch_theta_is_the_cold_solution():
 def _separated_gmr(pi0: np.ndarray, n_per: int = 400, seed: int = 0) -> tuple[GMR, tuple]:
     """A GMR on well-separated clusters in x (responsibility ≈ 1 at each component's own mean)."""
     rng = np.random.default_rng(seed)
-    centres = np.array([[0.3, 0.5, 0.8, -0.4, 2.0, 1.0], [-1.2, 1.4, -0.6, 0.9, -2.0, 3.0],
-                        [1.5, -1.0, 0.0, 0.0, 0.0, -3.0]])
+    centres = np.array(
+        [[0.3, 0.5, 0.8, -0.4, 2.0, 1.0], [-1.2, 1.4, -0.6, 0.9, -2.0, 3.0], [1.5, -1.0, 0.0, 0.0, 0.0, -3.0]]
+    )
     X = np.vstack([c + 0.03 * rng.standard_normal((n_per, 6)) for c in centres])
     q, dq, ddq = X[:, 0:2], X[:, 2:4], X[:, 4:6]
     tau = RIGID.predict(pi0 * 1.1, q, dq, ddq) + 0.05 * np.sin(7 * X[:, :2])
@@ -128,8 +131,9 @@ def test_consistency_transform_keeps_prediction_at_component_means(cross):
     pi0 = PI_CLEAR
     gmr, _ = _separated_gmr(pi0)
     jac = _arm_jacobian() if cross else None
-    online = OnlineIdentifier(RIGID.regressor, Estimator("fixed"), pi0, Stats.zeros(9), gmr=gmr,
-                              cross_covariance=cross, design_jacobian=jac)
+    online = OnlineIdentifier(
+        RIGID.regressor, Estimator("fixed"), pi0, Stats.zeros(9), gmr=gmr, cross_covariance=cross, design_jacobian=jac
+    )
     mu = gmr.means_[:, :6]
     before = [online.predict(m[0:2], m[2:4], m[4:6]).tau for m in mu]
     delta = np.array([0.05, -0.02, 0.03, 0.2, -0.1, 0.1, 0.05, -0.1, 0.07])
@@ -138,8 +142,10 @@ def test_consistency_transform_keeps_prediction_at_component_means(cross):
     after = [online.predict(m[0:2], m[2:4], m[4:6]).tau for m in mu]
     np.testing.assert_allclose(after, before, rtol=0, atol=1e-10)
     # The parametric part did move, so the GMR really compensated.
-    assert not np.allclose([online.predict(m[0:2], m[2:4], m[4:6]).parametric for m in mu],
-                           [RIGID.predict(pi0, m[None, 0:2], m[None, 2:4], m[None, 4:6])[0] for m in mu])
+    assert not np.allclose(
+        [online.predict(m[0:2], m[2:4], m[4:6]).parametric for m in mu],
+        [RIGID.predict(pi0, m[None, 0:2], m[None, 2:4], m[None, 4:6])[0] for m in mu],
+    )
     # The offline GMR is untouched (the transform works on a copy).
     assert not np.allclose(online.gmr.means_, gmr.means_)
 
@@ -159,8 +165,15 @@ def test_cross_covariance_transform_is_first_order_exact():
     mu = gmr.means_[0, :6]
     errors = {}
     for cross in (False, True):
-        online = OnlineIdentifier(RIGID.regressor, Estimator("fixed"), pi0, Stats.zeros(9), gmr=gmr,
-                                  cross_covariance=cross, design_jacobian=_arm_jacobian() if cross else None)
+        online = OnlineIdentifier(
+            RIGID.regressor,
+            Estimator("fixed"),
+            pi0,
+            Stats.zeros(9),
+            gmr=gmr,
+            cross_covariance=cross,
+            design_jacobian=_arm_jacobian() if cross else None,
+        )
         x = mu + np.array([0.01, -0.01, 0.02, 0.01, 0.03, -0.02])
         before = online.predict(x[0:2], x[2:4], x[4:6]).tau
         online.theta = pi0 + delta
@@ -173,8 +186,12 @@ def test_lazy_statistics_equal_batch_statistics_across_flushes():
     """Per-joint statistics folded in lazily (in batches of 4096) equal the batch statistics."""
     q, dq, ddq, tau = _trial(9000, 11, PI_CLEAR)
     Y = RIGID.regressor(q, dq, ddq)
-    online = OnlineIdentifier(RIGID.regressor, Estimator("bounded", bounds=default_bounds(RIGID)), np.zeros(9),
-                              Stats.from_regressor(Y[:100], tau[:100]))
+    online = OnlineIdentifier(
+        RIGID.regressor,
+        Estimator("bounded", bounds=default_bounds(RIGID)),
+        np.zeros(9),
+        Stats.from_regressor(Y[:100], tau[:100]),
+    )
     for k in range(100, 9000):
         online.add(Y[k], tau[k])
     ref = Stats.from_regressor(Y, tau)

@@ -22,8 +22,23 @@ def run(tmp_path_factory):
     data = tmp / "exp1_small.csv"
     data.write_text("\n".join((ROOT / "data" / "merit" / "exp1.csv").read_text().splitlines()[:3000]) + "\n")
     out = tmp / "out"
-    code = main(["online", "--problem", str(PROBLEM), "--data", str(data), "--out", str(out), "--json",
-                 str(tmp / "o.json"), "--components", "2", "--checks", "4"])
+    code = main(
+        [
+            "online",
+            "--problem",
+            str(PROBLEM),
+            "--data",
+            str(data),
+            "--out",
+            str(out),
+            "--json",
+            str(tmp / "o.json"),
+            "--components",
+            "2",
+            "--checks",
+            "4",
+        ]
+    )
     return code, json.loads((tmp / "o.json").read_text()), out
 
 
@@ -56,14 +71,15 @@ def test_online_differs_from_frozen_only_where_models_adapt(run):
 
 def test_outputs_written(run):
     _, _, out = run
-    for name in ("online.md", "online_metrics.csv", "online_parameters.csv", "online_trajectories.png",
-                 "online.json"):
+    for name in ("online.md", "online_metrics.csv", "online_parameters.csv", "online_trajectories.png", "online.json"):
         assert (out / name).stat().st_size > 0
     assert "| model |" in (out / "online.md").read_text() or "model" in (out / "online.md").read_text()
 
 
-@pytest.mark.parametrize("argv", [["--snapshot-every", "-1"], ["--stream", "--model", "gp"], ["--checks", "-2"],
-                                  ["--stream", "--model", "pbr+nn"]])
+@pytest.mark.parametrize(
+    "argv",
+    [["--snapshot-every", "-1"], ["--stream", "--model", "gp"], ["--checks", "-2"], ["--stream", "--model", "pbr+nn"]],
+)
 def test_bad_usage_exit_2(argv, capsys):
     assert main(["online", "--problem", str(PROBLEM), *argv]) == 2
     assert "error" in capsys.readouterr().err

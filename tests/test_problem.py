@@ -27,7 +27,7 @@ def test_shipped_problems_load(physical_problem, paper_problem):
 
 
 def test_minimal_problem_is_name_and_robot(tmp_path):
-    robot = BASE[BASE.index("[robot]"):BASE.index("# The real MERIt")]
+    robot = BASE[BASE.index("[robot]") : BASE.index("# The real MERIt")]
     path = tmp_path / "minimal.toml"
     path.write_text('name = "mine"\n' + robot)
     problem = load_problem(path)
@@ -45,7 +45,7 @@ def edit(tmp_path: Path, old: str, new: str) -> Path:
 CASES = [
     ("length = 0.430 ", "lenght = 0.430 ", ["lenght", "[robot.link1]"]),
     ("gear_ratio = 230.0", "gear_ratio = -230.0", ["gear_ratio", "[robot.joint1]", "positive"]),
-    ("density = 7800.0                     # kg/m^3", "density = \"steel\"", ["density", "number"]),
+    ("density = 7800.0                     # kg/m^3", 'density = "steel"', ["density", "number"]),
     ('convention = "physical"', 'convention = "metric"', ["convention", "physical"]),
     ("actuator_mass = 1.6680", "", ["actuator_mass", "missing"]),
     ("[robot.joint2]", "[robot.joint3]", ["joint3"]),
@@ -84,9 +84,11 @@ def test_missing_and_malformed_problem_files(tmp_path, capsys):
 def test_simulate_section_is_checked_when_the_file_loads(tmp_path):
     text = (PROBLEMS / "tudor_sim.toml").read_text()
     path = tmp_path / "sim.toml"
-    path.write_text(text.replace("[simulate]", '[simulate]\neffects = ["springs:k=3"]', 1)
-                    if "effects" not in text else
-                    text.replace("effects = [", 'effects = ["springs:k=3", ', 1))
+    path.write_text(
+        text.replace("[simulate]", '[simulate]\neffects = ["springs:k=3"]', 1)
+        if "effects" not in text
+        else text.replace("effects = [", 'effects = ["springs:k=3", ', 1)
+    )
     with pytest.raises(InputError) as err:
         load_problem(path)
     assert str(path) in str(err.value) and "springs" in str(err.value) and "effects" in str(err.value)

@@ -29,11 +29,13 @@ def pinocchio_arm(body) -> pin.Model:
     model = pin.Model()
     model.gravity = pin.Motion(np.array([0.0, -body.gravity, 0.0]), np.zeros(3))
     j1 = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "joint1")
-    model.appendBodyToJoint(j1, pin.Inertia(body.m1, np.array([body.lc1, 0, 0]), np.diag([1e-4, 1e-4, body.Ic1])),
-                            pin.SE3.Identity())
+    model.appendBodyToJoint(
+        j1, pin.Inertia(body.m1, np.array([body.lc1, 0, 0]), np.diag([1e-4, 1e-4, body.Ic1])), pin.SE3.Identity()
+    )
     j2 = model.addJoint(j1, pin.JointModelRZ(), pin.SE3(np.eye(3), np.array([body.l1, 0, 0])), "joint2")
-    model.appendBodyToJoint(j2, pin.Inertia(body.m2, np.array([body.lc2, 0, 0]), np.diag([1e-4, 1e-4, body.Ic2])),
-                            pin.SE3.Identity())
+    model.appendBodyToJoint(
+        j2, pin.Inertia(body.m2, np.array([body.lc2, 0, 0]), np.diag([1e-4, 1e-4, body.Ic2])), pin.SE3.Identity()
+    )
     model.armature = np.array(body.armature)
     return model
 
@@ -89,8 +91,12 @@ def test_regressor_times_pi_is_the_dynamics(model):
     tau = model.predict(pi, q, dq, ddq)
     for k in range(len(q)):
         args = (q[k], dq[k], ddq[k], pi)
-        terms = (np.array(fM(*args)) @ ddq[k] + np.array(fC(*args)) @ dq[k] + np.array(fG(*args)).ravel()
-                 + np.array(fF(*args)).ravel())
+        terms = (
+            np.array(fM(*args)) @ ddq[k]
+            + np.array(fC(*args)) @ dq[k]
+            + np.array(fG(*args)).ravel()
+            + np.array(fF(*args)).ravel()
+        )
         assert np.allclose(tau[k], terms, atol=1e-12)
 
 
@@ -99,18 +105,26 @@ def test_paper_printed_regressor_columns():
     q, dq, ddq = random_states(10)
     Y = ArmModel(gravity="paper").regressor(q, dq, ddq)
     c1, c2, s2, c12 = np.cos(q[:, 0]), np.cos(q[:, 1]), np.sin(q[:, 1]), np.cos(q[:, 0] + q[:, 1])
-    printed = np.stack([
-        np.stack([ddq[:, 0], 0 * c1], -1),
-        np.stack([2 * c2 * ddq[:, 0] + c2 * ddq[:, 1] - 2 * s2 * dq[:, 0] * dq[:, 1] - s2 * dq[:, 1] ** 2,
-                  c2 * ddq[:, 0] + s2 * dq[:, 0] ** 2], -1),
-        np.stack([ddq[:, 1], ddq[:, 0] + ddq[:, 1]], -1),
-        np.stack([c1, 0 * c1], -1),
-        np.stack([c1 + c12, c12], -1),
-        np.stack([dq[:, 0], 0 * c1], -1),
-        np.stack([0 * c1, dq[:, 1]], -1),
-        np.stack([np.sign(dq[:, 0]), 0 * c1], -1),
-        np.stack([0 * c1, np.sign(dq[:, 1])], -1),
-    ], axis=-1)
+    printed = np.stack(
+        [
+            np.stack([ddq[:, 0], 0 * c1], -1),
+            np.stack(
+                [
+                    2 * c2 * ddq[:, 0] + c2 * ddq[:, 1] - 2 * s2 * dq[:, 0] * dq[:, 1] - s2 * dq[:, 1] ** 2,
+                    c2 * ddq[:, 0] + s2 * dq[:, 0] ** 2,
+                ],
+                -1,
+            ),
+            np.stack([ddq[:, 1], ddq[:, 0] + ddq[:, 1]], -1),
+            np.stack([c1, 0 * c1], -1),
+            np.stack([c1 + c12, c12], -1),
+            np.stack([dq[:, 0], 0 * c1], -1),
+            np.stack([0 * c1, dq[:, 1]], -1),
+            np.stack([np.sign(dq[:, 0]), 0 * c1], -1),
+            np.stack([0 * c1, np.sign(dq[:, 1])], -1),
+        ],
+        axis=-1,
+    )
     assert np.allclose(Y, printed, atol=1e-14)
     # The physically correct gravity vector differs only in the β2 column of joint 1.
     Y_phys = RIGID.regressor(q, dq, ddq)
@@ -148,8 +162,9 @@ def test_mdot_minus_2c_is_skew_symmetric():
     for k in range(len(q)):
         N = np.array(f(q[k], dq[k], pi))
         assert np.allclose(N, -N.T, atol=1e-12)
-        assert np.allclose(np.array(arm.function("C")(q[k], dq[k], [0, 0], pi)) @ dq[k],
-                           _paper_printed_c(pi, q[k], dq[k]), atol=1e-12)
+        assert np.allclose(
+            np.array(arm.function("C")(q[k], dq[k], [0, 0], pi)) @ dq[k], _paper_printed_c(pi, q[k], dq[k]), atol=1e-12
+        )
 
 
 def _paper_printed_c(pi, q, dq):
@@ -177,8 +192,7 @@ def test_free_motion_conserves_energy(physical_problem):
         V = b1 * np.sin(q[0]) + b2 * np.sin(q[0] + q[1])  # G = ∂V/∂q
         return 0.5 * dq @ np.array(fM(q, dq, [0, 0], pi)) @ dq + V
 
-    sol = solve_ivp(rhs, (0, 3.0), [0.3, -0.5, 0.0, 1.0], method="DOP853", rtol=1e-11, atol=1e-12,
-                    dense_output=True)
+    sol = solve_ivp(rhs, (0, 3.0), [0.3, -0.5, 0.0, 1.0], method="DOP853", rtol=1e-11, atol=1e-12, dense_output=True)
     E = np.array([energy(sol.sol(t)) for t in np.linspace(0, 3, 50)])
     assert np.ptp(E) < 1e-7 * (b1 + b2)
     assert np.ptp(sol.y[0]) > 0.5  # it actually moved

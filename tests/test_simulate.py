@@ -138,9 +138,7 @@ def test_cli_writes_a_trial_the_loader_reads_back(tmp_path, robot):
     )
     assert rc == 0
     truth = json.loads(out.with_name("trial.truth.json").read_text())
-    assert (
-        truth["effects"]["elasticity"]["joint"] == 2 and truth["effects"]["elasticity"]["frequency_hz"] == 8.0
-    )
+    assert truth["effects"]["elasticity"]["joint"] == 2 and truth["effects"]["elasticity"]["frequency_hz"] == 8.0
     assert truth["effects"]["payload"] == {"mass": 0.1}
     data = load_dataset(out, DataSpec(), robot)
     assert data.n == 300 and data.derivatives == "given"
@@ -148,9 +146,7 @@ def test_cli_writes_a_trial_the_loader_reads_back(tmp_path, robot):
 
 
 def test_cli_bad_effect_exits_2_without_traceback(tmp_path, capsys):
-    rc = main(
-        ["simulate", "--problem", str(PROBLEM), "--out", str(tmp_path / "x.csv"), "--effect", "warp:x=1"]
-    )
+    rc = main(["simulate", "--problem", str(PROBLEM), "--out", str(tmp_path / "x.csv"), "--effect", "warp:x=1"])
     assert rc == 2
     err = capsys.readouterr().err
     assert "unknown effect 'warp'" in err and "Traceback" not in err
@@ -188,9 +184,7 @@ def test_common_load_reads_the_simulated_trials_of_a_sim_problem(tmp_path, monke
 
     monkeypatch.setenv("IDENT_OPT_CACHE", str(tmp_path / "cache"))
     problem = short_sim_problem(tmp_path)
-    loaded = load(
-        Namespace(problem=str(problem.path), data=None, allow_implausible=False, drop_invalid=False)
-    )
+    loaded = load(Namespace(problem=str(problem.path), data=None, allow_implausible=False, drop_invalid=False))
     assert len(loaded.trials) == 2 and loaded.train.n == 300
     assert not np.allclose(loaded.train.tau[:50], loaded.unseen.tau[:50])
 
@@ -199,9 +193,7 @@ def test_bad_simulate_settings_in_a_problem_file_name_the_file(tmp_path, monkeyp
     from ident_opt.simulate import problem_trials
 
     monkeypatch.setenv("IDENT_OPT_CACHE", str(tmp_path / "cache"))
-    text = (
-        (ROOT / "problems" / "tudor_sim.toml").read_text().replace('"asymmetric_coulomb",', '"friction:x=1",')
-    )
+    text = (ROOT / "problems" / "tudor_sim.toml").read_text().replace('"asymmetric_coulomb",', '"friction:x=1",')
     path = tmp_path / "bad.toml"
     path.write_text(text)
     with pytest.raises(InputError) as info:

@@ -81,9 +81,7 @@ def test_armature_adds_inertia_on_the_diagonal_only(robot, clean):
 
 
 def test_asymmetric_coulomb_is_recovered_by_the_asymmetric_model(robot):
-    trial = simulate_trial(
-        robot, effects=["asymmetric_coulomb:positive=[0.9,0.3],negative=[0.4,0.6]"], **EXACT
-    )
+    trial = simulate_trial(robot, effects=["asymmetric_coulomb:positive=[0.9,0.3],negative=[0.4,0.6]"], **EXACT)
     got = fit(trial, ArmModel(("armature", "asymmetric_coulomb")))
     assert [got["fc1p"], got["fc2p"]] == pytest.approx([0.9, 0.3], rel=1e-6)
     assert [got["fc1n"], got["fc2n"]] == pytest.approx([0.4, 0.6], rel=1e-6)

@@ -55,11 +55,7 @@ def test_energy_balance_without_friction(robot):
     d, p = trial.dataset(), trial.truth["pi"]
     M = MODEL.mass_matrix(MODEL.vector(p), d.q[:, 1])
     # E = ½ dqᵀ M(q) dq + V(q), with V = b1 sin q1 + b2 sin(q1 + q2) (so that G = ∂V/∂q).
-    energy = (
-        0.5 * np.einsum("ki,kij,kj->k", d.dq, M, d.dq)
-        + p["b1"] * np.sin(d.q[:, 0])
-        + p["b2"] * np.sin(d.q.sum(1))
-    )
+    energy = 0.5 * np.einsum("ki,kij,kj->k", d.dq, M, d.dq) + p["b1"] * np.sin(d.q[:, 0]) + p["b2"] * np.sin(d.q.sum(1))
     # The torque is held over each 1 ms tick, so the work over a tick is exactly τ_k · (q_{k+1} − q_k).
     work = np.concatenate([[0.0], np.cumsum(np.einsum("kj,kj->k", d.tau[:-1], np.diff(d.q, axis=0)))])
     assert np.ptp(energy) > 1.0  # J: a real exchange of energy took place

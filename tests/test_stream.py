@@ -44,15 +44,30 @@ def test_parser_formats_and_bad_lines():
     assert p.parse("t,q1,q2,dq1,dq2,ddq1,ddq2,tau1,tau2,extra\n") is None
     s = p.parse("0.1,1,2,3,4,5,6,7,8,x\n")
     assert s == {"t": 0.1, "q1": 1, "q2": 2, "dq1": 3, "dq2": 4, "ddq1": 5, "ddq2": 6, "tau1": 7, "tau2": 8}
-    for bad in ("0.1,1,2,3,4,5,6,7,8\n", "0.1,1,2,oops,4,5,6,7,8,x\n", "0.1,1,2,nan,4,5,6,7,8,x\n",
-                "0.1,1,2,3,4,5,6,7,,x\n"):
+    for bad in (
+        "0.1,1,2,3,4,5,6,7,8\n",
+        "0.1,1,2,oops,4,5,6,7,8,x\n",
+        "0.1,1,2,nan,4,5,6,7,8,x\n",
+        "0.1,1,2,3,4,5,6,7,,x\n",
+    ):
         with pytest.raises(BadLine):
             p.parse(bad)
     j = LineParser()
-    assert j.parse('{"q1": 1, "q2": 2, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": 0}') == \
-        {"q1": 1, "q2": 2, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": 0}
-    for bad in ("{not json", "[1, 2]", '{"q1": 1}', '{"q1": true, "q2": 2, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": 0}',
-                '{"q1": 1, "q2": 2, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": "inf"}'):
+    assert j.parse('{"q1": 1, "q2": 2, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": 0}') == {
+        "q1": 1,
+        "q2": 2,
+        "dq1": 0,
+        "dq2": 0,
+        "ddq1": 0,
+        "ddq2": 0,
+    }
+    for bad in (
+        "{not json",
+        "[1, 2]",
+        '{"q1": 1}',
+        '{"q1": true, "q2": 2, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": 0}',
+        '{"q1": 1, "q2": 2, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": "inf"}',
+    ):
         with pytest.raises(BadLine):
             j.parse(bad)
     with pytest.raises(BadLine):
@@ -84,8 +99,12 @@ def test_serve_equals_replay_and_skips_bad_lines(physical_problem, small):
     errors = [json.loads(line) for line in err.getvalue().splitlines()]
     assert [e["line"] for e in errors] == [6, 104, 155] and all("error" in e for e in errors)
     for row, rec in zip(rows, predictions):
-        p = twin.update(np.array([row["q1"], row["q2"]]), np.array([row["dq1"], row["dq2"]]),
-                        np.array([row["ddq1"], row["ddq2"]]), np.array([row["tau1"], row["tau2"]]))
+        p = twin.update(
+            np.array([row["q1"], row["q2"]]),
+            np.array([row["dq1"], row["dq2"]]),
+            np.array([row["ddq1"], row["ddq2"]]),
+            np.array([row["tau1"], row["tau2"]]),
+        )
         assert rec["tau"] == p.tau.tolist() and rec["lower"] == p.lower.tolist()
         assert rec["upper"] == p.upper.tolist() and rec["t"] == row["t"]
     assert records[-1] == final
@@ -106,10 +125,29 @@ def test_prediction_only_lines_do_not_update(physical_problem, small):
 
 def _start_stream(small, *extra):
     path, _, _ = small
-    cmd = [sys.executable, "-m", "ident_opt", "online", "--problem", str(PROBLEM), "--data", str(path), "--stream",
-           "--components", "2", *extra]
-    return subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    cmd = [
+        sys.executable,
+        "-m",
+        "ident_opt",
+        "online",
+        "--problem",
+        str(PROBLEM),
+        "--data",
+        str(path),
+        "--stream",
+        "--components",
+        "2",
+        *extra,
+    ]
+    return subprocess.Popen(
+        cmd,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
 
 
 def test_cli_stream_equals_cli_replay(physical_problem, small, tmp_path):
@@ -118,8 +156,9 @@ def test_cli_stream_equals_cli_replay(physical_problem, small, tmp_path):
 
     _, train, test = small
     n = 120
-    result = replay(physical_problem, train, test.subset(np.arange(n)), keys=("pbr",), components=2, checks=0,
-                    progress=False)
+    result = replay(
+        physical_problem, train, test.subset(np.arange(n)), keys=("pbr",), components=2, checks=0, progress=False
+    )
     proc = _start_stream(small, "--model", "pbr+gmr", "--final", str(tmp_path / "final.json"))
     lines = [json.dumps({k: float(v) for k, v in row.items()}) for row in _rows(test, n)]
     lines.insert(10, "{broken")
@@ -188,4 +227,5 @@ def test_currents_become_torques():
         LineParser().parse('{"q1": 0, "q2": 0, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": 0, "i1": 1, "i2": 1}')
     with pytest.raises(BadLine):
         LineParser(current_to_torque=(1.0, 1.0)).parse(
-            '{"q1": 0, "q2": 0, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": 0, "i1": 1, "i2": 1, "tau1": 0, "tau2": 0}')
+            '{"q1": 0, "q2": 0, "dq1": 0, "dq2": 0, "ddq1": 0, "ddq2": 0, "i1": 1, "i2": 1, "tau1": 0, "tau2": 0}'
+        )

@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         "",
         "## Parameters",
         "",
-        "The paper's data-fitted π̂ (its Table \"Linear Least Squares Solution\") beside the datasheet π computed "
+        'The paper\'s data-fitted π̂ (its Table "Linear Least Squares Solution") beside the datasheet π computed '
         "under both conventions. The paper fitted π̂ with its printed regressor, whose gravity column counts "
         "β2 cos q1 twice, so its β̂1 means β1 − β2: the `paper_fit_physical` column reads it physically "
         f"(β̂1 + β̂2 = {fit['b1']:.2f} N·m). Relative differences are to that column. Under `physical`, `a1` "
@@ -58,9 +58,11 @@ def run(args: argparse.Namespace) -> int:
         "",
         "The physical datasheet is closer to the fit than the paper's for: "
         + ", ".join(f"`{k}`" for k, v in closer.items() if v)
-        + "; not closer for: " + (", ".join(f"`{k}`" for k, v in closer.items() if not v) or "none") + ".",
+        + "; not closer for: "
+        + (", ".join(f"`{k}`" for k, v in closer.items() if not v) or "none")
+        + ".",
         "",
-        "Rigid-body parameters behind them (the paper's \"Dynamic Parameters Used in RBD Model\" is the `paper` "
+        'Rigid-body parameters behind them (the paper\'s "Dynamic Parameters Used in RBD Model" is the `paper` '
         "column; its printed Ic1 = 3.10e-3 kg·m² is the bar alone, before the actuator and parallel-axis terms):",
         "",
         markdown_table(body.T),
@@ -96,12 +98,18 @@ def run(args: argparse.Namespace) -> int:
     for name, row in paper.iterrows():
         print(f"  {name:<22} {row['nmse_j1']:.4f} / {row['nmse_j2']:.4f}")
     print(f"wrote {out / 'paper_audit.md'}")
-    write_json(args.json, {
-        "parameters": {"paper_fit": audit.PAPER_FIT, "paper_fit_physical": fit,
-                       **{c: params[f"datasheet_{c}"].to_dict() for c in ("paper", "physical")}},
-        "physical_closer": closer,
-        "metrics": {f"{m} | {p}": row.to_dict() for (m, p), row in data.table.iterrows()},
-    })
+    write_json(
+        args.json,
+        {
+            "parameters": {
+                "paper_fit": audit.PAPER_FIT,
+                "paper_fit_physical": fit,
+                **{c: params[f"datasheet_{c}"].to_dict() for c in ("paper", "physical")},
+            },
+            "physical_closer": closer,
+            "metrics": {f"{m} | {p}": row.to_dict() for (m, p), row in data.table.iterrows()},
+        },
+    )
     return 0
 
 
@@ -116,10 +124,16 @@ def _figure(trial, predictions: dict, path) -> None:
     fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
     for j, ax in enumerate(axes):
         ax.plot(trial.t, trial.tau[:, j], color="black", lw=1.0, label="measured")
-        ax.plot(trial.t, predictions["dm_paper (printed G)"][:, j], color="tab:red", lw=1.0,
-                label="datasheet, paper convention")
-        ax.plot(trial.t, predictions["dm_physical"][:, j], color="tab:blue", lw=1.0,
-                label="datasheet, physical convention")
+        ax.plot(
+            trial.t,
+            predictions["dm_paper (printed G)"][:, j],
+            color="tab:red",
+            lw=1.0,
+            label="datasheet, paper convention",
+        )
+        ax.plot(
+            trial.t, predictions["dm_physical"][:, j], color="tab:blue", lw=1.0, label="datasheet, physical convention"
+        )
         ax.set_ylabel(f"joint {j + 1} torque [N·m]")
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper right", fontsize=8)

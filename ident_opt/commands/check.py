@@ -37,12 +37,15 @@ def summary(trial) -> dict:
 def run(args: argparse.Namespace) -> int:
     loaded = load(args)
     reports = [summary(trial) for trial in loaded.trials]
-    print(f"problem {loaded.problem.name!r} ({loaded.problem.path}): robot convention "
-          f"{loaded.problem.robot.convention!r}")
+    print(
+        f"problem {loaded.problem.name!r} ({loaded.problem.path}): robot convention {loaded.problem.robot.convention!r}"
+    )
     units = {"q": "rad", "dq": "rad/s", "ddq": "rad/s²", "tau": "N·m"}
     for rep in reports:
-        print(f"{rep['source']}: {rep['samples']} samples, {rep['duration_s']:.2f} s at {rep['rate_hz']:.6g} Hz; "
-              f"derivatives {rep['derivatives']}; dropped rows: {rep['dropped_rows']}")
+        print(
+            f"{rep['source']}: {rep['samples']} samples, {rep['duration_s']:.2f} s at {rep['rate_hz']:.6g} Hz; "
+            f"derivatives {rep['derivatives']}; dropped rows: {rep['dropped_rows']}"
+        )
         for name, ((lo1, hi1), (lo2, hi2)) in rep["ranges"].items():
             print(f"  {name:>3} [{units[name]}]: joint 1 [{lo1:.4g}, {hi1:.4g}], joint 2 [{lo2:.4g}, {hi2:.4g}]")
     write_json(args.json, {"problem": loaded.problem.name, "trials": reports})

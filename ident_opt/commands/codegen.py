@@ -30,16 +30,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The standard problem flags, --out (required) and the model/estimator/GMR choices."""
     add_problem_arguments(parser)
     parser.add_argument("--out", metavar="DIR", required=True, help="output folder for the C code and library")
-    parser.add_argument("--extension", metavar="NAME", action="append", default=None,
-                        help="model extension to include (repeatable): armature, asymmetric_coulomb, stribeck, "
-                             "offset")
-    parser.add_argument("--estimator", choices=("constrained", "ols"), default="constrained",
-                        help="how π is identified (default: the physically consistent fit)")
-    parser.add_argument("--parameters", metavar="FILE",
-                        help="use the parameters (and GMR, if present) of a parameters.json from an earlier run "
-                             "instead of identifying them")
-    parser.add_argument("--components", metavar="K", type=int,
-                        help="GMR components (default: the problem's [residual] setting)")
+    parser.add_argument(
+        "--extension",
+        metavar="NAME",
+        action="append",
+        default=None,
+        help="model extension to include (repeatable): armature, asymmetric_coulomb, stribeck, offset",
+    )
+    parser.add_argument(
+        "--estimator",
+        choices=("constrained", "ols"),
+        default="constrained",
+        help="how π is identified (default: the physically consistent fit)",
+    )
+    parser.add_argument(
+        "--parameters",
+        metavar="FILE",
+        help="use the parameters (and GMR, if present) of a parameters.json from an earlier run "
+        "instead of identifying them",
+    )
+    parser.add_argument(
+        "--components", metavar="K", type=int, help="GMR components (default: the problem's [residual] setting)"
+    )
     parser.add_argument("--no-forward", action="store_true", help="do not generate ddq_hat (forward dynamics)")
 
 
@@ -67,29 +79,42 @@ def run(args: argparse.Namespace) -> int:
         status = saved.get("estimator_status", "")
     else:
         pi, estimator, status = _identify(model, train, args.estimator)
-    gmr = _gmr_from_saved(saved["gmr"]) if saved and saved.get("gmr") else _fit_gmr(model, pi, train, problem,
-                                                                                     args.components)
+    gmr = (
+        _gmr_from_saved(saved["gmr"])
+        if saved and saved.get("gmr")
+        else _fit_gmr(model, pi, train, problem, args.components)
+    )
 
-    print(f"ident-opt codegen: {len(model.names)} parameters ({estimator}), GMR with {len(gmr.weights_)} "
-          f"components; generating C in {out}", flush=True)
+    print(
+        f"ident-opt codegen: {len(model.names)} parameters ({estimator}), GMR with {len(gmr.weights_)} "
+        f"components; generating C in {out}",
+        flush=True,
+    )
     functions = codegen.build_functions(model, pi, gmr, forward=not args.no_forward)
     source, header = codegen.generate_sources(functions, out)
     library = codegen.compile_library(source, out, compiler)
     example = codegen.copy_example(out)
     readme = codegen.write_readme(out, functions)
 
-    errors = _check(codegen, library, model, pi, gmr, train, [f.name() for f in functions],
-                    np.random.default_rng(0))
+    errors = _check(codegen, library, model, pi, gmr, train, [f.name() for f in functions], np.random.default_rng(0))
     payload = {
         "estimator": estimator,
         "estimator_status": status,
-        "model": {"extensions": list(model.extensions), "gravity": model.gravity,
-                  "stribeck_velocity": list(model.stribeck_velocity)},
+        "model": {
+            "extensions": list(model.extensions),
+            "gravity": model.gravity,
+            "stribeck_velocity": list(model.stribeck_velocity),
+        },
         "parameters": model.as_dict(pi),
         "units": {"a": "kg m^2", "ia": "kg m^2", "b": "N m", "fv": "N m s/rad", "fc": "N m", "fs": "N m"},
-        "gmr": {"inputs": list(codegen.GMR_INPUTS), "outputs": ["r1", "r2"],
-                "n_components": len(gmr.weights_), "weights": gmr.weights_, "means": gmr.means_,
-                "covariances": gmr.covariances_},
+        "gmr": {
+            "inputs": list(codegen.GMR_INPUTS),
+            "outputs": ["r1", "r2"],
+            "n_components": len(gmr.weights_),
+            "weights": gmr.weights_,
+            "means": gmr.means_,
+            "covariances": gmr.covariances_,
+        },
         "problem": problem.name,
         "data": [t.source for t in trials] if trials else [],
         "functions": [f.name() for f in functions],
@@ -98,8 +123,9 @@ def run(args: argparse.Namespace) -> int:
     }
     write_json(out / "parameters.json", payload)
     for name, err in errors.items():
-        print(f"  {name}: compiled vs Python, {MEASURE[name].replace('_', ' ')} {err:.2e} "
-              f"(limit {TOLERANCE[name]:.0e})")
+        print(
+            f"  {name}: compiled vs Python, {MEASURE[name].replace('_', ' ')} {err:.2e} (limit {TOLERANCE[name]:.0e})"
+        )
     print(f"  wrote {', '.join(p.name for p in (source, header, library, example, readme))}, parameters.json")
     write_json(getattr(args, "json", None), payload)
     bad = {name: err for name, err in errors.items() if not err <= TOLERANCE[name]}
@@ -150,10 +176,18 @@ def _fit_gmr(model, pi, train, problem, components: int | None):
     X = np.hstack([train.q, train.dq, train.ddq])
     R = train.tau - model.predict(pi, train.q, train.dq, train.ddq)
     k = components if components is not None else spec.components
-    print(f"ident-opt codegen: fitting the GMR residual ({k or 'K chosen among ' + str(list(spec.candidates))}"
-          f" components) on {len(X)} samples", flush=True)
-    return GMR(n_components=k, candidates=spec.candidates, covariance=spec.covariance, reg_covar=spec.reg_covar,
-               max_train_samples=spec.max_train_samples).fit(X, R)
+    print(
+        f"ident-opt codegen: fitting the GMR residual ({k or 'K chosen among ' + str(list(spec.candidates))}"
+        f" components) on {len(X)} samples",
+        flush=True,
+    )
+    return GMR(
+        n_components=k,
+        candidates=spec.candidates,
+        covariance=spec.covariance,
+        reg_covar=spec.reg_covar,
+        max_train_samples=spec.max_train_samples,
+    ).fit(X, R)
 
 
 def _read_parameters(path: str) -> dict:
@@ -164,10 +198,14 @@ def _read_parameters(path: str) -> dict:
         raise InputError(f"{path}: cannot read the parameters file ({exc})") from None
     if not isinstance(raw, dict) or not isinstance(raw.get("parameters"), dict):
         raise InputError(f"{path}: not a parameters file (expected an object with a 'parameters' object)")
-    return {"parameters": raw["parameters"], "estimator": str(raw.get("estimator", "unknown")),
-            "estimator_status": str(raw.get("estimator_status", "")),
-            "extensions": list((raw.get("model") or {}).get("extensions", [])), "gmr": raw.get("gmr"),
-            "path": path}
+    return {
+        "parameters": raw["parameters"],
+        "estimator": str(raw.get("estimator", "unknown")),
+        "estimator_status": str(raw.get("estimator_status", "")),
+        "extensions": list((raw.get("model") or {}).get("extensions", [])),
+        "gmr": raw.get("gmr"),
+        "path": path,
+    }
 
 
 def _saved_vector(saved: dict, model):
@@ -197,8 +235,9 @@ def _gmr_from_saved(raw: dict):
         raise InputError("parameters file: 'gmr' needs numeric weights, means and covariances") from None
     K = w.shape[0] if w.ndim == 1 else 0
     if K == 0 or w.ndim != 1 or m.shape != (K, 8) or c.shape != (K, 8, 8):
-        raise InputError(f"parameters file: GMR shapes {w.shape}, {m.shape}, {c.shape}; expected (K,), (K, 8), "
-                         "(K, 8, 8)")
+        raise InputError(
+            f"parameters file: GMR shapes {w.shape}, {m.shape}, {c.shape}; expected (K,), (K, 8), (K, 8, 8)"
+        )
     gmr = GMR(n_components=K)
     gmr.weights_, gmr.means_, gmr.covariances_, gmr.n_inputs = w, m, c, 6
     return gmr
@@ -213,8 +252,10 @@ def _check(codegen, library: Path, model, pi, gmr, train, names: list[str], rng)
         lo = np.minimum(train.q.min(0), -np.pi), np.minimum(train.dq.min(0), -1), np.minimum(train.ddq.min(0), -1)
         hi = np.maximum(train.q.max(0), np.pi), np.maximum(train.dq.max(0), 1), np.maximum(train.ddq.max(0), 1)
     else:
-        lo, hi = (-np.pi * np.ones(2), -3 * np.ones(2), -10 * np.ones(2)), (np.pi * np.ones(2), 3 * np.ones(2),
-                                                                            10 * np.ones(2))
+        lo, hi = (
+            (-np.pi * np.ones(2), -3 * np.ones(2), -10 * np.ones(2)),
+            (np.pi * np.ones(2), 3 * np.ones(2), 10 * np.ones(2)),
+        )
     q, dq, ddq = (rng.uniform(a, b, (N_RANDOM, 2)) for a, b in zip(lo, hi))
     if train is not None:
         q, dq, ddq = np.vstack([q, train.q]), np.vstack([dq, train.dq]), np.vstack([ddq, train.ddq])

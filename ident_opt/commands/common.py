@@ -18,16 +18,24 @@ def add_problem_arguments(parser: argparse.ArgumentParser, data: bool = True, js
     """--problem, --data, --json and the bad-row flags, named the same in every subcommand."""
     parser.add_argument("--problem", required=True, metavar="P", help="problem file (problems/*.toml)")
     if data:
-        parser.add_argument("--data", metavar="D", action="append",
-                            help="data file(s) to use instead of the problem's [data] trials; "
-                                 "repeat for a second (unseen) trial")
+        parser.add_argument(
+            "--data",
+            metavar="D",
+            action="append",
+            help="data file(s) to use instead of the problem's [data] trials; repeat for a second (unseen) trial",
+        )
     if json_out:
         parser.add_argument("--json", metavar="F", help="also write a machine-readable result to F")
-    parser.add_argument("--allow-implausible", action="store_true",
-                        help="proceed when values look like the wrong unit (e.g. |q| > 100 rad)")
-    parser.add_argument("--drop-invalid", action="store_true",
-                        help="skip rows with non-numeric/NaN/inf cells or non-increasing t "
-                             "(the count is reported)")
+    parser.add_argument(
+        "--allow-implausible",
+        action="store_true",
+        help="proceed when values look like the wrong unit (e.g. |q| > 100 rad)",
+    )
+    parser.add_argument(
+        "--drop-invalid",
+        action="store_true",
+        help="skip rows with non-numeric/NaN/inf cells or non-increasing t (the count is reported)",
+    )
 
 
 @dataclass
@@ -58,8 +66,7 @@ def load(args: argparse.Namespace, min_samples: int | None = None) -> Loaded:
 
         paths = problem_trials(problem)
     if not paths:
-        raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] "
-                         "in the problem file")
+        raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
     kwargs = {"allow_implausible": args.allow_implausible, "drop_invalid": args.drop_invalid}
     if min_samples is not None:
         kwargs["min_samples"] = min_samples

@@ -20,8 +20,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """--problem, --data, --json, --out, plus --no-variants."""
     add_problem_arguments(parser)
     parser.add_argument("--out", metavar="DIR", help="output folder (default: the problem's [output] dir)")
-    parser.add_argument("--no-variants", action="store_true",
-                        help="skip the GMR variants of the paper's protocol (diagonal covariances; one component)")
+    parser.add_argument(
+        "--no-variants",
+        action="store_true",
+        help="skip the GMR variants of the paper's protocol (diagonal covariances; one component)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
     n_figs = 7 + (3 if unseen is not None else 0)
     total = seeds * (1 if args.no_variants else 3) + 2 + (unseen is not None) + n_figs
     with tqdm(total=total, desc="identify", unit="step", file=sys.stderr, leave=False) as bar:
+
         def tick() -> None:
             bar.update()
 
@@ -62,16 +66,27 @@ def run(args: argparse.Namespace) -> int:
         protocols["chronological"] = chronological_protocol(trial, problem, constrained=constrained, progress=tick)
         if unseen is not None:
             bar.set_postfix_str("cross-trial")
-            protocols["cross_trial"] = cross_trial_protocol(trial, unseen, problem, constrained=constrained,
-                                                            progress=tick)
+            protocols["cross_trial"] = cross_trial_protocol(
+                trial, unseen, problem, constrained=constrained, progress=tick
+            )
         bar.set_postfix_str("parameters")
         params, ses, eig = _parameters(problem, trial, constrained)
         ridge = _ridge(trial)
         tick()
-        result = report.IdentifyResult(problem.name, _rel(trial.source), _rel(unseen.source) if unseen else None,
-                                       protocols, params, ses, eig, variants,
-                                       gmr_candidates=tuple(problem.residual.candidates), command=_command(args),
-                                       ridge=ridge, reg_covar=problem.residual.reg_covar)
+        result = report.IdentifyResult(
+            problem.name,
+            _rel(trial.source),
+            _rel(unseen.source) if unseen else None,
+            protocols,
+            params,
+            ses,
+            eig,
+            variants,
+            gmr_candidates=tuple(problem.residual.candidates),
+            command=_command(args),
+            ridge=ridge,
+            reg_covar=problem.residual.reg_covar,
+        )
         bar.set_postfix_str("figures")
         result.figures = _figures(figures, result, trial, problem, fig_dir, tick)
         result.seconds = time.perf_counter() - start
@@ -129,8 +144,11 @@ def _ridge(trial) -> dict:
 
     rr = RidgeModel().fit(trial)
     features = ("q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
-    return {"alpha": rr.alpha_.tolist(), "intercept": rr.intercept_.tolist(),
-            "coef": {f: rr.coef_[:, i].tolist() for i, f in enumerate(features)}}
+    return {
+        "alpha": rr.alpha_.tolist(),
+        "intercept": rr.intercept_.tolist(),
+        "coef": {f: rr.coef_[:, i].tolist() for i, f in enumerate(features)},
+    }
 
 
 def _figures(figures, result, trial, problem, fig_dir: Path, tick) -> dict[str, Path]:
@@ -149,17 +167,29 @@ def _figures(figures, result, trial, problem, fig_dir: Path, tick) -> dict[str, 
     tick()
     cross = result.protocols.get("cross_trial")
     if cross is not None:
-        models = (("rr", "Model 1: ridge regression (RR)"), ("pbr", "Model 3: physics-based regression (PBR)"),
-                  ("cpbr", "Constrained physics-based regression (CPBR)")) if "cpbr" in cross.metrics["rmse"] else \
-            (("rr", "Model 1: ridge regression (RR)"), ("pbr", "Model 3: physics-based regression (PBR)"))
+        models = (
+            (
+                ("rr", "Model 1: ridge regression (RR)"),
+                ("pbr", "Model 3: physics-based regression (PBR)"),
+                ("cpbr", "Constrained physics-based regression (CPBR)"),
+            )
+            if "cpbr" in cross.metrics["rmse"]
+            else (("rr", "Model 1: ridge regression (RR)"), ("pbr", "Model 3: physics-based regression (PBR)"))
+        )
         for j in (0, 1):
             made[f"cross_j{j + 1}"] = figures.torque_figure(
-                cross.example, j, fig_dir / f"identify_cross_trial_j{j + 1}.png", models,
-                title=f"Joint {j + 1} on the unseen trial {result.unseen} (identified on {result.trial})")
+                cross.example,
+                j,
+                fig_dir / f"identify_cross_trial_j{j + 1}.png",
+                models,
+                title=f"Joint {j + 1} on the unseen trial {result.unseen} (identified on {result.trial})",
+            )
             tick()
         made["cross_interval"] = figures.interval_figure(
-            cross.example, fig_dir / "identify_cross_trial_interval_pbr.png",
-            title=f"PBR + GMR with 95 % intervals on the unseen trial {result.unseen}")
+            cross.example,
+            fig_dir / "identify_cross_trial_interval_pbr.png",
+            title=f"PBR + GMR with 95 % intervals on the unseen trial {result.unseen}",
+        )
         tick()
     return made
 
@@ -168,23 +198,32 @@ def _summary(result, out: Path, json_path) -> None:
     from ident_opt.report import reproduction_frame
     from ident_opt.tables import fmt
 
-    print(f"ident-opt identify: {result.problem_name} on {result.trial}"
-          + (f" (unseen: {result.unseen})" if result.unseen else ""))
+    print(
+        f"ident-opt identify: {result.problem_name} on {result.trial}"
+        + (f" (unseen: {result.unseen})" if result.unseen else "")
+    )
     repro = reproduction_frame(result)
     print("\nReproduction (paper's protocol: shuffled 70/30, mean over seeds)   ours    paper   diff   target")
     for (metric, key, joint), row in repro.iterrows():
         if "(" in metric:  # the GMR variants: in the tables, not the terminal
             continue
-        print(f"  {metric:<12} {key:<8} J{joint}  {fmt(row['ours'], 4):>28} {fmt(row['paper'], 4):>8} "
-              f"{row['difference']:>7} {row['met']:>8}")
+        print(
+            f"  {metric:<12} {key:<8} J{joint}  {fmt(row['ours'], 4):>28} {fmt(row['paper'], 4):>8} "
+            f"{row['difference']:>7} {row['met']:>8}"
+        )
     print("\nnmse (÷ variance) J1 / J2 per protocol:")
     keys = list(result.protocols["paper"].metrics["nmse"])
     print("  " + f"{'model':<16}" + "".join(f"{name:>24}" for name in result.protocols))
     for key in keys:
-        cells = "".join(f"{fmt(p.metrics['nmse'][key][0], 3) + ' / ' + fmt(p.metrics['nmse'][key][1], 3):>24}"
-                        for p in result.protocols.values())
+        cells = "".join(
+            f"{fmt(p.metrics['nmse'][key][0], 3) + ' / ' + fmt(p.metrics['nmse'][key][1], 3):>24}"
+            for p in result.protocols.values()
+        )
         print(f"  {key:<16}{cells}")
     cov = {n: p.coverage.get("pbr+gmr") for n, p in result.protocols.items()}
     print("\n95 % coverage of PBR + GMR: " + ", ".join(f"{n} {v[0]:.1%} / {v[1]:.1%}" for n, v in cov.items() if v))
-    print(f"\nwrote {out}/README.md, identify_*.md/.csv, figures/identify_*.png"
-          + (f" and {json_path}" if json_path else "") + f" in {result.seconds:.1f} s")
+    print(
+        f"\nwrote {out}/README.md, identify_*.md/.csv, figures/identify_*.png"
+        + (f" and {json_path}" if json_path else "")
+        + f" in {result.seconds:.1f} s"
+    )

@@ -30,21 +30,38 @@ GRAY_BOX = "pbr"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_problem_arguments(parser)
     parser.add_argument("--out", metavar="DIR", help="output folder (default: the problem's, else results/)")
-    parser.add_argument("--stream", action="store_true",
-                        help="serve samples from standard input (CSV with header or JSON lines) instead")
-    parser.add_argument("--model", default="pbr+gmr",
-                        help="model served by --stream: rr, dm, dm_physical, pbr or cpbr, optionally +gmr "
-                             "(default pbr+gmr)")
-    parser.add_argument("--snapshot-every", type=int, default=1000, metavar="N",
-                        help="--stream: a parameter snapshot line every N updates (0: none; default 1000)")
+    parser.add_argument(
+        "--stream",
+        action="store_true",
+        help="serve samples from standard input (CSV with header or JSON lines) instead",
+    )
+    parser.add_argument(
+        "--model",
+        default="pbr+gmr",
+        help="model served by --stream: rr, dm, dm_physical, pbr or cpbr, optionally +gmr (default pbr+gmr)",
+    )
+    parser.add_argument(
+        "--snapshot-every",
+        type=int,
+        default=1000,
+        metavar="N",
+        help="--stream: a parameter snapshot line every N updates (0: none; default 1000)",
+    )
     parser.add_argument("--final", metavar="F", help="--stream: also write the final parameters to F (JSON)")
-    parser.add_argument("--cross-covariance", action="store_true",
-                        help="also apply the first-order cross-covariance update to the GMRs")
-    parser.add_argument("--checks", type=int, default=10, metavar="K",
-                        help="random steps at which the online parameters are checked against a batch "
-                             "re-solve (plus the last step; default 10)")
-    parser.add_argument("--components", type=int, metavar="K",
-                        help="GMR components (default: the problem's [residual] setting)")
+    parser.add_argument(
+        "--cross-covariance", action="store_true", help="also apply the first-order cross-covariance update to the GMRs"
+    )
+    parser.add_argument(
+        "--checks",
+        type=int,
+        default=10,
+        metavar="K",
+        help="random steps at which the online parameters are checked against a batch "
+        "re-solve (plus the last step; default 10)",
+    )
+    parser.add_argument(
+        "--components", type=int, metavar="K", help="GMR components (default: the problem's [residual] setting)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -65,8 +82,15 @@ def run(args: argparse.Namespace) -> int:
     if args.stream:
         return _stream(args, problem, train)
     out = output_dir(args, problem)
-    result = replay(problem, train, test, cross_covariance=args.cross_covariance, checks=args.checks,
-                    components=args.components, seed=int(problem.split.seeds[0]))
+    result = replay(
+        problem,
+        train,
+        test,
+        cross_covariance=args.cross_covariance,
+        checks=args.checks,
+        components=args.components,
+        seed=int(problem.split.seeds[0]),
+    )
     payload = _payload(result, problem, trial, train, test, args.cross_covariance)
     _write_outputs(result, payload, out)
     write_json(args.json, payload)
@@ -75,8 +99,18 @@ def run(args: argparse.Namespace) -> int:
 
 
 # ---------------------------------------------------------------------------------------------- replay
-def replay(problem, train, test, *, keys=None, cross_covariance: bool = False, checks: int = 10,
-           components: int | None = None, seed: int = 0, progress: bool = True) -> dict:
+def replay(
+    problem,
+    train,
+    test,
+    *,
+    keys=None,
+    cross_covariance: bool = False,
+    checks: int = 10,
+    components: int | None = None,
+    seed: int = 0,
+    progress: bool = True,
+) -> dict:
     """Offline fits on `train`, then the sample-by-sample replay of `test`. Returns a dict with, per model
     key: online and frozen predictions, std, θ trajectories, initial/final θ, update timings; and the
     batch check."""
@@ -108,8 +142,9 @@ def replay(problem, train, test, *, keys=None, cross_covariance: bool = False, c
     seconds = dict.fromkeys(keys, 0.0)  # whole step: design row, prediction, update
     solve_seconds = dict.fromkeys(keys, 0.0)  # the parameter update alone (statistics + re-solve + transform)
     clock = time.perf_counter
-    for i in tqdm(range(n), desc="online replay", unit="sample", file=sys.stderr, disable=not progress,
-                  mininterval=0.5):
+    for i in tqdm(
+        range(n), desc="online replay", unit="sample", file=sys.stderr, disable=not progress, mininterval=0.5
+    ):
         q, dq, ddq, tau = test.q[i], test.dq[i], test.ddq[i], test.tau[i]
         for key, ident in online.items():
             t0 = clock()
@@ -123,9 +158,20 @@ def replay(problem, train, test, *, keys=None, cross_covariance: bool = False, c
             pred[key][i], pred[key + "+gmr"][i], std[key + "+gmr"][i] = p.parametric, p.tau, p.std
             theta[key][i] = ident.theta
     check = batch_check(starts, online, theta, train, test, checks, seed)
-    return {"keys": keys, "starts": starts, "online": online, "pred": pred, "std": std, "frozen": frozen,
-            "frozen_std": frozen_std, "theta": theta, "seconds": seconds, "solve_seconds": solve_seconds,
-            "batch_check": check, "n": n}
+    return {
+        "keys": keys,
+        "starts": starts,
+        "online": online,
+        "pred": pred,
+        "std": std,
+        "frozen": frozen,
+        "frozen_std": frozen_std,
+        "theta": theta,
+        "seconds": seconds,
+        "solve_seconds": solve_seconds,
+        "batch_check": check,
+        "n": n,
+    }
 
 
 def batch_check(starts, online, theta, train, test, checks: int, seed: int) -> dict:
@@ -149,21 +195,24 @@ def batch_check(starts, online, theta, train, test, checks: int, seed: int) -> d
         D_train = start.design(train.q, train.dq, train.ddq)
         D_test = start.design(test.q, test.dq, test.ddq)
         for i in steps:
-            D = np.concatenate([D_train, D_test[:i + 1]])
-            tau = np.concatenate([train.tau, test.tau[:i + 1]])
+            D = np.concatenate([D_train, D_test[: i + 1]])
+            tau = np.concatenate([train.tau, test.tau[: i + 1]])
             ref = batch_theta(start.estimator, Stats.from_regressor(D, tau))
             worst = max(worst, _relative(theta[key][i], ref))
             if key == "pbr":
                 b = start.estimator.bounds
-                bv = lsq_linear(D.reshape(-1, D.shape[2]), tau.reshape(-1), bounds=(b.lower, b.upper),
-                                method="bvls", tol=1e-15).x
+                bv = lsq_linear(
+                    D.reshape(-1, D.shape[2]), tau.reshape(-1), bounds=(b.lower, b.upper), method="bvls", tol=1e-15
+                ).x
                 paper = max(paper or 0.0, _relative(theta[key][i], bv))
         by_model[key] = worst
-    return {"max_relative_difference": max(by_model.values()) if by_model else 0.0,
-            "steps": [int(train.n + i + 1) for i in steps],  # samples seen at each checked step
-            "by_model": by_model,
-            "reference": "cold-started solver on from-scratch statistics of the same prefix",
-            "pbr_vs_lsq_linear": paper}
+    return {
+        "max_relative_difference": max(by_model.values()) if by_model else 0.0,
+        "steps": [int(train.n + i + 1) for i in steps],  # samples seen at each checked step
+        "by_model": by_model,
+        "reference": "cold-started solver on from-scratch statistics of the same prefix",
+        "pbr_vs_lsq_linear": paper,
+    }
 
 
 def _relative(a, b) -> float:
@@ -195,8 +244,10 @@ def _coverage(result, which: str) -> dict:
 
     preds = result["pred"] if which == "online" else result["frozen"]
     stds = result["std"] if which == "online" else result["frozen_std"]
-    return {k + "+gmr": [float(v) for v in coverage(result["tau"], preds[k + "+gmr"], stds[k + "+gmr"])]
-            for k in result["keys"]}
+    return {
+        k + "+gmr": [float(v) for v in coverage(result["tau"], preds[k + "+gmr"], stds[k + "+gmr"])]
+        for k in result["keys"]
+    }
 
 
 def _payload(result, problem, trial, train, test, cross_covariance: bool) -> dict:
@@ -208,23 +259,30 @@ def _payload(result, problem, trial, train, test, cross_covariance: bool) -> dic
     return {
         "problem": problem.name,
         "data": _shown(trial.source),
-        "protocol": (f"offline fit on the first {train.n} samples in time ({problem.split.train_fraction:.0%}), "
-                     f"online replay of the remaining {test.n}; one-step-ahead predictions"),
+        "protocol": (
+            f"offline fit on the first {train.n} samples in time ({problem.split.train_fraction:.0%}), "
+            f"online replay of the remaining {test.n}; one-step-ahead predictions"
+        ),
         "parameters": {
             "initial": dict(zip(names, map(float, starts[GRAY_BOX].theta0))) if names else {},
             "final": dict(zip(names, map(float, online[GRAY_BOX].theta))) if names else {},
         },
-        "parameters_by_model": {k: {"names": list(starts[k].names),
-                                    "initial": [float(v) for v in starts[k].theta0],
-                                    "final": [float(v) for v in online[k].theta]} for k in result["keys"]},
+        "parameters_by_model": {
+            k: {
+                "names": list(starts[k].names),
+                "initial": [float(v) for v in starts[k].theta0],
+                "final": [float(v) for v in online[k].theta],
+            }
+            for k in result["keys"]
+        },
         "metrics": {"online": _metrics(result, "online"), "frozen": _metrics(result, "frozen")},
         "coverage": {"online": _coverage(result, "online"), "frozen": _coverage(result, "frozen")},
         "updates_per_second": rate.get(GRAY_BOX),
         "updates_per_second_by_model": rate,
         "parameter_updates_per_second_by_model": solve_rate,
         "update_note": "updates_per_second: the whole step = regressor row, prediction (parametric + GMR with "
-                       "interval), fold into the statistics, exact re-solve, consistency transform; "
-                       "parameter_updates_per_second: the last three only",
+        "interval), fold into the statistics, exact re-solve, consistency transform; "
+        "parameter_updates_per_second: the last three only",
         # spec/cli.md: the largest relative difference (a number); where and against what, beside it.
         "batch_check": result["batch_check"]["max_relative_difference"],
         "batch_check_detail": result["batch_check"],
@@ -259,8 +317,16 @@ def _write_outputs(result, payload, out: Path) -> None:
     for metric in ("nmse", "nmse_range", "rmse"):
         for key in payload["metrics"]["online"][metric]:
             on, fr = payload["metrics"]["online"][metric][key], payload["metrics"]["frozen"][metric][key]
-            rows.append({"metric": metric, "model": key, "online_j1": on[0], "online_j2": on[1],
-                         "frozen_j1": fr[0], "frozen_j2": fr[1]})
+            rows.append(
+                {
+                    "metric": metric,
+                    "model": key,
+                    "online_j1": on[0],
+                    "online_j2": on[1],
+                    "frozen_j1": fr[0],
+                    "frozen_j2": fr[1],
+                }
+            )
     table = pd.DataFrame(rows).set_index(["metric", "model"])
     write_table(table, out / "online_metrics.csv")
     params = []
@@ -269,14 +335,22 @@ def _write_outputs(result, payload, out: Path) -> None:
             params.append({"model": key, "parameter": name, "initial": a, "final": b})
     write_table(pd.DataFrame(params).set_index(["model", "parameter"]), out / "online_parameters.csv")
     nmse = table.loc["nmse"]
-    text = ["# Online adaptation (replay in time order)", "", payload["protocol"] + ".", "",
-            "nMSE (÷ variance of the measured torque) per joint, online (exact re-solves after every sample, "
-            "GMR kept consistent by the mean-only transform) vs frozen (offline model, never updated):", "",
-            markdown_table(nmse), "",
-            f"Updates per second ({GRAY_BOX}+GMR, full step): {payload['updates_per_second']:.0f}; parameter "
-            f"update alone: {payload['parameter_updates_per_second_by_model'][GRAY_BOX]:.0f}. "
-            f"Batch check: largest relative difference {payload['batch_check']:.2e} "
-            f"at {len(payload['batch_check_detail']['steps'])} steps.", ""]
+    text = [
+        "# Online adaptation (replay in time order)",
+        "",
+        payload["protocol"] + ".",
+        "",
+        "nMSE (÷ variance of the measured torque) per joint, online (exact re-solves after every sample, "
+        "GMR kept consistent by the mean-only transform) vs frozen (offline model, never updated):",
+        "",
+        markdown_table(nmse),
+        "",
+        f"Updates per second ({GRAY_BOX}+GMR, full step): {payload['updates_per_second']:.0f}; parameter "
+        f"update alone: {payload['parameter_updates_per_second_by_model'][GRAY_BOX]:.0f}. "
+        f"Batch check: largest relative difference {payload['batch_check']:.2e} "
+        f"at {len(payload['batch_check_detail']['steps'])} steps.",
+        "",
+    ]
     (out / "online.md").write_text("\n".join(text), encoding="utf-8")
     write_json(out / "online.json", payload)
     _figure(result, out / "online_trajectories.png")
@@ -304,7 +378,7 @@ def _figure(result, path: Path) -> None:
             ax.axhline(result["starts"][key].theta0[p], color="0.6", lw=0.6, ls=":")
         ax.set_title(name, fontsize=9)
         ax.tick_params(labelsize=7)
-    for ax in list(axes.flat)[len(names):]:
+    for ax in list(axes.flat)[len(names) :]:
         ax.set_visible(False)
     axes.flat[0].legend(fontsize=7)
     fig.supxlabel("online samples")
@@ -321,11 +395,12 @@ def _print_summary(result, payload, out: Path) -> None:
     for key in on:
         print(f"{key:<16}{on[key][0]:>16.4f}{on[key][1]:>10.4f}{fr[key][0]:>16.4f}{fr[key][1]:>10.4f}")
     check = payload["batch_check_detail"]
-    print(f"updates/s ({GRAY_BOX}+gmr, full step): {payload['updates_per_second']:.0f} (parameter update alone: "
-          f"{payload['parameter_updates_per_second_by_model'][GRAY_BOX]:.0f}); batch check: max relative "
-          f"difference {check['max_relative_difference']:.2e} at {len(check['steps'])} steps")
-    print(f"wrote {out / 'online.md'}, online_metrics.csv, online_parameters.csv, online_trajectories.png, "
-          "online.json")
+    print(
+        f"updates/s ({GRAY_BOX}+gmr, full step): {payload['updates_per_second']:.0f} (parameter update alone: "
+        f"{payload['parameter_updates_per_second_by_model'][GRAY_BOX]:.0f}); batch check: max relative "
+        f"difference {check['max_relative_difference']:.2e} at {len(check['steps'])} steps"
+    )
+    print(f"wrote {out / 'online.md'}, online_metrics.csv, online_parameters.csv, online_trajectories.png, online.json")
 
 
 # ---------------------------------------------------------------------------------------------- stream
@@ -340,9 +415,19 @@ def _stream(args, problem, train) -> int:
     start = offline_start(key, problem, train)
     gmr = make_gmr(problem.residual, components=args.components, validation="blocked") if extra else None
     ident = start_identifier(start, train, gmr, cross_covariance=args.cross_covariance)
-    print(f"ident-opt online --stream: {args.model} ready (offline fit on {train.n} samples); reading samples",
-          file=sys.stderr, flush=True)
-    serve(ident, start.names, sys.stdin, sys.stdout, sys.stderr, args.snapshot_every,
-          on_final=(lambda record: write_json(args.final, record)) if args.final else None,
-          current_to_torque=tuple(j.current_to_torque for j in problem.robot.joints))
+    print(
+        f"ident-opt online --stream: {args.model} ready (offline fit on {train.n} samples); reading samples",
+        file=sys.stderr,
+        flush=True,
+    )
+    serve(
+        ident,
+        start.names,
+        sys.stdin,
+        sys.stdout,
+        sys.stderr,
+        args.snapshot_every,
+        on_final=(lambda record: write_json(args.final, record)) if args.final else None,
+        current_to_torque=tuple(j.current_to_torque for j in problem.robot.joints),
+    )
     return 0

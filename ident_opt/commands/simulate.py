@@ -43,24 +43,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME[:key=value,...]",
         help="hide an effect from the catalogue below (repeatable)",
     )
-    parser.add_argument(
-        "--seed", type=int, help="random seed (trajectory and noise); default: the problem's or 0"
-    )
+    parser.add_argument("--seed", type=int, help="random seed (trajectory and noise); default: the problem's or 0")
     parser.add_argument("--duration", type=float, metavar="S", help="trial length in seconds (default 80)")
     parser.add_argument(
-        "--rate", type=float, metavar="HZ",
+        "--rate",
+        type=float,
+        metavar="HZ",
         help="logging rate: a divisor of the 1 kHz control rate, or faster up to 5 kHz (the loop then runs at "
-             "the logging rate); default 100",
+        "the logging rate); default 100",
     )
     parser.add_argument(
         "--trajectory",
         choices=("tud01", "fourier"),
-        help="tud01: point-to-point moves with rests like MERIt's TUD01 (default); fourier: "
-        "a Swevers-style excitation",
+        help="tud01: point-to-point moves with rests like MERIt's TUD01 (default); fourier: a Swevers-style excitation",
     )
-    parser.add_argument(
-        "--current", action="store_true", help="log motor currents i1, i2 [A] instead of torques"
-    )
+    parser.add_argument("--current", action="store_true", help="log motor currents i1, i2 [A] instead of torques")
     parser.add_argument("--no-noise", action="store_true", help="no encoder quantisation and no torque noise")
     parser.add_argument(
         "--exact-derivatives",
@@ -92,8 +89,7 @@ def run(args: argparse.Namespace) -> int:
     hidden = ", ".join(f"{name} {values}" for name, values in trial.truth["effects"].items()) or "none"
     track = trial.truth["tracking"]["max_error"]
     print(
-        f"wrote {path} ({len(trial.frame)} samples at {trial.truth['settings']['rate_hz']:g} Hz) "
-        f"and {truth_path(path)}"
+        f"wrote {path} ({len(trial.frame)} samples at {trial.truth['settings']['rate_hz']:g} Hz) and {truth_path(path)}"
     )
     print(f"hidden effects: {hidden}")
     background = trial.truth.get("background") or {}

@@ -190,9 +190,7 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
                 theta, o, X, ls, nlp["kept"] = proposal, o2, X2, ls2, True
     beta, polished = ls.beta.copy(), []
     if family.cause == "stribeck":  # the nonlinear vs: IPOPT polish from the search's start
-        beta, theta, polished = polish.stribeck(
-            ctx.rest, ctx.train.dq, ctx.train.tau, o, X, names, beta, theta
-        )
+        beta, theta, polished = polish.stribeck(ctx.rest, ctx.train.dq, ctx.train.tau, o, X, names, beta, theta)
     params = dict(zip(names, map(float, beta)))
     se = dict(zip(names, map(float, ls.se)))
     params.update(theta)

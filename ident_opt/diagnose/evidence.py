@@ -90,9 +90,7 @@ def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float) -> dict:
         out["reversal_steps"].append(reversal_steps(rj, dqj, dt))
         signed = rj * np.sign(dqj)
         out["low_speed_excess"].append(
-            float(np.mean(signed[slow]) - np.mean(signed[fast]))
-            if slow.any() and fast.any()
-            else float("nan")
+            float(np.mean(signed[slow]) - np.mean(signed[fast])) if slow.any() and fast.any() else float("nan")
         )
         out["pose_r2"].append(pose_r2(rj, ds.q))
         out["lag_s"].append(signals.lag(tau_hat[:, j], ds.tau[:, j], dt))
@@ -102,9 +100,7 @@ def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float) -> dict:
     return out
 
 
-def forward_error(
-    model: ArmModel, pi: np.ndarray, ds: Dataset, dt: float, window_s: float = 0.5
-) -> list[float]:
+def forward_error(model: ArmModel, pi: np.ndarray, ds: Dataset, dt: float, window_s: float = 0.5) -> list[float]:
     """RMS joint-angle error [rad] at the end of short windows of forward simulation driven by the measured
     torque: M(q) q̈ = τ − C(q, q̇)q̇ − G(q) − F(q̇), semi-implicit Euler at the data rate, each window
     restarted from the measured state (so drift does not swamp the comparison). All windows run at once."""

@@ -56,9 +56,7 @@ def errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
     checks: list[tuple[bool, float]] = []
     if cause == "elasticity":
         rel = _rel(estimate["frequency_hz"], truth["frequency_hz"])
-        checks.append(
-            (estimate["joint"] == truth["joint"], 0.0 if estimate["joint"] == truth["joint"] else 1.0)
-        )
+        checks.append((estimate["joint"] == truth["joint"], 0.0 if estimate["joint"] == truth["joint"] else 1.0))
         checks.append((rel <= FREQUENCY_TOL, rel))
     elif cause == "delay":
         d, t = estimate["seconds"], truth["seconds"]

@@ -30,9 +30,7 @@ class LinearSolve:
     rss: np.ndarray
 
 
-def solve(
-    offset: np.ndarray, X: np.ndarray, tau: np.ndarray, weights: np.ndarray, with_se: bool = True
-) -> LinearSolve:
+def solve(offset: np.ndarray, X: np.ndarray, tau: np.ndarray, weights: np.ndarray, with_se: bool = True) -> LinearSolve:
     """Weighted least squares of τ − o on the columns X (see the module docstring). k = 0 is allowed;
     `with_se=False` skips the standard errors (inside searches)."""
     target = tau - offset
@@ -102,9 +100,7 @@ class Axis:
         return np.linspace(self.low, self.high, self.points)
 
 
-def search(
-    cost: Callable[[dict[str, float]], float], axes: Sequence[Axis], sweeps: int = 2
-) -> dict[str, float]:
+def search(cost: Callable[[dict[str, float]], float], axes: Sequence[Axis], sweeps: int = 2) -> dict[str, float]:
     """Minimise cost(θ) over the box of `axes`: coordinate-wise grid sweeps, then a bounded Brent refinement
     of each coordinate around its best grid point (on a log scale for `log` axes)."""
     theta = {a.name: float(a.grid()[len(a.grid()) // 2]) for a in axes}

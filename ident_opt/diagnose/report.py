@@ -19,9 +19,7 @@ def _pair(xs, unit: str = "") -> str:
 
 
 def _gain(d: Diagnosis) -> str:
-    return "; ".join(
-        f"joint {j + 1} {_v(b)} → {_v(a)}" for j, (b, a) in enumerate(zip(d.nmse_before, d.nmse_after))
-    )
+    return "; ".join(f"joint {j + 1} {_v(b)} → {_v(a)}" for j, (b, a) in enumerate(zip(d.nmse_before, d.nmse_after)))
 
 
 def cause_sentence(d: Diagnosis) -> str:
@@ -51,9 +49,7 @@ def cause_sentence(d: Diagnosis) -> str:
         return (
             f"The residual of the {base} model differs by direction of motion (mean while moving "
             f"positive / negative: "
-            + ", ".join(
-                f"joint {j + 1} {_v(m['positive'])} / {_v(m['negative'])} N m" for j, m in enumerate(mm)
-            )
+            + ", ".join(f"joint {j + 1} {_v(m['positive'])} / {_v(m['negative'])} N m" for j, m in enumerate(mm))
             + f"): Coulomb friction is asymmetric, fc+ = {_pair(e['positive'], 'N m')}, "
             f"fc− = {_pair(e['negative'], 'N m')}; {gain}"
         )
@@ -113,8 +109,7 @@ def summary(d: Diagnosis) -> str:
     ]
     for c in d.candidates:
         lines.append(
-            f"   {c['cause']:20s} {c['score']:10.1f}  vs {c['baseline']:9s} "
-            f"nMSE after {_pair(c['nmse_after'])}"
+            f"   {c['cause']:20s} {c['score']:10.1f}  vs {c['baseline']:9s} nMSE after {_pair(c['nmse_after'])}"
         )
     lines.append(f"4. held-out nMSE before → after: {_gain(d)}")
     return "\n".join(lines)
@@ -224,9 +219,7 @@ def channels_paragraph(d: Diagnosis) -> list[str]:
         "|---|---|---|",
     ]
     for name, info in ch.items():
-        peaks = ", ".join(
-            f"{_v(p['frequency_hz'])} ({_v(p['prominence_db'], digits=2)} dB)" for p in info["peaks"]
-        )
+        peaks = ", ".join(f"{_v(p['frequency_hz'])} ({_v(p['prominence_db'], digits=2)} dB)" for p in info["peaks"])
         lines.append(f"| `{name}` | {_v(info['mode_band_max_hz'])} Hz | {peaks or '—'} |")
     el = _elastic_candidate(d)
     if el is not None:

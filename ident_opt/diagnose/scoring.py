@@ -58,13 +58,9 @@ def resolved(cause: str, estimate: dict, dt: float) -> bool:
     return True
 
 
-def clears_margin(
-    mse_before: np.ndarray, mse_after: np.ndarray, score_value: float, variance: np.ndarray
-) -> bool:
+def clears_margin(mse_before: np.ndarray, mse_after: np.ndarray, score_value: float, variance: np.ndarray) -> bool:
     """Whether a candidate beats its baseline clearly enough to be named (`variance`: of the measured
     held-out torque per joint [N² m²])."""
     before, after = np.asarray(mse_before), np.asarray(mse_after)
-    clear = ((before - after) >= MARGIN * before) & (
-        (before - after) >= MARGIN_VARIANCE * np.asarray(variance)
-    )
+    clear = ((before - after) >= MARGIN * before) & ((before - after) >= MARGIN_VARIANCE * np.asarray(variance))
     return bool(score_value > 0 and np.any(clear))

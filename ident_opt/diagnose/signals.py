@@ -36,9 +36,7 @@ def deflection_acceleration(ddq: np.ndarray, frequency_hz: float, damping: float
     fs = 1.0 / dt
     w = 2.0 * fs * np.tan(np.pi * frequency_hz / fs)  # pre-warped ω [rad/s]
     K = 2.0 * fs  # s = K (z − 1) / (z + 1)
-    den = np.array(
-        [K * K + 2 * damping * w * K + w * w, 2 * (w * w - K * K), K * K - 2 * damping * w * K + w * w]
-    )
+    den = np.array([K * K + 2 * damping * w * K + w * w, 2 * (w * w - K * K), K * K - 2 * damping * w * K + w * w])
     num = np.array([-K * K, 2 * K * K, -K * K])
     return signal.lfilter(num / den[0], den / den[0], ddq, axis=0)
 
@@ -98,11 +96,7 @@ def peaks(
             hi += 1
         f1 = np.interp(half, [dbb[lo], dbb[lo + 1]], [fb[lo], fb[lo + 1]]) if lo < i else fb[i]
         f2 = np.interp(half, [dbb[hi], dbb[hi - 1]], [fb[hi], fb[hi - 1]]) if hi > i else fb[i]
-        out.append(
-            Peak(
-                float(fb[i]), float((f2 - f1) / (2 * fb[i])), float(props["prominences"][list(idx).index(i)])
-            )
-        )
+        out.append(Peak(float(fb[i]), float((f2 - f1) / (2 * fb[i])), float(props["prominences"][list(idx).index(i)])))
     return out
 
 
@@ -120,9 +114,7 @@ def lag(reference: np.ndarray, x: np.ndarray, dt: float, max_s: float = 0.2) -> 
     b = np.asarray(x, dtype=float) - np.mean(x)
     m = int(min(len(a) - 1, max(1, round(max_s / dt))))
     shifts = np.arange(-m, m + 1)
-    c = np.array(
-        [np.dot(a[max(0, -s) : len(a) - max(0, s)], b[max(0, s) : len(b) - max(0, -s)]) for s in shifts]
-    )
+    c = np.array([np.dot(a[max(0, -s) : len(a) - max(0, s)], b[max(0, s) : len(b) - max(0, -s)]) for s in shifts])
     i = int(np.argmax(c))
     offset = 0.0
     if 0 < i < len(c) - 1:

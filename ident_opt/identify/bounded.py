@@ -103,8 +103,14 @@ def kkt_residual(H: np.ndarray, h: np.ndarray, pi: np.ndarray, bounds: Bounds, s
     return float(np.max((bound_violation * np.abs(np.diag(H)) + wrong_sign + stationarity) / scale))
 
 
-def solve_bounded(H: np.ndarray, h: np.ndarray, bounds: Bounds, start: np.ndarray | None = None,
-                  state: np.ndarray | None = None, max_iter: int | None = None) -> BoundedSolution:
+def solve_bounded(
+    H: np.ndarray,
+    h: np.ndarray,
+    bounds: Bounds,
+    start: np.ndarray | None = None,
+    state: np.ndarray | None = None,
+    max_iter: int | None = None,
+) -> BoundedSolution:
     """The minimiser of ½πᵀHπ − hᵀπ on the box (H ≻ 0), from a warm start (`start`, `state` = a
     previous solution and active set; cold start: all free at the projection of 0).
 
@@ -129,8 +135,11 @@ def solve_bounded(H: np.ndarray, h: np.ndarray, bounds: Bounds, start: np.ndarra
         else:
             fixed = ~free
             F = np.flatnonzero(free)
-            target = np.linalg.solve(H[np.ix_(F, F)], h[F] - H[np.ix_(F, np.flatnonzero(fixed))] @ x[fixed]) \
-                if F.size else np.empty(0)
+            target = (
+                np.linalg.solve(H[np.ix_(F, F)], h[F] - H[np.ix_(F, np.flatnonzero(fixed))] @ x[fixed])
+                if F.size
+                else np.empty(0)
+            )
         xf = x[free]
         if np.all(target >= lo[free]) and np.all(target <= hi[free]):
             x[free] = target
@@ -180,8 +189,16 @@ class WarmBoundedLS:
         if key not in self._sets:
             F, X = np.flatnonzero(state == 0), np.flatnonzero(state != 0)
             values = np.where(state[X] < 0, self.bounds.lower[X], self.bounds.upper[X])
-            self._sets[key] = (F, X, np.ix_(F, F), np.ix_(F, X), self.bounds.lower[F], self.bounds.upper[F],
-                               values, state[X].astype(float))
+            self._sets[key] = (
+                F,
+                X,
+                np.ix_(F, F),
+                np.ix_(F, X),
+                self.bounds.lower[F],
+                self.bounds.upper[F],
+                values,
+                state[X].astype(float),
+            )
         return self._sets[key]
 
     def solve(self, H: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -229,8 +246,11 @@ class _Cones:
         self.GP, self.GS, self.GR = B[:, :, 0, 0], B[:, :, 1, 1], B[:, :, 0, 1]  # (2, P) each
         self.margin = margin
         # ∇²c_i = gp gsᵀ + gs gpᵀ − 2 gr grᵀ: constant, (2, P, P).
-        self.hessian = (np.einsum("ip,iq->ipq", self.GP, self.GS) + np.einsum("ip,iq->ipq", self.GS, self.GP)
-                        - 2 * np.einsum("ip,iq->ipq", self.GR, self.GR))
+        self.hessian = (
+            np.einsum("ip,iq->ipq", self.GP, self.GS)
+            + np.einsum("ip,iq->ipq", self.GS, self.GP)
+            - 2 * np.einsum("ip,iq->ipq", self.GR, self.GR)
+        )
         self.n = 2
 
     def values(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -296,8 +316,9 @@ class WarmConsistentLS:
     def _accept(self, x: np.ndarray, state: np.ndarray, mu: np.ndarray) -> None:
         self.pi, self.state, self.mu = x.copy(), state.copy(), mu.copy()
 
-    def _active_set(self, H: np.ndarray, h: np.ndarray, x: np.ndarray, state: np.ndarray, mu: np.ndarray,
-                    rounds: int = 8) -> np.ndarray | None:
+    def _active_set(
+        self, H: np.ndarray, h: np.ndarray, x: np.ndarray, state: np.ndarray, mu: np.ndarray, rounds: int = 8
+    ) -> np.ndarray | None:
         """Newton on an active set, then one change of the set where the KKT check fails, a few times:
         the small active-set changes of consecutive online steps are handled without the conic solver."""
         state, mu = state.astype(np.int8).copy(), mu.astype(float).copy()
@@ -313,8 +334,9 @@ class WarmConsistentLS:
             state, mu = change
         return None
 
-    def _newton(self, H: np.ndarray, h: np.ndarray, x0: np.ndarray, state: np.ndarray,
-                mu0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    def _newton(
+        self, H: np.ndarray, h: np.ndarray, x0: np.ndarray, state: np.ndarray, mu0: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
         """Newton on the KKT equations of one active set (box `state`, cones with μ > 0):
         ∇f − Σ μ_i ∇c_i = 0 on the free parameters, c_i = 0; converged (x, μ) or None."""
         lo, hi = self.bounds.lower, self.bounds.upper
@@ -349,8 +371,9 @@ class WarmConsistentLS:
             m += step[nF:]
         return None
 
-    def _kkt_change(self, H: np.ndarray, h: np.ndarray, x: np.ndarray, state: np.ndarray,
-                    mu: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    def _kkt_change(
+        self, H: np.ndarray, h: np.ndarray, x: np.ndarray, state: np.ndarray, mu: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
         """None when (x, μ) satisfies the KKT conditions; else the active set with its worst violation
         changed: a cone on the wrong branch of c = 0 (p or s ≤ 0) or with μ < 0 dropped, a violated
         bound or cone added, a wrong-signed box multiplier released."""
@@ -394,8 +417,9 @@ class WarmConsistentLS:
         c = 1.0 / np.max(np.diag(H))  # the minimiser does not depend on a common scale of (H, h)
         P = h.shape[0]
         stats = Stats(np.stack([H * c, np.zeros((P, P))]), np.stack([h * c, np.zeros(P)]), np.zeros(2), 1)
-        fit = fit_constrained(stats, self.model, margin=self.margin, friction=False,
-                              bounds=(self.bounds.lower, self.bounds.upper))
+        fit = fit_constrained(
+            stats, self.model, margin=self.margin, friction=False, bounds=(self.bounds.lower, self.bounds.upper)
+        )
         x = np.asarray(fit.pi, dtype=float)
         lo, hi = self.bounds.lower, self.bounds.upper
         near = 1e-7 * np.maximum(np.abs(x), 1.0)
@@ -405,8 +429,10 @@ class WarmConsistentLS:
         grads = self.cones.gradients(x)
         # Which cones are active is not always clear from Clarabel's point (a slack of 1e-8 may be either):
         # try the likely active sets, the one it shows first; keep the first that passes the KKT check.
-        subsets = sorted((s for s in itertools.product((False, True), repeat=self.cones.n) if any(s)),
-                         key=lambda s: sum(a != b for a, b in zip(s, near_cone)))
+        subsets = sorted(
+            (s for s in itertools.product((False, True), repeat=self.cones.n) if any(s)),
+            key=lambda s: sum(a != b for a, b in zip(s, near_cone)),
+        )
         for subset in subsets:
             on = np.array(subset)
             mu = np.zeros(self.cones.n)

@@ -69,8 +69,14 @@ def sign_constraints(model: ArmModel) -> dict[str, str]:
     return out
 
 
-def constraint_slacks(model: ArmModel, pi: np.ndarray, margin: float = 0.0, friction: bool = True,
-                      mass: bool = True, bounds: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, float]:
+def constraint_slacks(
+    model: ArmModel,
+    pi: np.ndarray,
+    margin: float = 0.0,
+    friction: bool = True,
+    mass: bool = True,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+) -> dict[str, float]:
     """Each named constraint's slack at π (≥ 0 feasible, ≈ 0 active); PSD slack = λ_min − margin."""
     out: dict[str, float] = {}
     if mass:
@@ -91,10 +97,20 @@ def constraint_slacks(model: ArmModel, pi: np.ndarray, margin: float = 0.0, fric
     return out
 
 
-def fit_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prior: np.ndarray | None = None,
-                    prior_weight: float = 0.0, bounds: tuple[np.ndarray, np.ndarray] | None = None,
-                    weights: str | np.ndarray | None = None, friction: bool = True, mass: bool = True,
-                    shortcut: bool = True, backend: str = "clarabel") -> LinearFit:
+def fit_constrained(
+    stats: Stats,
+    model: ArmModel,
+    *,
+    margin: float = 1e-6,
+    prior: np.ndarray | None = None,
+    prior_weight: float = 0.0,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    weights: str | np.ndarray | None = None,
+    friction: bool = True,
+    mass: bool = True,
+    shortcut: bool = True,
+    backend: str = "clarabel",
+) -> LinearFit:
     """Physically consistent π (see module doc): M(q) ⪰ margin·I ∀q [kg m²], friction and armature ≥ 0
     (`friction=False` drops both sign constraints), optional
     bounds (lb, ub) and prior π0 with weight λ. `weights` as in `fit_ols`. `shortcut=False` always runs
@@ -103,8 +119,19 @@ def fit_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prio
 
     π is `solve_constrained`'s (the same call); this adds standard errors, diagnostics and the active set.
     """
-    sol = _solution(stats, model, margin=margin, prior=prior, prior_weight=prior_weight, bounds=bounds,
-                    weights=weights, friction=friction, mass=mass, shortcut=shortcut, backend=backend)
+    sol = _solution(
+        stats,
+        model,
+        margin=margin,
+        prior=prior,
+        prior_weight=prior_weight,
+        bounds=bounds,
+        weights=weights,
+        friction=friction,
+        mass=mass,
+        shortcut=shortcut,
+        backend=backend,
+    )
     method = "constrained" if (friction or mass) else "bounded"
     if sol.unconstrained:
         return finish(stats, model, sol.pi, sol.weights, method, sol.status, [], sol.seconds)
@@ -115,10 +142,20 @@ def fit_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prio
     return fit
 
 
-def solve_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, prior: np.ndarray | None = None,
-                      prior_weight: float = 0.0, bounds: tuple[np.ndarray, np.ndarray] | None = None,
-                      weights: str | np.ndarray | None = None, friction: bool = True, mass: bool = True,
-                      shortcut: bool = True, backend: str = "clarabel") -> np.ndarray:
+def solve_constrained(
+    stats: Stats,
+    model: ArmModel,
+    *,
+    margin: float = 1e-6,
+    prior: np.ndarray | None = None,
+    prior_weight: float = 0.0,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    weights: str | np.ndarray | None = None,
+    friction: bool = True,
+    mass: bool = True,
+    shortcut: bool = True,
+    backend: str = "clarabel",
+) -> np.ndarray:
     """π only (no standard errors, no diagnostics): the constrained counterpart of `ols.solve_ols`.
 
     Arguments and units as in `fit_constrained`, whose π this is (one implementation). Everything that
@@ -126,8 +163,19 @@ def solve_constrained(stats: Stats, model: ArmModel, *, margin: float = 1e-6, pr
     solver settings — is built once and cached (`_structure`), so a call is: the P×P normal matrix H, the
     unconstrained minimiser and its feasibility (returned exactly if feasible), else one Clarabel solve.
     """
-    return _solution(stats, model, margin=margin, prior=prior, prior_weight=prior_weight, bounds=bounds,
-                     weights=weights, friction=friction, mass=mass, shortcut=shortcut, backend=backend).pi
+    return _solution(
+        stats,
+        model,
+        margin=margin,
+        prior=prior,
+        prior_weight=prior_weight,
+        bounds=bounds,
+        weights=weights,
+        friction=friction,
+        mass=mass,
+        shortcut=shortcut,
+        backend=backend,
+    ).pi
 
 
 class _Solution(NamedTuple):
@@ -141,9 +189,20 @@ class _Solution(NamedTuple):
     solver_seconds: float  # Clarabel's own solve time (nan when it did not run or is not reported)
 
 
-def _solution(stats: Stats, model: ArmModel, *, margin: float, prior: np.ndarray | None, prior_weight: float,
-              bounds: tuple[np.ndarray, np.ndarray] | None, weights: str | np.ndarray | None, friction: bool,
-              mass: bool, shortcut: bool, backend: str) -> _Solution:
+def _solution(
+    stats: Stats,
+    model: ArmModel,
+    *,
+    margin: float,
+    prior: np.ndarray | None,
+    prior_weight: float,
+    bounds: tuple[np.ndarray, np.ndarray] | None,
+    weights: str | np.ndarray | None,
+    friction: bool,
+    mass: bool,
+    shortcut: bool,
+    backend: str,
+) -> _Solution:
     """The one implementation behind `solve_constrained` and `fit_constrained` (arguments as there)."""
     if backend not in ("clarabel", "cvxpy"):
         raise ValueError(f"backend must be 'clarabel' or 'cvxpy', not {backend!r}")
@@ -165,8 +224,10 @@ def _solution(stats: Stats, model: ArmModel, *, margin: float, prior: np.ndarray
             bad = [n for n, lo, hi in zip(model.names, lb, ub) if lo > hi]
             raise ValueError(f"lower bound above upper bound for {', '.join(bad)}")
         # A non-finite bound is no bound (as in `constraint_blocks`): ±inf in the hashable cache key.
-        key = (tuple(np.where(np.isfinite(lb), lb, -np.inf).tolist()),
-               tuple(np.where(np.isfinite(ub), ub, np.inf).tolist()))
+        key = (
+            tuple(np.where(np.isfinite(lb), lb, -np.inf).tolist()),
+            tuple(np.where(np.isfinite(ub), ub, np.inf).tolist()),
+        )
     structure = _structure(model, float(margin), bool(friction), bool(mass), key)
     if prior_weight > 0:
         scale = np.maximum(np.abs(prior), 1e-3 * max(np.abs(prior).max(), 1e-12))
@@ -179,8 +240,9 @@ def _solution(stats: Stats, model: ArmModel, *, margin: float, prior: np.ndarray
         # Convex problem: a feasible unconstrained minimiser is the answer (returned exactly, like OLS).
         free = _solve(H + np.diag(Dp), h + Dp * prior)
         if structure.feasible(free):
-            return _Solution(free, w, "optimal (unconstrained minimiser feasible)", True,
-                             time.perf_counter() - t0, float("nan"))
+            return _Solution(
+                free, w, "optimal (unconstrained minimiser feasible)", True, time.perf_counter() - t0, float("nan")
+            )
     if backend == "clarabel":
         pi, status, solver_seconds = _solve_clarabel(structure, H, h, stats.n, Dp, prior)
     else:
@@ -195,8 +257,9 @@ def joint_weights_energy(stats: Stats, w: np.ndarray) -> float:
     return float(w @ stats.s)
 
 
-def fit_bounded(stats: Stats, model: ArmModel, lb: np.ndarray, ub: np.ndarray,
-                weights: str | np.ndarray | None = None) -> LinearFit:
+def fit_bounded(
+    stats: Stats, model: ArmModel, lb: np.ndarray, ub: np.ndarray, weights: str | np.ndarray | None = None
+) -> LinearFit:
     """Box-bounded least squares lb ≤ π ≤ ub (no consistency constraints), from the statistics."""
     return fit_constrained(stats, model, bounds=(lb, ub), weights=weights, friction=False, mass=False)
 
@@ -238,8 +301,13 @@ def _svec(M: np.ndarray) -> np.ndarray:
     return np.stack([M[..., 0, 0], np.sqrt(2.0) * M[..., 0, 1], M[..., 1, 1]], axis=-1)
 
 
-def constraint_blocks(model: ArmModel, margin: float = 1e-6, friction: bool = True, mass: bool = True,
-                      bounds: tuple[np.ndarray, np.ndarray] | None = None) -> list[Block]:
+def constraint_blocks(
+    model: ArmModel,
+    margin: float = 1e-6,
+    friction: bool = True,
+    mass: bool = True,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+) -> list[Block]:
     """The constraints of the module doc as named numeric blocks (same names as `constraint_slacks`).
 
     mass_pd_q2_0 / _pi:  s = svec(M0 ± M1 − margin·I) ∈ PSD:  A = −svec(A0 ± A1) per column, b = −margin svec I
@@ -256,14 +324,14 @@ def constraint_blocks(model: ArmModel, margin: float = 1e-6, friction: bool = Tr
     if friction:
         for label, name in sign_constraints(model).items():
             p = model.names.index(name)
-            blocks.append(Block(label, -eye[p:p + 1], np.zeros(1), "nonneg"))
+            blocks.append(Block(label, -eye[p : p + 1], np.zeros(1), "nonneg"))
     if bounds is not None:
         lb, ub = (np.broadcast_to(np.asarray(v, dtype=float), (P,)) for v in bounds)
         for p, name in enumerate(model.names):
             if np.isfinite(lb[p]):
-                blocks.append(Block(f"lower_{name}", -eye[p:p + 1], np.array([-lb[p]]), "nonneg"))
+                blocks.append(Block(f"lower_{name}", -eye[p : p + 1], np.array([-lb[p]]), "nonneg"))
             if np.isfinite(ub[p]):
-                blocks.append(Block(f"upper_{name}", eye[p:p + 1], np.array([ub[p]]), "nonneg"))
+                blocks.append(Block(f"upper_{name}", eye[p : p + 1], np.array([ub[p]]), "nonneg"))
     return blocks
 
 
@@ -303,8 +371,13 @@ class _Structure:
 
 
 @functools.lru_cache(maxsize=64)
-def _structure(model: ArmModel, margin: float, friction: bool, mass: bool,
-               bounds: tuple[tuple[float, ...], tuple[float, ...]] | None) -> _Structure:
+def _structure(
+    model: ArmModel,
+    margin: float,
+    friction: bool,
+    mass: bool,
+    bounds: tuple[tuple[float, ...], tuple[float, ...]] | None,
+) -> _Structure:
     """The cached `_Structure` (keyed on the frozen model and the options; bounds as tuples)."""
     import clarabel
     from scipy import sparse
@@ -313,8 +386,9 @@ def _structure(model: ArmModel, margin: float, friction: bool, mass: bool,
     blocks = constraint_blocks(model, margin, friction, mass, bounds)
     A = np.vstack([blk.A for blk in blocks]) if blocks else np.zeros((0, P))
     b = np.concatenate([blk.b for blk in blocks]) if blocks else np.zeros(0)
-    cones = tuple(clarabel.PSDTriangleConeT(2) if blk.cone == "psd2" else clarabel.NonnegativeConeT(len(blk.b))
-                  for blk in blocks)
+    cones = tuple(
+        clarabel.PSDTriangleConeT(2) if blk.cone == "psd2" else clarabel.NonnegativeConeT(len(blk.b)) for blk in blocks
+    )
     settings = []
     for tol in (1e-11, 1e-8):  # tight first (OLS to 1e-8 when nothing binds), looser if ill-conditioned
         s = clarabel.DefaultSettings()
@@ -328,13 +402,27 @@ def _structure(model: ArmModel, margin: float, friction: bool, mass: bool,
     pattern = sparse.csc_matrix((np.ones(rows.size), (rows, cols)), shape=(P, P))
     lb, ub = (np.full(P, -np.inf), np.full(P, np.inf)) if bounds is None else (np.array(v) for v in bounds)
     sign = [model.names.index(n) for n in sign_constraints(model).values()] if friction else []
-    return _Structure(sparse.csc_matrix(A), b, cones, tuple(settings), rows, cols, pattern.indices,
-                      pattern.indptr, margin, mass, tuple(a.reshape(P, 4) for a in model.mass_matrix_maps),
-                      np.array(sign, dtype=int), lb, ub)
+    return _Structure(
+        sparse.csc_matrix(A),
+        b,
+        cones,
+        tuple(settings),
+        rows,
+        cols,
+        pattern.indices,
+        pattern.indptr,
+        margin,
+        mass,
+        tuple(a.reshape(P, 4) for a in model.mass_matrix_maps),
+        np.array(sign, dtype=int),
+        lb,
+        ub,
+    )
 
 
-def _solve_clarabel(structure: _Structure, H: np.ndarray, h: np.ndarray, n: int, Dp: np.ndarray,
-                    prior: np.ndarray) -> tuple[np.ndarray | None, str, float]:
+def _solve_clarabel(
+    structure: _Structure, H: np.ndarray, h: np.ndarray, n: int, Dp: np.ndarray, prior: np.ndarray
+) -> tuple[np.ndarray | None, str, float]:
     """min ½ πᵀQπ + cᵀπ s.t. the named blocks, by Clarabel directly: (π or None, status, solver s).
 
     Q = 2(H + diag(D + ρ))/n and c = −2(h + D π0)/n: the module doc's objective per sample, with the
@@ -382,12 +470,19 @@ def _program(model: ArmModel, friction: bool, mass: bool, lower: tuple[int, ...]
 
     P = model.n_params
     pi = cp.Variable(P, name="pi")
-    par = {"R": cp.Parameter((P, P), name="R"), "d": cp.Parameter(P, name="d"),
-           "prior_term": cp.Parameter(P, name="prior_term"), "sqrt_dp": cp.Parameter(P, nonneg=True, name="sqrt_dp"),
-           "sqrt_ridge": cp.Parameter(P, nonneg=True, name="sqrt_ridge"), "margin": cp.Parameter(name="margin")}
-    objective = (cp.sum_squares(par["R"] @ pi - par["d"])
-                 + cp.sum_squares(cp.multiply(par["sqrt_dp"], pi) - par["prior_term"])
-                 + cp.sum_squares(cp.multiply(par["sqrt_ridge"], pi)))  # parameter inside: keeps it DPP
+    par = {
+        "R": cp.Parameter((P, P), name="R"),
+        "d": cp.Parameter(P, name="d"),
+        "prior_term": cp.Parameter(P, name="prior_term"),
+        "sqrt_dp": cp.Parameter(P, nonneg=True, name="sqrt_dp"),
+        "sqrt_ridge": cp.Parameter(P, nonneg=True, name="sqrt_ridge"),
+        "margin": cp.Parameter(name="margin"),
+    }
+    objective = (
+        cp.sum_squares(par["R"] @ pi - par["d"])
+        + cp.sum_squares(cp.multiply(par["sqrt_dp"], pi) - par["prior_term"])
+        + cp.sum_squares(cp.multiply(par["sqrt_ridge"], pi))
+    )  # parameter inside: keeps it DPP
     constraints = []
     if mass:
         A0, A1 = model.mass_matrix_maps
@@ -407,15 +502,27 @@ def _program(model: ArmModel, friction: bool, mass: bool, lower: tuple[int, ...]
     return problem, pi, par
 
 
-def _solve_conic(model: ArmModel, H: np.ndarray, h: np.ndarray, n: int, margin: float, Dp: np.ndarray,
-                 prior: np.ndarray, friction: bool, mass: bool,
-                 bounds: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray | None, str, float]:
+def _solve_conic(
+    model: ArmModel,
+    H: np.ndarray,
+    h: np.ndarray,
+    n: int,
+    margin: float,
+    Dp: np.ndarray,
+    prior: np.ndarray,
+    friction: bool,
+    mass: bool,
+    bounds: tuple[np.ndarray, np.ndarray] | None,
+) -> tuple[np.ndarray | None, str, float]:
     """Fill the cached program's parameters and solve it with Clarabel: (π or None, status, solver s)."""
     import cvxpy as cp
 
     P = model.n_params
-    lb, ub = ((np.full(P, -np.inf), np.full(P, np.inf)) if bounds is None else
-              (np.broadcast_to(np.asarray(v, dtype=float), (P,)) for v in bounds))
+    lb, ub = (
+        (np.full(P, -np.inf), np.full(P, np.inf))
+        if bounds is None
+        else (np.broadcast_to(np.asarray(v, dtype=float), (P,)) for v in bounds)
+    )
     lower = tuple(int(i) for i in np.flatnonzero(np.isfinite(lb)))
     upper = tuple(int(i) for i in np.flatnonzero(np.isfinite(ub)))
     problem, pi, par = _program(model, friction, mass, lower, upper)

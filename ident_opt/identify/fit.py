@@ -177,8 +177,16 @@ def base_combinations(H: np.ndarray, names: tuple[str, ...]) -> tuple[int, float
     return rank, cond, unexcited, base
 
 
-def finish(stats: Stats, model: ArmModel, pi: np.ndarray, w: np.ndarray, method: str, status: str = "optimal",
-           active: list[str] | None = None, solve_seconds: float = float("nan")) -> LinearFit:
+def finish(
+    stats: Stats,
+    model: ArmModel,
+    pi: np.ndarray,
+    w: np.ndarray,
+    method: str,
+    status: str = "optimal",
+    active: list[str] | None = None,
+    solve_seconds: float = float("nan"),
+) -> LinearFit:
     """A LinearFit for `pi` with standard errors and diagnostics from the statistics (see module doc)."""
     names = model.names
     H, _ = _normal(stats, w)
@@ -193,17 +201,33 @@ def finish(stats: Stats, model: ArmModel, pi: np.ndarray, w: np.ndarray, method:
     free = set(unexcited)
     if rank < len(names):
         free |= {t.split("·")[-1] for b in base for t in b.split() if "·" in t}
-        warnings.append(f"the data excite only {rank} of {len(names)} parameter directions; identifiable: "
-                        + ("; ".join(base) if base else "the excited columns") +
-                        (f"; not excited: {', '.join(unexcited)}" if unexcited else ""))
+        warnings.append(
+            f"the data excite only {rank} of {len(names)} parameter directions; identifiable: "
+            + ("; ".join(base) if base else "the excited columns")
+            + (f"; not excited: {', '.join(unexcited)}" if unexcited else "")
+        )
     poor = [n for n, v, e in zip(names, pi, se) if n in free or e > POOR_RELATIVE_SE * abs(v)]
     if poor:
         warnings.append("poorly determined (SE > 50% of |value| or not identifiable): " + ", ".join(poor))
     fit = LinearFit(
-        pi=np.asarray(pi, dtype=float), names=names, se=se, sigma2=sigma2, active=list(active or []),
-        method=method, status=status, weights=w, n=stats.n, rss=stats.rss(pi), cond=cond, rank=rank,
-        unexcited=unexcited, base=base, poorly_determined=poor, warnings=warnings,
-        min_mass_eigenvalue=model.min_mass_eigenvalue(pi), solve_seconds=solve_seconds,
+        pi=np.asarray(pi, dtype=float),
+        names=names,
+        se=se,
+        sigma2=sigma2,
+        active=list(active or []),
+        method=method,
+        status=status,
+        weights=w,
+        n=stats.n,
+        rss=stats.rss(pi),
+        cond=cond,
+        rank=rank,
+        unexcited=unexcited,
+        base=base,
+        poorly_determined=poor,
+        warnings=warnings,
+        min_mass_eigenvalue=model.min_mass_eigenvalue(pi),
+        solve_seconds=solve_seconds,
     )
     if not fit.consistent:
         what = []
@@ -211,8 +235,10 @@ def finish(stats: Stats, model: ArmModel, pi: np.ndarray, w: np.ndarray, method:
             what.append(f"M(q) is not positive definite (min eigenvalue {fit.min_mass_eigenvalue:.3g} kg m²)")
         for ok, kind, prefix in ((fit.friction_ok, "friction", "f"), (fit.armature_ok, "armature", "ia")):
             if not ok:
-                what.append(f"negative {kind}: " + ", ".join(
-                    n for n, v in fit.as_dict().items() if n.startswith(prefix) and v < 0))
+                what.append(
+                    f"negative {kind}: "
+                    + ", ".join(n for n, v in fit.as_dict().items() if n.startswith(prefix) and v < 0)
+                )
         fit.warnings.append("physically inconsistent: " + "; ".join(what))
     return fit
 

@@ -46,8 +46,17 @@ class ExpressionFit:
         return {n: float(v) for n, v in zip(self.names, self.values)}
 
 
-def _solve_nlp(theta: ca.SX, objective: ca.SX, x0: np.ndarray, lb: np.ndarray, ub: np.ndarray,
-               g: ca.SX | None = None, lbg=None, ubg=None, options: dict | None = None) -> tuple:
+def _solve_nlp(
+    theta: ca.SX,
+    objective: ca.SX,
+    x0: np.ndarray,
+    lb: np.ndarray,
+    ub: np.ndarray,
+    g: ca.SX | None = None,
+    lbg=None,
+    ubg=None,
+    options: dict | None = None,
+) -> tuple:
     """IPOPT on min objective(θ) s.t. lb ≤ θ ≤ ub (and lbg ≤ g(θ) ≤ ubg); returns (θ*, cost, stats)."""
     nlp = {"x": theta, "f": objective}
     if g is not None:
@@ -60,10 +69,20 @@ def _solve_nlp(theta: ca.SX, objective: ca.SX, x0: np.ndarray, lb: np.ndarray, u
     return np.array(sol["x"]).ravel(), float(sol["f"]), solver.stats()
 
 
-def fit_expression(expr: ca.SX, params: ca.SX, inputs: Sequence[ca.SX], data: Sequence[np.ndarray],
-                   target: np.ndarray, *, x0: Sequence[float], lb: Sequence[float] | None = None,
-                   ub: Sequence[float] | None = None, weights: Sequence[float] | None = None,
-                   names: Sequence[str] | None = None, options: dict | None = None) -> ExpressionFit:
+def fit_expression(
+    expr: ca.SX,
+    params: ca.SX,
+    inputs: Sequence[ca.SX],
+    data: Sequence[np.ndarray],
+    target: np.ndarray,
+    *,
+    x0: Sequence[float],
+    lb: Sequence[float] | None = None,
+    ub: Sequence[float] | None = None,
+    weights: Sequence[float] | None = None,
+    names: Sequence[str] | None = None,
+    options: dict | None = None,
+) -> ExpressionFit:
     """Fit the parameters `params` of a per-sample CasADi expression to data, by bounded least squares.
 
         minimise_θ   Σ_k Σ_i w_i (expr_i(x_k, θ) − target_ki)²     subject to  lb ≤ θ ≤ ub
@@ -113,8 +132,9 @@ def fit_expression(expr: ca.SX, params: ca.SX, inputs: Sequence[ca.SX], data: Se
     t0 = time.perf_counter()
     x, cost, st = _solve_nlp(theta, objective, np.asarray(x0, dtype=float), lb, ub, options=options)
     names = tuple(names) if names is not None else tuple(f"theta{i}" for i in range(K))
-    return ExpressionFit(x, names, cost * N, st["return_status"], bool(st["success"]), int(st["iter_count"]),
-                         time.perf_counter() - t0)
+    return ExpressionFit(
+        x, names, cost * N, st["return_status"], bool(st["success"]), int(st["iter_count"]), time.perf_counter() - t0
+    )
 
 
 # ---------------------------------------------------------------------------------------------- physical
@@ -129,16 +149,39 @@ def physical_start(robot, model: ArmModel) -> tuple[dict[str, float], dict[str, 
     Parameters of extensions that are not friction (e.g. offsets) are unbounded.
     """
     body = rigid_body(robot, "physical")
-    start = {"m1": body.m1, "m2": body.m2, "lc1": body.lc1, "lc2": body.lc2, "Ic1": body.Ic1, "Ic2": body.Ic2,
-             "ia1": body.armature[0], "ia2": body.armature[1]}
+    start = {
+        "m1": body.m1,
+        "m2": body.m2,
+        "lc1": body.lc1,
+        "lc2": body.lc2,
+        "Ic1": body.Ic1,
+        "Ic2": body.Ic2,
+        "ia1": body.armature[0],
+        "ia2": body.armature[1],
+    }
     if "ia2" not in model.names:
         start.pop("ia2")  # without the armature extension a joint-2 armature cannot be represented
     inf = np.inf
-    bounds = {"m1": (1e-3, inf), "m2": (1e-3, inf), "lc1": (0.0, body.l1), "lc2": (0.0, body.l2),
-              "Ic1": (0.0, inf), "Ic2": (0.0, inf), "ia1": (0.0, inf), "ia2": (0.0, inf)}
-    sheet = {"fv1": body.fv[0], "fv2": body.fv[1], "fc1": body.fc[0], "fc2": body.fc[1],
-             "fc1p": body.fc_positive[0], "fc2p": body.fc_positive[1],
-             "fc1n": body.fc_negative[0], "fc2n": body.fc_negative[1]}
+    bounds = {
+        "m1": (1e-3, inf),
+        "m2": (1e-3, inf),
+        "lc1": (0.0, body.l1),
+        "lc2": (0.0, body.l2),
+        "Ic1": (0.0, inf),
+        "Ic2": (0.0, inf),
+        "ia1": (0.0, inf),
+        "ia2": (0.0, inf),
+    }
+    sheet = {
+        "fv1": body.fv[0],
+        "fv2": body.fv[1],
+        "fc1": body.fc[0],
+        "fc2": body.fc[1],
+        "fc1p": body.fc_positive[0],
+        "fc2p": body.fc_positive[1],
+        "fc1n": body.fc_negative[0],
+        "fc2n": body.fc_negative[1],
+    }
     for name in model.names:
         if name in ("a1", "a2", "a3", "b1", "b2", "ia2"):
             continue
@@ -150,14 +193,22 @@ def physical_start(robot, model: ArmModel) -> tuple[dict[str, float], dict[str, 
 def pi_of_physical(theta: dict, robot, model: ArmModel) -> list:
     """π(θ) in the model's order, through `datasheet.grouped` (works on numbers and CasADi symbols)."""
     l1, g = robot.link1.length, robot.gravity
-    a1, a2, a3, b1, b2 = grouped(theta["m1"], theta["m2"], l1, theta["lc1"], theta["lc2"], theta["Ic1"],
-                                 theta["Ic2"], g)
+    a1, a2, a3, b1, b2 = grouped(
+        theta["m1"], theta["m2"], l1, theta["lc1"], theta["lc2"], theta["Ic1"], theta["Ic2"], g
+    )
     inertial = {"a1": a1 + theta["ia1"], "a2": a2, "a3": a3, "b1": b1, "b2": b2}
     return [inertial[n] if n in inertial else theta[n] for n in model.names]
 
 
-def fit_physical(source: Stats | object, robot, model: ArmModel | None = None, *, prior_weight: float = 1e-6,
-                 weights: str | np.ndarray | None = None, options: dict | None = None) -> LinearFit:
+def fit_physical(
+    source: Stats | object,
+    robot,
+    model: ArmModel | None = None,
+    *,
+    prior_weight: float = 1e-6,
+    weights: str | np.ndarray | None = None,
+    options: dict | None = None,
+) -> LinearFit:
     """Physical parameters θ (m [kg], lc [m], Ic and armature [kg m²], friction) by IPOPT, π = π(θ).
 
     `source` is a `Stats` (for `model`) or a Dataset (statistics are computed from it). The grouped π
@@ -167,8 +218,7 @@ def fit_physical(source: Stats | object, robot, model: ArmModel | None = None, *
     Returns a `LinearFit` (method "nlp_physical") whose `details["physical"]` holds θ by name.
     """
     model = model or ArmModel()
-    stats = source if isinstance(source, Stats) else Stats.from_data(model, source.q, source.dq, source.ddq,
-                                                                      source.tau)
+    stats = source if isinstance(source, Stats) else Stats.from_data(model, source.q, source.dq, source.ddq, source.tau)
     _check(stats, model)
     w = joint_weights(stats, weights)
     H, h = _normal(stats, w)
@@ -192,6 +242,7 @@ def fit_physical(source: Stats | object, robot, model: ArmModel | None = None, *
     pi_hat = np.array(pi_of_physical(values, robot, model), dtype=float)
     fit = finish(stats, model, pi_hat, w, "nlp_physical", st["return_status"], [], elapsed)
     fit.details["physical"] = values
-    fit.details["at_bound"] = [k for k in names if min(values[k] - bounds[k][0], bounds[k][1] - values[k])
-                               < 1e-6 * max(1.0, abs(values[k]))]
+    fit.details["at_bound"] = [
+        k for k in names if min(values[k] - bounds[k][0], bounds[k][1] - values[k]) < 1e-6 * max(1.0, abs(values[k]))
+    ]
     return fit

@@ -41,13 +41,21 @@ class SplitResults:
 
     def std(self, metric: str) -> dict[str, list[float]]:
         """Metric's standard deviation over splits (ddof = 1 when there are several)."""
-        return {e: [float(v) for v in m[metric].std(0, ddof=1 if len(self.labels) > 1 else 0)]
-                for e, m in self.metrics.items()}
+        return {
+            e: [float(v) for v in m[metric].std(0, ddof=1 if len(self.labels) > 1 else 0)]
+            for e, m in self.metrics.items()
+        }
 
 
-def split_fits(dataset: Dataset, model: ArmModel, splits: Sequence[tuple[np.ndarray, np.ndarray]],
-               fits: dict[str, FitFn], test: Dataset | None = None, labels: Sequence | None = None,
-               progress: bool = False) -> SplitResults:
+def split_fits(
+    dataset: Dataset,
+    model: ArmModel,
+    splits: Sequence[tuple[np.ndarray, np.ndarray]],
+    fits: dict[str, FitFn],
+    test: Dataset | None = None,
+    labels: Sequence | None = None,
+    progress: bool = False,
+) -> SplitResults:
     """Fit each estimator on each split's training samples (from statistics) and score it on the test
     samples — or on `test` (another trial) when given. The regressor is built once for the whole trial."""
     from tqdm import tqdm
@@ -72,8 +80,9 @@ def split_fits(dataset: Dataset, model: ArmModel, splits: Sequence[tuple[np.ndar
     return SplitResults(model.names, pi, metrics, ok, list(labels if labels is not None else range(S)))
 
 
-def seed_study(dataset: Dataset, model: ArmModel, split, fits: dict[str, FitFn] | None = None,
-               progress: bool = False) -> SplitResults:
+def seed_study(
+    dataset: Dataset, model: ArmModel, split, fits: dict[str, FitFn] | None = None, progress: bool = False
+) -> SplitResults:
     """The paper's protocol: for each seed in `split.seeds`, a shuffled `split.train_fraction` split;
     `fits` default to OLS only. Returns parameters and held-out metrics per seed."""
     fits = fits or {"ols": lambda st, m: fit_ols(st, m)}
@@ -86,8 +95,15 @@ def rmse_table(study: SplitResults) -> pd.DataFrame:
     rows = []
     for e in study.metrics:
         mean, std = study.mean("rmse")[e], study.std("rmse")[e]
-        rows.append({"estimator": e, "rmse_j1_mean": mean[0], "rmse_j1_std": std[0],
-                     "rmse_j2_mean": mean[1], "rmse_j2_std": std[1]})
+        rows.append(
+            {
+                "estimator": e,
+                "rmse_j1_mean": mean[0],
+                "rmse_j1_std": std[0],
+                "rmse_j2_mean": mean[1],
+                "rmse_j2_std": std[1],
+            }
+        )
     return pd.DataFrame(rows).set_index("estimator")
 
 
@@ -118,8 +134,9 @@ def seed_heatmap(study: SplitResults, path: str | Path, estimator: str = "ols") 
     for (r, c), v in np.ndenumerate(dev.to_numpy()):
         ax.text(c, r, f"{v:.1f}", ha="center", va="center", fontsize=6)
     fig.colorbar(im, ax=ax, label="deviation from the mean over seeds [%]")
-    ax.set_title(f"{estimator}: grouped parameters across {dev.shape[0]} shuffled 70/30 splits "
-                 "(column label: mean)", fontsize=9)
+    ax.set_title(
+        f"{estimator}: grouped parameters across {dev.shape[0]} shuffled 70/30 splits (column label: mean)", fontsize=9
+    )
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=130)

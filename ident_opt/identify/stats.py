@@ -36,8 +36,9 @@ class Stats:
         return cls(G, b, np.einsum("kj,kj->j", tau, tau), Y.shape[0])
 
     @classmethod
-    def from_data(cls, model: ArmModel, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, tau: np.ndarray,
-                  chunk: int = 65536) -> Stats:
+    def from_data(
+        cls, model: ArmModel, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, tau: np.ndarray, chunk: int = 65536
+    ) -> Stats:
         """One pass over N samples in chunks: memory O(chunk · P), independent of N."""
         total = cls.zeros(model.n_params)
         for start in range(0, len(q), chunk):

@@ -70,9 +70,7 @@ def ripple(background: dict, robot: Robot, q_enc: ca.SX, dq_enc: ca.SX) -> ca.SX
         return None
     p = background["ripple"]
     gear = [j.gear_ratio for j in robot.joints]
-    return ca.vertcat(
-        *[p["amplitude"][j] * dq_enc[j] * ca.sin(p["cycles"][j] * gear[j] * q_enc[j]) for j in range(2)]
-    )
+    return ca.vertcat(*[p["amplitude"][j] * dq_enc[j] * ca.sin(p["cycles"][j] * gear[j] * q_enc[j]) for j in range(2)])
 
 
 def drift(background: dict, n: int, dt: float, rng: np.random.Generator) -> np.ndarray:

@@ -60,9 +60,7 @@ CATALOGUE: dict[str, tuple[str, dict[str, Key]]] = {
         "a lightly damped mode: an elastic joint (two-mass, motor angle logged) or a flexible link",
         {
             "joint": Key("joint", 2, "1 or 2"),
-            "frequency_hz": Key(
-                "float", 3.0, "Hz, the mode's natural frequency with the joints held", 0.0, True
-            ),
+            "frequency_hz": Key("float", 3.0, "Hz, the mode's natural frequency with the joints held", 0.0, True),
             "damping": Key("float", 0.02, "damping ratio of that mode"),
             "kind": Key(
                 "choice",
@@ -210,16 +208,11 @@ def _check(name: str, key: str, value: object, where: str) -> object:
     if spec.kind == "choice":
         if value not in spec.choices:
             raise InputError(
-                f"effect {where!r}: key {key!r} of {name} must be one of {', '.join(spec.choices)}, "
-                f"got {value!r}"
+                f"effect {where!r}: key {key!r} of {name} must be one of {', '.join(spec.choices)}, got {value!r}"
             )
         return value
     values = value if spec.kind == "pair" else (value,)
-    if (
-        isinstance(values, str)
-        or not isinstance(values, Sequence)
-        or (spec.kind == "pair" and len(values) != 2)
-    ):
+    if isinstance(values, str) or not isinstance(values, Sequence) or (spec.kind == "pair" and len(values) != 2):
         raise InputError(f"effect {where!r}: key {key!r} of {name} must be a pair [v1,v2], got {value!r}")
     out = []
     for v in values:
@@ -233,9 +226,7 @@ def _check(name: str, key: str, value: object, where: str) -> object:
     return tuple(out) if spec.kind == "pair" else out[0]
 
 
-def normalise(
-    effects: Mapping[str, Mapping] | Sequence[str], coulomb: tuple[tuple, tuple]
-) -> dict[str, dict]:
+def normalise(effects: Mapping[str, Mapping] | Sequence[str], coulomb: tuple[tuple, tuple]) -> dict[str, dict]:
     """Effects (a name -> keys mapping, or a sequence of effect strings) as name -> complete, checked keys.
 
     `coulomb` = (positive, negative) datasheet Coulomb levels [N m, joint side], the defaults of
@@ -305,9 +296,7 @@ def is_active(name: str, p: Mapping, coulomb: tuple[tuple, tuple]) -> bool:
         return any(p["inertia"])
     if name == "asymmetric_coulomb":
         mean = [0.5 * (a + b) for a, b in zip(*coulomb)]
-        return any(v != m for m, v in zip(mean, p["positive"])) or any(
-            v != m for m, v in zip(mean, p["negative"])
-        )
+        return any(v != m for m, v in zip(mean, p["positive"])) or any(v != m for m, v in zip(mean, p["negative"]))
     if name == "stribeck":
         return any(p["static"])
     if name == "elasticity":

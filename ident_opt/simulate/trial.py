@@ -192,9 +192,7 @@ def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, 
             effects[name] = dict(p)
     physical = asdict(rigid_body(truth.robot, "physical"))  # the true plant's, not the datasheet's
     if "armature" in truth.effects:
-        physical["armature"] = [
-            a + J for a, J in zip(physical["armature"], truth.effects["armature"]["inertia"])
-        ]
+        physical["armature"] = [a + J for a, J in zip(physical["armature"], truth.effects["armature"]["inertia"])]
     if "asymmetric_coulomb" in truth.effects:
         ac = truth.effects["asymmetric_coulomb"]
         physical["fc_positive"], physical["fc_negative"] = list(ac["positive"]), list(ac["negative"])
