@@ -1,7 +1,7 @@
 """Measured trials: reading, validating, estimating missing derivatives, and splitting.
 
-The file format is `spec/data-format.md`: one row per sample, SI units, columns t, q1, q2, optional
-dq/ddq, and either joint torques tau1/tau2 or motor currents i1/i2. Every fault is reported as an
+The file format is `docs/data-format.md`: one row per sample, SI units, columns t, q1 … qn, optional
+dq/ddq, and either joint torques tau1 … taun or motor currents i1 … in. Every fault is reported as an
 `InputError` naming the file, the column and the first offending row; input files are only read.
 """
 
@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from scipy import signal
+from scipy.interpolate import CubicSpline
 from sklearn.model_selection import train_test_split
 
 from ident_opt.datasheet import PI_NAMES
@@ -63,7 +64,7 @@ class Dataset:
         """The trial in the data format's column names (torques, not currents)."""
         cols = {"t": self.t}
         for name, arr in (("q", self.q), ("dq", self.dq), ("ddq", self.ddq), ("tau", self.tau)):
-            cols[name + "1"], cols[name + "2"] = arr[:, 0], arr[:, 1]
+            cols.update({f"{name}{j + 1}": arr[:, j] for j in range(arr.shape[1])})
         return pd.concat([pd.DataFrame(cols), self.extra.reset_index(drop=True)], axis=1)
 
 
@@ -101,10 +102,16 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
     return frame
 
 
-def _locate(frame: pd.DataFrame, spec: DataSpec, path: Path) -> dict[str, object]:
+def channel_names(n_joints: int) -> dict[str, tuple[str, ...]]:
+    """The data format's column names per signal for an arm of `n_joints` joints (q → q1 … qn, ...)."""
+    return {kind: tuple(f"{kind}{j}" for j in range(1, n_joints + 1)) for kind in ("q", "dq", "ddq", "tau", "i")}
+
+
+def _locate(frame: pd.DataFrame, spec: DataSpec, path: Path, n_joints: int) -> dict[str, object]:
     """Map each data-format column present in the file to its column label in `frame`."""
     found: dict[str, object] = {}
-    for name in ("t", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2", "tau1", "tau2", "i1", "i2"):
+    names = ("t", *(name for group in channel_names(n_joints).values() for name in group))
+    for name in names:
         source = spec.columns.get(name, name if spec.header else None)
         if source is None:
             continue
@@ -155,6 +162,91 @@ def _numeric(
     return values
 
 
+def _check_columns(cols: dict[str, object], frame: pd.DataFrame, path: Path, n_joints: int) -> str:
+    """Required columns present, signals complete per joint, exactly one of torques/currents: its kind."""
+    have = ", ".join(map(str, frame.columns[:30]))
+    names = channel_names(n_joints)
+    for required in ("t", *names["q"]):
+        if required not in cols:
+            raise InputError(
+                f"{path}: required column '{required}' is missing; the file has: {have}. "
+                "Map foreign names with [data.columns] in the problem file."
+            )
+    present = {kind: [c for c in names[kind] if c in cols] for kind in ("tau", "i")}
+    for kind, group in present.items():
+        if 0 < len(group) < n_joints:
+            missing = next(c for c in names[kind] if c not in group)
+            raise InputError(
+                f"{path}: column '{missing}' is missing; torques ({', '.join(names['tau'])}) or currents "
+                f"({', '.join(names['i'])}) come in pairs; the file has: {have}"
+            )
+    if present["tau"] and present["i"]:
+        raise InputError(
+            f"{path}: the file has both torques ({', '.join(names['tau'])}) and currents ({', '.join(names['i'])}); "
+            "keep one pair or map only one of them with [data.columns]"
+        )
+    if not present["tau"] and not present["i"]:
+        raise InputError(
+            f"{path}: neither torques ({', '.join(names['tau'])}) nor currents ({', '.join(names['i'])}) found; "
+            f"the file has: {have}. Map foreign names with [data.columns] in the problem file."
+        )
+    for kind in ("dq", "ddq"):
+        group = [c for c in names[kind] if c in cols]
+        if 0 < len(group) < n_joints:
+            missing = next(c for c in names[kind] if c not in group)
+            raise InputError(f"{path}: column '{missing}' is missing; {' and '.join(names[kind])} come in pairs")
+    return "tau" if present["tau"] else "i"
+
+
+def _non_increasing(t: np.ndarray, bad: np.ndarray) -> np.ndarray:
+    """Rows (not already `bad`) that break the strict increase of t: every sample not after the last kept."""
+    breaks = np.zeros(len(t), dtype=bool)
+    last = -np.inf
+    for k, tk in enumerate(t):
+        if bad[k]:
+            continue
+        if tk > last:
+            last = tk
+        else:
+            breaks[k] = True
+    return breaks
+
+
+def _check_time(t: np.ndarray, path: Path, spec: DataSpec) -> None:
+    """t strictly increasing, else an error naming the first row where it repeats or goes back."""
+    steps = np.diff(t)
+    if (steps <= 0).any():
+        row = int(np.argmax(steps <= 0)) + 1
+        kind = "repeats" if steps[row - 1] == 0 else "goes back"
+        raise InputError(
+            f"{path}: column 't' is not strictly increasing: it {kind} at "
+            f"{_row_label(path, row, spec)} ({t[row - 1]!r} then {t[row]!r})"
+        )
+
+
+def _check_plausible(signals: dict[str, np.ndarray], keep: np.ndarray, path: Path, spec: DataSpec) -> None:
+    """Every signal within `PLAUSIBLE` for its unit, else an error naming column and row."""
+    for kind, arr in signals.items():
+        over = np.abs(arr) > PLAUSIBLE[kind]
+        if over.any():
+            row, joint = np.unravel_index(int(np.argmax(over)), over.shape)
+            original_row = int(np.flatnonzero(keep)[row])
+            hint = " (degrees or encoder counts?)" if kind == "q" else " (wrong unit?)"
+            raise InputError(
+                f"{path}: column '{kind}{joint + 1}' has the implausible value {arr[row, joint]!r} at "
+                f"{_row_label(path, original_row, spec)}: |{kind}| > {PLAUSIBLE[kind]:g} in SI units"
+                f"{hint}. Use --allow-implausible to proceed anyway."
+            )
+
+
+def _extra_columns(frame: pd.DataFrame, cols: dict[str, object], keep: np.ndarray) -> pd.DataFrame:
+    """The columns the models do not use (strain, temperature, ...), numeric, on the kept rows."""
+    used = set(cols.values())
+    extra = frame[[c for c in frame.columns if c not in used]][keep].reset_index(drop=True)
+    extra.columns = [f"col{c}" if isinstance(c, int) else str(c) for c in extra.columns]
+    return extra.apply(pd.to_numeric, errors="coerce") if len(extra.columns) else extra
+
+
 def load_dataset(
     path: str | Path,
     spec: DataSpec,
@@ -164,113 +256,47 @@ def load_dataset(
     drop_invalid: bool = False,
     min_samples: int = len(PI_NAMES),
 ) -> Dataset:
-    """Read, validate and complete one trial (see the module docstring); never modifies the file."""
+    """Read, validate and complete one trial (see the module docstring); never modifies the file.
+
+    Joint signals are (N, n) arrays with n = the robot's number of joints; torque [N m] is the logged
+    torque, or current [A] × torque constant × gear ratio per joint.
+    """
     path = Path(path)
+    n_joints = len(robot.joints)
+    names = channel_names(n_joints)
     frame = _read_table(path, spec)
-    cols = _locate(frame, spec, path)
-    have = ", ".join(map(str, frame.columns[:30]))
-    for required in ("t", "q1", "q2"):
-        if required not in cols:
-            raise InputError(
-                f"{path}: required column '{required}' is missing; the file has: {have}. "
-                "Map foreign names with [data.columns] in the problem file."
-            )
-    torque = [c for c in ("tau1", "tau2") if c in cols]
-    current = [c for c in ("i1", "i2") if c in cols]
-    if len(torque) == 1 or len(current) == 1:
-        missing = ({"tau1", "tau2"} - set(torque)) if len(torque) == 1 else ({"i1", "i2"} - set(current))
-        raise InputError(
-            f"{path}: column '{missing.pop()}' is missing; torques (tau1, tau2) or currents "
-            f"(i1, i2) come in pairs; the file has: {have}"
-        )
-    if torque and current:
-        raise InputError(
-            f"{path}: the file has both torques (tau1, tau2) and currents (i1, i2); keep one pair "
-            "or map only one of them with [data.columns]"
-        )
-    if not torque and not current:
-        raise InputError(
-            f"{path}: neither torques (tau1, tau2) nor currents (i1, i2) found; the file has: "
-            f"{have}. Map foreign names with [data.columns] in the problem file."
-        )
-    for pair in (("dq1", "dq2"), ("ddq1", "ddq2")):
-        if (pair[0] in cols) != (pair[1] in cols):
-            raise InputError(
-                f"{path}: column '{pair[0] if pair[1] in cols else pair[1]}' is missing; "
-                f"{pair[0]} and {pair[1]} come in pairs"
-            )
+    cols = _locate(frame, spec, path, n_joints)
+    load_kind = _check_columns(cols, frame, path, n_joints)
 
     bad = np.zeros(len(frame), dtype=bool)
     values = {name: _numeric(frame, label, name, path, spec, drop_invalid, bad) for name, label in cols.items()}
-    t_raw = values["t"]
-    if drop_invalid:
-        # Rows that break strict increase of t are also dropped (keep the first of a run).
-        keep_t = np.ones(len(t_raw), dtype=bool)
-        last = -np.inf
-        for k, tk in enumerate(t_raw):
-            if bad[k]:
-                continue
-            if tk > last:
-                last = tk
-            else:
-                keep_t[k] = False
-        bad |= ~keep_t
+    if drop_invalid:  # rows that break strict increase of t are dropped too (the first of a run is kept)
+        bad |= _non_increasing(values["t"], bad)
     keep = ~bad
     values = {name: v[keep] for name, v in values.items()}
     t = values["t"]
     if not drop_invalid:
-        steps = np.diff(t)
-        if (steps <= 0).any():
-            row = int(np.argmax(steps <= 0)) + 1
-            kind = "repeats" if steps[row - 1] == 0 else "goes back"
-            raise InputError(
-                f"{path}: column 't' is not strictly increasing: it {kind} at "
-                f"{_row_label(path, row, spec)} ({t[row - 1]!r} then {t[row]!r})"
-            )
+        _check_time(t, path, spec)
     n = len(t)
     if n < max(min_samples, 2):
         raise InputError(f"{path}: only {n} valid samples, fewer than the {max(min_samples, 2)} parameters to identify")
 
-    def pair(prefix: str) -> np.ndarray:
-        return np.column_stack([values[prefix + "1"], values[prefix + "2"]])
-
-    q = pair("q")
-    if "tau1" in values:
-        tau, tau_kind = pair("tau"), "tau"
-    else:
-        tau_kind = "i"
-        k = np.array([j.current_to_torque for j in robot.joints])
-        tau = pair("i") * k
+    signals = {kind: np.column_stack([values[c] for c in group]) for kind, group in names.items() if group[0] in values}
     if not allow_implausible:
-        checks = [("q", q), (tau_kind, pair(tau_kind))]
-        checks += [(p, pair(p)) for p in ("dq", "ddq") if p + "1" in values]
-        for kind, arr in checks:
-            over = np.abs(arr) > PLAUSIBLE[kind]
-            if over.any():
-                row, joint = np.unravel_index(int(np.argmax(over)), over.shape)
-                original_row = int(np.flatnonzero(keep)[row])
-                hint = " (degrees or encoder counts?)" if kind == "q" else " (wrong unit?)"
-                raise InputError(
-                    f"{path}: column '{kind}{joint + 1}' has the implausible value {arr[row, joint]!r} at "
-                    f"{_row_label(path, original_row, spec)}: |{kind}| > {PLAUSIBLE[kind]:g} in SI units"
-                    f"{hint}. Use --allow-implausible to proceed anyway."
-                )
+        _check_plausible(signals, keep, path, spec)
+    q = signals["q"]
+    tau = signals["tau"] if load_kind == "tau" else signals["i"] * np.array([j.current_to_torque for j in robot.joints])
 
     notes: list[str] = []
-    if "dq1" in values and "ddq1" in values:
-        dq, ddq, how = pair("dq"), pair("ddq"), "given"
+    if "dq" in signals and "ddq" in signals:
+        dq, ddq, how = signals["dq"], signals["ddq"], "given"
     else:
-        dq_given = pair("dq") if "dq1" in values else None
-        dq, ddq, how = estimate_derivatives(t, q, spec.derivative_cutoff_hz, dq_given)
+        dq, ddq, how = estimate_derivatives(t, q, spec.derivative_cutoff_hz, signals.get("dq"))
         notes.append(f"derivatives {how}")
     dropped = int(bad.sum())
     if dropped:
         notes.append(f"dropped {dropped} invalid row(s)")
-    used = set(cols.values())
-    extra = frame[[c for c in frame.columns if c not in used]][keep].reset_index(drop=True)
-    extra.columns = [f"col{c}" if isinstance(c, int) else str(c) for c in extra.columns]
-    extra = extra.apply(pd.to_numeric, errors="coerce") if len(extra.columns) else extra
-    return Dataset(str(path), t, q, dq, ddq, tau, extra, how, dropped, notes)
+    return Dataset(str(path), t, q, dq, ddq, tau, _extra_columns(frame, cols, keep), how, dropped, notes)
 
 
 # ---------------------------------------------------------------------------------------------- derivatives
@@ -289,8 +315,6 @@ def estimate_derivatives(
     if uniform:
         grid, qg, dqg = t, q, dq
     else:
-        from scipy.interpolate import CubicSpline
-
         grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
         qg = CubicSpline(t, q, axis=0)(grid)
         dqg = CubicSpline(t, dq, axis=0)(grid) if dq is not None else None
@@ -315,8 +339,6 @@ def estimate_derivatives(
         how += " (velocities as logged)"
     acc = np.gradient(smooth(v), grid, axis=0)
     if not uniform:
-        from scipy.interpolate import CubicSpline
-
         v, acc = CubicSpline(grid, v, axis=0)(t), CubicSpline(grid, acc, axis=0)(t)
         how += f"; non-uniform sampling resampled to {fs:.6g} Hz"
     return (dq if dq is not None else v), acc, how
