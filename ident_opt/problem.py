@@ -1,14 +1,15 @@
 """Problem files (`problems/*.toml`): which robot, which data, and how to identify it.
 
-The `[robot]` section is the contract of `spec/problem-format.md` (datasheet values as printed:
+The `[robot]` section is a contract, documented in `docs/problem-files.md` (datasheet values as printed:
 motor-side friction and rotor inertia, everything else joint-side, SI units). The other sections are
-documented in `problems/README.md`; every key has a default, and an unknown key is an error so that a
+documented in `docs/problem-files.md`; every key has a default, and an unknown key is an error so that a
 typo never falls back silently to a default. Paths are relative to the problem file.
 """
 
 from __future__ import annotations
 
 import difflib
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +18,25 @@ from typing import Any
 from ident_opt.errors import InputError
 
 _REQUIRED = object()
+
+#: Upper limits of a sane value per unit: a number above these is a typo or a unit mistake, and would overflow
+#: the arithmetic downstream (lengths in m, densities in kg/m³, masses in kg, inertias in kg m², gravity in
+#: m/s², torque constants in N m/A, friction in N m or N m s/rad, rates in Hz).
+LIMITS = {
+    "length": 100.0,
+    "density": 1e5,
+    "mass": 1e4,
+    "inertia": 1e3,
+    "gravity": 100.0,
+    "torque_constant": 1e3,
+    "gear_ratio": 1e5,
+    "friction": 1e4,
+    "rate_hz": 1e6,
+}
+#: At most this many seeds (each is a full refit of every model) and mixture components.
+MAX_SEEDS = 100
+MAX_SEED = 2**32 - 1  # NumPy's and scikit-learn's range of random seeds
+MAX_COMPONENTS = 50
 
 #: Columns of the data format, in the order the loader reports them.
 DATA_COLUMNS = ("t", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2", "tau1", "tau2", "i1", "i2")
@@ -169,20 +189,35 @@ class _Table:
         if isinstance(value, bool) and bool not in kinds:
             raise InputError(f"{self._name(key)} must be {_kind_name(kinds)}, got a boolean")
         if not isinstance(value, kinds):
-            raise InputError(f"{self._name(key)} must be {_kind_name(kinds)}, got {value!r}")
+            raise InputError(f"{self._name(key)} must be {_kind_name(kinds)}, got {_excerpt(value)}")
         return value
 
-    def positive(self, key: str, default: Any = _REQUIRED) -> float:
+    def number(self, key: str, default: Any, low: float, high: float, *, open_low: bool = False) -> float:
+        """A finite number in [low, high] (or (low, high] with `open_low`), in the key's SI unit."""
         value = self.take(key, float, default)
-        if not value > 0:
-            raise InputError(f"{self._name(key)} must be a positive number, got {value!r}")
+        below = value <= low if open_low else value < low
+        if not math.isfinite(value) or below or value > high:
+            if low == 0:
+                what = "a positive number" if open_low else "zero or positive"
+            else:
+                what = f"a number in {'(' if open_low else '['}{low:g}, {high:g}]"
+            raise InputError(f"{self._name(key)} must be {what} (finite, at most {high:g}), got {_excerpt(value)}")
         return value
 
-    def non_negative(self, key: str, default: Any = _REQUIRED) -> float:
-        value = self.take(key, float, default)
-        if not value >= 0:
-            raise InputError(f"{self._name(key)} must be zero or positive, got {value!r}")
+    def integer(self, key: str, default: Any, low: int, high: int) -> int:
+        """A whole number in [low, high] (a float such as 0.5 is refused, not truncated)."""
+        value = self.take(key, int, default)
+        if not low <= value <= high:
+            raise InputError(f"{self._name(key)} must be an integer in [{low}, {high}], got {_excerpt(value)}")
         return value
+
+    def positive(self, key: str, default: Any = _REQUIRED, high: float = 1e6) -> float:
+        """A finite number in (0, high]."""
+        return self.number(key, default, 0.0, high, open_low=True)
+
+    def non_negative(self, key: str, default: Any = _REQUIRED, high: float = 1e6) -> float:
+        """A finite number in [0, high]."""
+        return self.number(key, default, 0.0, high)
 
     def table(self, key: str, required: bool = True) -> _Table:
         where = f"{self.where}.{key}" if self.where else key
@@ -199,6 +234,14 @@ class _Table:
             raise InputError(f"{self.path}: unknown key(s) {keys} in {place} (check the spelling)")
 
 
+def _excerpt(value: Any, limit: int = 60) -> str:
+    """A short repr of a value for a message (a huge list must not become a megabyte-long line)."""
+    text = repr(value)
+    return (
+        text if len(text) <= limit else text[: limit - 5] + " ...]" if isinstance(value, list) else text[:limit] + "..."
+    )
+
+
 def _kind_name(kinds: tuple[type, ...]) -> str:
     names = {float: "a number", int: "an integer", str: "a string", bool: "true or false", list: "a list"}
     return " or ".join(names.get(k, k.__name__) for k in kinds)
@@ -206,17 +249,19 @@ def _kind_name(kinds: tuple[type, ...]) -> str:
 
 def _friction(table: _Table, key: str) -> Friction:
     sub = table.table(key)
-    friction = Friction(sub.non_negative("positive"), sub.non_negative("negative"))
+    friction = Friction(
+        sub.non_negative("positive", high=LIMITS["friction"]), sub.non_negative("negative", high=LIMITS["friction"])
+    )
     sub.done()
     return friction
 
 
 def _link(table: _Table) -> Link:
     link = Link(
-        length=table.positive("length"),
-        width=table.positive("width"),
-        height=table.positive("height"),
-        density=table.positive("density"),
+        length=table.positive("length", high=LIMITS["length"]),
+        width=table.positive("width", high=LIMITS["length"]),
+        height=table.positive("height", high=LIMITS["length"]),
+        density=table.positive("density", high=LIMITS["density"]),
     )
     table.done()
     return link
@@ -224,13 +269,13 @@ def _link(table: _Table) -> Link:
 
 def _joint(table: _Table) -> Joint:
     joint = Joint(
-        torque_constant=table.positive("torque_constant"),
-        gear_ratio=table.positive("gear_ratio"),
-        rotor_inertia=table.non_negative("rotor_inertia"),
+        torque_constant=table.positive("torque_constant", high=LIMITS["torque_constant"]),
+        gear_ratio=table.positive("gear_ratio", high=LIMITS["gear_ratio"]),
+        rotor_inertia=table.non_negative("rotor_inertia", high=LIMITS["inertia"]),
         viscous_friction=_friction(table, "viscous_friction"),
         coulomb_friction=_friction(table, "coulomb_friction"),
-        motor_diameter=table.positive("motor_diameter"),
-        actuator_mass=table.non_negative("actuator_mass"),
+        motor_diameter=table.positive("motor_diameter", high=LIMITS["length"]),
+        actuator_mass=table.non_negative("actuator_mass", high=LIMITS["mass"]),
     )
     table.done()
     return joint
@@ -242,11 +287,11 @@ def _robot(table: _Table) -> Robot:
         raise InputError(
             f'{table.path}: key \'convention\' in [robot] must be "physical" or "paper", got {convention!r}'
         )
-    gravity = table.positive("gravity")
+    gravity = table.positive("gravity", high=LIMITS["gravity"])
     link1, link2 = _link(table.table("link1")), _link(table.table("link2"))
     joint1, joint2 = _joint(table.table("joint1")), _joint(table.table("joint2"))
     payload = table.table("payload", required=False)
-    payload_mass = payload.non_negative("mass", 0.0)
+    payload_mass = payload.non_negative("mass", 0.0, high=LIMITS["mass"])
     payload.done()
     table.done()
     return Robot(gravity, convention, link1, link2, joint1, joint2, payload_mass)
@@ -278,7 +323,9 @@ def _data(table: _Table, base: Path) -> DataSpec:
         header=table.take("header", bool, True),
         sheet=table.take("sheet", str, None),
         columns=columns,
-        derivative_cutoff_hz=table.positive("derivative_cutoff_hz", DataSpec.derivative_cutoff_hz),
+        derivative_cutoff_hz=table.positive(
+            "derivative_cutoff_hz", DataSpec.derivative_cutoff_hz, high=LIMITS["rate_hz"]
+        ),
     )
     if not spec.header and any(isinstance(v, str) for v in columns.values()):
         raise InputError(f"{table.path}: [data] header = false needs 0-based column indices in [data.columns]")
@@ -287,12 +334,16 @@ def _data(table: _Table, base: Path) -> DataSpec:
 
 
 def _split(table: _Table) -> SplitSpec:
-    fraction = table.take("train_fraction", float, SplitSpec.train_fraction)
-    if not 0 < fraction < 1:
-        raise InputError(f"{table.path}: key 'train_fraction' in [split] must be in (0, 1), got {fraction}")
+    # Both parts of a split must hold enough samples to fit and to score: 5 % .. 95 %.
+    fraction = table.number("train_fraction", SplitSpec.train_fraction, 0.05, 0.95)
     seeds = table.take("seeds", list, list(SplitSpec.seeds))
-    if not seeds or not all(isinstance(s, int) and not isinstance(s, bool) for s in seeds):
-        raise InputError(f"{table.path}: key 'seeds' in [split] must be a non-empty list of integers")
+    if not 0 < len(seeds) <= MAX_SEEDS or not all(
+        isinstance(s, int) and not isinstance(s, bool) and 0 <= s <= MAX_SEED for s in seeds
+    ):
+        raise InputError(
+            f"{table.path}: key 'seeds' in [split] must be a list of 1 to {MAX_SEEDS} integers in [0, {MAX_SEED}], "
+            f"got {_excerpt(seeds)}"
+        )
     table.done()
     return SplitSpec(fraction, tuple(seeds))
 
@@ -301,11 +352,19 @@ def _residual(table: _Table) -> ResidualSpec:
     components = table.take("components", (int, str), "auto")
     if components == "auto":
         components = None
-    elif not isinstance(components, int) or components < 1:
-        raise InputError(f"{table.path}: key 'components' in [residual] must be \"auto\" or an integer >= 1")
+    elif not isinstance(components, int) or not 1 <= components <= MAX_COMPONENTS:
+        raise InputError(
+            f"{table.path}: key 'components' in [residual] must be \"auto\" or an integer in [1, {MAX_COMPONENTS}], "
+            f"got {_excerpt(components)}"
+        )
     candidates = table.take("candidates", list, list(ResidualSpec.candidates))
-    if not candidates or not all(isinstance(k, int) and k >= 1 for k in candidates):
-        raise InputError(f"{table.path}: key 'candidates' in [residual] must be a list of integers >= 1")
+    if not 0 < len(candidates) <= MAX_COMPONENTS or not all(
+        isinstance(k, int) and not isinstance(k, bool) and 1 <= k <= MAX_COMPONENTS for k in candidates
+    ):
+        raise InputError(
+            f"{table.path}: key 'candidates' in [residual] must be a list of 1 to {MAX_COMPONENTS} integers in "
+            f"[1, {MAX_COMPONENTS}], got {_excerpt(candidates)}"
+        )
     covariance = table.take("covariance", str, ResidualSpec.covariance)
     if covariance not in ("full", "diag"):
         raise InputError(f'{table.path}: key \'covariance\' in [residual] must be "full" or "diag"')
@@ -313,8 +372,8 @@ def _residual(table: _Table) -> ResidualSpec:
         components=components,
         candidates=tuple(candidates),
         covariance=covariance,
-        reg_covar=table.positive("reg_covar", ResidualSpec.reg_covar),
-        max_train_samples=int(table.positive("max_train_samples", ResidualSpec.max_train_samples)),
+        reg_covar=table.positive("reg_covar", ResidualSpec.reg_covar, high=1e3),
+        max_train_samples=table.integer("max_train_samples", ResidualSpec.max_train_samples, 100, 10**7),
     )
     table.done()
     return spec
