@@ -22,6 +22,8 @@ from ident_opt.problem import DataSpec, Robot
 
 #: Limits beyond which a value is almost surely in the wrong unit (degrees, encoder counts, mA ...).
 PLAUSIBLE = {"q": 100.0, "dq": 1e3, "ddq": 1e5, "tau": 1e5, "i": 1e3}
+#: Sampling rates [Hz] a robot log can have: outside, t is almost surely not in seconds.
+PLAUSIBLE_RATE_HZ = (0.1, 1e5)
 
 
 @dataclass
@@ -100,6 +102,42 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
     if frame.shape[0] == 0:
         raise InputError(f"{path}: the file has no data rows")
     return frame
+
+
+def _standard_layout(frame: pd.DataFrame, spec: DataSpec) -> tuple[pd.DataFrame, DataSpec]:
+    """A file whose header row has the standard names (t, q1, q2) is read by name, whatever the problem
+    maps (the mapping is for the problem's own foreign layout), unless `[data] standard_by_name = false`."""
+    if not spec.standard_by_name:
+        return frame, spec
+    if spec.header:
+        names = [str(c).strip() for c in frame.columns]
+        if {"t", "q1", "q2"} <= set(names) and spec.columns:
+            return frame, replace(spec, columns={}, conversions={})
+        return frame, spec
+    first = [str(v).strip() for v in frame.iloc[0]]
+    if not {"t", "q1", "q2"} <= set(first):
+        return frame, spec
+    body = frame.iloc[1:].reset_index(drop=True)
+    body.columns = first
+    return body, replace(spec, header=True, columns={}, conversions={})
+
+
+def _check_unique_header(frame: pd.DataFrame, path: Path, spec: DataSpec) -> None:
+    """A column name twice in the header is ambiguous (pandas would silently rename the second 'q1.1')."""
+    if not spec.header or not path.name.lower().endswith((".csv", ".csv.gz")):
+        return
+    try:
+        names = [str(c).strip() for c in pd.read_csv(path, header=None, nrows=1, dtype=str).iloc[0]]
+    except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError):
+        return  # the full read succeeded; a header this odd is judged by the columns found
+    seen: dict[str, int] = {}
+    for index, name in enumerate(names):
+        if name in seen:
+            raise InputError(
+                f"{path}: column '{name}' appears twice in the header (columns {seen[name]} and {index}, "
+                "0-based); rename one of them"
+            )
+        seen[name] = index
 
 
 def channel_names(n_joints: int) -> dict[str, tuple[str, ...]]:
@@ -224,7 +262,25 @@ def _check_time(t: np.ndarray, path: Path, spec: DataSpec) -> None:
         )
 
 
-def _check_plausible(signals: dict[str, np.ndarray], keep: np.ndarray, path: Path, spec: DataSpec) -> None:
+def convert(values: np.ndarray, scale: float, offset: float) -> np.ndarray:
+    """A mapped column's conversion on the way in: scale × raw + offset (`[data.columns]`)."""
+    return values if (scale, offset) == (1.0, 0.0) else scale * values + offset
+
+
+def _check_rate(t: np.ndarray, path: Path) -> None:
+    """A sampling rate outside `PLAUSIBLE_RATE_HZ` means t is not in seconds (ms, µs, sample counts)."""
+    rate = 1.0 / float(np.median(np.diff(t)))
+    low, high = PLAUSIBLE_RATE_HZ
+    if not low <= rate <= high:
+        raise InputError(
+            f"{path}: column 't' gives a sampling rate of {rate:.3g} Hz, outside [{low:g}, {high:g}] Hz: "
+            "is t in seconds? Use --allow-implausible to proceed anyway."
+        )
+
+
+def _check_plausible(
+    signals: dict[str, np.ndarray], keep: np.ndarray, path: Path, spec: DataSpec, estimated: bool = False
+) -> None:
     """Every signal within `PLAUSIBLE` for its unit, else an error naming column and row."""
     for kind, arr in signals.items():
         over = np.abs(arr) > PLAUSIBLE[kind]
@@ -232,8 +288,10 @@ def _check_plausible(signals: dict[str, np.ndarray], keep: np.ndarray, path: Pat
             row, joint = np.unravel_index(int(np.argmax(over)), over.shape)
             original_row = int(np.flatnonzero(keep)[row])
             hint = " (degrees or encoder counts?)" if kind == "q" else " (wrong unit?)"
+            if estimated:
+                hint = " (estimated from q and t: is t in seconds, q in radians?)"
             raise InputError(
-                f"{path}: column '{kind}{joint + 1}' has the implausible value {arr[row, joint]!r} at "
+                f"{path}: column '{kind}{joint + 1}' has the implausible value {float(arr[row, joint])!r} at "
                 f"{_row_label(path, original_row, spec)}: |{kind}| > {PLAUSIBLE[kind]:g} in SI units"
                 f"{hint}. Use --allow-implausible to proceed anyway."
             )
@@ -265,6 +323,8 @@ def load_dataset(
     n_joints = len(robot.joints)
     names = channel_names(n_joints)
     frame = _read_table(path, spec)
+    frame, spec = _standard_layout(frame, spec)
+    _check_unique_header(frame, path, spec)
     cols = _locate(frame, spec, path, n_joints)
     load_kind = _check_columns(cols, frame, path, n_joints)
 
@@ -273,7 +333,7 @@ def load_dataset(
     if drop_invalid:  # rows that break strict increase of t are dropped too (the first of a run is kept)
         bad |= _non_increasing(values["t"], bad)
     keep = ~bad
-    values = {name: v[keep] for name, v in values.items()}
+    values = {name: convert(v[keep], *spec.conversions.get(name, (1.0, 0.0))) for name, v in values.items()}
     t = values["t"]
     if not drop_invalid:
         _check_time(t, path, spec)
@@ -283,6 +343,7 @@ def load_dataset(
 
     signals = {kind: np.column_stack([values[c] for c in group]) for kind, group in names.items() if group[0] in values}
     if not allow_implausible:
+        _check_rate(t, path)
         _check_plausible(signals, keep, path, spec)
     q = signals["q"]
     tau = signals["tau"] if load_kind == "tau" else signals["i"] * np.array([j.current_to_torque for j in robot.joints])
@@ -293,6 +354,8 @@ def load_dataset(
     else:
         dq, ddq, how = estimate_derivatives(t, q, spec.derivative_cutoff_hz, signals.get("dq"))
         notes.append(f"derivatives {how}")
+        if not allow_implausible:  # estimated from q and t: a wrong time unit shows here first
+            _check_plausible({"dq": dq, "ddq": ddq}, keep, path, spec, estimated=True)
     dropped = int(bad.sum())
     if dropped:
         notes.append(f"dropped {dropped} invalid row(s)")

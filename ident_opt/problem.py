@@ -32,6 +32,8 @@ LIMITS = {
     "gear_ratio": 1e5,
     "friction": 1e4,
     "rate_hz": 1e6,
+    "scale": 1e6,  # a column conversion's factor (dimensionless or a unit conversion)
+    "offset": 1e6,  # a column conversion's offset, in the column's SI unit
 }
 #: At most this many seeds (each is a full refit of every model) and mixture components.
 MAX_SEEDS = 100
@@ -106,13 +108,22 @@ class Robot:
 
 @dataclass(frozen=True)
 class DataSpec:
-    """The `[data]` section: the trials and how to read them."""
+    """The `[data]` section: the trials and how to read them.
+
+    `columns` maps a data-format name (q1, tau2, ...) to the file's column (a name, or a 0-based index);
+    `conversions` holds (scale, offset) for the mapped columns that are converted on the way in:
+    value = scale × raw + offset (scale −1 flips a sign, 0.01745 reads degrees, offset −π/2 moves a zero).
+    With `standard_by_name`, a file whose header already has the standard names (t, q1, q2, ...) is read by
+    name, whatever `columns` says.
+    """
 
     trials: tuple[Path, ...] = ()
     header: bool = True
     sheet: str | None = None
     columns: dict[str, str | int] = field(default_factory=dict)
     derivative_cutoff_hz: float = 15.0
+    conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
+    standard_by_name: bool = True
 
 
 @dataclass(frozen=True)
@@ -302,6 +313,25 @@ def _relative(base: Path, value: str) -> Path:
     return path if path.is_absolute() else (base / path)
 
 
+def _column(table: _Table, key: str) -> tuple[str | int, tuple[float, float] | None]:
+    """One `[data.columns]` entry: a name, a 0-based index, or {column, scale, offset} (a conversion)."""
+    if isinstance(table.raw.get(key), dict):
+        sub = table.table(key)
+        source = sub.take("column", (str, int))
+        conversion = (
+            sub.number("scale", 1.0, -LIMITS["scale"], LIMITS["scale"]),
+            sub.number("offset", 0.0, -LIMITS["offset"], LIMITS["offset"]),
+        )
+        sub.done()
+        if conversion[0] == 0:
+            raise InputError(f"{table.path}: key 'scale' in [{sub.where}] must not be 0")
+    else:
+        source, conversion = table.take(key, (str, int)), None
+    if isinstance(source, int) and source < 0:
+        raise InputError(f"{table.path}: key '{key}' in [data.columns] must be a 0-based index >= 0")
+    return source, conversion
+
+
 def _data(table: _Table, base: Path) -> DataSpec:
     trials = table.take("trials", list, [])
     for i, trial in enumerate(trials):
@@ -309,15 +339,15 @@ def _data(table: _Table, base: Path) -> DataSpec:
             raise InputError(f"{table.path}: key 'trials' in [data]: entry {i} must be a path string")
     columns_table = table.table("columns", required=False)
     columns: dict[str, str | int] = {}
+    conversions: dict[str, tuple[float, float]] = {}
     for key in list(columns_table.raw):
         if key not in DATA_COLUMNS:
             raise InputError(
                 f"{table.path}: unknown column '{key}' in [data.columns]; known: {', '.join(DATA_COLUMNS)}"
             )
-        value = columns_table.take(key, (str, int))
-        if isinstance(value, int) and value < 0:
-            raise InputError(f"{table.path}: key '{key}' in [data.columns] must be a 0-based index >= 0")
-        columns[key] = value
+        columns[key], conversion = _column(columns_table, key)
+        if conversion is not None:
+            conversions[key] = conversion
     spec = DataSpec(
         trials=tuple(_relative(base, t) for t in trials),
         header=table.take("header", bool, True),
@@ -326,6 +356,8 @@ def _data(table: _Table, base: Path) -> DataSpec:
         derivative_cutoff_hz=table.positive(
             "derivative_cutoff_hz", DataSpec.derivative_cutoff_hz, high=LIMITS["rate_hz"]
         ),
+        conversions=conversions,
+        standard_by_name=table.take("standard_by_name", bool, True),
     )
     if not spec.header and any(isinstance(v, str) for v in columns.values()):
         raise InputError(f"{table.path}: [data] header = false needs 0-based column indices in [data.columns]")
