@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
+from sklearn.mixture import GaussianMixture
+from threadpoolctl import ThreadpoolController, threadpool_limits
 
 from ident_opt.errors import InputError
 
@@ -68,8 +70,6 @@ class GMR:
     # ------------------------------------------------------------------ fitting
     def fit(self, X: np.ndarray, R: np.ndarray) -> GMR:
         """Fit the joint mixture on [X, R] (rows are samples); returns self."""
-        from threadpoolctl import threadpool_limits
-
         # EM on N × D with D ≈ 8 is many small matrix products: BLAS threads only add overhead and, on a busy
         # machine, oversubscribe the cores (measured: a 10-component fit 0.14 s single-threaded, 1–5 s not).
         with threadpool_limits(limits=1):
@@ -110,8 +110,6 @@ class GMR:
         return self
 
     def _mixture(self, k: int):
-        from sklearn.mixture import GaussianMixture
-
         return GaussianMixture(
             n_components=k,
             covariance_type=self.covariance,
@@ -257,8 +255,6 @@ def conditional(
 # ---------------------------------------------------------------------------------------------- threads
 @lru_cache(maxsize=1)
 def _blas_controller():
-    from threadpoolctl import ThreadpoolController
-
     return ThreadpoolController()  # built once: entering its limit() then costs ~3 µs, not ~150 µs
 
 
