@@ -12,7 +12,7 @@ Conventions: q1 from the horizontal, q2 relative to link 1, counter-clockwise po
 β in N·m (the regressor's gravity columns are cos q1, cos(q1 + q2) without g). C is the Christoffel
 form, so Ṁ − 2C is skew-symmetric; C dq equals the paper's printed C dq.
 
-Extensions (added or replaced columns, names as in `spec/cli.md`):
+Extensions (added or replaced columns, names as in `docs/effects.md`):
 
 | extension            | parameters                 | what it adds                                           |
 |----------------------|----------------------------|--------------------------------------------------------|
@@ -71,7 +71,7 @@ EXTENSIONS = {name: tuple(p.name for p in params) for name, params in EXTENSION_
 
 @dataclass(frozen=True)
 class ArmModel:
-    """A rigid two-link arm model: which parameters it has and how τ depends on them.
+    """A rigid two-link arm model: which parameters it has and how τ depends on them (an `Arm`).
 
     `gravity="paper"` gives the paper's printed G1 = (β1 + β2) c1 + β2 c12, kept only to reproduce its
     Model 2; identification uses the physically correct G1 = β1 c1 + β2 c12.
@@ -111,7 +111,13 @@ class ArmModel:
 
     @property
     def n_params(self) -> int:
+        """P, the number of parameters."""
         return len(self.names)
+
+    @property
+    def n_joints(self) -> int:
+        """n = 2 joints."""
+        return 2
 
     def vector(self, pi: dict[str, float]) -> np.ndarray:
         """π as a vector in this model's order; names absent from `pi` are 0 (asymmetric Coulomb
@@ -174,7 +180,8 @@ class ArmModel:
     @cached_property
     def symbols(self) -> dict[str, ca.SX]:
         """The CasADi symbols q, dq, ddq (2×1) and pi (P×1) and the expressions built from them."""
-        q, dq, ddq = ca.SX.sym("q", 2), ca.SX.sym("dq", 2), ca.SX.sym("ddq", 2)
+        n = self.n_joints
+        q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
         pi = ca.SX.sym("pi", self.n_params)
         M, C, G, F = self._terms(q, dq, pi)
         tau = M @ ddq + C @ dq + G + F
@@ -205,9 +212,10 @@ class ArmModel:
     def regressor(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
         """Y for N samples: array (N, 2, P) with τ[k] = Y[k] @ π. Inputs (N, 2) in rad, rad/s, rad/s²."""
         q, dq, ddq = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (q, dq, ddq))
-        Y = np.empty((q.shape[0], 2, self.n_params))
+        Y = np.empty((q.shape[0], self.n_joints, self.n_params))
         for i, name in enumerate(self.names):
-            Y[:, 0, i], Y[:, 1, i] = self._columns[name](q, dq, ddq)
+            for j, row in enumerate(self._columns[name](q, dq, ddq)):
+                Y[:, j, i] = row
         return Y
 
     def predict(self, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
@@ -281,12 +289,27 @@ class ArmModel:
         c2 = np.cos(np.asarray(q2, dtype=float))[..., None, None]
         return M0 + M1 * c2
 
+    def mass_matrices(self, pi: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """M(q) (N, 2, 2) [kg m²] at configurations q (N, 2) [rad] (the `Arm` form of `mass_matrix`)."""
+        return self.mass_matrix(pi, np.asarray(q, dtype=float)[..., 1])
+
+    def mass_lmis(self) -> dict[str, np.ndarray]:
+        """The two exact LMIs of M(q) ≻ 0 ∀q, as maps A (P, 2, 2) with Σ_p π_p A_p = M at cos q2 = +1
+        ("mass_pd_q2_0") and at cos q2 = −1 ("mass_pd_q2_pi"): λ_min(M0 + c M1) is concave in c = cos q2,
+        so its minimum over c ∈ [−1, 1] lies at an end."""
+        A0, A1 = self.mass_matrix_maps
+        return {"mass_pd_q2_0": A0 + A1, "mass_pd_q2_pi": A0 - A1}
+
     def min_mass_eigenvalue(self, pi: np.ndarray) -> float:
         """min over all q of the smallest eigenvalue of M(q) [kg m²]: > 0 means physically consistent."""
         A0, A1 = self.mass_matrix_maps
         M0, M1 = np.tensordot(pi, A0, 1), np.tensordot(pi, A1, 1)
         # λ_min(M0 + c M1) is concave in c, so its minimum over c ∈ [−1, 1] lies at an end.
         return float(min(np.linalg.eigvalsh(M0 + M1)[0], np.linalg.eigvalsh(M0 - M1)[0]))
+
+
+#: The two-link closed form under the name of what it is (`ArmModel` is kept for existing callers).
+TwoLinkArm = ArmModel
 
 
 #: The paper's identification model (physically correct gravity vector).

@@ -1,0 +1,112 @@
+"""What the estimators, GMR, online identification, code generation and reports need from an arm.
+
+An arm is a rigid-body torque model that is linear in its parameters π (P,):
+
+    τ = M(q) ddq + C(q, dq) dq + G(q) + F(dq) = Y(q, dq, ddq) π          q, dq, ddq, τ ∈ Rⁿ (n joints)
+
+`Arm` is that contract. The two-link closed form (`ident_opt.robot.ArmModel`, alias `TwoLinkArm`) is one
+implementation; the rest of the package depends on this interface only, so another arm plugs in without
+touching the estimators (`ident_opt.identify`), GMR, online identification, code generation or reports.
+
+How an n-joint arm from a URDF would implement it (a sketch for whoever adds it, e.g. with Pinocchio):
+
+- `parameters`: the standard 10 per link, m, m c (3) and the inertia about the joint frame (6), each a
+  `Parameter` with its kind (mass and principal moments "inertia"; first moments "gravity" and products
+  of inertia "coupling", whose signs follow the geometry), plus per joint viscous and Coulomb friction
+  ("friction") and a rotor armature ("armature"). The kinds decide the sign constraints
+  (`ident_opt.consistency`); no name is matched.
+- `regressor`: `pinocchio.computeJointTorqueRegressor(model, data, q, dq, ddq)` per sample (n, 10·links),
+  with the friction and armature columns appended (dq_j, sign dq_j, ddq_j on row j).
+- `symbols`, `function`, `tau_expression`: the same dynamics in CasADi (`pinocchio.casadi`), τ as an SX
+  expression of q, dq, ddq and π, and Y its Jacobian with respect to π.
+- `mass_lmis`: one 4×4 pseudo-inertia matrix per link, J(π_link) = [[½ tr(Ī) I − Ī, h], [hᵀ, m]] with
+  Ī the inertia about the link frame and h = m c: J ≻ 0 for every link is the physical consistency of
+  its 10 parameters, and makes M(q) positive definite for every q (sufficient there, where the two-link
+  arm's two 2×2 LMIs are necessary and sufficient). Each is an affine map A (P, 4, 4), J = Σ_p π_p A_p.
+- `min_mass_eigenvalue`: min over the LMIs of λ_min (or over sampled q of λ_min M(q)).
+- `n_joints` = model.nv; arrays are (N, n) per sample, Y is (N, n, P), statistics G are (n, P, P).
+
+Units: q [rad], dq [rad/s], ddq [rad/s²], τ [N m]; π in each parameter's own unit (`Parameter.unit`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Protocol, runtime_checkable
+
+import casadi as ca
+import numpy as np
+
+from ident_opt.parameters import Parameter
+
+
+@runtime_checkable
+class Arm(Protocol):
+    """A rigid arm whose joint torques are linear in π: τ = Y(q, dq, ddq) π (module doc).
+
+    Implementations are immutable and hashable (estimators cache per arm, e.g. the constrained fit's
+    constraint matrix). Every array argument holds N samples: q, dq, ddq (N, n) [rad, rad/s, rad/s²].
+    """
+
+    @property
+    def n_joints(self) -> int:
+        """n, the number of joints (rows of Y per sample)."""
+        ...
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Parameter names, in the order of π and of Y's columns."""
+        ...
+
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        """Each parameter's declaration (name, unit, meaning, kind), in the order of π."""
+        ...
+
+    @property
+    def n_params(self) -> int:
+        """P, the number of parameters."""
+        ...
+
+    @property
+    def symbols(self) -> dict[str, ca.SX]:
+        """CasADi symbols q, dq, ddq (n×1), pi (P×1) and the expressions M, C, G, F, tau, Y built from them."""
+        ...
+
+    def vector(self, pi: Mapping[str, float]) -> np.ndarray:
+        """π (P,) in this arm's order from a name → value mapping (missing names: the arm's default, 0)."""
+        ...
+
+    def as_dict(self, pi: np.ndarray) -> dict[str, float]:
+        """π (P,) to a name → value dict."""
+        ...
+
+    def regressor(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        """Y (N, n, P) with τ[k] = Y[k] @ π [N m]."""
+        ...
+
+    def predict(self, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        """τ (N, n) [N m] for parameters π."""
+        ...
+
+    def function(self, what: str) -> ca.Function:
+        """A CasADi Function of (q, dq, ddq, pi) for one of "M", "C", "G", "F", "tau", "Y"."""
+        ...
+
+    def tau_expression(self, q, dq, ddq, pi):
+        """τ (n×1) as a CasADi expression of any (symbolic or numeric) q, dq, ddq (n×1) and π (P×1)."""
+        ...
+
+    def mass_lmis(self) -> dict[str, np.ndarray]:
+        """Named affine matrix maps A (P, k, k): Σ_p π_p A_p ⪰ margin·I for each of them is the arm's
+        statement that M(q) ≻ 0 (two-link: two exact 2×2 LMIs at cos q2 = ±1; URDF: one 4×4 pseudo-inertia
+        per link). The names are the constraints' names in every output."""
+        ...
+
+    def mass_matrices(self, pi: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """M(q) (N, n, n) [kg m²] at configurations q (N, n) for parameters π."""
+        ...
+
+    def min_mass_eigenvalue(self, pi: np.ndarray) -> float:
+        """min over all q of λ_min(M(q)) [kg m²] (or the arm's best lower bound): > 0 means consistent."""
+        ...
