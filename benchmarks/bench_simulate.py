@@ -15,9 +15,9 @@ from pathlib import Path
 
 from timing import best_time
 
+from ident_opt.effects import BACKGROUND
 from ident_opt.problem import load_problem
 from ident_opt.simulate import CATALOGUE, simulate_trial
-from ident_opt.simulate.effects import BACKGROUND
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ident_opt.effects import parse_effect
 from ident_opt.errors import InputError
 
 _REQUIRED = object()
@@ -415,8 +416,6 @@ def _simulate(table: _Table) -> SimulateSpec:
     effects = table.take("effects", list, [])
     if not all(isinstance(e, str) for e in effects):
         raise InputError(f"{table.path}: key 'effects' in [simulate] must be a list of strings")
-    from ident_opt.simulate.effects import parse_effect  # the catalogue's home; imported only when needed
-
     for effect in effects:
         try:
             parse_effect(effect)

@@ -11,13 +11,13 @@ import pytest
 from scipy import stats
 
 from ident_opt.datasheet import datasheet_pi
+from ident_opt.effects import normalise
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import Friction, load_problem
 from ident_opt.robot import ArmModel
 from ident_opt.simulate import simulate_trial
 from ident_opt.simulate.closed_loop import MAX_TRACKING_ERROR
-from ident_opt.simulate.effects import normalise
 from ident_opt.simulate.flexible_link import datasheet_armature, lagrangian_terms
 from ident_opt.simulate.trajectories import TAU_MAX
 from ident_opt.simulate.truth import build_truth, coulomb_levels, plant

@@ -2,7 +2,7 @@
 
 The truth is the problem's datasheet read physically (rigid arm, symmetric viscous + Coulomb friction,
 reflected rotor inertia), tracked by a 1 kHz PD + feedforward controller; effects from the catalogue of
-`spec/diagnose.md` can be hidden in it. Beside OUT.csv the true values of everything hidden are written to
+`docs/effects.md` can be hidden in it. Beside OUT.csv the true values of everything hidden are written to
 OUT.truth.json (π in the names of the armature model, effects in the diagnosis's estimate keys).
 
 Effect syntax: --effect NAME or --effect NAME:key=value,key=value (repeatable); per-joint values are
@@ -27,7 +27,7 @@ from ident_opt.commands.common import add_problem_arguments, write_json
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from ident_opt.simulate.effects import describe  # light: no CasADi
+    from ident_opt.effects import describe  # light: no NumPy, no CasADi
 
     parser.description = (parser.description or "") + "\n" + describe()
     add_problem_arguments(parser, data=False)

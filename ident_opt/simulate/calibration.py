@@ -20,11 +20,11 @@ from scipy import signal
 
 from ident_opt.data import Dataset, load_dataset
 from ident_opt.datasheet import datasheet_pi
+from ident_opt.effects import BACKGROUND, parse_effect
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
 from ident_opt.robot import RIGID
-from ident_opt.simulate.effects import BACKGROUND, parse_effect
 from ident_opt.simulate.trial import simulate_trial
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -14,10 +14,10 @@ import pandas as pd
 
 from ident_opt.data import Dataset
 from ident_opt.datasheet import datasheet_pi, rigid_body
+from ident_opt.effects import is_active, normalise
 from ident_opt.errors import InputError
 from ident_opt.problem import Robot
 from ident_opt.simulate import closed_loop, measurement
-from ident_opt.simulate.effects import is_active, normalise
 from ident_opt.simulate.trajectories import reference
 from ident_opt.simulate.truth import TRUTH_MODEL, Truth, build_truth, coulomb_levels
 

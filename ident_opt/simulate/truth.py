@@ -29,10 +29,10 @@ import casadi as ca
 import numpy as np
 
 from ident_opt.datasheet import datasheet_pi, rigid_body
+from ident_opt.effects import BACKGROUND
 from ident_opt.problem import Robot
 from ident_opt.robot import ArmModel
 from ident_opt.simulate import flexible_link
-from ident_opt.simulate.effects import BACKGROUND
 
 #: The structure of `SimTrial.truth["pi"]`.
 TRUTH_MODEL = ArmModel(("armature",))

@@ -1,0 +1,41 @@
+"""``asymmetric_coulomb``: Coulomb friction that differs by direction (replaces the datasheet mean).
+
+Model extension ``asymmetric_coulomb``: fc1p fc1n fc2p fc2n replace fc1, fc2 (a Coulomb level per velocity
+sign). Omitted keys default to the datasheet's own per-direction levels (reflected through the gear ratio);
+the effect's magnitude is its departure from the datasheet's symmetric (mean) level.
+"""
+
+from __future__ import annotations
+
+from ident_opt.effects.base import Effect, Key
+
+
+def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
+    """The datasheet's symmetric Coulomb level per joint [N m]: the clean trial's friction."""
+    return [0.5 * (a + b) for a, b in zip(*coulomb)]
+
+
+class AsymmetricCoulomb(Effect):
+    name = "asymmetric_coulomb"
+    summary = "Coulomb friction that differs by direction (replaces the datasheet mean)"
+    order = 2
+    keys = {  # noqa: RUF012
+        "positive": Key("pair", None, "N m, level for dq > 0 (default: the datasheet's, x gear ratio)"),
+        "negative": Key("pair", None, "N m, level for dq < 0 (default: the datasheet's, x gear ratio)"),
+    }
+
+    def default(self, key: str, coulomb: tuple[tuple, tuple]) -> object:
+        return coulomb[0] if key == "positive" else coulomb[1]
+
+    def scaled(self, p: dict, s: float, coulomb: tuple[tuple, tuple]) -> dict:
+        mean = _mean(coulomb)
+        p["positive"] = tuple(m + s * (v - m) for m, v in zip(mean, p["positive"]))
+        p["negative"] = tuple(m + s * (v - m) for m, v in zip(mean, p["negative"]))
+        return p
+
+    def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
+        mean = _mean(coulomb)
+        return any(v != m for m, v in zip(mean, p["positive"])) or any(v != m for m, v in zip(mean, p["negative"]))
+
+
+EFFECT = AsymmetricCoulomb()
