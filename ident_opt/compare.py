@@ -15,12 +15,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 import pandas as pd
 
 from ident_opt.data import Dataset
 from ident_opt.datasheet import datasheet_pi
+from ident_opt.identify import estimators as registry
 from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import LinearFit, fit_ols
 from ident_opt.identify.nlp import fit_physical
@@ -37,8 +39,8 @@ def estimators(
 ) -> dict[str, Callable[[Stats, ArmModel], LinearFit]]:
     """The fitted estimators by key: statistics + model → LinearFit (`weights`: None or "wls")."""
     return {
-        "ols": lambda st, m: fit_ols(st, m, weights),
-        "constrained": lambda st, m: fit_constrained(st, m, margin=margin, weights=weights),
+        "ols": partial(registry.fit, "ols", weights=weights),
+        "constrained": partial(registry.fit, "constrained", margin=margin, weights=weights),
         "nlp_physical": lambda st, m: fit_physical(st, robot, m, weights=weights),
     }
 

@@ -20,14 +20,24 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
+from sklearn.linear_model import RidgeCV
 
 from ident_opt.data import Dataset
+from ident_opt.datasheet import datasheet_pi
 from ident_opt.gmr import GMR
+from ident_opt.identify import estimators
+from ident_opt.identify.stats import Stats
 from ident_opt.problem import ResidualSpec, Robot
-from ident_opt.robot import RIGID, ArmModel
+from ident_opt.robot import PAPER, PHYSICAL, RIGID, ArmModel
 
 #: Ridge penalties searched by (efficient leave-one-out) cross-validation.
 RIDGE_ALPHAS = tuple(np.logspace(-4, 4, 17))
+#: The identified rigid-body models: key -> estimator (`ident_opt.identify.estimators`).
+FITTED = {"pbr": "ols", "cpbr": "constrained"}
+#: The datasheet models: convention -> (key, the arm it is evaluated with). The paper's is evaluated with
+#: its printed gravity vector, as its Model 2 was (that is what reproduces its DM row); the physical
+#: reading carries the joint-2 armature.
+DATASHEETS = {"paper": ("dm", PAPER), "physical": ("dm_physical", PHYSICAL)}
 
 
 class TorqueModel(Protocol):
@@ -41,7 +51,8 @@ class TorqueModel(Protocol):
 
 
 def features(data: Dataset) -> np.ndarray:
-    """The kinematic input x = [q1 q2 dq1 dq2 ddq1 ddq2] (N, 6) [rad, rad/s, rad/s²]."""
+    """The kinematic input x = [q1 q2 dq1 dq2 ddq1 ddq2] (N, 6) [rad, rad/s, rad/s²] of a trial (anything
+    with q, dq, ddq (N, 2)): the input of the ridge model and of every GMR residual."""
     return np.hstack([data.q, data.dq, data.ddq])
 
 
@@ -58,8 +69,6 @@ class RidgeModel:
 
     def fit(self, train: Dataset) -> RidgeModel:
         """Fit w, c and the penalty on the training trial."""
-        from sklearn.linear_model import RidgeCV
-
         reg = RidgeCV(alphas=self.alphas, alpha_per_target=True).fit(features(train), train.tau)
         self._reg = reg
         self.alpha_, self.coef_, self.intercept_ = np.atleast_1d(reg.alpha_), reg.coef_, reg.intercept_
@@ -74,8 +83,9 @@ class RidgeModel:
 class RigidModel:
     """A rigid-body model τ̂ = Y(q, dq, ddq) π with π fixed (datasheet) or identified (`estimator`).
 
-    estimator: None (no fitting: `pi` is given), ``"ols"`` (Model 3) or ``"constrained"`` (physically
-    consistent). After fit: `pi` (vector in `arm.names` order) and `fit_` (the estimator's result, if any).
+    estimator: None (no fitting: `pi` is given) or a name of `ident_opt.identify.estimators` (``"ols"``:
+    Model 3, ``"constrained"``: physically consistent). After fit: `pi` (vector in `arm.names` order) and
+    `fit_` (the estimator's `LinearFit`, if any).
     """
 
     key: str
@@ -88,11 +98,9 @@ class RigidModel:
         """Identify π on the training trial (a no-op for a datasheet model)."""
         if self.estimator is None:
             return self
-        from ident_opt.identify.stats import Stats
-
         stats = Stats.from_data(self.arm, train.q, train.dq, train.ddq, train.tau)
-        self.fit_ = identify(stats, self.arm, self.estimator)
-        self.pi = np.asarray(self.fit_.pi if hasattr(self.fit_, "pi") else self.fit_, dtype=float)
+        self.fit_ = estimators.fit(self.estimator, stats, self.arm)
+        self.pi = np.asarray(self.fit_.pi, dtype=float)
         return self
 
     def predict(self, data: Dataset) -> np.ndarray:
@@ -104,43 +112,10 @@ class RigidModel:
         return self.arm.as_dict(self.pi)
 
 
-def identify(stats, arm: ArmModel, estimator: str):
-    """π̂ from sufficient statistics: ``"ols"`` or ``"constrained"`` (a `LinearFit`, or a vector for OLS
-    while the fit module is absent)."""
-    if estimator == "ols":
-        try:
-            from ident_opt.identify.ols import fit_ols
-        except ImportError:  # the plain solver: same estimate, no standard errors
-            from ident_opt.identify.ols import solve_ols
-
-            return solve_ols(stats)
-        return fit_ols(stats, arm)
-    if estimator == "constrained":
-        from ident_opt.identify.constrained import fit_constrained
-
-        return fit_constrained(stats, arm)
-    raise ValueError(f"unknown estimator {estimator!r}")
-
-
-def constrained_available() -> bool:
-    """Whether the constrained estimator is installed in this checkout."""
-    try:
-        from ident_opt.identify.constrained import fit_constrained  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 def datasheet_model(robot: Robot, convention: str) -> RigidModel:
     """The datasheet model: the paper's (its printed G, key `dm`) or the physical reading (`dm_physical`)."""
-    from ident_opt.datasheet import datasheet_pi
-
-    pi = datasheet_pi(robot, convention)
-    if convention == "paper":
-        arm = ArmModel(gravity="paper")
-        return RigidModel("dm", arm, arm.vector(pi))
-    arm = ArmModel(("armature",))
-    return RigidModel("dm_physical", arm, arm.vector(pi))
+    key, arm = DATASHEETS[convention]
+    return RigidModel(key, arm, arm.vector(datasheet_pi(robot, convention)))
 
 
 # ---------------------------------------------------------------------------------------------- hybrid
@@ -199,12 +174,9 @@ def make_gmr(
 
 def parametric_models(robot: Robot, constrained: bool = True) -> list:
     """Fresh, unfitted parametric models in report order: rr, dm, dm_physical, pbr (, cpbr)."""
-    models = [
+    fitted = {key: name for key, name in FITTED.items() if constrained or name != "constrained"}
+    return [
         RidgeModel(),
-        datasheet_model(robot, "paper"),
-        datasheet_model(robot, "physical"),
-        RigidModel("pbr", RIGID, estimator="ols"),
+        *(datasheet_model(robot, convention) for convention in DATASHEETS),
+        *(RigidModel(key, RIGID, estimator=name) for key, name in fitted.items()),
     ]
-    if constrained:
-        models.append(RigidModel("cpbr", RIGID, estimator="constrained"))
-    return models

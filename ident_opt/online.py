@@ -40,8 +40,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ident_opt.identify.bounded import Bounds, WarmBoundedLS
+from ident_opt.identify import estimators
+from ident_opt.identify.bounded import Bounds, WarmBoundedLS, WarmConsistentLS, default_bounds
 from ident_opt.identify.stats import Stats
+from ident_opt.models import DATASHEETS, FITTED, RidgeModel, datasheet_model, features
+from ident_opt.robot import RIGID
 
 #: z-value of the central 95 % interval of a Gaussian.
 Z95 = 1.959963984540054
@@ -284,32 +287,40 @@ class Start:
 def offline_start(key: str, problem, train, bounds: Bounds | None = None, margin: float = 1e-6) -> Start:
     """The offline fit of one model on the training trial (`ident_opt.models` for RR's penalty and the
     datasheet π): rr — ridge with the per-joint penalty RidgeCV picks; dm, dm_physical — the datasheet
-    (fixed); pbr — bounded LS (`identify.bounded.default_bounds` unless `bounds`); cpbr — M(q) ⪰ margin·I
-    for all q [kg m²] with the same box."""
-    from ident_opt.identify.bounded import WarmConsistentLS, default_bounds
-    from ident_opt.models import RidgeModel, datasheet_model
-    from ident_opt.robot import RIGID
-
+    (fixed); pbr, cpbr — their estimator (`models.FITTED`) followed online as `estimators.ONLINE` says: box-
+    bounded LS (`identify.bounded.default_bounds` unless `bounds`), or M(q) ⪰ margin·I for all q [kg m²]
+    with the same box."""
     if key == "rr":
-        ridge = RidgeModel().fit(train)
-        alpha = np.broadcast_to(ridge.alpha_, (2,))
-        penalty = np.concatenate([np.r_[0.0, np.full(6, a)] for a in alpha])  # intercepts unpenalised
-        theta0 = np.concatenate([np.r_[ridge.intercept_[j], ridge.coef_[j]] for j in range(2)])
-        names = tuple(f"{w}_{j}" for j in (1, 2) for w in ("c", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2"))
-        return Start(key, kinematic_design, Estimator("ridge", penalty=penalty), theta0, names, _kinematic_jacobian)
-    if key in ("dm", "dm_physical"):
-        dm = datasheet_model(problem.robot, "paper" if key == "dm" else "physical")
+        return _ridge_start(train)
+    datasheets = {k: convention for convention, (k, _) in DATASHEETS.items()}
+    if key in datasheets:
+        dm = datasheet_model(problem.robot, datasheets[key])
         return Start(key, dm.arm.regressor, Estimator("fixed"), dm.pi, dm.arm.names, arm_design_jacobian(dm.arm))
-    box = bounds or default_bounds(RIGID)
-    if key == "pbr":
-        estimator = Estimator("bounded", bounds=box)
-    elif key == "cpbr":
-        estimator = Estimator("consistent", solver=WarmConsistentLS(RIGID, box, margin))
-    else:
+    if key not in FITTED:
         raise ValueError(f"unknown online model {key!r}; known: {', '.join(MODEL_KEYS)}")
+    estimator = online_estimator(FITTED[key], bounds or default_bounds(RIGID), margin)
     stats = Stats.from_data(RIGID, train.q, train.dq, train.ddq, train.tau)
     theta0 = batch_theta(estimator, stats)
     return Start(key, RIGID.regressor, estimator, theta0, RIGID.names, arm_design_jacobian(RIGID))
+
+
+def online_estimator(name: str, bounds: Bounds, margin: float = 1e-6) -> Estimator:
+    """The online counterpart (`identify.estimators.ONLINE`) of estimator `name` on the rigid model, within
+    `bounds`; `margin` [kg m²] of M(q) ⪰ margin·I for the consistent one."""
+    kind = estimators.ONLINE[name]
+    return Estimator(
+        kind, bounds=bounds, solver=WarmConsistentLS(RIGID, bounds, margin) if kind == "consistent" else None
+    )
+
+
+def _ridge_start(train) -> Start:
+    """RR: the ridge RidgeCV fits offline, as θ = [c1, w1, c2, w2] of `kinematic_design`."""
+    ridge = RidgeModel().fit(train)
+    alpha = np.broadcast_to(ridge.alpha_, (2,))
+    penalty = np.concatenate([np.r_[0.0, np.full(6, a)] for a in alpha])  # intercepts unpenalised
+    theta0 = np.concatenate([np.r_[ridge.intercept_[j], ridge.coef_[j]] for j in range(2)])
+    names = tuple(f"{w}_{j}" for j in (1, 2) for w in ("c", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2"))
+    return Start("rr", kinematic_design, Estimator("ridge", penalty=penalty), theta0, names, _kinematic_jacobian)
 
 
 def start_identifier(start: Start, train, gmr=None, cross_covariance: bool = False) -> OnlineIdentifier:
@@ -318,7 +329,7 @@ def start_identifier(start: Start, train, gmr=None, cross_covariance: bool = Fal
     D = start.design(train.q, train.dq, train.ddq)
     stats0 = Stats.from_regressor(D, train.tau)
     if gmr is not None:
-        gmr.fit(np.hstack([train.q, train.dq, train.ddq]), train.tau - D @ start.theta0)
+        gmr.fit(features(train), train.tau - D @ start.theta0)
     online = OnlineIdentifier(
         start.design,
         start.estimator,

@@ -39,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--estimator",
-        choices=("constrained", "ols"),
+        choices=("constrained", "ols"),  # the names of ident_opt.identify.estimators.ESTIMATORS
         default="constrained",
         help="how π is identified (default: the physically consistent fit)",
     )
@@ -145,49 +145,38 @@ def _model(extensions):
         raise InputError(f"codegen: {exc}") from None
 
 
+#: The solver status written for estimators that have none to report.
+STATUS = {"ols": "least squares (no constraints)"}
+
+
 def _identify(model, train, estimator: str):
-    """(π, estimator name, solver status) from the training trial: the physically consistent fit (default)
-    or OLS."""
+    """(π, estimator name, solver status) from the training trial, by the chosen estimator (registry)."""
+    from ident_opt.identify import estimators
     from ident_opt.identify.stats import Stats
 
     stats = Stats.from_data(model, train.q, train.dq, train.ddq, train.tau)
-    if estimator == "ols":
-        from ident_opt.identify.ols import solve_ols
-
-        return solve_ols(stats), "ols", "least squares (no constraints)"
-    from ident_opt.identify.constrained import fit_constrained
-
     try:
-        fit = fit_constrained(stats, model)
+        fit = estimators.fit(estimator, stats, model)
     except RuntimeError as exc:  # the solver failed: nothing consistent to generate
         raise InputError(f"codegen: the physically consistent fit failed ({exc}); try --estimator ols") from None
-    return fit.pi, fit.method, fit.status
+    return fit.pi, fit.method, STATUS.get(fit.method, fit.status)
 
 
 def _fit_gmr(model, pi, train, problem, components: int | None):
     """The GMR residual model on x = [q dq ddq], r = τ − τ̂(π), with the problem's [residual] settings."""
-    import numpy as np
-
-    from ident_opt.gmr import GMR
+    from ident_opt.models import features, make_gmr
 
     spec = problem.residual
     if components is not None and components < 1:
         raise InputError(f"codegen: --components must be >= 1, got {components}")
-    X = np.hstack([train.q, train.dq, train.ddq])
-    R = train.tau - model.predict(pi, train.q, train.dq, train.ddq)
     k = components if components is not None else spec.components
     print(
         f"ident-opt codegen: fitting the GMR residual ({k or 'K chosen among ' + str(list(spec.candidates))}"
-        f" components) on {len(X)} samples",
+        f" components) on {train.n} samples",
         flush=True,
     )
-    return GMR(
-        n_components=k,
-        candidates=spec.candidates,
-        covariance=spec.covariance,
-        reg_covar=spec.reg_covar,
-        max_train_samples=spec.max_train_samples,
-    ).fit(X, R)
+    residual = train.tau - model.predict(pi, train.q, train.dq, train.ddq)
+    return make_gmr(spec, components).fit(features(train), residual)
 
 
 def _read_parameters(path: str) -> dict:

@@ -33,7 +33,6 @@ def run(args: argparse.Namespace) -> int:
 
     from ident_opt import figures, report
     from ident_opt.commands.common import load, output_dir, write_json
-    from ident_opt.models import constrained_available
     from ident_opt.protocols import chronological_protocol, cross_trial_protocol, paper_protocol
 
     start = time.perf_counter()
@@ -41,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     problem, trial, unseen = loaded.problem, loaded.train, loaded.unseen
     out = output_dir(args, problem)
     fig_dir = out / "figures"
-    constrained = constrained_available()
+    constrained = True
     seeds = len(problem.split.seeds)
     n_figs = 7 + (3 if unseen is not None else 0)
     total = seeds * (1 if args.no_variants else 3) + 2 + (unseen is not None) + n_figs
