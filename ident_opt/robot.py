@@ -12,14 +12,9 @@ Conventions: q1 from the horizontal, q2 relative to link 1, counter-clockwise po
 β in N·m (the regressor's gravity columns are cos q1, cos(q1 + q2) without g). C is the Christoffel
 form, so Ṁ − 2C is skew-symmetric; C dq equals the paper's printed C dq.
 
-Extensions (added or replaced columns, names as in `docs/effects.md`):
-
-| extension            | parameters                 | what it adds                                           |
-|----------------------|----------------------------|--------------------------------------------------------|
-| `armature`           | ia2                        | joint-2 reflected rotor inertia on M22 (joint 1's: a1)  |
-| `asymmetric_coulomb` | fc1p fc1n fc2p fc2n        | replaces fc1, fc2: Coulomb level per velocity sign     |
-| `stribeck`           | fs1 fs2                    | static excess fs·sgn(dq)·exp(−(dq/vs)²), vs given      |
-| `offset`             | b1s b2s                    | sin gravity columns: an encoder zero offset rotates G  |
+Extensions (added or replaced columns): the causes of `ident_opt.effects` that are linear in their
+parameters (armature, asymmetric_coulomb, stribeck, joint_offset; see `docs/effects.md`) declare their
+parameters, NumPy columns and CasADi terms in their own module; this one adds them, in catalogue order.
 """
 
 from __future__ import annotations
@@ -31,6 +26,7 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
+from ident_opt import effects as catalogue
 from ident_opt.datasheet import PI_NAMES
 from ident_opt.parameters import Parameter
 
@@ -50,23 +46,8 @@ RIGID_PARAMETERS = (
 )
 assert tuple(p.name for p in RIGID_PARAMETERS) == PI_NAMES
 
-#: Extension name -> the parameters it adds (in column order).
-EXTENSION_PARAMETERS = {
-    "armature": (Parameter("ia2", "kg m^2", "joint-2 reflected rotor inertia N² J", "armature"),),
-    "asymmetric_coulomb": tuple(
-        Parameter(f"fc{j}{s}", "N m", f"joint-{j} Coulomb level for {d} velocity", "friction")
-        for j in (1, 2)
-        for s, d in (("p", "positive"), ("n", "negative"))
-    ),
-    "stribeck": tuple(
-        Parameter(f"fs{j}", "N m", f"joint-{j} Stribeck excess over the Coulomb level", "friction") for j in (1, 2)
-    ),
-    "offset": (
-        Parameter("b1s", "N m", "sin q1 gravity column: an encoder zero offset rotates G", "gravity"),
-        Parameter("b2s", "N m", "sin(q1 + q2) gravity column", "gravity"),
-    ),
-}
-EXTENSIONS = {name: tuple(p.name for p in params) for name, params in EXTENSION_PARAMETERS.items()}
+#: Extension name -> the names of the parameters it adds (in column order).
+EXTENSIONS = {name: tuple(p.name for p in e.parameters) for name, e in catalogue.EXTENSIONS.items()}
 
 
 @dataclass(frozen=True)
@@ -82,21 +63,27 @@ class ArmModel:
     stribeck_velocity: tuple[float, float] = (0.05, 0.05)  # rad/s
 
     def __post_init__(self):
-        unknown = [e for e in self.extensions if e not in EXTENSIONS]
-        if unknown:
-            raise ValueError(f"unknown model extension(s) {unknown}; known: {sorted(EXTENSIONS)}")
+        try:  # an alias (e.g. "offset") stands for its extension's own name
+            object.__setattr__(self, "extensions", tuple(catalogue.extension(e).name for e in self.extensions))
+        except KeyError:
+            unknown = [e for e in self.extensions if not catalogue.is_extension(e)]
+            raise ValueError(f"unknown model extension(s) {unknown}; known: {sorted(EXTENSIONS)}") from None
         if self.gravity not in ("physical", "paper"):
             raise ValueError("gravity must be 'physical' or 'paper'")
-        if self.gravity == "paper" and "offset" in self.extensions:
-            raise ValueError("the offset extension needs the physical gravity vector")
+        for effect in self._effects:
+            effect.check_model(self)
+
+    @cached_property
+    def _effects(self) -> tuple[catalogue.Effect, ...]:
+        """The extensions' effects, in catalogue order (the order their terms are added in)."""
+        return tuple(e for name, e in catalogue.EXTENSIONS.items() if name in self.extensions)
 
     # ------------------------------------------------------------------ parameters
     @cached_property
     def names(self) -> tuple[str, ...]:
         """Parameter names, in the order of π and of Y's columns."""
-        names = list(PI_NAMES)
-        if "asymmetric_coulomb" in self.extensions:
-            names = [n for n in names if n not in ("fc1", "fc2")]
+        replaced = {name for e in self._effects for name in e.replaces}
+        names = [n for n in PI_NAMES if n not in replaced]
         for ext in self.extensions:
             names += EXTENSIONS[ext]
         return tuple(names)
@@ -105,8 +92,8 @@ class ArmModel:
     def parameters(self) -> tuple[Parameter, ...]:
         """Each parameter's declaration (unit, meaning, kind), in the order of π."""
         declared = {p.name: p for p in RIGID_PARAMETERS}
-        for ext in self.extensions:
-            declared.update({p.name: p for p in EXTENSION_PARAMETERS[ext]})
+        for effect in self._effects:
+            declared.update({p.name: p for p in effect.parameters})
         return tuple(declared[n] for n in self.names)
 
     @property
@@ -120,14 +107,15 @@ class ArmModel:
         return 2
 
     def vector(self, pi: dict[str, float]) -> np.ndarray:
-        """π as a vector in this model's order; names absent from `pi` are 0 (asymmetric Coulomb
-        parameters default to the symmetric ``fc`` values when those are given)."""
+        """π as a vector in this model's order; names absent from `pi` are 0 (an extension's parameter may
+        default to a rigid one when that is given, e.g. the asymmetric fc1p to the symmetric fc1)."""
+        fallback = {name: rigid for e in self._effects for name, rigid in e.fallback.items()}
         out = []
         for name in self.names:
             if name in pi:
                 out.append(pi[name])
-            elif name[:3] in ("fc1", "fc2") and len(name) == 4 and name[:3] in pi:
-                out.append(pi[name[:3]])
+            elif fallback.get(name) in pi:
+                out.append(pi[fallback[name]])
             else:
                 out.append(0.0)
         return np.asarray(out, dtype=float)
@@ -144,11 +132,7 @@ class ArmModel:
         c1, c2, s2 = ca.cos(q[0]), ca.cos(q[1]), ca.sin(q[1])
         c12 = ca.cos(q[0] + q[1])
         a1, a2, a3 = p["a1"], p["a2"], p["a3"]
-        ia2 = p.get("ia2", zero)
-        M = ca.vertcat(
-            ca.horzcat(a1 + 2 * a2 * c2, a3 + a2 * c2),
-            ca.horzcat(a3 + a2 * c2, a3 + ia2),
-        )
+        M = [[a1 + 2 * a2 * c2, a3 + a2 * c2], [a3 + a2 * c2, a3]]
         C = ca.vertcat(
             ca.horzcat(-a2 * s2 * dq[1], -a2 * s2 * (dq[0] + dq[1])),
             ca.horzcat(a2 * s2 * dq[0], zero),
@@ -156,26 +140,17 @@ class ArmModel:
         g1 = p["b1"] * c1 + p["b2"] * c12
         if self.gravity == "paper":
             g1 += p["b2"] * c1
-        g2 = p["b2"] * c12
-        if "offset" in self.extensions:
-            s1, s12 = ca.sin(q[0]), ca.sin(q[0] + q[1])
-            g1 += p["b1s"] * s1 + p["b2s"] * s12
-            g2 += p["b2s"] * s12
-        G = ca.vertcat(g1, g2)
+        G = [g1, p["b2"] * c12]
         F = []
         for j in range(2):
             k = str(j + 1)
             f = p["fv" + k] * dq[j]
-            if "asymmetric_coulomb" in self.extensions:
-                f += p["fc" + k + "p"] * ca.if_else(dq[j] > 0, 1, 0)
-                f -= p["fc" + k + "n"] * ca.if_else(dq[j] < 0, 1, 0)
-            else:
+            if "fc" + k in p:  # unless an extension replaces the symmetric Coulomb term
                 f += p["fc" + k] * ca.sign(dq[j])
-            if "stribeck" in self.extensions:
-                vs = self.stribeck_velocity[j]
-                f += p["fs" + k] * ca.sign(dq[j]) * ca.exp(-((dq[j] / vs) ** 2))
             F.append(f)
-        return M, C, G, ca.vertcat(*F)
+        for effect in self._effects:
+            effect.add_terms(self, q, dq, p, M, G, F)
+        return ca.vertcat(ca.horzcat(*M[0]), ca.horzcat(*M[1])), C, ca.vertcat(*G), ca.vertcat(*F)
 
     @cached_property
     def symbols(self) -> dict[str, ca.SX]:
@@ -226,7 +201,6 @@ class ArmModel:
     def _columns(self) -> dict[str, Callable]:
         """The paper's printed regressor, one function per column: (q, dq, ddq) -> (row 1, row 2)."""
         zero = np.zeros_like
-        vs = self.stribeck_velocity
 
         def c(a):
             return np.cos(a)
@@ -250,16 +224,9 @@ class ArmModel:
             "fv2": lambda q, dq, a: (zero(dq[:, 1]), dq[:, 1]),
             "fc1": lambda q, dq, a: (np.sign(dq[:, 0]), zero(dq[:, 0])),
             "fc2": lambda q, dq, a: (zero(dq[:, 1]), np.sign(dq[:, 1])),
-            "ia2": lambda q, dq, a: (zero(a[:, 1]), a[:, 1]),
-            "fc1p": lambda q, dq, a: ((dq[:, 0] > 0).astype(float), zero(dq[:, 0])),
-            "fc1n": lambda q, dq, a: (-(dq[:, 0] < 0).astype(float), zero(dq[:, 0])),
-            "fc2p": lambda q, dq, a: (zero(dq[:, 1]), (dq[:, 1] > 0).astype(float)),
-            "fc2n": lambda q, dq, a: (zero(dq[:, 1]), -(dq[:, 1] < 0).astype(float)),
-            "fs1": lambda q, dq, a: (np.sign(dq[:, 0]) * np.exp(-((dq[:, 0] / vs[0]) ** 2)), zero(dq[:, 0])),
-            "fs2": lambda q, dq, a: (zero(dq[:, 1]), np.sign(dq[:, 1]) * np.exp(-((dq[:, 1] / vs[1]) ** 2))),
-            "b1s": lambda q, dq, a: (s(q[:, 0]), zero(q[:, 0])),
-            "b2s": lambda q, dq, a: (s(q[:, 0] + q[:, 1]), s(q[:, 0] + q[:, 1])),
         }
+        for effect in self._effects:
+            cols.update(effect.columns(self))
         return {name: cols[name] for name in self.names}
 
     # ------------------------------------------------------------------ structure for constraints

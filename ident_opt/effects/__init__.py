@@ -36,6 +36,11 @@ def extension(name: str) -> Effect:
     return EXTENSIONS[name] if name in EXTENSIONS else _ALIASES[name]
 
 
+def is_extension(name: str) -> bool:
+    """Whether `name` is a model extension (or one of its aliases)."""
+    return name in EXTENSIONS or name in _ALIASES
+
+
 def cause(name: str) -> Effect | None:
     """The catalogue's cause called `name`; None for "none" (the diagnosis's no-cause answer)."""
     return CATALOGUE.get(name)

@@ -5,7 +5,10 @@ Model extension ``armature``: the joint-2 reflected rotor inertia ia2 on M22 (jo
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key
+from ident_opt.effects.base import Effect, Key, deferred
+from ident_opt.parameters import Parameter
+
+np = deferred("numpy")
 
 
 class Armature(Effect):
@@ -15,6 +18,15 @@ class Armature(Effect):
     keys = {  # noqa: RUF012
         "inertia": Key("pair", (0.25, 0.025), "kg m^2, joint side, per joint", magnitude=True),
     }
+
+    # ------------------------------------------------------------------ model: ia2 on M22
+    parameters = (Parameter("ia2", "kg m^2", "joint-2 reflected rotor inertia N² J", "armature"),)
+
+    def columns(self, model) -> dict:
+        return {"ia2": lambda q, dq, a: (np.zeros_like(a[:, 1]), a[:, 1])}
+
+    def add_terms(self, model, q, dq, p: dict, M: list, G: list, F: list) -> None:
+        M[1][1] = M[1][1] + p["ia2"]
 
 
 EFFECT = Armature()

@@ -7,7 +7,11 @@ the effect's magnitude is its departure from the datasheet's symmetric (mean) le
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key
+from ident_opt.effects.base import Effect, Key, deferred
+from ident_opt.parameters import Parameter
+
+np = deferred("numpy")
+ca = deferred("casadi")
 
 
 def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
@@ -36,6 +40,30 @@ class AsymmetricCoulomb(Effect):
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
         mean = _mean(coulomb)
         return any(v != m for m, v in zip(mean, p["positive"])) or any(v != m for m, v in zip(mean, p["negative"]))
+
+    # ------------------------------------------------------------------ model: fcjp [dq_j > 0] − fcjn [dq_j < 0]
+    parameters = tuple(
+        Parameter(f"fc{j}{s}", "N m", f"joint-{j} Coulomb level for {d} velocity", "friction")
+        for j in (1, 2)
+        for s, d in (("p", "positive"), ("n", "negative"))
+    )
+    replaces = ("fc1", "fc2")
+    fallback = {"fc1p": "fc1", "fc1n": "fc1", "fc2p": "fc2", "fc2n": "fc2"}  # noqa: RUF012
+
+    def columns(self, model) -> dict:
+        zero = np.zeros_like
+        return {
+            "fc1p": lambda q, dq, a: ((dq[:, 0] > 0).astype(float), zero(dq[:, 0])),
+            "fc1n": lambda q, dq, a: (-(dq[:, 0] < 0).astype(float), zero(dq[:, 0])),
+            "fc2p": lambda q, dq, a: (zero(dq[:, 1]), (dq[:, 1] > 0).astype(float)),
+            "fc2n": lambda q, dq, a: (zero(dq[:, 1]), -(dq[:, 1] < 0).astype(float)),
+        }
+
+    def add_terms(self, model, q, dq, p: dict, M: list, G: list, F: list) -> None:
+        for j in range(2):
+            k = str(j + 1)
+            F[j] = F[j] + p["fc" + k + "p"] * ca.if_else(dq[j] > 0, 1, 0)
+            F[j] = F[j] - p["fc" + k + "n"] * ca.if_else(dq[j] < 0, 1, 0)
 
 
 EFFECT = AsymmetricCoulomb()
