@@ -105,13 +105,16 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
 
 
 def _standard_layout(frame: pd.DataFrame, spec: DataSpec) -> tuple[pd.DataFrame, DataSpec]:
-    """A file whose header row has the standard names (t, q1, q2) is read by name, whatever the problem
-    maps (the mapping is for the problem's own foreign layout), unless `[data] standard_by_name = false`."""
+    """A file whose header row has the standard names (t, q1, q2) is read by name when the problem's mapping
+    is for another layout (it names columns this file lacks, or indices of a header-less export), unless
+    `[data] standard_by_name = false`. A mapping whose names all exist in the file is applied as written."""
     if not spec.standard_by_name:
         return frame, spec
     if spec.header:
-        names = [str(c).strip() for c in frame.columns]
-        if {"t", "q1", "q2"} <= set(names) and spec.columns:
+        names = {str(c).strip() for c in frame.columns}
+        # The mapping fits this file (every mapped name is in it): keep it, conversions included.
+        fits = all(isinstance(v, str) and v in names for v in spec.columns.values())
+        if spec.columns and not fits and {"t", "q1", "q2"} <= names:
             return frame, replace(spec, columns={}, conversions={})
         return frame, spec
     first = [str(v).strip() for v in frame.iloc[0]]

@@ -95,3 +95,13 @@ def test_estimated_derivatives_are_checked(tmp_path):
     frame.to_csv(path, index=False)
     with pytest.raises(InputError, match=r"'dq1'.*estimated from q and t"):
         load_dataset(path, DataSpec(derivative_cutoff_hz=200.0), load_problem(minimal_problem(tmp_path)).robot)
+
+
+def test_conversion_on_a_standard_named_file_is_applied(tmp_path):
+    # A mapping that names this file's own columns is for this file: its conversion must not be skipped.
+    frame = trial_frame()
+    path = tmp_path / "deg.csv"
+    frame.assign(q2=np.degrees(frame["q2"])).to_csv(path, index=False)
+    spec = DataSpec(columns={"q2": "q2"}, conversions={"q2": (np.pi / 180, 0.0)})
+    data = load_dataset(path, spec, load_problem(minimal_problem(tmp_path)).robot)
+    assert np.allclose(data.q[:, 1], frame["q2"], atol=1e-12)
