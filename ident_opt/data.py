@@ -356,6 +356,8 @@ def load_dataset(
         dq, ddq, how = signals["dq"], signals["ddq"], "given"
     else:
         dq, ddq, how = estimate_derivatives(t, q, spec.derivative_cutoff_hz, signals.get("dq"))
+        if "ddq" in signals:  # logged accelerations are kept: only the velocities were missing
+            ddq, how = signals["ddq"], how + " (accelerations as logged)"
         notes.append(f"derivatives {how}")
         if not allow_implausible:  # estimated from q and t: a wrong time unit shows here first
             _check_plausible({"dq": dq, "ddq": ddq}, keep, path, spec, estimated=True)

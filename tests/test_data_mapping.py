@@ -105,3 +105,13 @@ def test_conversion_on_a_standard_named_file_is_applied(tmp_path):
     spec = DataSpec(columns={"q2": "q2"}, conversions={"q2": (np.pi / 180, 0.0)})
     data = load_dataset(path, spec, load_problem(minimal_problem(tmp_path)).robot)
     assert np.allclose(data.q[:, 1], frame["q2"], atol=1e-12)
+
+
+def test_logged_accelerations_are_kept_when_only_velocities_are_missing(tmp_path):
+    frame = trial_frame()
+    frame["ddq1"], frame["ddq2"] = 0.123, -0.456  # deliberately not the derivative of q
+    path = tmp_path / "acc.csv"
+    frame.to_csv(path, index=False)
+    data = load_dataset(path, DataSpec(), load_problem(minimal_problem(tmp_path)).robot)
+    assert np.all(data.ddq[:, 0] == 0.123) and np.all(data.ddq[:, 1] == -0.456)
+    assert "accelerations as logged" in data.derivatives
