@@ -1,14 +1,15 @@
 """Generated C for embedded torque prediction: CasADi expressions → C sources → a shared library.
 
 Three functions, each in CasADi's calling convention (`f(arg, res, iw, w, mem)` plus `f_work`,
-`f_incref`, `f_checkout`, ...), all with the identified π baked in as literal constants:
+`f_incref`, `f_checkout`, ...), all with the identified π baked in as literal constants (q, dq, ddq, τ
+have one entry per joint, `Arm.n_joints`):
 
     tau_hat(q, dq, ddq)     -> tau       τ = M(q) ddq + C(q, dq) dq + G(q) + F(dq)        [N m]
     tau_hat_gmr(q, dq, ddq) -> tau       the same + E[r | x], x = [q; dq; ddq]            [N m]
     ddq_hat(q, dq, tau)     -> ddq       M(q)⁻¹ (τ − C(q, dq) dq − G(q) − F(dq))          [rad/s²]
 
-The rigid part is `ArmModel.tau_expression` (and `ArmModel.function` for M), never re-typed here, so
-the extensions the user chose flow through unchanged. The GMR term is a fixed sum of K Gaussians, written
+The rigid part is `Arm.tau_expression` (and `Arm.function` for M), never re-typed here, so the arm
+and the extensions the user chose flow through unchanged. The GMR term is a fixed sum of K Gaussians, written
 with precomputed constants per component k (Σxx_k = L_k L_kᵀ):
 
     l_k(x) = log w_k − Σ log diag L_k − ½ ‖L_k⁻¹ (x − μx_k)‖²        (log weight × density, up to a constant)
@@ -27,20 +28,28 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from string import Template
 
 import casadi as ca
 import numpy as np
 
+from ident_opt.arm import Arm
 from ident_opt.errors import InputError
-from ident_opt.robot import ArmModel
 
 #: Base name of the generated files: <NAME>.c, <NAME>.h and lib<NAME>.so (.dylib on macOS).
 NAME = "ident_opt_model"
 #: Flags used to build the shared library (the README repeats them). No -ffast-math: it would change
 #: results (and NaN/inf handling) relative to the Python model.
 CFLAGS = ("-O2", "-std=c99", "-fPIC")
-#: The GMR inputs x, in order.
-GMR_INPUTS = ("q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
+
+
+def gmr_inputs(n_joints: int) -> tuple[str, ...]:
+    """The GMR inputs x = [q; dq; ddq] by name, in order: q1 … qn, dq1 … dqn, ddq1 … ddqn."""
+    return tuple(f"{v}{j + 1}" for v in ("q", "dq", "ddq") for j in range(n_joints))
+
+
+#: The two-link arm's GMR inputs (kept for callers that name them without an arm at hand).
+GMR_INPUTS = gmr_inputs(2)
 #: Smallest accepted GMR input standard deviation, relative to max(1, |mean|) of that input (rad, rad/s,
 #: rad/s²). Below it the component is a near-delta in that input (a column that was constant up to rounding in
 #: the training data): its log-density then changes by ~|x|·eps/σ² per ulp of x, so no two implementations
@@ -88,7 +97,7 @@ def gmr_constants(gmr) -> GmrConstants:
     tiny = std < MIN_INPUT_STD * np.maximum(1.0, np.abs(means[:, :d]))
     if tiny.any():
         k, i = np.argwhere(tiny)[0]
-        label = GMR_INPUTS[i] if d == len(GMR_INPUTS) else f"x{i}"
+        label = gmr_inputs(d // 3)[i] if d % 3 == 0 else f"x{i}"
         raise InputError(
             f"GMR component {k}: input {label} has a standard deviation of {std[k, i]:.3g} "
             f"(mean {means[k, i]:.6g}): the training data barely vary there (a joint at rest?), "
@@ -132,7 +141,7 @@ def gmr_mean_expression(x: ca.SX, c: GmrConstants) -> ca.SX:
 
 
 # ---------------------------------------------------------------------------------------------- functions
-def build_functions(model: ArmModel, pi: np.ndarray, gmr=None, forward: bool = True) -> list[ca.Function]:
+def build_functions(model: Arm, pi: np.ndarray, gmr=None, forward: bool = True) -> list[ca.Function]:
     """The CasADi Functions to generate: tau_hat, tau_hat_gmr (when `gmr` is given), ddq_hat (when
     `forward`). π (model.n_params,) is baked in as constants."""
     pi = np.asarray(pi, dtype=float).ravel()
@@ -140,36 +149,58 @@ def build_functions(model: ArmModel, pi: np.ndarray, gmr=None, forward: bool = T
         raise InputError(f"{pi.size} parameters given, the model {list(model.names)} needs {model.n_params}")
     if not np.isfinite(pi).all():
         raise InputError("the parameters are not all finite: the model cannot be generated")
-    q, dq, ddq, tau = (ca.SX.sym(name, 2) for name in ("q", "dq", "ddq", "tau"))
+    n = model.n_joints
+    q, dq, ddq, tau = (ca.SX.sym(name, n) for name in ("q", "dq", "ddq", "tau"))
     pi_dm = ca.DM(pi)
     tau_rigid = model.tau_expression(q, dq, ddq, pi_dm)
     out = [ca.Function("tau_hat", [q, dq, ddq], [tau_rigid], ["q", "dq", "ddq"], ["tau"])]
     if gmr is not None:
         c = gmr_constants(gmr)
-        if c.mu_x.shape[1] != 6 or c.mu_r.shape[1] != 2:
+        if c.mu_x.shape[1] != 3 * n or c.mu_r.shape[1] != n:
             raise InputError(
-                f"the GMR must map 6 inputs [q dq ddq] to 2 outputs, got {c.mu_x.shape[1]} → {c.mu_r.shape[1]}"
+                f"the GMR must map {3 * n} inputs [q dq ddq] to {n} outputs, got {c.mu_x.shape[1]} → {c.mu_r.shape[1]}"
             )
         r = gmr_mean_expression(ca.vertcat(q, dq, ddq), c)
         out.append(ca.Function("tau_hat_gmr", [q, dq, ddq], [tau_rigid + r], ["q", "dq", "ddq"], ["tau"]))
     if forward:
         # τ − M ddq = C dq + G + F: the bias is τ̂ at ddq = 0, so M⁻¹ (τ − bias) reuses the one model.
         M = model.function("M")(q, dq, ddq, pi_dm)
-        bias = model.tau_expression(q, dq, ca.DM.zeros(2), pi_dm)
-        out.append(ca.Function("ddq_hat", [q, dq, tau], [_solve2(M, tau - bias)], ["q", "dq", "tau"], ["ddq"]))
+        bias = model.tau_expression(q, dq, ca.DM.zeros(n), pi_dm)
+        out.append(ca.Function("ddq_hat", [q, dq, tau], [solve_ldl(M, tau - bias)], ["q", "dq", "tau"], ["ddq"]))
     return out
 
 
-def _solve2(M: ca.SX, b: ca.SX) -> ca.SX:
-    """M⁻¹ b for a symmetric 2×2 M by LDLᵀ (M = [1 0; l 1] diag(d1, d2) [1 l; 0 1]): branch-free, a few
-    flops, no work arrays, and backward stable for M ≻ 0 even when it is ill-conditioned (Cramer's rule
-    is not). M11 = a1 + 2 a2 cos q2 + ... is the large, well-separated pivot of an arm's mass matrix."""
-    d1 = M[0, 0]
-    l = M[1, 0] / d1
-    d2 = M[1, 1] - l * M[1, 0]
-    x2 = (b[1] - l * b[0]) / d2
-    x1 = b[0] / d1 - l * x2
-    return ca.vertcat(x1, x2)
+def solve_ldl(M: ca.SX, b: ca.SX) -> ca.SX:
+    """M⁻¹ b for a symmetric n×n M by LDLᵀ without pivoting, unrolled into scalar expressions: branch-free,
+    no work arrays, and backward stable for M ≻ 0 even when it is ill-conditioned (Cramer's rule is not).
+    An arm's mass matrix is positive definite, so every pivot d_j > 0. For n = 2: l = M21/M11,
+    d2 = M22 − l M21, x2 = (b2 − l b1)/d2, x1 = b1/M11 − l x2.
+
+    u_ij = M_ij − Σ_{k<j} l_jk u_ik (i > j) is L_ij d_j, l_ij = u_ij / d_j, d_j = M_jj − Σ_{k<j} l_jk u_jk;
+    then L y = b, and Lᵀ x = D⁻¹ y.
+    """
+    n = M.shape[0]
+    u = [[M[i, j] for j in range(n)] for i in range(n)]
+    l = [[None] * n for _ in range(n)]
+    d = [None] * n
+    for j in range(n):
+        d[j] = u[j][j]
+        for k in range(j):
+            d[j] = d[j] - l[j][k] * u[j][k]
+        for i in range(j + 1, n):
+            for k in range(j):
+                u[i][j] = u[i][j] - l[j][k] * u[i][k]
+            l[i][j] = u[i][j] / d[j]
+    y = [b[i] for i in range(n)]
+    for i in range(n):
+        for k in range(i):
+            y[i] = y[i] - l[i][k] * y[k]
+    x = [None] * n
+    for i in reversed(range(n)):
+        x[i] = y[i] / d[i]
+        for k in range(i + 1, n):
+            x[i] = x[i] - l[k][i] * x[k]
+    return ca.vertcat(*x)
 
 
 # ---------------------------------------------------------------------------------------------- C files
@@ -230,8 +261,6 @@ def compile_library(source: Path, out_dir: Path, compiler: list[str] | None = No
 
 def write_readme(out_dir: Path, functions: list[ca.Function], name: str = NAME) -> Path:
     """The embedding README (template in `codegen_files/README.md`) filled with this build's names."""
-    from string import Template
-
     rows = "\n".join(f"| `{f.name()}` | {_signature(f)} |" for f in functions)
     text = Template((FILES / "README.md").read_text(encoding="utf-8")).substitute(
         name=name, library=library_name(name), cflags=" ".join(CFLAGS), functions=rows
@@ -259,7 +288,7 @@ def load_external(lib: Path, fname: str) -> ca.Function:
 
 
 def evaluate(f: ca.Function, *inputs: np.ndarray) -> np.ndarray:
-    """Evaluate a (2×1, 2×1, 2×1) -> 2×1 Function on N states at once: inputs (N, 2), output (N, 2)."""
+    """Evaluate an (n×1, n×1, n×1) -> n×1 Function on N states at once: inputs (N, n), output (N, n)."""
     n = len(inputs[0])
     return np.asarray(f.map(n)(*(np.asarray(a, dtype=float).T for a in inputs))).T
 
@@ -273,13 +302,13 @@ def relative_error(got: np.ndarray, ref: np.ndarray) -> float:
 
 
 def forward_backward_error(
-    model: ArmModel, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, ddq: np.ndarray
+    model: Arm, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, ddq: np.ndarray
 ) -> float:
-    """How well `ddq` (N, 2) solves M(q) ddq = τ − b, b = C dq + G + F, as a normwise backward error:
+    """How well `ddq` (N, n) solves M(q) ddq = τ − b, b = C dq + G + F, as a normwise backward error:
     max over samples of ‖M ddq − (τ − b)‖∞ / (‖M‖∞ ‖ddq‖∞ + ‖τ‖∞ + ‖b‖∞). It is small for a correct solve
     however ill-conditioned M is (a forward error would be amplified by cond M), and τ − b is judged on the
     scale of τ and b, since it cancels at rest. M and b come from NumPy."""
-    M = model.mass_matrix(pi, q[:, 1])
+    M = model.mass_matrices(pi, q)
     bias = model.predict(pi, q, dq, np.zeros_like(q))
     residual = np.einsum("nij,nj->ni", M, ddq) - (tau - bias)
     scale = (

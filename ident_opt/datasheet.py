@@ -3,7 +3,8 @@
 Both conventions model each link as a uniform bar (I = m (h² + l²)/12 about its centre, centre at
 mid-length), lump an actuator as a solid cylinder (I = m r²/2) at the distal end of link 1, and move
 inertias to the combined centre of mass with the parallel-axis theorem. They differ in what a
-mechanical engineer would call right (see `spec/problem-format.md`):
+mechanical engineer would call right (see `docs/problem-files.md`, "From the datasheet to π: the two
+conventions"):
 
 - ``paper``: joint 1's actuator on link 1, motor-side friction averaged and used as is, no rotor inertia.
 - ``physical``: joint 2's actuator on link 1 (joint 1's motor sits on the base); friction reflected to the

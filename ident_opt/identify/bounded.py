@@ -15,18 +15,20 @@ restricted to the free set, every bound holds, and every fixed parameter's multi
 makes the point optimal (g_p = (Hπ − h)_p ≥ 0 at a lower bound, ≤ 0 at an upper bound). For H ≻ 0 this
 point is unique, so a warm start changes the work done, never the answer.
 
-Bounds (`default_bounds`; the paper's "bounded least squares" does not say which it used):
+Bounds (`default_bounds`, from the parameters' declared kinds through `consistency.physical_bounds`; the
+paper's "bounded least squares" does not say which it used):
 
-| parameter        | bound      | why                                                                  |
-|------------------|------------|----------------------------------------------------------------------|
-| a1, a3, ia2      | ≥ 0        | sums of inertias: a1 = I1 + m1 lc1² + m2 l1² + a3, a3 = I2 + m2 lc2², N²J |
-| fv*, fc*, fs*    | ≥ 0        | friction dissipates: it never pushes the joint along its motion     |
-| a2, b1, b2, b*s  | free       | m2 l1 lc2 and g·(m lc) change sign with the centre of mass's side    |
+| kind (two-link examples)            | bound | why                                                          |
+|-------------------------------------|-------|--------------------------------------------------------------|
+| inertia, armature (a1, a3, ia2)     | ≥ 0   | inertia sums: a1 = I1 + m1 lc1² + m2 l1² + a3, a3 = I2 + m2 lc2², N² J |
+| friction (fv*, fc*, fs*)            | ≥ 0   | friction dissipates: it never pushes the joint along its motion |
+| coupling, gravity (a2, b1, b2, b*s) | free  | m2 l1 lc2 and g·(m lc) change sign with the centre of mass's side |
 
-`default_bounds(model, signs_from=π_datasheet)` also fixes the sign of a2, b1, b2 to the datasheet's (a
-stronger, robot-specific prior: the centre of mass lies on the datasheet's side of the joint).
-Box bounds alone do not make M(q) positive definite (a3 = 0 with a2 ≠ 0 is still indefinite): that
-is what the physically constrained fit (CPBR) is for.
+`default_bounds(model, signs_from=π_datasheet)` also fixes the sign of the coupling and gravity parameters
+to the datasheet's (a stronger, robot-specific prior: the centre of mass lies on the datasheet's side of
+the joint). Box bounds alone do not make M(q) positive definite (a3 = 0 with a2 ≠ 0 is still indefinite):
+that is what the physically constrained fit (CPBR, `WarmConsistentLS`) is for; its mass-matrix cones are
+the arm's declared 2×2 LMIs (`Arm.mass_lmis`).
 """
 
 from __future__ import annotations
@@ -40,13 +42,10 @@ import numpy as np
 from scipy.linalg.lapack import dgesv as _dgesv
 from scipy.linalg.lapack import dposv as _dposv
 
-from ident_opt.robot import ArmModel
-
-#: Parameters that are sums of inertias (kg m²) or friction coefficients: never negative.
-NON_NEGATIVE_PREFIXES = ("fv", "fc", "fs")
-NON_NEGATIVE_NAMES = ("a1", "a3", "ia2")
-#: Parameters whose sign follows the centre of mass's side of the joint (fixed only with `signs_from`).
-SIGNED_BY_GEOMETRY = ("a2", "b1", "b2")
+from ident_opt.arm import Arm
+from ident_opt.consistency import MARGIN, MatrixInequality, mass_constraints, physical_bounds
+from ident_opt.identify.constrained import solve_constrained
+from ident_opt.identify.stats import Stats
 
 #: Multipliers and bound violations below this, relative to the scale of the gradient, count as zero.
 KKT_TOL = 1e-11
@@ -64,20 +63,11 @@ class Bounds:
             raise ValueError("bounds need lower ≤ upper, with equal shapes")
 
 
-def default_bounds(model: ArmModel, signs_from: np.ndarray | None = None) -> Bounds:
-    """The documented physical bounds (module doc) for `model`; with `signs_from` (e.g. the datasheet
-    π), a2, b1, b2 are also kept on the side of zero where that vector has them."""
-    P = model.n_params
-    lower, upper = np.full(P, -np.inf), np.full(P, np.inf)
-    for p, name in enumerate(model.names):
-        if name in NON_NEGATIVE_NAMES or name.startswith(NON_NEGATIVE_PREFIXES):
-            lower[p] = 0.0
-        if signs_from is not None and name in SIGNED_BY_GEOMETRY:
-            if signs_from[p] > 0:
-                lower[p] = 0.0
-            elif signs_from[p] < 0:
-                upper[p] = 0.0
-    return Bounds(lower, upper)
+def default_bounds(model: Arm, signs_from: np.ndarray | None = None) -> Bounds:
+    """The documented physical bounds (module doc) for `model`, from its parameters' kinds; with
+    `signs_from` (e.g. the datasheet π), coupling and gravity parameters are also kept on the side of zero
+    where that vector has them."""
+    return Bounds(*physical_bounds(model.parameters, signs_from))
 
 
 @dataclass
@@ -236,30 +226,30 @@ class WarmBoundedLS:
 
 # ---------------------------------------------------------------------------------------------- CPBR
 class _Cones:
-    """The 2×2 LMIs N_i(π) = Σ_p π_p B_ip ⪰ margin·I (i = 0: cos q2 = +1, 1: cos q2 = −1), each written as
-    p_i ≥ 0, s_i ≥ 0, c_i(π) = p_i s_i − r_i² ≥ 0 with p = N11 − m, s = N22 − m, r = N12 affine in π
-    (rows of GP, GS, GR): rotated second-order cones. All cones are evaluated at once (vectorised)."""
+    """The arm's 2×2 mass LMIs N_i(π) = Σ_p π_p B_ip ⪰ margin·I (two-link arm: i = 0 at cos q2 = +1, 1 at
+    cos q2 = −1), each written as p_i ≥ 0, s_i ≥ 0, c_i(π) = p_i s_i − r_i² ≥ 0 with p = N11 − m,
+    s = N22 − m, r = N12 affine in π (rows of GP, GS, GR, from `MatrixInequality.rotated_cone`): rotated
+    second-order cones. All L cones are evaluated at once (vectorised). Larger LMIs are refused there."""
 
-    def __init__(self, model: ArmModel, margin: float):
-        A0, A1 = model.mass_matrix_maps
-        B = np.stack([A0 + A1, A0 - A1])  # (2, P, 2, 2)
-        self.GP, self.GS, self.GR = B[:, :, 0, 0], B[:, :, 1, 1], B[:, :, 0, 1]  # (2, P) each
-        self.margin = margin
-        # ∇²c_i = gp gsᵀ + gs gpᵀ − 2 gr grᵀ: constant, (2, P, P).
+    def __init__(self, lmis: tuple[MatrixInequality, ...]):
+        rows = [lmi.rotated_cone() for lmi in lmis]
+        self.GP, self.GS, self.GR = (np.stack([r[i] for r in rows]) for i in range(3))  # (L, P) each
+        self.margin = np.array([lmi.margin for lmi in lmis])  # (L,) [kg m²]
+        # ∇²c_i = gp gsᵀ + gs gpᵀ − 2 gr grᵀ: constant, (L, P, P).
         self.hessian = (
             np.einsum("ip,iq->ipq", self.GP, self.GS)
             + np.einsum("ip,iq->ipq", self.GS, self.GP)
             - 2 * np.einsum("ip,iq->ipq", self.GR, self.GR)
         )
-        self.n = 2
+        self.n = len(lmis)
 
     def values(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(p, s, r, c) of every cone at x, each (2,)."""
+        """(p, s, r, c) of every cone at x, each (L,)."""
         p, s, r = self.GP @ x - self.margin, self.GS @ x - self.margin, self.GR @ x
         return p, s, r, p * s - r * r
 
     def gradients(self, x: np.ndarray) -> np.ndarray:
-        """∇c_i at x, (2, P)."""
+        """∇c_i at x, (L, P)."""
         p, s, r, _ = self.values(x)
         return s[:, None] * self.GP + p[:, None] * self.GS - 2 * r[:, None] * self.GR
 
@@ -272,9 +262,10 @@ class _Cones:
 class WarmConsistentLS:
     """Physically consistent LS (CPBR) re-solved from statistics that change a little between calls.
 
-        minimise ½πᵀHπ − hᵀπ  subject to  lower ≤ π ≤ upper,  M0(π) ± M1(π) ⪰ margin·I
+        minimise ½πᵀHπ − hᵀπ  subject to  lower ≤ π ≤ upper,  every mass LMI of the arm ⪰ margin·I
 
-    (M(q) = M0 + M1 cos q2 ⪰ margin·I for every q; the same problem as `constrained.fit_constrained`).
+    (two-link arm: M(q) = M0 + M1 cos q2 ⪰ margin·I for every q; the same problem as
+    `constrained.fit_constrained`). The LMIs must be 2×2 (`MatrixInequality.rotated_cone`).
     Each call: (1) the box-only solution (`WarmBoundedLS`); if M is positive definite there it is the
     answer (the cone constraints are inactive). (2) Otherwise Newton's method on the KKT equations of
     the previous call's active set (box parameters fixed, active cones as equalities c(π) = 0),
@@ -286,9 +277,9 @@ class WarmConsistentLS:
     calls that needed (3); `inexact` those where even the polish failed (Clarabel's answer is returned).
     """
 
-    def __init__(self, model: ArmModel, bounds: Bounds, margin: float = 1e-6):
+    def __init__(self, model: Arm, bounds: Bounds, margin: float = MARGIN):
         self.model, self.bounds, self.margin = model, bounds, margin
-        self.cones = _Cones(model, margin)
+        self.cones = _Cones(mass_constraints(model, margin))
         self.box = WarmBoundedLS(bounds)
         self.pi: np.ndarray | None = None
         self.state = np.zeros(model.n_params, dtype=np.int8)
@@ -408,20 +399,20 @@ class WarmConsistentLS:
             return state, mu
         return None
 
+    def _as_stats(self, H: np.ndarray, h: np.ndarray) -> Stats:
+        """Statistics whose normal equations are (H, h) up to a common scale (which does not move the
+        minimiser): all on the first joint, the others zero."""
+        c = 1.0 / np.max(np.diag(H))
+        J, P = self.model.n_joints, h.shape[0]
+        G, b = np.zeros((J, P, P)), np.zeros((J, P))
+        G[0], b[0] = H * c, h * c
+        return Stats(G, b, np.zeros(J), 1)
+
     def _clarabel(self, H: np.ndarray, h: np.ndarray) -> np.ndarray:
         """The conic solver for a new active set, then Newton polishes its answer on the active set it
         shows (exact KKT); if no polish passes the check, the conic answer is returned (`inexact`)."""
-        from ident_opt.identify.constrained import fit_constrained
-        from ident_opt.identify.stats import Stats
-
-        c = 1.0 / np.max(np.diag(H))  # the minimiser does not depend on a common scale of (H, h)
-        P = h.shape[0]
-        stats = Stats(np.stack([H * c, np.zeros((P, P))]), np.stack([h * c, np.zeros(P)]), np.zeros(2), 1)
-        fit = fit_constrained(
-            stats, self.model, margin=self.margin, friction=False, bounds=(self.bounds.lower, self.bounds.upper)
-        )
-        x = np.asarray(fit.pi, dtype=float)
         lo, hi = self.bounds.lower, self.bounds.upper
+        x = solve_constrained(self._as_stats(H, h), self.model, margin=self.margin, friction=False, bounds=(lo, hi))
         near = 1e-7 * np.maximum(np.abs(x), 1.0)
         state = np.where(x - lo <= near, -1, np.where(hi - x <= near, 1, 0)).astype(np.int8)
         near_cone = self.cones.slacks(x) <= 1e-6 * max(1.0, np.max(np.abs(x)))

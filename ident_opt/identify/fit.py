@@ -4,25 +4,33 @@ Everything is computed from the sufficient statistics (`Stats`): per joint j, G_
 b_j = Σ Y_jᵀτ_j, s_j = Σ τ_j², n. With joint weights w_j the normal equations are H π = h, where
 H = Σ_j w_j G_j and h = Σ_j w_j b_j.
 
-Standard errors use a residual variance per joint (the two joints have different noise and model error):
+Standard errors use a residual variance per joint (joints have different noise and model error):
 σ_j² = RSS_j / dof_j with dof_j = n − w_j tr(H⁺ G_j) (the joint's share of the hat matrix's trace, so the
-dofs add up to 2n − rank), and Cov(π̂) = H⁺ (Σ_j w_j² σ_j² G_j) H⁺ (the sandwich; it reduces to H⁻¹ for
+dofs of J joints add up to J·n − rank), and Cov(π̂) = H⁺ (Σ_j w_j² σ_j² G_j) H⁺ (the sandwich; it reduces to H⁻¹ for
 WLS with w_j = 1/σ_j²). They assume independent residuals: on densely sampled real trials, where
 consecutive residuals are correlated, they are optimistic; read them as a lower bound.
 
 Conditioning is judged on the column-equilibrated regressor (each column scaled to unit norm), so units
 (kg m² next to N m) do not decide what counts as "poorly determined".
+
+Physical consistency is judged by the one statement of it (`ident_opt.consistency`): M(q) ≻ 0 for every q
+(`Arm.min_mass_eigenvalue` > 0) and the sign constraints of the parameters' declared kinds.
+
+`check_stats`, `normal_equations` and `solve_normal` are shared with the other estimators.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import scipy.linalg
 
+from ident_opt import consistency
+from ident_opt.arm import Arm
 from ident_opt.identify.stats import Stats
-from ident_opt.robot import ArmModel
+from ident_opt.parameters import Parameter
 
 #: Columns whose squared norm is below this fraction of the largest are "not excited".
 UNEXCITED = 1e-12
@@ -34,8 +42,8 @@ POOR_RELATIVE_SE = 0.5
 
 @dataclass
 class LinearFit:
-    """Identified π with its uncertainty and diagnostics. Units: a [kg m²], b [N m], fv [N m s/rad],
-    fc [N m]; `sigma2` [N² m²] per joint."""
+    """Identified π with its uncertainty and diagnostics. Units: each parameter's own (`Parameter.unit`;
+    a [kg m²], b [N m], fv [N m s/rad], fc [N m]); `sigma2`, `rss` [N² m²] and `weights` per joint."""
 
     pi: np.ndarray
     names: tuple[str, ...]
@@ -44,9 +52,9 @@ class LinearFit:
     active: list[str] = field(default_factory=list)
     method: str = "ols"
     status: str = "optimal"
-    weights: np.ndarray = field(default_factory=lambda: np.ones(2))
+    weights: np.ndarray = field(default_factory=lambda: np.ones(0))
     n: int = 0
-    rss: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    rss: np.ndarray = field(default_factory=lambda: np.zeros(0))
     cond: float = float("nan")  # condition number of the column-equilibrated regressor
     rank: int = 0
     unexcited: list[str] = field(default_factory=list)
@@ -56,6 +64,7 @@ class LinearFit:
     min_mass_eigenvalue: float = float("nan")  # min over q of λ_min(M(q)) [kg m²]
     solve_seconds: float = float("nan")
     details: dict = field(default_factory=dict)  # estimator-specific extras (e.g. physical parameters)
+    parameters: tuple[Parameter, ...] = ()  # the arm's declarations (their kinds decide the sign checks)
 
     def as_dict(self) -> dict[str, float]:
         """π by name."""
@@ -66,23 +75,28 @@ class LinearFit:
         return {name: float(v) for name, v in zip(self.names, self.se)}
 
     @property
+    def sign_violations(self) -> dict[str, list[str]]:
+        """Kind → its sign-constrained parameters that are negative (`consistency.sign_violations`)."""
+        return consistency.sign_violations(self.parameters, self.pi)
+
+    @property
     def friction_ok(self) -> bool:
-        """All friction parameters (fv*, fc*, fs*) ≥ 0."""
-        return all(v >= 0 for name, v in self.as_dict().items() if name.startswith("f"))
+        """All parameters of kind friction (viscous, Coulomb, Stribeck, ...) ≥ 0."""
+        return "friction" not in self.sign_violations
 
     @property
     def armature_ok(self) -> bool:
-        """All reflected rotor inertias (ia*) ≥ 0."""
-        return all(v >= 0 for name, v in self.as_dict().items() if name.startswith("ia"))
+        """All parameters of kind armature (reflected rotor inertias) ≥ 0."""
+        return "armature" not in self.sign_violations
 
     @property
     def consistent(self) -> bool:
-        """Physically consistent: M(q) ≻ 0 for every q, friction ≥ 0 and armature ≥ 0."""
-        return bool(self.min_mass_eigenvalue > 0 and self.friction_ok and self.armature_ok)
+        """Physically consistent: M(q) ≻ 0 for every q and every sign constraint (friction, armature) holds."""
+        return bool(self.min_mass_eigenvalue > 0 and not self.sign_violations)
 
     def summary(self) -> dict:
         """A JSON-friendly dict of everything (arrays as lists, π and SE by name)."""
-        out = {k: v for k, v in asdict(self).items() if k not in ("pi", "se", "names")}
+        out = {k: v for k, v in asdict(self).items() if k not in ("pi", "se", "names", "parameters")}
         out = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in out.items()}
         out.update(parameters=self.as_dict(), se=self.se_dict(), consistent=self.consistent)
         return out
@@ -90,22 +104,24 @@ class LinearFit:
 
 # ---------------------------------------------------------------------------------------------- weights
 def joint_weights(stats: Stats, weights: str | np.ndarray | None) -> np.ndarray:
-    """Per-joint weights: None → (1, 1); "wls" → 1/σ_j² from a first OLS pass; an array (2,) as given."""
+    """Per-joint weights (J,): None → all 1; "wls" → 1/σ_j² [1/(N² m²)] from a first OLS pass; an array as given."""
+    ones = np.ones(stats.n_joints)
     if weights is None:
-        return np.ones(2)
+        return ones
     if isinstance(weights, str):
         if weights != "wls":
-            raise ValueError(f"weights must be None, 'wls' or an array of 2, not {weights!r}")
-        first = _solve(*_normal(stats, np.ones(2)))
-        sigma2 = _sigma2(stats, first, np.ones(2))
+            raise ValueError(f"weights must be None, 'wls' or an array of {len(ones)}, not {weights!r}")
+        first = solve_normal(*normal_equations(stats, ones))
+        sigma2 = _sigma2(stats, first, ones)
         return 1.0 / np.maximum(sigma2, 1e-300)
     w = np.asarray(weights, dtype=float)
-    if w.shape != (2,) or not np.all(w > 0):
-        raise ValueError("joint weights must be two positive numbers")
+    if w.shape != ones.shape or not np.all(w > 0):
+        raise ValueError(f"joint weights must be {len(ones)} positive numbers")
     return w
 
 
-def _normal(stats: Stats, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def normal_equations(stats: Stats, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(H, h) = (Σ_j w_j G_j, Σ_j w_j b_j): the normal equations H π = h of the weighted fit."""
     G, b, _ = stats.combined(w)
     return G, b
 
@@ -126,15 +142,15 @@ def _pinv(H: np.ndarray) -> np.ndarray:
     return D[:, None] * np.linalg.pinv(Hs, rcond=RANK_TOL**2, hermitian=True) * D[None, :]
 
 
-def _solve(H: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Least-norm (in equilibrated units) solution of H π = h."""
+def solve_normal(H: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Least-norm (in equilibrated units) solution π of H π = h."""
     return _pinv(H) @ h
 
 
 def _sigma2(stats: Stats, pi: np.ndarray, w: np.ndarray) -> np.ndarray:
-    H, _ = _normal(stats, w)
+    H, _ = normal_equations(stats, w)
     Hp = _pinv(H)
-    dof = stats.n - w * np.array([np.trace(Hp @ stats.G[j]) for j in range(2)])
+    dof = stats.n - w * np.array([np.trace(Hp @ G_j) for G_j in stats.G])
     return np.maximum(stats.rss(pi), 0.0) / np.maximum(dof, 1.0)
 
 
@@ -179,7 +195,7 @@ def base_combinations(H: np.ndarray, names: tuple[str, ...]) -> tuple[int, float
 
 def finish(
     stats: Stats,
-    model: ArmModel,
+    model: Arm,
     pi: np.ndarray,
     w: np.ndarray,
     method: str,
@@ -189,26 +205,14 @@ def finish(
 ) -> LinearFit:
     """A LinearFit for `pi` with standard errors and diagnostics from the statistics (see module doc)."""
     names = model.names
-    H, _ = _normal(stats, w)
+    H, _ = normal_equations(stats, w)
     Hp = _pinv(H)
     sigma2 = _sigma2(stats, pi, w)
-    meat = sum(w[j] ** 2 * sigma2[j] * stats.G[j] for j in range(2))
+    meat = sum(w_j**2 * s2_j * G_j for w_j, s2_j, G_j in zip(w, sigma2, stats.G))
     cov = Hp @ meat @ Hp
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     rank, cond, unexcited, base = base_combinations(H, names)
-    warnings: list[str] = []
-    # A parameter in a not-identifiable direction has no meaningful SE: flag it by name.
-    free = set(unexcited)
-    if rank < len(names):
-        free |= {t.split("·")[-1] for b in base for t in b.split() if "·" in t}
-        warnings.append(
-            f"the data excite only {rank} of {len(names)} parameter directions; identifiable: "
-            + ("; ".join(base) if base else "the excited columns")
-            + (f"; not excited: {', '.join(unexcited)}" if unexcited else "")
-        )
-    poor = [n for n, v, e in zip(names, pi, se) if n in free or e > POOR_RELATIVE_SE * abs(v)]
-    if poor:
-        warnings.append("poorly determined (SE > 50% of |value| or not identifiable): " + ", ".join(poor))
+    warnings, poor = _identifiability(names, pi, se, rank, unexcited, base)
     fit = LinearFit(
         pi=np.asarray(pi, dtype=float),
         names=names,
@@ -228,42 +232,65 @@ def finish(
         warnings=warnings,
         min_mass_eigenvalue=model.min_mass_eigenvalue(pi),
         solve_seconds=solve_seconds,
+        parameters=model.parameters,
     )
     if not fit.consistent:
-        what = []
-        if fit.min_mass_eigenvalue <= 0:
-            what.append(f"M(q) is not positive definite (min eigenvalue {fit.min_mass_eigenvalue:.3g} kg m²)")
-        for ok, kind, prefix in ((fit.friction_ok, "friction", "f"), (fit.armature_ok, "armature", "ia")):
-            if not ok:
-                what.append(
-                    f"negative {kind}: "
-                    + ", ".join(n for n, v in fit.as_dict().items() if n.startswith(prefix) and v < 0)
-                )
-        fit.warnings.append("physically inconsistent: " + "; ".join(what))
+        fit.warnings.append(_inconsistency(fit))
     return fit
 
 
+def _identifiability(
+    names: tuple[str, ...], pi: np.ndarray, se: np.ndarray, rank: int, unexcited: list[str], base: list[str]
+) -> tuple[list[str], list[str]]:
+    """(warnings, poorly determined names): directions the data do not excite, and large standard errors."""
+    warnings: list[str] = []
+    # A parameter in a not-identifiable direction has no meaningful SE: flag it by name.
+    free = set(unexcited)
+    if rank < len(names):
+        free |= {t.split("·")[-1] for b in base for t in b.split() if "·" in t}
+        warnings.append(
+            f"the data excite only {rank} of {len(names)} parameter directions; identifiable: "
+            + ("; ".join(base) if base else "the excited columns")
+            + (f"; not excited: {', '.join(unexcited)}" if unexcited else "")
+        )
+    poor = [n for n, v, e in zip(names, pi, se) if n in free or e > POOR_RELATIVE_SE * abs(v)]
+    if poor:
+        warnings.append("poorly determined (SE > 50% of |value| or not identifiable): " + ", ".join(poor))
+    return warnings, poor
+
+
+def _inconsistency(fit: LinearFit) -> str:
+    """The warning for an inconsistent fit: which part of `ident_opt.consistency` it violates."""
+    what = []
+    if fit.min_mass_eigenvalue <= 0:
+        what.append(f"M(q) is not positive definite (min eigenvalue {fit.min_mass_eigenvalue:.3g} kg m²)")
+    what += [f"negative {kind}: " + ", ".join(names) for kind, names in fit.sign_violations.items()]
+    return "physically inconsistent: " + "; ".join(what)
+
+
 # ---------------------------------------------------------------------------------------------- OLS
-def fit_ols(stats: Stats, model: ArmModel, weights: str | np.ndarray | None = None) -> LinearFit:
+def fit_ols(stats: Stats, model: Arm, weights: str | np.ndarray | None = None) -> LinearFit:
     """(Weighted) least squares π̂ = argmin Σ_j w_j Σ_k (τ_kj − Y_kj π)² from the statistics.
 
     `weights`: None (plain OLS), "wls" (w_j = 1/σ_j² from a first OLS pass: joints with less noise count
-    more) or an array of two positive numbers. Least-norm (equilibrated) if the data do not excite every
-    direction; the fit's `base` and `warnings` then say what is identifiable.
+    more) or an array of positive numbers, one per joint. Least-norm (equilibrated) if the data do not
+    excite every direction; the fit's `base` and `warnings` then say what is identifiable.
     """
-    import time
-
-    _check(stats, model)
+    check_stats(stats, model)
     w = joint_weights(stats, weights)
     t0 = time.perf_counter()
-    pi = _solve(*_normal(stats, w))
+    pi = solve_normal(*normal_equations(stats, w))
     elapsed = time.perf_counter() - t0
     return finish(stats, model, pi, w, "wls" if weights is not None else "ols", solve_seconds=elapsed)
 
 
-def _check(stats: Stats, model: ArmModel) -> None:
+def check_stats(stats: Stats, model: Arm) -> None:
+    """Raise ValueError unless the statistics are for this arm (J = n_joints, P = n_params) and hold samples."""
     P = model.n_params
-    if stats.G.shape != (2, P, P):
-        raise ValueError(f"statistics for {stats.G.shape[-1]} parameters, model {model.names} has {P}")
+    if stats.G.shape != (model.n_joints, P, P):
+        raise ValueError(
+            f"statistics for {stats.G.shape[-1]} parameters and {stats.G.shape[0]} joints, "
+            f"model {model.names} has {P} and {model.n_joints}"
+        )
     if stats.n <= 0:
         raise ValueError("no samples in the statistics")

@@ -7,8 +7,9 @@ Two tools:
   a delay, an elastic mode ...).
 - `fit_physical`: identify the *physical* parameters (masses, centres of mass, inertias, armature,
   friction) within physical bounds; π follows from them through `datasheet.grouped`, so the result is
-  physically consistent by construction. Works from the sufficient statistics: the objective
-  Σ_j RSS_j(π(θ)) = π(θ)ᵀHπ(θ) − 2hᵀπ(θ) + s costs nothing per sample.
+  physically consistent by construction (friction and other sign-constrained parameters kept ≥ 0 from
+  their declared kinds, `consistency.sign_constraints`). Works from the sufficient statistics: the
+  objective Σ_j RSS_j(π(θ)) = π(θ)ᵀHπ(θ) − 2hᵀπ(θ) + s costs nothing per sample.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from ident_opt.consistency import sign_constraints
 from ident_opt.datasheet import grouped, rigid_body
-from ident_opt.identify.fit import LinearFit, _check, _normal, finish, joint_weights
+from ident_opt.identify.fit import LinearFit, check_stats, finish, joint_weights, normal_equations
 from ident_opt.identify.stats import Stats
 from ident_opt.robot import ArmModel
 
@@ -145,8 +147,8 @@ PHYSICAL_INERTIAL = ("m1", "m2", "lc1", "lc2", "Ic1", "Ic2", "ia1", "ia2")
 def physical_start(robot, model: ArmModel) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
     """Datasheet start values (physical convention) and physical bounds for every parameter θ.
 
-    Masses ≥ 1 g, centres of mass on their link (0 ≤ lc ≤ l), inertias and armatures ≥ 0, friction ≥ 0.
-    Parameters of extensions that are not friction (e.g. offsets) are unbounded.
+    Masses ≥ 1 g, centres of mass on their link (0 ≤ lc ≤ l), inertias and armatures ≥ 0; the other
+    parameters ≥ 0 when their kind is sign-constrained (friction, armature), else unbounded (e.g. offsets).
     """
     body = rigid_body(robot, "physical")
     start = {
@@ -182,11 +184,12 @@ def physical_start(robot, model: ArmModel) -> tuple[dict[str, float], dict[str, 
         "fc1n": body.fc_negative[0],
         "fc2n": body.fc_negative[1],
     }
+    nonnegative = {model.names[c.index] for c in sign_constraints(model.parameters)}
     for name in model.names:
         if name in ("a1", "a2", "a3", "b1", "b2", "ia2"):
             continue
         start[name] = sheet.get(name, 0.0)
-        bounds[name] = (0.0, inf) if name[:2] in ("fv", "fc", "fs") else (-inf, inf)
+        bounds[name] = (0.0, inf) if name in nonnegative else (-inf, inf)
     return start, {k: bounds[k] for k in start}
 
 
@@ -219,9 +222,9 @@ def fit_physical(
     """
     model = model or ArmModel()
     stats = source if isinstance(source, Stats) else Stats.from_data(model, source.q, source.dq, source.ddq, source.tau)
-    _check(stats, model)
+    check_stats(stats, model)
     w = joint_weights(stats, weights)
-    H, h = _normal(stats, w)
+    H, h = normal_equations(stats, w)
     start, bounds = physical_start(robot, model)
     names = tuple(start)
     theta = ca.SX.sym("theta", len(names))
