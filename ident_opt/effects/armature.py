@@ -28,5 +28,15 @@ class Armature(Effect):
     def add_terms(self, model, q, dq, p: dict, M: list, G: list, F: list) -> None:
         M[1][1] = M[1][1] + p["ia2"]
 
+    # ------------------------------------------------------------------ simulator: J1 on a1, J2 on ia2
+    def true_plant(self, plant, p: dict) -> None:
+        J1, J2 = p["inertia"]
+        plant.pi["a1"] += J1
+        plant.pi["ia2"] += J2
+        plant.armature = [a + J for a, J in zip(plant.armature, p["inertia"])]
+
+    def true_physical(self, physical: dict, p: dict) -> None:
+        physical["armature"] = [a + J for a, J in zip(physical["armature"], p["inertia"])]
+
 
 EFFECT = Armature()

@@ -65,5 +65,15 @@ class AsymmetricCoulomb(Effect):
             F[j] = F[j] + p["fc" + k + "p"] * ca.if_else(dq[j] > 0, 1, 0)
             F[j] = F[j] - p["fc" + k + "n"] * ca.if_else(dq[j] < 0, 1, 0)
 
+    # ------------------------------------------------------------------ simulator: the model extension's friction
+    def true_plant(self, plant, p: dict) -> None:
+        plant.extensions.append(self.name)
+        for j, (positive, negative) in enumerate(zip(p["positive"], p["negative"]), start=1):
+            plant.pi[f"fc{j}p"], plant.pi[f"fc{j}n"] = positive, negative
+
+    def true_physical(self, physical: dict, p: dict) -> None:
+        physical["fc_positive"], physical["fc_negative"] = list(p["positive"]), list(p["negative"])
+        physical["fc"] = [0.5 * (a + b) for a, b in zip(p["positive"], p["negative"])]
+
 
 EFFECT = AsymmetricCoulomb()

@@ -292,17 +292,20 @@ class Background(Effect):
         """The added states at the start (length `states`)."""
         return np.zeros(0)
 
+    #: Whether the term is an external torque d on the joints (see `disturbance`).
+    disturbs: bool = False
+
     def disturbance(self, p: dict, n: int, dt: float, rng):
-        """An external torque d (n, 2) [N m] on a grid of step dt [s], or None when the term has none."""
-        return None
+        """The external torque d (n, 2) [N m] on a grid of step dt [s] (terms that `disturb`)."""
+        return np.zeros((n, 2))
 
     def force(self, p: dict, z):
-        """The torque [N m] the term's states z apply at the joints (a CasADi 2-vector)."""
-        return None
+        """The torque [N m] the term's states z resist the motion with, at the joints (a CasADi 2-vector)."""
+        return 0
 
     def rate(self, p: dict, z, v):
         """dz/dt of the term's states at encoder-side joint rates v [rad/s] (CasADi)."""
-        return None
+        return z[:0]
 
     def current(self, p: dict, robot, q, dq):
         """A torque [N m] added to the commanded one (part of the actual motor current), or None."""

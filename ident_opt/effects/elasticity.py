@@ -1,10 +1,144 @@
-"""``elasticity``: a lightly damped mode, an elastic joint (two-mass, motor angle logged) or a flexible link."""
+"""``elasticity``: a lightly damped mode, an elastic joint (two-mass, motor angle logged) or a flexible link.
+
+In the simulator (values in SI units):
+
+- ``kind=joint``: joint j becomes a two-mass (Spong) model. The motor (inertia B = the joint's armature,
+  its friction F_j) drives the link through a spring k and damper d: τ_s = k (θ − q_j) + d (dθ − dq_j),
+  B ddθ + F_j(dθ) = τ_j − τ_s, and the link side is the rigid model without that armature and friction,
+  driven by τ_s at joint j. k = J_l (2π f)², d = 2 ζ √(k J_l), with J_l the link-side inertia at joint j
+  (joint 1: at q2 = 0 with joint 2 held). The logged angle of joint j is the motor's θ.
+- ``kind=link``: link j is cut at mid-length into two rigid halves joined by a torsional spring (see
+  `simulate/flexible_link.py`); the joints stay rigid and their angles are logged.
+
+Either way the plant gains two states and logs the spring's deflection as ``deflection<j>``.
+"""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
-from ident_opt.effects.base import Effect, Key
+from ident_opt.effects.base import Effect, Key, deferred
+
+np = deferred("numpy")
+ca = deferred("casadi")
+flexible_link = deferred("ident_opt.simulate.flexible_link")
+sim = deferred("ident_opt.simulate.truth")
+
+#: Joint-2 angles [rad] the trajectories reach: |q2| ≤ 1.4 rad (the band of the mode over the workspace).
+Q2_RANGE = (0.0, 1.4)
+
+
+@dataclass(frozen=True)
+class Elastic:
+    """An elastic joint or flexible link: which (0-based), stiffness k [N m/rad], damping d [N m s/rad],
+    motor inertia B [kg m²], the inertia J [kg m²] used for k, and the natural frequency f [Hz]."""
+
+    index: int
+    k: float
+    d: float
+    B: float
+    J_link: float
+    frequency_hz: float
+    damping: float
+    frequency_range_hz: tuple[float, float]  # over the workspace (joint 1: J_l depends on q2)
+    kind: str = "joint"  # "joint" (two-mass) or "link" (flexible link, see flexible_link.py)
+    fastest_rate: float = 0.0  # rad/s, a bound of the mode's rate with free joints (sizes the RK4 step)
+
+    #: The state: [q (2), θ, dq (2), dθ] (elastic joint) or [q (2), φ, dq (2), dφ] (flexible link).
+    state_size = 6
+
+    @property
+    def deflection_column(self) -> str:
+        """The logged column of the spring's deflection."""
+        return f"deflection{self.index + 1}"
+
+    def rates(self, kd: tuple[float, float]) -> list[float]:
+        """The fastest closed-loop rate [1/s] the mode adds under PD damping gains kd [N m s/rad]."""
+        return [self.fastest_rate + kd[self.index] / self.B]
+
+    def plant(self, truth) -> ca.Function:
+        """(x, τ) -> (ẋ, y) as `simulate.truth.plant`, y's deflection θ − q_j (joint) or φ (link)."""
+        x, tau = ca.SX.sym("x", self.state_size), ca.SX.sym("tau", 2)
+        delta = ca.DM(truth.offset)
+        if self.kind == "link":
+            return self._link_plant(truth, x, tau, delta)
+        model, pi, j = truth.model, truth.pi, self.index
+        q, theta, dq, dtheta = x[:2], x[2], x[3:5], x[5]
+        link = pi - sim.friction_only(model, pi, j)  # the link side: no friction and no motor inertia at j
+        link[model.names.index("a1" if j == 0 else "ia2")] -= self.B
+        spring = self.k * (theta - q[j]) + self.d * (dtheta - dq[j])
+        tau_link = ca.vertcat(spring, tau[1]) if j == 0 else ca.vertcat(tau[0], spring)
+        ddq = sim.solve_forward(model, ca.DM(link), q, dq, tau_link)
+        v = ca.vertcat(dtheta, 0) if j == 0 else ca.vertcat(0, dtheta)
+        motor_friction = model.tau_expression(q, v, ca.DM.zeros(2), ca.DM(sim.friction_only(model, pi, j)))[j]
+        ddtheta = (tau[j] - spring - motor_friction) / self.B
+        xdot = ca.vertcat(dq, dtheta, ddq, ddtheta)
+        q_enc = ca.vertcat(theta, q[1]) if j == 0 else ca.vertcat(q[0], theta)
+        dq_enc = ca.vertcat(dtheta, dq[1]) if j == 0 else ca.vertcat(dq[0], dtheta)
+        ddq_enc = ca.vertcat(ddtheta, ddq[1]) if j == 0 else ca.vertcat(ddq[0], ddtheta)
+        y = ca.vertcat(q_enc - delta, dq_enc, ddq_enc, theta - q[j])
+        return ca.Function("plant", [x, tau], [xdot, y], ["x", "tau"], ["xdot", "y"])
+
+    def _link_plant(self, truth, x, tau, delta) -> ca.Function:
+        """The flexible-link plant (see flexible_link.py): x = [q1, q2, φ, dq1, dq2, dφ]."""
+        model, pi = truth.model, truth.pi
+        z, dz, M, h = flexible_link.lagrangian_terms(truth.robot, self.index, truth.armature)
+        friction_pi = sim.friction_only(model, pi, 0) + sim.friction_only(model, pi, 1)
+        F = model.tau_expression(z[:2], dz[:2], ca.DM.zeros(2), ca.DM(friction_pi))
+        Q = ca.vertcat(tau - F, -self.k * z[2] - self.d * dz[2])
+        ddz = ca.solve(M, Q - h)
+        motion = ca.Function("motion", [z, dz, tau], [ddz])
+        ddz_x = motion(x[:3], x[3:], tau)
+        xdot = ca.vertcat(x[3:], ddz_x)
+        y = ca.vertcat(x[:2] - delta, x[3:5], ddz_x[:2], x[2])
+        return ca.Function("plant", [x, tau], [xdot, y], ["x", "tau"], ["xdot", "y"])
+
+    def initial_state(self, truth, q: np.ndarray) -> np.ndarray:
+        """A state at rest with true joint angles `q` [rad], the spring at its static deflection."""
+        if self.kind == "link":  # the static bend: k φ = −∂V/∂φ
+            z, dz, _, h = flexible_link.lagrangian_terms(truth.robot, self.index, truth.armature)
+            dV = ca.Function("dV", [z], [ca.substitute(h, dz, ca.DM.zeros(3))[2]])
+            phi = 0.0
+            for _ in range(20):
+                phi = -float(dV([q[0], q[1], phi])) / self.k
+            return np.array([q[0], q[1], phi, 0.0, 0.0, 0.0])
+        theta = q[self.index]
+        gravity = sim.TRUTH_MODEL.function("G")
+        link_pi = sim.TRUTH_MODEL.vector(truth.pi_rigid)
+        for _ in range(20):  # fixed point of k (θ − q_j) = G_j(q): the spring holds the link against gravity
+            q[self.index] = theta - float(gravity(q, [0, 0], [0, 0], link_pi)[self.index]) / self.k
+        return np.concatenate([q, [theta], [0.0, 0.0, 0.0]])
+
+
+def elastic_joint(plant, j: int, f: float, zeta: float) -> Elastic:
+    """Joint j (0-based) elastic at f [Hz] with damping ratio ζ, on the true plant `plant` (a `PlantSpec`)."""
+    pi = plant.pi
+    B = plant.armature[j]  # the motor side: reflected rotor inertia
+    J_link = (pi["a1"] - B + 2 * pi["a2"]) if j == 0 else pi["a3"]
+    k = J_link * (2 * math.pi * f) ** 2
+    if j == 0:  # J_l(q2) = a1 − B + 2 a2 cos q2 over the trajectories' range of q2
+        inertias = [pi["a1"] - B + 2 * pi["a2"] * math.cos(q2) for q2 in Q2_RANGE]
+    else:
+        inertias = [J_link, J_link]
+    band = tuple(math.sqrt(k / J) / (2 * math.pi) for J in inertias)
+    d = 2 * zeta * math.sqrt(k * J_link)
+    w_free = math.sqrt(k * (1 / B + 1 / min(inertias)))
+    rate = w_free + d * (1 / B + 1 / min(inertias))
+    return Elastic(j, k, d, B, J_link, f, zeta, band, "joint", rate)
+
+
+def flexible(plant, j: int, f: float, zeta: float) -> Elastic:
+    """Link j (0-based) flexible at f [Hz] with damping ratio ζ, on the true plant `plant` (a `PlantSpec`)."""
+    robot, armature = plant.robot, tuple(plant.armature)
+    J = flexible_link.mode_inertia(robot, j, armature, 0.0)
+    k = J * (2 * math.pi * f) ** 2
+    inertias = [flexible_link.mode_inertia(robot, j, armature, q2) for q2 in Q2_RANGE]
+    band = tuple(math.sqrt(k / Jq) / (2 * math.pi) for Jq in inertias)
+    d = 2 * zeta * math.sqrt(k * J)
+    w_free = flexible_link.free_rate(robot, j, armature, k)
+    rate = w_free + d * w_free**2 / k  # d (M⁻¹)_φφ, with (M⁻¹)_φφ = ω²/k
+    return Elastic(j, k, d, armature[j], J, f, zeta, band, "link", rate)
 
 
 class Elasticity(Effect):
@@ -31,6 +165,25 @@ class Elasticity(Effect):
 
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
         return math.isfinite(p["frequency_hz"])
+
+    # ------------------------------------------------------------------ simulator
+    def mechanism(self, plant, p: dict) -> Elastic:
+        make = elastic_joint if p["kind"] == "joint" else flexible
+        return make(plant, p["joint"] - 1, p["frequency_hz"], p["damping"])
+
+    def truth_entry(self, truth, p: dict) -> dict:
+        e = truth.elastic
+        return {
+            "joint": e.index + 1,
+            "kind": e.kind,
+            "frequency_range_hz": list(e.frequency_range_hz),
+            "frequency_hz": e.frequency_hz,
+            "damping": e.damping,
+            "stiffness": e.k,
+            "damper": e.d,
+            "motor_inertia": e.B,
+            "link_inertia": e.J_link,
+        }
 
 
 EFFECT = Elasticity()

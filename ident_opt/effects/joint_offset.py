@@ -42,5 +42,9 @@ class JointOffset(Effect):
         G[0] = G[0] + (p["b1s"] * s1 + p["b2s"] * s12)
         G[1] = G[1] + p["b2s"] * s12
 
+    # ------------------------------------------------------------------ simulator: the encoders' zero
+    def true_plant(self, plant, p: dict) -> None:
+        plant.offset = [a + b for a, b in zip(plant.offset, p["offset"])]
+
 
 EFFECT = JointOffset()

@@ -38,5 +38,16 @@ class Stribeck(Effect):
             vs = model.stribeck_velocity[j]
             F[j] = F[j] + p["fs" + str(j + 1)] * ca.sign(dq[j]) * ca.exp(-((dq[j] / vs) ** 2))
 
+    # ------------------------------------------------------------------ simulator: the model extension's friction
+    def true_plant(self, plant, p: dict) -> None:
+        plant.extensions.append(self.name)
+        plant.pi["fs1"], plant.pi["fs2"] = p["static"]
+        plant.options["stribeck_velocity"] = tuple(p["velocity"])
+
+    def truth_entry(self, truth, p: dict) -> dict:
+        # The static level fs is above the true plant's (mean) Coulomb level.
+        levels = [truth.pi_rigid["fc1"], truth.pi_rigid["fc2"]]
+        return {**p, "static_level": [c + s for c, s in zip(levels, p["static"])]}
+
 
 EFFECT = Stribeck()

@@ -15,8 +15,9 @@ Integration: the torque is constant over each tick (1 ms at 1 kHz); the plant is
 limit of 2.8), so stiff springs and high gains stay stable and accurate. The step is one CasADi function,
 run tick after tick by `mapaccum` in chunks (fast: no Python per step).
 
-Background terms (background.py) enter here: the ripple is added to the commanded torque (the actual motor
-current, held over the tick and logged), the drift is an extra input per tick, and stiction adds states.
+Background terms (background.py) enter here: their currents are added to the commanded torque (the actual
+motor current, held over the tick and logged), their external torques are an extra input per tick, and their
+states extend the plant's.
 """
 
 from __future__ import annotations
@@ -79,9 +80,8 @@ def substeps(truth: Truth, g: Gains, robot: Robot, control: float = CONTROL_HZ) 
     p = datasheet_pi(robot, "physical")
     J = np.array([p["a1"] + 2 * p["a2"], p["a3"] + p["ia2"]])
     rates = [math.sqrt(max(g.kp[i] / J[i], 0.0)) + g.kd[i] / J[i] for i in range(2)]
-    e = truth.elastic
-    if e is not None:
-        rates.append(e.fastest_rate + g.kd[e.index] / e.B)
+    if truth.elastic is not None:
+        rates += truth.elastic.rates(g.kd)
     # Joint 1's inertia drops to a1 + 2 a2 cos(1.4) at the trajectories' widest q2; halve for margin.
     rates += background.rates(truth.background, 0.5 * np.array([p["a1"] + 2 * p["a2"] * math.cos(1.4), J[1]]))
     return max(2, math.ceil(max(rates) / control / 0.25))
@@ -90,18 +90,18 @@ def substeps(truth: Truth, g: Gains, robot: Robot, control: float = CONTROL_HZ) 
 def tick(truth: Truth, robot: Robot, g: Gains, control: float = CONTROL_HZ) -> ca.Function:
     """One tick of a `control` [Hz] loop: (x, ref) -> (x_next, out) with out = [τ (2), y (7)] at its start.
 
-    ref = [q_r, dq_r, ddq_r, d]: the reference and the drift disturbance d [N m] over the tick."""
+    ref = [q_r, dq_r, ddq_r, d]: the reference and the background's external torque d [N m] over the tick."""
     nx = state_size(truth)
     bg = truth.background
     f = background.with_background(plant(truth), nx, bg)
     ctrl = controller(robot, g)
-    x, ref = ca.SX.sym("x", nx + (2 if background.has_states(bg) else 0)), ca.SX.sym("ref", 8)
+    x, ref = ca.SX.sym("x", nx + background.n_states(bg)), ca.SX.sym("ref", 8)
     d = ref[6:]
     _, y = f(x, ca.DM.zeros(2), d)
     tau = ctrl(ref[:6], y[:2], y[2:4])
-    r = background.ripple(bg, robot, y[:2], y[2:4])
+    r = background.current(bg, robot, y[:2], y[2:4])
     if r is not None:
-        tau = tau + r  # the actual motor current: commanded plus ripple
+        tau = tau + r  # the actual motor current: commanded plus the background's (e.g. a ripple)
     _, y = f(x, tau, d)  # y's accelerations are those the dynamics produce under the applied torque
     n = substeps(truth, g, robot, control)
     h = 1.0 / control / n
@@ -125,13 +125,13 @@ def run(
 ) -> np.ndarray:
     """Simulate the loop over the reference (sampled at the control rate `control` [Hz]); returns out (N, 9):
     τ, q_enc, dq_enc, ddq_enc, deflection at each tick. `seed` drives the background terms' randomness
-    (drift, initial bristle state), on streams of their own."""
+    (external torques, initial states), on streams of their own."""
     g = gains(robot)
     step = tick(truth, robot, g, control)
     bg = truth.background
-    z0 = background.initial_bristles(bg, np.random.default_rng([seed, 17]))
+    z0 = background.initial_states(bg, np.random.default_rng([seed, 17]))
     x = ca.DM(np.concatenate([initial_state(truth, ref.q[0]), z0]))
-    d = background.drift(bg, len(ref.t), 1.0 / control, np.random.default_rng([seed, 13]))
+    d = background.disturbance(bg, len(ref.t), 1.0 / control, np.random.default_rng([seed, 13]))
     refs = np.hstack([ref.q, ref.dq, ref.ddq, d]).T
     n = refs.shape[1]
     out = np.empty((9, n))

@@ -4,13 +4,15 @@
   rate up to 5 kHz, at which the controller then runs too (one logged sample per tick, see `closed_loop`);
 - encoders quantised to `ENCODER_COUNTS` counts per motor revolution (joint-side step 2π/(counts·N));
 - torque (or current) noise: white Gaussian, σ per joint as measured on the real exp1 at rest;
-- a torque-channel delay d: the logged torque at t is the applied torque at t − d (linear interpolation);
+- the torque channel as the hidden effects leave it (`Truth.logged_torque`: e.g. a delay);
 - dq, ddq estimated from the logged angles with the project's zero-phase estimator (`estimate_derivatives`),
   unless exact derivatives are asked for (then the true encoder-side rates and the accelerations the
   dynamics produce, so that the rigid model holds exactly at every logged sample).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
@@ -47,14 +49,17 @@ def log(
     robot: Robot,
     *,
     rate_hz: float,
-    delay: float,
+    channel: Callable[[np.ndarray, np.ndarray], np.ndarray],
     noise: bool,
     exact_derivatives: bool,
     output: str,
     rng: np.random.Generator,
-    elastic_joint: int | None,
+    deflection_column: str | None,
 ) -> pd.DataFrame:
-    """The logged trial as a data-format frame, from the per-tick loop output (N, 9) (see closed_loop.run)."""
+    """The logged trial as a data-format frame, from the per-tick loop output (N, 9) (see closed_loop.run).
+
+    `channel`: (t [s], τ (N, 2) [N m]) -> the torque as logged, at the ticks; `deflection_column`: where the
+    spring deflection goes (None: the plant has none)."""
     every = decimation(rate_hz)
     n_ticks = out.shape[0]
     t_tick = np.arange(n_ticks) / control_hz(rate_hz)
@@ -67,11 +72,7 @@ def log(
         out[:, 6:8],
         out[:, 8],
     )
-    if delay > 0:
-        # The torque channel lags: what is logged at t was applied at t − d (held at the start before that).
-        tau = np.column_stack([np.interp(t - delay, t_tick, tau_tick[:, j]) for j in range(2)])
-    else:
-        tau = tau_tick[idx].copy()
+    tau = channel(t_tick, tau_tick)[idx]
     q = q_enc[idx].copy()
     if noise:
         step = 2 * np.pi / (ENCODER_COUNTS * np.array([j.gear_ratio for j in robot.joints]))
@@ -89,8 +90,8 @@ def log(
         cols["i1"], cols["i2"] = tau[:, 0] / k[0], tau[:, 1] / k[1]
     else:
         cols["tau1"], cols["tau2"] = tau[:, 0], tau[:, 1]
-    # Extra columns a real logger has: the commanded angles, and a strain-like deflection at an elastic joint.
+    # Extra columns a real logger has: the commanded angles, and a strain-like deflection of a spring.
     cols["q1_ref"], cols["q2_ref"] = q_ref[idx, 0], q_ref[idx, 1]
-    if elastic_joint is not None:
-        cols[f"deflection{elastic_joint}"] = deflection[idx]
+    if deflection_column is not None:
+        cols[deflection_column] = deflection[idx]
     return pd.DataFrame(cols)

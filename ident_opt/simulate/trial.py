@@ -14,7 +14,7 @@ import pandas as pd
 
 from ident_opt.data import Dataset
 from ident_opt.datasheet import datasheet_pi, rigid_body
-from ident_opt.effects import is_active, normalise
+from ident_opt.effects import CATALOGUE, is_active, normalise
 from ident_opt.errors import InputError
 from ident_opt.problem import Robot
 from ident_opt.simulate import closed_loop, measurement
@@ -107,7 +107,7 @@ def simulate_trial(
     """Simulate one trial of `robot` (datasheet read physically) with hidden `effects`; deterministic.
 
     `effects`: name -> keys (e.g. {"elasticity": {"joint": 2, "frequency_hz": 8}}) or effect strings
-    ("elasticity:joint=2,frequency_hz=8"); see `effects.CATALOGUE`. `duration` [s], `rate_hz` [Hz] (a divisor
+    ("elasticity:joint=2,frequency_hz=8"); see `ident_opt.effects.CATALOGUE`. `duration` [s], `rate_hz` [Hz] (a divisor
     of 1 kHz, or faster up to 5 kHz: the controller then runs at that rate), `output` "torque" (tau1, tau2
     [N m]) or "current" (i1, i2 [A]). With `noise=False` the angles are not quantised and no noise is added;
     `exact_derivatives=True` logs the true dq and the ddq the dynamics produce instead of estimating them
@@ -128,18 +128,17 @@ def simulate_trial(
     ref = reference(trajectory, duration, seed, 1.0 / control)
     out = closed_loop.run(truth, robot, ref, progress=progress, seed=int(seed), control=control)
     rng = np.random.default_rng([seed, 11])  # the measurement noise's own stream
-    elastic_joint = truth.elastic.index + 1 if truth.elastic else None
     frame = measurement.log(
         out,
         ref.q,
         robot,
         rate_hz=rate_hz,
-        delay=truth.delay,
+        channel=truth.logged_torque,
         noise=noise,
         exact_derivatives=exact_derivatives,
         output=output,
         rng=rng,
-        elastic_joint=elastic_joint,
+        deflection_column=truth.elastic.deflection_column if truth.elastic else None,
     )
     settings = {
         "trajectory": trajectory,
@@ -166,37 +165,11 @@ def _plain(value):
 
 
 def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, settings: dict) -> dict:
-    """The ground truth, with effects in the estimate keys of `spec/diagnose.md`."""
-    effects = {}
-    for name, p in truth.effects.items():
-        if name == "elasticity":
-            e = truth.elastic
-            effects[name] = {
-                "joint": e.index + 1,
-                "kind": e.kind,
-                "frequency_range_hz": list(e.frequency_range_hz),
-                "frequency_hz": e.frequency_hz,
-                "damping": e.damping,
-                "stiffness": e.k,
-                "damper": e.d,
-                "motor_inertia": e.B,
-                "link_inertia": e.J_link,
-            }
-        elif name == "stribeck":
-            levels = [0.5 * (a + b) for a, b in zip(*coulomb_levels(robot))]
-            if "asymmetric_coulomb" in truth.effects:
-                ac = truth.effects["asymmetric_coulomb"]
-                levels = [0.5 * (a + b) for a, b in zip(ac["positive"], ac["negative"])]
-            effects[name] = {**p, "static_level": [c + s for c, s in zip(levels, p["static"])]}
-        else:
-            effects[name] = dict(p)
+    """The ground truth, with effects in the diagnosis's estimate keys (`docs/effects.md`)."""
+    effects = {name: CATALOGUE[name].truth_entry(truth, p) for name, p in truth.effects.items()}
     physical = asdict(rigid_body(truth.robot, "physical"))  # the true plant's, not the datasheet's
-    if "armature" in truth.effects:
-        physical["armature"] = [a + J for a, J in zip(physical["armature"], truth.effects["armature"]["inertia"])]
-    if "asymmetric_coulomb" in truth.effects:
-        ac = truth.effects["asymmetric_coulomb"]
-        physical["fc_positive"], physical["fc_negative"] = list(ac["positive"]), list(ac["negative"])
-        physical["fc"] = [0.5 * (a + b) for a, b in zip(ac["positive"], ac["negative"])]
+    for name, p in truth.effects.items():
+        CATALOGUE[name].true_physical(physical, p)
     g = closed_loop.gains(robot)
     control = closed_loop.control_hz(settings["rate_hz"])
     error = out[:, 2:4] - q_ref  # encoder angle minus reference, at every control tick
