@@ -28,10 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt.data import load_dataset
 from ident_opt.identify.constrained import fit_constrained, solve_constrained
 from ident_opt.identify.fit import fit_ols
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
+from ident_opt.problem import load_problem
 from ident_opt.robot import ArmModel
 
 
@@ -82,9 +84,6 @@ def medians(fns: dict[str, Callable[[], object]], repeats: int, interleaved: boo
 
 def exp1_stats(model: ArmModel) -> Stats | None:
     """Statistics of the real trial exp1, or None when its data file is not in the checkout."""
-    from ident_opt.data import load_dataset
-    from ident_opt.problem import load_problem
-
     problem = load_problem(Path(__file__).resolve().parents[1] / "problems" / "tudor_2dof.toml")
     if not problem.data.trials or not Path(problem.data.trials[0]).exists():
         return None

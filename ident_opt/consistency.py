@@ -4,10 +4,12 @@ What physics requires of π is declared next to the parameters, by the arm (`ide
 
 - each parameter's kind (`ident_opt.parameters`): friction and armature parameters must be ≥ 0 (friction
   dissipates; a reflected rotor inertia N² J is a mass, and M(q) ≻ 0 alone would allow a negative one
-  offset by the link inertias). Inertia sums are ≥ 0 too, but the mass-matrix LMIs state them in the
-  constrained fits (as in the paper's CPBR); box bounds (`physical_bounds`) use every non-negative kind.
-- `arm.mass_lmis()`: named affine maps A (P, k, k) with Σ_p π_p A_p ⪰ margin·I for each ⇔ M(q) ⪰ margin·I
-  for every q. The two-link arm has two 2×2 ones, at cos q2 = ±1.
+  offset by the link inertias). Inertia sums are ≥ 0 as well: the constrained fits leave them to the
+  mass-matrix LMIs (no separate constraint, as in the paper's CPBR); box bounds (`physical_bounds`) use
+  every non-negative kind.
+- `arm.mass_lmis()`: named affine maps A (P, k, k), Σ_p π_p A_p ⪰ margin·I for each being the arm's
+  statement of M(q) ≻ 0. The two-link arm's two 2×2 ones, at cos q2 = ±1, are exactly M(q) ⪰ margin·I for
+  every q; an arm from a URDF would give one 4×4 pseudo-inertia per link.
 
 `Consistency.of(arm, margin, signs, mass, bounds)` turns them (with optional box bounds) into constraint
 objects, each of which gives what every consumer needs, so the statement is written once:
@@ -18,14 +20,14 @@ objects, each of which gives what every consumer needs, so the statement is writ
 | π_p ≥ 0 (kind friction, armature)  | π_p                                | `friction_<p>`, `armature_<p>` |
 | π_p ≥ lb_p / π_p ≤ ub_p (optional) | π_p − lb_p / ub_p − π_p            | `lower_<p>`, `upper_<p>`   |
 
-| consumer                                              | uses                                              |
-|-------------------------------------------------------|---------------------------------------------------|
-| `identify.fit` (`LinearFit.consistent`, its warnings) | `sign_violations`, `Arm.min_mass_eigenvalue`      |
-| `identify.constrained`, Clarabel path                 | `Consistency.blocks` (A π + s = b, s ∈ cone), `.feasible` |
-| `identify.constrained`, cvxpy statement (test oracle) | `Consistency.cvxpy`                               |
-| active sets in reports                                | `Consistency.slacks`                              |
-| `identify.bounded` (online CPBR)                      | `MatrixInequality.rotated_cone` (2×2 only), `physical_bounds` |
-| `identify.nlp`                                        | `sign_constraints` (bounds of friction parameters) |
+| consumer                                   | uses                                                        |
+|--------------------------------------------|-------------------------------------------------------------|
+| `identify.fit`: `LinearFit.consistent`     | `sign_violations`, `Arm.min_mass_eigenvalue`                |
+| `identify.constrained`, Clarabel path      | `Consistency.blocks` (A π + s = b, s ∈ cone), `.feasible`   |
+| `identify.constrained`, cvxpy (test oracle) | `Consistency.cvxpy`                                        |
+| active sets in reports                     | `Consistency.slacks`                                        |
+| `identify.bounded` (online CPBR)           | `MatrixInequality.rotated_cone` (2×2), `physical_bounds`    |
+| `identify.nlp`                             | `sign_constraints` (bounds of friction parameters)          |
 """
 
 from __future__ import annotations
@@ -148,7 +150,7 @@ def sign_constraints(parameters: Sequence[Parameter]) -> tuple[Bound, ...]:
 
 
 def bound_constraints(names: Sequence[str], bounds: tuple[Sequence[float], Sequence[float]]) -> tuple[Bound, ...]:
-    """"lower_<p>" / "upper_<p>" for every finite entry of bounds = (lb, ub) (each (P,) or a scalar)."""
+    """The box bounds "lower_<p>" / "upper_<p>" for every finite entry of (lb, ub) (each (P,) or a scalar)."""
     lb, ub = (np.broadcast_to(np.asarray(v, dtype=float), (len(names),)) for v in bounds)
     out = []
     for p, name in enumerate(names):
@@ -253,7 +255,7 @@ class Consistency:
         )
 
     def feasible(self, pi: np.ndarray) -> bool:
-        """Every slack ≥ 0 at π: the same arithmetic as `slacks`, vectorised (the constrained fit's shortcut)."""
+        """Every slack ≥ 0 at π: the test of `slacks`, vectorised (the constrained fit's shortcut)."""
         groups, lower_index, upper_index, lower, upper = self._packed
         for maps, shape, margins in groups:
             if np.any(np.linalg.eigvalsh(np.dot(pi, maps).reshape(shape))[:, 0] - margins < 0):

@@ -8,6 +8,7 @@ import re
 import shutil
 import subprocess
 
+import casadi as ca
 import numpy as np
 import pytest
 from scipy.special import logsumexp
@@ -299,3 +300,19 @@ def test_missing_compiler(monkeypatch):
     monkeypatch.setenv("PATH", "/nonexistent")
     with pytest.raises(InputError, match="no C compiler"):
         codegen.find_compiler()
+
+
+def test_ldl_solve_of_any_size():
+    """The unrolled LDLᵀ of ddq_hat solves M x = b for n×n symmetric positive definite M (n = 1 … 4)."""
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 4):
+        A = rng.normal(size=(n, n))
+        M, b = A @ A.T + 0.1 * np.eye(n), rng.normal(size=n)
+        Ms, bs = ca.SX.sym("M", n, n), ca.SX.sym("b", n)
+        x = np.asarray(ca.Function("f", [Ms, bs], [codegen.solve_ldl(Ms, bs)])(M, b)).ravel()
+        np.testing.assert_allclose(M @ x, b, rtol=1e-12, atol=1e-12)
+
+
+def test_gmr_input_names_follow_the_number_of_joints():
+    assert codegen.GMR_INPUTS == ("q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
+    assert codegen.gmr_inputs(3) == ("q1", "q2", "q3", "dq1", "dq2", "dq3", "ddq1", "ddq2", "ddq3")

@@ -7,9 +7,11 @@ import pytest
 
 from ident_opt.compare import multisine_trial
 from ident_opt.datasheet import datasheet_pi
+from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import base_combinations, fit_ols
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
+from ident_opt.parameters import Parameter
 from ident_opt.robot import ArmModel
 
 RIGID = ArmModel()
@@ -103,3 +105,46 @@ def test_mismatched_statistics_rejected(truth):
         fit_ols(_stats(trial), ArmModel(("armature",)))
     with pytest.raises(ValueError):
         fit_ols(_stats(trial), RIGID, weights="nonsense")
+
+
+class ThreePendulums:
+    """Three decoupled joints τ_j = I_j ddq_j + fv_j dq_j (test only): the part of the `Arm` interface the
+    estimators use, for a number of joints other than two. Its mass LMIs are 1×1: I_j ⪰ margin."""
+
+    n_joints = 3
+    parameters = tuple(Parameter(f"I{j}", "kg m^2", f"joint-{j} inertia", "inertia") for j in (1, 2, 3)) + tuple(
+        Parameter(f"fv{j}", "N m s/rad", f"joint-{j} viscous friction", "friction") for j in (1, 2, 3)
+    )
+    names = tuple(p.name for p in parameters)
+    n_params = 6
+
+    def regressor(self, q, dq, ddq):
+        Y = np.zeros((len(q), 3, 6))
+        for j in range(3):
+            Y[:, j, j], Y[:, j, 3 + j] = ddq[:, j], dq[:, j]
+        return Y
+
+    def mass_lmis(self):
+        return {f"inertia_{j + 1}": np.eye(6)[:, j, None, None] for j in range(3)}
+
+    def min_mass_eigenvalue(self, pi):
+        return float(np.min(pi[:3]))
+
+
+def test_estimators_take_any_number_of_joints():
+    """Statistics, (weighted) OLS and the constrained fit work from the arm's n_joints and declarations."""
+    arm = ThreePendulums()
+    rng = np.random.default_rng(0)
+    q, dq, ddq = (rng.normal(size=(400, 3)) for _ in range(3))
+    pi_true = np.array([0.5, 0.2, 0.1, 0.3, 0.2, -0.02])  # fv3 < 0: a sign constraint must bind
+    tau = arm.regressor(q, dq, ddq) @ pi_true + rng.normal(size=(400, 3)) * np.array([0.01, 0.05, 0.01])
+    st = Stats.from_data(arm, q, dq, ddq, tau)
+    assert st.G.shape == (3, 6, 6) and st.n_joints == 3
+    ols, wls = fit_ols(st, arm), fit_ols(st, arm, weights="wls")
+    assert ols.weights.shape == wls.weights.shape == (3,) and wls.weights[1] < wls.weights[0]
+    np.testing.assert_allclose(ols.pi, pi_true, atol=0.01)
+    assert not ols.friction_ok and ols.sign_violations == {"friction": ["fv3"]}
+    con = fit_constrained(st, arm, margin=1e-4)
+    assert con.active == ["friction_fv3"] and con.consistent and con.as_dict()["fv3"] == pytest.approx(0, abs=1e-9)
+    with pytest.raises(ValueError, match="3 positive"):
+        fit_ols(st, arm, weights=np.ones(2))

@@ -211,8 +211,6 @@ def finish(
     meat = sum(w_j**2 * s2_j * G_j for w_j, s2_j, G_j in zip(w, sigma2, stats.G))
     cov = Hp @ meat @ Hp
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    rank, cond, unexcited, base = base_combinations(H, names)
-    warnings, poor = _identifiability(names, pi, se, rank, unexcited, base)
     fit = LinearFit(
         pi=np.asarray(pi, dtype=float),
         names=names,
@@ -224,25 +222,20 @@ def finish(
         weights=w,
         n=stats.n,
         rss=stats.rss(pi),
-        cond=cond,
-        rank=rank,
-        unexcited=unexcited,
-        base=base,
-        poorly_determined=poor,
-        warnings=warnings,
         min_mass_eigenvalue=model.min_mass_eigenvalue(pi),
         solve_seconds=solve_seconds,
         parameters=model.parameters,
+        **_diagnostics(H, names, pi, se),
     )
     if not fit.consistent:
         fit.warnings.append(_inconsistency(fit))
     return fit
 
 
-def _identifiability(
-    names: tuple[str, ...], pi: np.ndarray, se: np.ndarray, rank: int, unexcited: list[str], base: list[str]
-) -> tuple[list[str], list[str]]:
-    """(warnings, poorly determined names): directions the data do not excite, and large standard errors."""
+def _diagnostics(H: np.ndarray, names: tuple[str, ...], pi: np.ndarray, se: np.ndarray) -> dict:
+    """LinearFit's identifiability fields: rank, cond, unexcited, base (`base_combinations`), the poorly
+    determined names and the warnings about both."""
+    rank, cond, unexcited, base = base_combinations(H, names)
     warnings: list[str] = []
     # A parameter in a not-identifiable direction has no meaningful SE: flag it by name.
     free = set(unexcited)
@@ -256,7 +249,14 @@ def _identifiability(
     poor = [n for n, v, e in zip(names, pi, se) if n in free or e > POOR_RELATIVE_SE * abs(v)]
     if poor:
         warnings.append("poorly determined (SE > 50% of |value| or not identifiable): " + ", ".join(poor))
-    return warnings, poor
+    return {
+        "rank": rank,
+        "cond": cond,
+        "unexcited": unexcited,
+        "base": base,
+        "poorly_determined": poor,
+        "warnings": warnings,
+    }
 
 
 def _inconsistency(fit: LinearFit) -> str:

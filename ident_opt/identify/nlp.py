@@ -151,46 +151,27 @@ def physical_start(robot, model: ArmModel) -> tuple[dict[str, float], dict[str, 
     parameters ≥ 0 when their kind is sign-constrained (friction, armature), else unbounded (e.g. offsets).
     """
     body = rigid_body(robot, "physical")
-    start = {
-        "m1": body.m1,
-        "m2": body.m2,
-        "lc1": body.lc1,
-        "lc2": body.lc2,
-        "Ic1": body.Ic1,
-        "Ic2": body.Ic2,
-        "ia1": body.armature[0],
-        "ia2": body.armature[1],
-    }
-    if "ia2" not in model.names:
-        start.pop("ia2")  # without the armature extension a joint-2 armature cannot be represented
     inf = np.inf
-    bounds = {
-        "m1": (1e-3, inf),
-        "m2": (1e-3, inf),
-        "lc1": (0.0, body.l1),
-        "lc2": (0.0, body.l2),
-        "Ic1": (0.0, inf),
-        "Ic2": (0.0, inf),
-        "ia1": (0.0, inf),
-        "ia2": (0.0, inf),
+    theta = {  # name: (datasheet value, (lower, upper))
+        "m1": (body.m1, (1e-3, inf)),
+        "m2": (body.m2, (1e-3, inf)),
+        "lc1": (body.lc1, (0.0, body.l1)),
+        "lc2": (body.lc2, (0.0, body.l2)),
+        "Ic1": (body.Ic1, (0.0, inf)),
+        "Ic2": (body.Ic2, (0.0, inf)),
+        "ia1": (body.armature[0], (0.0, inf)),
     }
-    sheet = {
-        "fv1": body.fv[0],
-        "fv2": body.fv[1],
-        "fc1": body.fc[0],
-        "fc2": body.fc[1],
-        "fc1p": body.fc_positive[0],
-        "fc2p": body.fc_positive[1],
-        "fc1n": body.fc_negative[0],
-        "fc2n": body.fc_negative[1],
-    }
+    if "ia2" in model.names:  # without the armature extension a joint-2 armature cannot be represented
+        theta["ia2"] = (body.armature[1], (0.0, inf))
+    sheet = {}
+    for j, k in enumerate(("1", "2")):
+        sheet |= {f"fv{k}": body.fv[j], f"fc{k}": body.fc[j]}
+        sheet |= {f"fc{k}p": body.fc_positive[j], f"fc{k}n": body.fc_negative[j]}
     nonnegative = {model.names[c.index] for c in sign_constraints(model.parameters)}
     for name in model.names:
-        if name in ("a1", "a2", "a3", "b1", "b2", "ia2"):
-            continue
-        start[name] = sheet.get(name, 0.0)
-        bounds[name] = (0.0, inf) if name in nonnegative else (-inf, inf)
-    return start, {k: bounds[k] for k in start}
+        if name not in ("a1", "a2", "a3", "b1", "b2", "ia2"):
+            theta[name] = (sheet.get(name, 0.0), (0.0, inf) if name in nonnegative else (-inf, inf))
+    return {k: v for k, (v, _) in theta.items()}, {k: b for k, (_, b) in theta.items()}
 
 
 def pi_of_physical(theta: dict, robot, model: ArmModel) -> list:
