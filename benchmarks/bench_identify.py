@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt.arm import Arm
 from ident_opt.data import load_dataset
 from ident_opt.identify.constrained import fit_constrained, solve_constrained
 from ident_opt.identify.fit import fit_ols
@@ -82,7 +83,7 @@ def medians(fns: dict[str, Callable[[], object]], repeats: int, interleaved: boo
     return {name: statistics.median(t) for name, t in times.items()}
 
 
-def exp1_stats(model: ArmModel) -> Stats | None:
+def exp1_stats(model: Arm) -> Stats | None:
     """Statistics of the real trial exp1, or None when its data file is not in the checkout."""
     problem = load_problem(Path(__file__).resolve().parents[1] / "problems" / "tudor_2dof.toml")
     if not problem.data.trials or not Path(problem.data.trials[0]).exists():
@@ -91,7 +92,7 @@ def exp1_stats(model: ArmModel) -> Stats | None:
     return Stats.from_data(model, trial_.q, trial_.dq, trial_.ddq, trial_.tau)
 
 
-def solve_table(cases: dict[str, Stats], model: ArmModel, repeats: int, interleaved: bool) -> None:
+def solve_table(cases: dict[str, Stats], model: Arm, repeats: int, interleaved: bool) -> None:
     """Part 2: per statistics, constrained vs OLS (lean solves and full fits) and Clarabel's own time."""
     print(f"   {'interleaved' if interleaved else 'back to back'}, median of {repeats} calls each")
     print(
