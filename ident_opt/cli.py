@@ -1,7 +1,9 @@
 """The `ident-opt` command line: one subcommand per job, each in `ident_opt/commands/<name>.py`.
 
 Exit status: 0 success, 2 bad input or usage (a one-paragraph message, no traceback), 1 anything else.
-Subcommand modules keep their heavy imports inside `run()`, so `ident-opt --help` stays fast.
+Each command module is thin: arguments, then `run()` = load, call a study (`ident_opt.studies`), call its
+report writer (`ident_opt.report`), return the exit status. Its heavy imports wait inside `run()`, so
+`ident-opt --help` (which builds every subcommand's parser) stays fast.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ COMMANDS = {
     "online": "offline fit, then exact sequential updates on the rest of the trial (or a stream)",
     "check": "validate a problem file and its data; summarise each trial",
     "audit": "the paper audit: its datasheet model under both conventions against its own fit",
+    "calibrate": "how close the simulator's default trial is to a real one (residual size, spectrum, strain)",
 }
 
 

@@ -40,10 +40,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ident_opt.errors import InputError
 from ident_opt.identify import estimators
 from ident_opt.identify.bounded import Bounds, WarmBoundedLS, WarmConsistentLS, default_bounds
 from ident_opt.identify.stats import Stats
-from ident_opt.models import DATASHEETS, FITTED, RidgeModel, datasheet_model, features
+from ident_opt.models import DATASHEETS, FITTED, RidgeModel, datasheet_model, features, make_gmr
 from ident_opt.robot import RIGID
 
 #: z-value of the central 95 % interval of a Gaussian.
@@ -344,3 +345,17 @@ def start_identifier(start: Start, train, gmr=None, cross_covariance: bool = Fal
         if not np.allclose(online.theta, start.theta0, rtol=1e-8, atol=1e-10 * np.abs(start.theta0).max()):
             raise RuntimeError("ridge on the statistics differs from the offline RidgeCV fit")
     return online
+
+
+def serving_identifier(
+    model: str, problem, train, components: int | None = None, cross_covariance: bool = False
+) -> tuple[Start, OnlineIdentifier]:
+    """The identifier `ident-opt online --stream` serves, fitted offline on `train`: `model` is a key of
+    `MODEL_KEYS`, with ``+gmr`` for its GMR residual (K = `components`, else the problem's; chosen on blocked
+    validation: the model will predict later motions)."""
+    key, _, extra = model.partition("+")
+    if key not in MODEL_KEYS or extra not in ("", "gmr"):
+        raise InputError(f"--model must be one of {', '.join(MODEL_KEYS)}, optionally with +gmr; got {model!r}")
+    start = offline_start(key, problem, train)
+    gmr = make_gmr(problem.residual, components=components, validation="blocked") if extra else None
+    return start, start_identifier(start, train, gmr, cross_covariance=cross_covariance)

@@ -7,8 +7,8 @@ import json
 import pandas as pd
 import pytest
 
-from ident_opt import audit
 from ident_opt.cli import main
+from ident_opt.studies import audit
 
 from .conftest import PROBLEMS
 

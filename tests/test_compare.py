@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from ident_opt.cli import main
-from ident_opt.compare import constraints_study, study_markdown
+from ident_opt.report.constraints import study_markdown
+from ident_opt.studies.constraints import constraints_study
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 PI = ["a1", "a2", "a3", "b1", "b2", "fv1", "fv2", "fc1", "fc2"]

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from ident_opt.protocols import ProtocolResult
-from ident_opt.report import PAPER_NMSE_RANGE, PAPER_RMSE, IdentifyResult, reproduction_frame
+from ident_opt.paper import NMSE_RANGE as PAPER_NMSE_RANGE
+from ident_opt.paper import RMSE as PAPER_RMSE
+from ident_opt.report.identify import reproduction_frame
+from ident_opt.studies.identify import IdentifyResult
+from ident_opt.studies.protocols import ProtocolResult
 
 
 def _result(scale_rmse: float, scale_nmse: float) -> IdentifyResult:

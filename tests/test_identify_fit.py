@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident_opt.compare import multisine_trial
 from ident_opt.datasheet import datasheet_pi
 from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import base_combinations, fit_ols
@@ -13,6 +12,7 @@ from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.parameters import Parameter
 from ident_opt.robot import ArmModel
+from ident_opt.studies.constraints import multisine_trial
 
 RIGID = ArmModel()
 

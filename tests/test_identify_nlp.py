@@ -6,11 +6,11 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from ident_opt.compare import multisine_trial
 from ident_opt.datasheet import datasheet_pi
 from ident_opt.identify.nlp import fit_expression, fit_physical
 from ident_opt.identify.stats import Stats
 from ident_opt.robot import ArmModel
+from ident_opt.studies.constraints import multisine_trial
 
 ARM = ArmModel(("armature",))
 

@@ -10,9 +10,9 @@ import pytest
 from ident_opt.data import shuffled_split
 from ident_opt.models import HybridModel, RidgeModel, RigidModel, datasheet_model, features, make_gmr
 from ident_opt.problem import ResidualSpec, SplitSpec, load_problem
-from ident_opt.protocols import chronological_protocol, evaluate_split, paper_protocol
 from ident_opt.robot import RIGID
 from ident_opt.simulate.trial import simulate_trial
+from ident_opt.studies.protocols import chronological_protocol, evaluate_split, paper_protocol
 
 PROBLEM = "problems/tudor_2dof.toml"
 

@@ -152,7 +152,7 @@ def _start_stream(small, *extra):
 
 def test_cli_stream_equals_cli_replay(physical_problem, small, tmp_path):
     """The service's JSON-lines output equals the replay's predictions for the same samples."""
-    from ident_opt.commands.online import replay
+    from ident_opt.studies.online_replay import replay
 
     _, train, test = small
     n = 120
@@ -166,11 +166,11 @@ def test_cli_stream_equals_cli_replay(physical_problem, small, tmp_path):
     assert proc.returncode == 0, err
     records = [json.loads(x) for x in out.splitlines()]
     taus = np.array([r["tau"] for r in records if "tau" in r])
-    np.testing.assert_array_equal(taus, result["pred"]["pbr+gmr"])
-    np.testing.assert_array_equal(np.array([r["std"] for r in records if "tau" in r]), result["std"]["pbr+gmr"])
+    np.testing.assert_array_equal(taus, result.pred["pbr+gmr"])
+    np.testing.assert_array_equal(np.array([r["std"] for r in records if "tau" in r]), result.std["pbr+gmr"])
     final = json.loads((tmp_path / "final.json").read_text())
     assert final == records[-1]
-    assert list(final["final"]["parameters"].values()) == result["theta"]["pbr"][-1].tolist()
+    assert list(final["final"]["parameters"].values()) == result.theta["pbr"][-1].tolist()
     assert '"line": 11' in err
 
 

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ident_opt.errors import InputError
+from ident_opt.report import write_json  # noqa: F401  (every command's --json goes through it)
 
 
 def add_problem_arguments(parser: argparse.ArgumentParser, data: bool = True, json_out: bool = True) -> None:
@@ -88,32 +87,3 @@ def output_dir(args: argparse.Namespace, problem, default: Path | None = None) -
     if not os.access(path, os.W_OK):
         raise InputError(f"{path}: the output folder is not writable")
     return path
-
-
-def write_json(path: str | Path | None, payload: dict) -> None:
-    """Write `payload` as JSON atomically (a temporary file renamed into place): never half a file."""
-    if not path:
-        return
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        with os.fdopen(fd, "w") as fh:
-            json.dump(payload, fh, indent=2, default=_plain)
-            fh.write("\n")
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot write the JSON output ({exc.strerror})") from None
-
-
-def _plain(value: Any) -> Any:
-    """JSON for NumPy scalars/arrays and paths."""
-    import numpy as np
-
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

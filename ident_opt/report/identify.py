@@ -1,63 +1,31 @@
-"""What `ident-opt identify` writes: Markdown + CSV tables, the JSON of `spec/cli.md`, results/README.md.
+"""What `ident-opt identify` writes: Markdown + CSV tables, the figures, the JSON (`docs/cli.md`), and the
+front and back of results/README.md (the reproduction table, findings, every figure explained).
 
-Every table names its protocol. The paper's published numbers are kept here only as reference columns
-(the reproduction targets); nothing is fitted or tuned to them.
+Every table names its protocol. The paper's published numbers (`ident_opt.paper`) appear only as reference
+columns (the reproduction targets); nothing is fitted or tuned to them.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from ident_opt.protocols import METRICS, ProtocolResult
-from ident_opt.tables import fmt, markdown_table, write_table
+from ident_opt.paper import NMSE_RANGE, NMSE_RANGE_TOLERANCE, PI_HAT, PI_TRUE, RMSE, RMSE_TOLERANCE
+from ident_opt.report import figures, record, shown, write_json
+from ident_opt.report.tables import fmt, markdown_table, write_table
+from ident_opt.studies import METRICS
+from ident_opt.studies.identify import IdentifyResult
+from ident_opt.studies.protocols import ProtocolResult
 
-#: The paper's nMSE table (its nMSE is MSE ÷ range², our `nmse_range`), joints 1 and 2.
-PAPER_NMSE_RANGE = {
-    "rr": (0.002713, 0.01786),
-    "rr+gmr": (0.001911, 0.01243),
-    "dm": (0.02326, 0.03240),
-    "dm+gmr": (0.01810, 0.01256),
-    "pbr": (0.002139, 0.02711),
-    "pbr+gmr": (0.001578, 0.01126),
-}
-#: The paper's "torque error statistics across 10 seeds": (mean, std) of the test RMSE [N m] per joint.
-PAPER_RMSE = {"rr": ((1.26026, 0.01802), (0.58937, 0.00618)), "pbr": ((1.11702, 0.02005), (0.71573, 0.00518))}
-#: The paper's least-squares π̂ (its printed regressor: its b1 reads as b1 − b2 physically) and π_True.
-PAPER_PI_HAT = {
-    "a1": 0.76283,
-    "a2": 0.052071,
-    "a3": 0.040211,
-    "b1": 3.6403,
-    "b2": 0.36291,
-    "fv1": 1.1537,
-    "fv2": 0.097576,
-    "fc1": 0.99977,
-    "fc2": 0.29952,
-}
-PAPER_PI_TRUE = {
-    "a1": 0.36571,
-    "a2": 0.016914,
-    "a3": 0.010752,
-    "b1": 8.2331,
-    "b2": 0.38588,
-    "fv1": 1.86e-5,
-    "fv2": 2.45e-6,
-    "fc1": 2.25e-3,
-    "fc2": 1.95e-3,
-}
 PARAMETER_NOTE = (
     "Units: a [kg·m²], b [N·m], fv [N·m·s/rad], fc [N·m]; `se` = standard errors (assuming independent residuals: "
     "a lower bound on densely sampled trials). The physical datasheet folds joint 1's armature into a1 and "
     "reports joint 2's as ia2. The paper's π̂ was fitted with its printed gravity regressor, so its b1 reads "
     "as b1 − b2 physically (b1 + b2 = 4.00 N·m)."
 )
-#: Reproduction targets: relative tolerance on the parametric rows (the GMR rows are reported, not targeted).
-RMSE_TOLERANCE, NMSE_RANGE_TOLERANCE = 0.10, 0.25
-
 MODEL_NAMES = {
     "rr": "RR (ridge, black box)",
     "dm": "DM (datasheet, paper's convention)",
@@ -72,27 +40,6 @@ def model_name(key: str) -> str:
     """Readable name of a model key (`pbr+gmr` → "PBR (OLS rigid body) + GMR")."""
     base, _, gmr = key.partition("+")
     return MODEL_NAMES.get(base, base) + (" + GMR" if gmr else "")
-
-
-@dataclass
-class IdentifyResult:
-    """Everything the report needs from one `identify` run."""
-
-    problem_name: str
-    trial: str
-    unseen: str | None
-    protocols: dict[str, ProtocolResult]
-    parameters: dict[str, dict[str, float]]  # datasheet, datasheet_paper, ols, constrained
-    standard_errors: dict[str, dict[str, float]]
-    consistency: dict[str, float]  # estimator -> min over q of λ_min(M(q)) [kg m²]
-    #: the paper's protocol with other GMR settings: name -> (label, result), e.g. diagonal covariances
-    variants: dict[str, tuple[str, ProtocolResult]] = field(default_factory=dict)
-    figures: dict[str, Path] = field(default_factory=dict)
-    seconds: float = float("nan")
-    gmr_candidates: tuple[int, ...] = ()  # the problem's candidate numbers of components
-    command: str = ""  # the command line that produced it
-    ridge: dict = field(default_factory=dict)  # Model 1 on the whole first trial: alpha, intercept, coef
-    reg_covar: float = float("nan")  # the GMR's covariance regulariser (standardised units)
 
 
 # ---------------------------------------------------------------------------------------------- tables
@@ -125,11 +72,11 @@ def reproduction_frame(result: IdentifyResult) -> pd.DataFrame:
     """Ours (paper's protocol) beside the paper, with the relative difference and whether a target is met."""
     paper = result.protocols["paper"]
     rows = []
-    for key, (ref1, ref2) in PAPER_RMSE.items():
+    for key, (ref1, ref2) in RMSE.items():
         for j, (mean, _) in enumerate((ref1, ref2)):
             ours = paper.metrics["rmse"][key][j]
             rows.append(_repro_row("RMSE [N·m]", key, j, ours, mean, RMSE_TOLERANCE))
-    for key, ref in PAPER_NMSE_RANGE.items():
+    for key, ref in NMSE_RANGE.items():
         for j in range(2):
             ours = paper.metrics["nmse_range"][key][j]
             tol = None if key.endswith("+gmr") else NMSE_RANGE_TOLERANCE
@@ -164,7 +111,7 @@ def seeds_frame(result: IdentifyResult) -> pd.DataFrame:
     for key, values in per.items():
         arr = np.asarray(values)
         for j in range(2):
-            ref = PAPER_RMSE.get(key)
+            ref = RMSE.get(key)
             rows.append(
                 {
                     "model": key,
@@ -192,8 +139,8 @@ def parameters_frame(result: IdentifyResult) -> pd.DataFrame:
         frame[labels.get(est, est)] = [values.get(n, np.nan) for n in names]
         if est in result.standard_errors:
             frame[f"{est} se"] = [result.standard_errors[est].get(n, np.nan) for n in names]
-    frame["paper π_True"] = [PAPER_PI_TRUE.get(n, np.nan) for n in names]
-    frame["paper π̂"] = [PAPER_PI_HAT.get(n, np.nan) for n in names]
+    frame["paper π_True"] = [PI_TRUE.get(n, np.nan) for n in names]
+    frame["paper π̂"] = [PI_HAT.get(n, np.nan) for n in names]
     return frame
 
 
@@ -268,20 +215,93 @@ def write_tables(result: IdentifyResult, out: Path) -> dict[str, Path]:
     return written
 
 
+# ---------------------------------------------------------------------------------------------- writer
+def figure_count(result_has_unseen: bool) -> int:
+    """How many figures `write` draws (one progress tick each)."""
+    return 7 + (3 if result_has_unseen else 0)
+
+
+def write(
+    result: IdentifyResult,
+    out: Path,
+    json_path: str | Path | None,
+    command: str,
+    started: float,
+    tick=lambda: None,
+) -> float:
+    """Every figure, table, the README and the JSON into `out`; `command` is the command line that ran, `started`
+    its `time.perf_counter()` at the start (the README and the JSON say how long it took, figures included).
+    `tick()` after each figure. Returns those seconds."""
+    made = draw_figures(result, out / "figures", tick)
+    seconds = time.perf_counter() - started
+    tables = write_tables(result, out)
+    head, tail = readme_parts(result, out, tables, made, command, seconds)
+    files = [*(f"{name}.md" for name in tables), *(f"{name}.csv" for name in tables), *made.values()]
+    record(out, "identify", "every model under every protocol", files, readme_head=head, readme_tail=tail)
+    write_json(json_path, json_payload(result, seconds))
+    return seconds
+
+
+def draw_figures(result: IdentifyResult, fig_dir: Path, tick) -> dict[str, Path]:
+    """The paper's figures on the first split of its protocol, the seed heatmap, and (cross-trial) the unseen
+    trial's predictions: name -> path."""
+    example = result.protocols["paper"].example
+    made = {}
+    for j in (0, 1):
+        made[f"torque_j{j + 1}"] = figures.torque_figure(example, j, fig_dir / f"identify_torque_j{j + 1}.png")
+        tick()
+        made[f"error_j{j + 1}"] = figures.error_figure(example, j, fig_dir / f"identify_error_j{j + 1}.png")
+        tick()
+    made["parity"] = figures.parity_figure(example, fig_dir / "identify_parity.png")
+    tick()
+    made["interval"] = figures.interval_figure(example, fig_dir / "identify_interval_pbr.png")
+    tick()
+    made["seeds"] = figures.seed_heatmap(result.seeds, fig_dir / "identify_seeds.png")
+    tick()
+    cross = result.protocols.get("cross_trial")
+    if cross is not None:
+        made.update(_cross_trial_figures(result, cross, fig_dir, tick))
+    return made
+
+
+def _cross_trial_figures(result: IdentifyResult, cross: ProtocolResult, fig_dir: Path, tick) -> dict[str, Path]:
+    trial, unseen = shown(result.trial), shown(result.unseen)
+    models = (("rr", "Model 1: ridge regression (RR)"), ("pbr", "Model 3: physics-based regression (PBR)"))
+    if "cpbr" in cross.metrics["rmse"]:
+        models += (("cpbr", "Constrained physics-based regression (CPBR)"),)
+    made = {}
+    for j in (0, 1):
+        made[f"cross_j{j + 1}"] = figures.torque_figure(
+            cross.example,
+            j,
+            fig_dir / f"identify_cross_trial_j{j + 1}.png",
+            models,
+            title=f"Joint {j + 1} on the unseen trial {unseen} (identified on {trial})",
+        )
+        tick()
+    made["cross_interval"] = figures.interval_figure(
+        cross.example,
+        fig_dir / "identify_cross_trial_interval_pbr.png",
+        title=f"PBR + GMR with 95 % intervals on the unseen trial {unseen}",
+    )
+    tick()
+    return made
+
+
 # ---------------------------------------------------------------------------------------------- JSON
-def json_payload(result: IdentifyResult) -> dict:
-    """The JSON of `spec/cli.md`: parameters (datasheet/ols/constrained, plus extras) and metrics."""
+def json_payload(result: IdentifyResult, seconds: float = float("nan")) -> dict:
+    """The JSON of `docs/cli.md`: parameters (datasheet/ols/constrained, plus extras) and metrics."""
     metrics = {name: p.as_json() for name, p in result.protocols.items()}
     payload = {
         "problem": result.problem_name,
-        "trials": {"identification": result.trial, "unseen": result.unseen},
+        "trials": {"identification": shown(result.trial), "unseen": shown(result.unseen) if result.unseen else None},
         "parameters": result.parameters,
         "ridge": result.ridge,
         "standard_errors": result.standard_errors,
         "min_mass_eigenvalue": result.consistency,
         "metrics": metrics,
         "protocols": {name: p.description for name, p in result.protocols.items()},
-        "seconds": result.seconds,
+        "seconds": seconds,
     }
     if result.variants:
         payload["gmr_variants"] = {
@@ -295,24 +315,41 @@ def _v(p: ProtocolResult, key: str, j: int, metric: str = "nmse") -> str:
     return fmt(p.metrics[metric][key][j], 3)
 
 
-def write_readme(result: IdentifyResult, out: Path, tables: dict[str, Path]) -> Path:
-    """results/README.md: how it was made, the reproduction table, findings, and every figure explained."""
+def readme_parts(
+    result: IdentifyResult, out: Path, tables: dict[str, Path], made: dict[str, Path], command: str, seconds: float
+) -> tuple[str, str]:
+    """The README's front (how it was made, the reproduction table, findings, the tables) and back (every
+    figure explained); the index of the other reports goes between them (`ident_opt.report.record`)."""
     P = result.protocols
     paper, chrono, cross = P["paper"], P.get("chronological"), P.get("cross_trial")
-    has_c = "cpbr" in paper.metrics["rmse"]
-    repro = reproduction_frame(result)
-    missed = repro[repro["met"] == "NO"]
+    lines = _readme_intro(result, command, seconds)
+    lines += _reproduction(result)
+    lines += ["", "## Findings", ""]
+    lines += _findings(result, paper, chrono, cross, "cpbr" in paper.metrics["rmse"])
+    lines += ["", "## Tables", ""]
+    lines += [f"- [{path.name}]({path.name}) (CSV beside it)" for path in tables.values()]
+    lines += ["- [identify.json](identify.json): the machine-readable result (`spec/cli.md`)"]
+    back = ["", "## Figures", ""]
+    for name, (path, sentence) in _figure_sentences(result, paper, cross).items():
+        if name in made:
+            rel = made[name].relative_to(out) if made[name].is_relative_to(out) else path
+            back += [f"### {sentence[0]}", "", f"![{sentence[0]}]({rel})", "", sentence[1], ""]
+    return "\n".join(lines), "\n".join(back)
+
+
+def _readme_intro(result: IdentifyResult, command: str, seconds: float) -> list[str]:
     lines = [
         f"# Results for `{result.problem_name}`",
         "",
-        f"Written by `{result.command}` in {result.seconds:.0f} s. Identification trial: "
-        f"`{result.trial}`" + (f"; unseen trial: `{result.unseen}`." if result.unseen else "."),
+        f"Written by `{command}` in {seconds:.0f} s. Identification trial: `{shown(result.trial)}`"
+        + (f"; unseen trial: `{shown(result.unseen)}`." if result.unseen else "."),
         "",
         "Protocols (every table says which one it uses):",
         "",
     ]
-    lines += [f"- **{name}**: {p.description}" for name, p in P.items()]
-    lines += [
+    return [
+        *lines,
+        *(f"- **{name}**: {p.description}" for name, p in result.protocols.items()),
         "",
         "The paper's protocol shuffles samples before splitting: at 100 Hz every test sample has near-copies "
         "in training, which flatters local models such as GMR. The chronological and cross-trial protocols are "
@@ -325,10 +362,18 @@ def write_readme(result: IdentifyResult, out: Path, tables: dict[str, Path]) -> 
         f"({result.reg_covar:g}, relative to unit variance), full covariances unless a table says otherwise; "
         "predictions are the conditional mean, intervals use the conditional mixture variance (within- plus "
         "between-component).",
+    ]
+
+
+def _reproduction(result: IdentifyResult) -> list[str]:
+    repro = reproduction_frame(result)
+    missed = repro[repro["met"] == "NO"]
+    return [
         "",
         "## Reproduction of the paper (paper's protocol)",
         "",
-        "Targets: RMSE within 10 % of the paper's seed table, `nmse_range` within 25 % of its parametric rows. "
+        f"Targets: RMSE within {RMSE_TOLERANCE * 100:.0f} % of the paper's seed table, `nmse_range` within "
+        f"{NMSE_RANGE_TOLERANCE * 100:.0f} % of its parametric rows. "
         "The paper does not give its GMR settings (components, covariance type, scaling), so its GMR rows "
         "are reported beside ours, not targeted. `nmse_range` is MSE ÷ (max − min)², the paper's nMSE; "
         "`nmse` (÷ variance) is the usual one.",
@@ -340,36 +385,7 @@ def write_readme(result: IdentifyResult, out: Path, tables: dict[str, Path]) -> 
             if missed.empty
             else f"**{len(missed)} target(s) missed:** " + ", ".join(f"{m} {k} J{j}" for m, k, j in missed.index) + "."
         ),
-        "",
-        "## Findings",
-        "",
     ]
-    lines += _findings(result, paper, chrono, cross, has_c)
-    lines += ["", "## Tables", ""]
-    lines += [f"- [{path.name}]({path.name}) (CSV beside it)" for path in tables.values()]
-    lines += ["- [identify.json](identify.json): the machine-readable result (`spec/cli.md`)"]
-    others = [
-        ("paper_audit.md", "the paper audit: its datasheet model under both conventions"),
-        ("compare.md", "constrained vs OLS vs datasheet parameters"),
-        ("constraints_study.md", "when the physical constraints matter"),
-        ("diagnosis/diagnosis.md", "what the rigid model gets wrong, why, and the held-out gain of the fix"),
-        ("diagnosis/confusion.md", "the diagnosis on simulated trials with hidden effects (confusion matrix)"),
-        ("online.md", "online adaptation: exact re-solves after every sample, online vs frozen"),
-        ("online_benchmark.md", "online update cost against the paper's re-solve"),
-        ("simulator_calibration.md", "the simulator against the real trial"),
-    ]
-    present = [(f, d) for f, d in others if (out / f).exists()]
-    if present:
-        lines += ["", "Other reports in this folder:", ""]
-        lines += [f"- [{f}]({f}): {d}" for f, d in present]
-    lines += ["", "## Figures", ""]
-    for name, (path, sentence) in _figure_sentences(result, paper, cross).items():
-        if name in result.figures:
-            rel = result.figures[name].relative_to(out) if result.figures[name].is_relative_to(out) else path
-            lines += [f"### {sentence[0]}", "", f"![{sentence[0]}]({rel})", "", sentence[1], ""]
-    path = out / "README.md"
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return path
 
 
 def _findings(result, paper, chrono, cross, has_c) -> list[str]:
@@ -402,8 +418,8 @@ def _findings(result, paper, chrono, cross, has_c) -> list[str]:
     one, diag = result.variants.get("one_component"), result.variants.get("diagonal_covariance")
     f.append(
         f"- A full-covariance GMR on DM's residual brings DM's joint-1 `nmse_range` from "
-        f"{_v(paper, 'dm', 0, 'nmse_range')} to {_v(paper, 'dm+gmr', 0, 'nmse_range')} (paper: 0.02326 → "
-        "0.01810)"
+        f"{_v(paper, 'dm', 0, 'nmse_range')} to {_v(paper, 'dm+gmr', 0, 'nmse_range')} (paper: "
+        f"{NMSE_RANGE['dm'][0]:#.4g} → {NMSE_RANGE['dm+gmr'][0]:#.4g})"
         + (
             f"; with a single component (a linear correction) already {_v(one[1], 'dm+gmr', 0, 'nmse_range')}"
             if one
@@ -411,8 +427,8 @@ def _findings(result, paper, chrono, cross, has_c) -> list[str]:
         )
         + (
             f"; with diagonal covariances {_v(diag[1], 'dm+gmr', 0, 'nmse_range')}, since each component then "
-            "predicts a constant — nearer the paper's 0.0181, whose GMR settings are not given (for the other GMR "
-            "rows diagonal covariances move away from the paper's numbers: see the table)"
+            f"predicts a constant — nearer the paper's {NMSE_RANGE['dm+gmr'][0]:.3g}, whose GMR settings are not "
+            "given (for the other GMR rows diagonal covariances move away from the paper's numbers: see the table)"
             if diag
             else ""
         )
@@ -566,3 +582,41 @@ def _figure_sentences(result, paper, cross) -> dict[str, tuple[str, tuple[str, s
             ),
         )
     return s
+
+
+# ---------------------------------------------------------------------------------------------- terminal
+def terminal(result: IdentifyResult, out: Path, json_path: str | Path | None, seconds: float) -> str:
+    """The reproduction rows, nmse per model and protocol, PBR + GMR's coverage, and where the files went."""
+    lines = [
+        f"ident-opt identify: {result.problem_name} on {shown(result.trial)}"
+        + (f" (unseen: {shown(result.unseen)})" if result.unseen else ""),
+        "",
+        "Reproduction (paper's protocol: shuffled 70/30, mean over seeds)   ours    paper   diff   target",
+    ]
+    for (metric, key, joint), row in reproduction_frame(result).iterrows():
+        if "(" in metric:  # the GMR variants: in the tables, not the terminal
+            continue
+        lines.append(
+            f"  {metric:<12} {key:<8} J{joint}  {fmt(row['ours'], 4):>28} {fmt(row['paper'], 4):>8} "
+            f"{row['difference']:>7} {row['met']:>8}"
+        )
+    lines += ["", "nmse (÷ variance) J1 / J2 per protocol:"]
+    lines.append("  " + f"{'model':<16}" + "".join(f"{name:>24}" for name in result.protocols))
+    for key in result.protocols["paper"].metrics["nmse"]:
+        cells = "".join(
+            f"{fmt(p.metrics['nmse'][key][0], 3) + ' / ' + fmt(p.metrics['nmse'][key][1], 3):>24}"
+            for p in result.protocols.values()
+        )
+        lines.append(f"  {key:<16}{cells}")
+    cov = {n: p.coverage.get("pbr+gmr") for n, p in result.protocols.items()}
+    lines += [
+        "",
+        "95 % coverage of PBR + GMR: " + ", ".join(f"{n} {v[0]:.1%} / {v[1]:.1%}" for n, v in cov.items() if v),
+    ]
+    lines += [
+        "",
+        f"wrote {out}/README.md, identify_*.md/.csv, figures/identify_*.png"
+        + (f" and {json_path}" if json_path else "")
+        + f" in {seconds:.1f} s",
+    ]
+    return "\n".join(lines)

@@ -21,15 +21,16 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ident_opt.data import Dataset, chronological_split, shuffled_split
 from ident_opt.metrics import all_metrics, coverage
 from ident_opt.models import HybridModel, make_gmr, parametric_models
 from ident_opt.problem import Problem
-
-METRICS = ("rmse", "nmse", "nmse_range")
+from ident_opt.studies import METRICS
 
 
 @dataclass
@@ -84,8 +85,6 @@ def evaluate_split(
     components: `+gmr` key -> a fixed K (else the problem's `[residual]` setting, "auto" = chosen on
     validation data inside the training part: `validation` "random" or "blocked", the latest samples).
     """
-    from threadpoolctl import threadpool_limits
-
     # The matrices here are small (N × 8, K ≤ 20): BLAS threads only add overhead, and on a busy machine
     # they oversubscribe the cores (measured: a 10-component fit 0.14 s single-threaded, 1–5 s threaded).
     with threadpool_limits(limits=1):
@@ -209,6 +208,4 @@ def cross_trial_protocol(
 
 
 def _name(d: Dataset) -> str:
-    from pathlib import Path
-
     return Path(d.source).name

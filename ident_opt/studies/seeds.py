@@ -10,19 +10,21 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from tqdm import tqdm
 
 from ident_opt.data import Dataset, shuffled_split
-from ident_opt.identify.fit import LinearFit, fit_ols
+from ident_opt.identify import estimators
+from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.stats import Stats
 from ident_opt.metrics import all_metrics
 from ident_opt.robot import ArmModel
+from ident_opt.studies import METRICS
 
+#: statistics + model -> fit.
 FitFn = Callable[[Stats, ArmModel], LinearFit]
-METRICS = ("rmse", "nmse", "nmse_range")
 
 
 @dataclass
@@ -58,8 +60,6 @@ def split_fits(
 ) -> SplitResults:
     """Fit each estimator on each split's training samples (from statistics) and score it on the test
     samples — or on `test` (another trial) when given. The regressor is built once for the whole trial."""
-    from tqdm import tqdm
-
     Y = model.regressor(dataset.q, dataset.dq, dataset.ddq)
     Y_other = model.regressor(test.q, test.dq, test.ddq) if test is not None else None
     S, P = len(splits), model.n_params
@@ -85,7 +85,7 @@ def seed_study(
 ) -> SplitResults:
     """The paper's protocol: for each seed in `split.seeds`, a shuffled `split.train_fraction` split;
     `fits` default to OLS only. Returns parameters and held-out metrics per seed."""
-    fits = fits or {"ols": lambda st, m: fit_ols(st, m)}
+    fits = fits or {"ols": estimators.estimator("ols")}
     splits = [shuffled_split(dataset.n, split.train_fraction, seed) for seed in split.seeds]
     return split_fits(dataset, model, splits, fits, labels=list(split.seeds), progress=progress)
 
@@ -113,32 +113,3 @@ def deviation_from_mean(study: SplitResults, estimator: str = "ols") -> pd.DataF
     mean = pi.mean(0)
     dev = 100.0 * (pi - mean) / np.where(np.abs(mean) > 0, np.abs(mean), 1.0)
     return pd.DataFrame(dev, index=pd.Index(study.labels, name="seed"), columns=list(study.names))
-
-
-def seed_heatmap(study: SplitResults, path: str | Path, estimator: str = "ols") -> Path:
-    """The paper's "grouped parameters regressed across 10 seeds" figure: deviation from the mean (%)
-    per seed and parameter, with each parameter's mean printed under its name. Writes a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    dev = deviation_from_mean(study, estimator)
-    mean = study.pi[estimator].mean(0)
-    lim = max(float(np.abs(dev.to_numpy()).max()), 1e-9)
-    fig, ax = plt.subplots(figsize=(1.0 + 0.85 * dev.shape[1], 1.2 + 0.42 * dev.shape[0]))
-    im = ax.imshow(dev.to_numpy(), cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
-    ax.set_xticks(range(dev.shape[1]), [f"{n}\n{m:.3g}" for n, m in zip(dev.columns, mean)], fontsize=8)
-    ax.set_yticks(range(dev.shape[0]), [str(s) for s in dev.index], fontsize=8)
-    ax.set_ylabel("seed")
-    for (r, c), v in np.ndenumerate(dev.to_numpy()):
-        ax.text(c, r, f"{v:.1f}", ha="center", va="center", fontsize=6)
-    fig.colorbar(im, ax=ax, label="deviation from the mean over seeds [%]")
-    ax.set_title(
-        f"{estimator}: grouped parameters across {dev.shape[0]} shuffled 70/30 splits (column label: mean)", fontsize=9
-    )
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path

@@ -1,0 +1,124 @@
+"""Reports: what the studies found, as Markdown, CSV, PNG and JSON, and the index of a results folder.
+
+One writer per study (`identify`, `compare`, `constraints`, `audit`, `online`, `calibration`; the diagnosis
+writes its own in `ident_opt.diagnose.report`); `tables` and `figures` are their helpers. Every writer ends
+with `record(out_dir, study, title, files)`: a small manifest (`.manifest/<study>.json` in the output folder)
+says what the study wrote, and the folder's `README.md` is rebuilt from every manifest present — so the
+index lists what is there whatever order the commands ran in.
+
+A study may also give the README a front part and a back part (`readme_head`, `readme_tail`: Markdown); the
+identify report does (the reproduction table, findings, its tables, its figures). The other reports are listed
+between them, in `ORDER`, each as its first file with its title.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from ident_opt.errors import InputError
+
+#: Where the manifests live inside an output folder.
+MANIFESTS = ".manifest"
+#: The order of the reports in the index (studies not listed follow, by name).
+ORDER = ("audit", "compare", "constraints", "diagnosis", "confusion", "online", "online_benchmark", "calibration")
+
+
+def record(
+    out_dir: str | Path,
+    study: str,
+    title: str,
+    files: Iterable[str | Path],
+    *,
+    readme_head: str = "",
+    readme_tail: str = "",
+) -> Path:
+    """Note that `study` wrote `files` (relative to `out_dir`, or inside it; the main report first) under
+    `title` (one line for the index), then rebuild the results folder's README.md. The results folder is
+    `out_dir`, or its parent when that holds manifests too (so `results/diagnosis` is indexed in
+    `results/README.md`). Returns the README's path."""
+    out_dir = Path(out_dir)
+    rel = [_relative(Path(f), out_dir) for f in files]
+    manifest = {"study": study, "title": title, "files": rel, "readme_head": readme_head, "readme_tail": readme_tail}
+    folder = out_dir / MANIFESTS
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{study}.json").write_text(json.dumps(manifest, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+    root = out_dir.parent if (out_dir.parent / MANIFESTS).is_dir() else out_dir
+    return write_index(root)
+
+
+def write_index(root: Path) -> Path:
+    """`root`/README.md from every manifest in `root` and its subfolders whose main file exists."""
+    manifests = _manifests(root)
+    main = [m for m in manifests if m["readme_head"] or m["readme_tail"]]
+    others = [m for m in manifests if not (m["readme_head"] or m["readme_tail"])]
+    parts = [m["readme_head"] for m in main if m["readme_head"]] or ["# Results", ""]
+    if others:
+        parts += ["", "Other reports in this folder:" if main else "Reports in this folder:", ""]
+        parts += [f"- [{m['files'][0]}]({m['files'][0]}): {m['title']}" for m in others]
+    parts += [m["readme_tail"] for m in main if m["readme_tail"]]
+    path = root / "README.md"
+    path.write_text("\n".join(parts) + "\n", encoding="utf-8")
+    return path
+
+
+def _manifests(root: Path) -> list[dict]:
+    """Every manifest in `root` and its subfolders, its files made relative to `root`, in `ORDER`; those whose
+    main file is gone are left out."""
+    found = []
+    for path in [*root.glob(f"{MANIFESTS}/*.json"), *root.glob(f"*/{MANIFESTS}/*.json")]:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+        prefix = path.parent.parent.relative_to(root)
+        manifest["files"] = [(prefix / f).as_posix() for f in manifest["files"]]
+        if manifest["files"] and (root / manifest["files"][0]).exists():
+            found.append(manifest)
+    rank = {study: i for i, study in enumerate(ORDER)}
+    return sorted(found, key=lambda m: (rank.get(m["study"], len(ORDER)), m["study"]))
+
+
+def _relative(path: Path, out_dir: Path) -> str:
+    if path.is_absolute() or path.parts[: len(out_dir.parts)] == out_dir.parts:
+        try:
+            return path.resolve().relative_to(out_dir.resolve()).as_posix()
+        except ValueError:
+            raise ValueError(f"{path} is not inside the output folder {out_dir}") from None
+    return path.as_posix()
+
+
+def shown(path: str | Path) -> str:
+    """A data path as people read it: relative to the working folder when inside it, else absolute."""
+    resolved = Path(path).resolve()
+    try:
+        return os.path.relpath(resolved) if resolved.is_relative_to(Path.cwd()) else str(resolved)
+    except ValueError:
+        return str(resolved)
+
+
+def write_json(path: str | Path | None, payload: dict) -> None:
+    """Write `payload` as JSON atomically (a temporary file renamed into place): never half a file. NumPy
+    scalars and arrays and paths are written as plain values. Nothing when `path` is None."""
+    if not path:
+        return
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "w") as fh:
+            json.dump(payload, fh, indent=2, default=_plain)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write the JSON output ({exc.strerror})") from None
+
+
+def _plain(value: Any) -> Any:
+    """JSON for NumPy scalars/arrays (both have `tolist`; NumPy itself is not imported for it) and paths."""
+    if type(value).__module__ == "numpy" and hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

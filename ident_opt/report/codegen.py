@@ -1,0 +1,80 @@
+"""What `ident-opt codegen` writes: the generated C sources and header, the compiled shared library, the
+example `main.c`, a README for embedding (all from `ident_opt.codegen`), and parameters.json (the parameters
+baked in, the estimator, the GMR, the check against Python); with the terminal lines."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ident_opt import codegen
+from ident_opt.report import write_json
+from ident_opt.studies.ship import MEASURE, TOLERANCE, Shipped
+
+#: Units of the parameters by prefix (parameters.json).
+UNITS = {"a": "kg m^2", "ia": "kg m^2", "b": "N m", "fv": "N m s/rad", "fc": "N m", "fs": "N m"}
+
+
+@dataclass
+class Built:
+    """The generated CasADi functions and the files written for them."""
+
+    functions: list
+    files: list[Path]  # sources, header, library, example, README
+    library: Path
+
+    @property
+    def names(self) -> list[str]:
+        return [f.name() for f in self.functions]
+
+
+def build(shipped: Shipped, out: Path, compiler: str, forward: bool = True) -> Built:
+    """Generate the C code of `shipped` into `out` and compile it (`forward`: also ddq_hat)."""
+    functions = codegen.build_functions(shipped.model, shipped.pi, shipped.gmr, forward=forward)
+    source, header = codegen.generate_sources(functions, out)
+    library = codegen.compile_library(source, out, compiler)
+    example = codegen.copy_example(out)
+    readme = codegen.write_readme(out, functions)
+    return Built(functions, [source, header, library, example, readme], library)
+
+
+def payload(shipped: Shipped, built: Built, errors: dict[str, float], problem, sources: list[str]) -> dict:
+    """parameters.json (and the --json payload)."""
+    model, gmr = shipped.model, shipped.gmr
+    return {
+        "estimator": shipped.estimator,
+        "estimator_status": shipped.status,
+        "model": {
+            "extensions": list(model.extensions),
+            "gravity": model.gravity,
+            "stribeck_velocity": list(model.stribeck_velocity),
+        },
+        "parameters": model.as_dict(shipped.pi),
+        "units": UNITS,
+        "gmr": {
+            "inputs": list(codegen.GMR_INPUTS),
+            "outputs": ["r1", "r2"],
+            "n_components": len(gmr.weights_),
+            "weights": gmr.weights_,
+            "means": gmr.means_,
+            "covariances": gmr.covariances_,
+        },
+        "problem": problem.name,
+        "data": sources,
+        "functions": built.names,
+        "library": built.library.name,
+        "check": {name: {MEASURE[name]: err, "limit": TOLERANCE[name]} for name, err in errors.items()},
+    }
+
+
+def write(data: dict, built: Built, out: Path, json_path: str | Path | None = None) -> str:
+    """parameters.json into `out` (and `json_path`); returns the terminal lines: each check, the files."""
+    write_json(out / "parameters.json", data)
+    write_json(json_path, data)
+    lines = [
+        f"  {name}: compiled vs Python, {MEASURE[name].replace('_', ' ')} {v[MEASURE[name]]:.2e} "
+        f"(limit {TOLERANCE[name]:.0e})"
+        for name, v in data["check"].items()
+    ]
+    lines.append(f"  wrote {', '.join(p.name for p in built.files)}, parameters.json")
+    return "\n".join(lines)

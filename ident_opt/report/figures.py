@@ -1,0 +1,242 @@
+"""Every figure of the reports: each function draws one PNG from a study's data and returns its path.
+
+The identify figures follow the paper, one per figure of it, drawn from a fitted split (`SplitResult`: the
+models fitted on one training part and their predictions on its test part; time axes show the test samples
+in time order). Colours follow the paper: measured torque black, parametric prediction red, GMR-corrected
+green. Then the seed heatmap (identify, compare), the audit's torque figure, the online parameter trajectories
+and the simulator calibration.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from statistics import NormalDist
+
+import matplotlib
+import numpy as np
+
+matplotlib.use("Agg")  # files only, never a window
+
+import matplotlib.pyplot as plt
+
+from ident_opt.studies.protocols import SplitResult
+from ident_opt.studies.seeds import SplitResults, deviation_from_mean
+
+MEASURED, PARAMETRIC, CORRECTED = "black", "tab:red", "tab:green"
+#: The paper's three models, in its order, with its names.
+PAPER_MODELS = (
+    ("rr", "Model 1: ridge regression (RR)"),
+    ("dm", "Model 2: datasheet dynamics (DM)"),
+    ("pbr", "Model 3: physics-based regression (PBR)"),
+)
+
+
+def _save(fig, path: Path, dpi: int = 110) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def torque_figure(split: SplitResult, joint: int, path: Path, models=PAPER_MODELS, title: str = "") -> Path:
+    """Measured vs predicted torque of one joint (0 or 1) over time, one panel per model."""
+    t, tau = split.test.t, split.test.tau[:, joint]
+    fig, axes = plt.subplots(len(models), 1, figsize=(11, 2.6 * len(models)), sharex=True, squeeze=False)
+    for ax, (key, name) in zip(axes[:, 0], models):
+        ax.plot(t, tau, color=MEASURED, lw=0.8, label="measured")
+        ax.plot(t, split.predictions[key][:, joint], color=PARAMETRIC, lw=0.8, label=f"{key.upper()} (parametric)")
+        ax.plot(t, split.predictions[key + "+gmr"][:, joint], color=CORRECTED, lw=0.8, label=f"{key.upper()} + GMR")
+        ax.set_title(name, fontsize=10)
+        ax.set_ylabel(f"τ{joint + 1} [N·m]")
+        ax.legend(loc="upper right", fontsize=8, ncol=3)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(title or f"Joint {joint + 1} torque predictions (test samples)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def error_figure(split: SplitResult, joint: int, path: Path, models=PAPER_MODELS, title: str = "") -> Path:
+    """Torque error (measured − predicted) of one joint over time: parametric red, with GMR green."""
+    t, tau = split.test.t, split.test.tau[:, joint]
+    fig, axes = plt.subplots(len(models), 1, figsize=(11, 2.4 * len(models)), sharex=True, sharey=True, squeeze=False)
+    for ax, (key, name) in zip(axes[:, 0], models):
+        ax.plot(t, tau - split.predictions[key][:, joint], color=PARAMETRIC, lw=0.7, label=f"{key.upper()}")
+        ax.plot(
+            t, tau - split.predictions[key + "+gmr"][:, joint], color=CORRECTED, lw=0.7, label=f"{key.upper()} + GMR"
+        )
+        ax.axhline(0, color="gray", lw=0.5)
+        ax.set_title(name, fontsize=10)
+        ax.set_ylabel(f"error τ{joint + 1} [N·m]")
+        ax.legend(loc="upper right", fontsize=8, ncol=2)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(title or f"Joint {joint + 1} torque error, measured − predicted (test samples)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def parity_figure(split: SplitResult, path: Path, models=PAPER_MODELS, title: str = "") -> Path:
+    """Predicted vs measured torque: joints in rows, models in columns (the paper's 2×3 parity plots)."""
+    fig, axes = plt.subplots(2, len(models), figsize=(4.2 * len(models), 8), squeeze=False)
+    for j in range(2):
+        tau = split.test.tau[:, j]
+        lo, hi = float(tau.min()), float(tau.max())
+        pad = 0.1 * (hi - lo)
+        for c, (key, name) in enumerate(models):
+            ax = axes[j, c]
+            ax.scatter(tau, split.predictions[key][:, j], s=3, color=PARAMETRIC, alpha=0.35, label=key.upper())
+            ax.scatter(
+                tau,
+                split.predictions[key + "+gmr"][:, j],
+                s=3,
+                color=CORRECTED,
+                alpha=0.35,
+                label=f"{key.upper()} + GMR",
+            )
+            ax.plot([lo - pad, hi + pad], [lo - pad, hi + pad], color=MEASURED, lw=0.8, label="ideal")
+            ax.set_xlim(lo - pad, hi + pad)
+            ax.set_xlabel(f"measured τ{j + 1} [N·m]")
+            ax.set_ylabel(f"predicted τ{j + 1} [N·m]")
+            ax.set_title(f"{name.split(': ')[0]}, joint {j + 1}", fontsize=10)
+            ax.legend(loc="upper left", fontsize=8, markerscale=3)
+    fig.suptitle(title or "Parity plots (test samples)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def interval_figure(
+    split: SplitResult,
+    path: Path,
+    key: str = "pbr",
+    level: float = 0.95,
+    window: tuple[float, float] | None = None,
+    title: str = "",
+) -> Path:
+    """The hybrid's prediction with its `level` predictive interval (GMR mixture variance) per joint."""
+    z = NormalDist().inv_cdf(0.5 + level / 2)
+    t = split.test.t
+    sel = np.ones(len(t), bool) if window is None else (t >= window[0]) & (t <= window[1])
+    mean, std = split.predictions[key + "+gmr"], split.std[key + "+gmr"]
+    cover = split.coverage[key + "+gmr"]
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True)
+    for j, ax in enumerate(axes):
+        ax.fill_between(
+            t[sel],
+            (mean - z * std)[sel, j],
+            (mean + z * std)[sel, j],
+            color=CORRECTED,
+            alpha=0.25,
+            lw=0,
+            label=f"{level:.0%} interval (covers {cover[j]:.1%} of test samples)",
+        )
+        ax.plot(t[sel], split.test.tau[sel, j], color=MEASURED, lw=0.8, label="measured")
+        ax.plot(t[sel], mean[sel, j], color=CORRECTED, lw=0.8, label=f"{key.upper()} + GMR")
+        ax.set_ylabel(f"τ{j + 1} [N·m]")
+        ax.set_title(f"Joint {j + 1}", fontsize=10)
+        ax.legend(loc="upper right", fontsize=8, ncol=3)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(title or f"{key.upper()} + GMR with {level:.0%} predictive intervals (test samples)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def seed_heatmap(study: SplitResults, path: str | Path, estimator: str = "ols") -> Path:
+    """The paper's "grouped parameters regressed across 10 seeds" figure: deviation from the mean (%)
+    per seed and parameter, with each parameter's mean printed under its name. Writes a PNG."""
+    dev = deviation_from_mean(study, estimator)
+    mean = study.pi[estimator].mean(0)
+    lim = max(float(np.abs(dev.to_numpy()).max()), 1e-9)
+    fig, ax = plt.subplots(figsize=(1.0 + 0.85 * dev.shape[1], 1.2 + 0.42 * dev.shape[0]))
+    im = ax.imshow(dev.to_numpy(), cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
+    ax.set_xticks(range(dev.shape[1]), [f"{n}\n{m:.3g}" for n, m in zip(dev.columns, mean)], fontsize=8)
+    ax.set_yticks(range(dev.shape[0]), [str(s) for s in dev.index], fontsize=8)
+    ax.set_ylabel("seed")
+    for (r, c), v in np.ndenumerate(dev.to_numpy()):
+        ax.text(c, r, f"{v:.1f}", ha="center", va="center", fontsize=6)
+    fig.colorbar(im, ax=ax, label="deviation from the mean over seeds [%]")
+    ax.set_title(
+        f"{estimator}: grouped parameters across {dev.shape[0]} shuffled 70/30 splits (column label: mean)", fontsize=9
+    )
+    fig.tight_layout()
+    return _save(fig, Path(path), dpi=130)
+
+
+def audit_torque_figure(trial, predictions: dict[str, np.ndarray], path: Path) -> Path:
+    """Measured vs predicted torque over time, both joints, both datasheet conventions (no fitting)."""
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+    for j, ax in enumerate(axes):
+        ax.plot(trial.t, trial.tau[:, j], color="black", lw=1.0, label="measured")
+        ax.plot(
+            trial.t,
+            predictions["dm_paper (printed G)"][:, j],
+            color="tab:red",
+            lw=1.0,
+            label="datasheet, paper convention",
+        )
+        ax.plot(
+            trial.t, predictions["dm_physical"][:, j], color="tab:blue", lw=1.0, label="datasheet, physical convention"
+        )
+        ax.set_ylabel(f"joint {j + 1} torque [N·m]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle("Datasheet models without fitting vs measured torque")
+    fig.tight_layout()
+    return _save(fig, path, dpi=120)
+
+
+def online_trajectories_figure(names: tuple[str, ...], theta: dict, theta0: dict, path: Path) -> Path:
+    """Parameters over an online replay, one panel per parameter: `theta` model key -> (N, P) trajectory,
+    `theta0` model key -> the offline values (P,) drawn dotted."""
+    cols = 3
+    rows = int(np.ceil(len(names) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(11, 2.4 * rows), sharex=True)
+    for p, (ax, name) in enumerate(zip(axes.flat, names)):
+        for key, trajectory in theta.items():
+            ax.plot(np.arange(1, len(trajectory) + 1), trajectory[:, p], label=key, lw=1.2)
+            ax.axhline(theta0[key][p], color="0.6", lw=0.6, ls=":")
+        ax.set_title(name, fontsize=9)
+        ax.tick_params(labelsize=7)
+    for ax in list(axes.flat)[len(names) :]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    fig.supxlabel("online samples")
+    fig.suptitle("Online parameter trajectories (dotted: offline fit); a kg·m², b N·m, fv N·m·s/rad, fc N·m")
+    fig.tight_layout()
+    return _save(fig, path, dpi=120)
+
+
+def calibration_figure(summaries: list, path: Path) -> Path:
+    """The simulator calibration: residual spectra per joint, strain spectra, and a residual trace, real vs
+    simulated (`studies.calibration.Summary` each: [exp1, exp2, sim, sim, before])."""
+    fig, ax = plt.subplots(2, 2, figsize=(11, 7.5))
+    styles = ["-", "--", "-", "--", ":"]
+    colours = ["C0", "C0", "C3", "C3", "0.5"]
+    for s, ls, c in zip(summaries, styles, colours):
+        for j in range(2):
+            ax[0, j].semilogy(s.f, s.psd[:, j], ls, color=c, label=s.label, lw=1)
+        if s.strain_psd is not None and not s.label.startswith("before"):
+            ax[1, 0].semilogy(s.strain_f, s.strain_psd.mean(1), ls, color=c, label=s.label, lw=1)
+    for j in range(2):
+        ax[0, j].set(
+            xlim=(0, 20),
+            xlabel="frequency [Hz]",
+            ylabel="PSD [N² m² / Hz]",
+            title=f"joint {j + 1}: rigid-fit residual spectrum",
+        )
+        ax[0, j].legend(fontsize=8)
+    ax[1, 0].set(
+        xlim=(0.5, 20),
+        ylim=(1e-5, 2),
+        xlabel="frequency [Hz]",
+        ylabel="PSD (unit peak above 0.5 Hz)",
+        title="strain gauges (real, mean of 4) vs spring deflection (sim)",
+    )
+    ax[1, 0].legend(fontsize=8)
+    for s, c in ((summaries[0], "C0"), (summaries[2], "C3")):
+        t = s.data.t
+        window = (t >= 15) & (t < 45)
+        ax[1, 1].plot(t[window], s.residual[window, 1], color=c, lw=0.8, label=s.label)
+    ax[1, 1].set(xlabel="t [s]", ylabel="residual τ2 − Y π̂ [N m]", title="joint 2 residual, 15–45 s")
+    ax[1, 1].legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, path)
