@@ -5,8 +5,9 @@
 
 For every catalogue cause and seed, a simulated trial (the built-in simulator, the default problem's robot)
 hides that one effect at a random realistic magnitude (`ident_opt.diagnose.hidden.draw`); `none` trials are
-clean. The reference is the point-to-point `tud01` (like the real trials), except for Stribeck friction,
-which needs slow motion and gets the smooth `fourier` reference (`--trajectory auto`). `diagnose` runs on
+clean. The reference is the point-to-point `tud01` (like the real trials), except for causes that need slow
+motion (Stribeck friction), which get the reference their module names (`Effect.reference`, here `fourier`;
+`--trajectory auto`). `diagnose` runs on
 each (chronological 70/30 split); the table counts what it named, and the error column is the median over
 trials of the worst relative error of the estimate (when the cause was named).
 """
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt.diagnose import CAUSES
+from ident_opt.effects import CATALOGUE
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,7 +36,7 @@ def one(job: tuple[str, int, float, str]) -> dict:
 
     cause, seed, duration, trajectory = job
     if trajectory == "auto":  # as the tests: Stribeck friction shows only on a smooth reference
-        trajectory = "fourier" if cause == "stribeck" else "tud01"
+        trajectory = CATALOGUE[cause].reference if cause in CATALOGUE else "tud01"
     robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
     rng = np.random.default_rng([seed, CAUSES.index(cause)])
     effects = {} if cause == "none" else {cause: hidden.draw(cause, rng, robot)}
@@ -124,22 +126,11 @@ def table(results: list[dict], command: str) -> str:
     for r in results:
         err = f"{r['error']:.3f}" if r["error"] is not None else "—"
         est = {k: (np.round(v, 4).tolist() if not isinstance(v, int) else v) for k, v in r["estimate"].items()}
+        judged = {key for effect in CATALOGUE.values() for key in effect.judged}
         truth = {
             k: (np.round(v, 4).tolist() if not isinstance(v, int) else v)
             for k, v in (r["truth"] or {}).items()
-            if k
-            in (
-                "inertia",
-                "positive",
-                "negative",
-                "static",
-                "velocity",
-                "joint",
-                "frequency_hz",
-                "mass",
-                "seconds",
-                "offset",
-            )
+            if k in judged
         }
         lines.append(f"| {r['cause']} | {r['seed']} | {r['named']} | {r['ok']} | {err} | `{est}` | `{truth}` |")
     return "\n".join(lines) + "\n"

@@ -199,8 +199,8 @@ def test_elastic_polish_recovers_the_mode_from_a_wrong_start():
 
 def test_offset_polish_recovers_both_offsets_jointly_with_pi(physical_problem):
     from ident_opt.datasheet import datasheet_pi
-    from ident_opt.diagnose import polish
     from ident_opt.diagnose.candidates import NOMINAL
+    from ident_opt.effects.joint_offset import offsets
 
     rng = np.random.default_rng(3)
     n = 2000
@@ -211,6 +211,6 @@ def test_offset_polish_recovers_both_offsets_jointly_with_pi(physical_problem):
     tau = NOMINAL.predict(pi, q + delta, dq, ddq)
     labels = signals.rest_runs(np.ones((n, 2)))
     start = {"delta1": 0.02, "delta2": -0.03}
-    theta, info = polish.offsets(NOMINAL, q, dq, ddq, tau, labels, np.ones(2), None, pi * 0.9, start, (-0.1, 0.1))
+    theta, info = offsets(NOMINAL, q, dq, ddq, tau, labels, np.ones(2), None, pi * 0.9, start, (-0.1, 0.1))
     assert theta is not None, info
     np.testing.assert_allclose([theta["delta1"], theta["delta2"]], delta, atol=1e-6)

@@ -1,5 +1,5 @@
 """`ident-opt diagnose`: what the nominal model gets wrong, which catalogue cause explains it, the extended
-model and its held-out gain (spec/diagnose.md).
+model and its held-out gain (`docs/cli.md`, `docs/effects.md`).
 
 With two --data files the first trains and the second is held out; with one, its first part (the problem's
 train_fraction, in time) trains and the rest is held out. Writes diagnosis.md and two figures to --out

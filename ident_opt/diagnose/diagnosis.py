@@ -53,7 +53,7 @@ class Diagnosis:
     timings: dict[str, float] = field(default_factory=dict)
 
     def as_json(self) -> dict:
-        """The `--json` payload of `spec/diagnose.md`, plus extra keys (NaN, e.g. no reversal, as null)."""
+        """The `--json` payload (`docs/cli.md`), plus extra keys (NaN, e.g. no reversal, as null)."""
         return _finite(self._payload())
 
     def _payload(self) -> dict:
@@ -75,8 +75,7 @@ class Diagnosis:
             "score": "held-out log-likelihood gain over the candidate's baseline minus (k/2) ln n; a cause "
             f"is named when its score > 0 and, on some joint, it removes >= {scoring.MARGIN:.0%} of the "
             f"baseline's held-out MSE and >= {scoring.MARGIN_VARIANCE:.2%} of the torque variance "
-            "(delays "
-            f"shorter than {1e3 * scoring.MIN_DELAY_S:g} ms are not named)",
+            + scoring.rules_note(),
             "nmse_definition": "MSE ÷ variance of the measured torque, per joint, on the held-out part; "
             "within "
             "each stretch where a joint rests, its residual's mean is removed first (stiction "

@@ -1,7 +1,7 @@
 """IPOPT polish of the elastic candidate: the mode (f, ζ) jointly with every linear coefficient, by multiple
 shooting of the elastic-joint model driven by the measured motor-side motion.
 
-The model (`candidates._elastic_columns`, `signals.deflection_acceleration`): the link behind elastic joint j
+The model (`effects/elasticity.py`, `signals.deflection_acceleration`): the link behind elastic joint j
 deflects by e from its motor, driven by the measured motor-side acceleration u [rad/s²],
 
     ë + 2ζω ė + ω² e = −u,        τ̂ = o + X_rigid β + s · P ë,        ω = 2π f,
@@ -97,6 +97,41 @@ def _basis(A: np.ndarray) -> np.ndarray:
     return U[:, sv > sv[0] * max(A.shape) * np.finfo(float).eps]
 
 
+def _simulate(u_ext: np.ndarray, h: float, f: float, zeta: float, steps: int) -> np.ndarray:
+    """States (steps + 1, 2) of the mode at f [Hz], ζ driven by u_ext [rad/s²] on a grid of step h [s], from
+    the filter's zero-history initial state (single shooting, the start of the NLP)."""
+    step = trapezoid_step(h, math.tan)
+    states = np.zeros((steps + 1, 2))
+    w0 = 2.0 / h * math.tan(math.pi * f * h)
+    a0, b0 = h / 2.0, w0 * w0 * h / 2.0
+    det0 = 1.0 + zeta * w0 * h + a0 * b0
+    states[0] = [a0 * (-a0 * u_ext[0]) / det0, (-a0 * u_ext[0]) / det0]  # lfilter's zero-history state
+    for k in range(steps):
+        e, ed, _ = step(states[k, 0], states[k, 1], u_ext[k], u_ext[k + 1], f, zeta)
+        states[k + 1] = [float(e), float(ed)]
+    return states
+
+
+def _shooting(u_ext, h: float, S: int, L: int, f, zeta, first: np.ndarray, xs, x_scale: np.ndarray) -> tuple:
+    """(continuity gaps (2(S − 1),) scaled by x_scale, ë (S·L,) in time order) of S segments of L steps run in
+    parallel (one SX step over S-vectors, accumulated L times): the first from the state `first`, the others
+    from the decision variables xs (2, S − 1) × x_scale; f, ζ symbolic."""
+    e_s, ed_s, uk_s, uk1_s = (ca.SX.sym(nm, S) for nm in ("e", "ed", "uk", "uk1"))
+    par = ca.SX.sym("par", 2)
+    e_n, ed_n, y = trapezoid_step(h)(e_s, ed_s, uk_s, uk1_s, par[0], par[1])
+    one = ca.Function("one", [ca.vertcat(e_s, ed_s), ca.vertcat(uk_s, uk1_s, par)], [ca.vertcat(e_n, ed_n), y])
+    run = one.mapaccum(L)
+    x_start = ca.horzcat(ca.DM(first), xs * ca.DM(x_scale))  # (2, S)
+    x0 = ca.vertcat(x_start[0, :].T, x_start[1, :].T)
+    U = u_ext[: S * L].reshape(S, L)
+    U1 = u_ext[1 : S * L + 1].reshape(S, L)
+    inputs = ca.vertcat(ca.DM(U), ca.DM(U1), ca.repmat(ca.vertcat(f, zeta), 1, L))
+    X_all, Y = run(x0, inputs)  # (2S, L), (S, L)
+    ends = X_all[:, -1]
+    gap = ca.vertcat(ends[: S - 1] - x_start[0, 1:].T, ends[S : 2 * S - 1] - x_start[1, 1:].T)
+    return gap / ca.DM(np.repeat(x_scale, S - 1)), ca.reshape(Y.T, S * L, 1)
+
+
 def polish(
     u: np.ndarray,
     pattern: np.ndarray,
@@ -128,15 +163,7 @@ def polish(
 
     # Start: the search's mode, simulated (single shooting from the filter's initial state) for the states.
     f0, z0 = float(theta["frequency_hz"]), float(theta["damping"])
-    step = trapezoid_step(h, math.tan)
-    states = np.zeros((S * L + 1, 2))
-    w0 = 2.0 / h * math.tan(math.pi * f0 * h)
-    a0, b0 = h / 2.0, w0 * w0 * h / 2.0
-    det0 = 1.0 + z0 * w0 * h + a0 * b0
-    states[0] = [a0 * (-a0 * u_ext[0]) / det0, (-a0 * u_ext[0]) / det0]  # lfilter's zero-history state
-    for k in range(S * L):
-        e, ed, _ = step(states[k, 0], states[k, 1], u_ext[k], u_ext[k + 1], f0, z0)
-        states[k + 1] = [float(e), float(ed)]
+    states = _simulate(u_ext, h, f0, z0, S * L)
     x_scale = np.maximum(np.std(states, axis=0), 1e-12)
 
     # Decision variables, scaled to O(1): log f, log ζ, the scale s on a unit-norm column, segment states
@@ -150,25 +177,8 @@ def polish(
     lf, lz = ca.MX.sym("lf"), ca.MX.sym("lz")
     ss = ca.MX.sym("s")
     xs = ca.MX.sym("x", 2, S - 1)
-    f, zeta = ca.exp(lf), ca.exp(lz)
-
-    # Segments in parallel: one SX step over S-vectors, accumulated L times.
-    e_s, ed_s, uk_s, uk1_s = (ca.SX.sym(nm, S) for nm in ("e", "ed", "uk", "uk1"))
-    par = ca.SX.sym("par", 2)
-    e_n, ed_n, y = trapezoid_step(h)(e_s, ed_s, uk_s, uk1_s, par[0], par[1])
-    one = ca.Function("one", [ca.vertcat(e_s, ed_s), ca.vertcat(uk_s, uk1_s, par)], [ca.vertcat(e_n, ed_n), y])
-    run = one.mapaccum(L)
-    first = ca.DM(states[0])
-    x_start = ca.horzcat(first, xs * ca.DM(x_scale))  # (2, S)
-    x0 = ca.vertcat(x_start[0, :].T, x_start[1, :].T)
-    U = u_ext[: S * L].reshape(S, L)
-    U1 = u_ext[1 : S * L + 1].reshape(S, L)
-    inputs = ca.vertcat(ca.DM(U), ca.DM(U1), ca.repmat(ca.vertcat(f, zeta), 1, L))
-    X_all, Y = run(x0, inputs)  # (2S, L), (S, L)
-    ends = X_all[:, -1]
-    gap = ca.vertcat(ends[: S - 1] - x_start[0, 1:].T, ends[S : 2 * S - 1] - x_start[1, 1:].T)
-    gap = gap / ca.DM(np.repeat(x_scale, S - 1))
-    edd = ca.reshape(Y.T, S * L, 1)[:n]  # time order
+    gap, edd = _shooting(u_ext, h, S, L, ca.exp(lf), ca.exp(lz), states[0], xs, x_scale)
+    edd = edd[:n]  # time order
 
     # Weighted, rest-projected residual of both joints stacked: ρ = √w (t − s·v(f, ζ)). The rigid columns
     # enter linearly, so their best coefficients for any (f, ζ, s) are a least-squares solve; minimising

@@ -1,4 +1,7 @@
-"""The diagnosis in words and figures: a terminal summary, a Markdown report, two PNG figures."""
+"""The diagnosis in words and figures: a terminal summary, a Markdown report, two PNG figures.
+
+What each cause's finding says in words is the cause's own (`Effect.sentence`, built with `num`, `pair` and
+`polish_note` from here)."""
 
 from __future__ import annotations
 
@@ -6,89 +9,45 @@ from pathlib import Path
 
 import numpy as np
 
-from ident_opt.diagnose import signals
+from ident_opt.diagnose import scoring, signals
 from ident_opt.diagnose.diagnosis import Diagnosis
+from ident_opt.effects import CATALOGUE
 
 
-def _v(x: float, unit: str = "", digits: int = 3) -> str:
+def num(x: float, unit: str = "", digits: int = 3) -> str:
+    """A number to `digits` significant digits, with its unit."""
     return f"{x:.{digits}g}{(' ' + unit) if unit else ''}"
 
 
-def _pair(xs, unit: str = "") -> str:
-    return "[" + ", ".join(_v(float(x)) for x in xs) + "]" + (f" {unit}" if unit else "")
+def pair(xs, unit: str = "") -> str:
+    """Per-joint numbers as "[a, b] unit"."""
+    return "[" + ", ".join(num(float(x)) for x in xs) + "]" + (f" {unit}" if unit else "")
 
 
 def _gain(d: Diagnosis) -> str:
-    return "; ".join(f"joint {j + 1} {_v(b)} → {_v(a)}" for j, (b, a) in enumerate(zip(d.nmse_before, d.nmse_after)))
+    return "; ".join(f"joint {j + 1} {num(b)} → {num(a)}" for j, (b, a) in enumerate(zip(d.nmse_before, d.nmse_after)))
 
 
 def cause_sentence(d: Diagnosis) -> str:
     """One or two sentences that say what was found, with its held-out gain."""
-    e, base = d.estimate, ("datasheet" if d.baseline == "datasheet" else "best rigid fit")
-    ev = d.evidence[d.baseline]
+    base = "datasheet" if d.baseline == "datasheet" else "best rigid fit"
     gain = f"held-out nMSE {_gain(d)}."
     if d.cause == "none":
         best = d.candidates[0]
         return (
             f"No catalogue effect beats the nominal models by the stated margin: the best candidate, "
             f"{best['cause']}, scores {best['score']:.1f} against the {best['baseline']} model. "
-            f"The {base} model stands (held-out nMSE {_pair(d.nmse_before)})."
+            f"The {base} model stands (held-out nMSE {pair(d.nmse_before)})."
         )
-    if d.cause == "armature":
-        return (
-            f"The {base} model lacks inertia on the diagonal of M: reflected rotor inertia of "
-            f"J = {_pair(e['inertia'], 'kg m²')} (joint side) explains the residual; {gain}"
-        )
-    if d.cause == "payload":
-        return (
-            f"Gravity and inertia are both off along the direction of a point mass at the tip of link 2: "
-            f"an unmodelled payload of {_v(e['mass'], 'kg')} explains it; {gain}"
-        )
-    if d.cause == "asymmetric_coulomb":
-        mm = ev["moving_mean"]
-        return (
-            f"The residual of the {base} model differs by direction of motion (mean while moving "
-            f"positive / negative: "
-            + ", ".join(f"joint {j + 1} {_v(m['positive'])} / {_v(m['negative'])} N m" for j, m in enumerate(mm))
-            + f"): Coulomb friction is asymmetric, fc+ = {_pair(e['positive'], 'N m')}, "
-            f"fc− = {_pair(e['negative'], 'N m')}; {gain}"
-        )
-    if d.cause == "stribeck":
-        return (
-            f"Friction rises at low speed beyond the Coulomb level (low-speed excess of the residual "
-            f"{_pair(ev['low_speed_excess'], 'N m')}): a Stribeck excess fs = {_pair(e['static'], 'N m')} "
-            f"falling off over vs = {_pair(e['velocity'], 'rad/s')} explains it; {gain}"
-        )
-    if d.cause == "elasticity":
-        det = d.named.detail if d.named else {}
-        return (
-            f"Joint {e['joint']} shows a lightly damped {_v(e['frequency_hz'], 'Hz')} oscillation that the "
-            f"rigid model cannot produce; an elastic joint with "
-            f"k = {_v(det.get('stiffness', float('nan')), 'N m/rad')} "
-            f"(link inertia {_v(det.get('inertia', float('nan')), 'kg m²')}, damping ratio "
-            f"{_v(det.get('damping_ratio', float('nan')))}) driven by the measured motor-side angle explains "
-            "it"
-            f"{_polish_note(d, 'frequency_hz', 'Hz')}; {gain}"
-        )
-    if d.cause == "delay":
-        return (
-            f"The measured torque lags the encoder channel: a delay of {_v(1e3 * e['seconds'], 'ms')} "
-            f"(cross-correlation lag of the {base} model: {_pair(np.array(ev['lag_s']) * 1e3, 'ms')}); {gain}"
-        )
-    if d.cause == "joint_offset":
-        return (
-            f"Gravity looks rotated (pose-correlated share of the residual {_pair(ev['pose_r2'])}): encoder "
-            f"zero offsets δ = {_pair(e['offset'], 'rad')} explain it{_polish_note(d, 'offset', 'rad')}; {gain}"
-        )
-    return gain
+    return CATALOGUE[d.cause].sentence(d, base, gain)
 
 
-def _polish_note(d: Diagnosis, key: str, unit: str) -> str:
+def polish_note(d: Diagnosis, key: str, unit: str) -> str:
     """' (IPOPT polish of the grid search's answer: a → b unit)', or '' when there was no polish."""
     nlp = d.named.detail.get("polish") if d.named else None
     if not nlp:
         return ""
-    show = _pair if isinstance(nlp["before"][key], list | tuple) else _v
+    show = pair if isinstance(nlp["before"][key], list | tuple) else num
     verdict = "kept" if nlp["kept"] else "not kept: it did not lower the training objective"
     before, after = show(nlp["before"][key]), show(nlp["after"][key], unit)
     return f" (IPOPT polish of the grid search's {key}: {before} → {after}, {verdict})"
@@ -100,16 +59,16 @@ def summary(d: Diagnosis) -> str:
     lines = [
         f"diagnosis ({d.split}; {d.rate_hz:.4g} Hz)",
         "1. nominal models, held-out nMSE per joint: datasheet "
-        + _pair(nom["datasheet"]["nmse"])
+        + pair(nom["datasheet"]["nmse"])
         + ", rigid fit "
-        + _pair(nom["rigid_fit"]["nmse"]),
+        + pair(nom["rigid_fit"]["nmse"]),
         f"2. cause: {d.cause}" + (f" (against the {d.baseline} model)" if d.cause != "none" else ""),
         "   " + cause_sentence(d),
         "3. candidates (score = penalised held-out log-likelihood gain):",
     ]
     for c in d.candidates:
         lines.append(
-            f"   {c['cause']:20s} {c['score']:10.1f}  vs {c['baseline']:9s} nMSE after {_pair(c['nmse_after'])}"
+            f"   {c['cause']:20s} {c['score']:10.1f}  vs {c['baseline']:9s} nMSE after {pair(c['nmse_after'])}"
         )
     lines.append(f"4. held-out nMSE before → after: {_gain(d)}")
     return "\n".join(lines)
@@ -143,8 +102,9 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
         for r, lab in ((before, "before"), (after, label_after)):
             f, p = signals.spectrum(r[:, j], dt)
             ax.semilogy(f[1:], p[1:], lw=0.8, label=lab)
-        if d.cause == "elasticity" and d.estimate["joint"] == j + 1:
-            ax.axvline(d.estimate["frequency_hz"], color="k", ls=":", lw=0.8, label="identified mode")
+        marker = CATALOGUE[d.cause].spectrum_marker(d.estimate, j) if d.cause in CATALOGUE else None
+        if marker is not None:
+            ax.axvline(marker, color="k", ls=":", lw=0.8, label="identified mode")
         ax.set_xlabel("frequency [Hz]")
         ax.set_ylabel(f"joint {j + 1} residual PSD [(N m)²/Hz]")
         ax.legend(fontsize=8)
@@ -165,42 +125,38 @@ def _evidence_table(d: Diagnosis) -> list[str]:
         vals = [fn(d.evidence[b], j) for b in ("datasheet", "rigid_fit") for j in range(2)]
         rows.append(f"| {name} | " + " | ".join(vals) + " |")
 
-    row("residual RMS [N m]", lambda e, j: _v(e["rms"][j]))
-    row("nMSE of the raw residual (rest levels included)", lambda e, j: _v(e["nmse"][j]))
+    row("residual RMS [N m]", lambda e, j: num(e["rms"][j]))
+    row("nMSE of the raw residual (rest levels included)", lambda e, j: num(e["nmse"][j]))
     row(
         "strongest residual peak [Hz] (ζ)",
         lambda e, j: (
-            f"{_v(e['peaks'][j][0]['frequency_hz'])} ({_v(e['peaks'][j][0]['damping'], digits=2)})"
+            f"{num(e['peaks'][j][0]['frequency_hz'])} ({num(e['peaks'][j][0]['damping'], digits=2)})"
             if e["peaks"][j]
             else "—"
         ),
     )
-    row(f"power share below {0.6} Hz", lambda e, j: _v(e["low_band_fraction"][j]))
+    row(f"power share below {0.6} Hz", lambda e, j: num(e["low_band_fraction"][j]))
     row(
         "mean residual moving +/− [N m]",
-        lambda e, j: f"{_v(e['moving_mean'][j]['positive'])} / {_v(e['moving_mean'][j]['negative'])}",
+        lambda e, j: f"{num(e['moving_mean'][j]['positive'])} / {num(e['moving_mean'][j]['negative'])}",
     )
     row(
         "reversal jump −→+ / +→− [N m]",
         lambda e, j: (
-            f"{_v(e['reversal_steps'][j]['negative_to_positive'])} / "
-            f"{_v(e['reversal_steps'][j]['positive_to_negative'])}"
+            f"{num(e['reversal_steps'][j]['negative_to_positive'])} / "
+            f"{num(e['reversal_steps'][j]['positive_to_negative'])}"
         ),
     )
-    row("low-speed excess [N m]", lambda e, j: _v(e["low_speed_excess"][j]))
-    row("pose-explained share (gravity-like)", lambda e, j: _v(e["pose_r2"][j]))
-    row("lag of measured vs predicted [ms]", lambda e, j: _v(1e3 * e["lag_s"][j]))
+    row("low-speed excess [N m]", lambda e, j: num(e["low_speed_excess"][j]))
+    row("pose-explained share (gravity-like)", lambda e, j: num(e["pose_r2"][j]))
+    row("lag of measured vs predicted [ms]", lambda e, j: num(1e3 * e["lag_s"][j]))
     fe = d.evidence["forward_error_rad"]
     rows.append(
         "| forward simulation, 0.5 s windows, RMS angle error [rad] | "
-        + " | ".join(_v(fe[b][j]) for b in ("datasheet", "rigid_fit") for j in range(2))
+        + " | ".join(num(fe[b][j]) for b in ("datasheet", "rigid_fit") for j in range(2))
         + " |"
     )
     return rows
-
-
-def _elastic_candidate(d: Diagnosis) -> dict | None:
-    return next((c for c in d.candidates if c["cause"] == "elasticity"), None)
 
 
 def channels_paragraph(d: Diagnosis) -> list[str]:
@@ -219,20 +175,10 @@ def channels_paragraph(d: Diagnosis) -> list[str]:
         "|---|---|---|",
     ]
     for name, info in ch.items():
-        peaks = ", ".join(f"{_v(p['frequency_hz'])} ({_v(p['prominence_db'], digits=2)} dB)" for p in info["peaks"])
-        lines.append(f"| `{name}` | {_v(info['mode_band_max_hz'])} Hz | {peaks or '—'} |")
-    el = _elastic_candidate(d)
-    if el is not None:
-        f = el["estimate"]["frequency_hz"]
-        near = [n for n, info in ch.items() if abs(info["mode_band_max_hz"] - f) <= 0.2 * f]
-        status = "the named cause" if d.cause == "elasticity" else f"not named; score {el['score']:.1f}"
-        lines += [
-            "",
-            f"The elastic-joint candidate ({status}) puts a mode at {_v(f, 'Hz')} on joint "
-            f"{el['estimate']['joint']}; channels whose 1–10 Hz maximum lies within 20 % of it: "
-            + (", ".join(f"`{n}`" for n in near) if near else "none")
-            + ".",
-        ]
+        peaks = ", ".join(f"{num(p['frequency_hz'])} ({num(p['prominence_db'], digits=2)} dB)" for p in info["peaks"])
+        lines.append(f"| `{name}` | {num(info['mode_band_max_hz'])} Hz | {peaks or '—'} |")
+    for effect in CATALOGUE.values():
+        lines += effect.channel_lines(d, ch)
     return [*lines, ""]
 
 
@@ -245,7 +191,7 @@ def also_clear(d: Diagnosis) -> list[str]:
         "Other candidates that also clear the margin on their own (effects need not come alone): "
         + "; ".join(
             f"{c['cause']} against the {c['baseline']} model (score {c['score']:.1f}, estimate "
-            f"`{_rounded(c['estimate'])}`, held-out nMSE after {_pair(c['nmse_after'])})"
+            f"`{_rounded(c['estimate'])}`, held-out nMSE after {pair(c['nmse_after'])})"
             for c in others
         )
         + ".",
@@ -270,9 +216,9 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "",
         "## 1. What the nominal models get wrong",
         "",
-        f"Held-out nMSE (MSE ÷ variance) per joint: datasheet {_pair(nom['datasheet']['nmse'])}, "
+        f"Held-out nMSE (MSE ÷ variance) per joint: datasheet {pair(nom['datasheet']['nmse'])}, "
         "best rigid fit "
-        f"{_pair(nom['rigid_fit']['nmse'])}.",
+        f"{pair(nom['rigid_fit']['nmse'])}.",
         "",
         *_evidence_table(d),
         "",
@@ -287,8 +233,7 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "and/or against the rigid fit with π refitted) and scored on the held-out part: score = (n/2) Σ_j "
         "ln(MSE_before,j / MSE_after,j) − (k/2) ln n for k added parameters. A cause is named when its score "
         "is positive and, on some joint, it removes at least 5 % of its baseline's held-out MSE and at least "
-        "0.01 % of the torque's variance; delays shorter than 2 ms are not named (sample-and-hold timing and "
-        "filter mismatch produce them).",
+        "0.01 % of the torque's variance" + "".join(f"; {rule} ({reason})" for rule, reason in scoring.rules()) + ".",
         "",
         "| cause | score | baseline | added parameters | held-out nMSE after | estimate |",
         "|---|---|---|---|---|---|",
@@ -296,7 +241,7 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
     for c in d.candidates:
         lines.append(
             f"| {c['cause']} | {c['score']:.1f} | {c['baseline']} | {c['added_parameters']} | "
-            f"{_pair(c['nmse_after'])} | `{_rounded(c['estimate'])}` |"
+            f"{pair(c['nmse_after'])} | `{_rounded(c['estimate'])}` |"
         )
     lines += ["", *also_clear(d), "## 3. The extended model", ""]
     if d.named is not None:

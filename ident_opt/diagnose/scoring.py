@@ -13,8 +13,9 @@ positive *and*, on some joint, the extension removes at least `MARGIN` (5 %) of 
 MSE and at least `MARGIN_VARIANCE` (0.01 %) of the measured torque's variance (an nMSE drop of 1e-4). The
 log-likelihood alone counts correlated residual samples as independent and would accept tiny gains on long
 trials; the two floors ask for a gain that matters relative to what the baseline gets wrong and is not
-numerically nil. A candidate must also be *resolved* (`resolved`): a delay shorter than `MIN_DELAY_S`
-(2 ms) is what sample-and-hold timing and filter mismatch produce on a perfect model, not a cause.
+numerically nil. A candidate must also be *resolved* by its cause's own rule (`resolved`, `rules`: e.g. a
+delay shorter than 2 ms is what sample-and-hold timing and filter mismatch produce on a perfect model, not a
+cause).
 """
 
 from __future__ import annotations
@@ -22,13 +23,12 @@ from __future__ import annotations
 import numpy as np
 
 from ident_opt.diagnose import signals
+from ident_opt.effects import CATALOGUE
 
 #: Least fraction of the baseline's held-out MSE (on some joint) the named extension must remove.
 MARGIN = 0.05
 #: Least fraction of the measured torque's variance (on the same joint) it must remove.
 MARGIN_VARIANCE = 1e-4
-#: Shortest delay [s] that counts as a cause (the issue's tolerance on delays is 2 ms, too).
-MIN_DELAY_S = 0.002
 
 
 def mse(tau: np.ndarray, tau_hat: np.ndarray, rest: np.ndarray | None = None) -> np.ndarray:
@@ -52,10 +52,19 @@ def score(mse_before: np.ndarray, mse_after: np.ndarray, n: int, k: int) -> floa
 
 
 def resolved(cause: str, estimate: dict, dt: float) -> bool:
-    """Whether a fitted candidate describes an effect at all (see the module docstring)."""
-    if cause == "delay":
-        return estimate["seconds"] >= max(MIN_DELAY_S, 0.5 * dt)
-    return True
+    """Whether a fitted candidate describes an effect at all (its cause's `Effect.resolved`, `dt` [s])."""
+    return CATALOGUE[cause].resolved(estimate, dt)
+
+
+def rules() -> list[tuple[str, str]]:
+    """The causes' resolution rules as (rule, reason), for the reports."""
+    return [e.resolution for e in CATALOGUE.values() if e.resolution is not None]
+
+
+def rules_note() -> str:
+    """The resolution rules in parentheses, e.g. "(delays shorter than 2 ms are not named)"; "" when none."""
+    found = [rule for rule, _ in rules()]
+    return f"({'; '.join(found)})" if found else ""
 
 
 def clears_margin(mse_before: np.ndarray, mse_after: np.ndarray, score_value: float, variance: np.ndarray) -> bool:

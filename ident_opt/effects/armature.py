@@ -1,6 +1,8 @@
 """``armature``: extra reflected rotor inertia on the diagonal of M, beyond the datasheet's.
 
 Model extension ``armature``: the joint-2 reflected rotor inertia ia2 on M22 (joint 1's is folded into a1).
+Simulator: the extra J1 on a1 and J2 on ia2 (the diagonal of M). Diagnosis: J1·ddq1 on joint 1's row and
+J2·ddq2 on joint 2's (the a1 and ia2 directions), J ≥ 0, against the datasheet.
 """
 
 from __future__ import annotations
@@ -9,6 +11,8 @@ from ident_opt.effects.base import Effect, Key, deferred
 from ident_opt.parameters import Parameter
 
 np = deferred("numpy")
+cands = deferred("ident_opt.diagnose.candidates")
+report = deferred("ident_opt.diagnose.report")
 
 
 class Armature(Effect):
@@ -37,6 +41,44 @@ class Armature(Effect):
 
     def true_physical(self, physical: dict, p: dict) -> None:
         physical["armature"] = [a + J for a, J in zip(physical["armature"], p["inertia"])]
+
+    # ------------------------------------------------------------------ diagnosis
+    judged = ("inertia",)
+
+    def families(self, robot) -> list:
+        return [
+            cands.Family(
+                self.name,
+                cands.nominal,
+                (),
+                extra=_columns,
+                baselines=("datasheet",),
+                nonnegative=("j1", "j2"),
+                estimate=_estimate,
+            )
+        ]
+
+    def sentence(self, d, base: str, gain: str) -> str:
+        return (
+            f"The {base} model lacks inertia on the diagonal of M: reflected rotor inertia of "
+            f"J = {report.pair(d.estimate['inertia'], 'kg m²')} (joint side) explains the residual; {gain}"
+        )
+
+    def draw(self, rng, robot) -> dict:
+        u = rng.uniform
+        return {"inertia": (u(0.1, 0.4), u(0.01, 0.04))}
+
+
+def _columns(ds, theta: dict, dt: float, ctx) -> tuple[np.ndarray, list[str]]:
+    """Extra reflected inertia J_j on the diagonal of M: J1·ddq1 on joint 1's row, J2·ddq2 on joint 2's
+    (the a1 and ia2 columns of the nominal structure)."""
+    X = np.zeros((ds.n, 2, 2))
+    X[:, 0, 0], X[:, 1, 1] = ds.ddq[:, 0], ds.ddq[:, 1]
+    return X, ["j1", "j2"]
+
+
+def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+    return {"inertia": [p["j1"], p["j2"]]}, {"se": [se["j1"], se["j2"]]}
 
 
 EFFECT = Armature()

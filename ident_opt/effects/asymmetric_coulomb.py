@@ -2,7 +2,8 @@
 
 Model extension ``asymmetric_coulomb``: fc1p fc1n fc2p fc2n replace fc1, fc2 (a Coulomb level per velocity
 sign). Omitted keys default to the datasheet's own per-direction levels (reflected through the gear ratio);
-the effect's magnitude is its departure from the datasheet's symmetric (mean) level.
+the effect's magnitude is its departure from the datasheet's symmetric (mean) level. Simulator: that
+friction. Diagnosis: the extension's four levels fitted, against both nominal models.
 """
 
 from __future__ import annotations
@@ -12,6 +13,10 @@ from ident_opt.parameters import Parameter
 
 np = deferred("numpy")
 ca = deferred("casadi")
+cands = deferred("ident_opt.diagnose.candidates")
+datasheet = deferred("ident_opt.datasheet")
+report = deferred("ident_opt.diagnose.report")
+robot_model = deferred("ident_opt.robot")
 
 
 def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
@@ -74,6 +79,47 @@ class AsymmetricCoulomb(Effect):
     def true_physical(self, physical: dict, p: dict) -> None:
         physical["fc_positive"], physical["fc_negative"] = list(p["positive"]), list(p["negative"])
         physical["fc"] = [0.5 * (a + b) for a, b in zip(p["positive"], p["negative"])]
+
+    # ------------------------------------------------------------------ diagnosis
+    judged = ("positive", "negative")
+
+    def families(self, robot) -> list:
+        extended = (*cands.NOMINAL.extensions, self.name)
+        return [
+            cands.Family(
+                self.name,
+                lambda th: robot_model.ArmModel(extended),
+                tuple(p.name for p in self.parameters),
+                estimate=_estimate,
+            )
+        ]
+
+    def sentence(self, d, base: str, gain: str) -> str:
+        e, mm = d.estimate, d.evidence[d.baseline]["moving_mean"]
+        num, pair = report.num, report.pair
+        return (
+            f"The residual of the {base} model differs by direction of motion (mean while moving "
+            f"positive / negative: "
+            + ", ".join(f"joint {j + 1} {num(m['positive'])} / {num(m['negative'])} N m" for j, m in enumerate(mm))
+            + f"): Coulomb friction is asymmetric, fc+ = {pair(e['positive'], 'N m')}, "
+            f"fc− = {pair(e['negative'], 'N m')}; {gain}"
+        )
+
+    def draw(self, rng, robot) -> dict:
+        body = datasheet.rigid_body(robot, "physical")
+        pos, neg = [], []
+        for fc in body.fc:  # a per-direction split of the datasheet's mean level by ±30..60 %
+            a = rng.uniform(0.3, 0.6) * rng.choice([-1.0, 1.0])
+            pos.append(fc * (1 + a))
+            neg.append(fc * (1 - a))
+        return {"positive": tuple(pos), "negative": tuple(neg)}
+
+
+def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+    return (
+        {"positive": [p["fc1p"], p["fc2p"]], "negative": [p["fc1n"], p["fc2n"]]},
+        {"se_positive": [se["fc1p"], se["fc2p"]], "se_negative": [se["fc1n"], se["fc2n"]]},
+    )
 
 
 EFFECT = AsymmetricCoulomb()

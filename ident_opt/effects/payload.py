@@ -1,10 +1,18 @@
-"""``payload``: an unmodelled point mass at the tip of link 2."""
+"""``payload``: an unmodelled point mass at the tip of link 2.
+
+Simulator: the datasheet robot carries the mass (π changes along that direction). Diagnosis: the column
+Y·∂π/∂m (π is affine in a tip mass m), m ≥ 0, against the datasheet.
+"""
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-from ident_opt.effects.base import Effect, Key
+from ident_opt.effects.base import Effect, Key, deferred
+
+cands = deferred("ident_opt.diagnose.candidates")
+datasheet = deferred("ident_opt.datasheet")
+report = deferred("ident_opt.diagnose.report")
 
 
 class Payload(Effect):
@@ -16,6 +24,39 @@ class Payload(Effect):
     # ------------------------------------------------------------------ simulator: the robot carries it
     def true_robot(self, robot, p: dict):
         return replace(robot, payload_mass=robot.payload_mass + p["mass"])
+
+    # ------------------------------------------------------------------ diagnosis
+    judged = ("mass",)
+
+    def families(self, robot) -> list:
+        return [
+            cands.Family(
+                self.name,
+                cands.nominal,
+                (),
+                extra=lambda ds, th, dt, ctx: (self.column(ds, robot), ["mass"]),
+                baselines=("datasheet",),
+                nonnegative=("mass",),
+                estimate=lambda p, se, ctx: ({"mass": p["mass"]}, {"se": se["mass"]}),
+            )
+        ]
+
+    def column(self, ds, robot):
+        """Y·∂π/∂m (N, 2, 1): π is affine in a tip mass m (the combined link-2 inertia about joint 2 and its
+        first moment are both linear in m), so the difference quotient at m = 1 kg is exact."""
+        model = cands.NOMINAL
+        heavier = self.true_robot(robot, {"mass": 1.0})
+        d = model.vector(datasheet.datasheet_pi(heavier)) - model.vector(datasheet.datasheet_pi(robot))
+        return (model.regressor(ds.q, ds.dq, ds.ddq) @ d)[:, :, None]
+
+    def sentence(self, d, base: str, gain: str) -> str:
+        return (
+            f"Gravity and inertia are both off along the direction of a point mass at the tip of link 2: "
+            f"an unmodelled payload of {report.num(d.estimate['mass'], 'kg')} explains it; {gain}"
+        )
+
+    def draw(self, rng, robot) -> dict:
+        return {"mass": rng.uniform(0.1, 0.4)}
 
 
 EFFECT = Payload()

@@ -1,6 +1,9 @@
 """``stribeck``: a friction excess fs sgn(dq) exp(−(dq/vs)²) above the Coulomb level at low speed.
 
 Model extension ``stribeck``: fs1 fs2, with the Stribeck velocities vs given (`ArmModel.stribeck_velocity`).
+Simulator: that friction. Diagnosis: fs1 fs2 ≥ 0 linear, vs1 vs2 [rad/s] searched by variable projection,
+then polished by IPOPT (`polish`), against both nominal models. It shows only where the joints move slowly
+for a while, so its hidden trials follow the smooth `fourier` reference.
 """
 
 from __future__ import annotations
@@ -10,6 +13,11 @@ from ident_opt.parameters import Parameter
 
 np = deferred("numpy")
 ca = deferred("casadi")
+cands = deferred("ident_opt.diagnose.candidates")
+linear = deferred("ident_opt.diagnose.linear")
+nlp = deferred("ident_opt.identify.nlp")
+report = deferred("ident_opt.diagnose.report")
+robot_model = deferred("ident_opt.robot")
 
 
 class Stribeck(Effect):
@@ -48,6 +56,106 @@ class Stribeck(Effect):
         # The static level fs is above the true plant's (mean) Coulomb level.
         levels = [truth.pi_rigid["fc1"], truth.pi_rigid["fc2"]]
         return {**p, "static_level": [c + s for c, s in zip(levels, p["static"])]}
+
+    # ------------------------------------------------------------------ diagnosis
+    reference = "fourier"
+    judged = ("static", "velocity")
+
+    def families(self, robot) -> list:
+        extended = (*cands.NOMINAL.extensions, self.name)
+        names = tuple(p.name for p in self.parameters)
+        return [
+            cands.Family(
+                self.name,
+                lambda th: robot_model.ArmModel(extended, stribeck_velocity=(th["vs1"], th["vs2"])),
+                names,
+                nonnegative=names,
+                axes=lambda rate: [
+                    linear.Axis("vs1", 0.005, 0.5, 11, True),
+                    linear.Axis("vs2", 0.005, 0.5, 11, True),
+                ],
+                estimate=_estimate,
+                refine=lambda ctx, o, X, names, beta, theta: polish(
+                    ctx.rest, ctx.train.dq, ctx.train.tau, o, X, names, beta, theta
+                ),
+            )
+        ]
+
+    def sentence(self, d, base: str, gain: str) -> str:
+        e, ev, pair = d.estimate, d.evidence[d.baseline], report.pair
+        return (
+            f"Friction rises at low speed beyond the Coulomb level (low-speed excess of the residual "
+            f"{pair(ev['low_speed_excess'], 'N m')}): a Stribeck excess fs = {pair(e['static'], 'N m')} "
+            f"falling off over vs = {pair(e['velocity'], 'rad/s')} explains it; {gain}"
+        )
+
+    def draw(self, rng, robot) -> dict:
+        u = rng.uniform
+        return {"static": (u(0.2, 0.4), u(0.15, 0.3)), "velocity": (u(0.03, 0.1), u(0.03, 0.1))}
+
+
+def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+    static, velocity = [], []
+    for j in ("1", "2"):
+        fs, s = p["fs" + j], se["fs" + j]
+        # A joint whose excess is not resolved from zero is "untouched": report 0 for both keys.
+        resolved = fs > 3.0 * s
+        static.append(fs if resolved else 0.0)
+        velocity.append(p["vs" + j] if resolved else 0.0)
+    return {"static": static, "velocity": velocity}, {"se_static": [se["fs1"], se["fs2"]]}
+
+
+def polish(
+    rest: np.ndarray,
+    dq: np.ndarray,
+    tau: np.ndarray,
+    offset: np.ndarray,
+    X: np.ndarray,
+    names: list[str],
+    beta: np.ndarray,
+    theta: dict,
+) -> tuple[np.ndarray, dict, list[str]]:
+    """(β, θ, IPOPT statuses) with (fs_j, vs_j) polished; inputs as in `candidates.fit` (training part).
+
+    vs enters nonlinearly: IPOPT moves (fs_j, vs_j) jointly, per joint, with every other coefficient held,
+    from the search's answer. Only samples where joint j moves are used: at rest the Stribeck term is zero
+    (dq = 0) and the rest stretches' projection does not touch them, so this is exactly the candidate's
+    objective restricted to (fs_j, vs_j); a joint's polish is kept only if it lowers that objective."""
+    beta, theta, statuses = beta.copy(), dict(theta), []
+    fs, vs, v = ca.SX.sym("fs"), ca.SX.sym("vs"), ca.SX.sym("dq")
+    expr = fs * ca.sign(v) * ca.exp(-((v / vs) ** 2))  # N m, the excess over the Coulomb level
+    f = ca.Function("stribeck", [v, fs, vs], [expr])
+    for j in range(2):
+        k = names.index(f"fs{j + 1}")
+        moving = rest[:, j] < 0
+        if moving.sum() < 10:
+            continue
+        others = beta.copy()
+        others[k] = 0.0
+        target = (tau[:, j] - offset[:, j] - X[:, j, :] @ others)[moving]
+        x0 = [beta[k], theta[f"vs{j + 1}"]]
+        every = max(1, int(moving.sum()) // cands.POLISH_ROWS)
+
+        def cost(p, target=target, moving=moving, j=j):
+            pred = np.array(f(dq[moving, j][None, :], p[0], p[1])).ravel()
+            return float(np.sum((target - pred) ** 2))
+
+        fit = nlp.fit_expression(
+            expr,
+            ca.vertcat(fs, vs),
+            [v],
+            [dq[moving, j][::every]],
+            target[::every],
+            x0=x0,
+            lb=[0.0, 0.002],
+            ub=[np.inf, 1.0],
+            names=[f"fs{j + 1}", f"vs{j + 1}"],
+            options={"ipopt.max_iter": 100},
+        )
+        statuses.append(f"joint {j + 1}: {fit.status}")
+        if fit.success and cost(fit.values) < cost(x0):
+            beta[k], theta[f"vs{j + 1}"] = float(fit.values[0]), float(fit.values[1])
+    return beta, theta, statuses
 
 
 EFFECT = Stribeck()

@@ -25,10 +25,10 @@ import numpy as np
 from ident_opt.datasheet import datasheet_pi, rigid_body
 from ident_opt.effects import BACKGROUND, CATALOGUE
 from ident_opt.problem import Robot
-from ident_opt.robot import ArmModel
+from ident_opt.robot import PHYSICAL, ArmModel
 
-#: The structure of `SimTrial.truth["pi"]`.
-TRUTH_MODEL = ArmModel(("armature",))
+#: The structure of `SimTrial.truth["pi"]`: the nominal physical-convention arm.
+TRUTH_MODEL = PHYSICAL
 
 
 @dataclass
