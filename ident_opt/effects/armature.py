@@ -7,12 +7,8 @@ J2·ddq2 on joint 2's (the a1 and ia2 directions), J ≥ 0, against the datashee
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, deferred
+from ident_opt.effects.base import Effect, Key, np, report
 from ident_opt.parameters import Parameter
-
-np = deferred("numpy")
-cands = deferred("ident_opt.diagnose.candidates")
-report = deferred("ident_opt.diagnose.report")
 
 
 class Armature(Effect):
@@ -47,10 +43,7 @@ class Armature(Effect):
 
     def families(self, robot) -> list:
         return [
-            cands.Family(
-                self.name,
-                cands.nominal,
-                (),
+            self.family(
                 extra=_columns,
                 baselines=("datasheet",),
                 nonnegative=("j1", "j2"),

@@ -8,15 +8,8 @@ friction. Diagnosis: the extension's four levels fitted, against both nominal mo
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, deferred
+from ident_opt.effects.base import Effect, Key, ca, cands, datasheet, np, report, robot_model
 from ident_opt.parameters import Parameter
-
-np = deferred("numpy")
-ca = deferred("casadi")
-cands = deferred("ident_opt.diagnose.candidates")
-datasheet = deferred("ident_opt.datasheet")
-report = deferred("ident_opt.diagnose.report")
-robot_model = deferred("ident_opt.robot")
 
 
 def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
@@ -86,8 +79,7 @@ class AsymmetricCoulomb(Effect):
     def families(self, robot) -> list:
         extended = (*cands.NOMINAL.extensions, self.name)
         return [
-            cands.Family(
-                self.name,
+            self.family(
                 lambda th: robot_model.ArmModel(extended),
                 tuple(p.name for p in self.parameters),
                 estimate=_estimate,

@@ -53,7 +53,19 @@ class deferred:  # lower case: used like the module it stands for
         return getattr(importlib.import_module(self._module), attr)
 
 
+# What the hooks reach, each imported on first use (see `deferred`).
 np = deferred("numpy")
+ca = deferred("casadi")
+cands = deferred("ident_opt.diagnose.candidates")
+datasheet = deferred("ident_opt.datasheet")
+elastic_nlp = deferred("ident_opt.diagnose.elastic_nlp")
+flexible_link = deferred("ident_opt.simulate.flexible_link")
+linear = deferred("ident_opt.diagnose.linear")
+nlp = deferred("ident_opt.identify.nlp")
+report = deferred("ident_opt.diagnose.report")
+robot_model = deferred("ident_opt.robot")
+signals = deferred("ident_opt.diagnose.signals")
+sim = deferred("ident_opt.simulate.truth")
 
 #: Relative tolerance on a hidden magnitude (the default `Effect.judge`).
 MAGNITUDE_TOL = 0.15
@@ -243,6 +255,11 @@ class Effect:
     def families(self, robot) -> list:
         """The candidate model families (`diagnose.candidates.Family`) that explain this cause."""
         return []
+
+    def family(self, model=None, free: tuple[str, ...] = (), **options):
+        """One candidate family of this cause: `model(θ)` (default: the nominal model) with the π names
+        `free` freed against the datasheet (default: none) and the other `Family` fields in `options`."""
+        return cands.Family(self.name, model or cands.nominal, free, **options)
 
     def resolved(self, estimate: dict, dt: float) -> bool:
         """Whether a fitted estimate describes an effect at all (`dt` the sample step [s])."""

@@ -17,13 +17,7 @@ from __future__ import annotations
 
 from functools import partial
 
-from ident_opt.effects.base import Effect, Key, deferred, relative_error
-
-np = deferred("numpy")
-cands = deferred("ident_opt.diagnose.candidates")
-linear = deferred("ident_opt.diagnose.linear")
-report = deferred("ident_opt.diagnose.report")
-signals = deferred("ident_opt.diagnose.signals")
+from ident_opt.effects.base import Effect, Key, linear, np, relative_error, report, signals
 
 #: Shortest delay [s] that counts as a cause (the tolerance on hidden delays is 2 ms, too).
 MIN_DELAY_S = 0.002
@@ -50,10 +44,7 @@ class Delay(Effect):
 
     def families(self, robot) -> list:
         return [
-            cands.Family(
-                self.name,
-                cands.nominal,
-                (),
+            self.family(
                 transform=_delayed_prediction,
                 axes=lambda rate: [linear.Axis("delay", 0.0, 0.15, 31)],
                 estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {}),

@@ -24,17 +24,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ident_opt.effects.base import Effect, Key, deferred, relative_error
-
-np = deferred("numpy")
-ca = deferred("casadi")
-cands = deferred("ident_opt.diagnose.candidates")
-elastic_nlp = deferred("ident_opt.diagnose.elastic_nlp")
-flexible_link = deferred("ident_opt.simulate.flexible_link")
-linear = deferred("ident_opt.diagnose.linear")
-report = deferred("ident_opt.diagnose.report")
-signals = deferred("ident_opt.diagnose.signals")
-sim = deferred("ident_opt.simulate.truth")
+from ident_opt.effects.base import (
+    Effect,
+    Key,
+    ca,
+    elastic_nlp,
+    flexible_link,
+    linear,
+    np,
+    relative_error,
+    report,
+    signals,
+    sim,
+)
 
 #: Joint-2 angles [rad] the trajectories reach: |q2| ≤ 1.4 rad (the band of the mode over the workspace).
 Q2_RANGE = (0.0, 1.4)
@@ -207,10 +209,7 @@ class Elasticity(Effect):
 
     def families(self, robot) -> list:
         return [
-            cands.Family(
-                self.name,
-                cands.nominal,
-                (),
+            self.family(
                 extra=_columns(joint),
                 axes=lambda rate: [
                     linear.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),

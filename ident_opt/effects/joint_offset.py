@@ -10,17 +10,8 @@ from __future__ import annotations
 
 import time
 
-from ident_opt.effects.base import Effect, Key, deferred, relative_error
+from ident_opt.effects.base import Effect, Key, ca, cands, elastic_nlp, linear, nlp, np, relative_error, report, signals
 from ident_opt.parameters import Parameter
-
-np = deferred("numpy")
-ca = deferred("casadi")
-cands = deferred("ident_opt.diagnose.candidates")
-elastic_nlp = deferred("ident_opt.diagnose.elastic_nlp")
-linear = deferred("ident_opt.diagnose.linear")
-nlp = deferred("ident_opt.identify.nlp")
-report = deferred("ident_opt.diagnose.report")
-signals = deferred("ident_opt.diagnose.signals")
 
 #: A hidden offset is found when the estimate is within this [rad] or this relative error.
 OFFSET_TOL = (0.01, 0.20)
@@ -64,10 +55,7 @@ class JointOffset(Effect):
 
     def families(self, robot) -> list:
         return [
-            cands.Family(
-                self.name,
-                cands.nominal,
-                (),
+            self.family(
                 angles=lambda th: np.array([th["delta1"], th["delta2"]]),
                 axes=lambda rate: [linear.Axis("delta1", -0.1, 0.1, 21), linear.Axis("delta2", -0.1, 0.1, 21)],
                 estimate=lambda p, se, ctx: ({"offset": [p["delta1"], p["delta2"]]}, {}),

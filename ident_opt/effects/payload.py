@@ -8,11 +8,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from ident_opt.effects.base import Effect, Key, deferred
-
-cands = deferred("ident_opt.diagnose.candidates")
-datasheet = deferred("ident_opt.datasheet")
-report = deferred("ident_opt.diagnose.report")
+from ident_opt.effects.base import Effect, Key, cands, datasheet, report
 
 
 class Payload(Effect):
@@ -30,10 +26,7 @@ class Payload(Effect):
 
     def families(self, robot) -> list:
         return [
-            cands.Family(
-                self.name,
-                cands.nominal,
-                (),
+            self.family(
                 extra=lambda ds, th, dt, ctx: (self.column(ds, robot), ["mass"]),
                 baselines=("datasheet",),
                 nonnegative=("mass",),

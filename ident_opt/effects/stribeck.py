@@ -8,16 +8,8 @@ for a while, so its hidden trials follow the smooth `fourier` reference.
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, deferred
+from ident_opt.effects.base import Effect, Key, ca, cands, linear, nlp, np, report, robot_model
 from ident_opt.parameters import Parameter
-
-np = deferred("numpy")
-ca = deferred("casadi")
-cands = deferred("ident_opt.diagnose.candidates")
-linear = deferred("ident_opt.diagnose.linear")
-nlp = deferred("ident_opt.identify.nlp")
-report = deferred("ident_opt.diagnose.report")
-robot_model = deferred("ident_opt.robot")
 
 
 class Stribeck(Effect):
@@ -65,8 +57,7 @@ class Stribeck(Effect):
         extended = (*cands.NOMINAL.extensions, self.name)
         names = tuple(p.name for p in self.parameters)
         return [
-            cands.Family(
-                self.name,
+            self.family(
                 lambda th: robot_model.ArmModel(extended, stribeck_velocity=(th["vs1"], th["vs2"])),
                 names,
                 nonnegative=names,

@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import math
 
-from ident_opt.effects.base import Background, Key, deferred
-
-np = deferred("numpy")
+from ident_opt.effects.base import Background, Key, np
 
 
 class Drift(Background):

@@ -8,9 +8,7 @@ alias as a real logger's would.
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Background, Key, deferred
-
-ca = deferred("casadi")
+from ident_opt.effects.base import Background, Key, ca
 
 
 class Ripple(Background):

@@ -15,10 +15,7 @@ from __future__ import annotations
 
 import math
 
-from ident_opt.effects.base import Background, Key, deferred
-
-np = deferred("numpy")
-ca = deferred("casadi")
+from ident_opt.effects.base import Background, Key, ca, np
 
 #: rad/s: a bound of the joint speeds the trajectories reach (plateaus ≤ 1.33 rad/s, plus PD overshoot).
 MAX_SPEED = 3.0
