@@ -300,6 +300,18 @@ def _check_plausible(
             )
 
 
+def _current_to_torque(robot: Robot, path: Path) -> np.ndarray:
+    """Joint-side torque per ampere per joint [N m/A]; an error when the problem lacks it for a joint."""
+    k = [j.current_to_torque for j in robot.joints]
+    missing = [f"joint{i + 1}" for i, v in enumerate(k) if v is None]
+    if missing:
+        raise InputError(
+            f"{path}: the file logs motor currents, but [robot.{missing[0]}] gives no torque_constant and "
+            "gear_ratio to turn them into torques; add both, or log joint torques (tau1, tau2)"
+        )
+    return np.array(k, dtype=float)
+
+
 def _extra_columns(frame: pd.DataFrame, cols: dict[str, object], keep: np.ndarray) -> pd.DataFrame:
     """The columns the models do not use (strain, temperature, ...), numeric, on the kept rows."""
     used = set(cols.values())
@@ -349,7 +361,7 @@ def load_dataset(
         _check_rate(t, path)
         _check_plausible(signals, keep, path, spec)
     q = signals["q"]
-    tau = signals["tau"] if load_kind == "tau" else signals["i"] * np.array([j.current_to_torque for j in robot.joints])
+    tau = signals["tau"] if load_kind == "tau" else signals["i"] * _current_to_torque(robot, path)
 
     notes: list[str] = []
     if "dq" in signals and "ddq" in signals:

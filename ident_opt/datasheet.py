@@ -65,10 +65,13 @@ def combine(parts: list[tuple[float, float, float]]) -> tuple[float, float, floa
 
 
 def rigid_body(robot: Robot, convention: str | None = None) -> RigidBody:
-    """Rigid-body parameters from the datasheet under `convention` (default: the robot's own)."""
+    """Rigid-body parameters from the datasheet under `convention` (default: the robot's own); a robot
+    given by measured inertials is read as it is (joint-side values; the conventions concern bars)."""
     convention = convention or robot.convention
     if convention not in ("paper", "physical"):
         raise ValueError(f"unknown convention {convention!r}")
+    if robot.description == "inertials":
+        return _from_inertials(robot)
     l1, l2 = robot.link1.length, robot.link2.length
     # Which actuator rides at the distal end of link 1 is the paper's main slip (see module docstring).
     rider = robot.joint1 if convention == "paper" else robot.joint2
@@ -96,6 +99,36 @@ def rigid_body(robot: Robot, convention: str | None = None) -> RigidBody:
         fc_neg = tuple(j.gear_ratio * j.coulomb_friction.negative for j in joints)
     fc = tuple(0.5 * (p + n) for p, n in zip(fc_pos, fc_neg))
     return RigidBody(m1, m2, l1, l2, lc1, lc2, Ic1, Ic2, robot.gravity, armature, fv, fc, fc_pos, fc_neg)
+
+
+def _from_inertials(robot: Robot) -> RigidBody:
+    """Rigid-body parameters of a robot given by measured inertials (`[robot.linkN]` mass, com, inertia about
+    the centre of mass; `[robot.jointN]` joint-side friction and reflected rotor inertia); a payload is a point
+    mass at the tip of link 2."""
+    l1, l2 = robot.link1.length, robot.link2.length
+    m1, lc1, Ic1 = robot.link1.mass, robot.link1.com, robot.link1.inertia
+    m2, lc2, Ic2 = robot.link2.mass, robot.link2.com, robot.link2.inertia
+    if robot.payload_mass > 0:
+        m2, lc2, Ic2 = combine([(m2, lc2, Ic2), (robot.payload_mass, l2, 0.0)])
+    joints = robot.joints
+    fc_pos = tuple(j.coulomb_friction.positive for j in joints)
+    fc_neg = tuple(j.coulomb_friction.negative for j in joints)
+    return RigidBody(
+        m1,
+        m2,
+        l1,
+        l2,
+        lc1,
+        lc2,
+        Ic1,
+        Ic2,
+        robot.gravity,
+        tuple(j.rotor_inertia for j in joints),
+        tuple(j.viscous_friction.mean for j in joints),
+        tuple(0.5 * (p + n) for p, n in zip(fc_pos, fc_neg)),
+        fc_pos,
+        fc_neg,
+    )
 
 
 def grouped(m1, m2, l1, lc1, lc2, Ic1, Ic2, g):

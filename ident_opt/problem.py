@@ -91,19 +91,54 @@ class Joint:
 
 
 @dataclass(frozen=True)
+class InertialLink:
+    """A link given by its measured or CAD inertials: `length` [m] (joint axis to the next axis or the tip),
+    `mass` [kg] (everything it carries included), `com` [m] (along the link from its own joint axis) and
+    `inertia` [kg m²] (about the centre of mass, around the joint axis)."""
+
+    length: float
+    mass: float
+    com: float
+    inertia: float
+
+
+@dataclass(frozen=True)
+class JointSide:
+    """A joint given by joint-side values (`side = "joint"`): friction [N m s/rad, N m], reflected rotor
+    inertia N² J [kg m²], and torque constant [N m/A] and gear ratio, needed only for currents."""
+
+    viscous_friction: Friction
+    coulomb_friction: Friction
+    rotor_inertia: float
+    torque_constant: float | None = None
+    gear_ratio: float | None = None
+
+    @property
+    def current_to_torque(self) -> float | None:
+        """Joint-side torque per ampere [N m / A], or None when the problem does not give it."""
+        if self.torque_constant is None or self.gear_ratio is None:
+            return None
+        return self.torque_constant * self.gear_ratio
+
+
+@dataclass(frozen=True)
 class Robot:
-    """The `[robot]` section: a two-link planar arm under gravity."""
+    """The `[robot]` section: a two-link planar arm under gravity, as bars and cylinders (`description`
+    "bars": a datasheet, motor-side friction and rotor inertia) or as measured inertials ("inertials":
+    joint-side values)."""
 
     gravity: float
     convention: str  # "physical" or "paper"
-    link1: Link
-    link2: Link
-    joint1: Joint
-    joint2: Joint
+    link1: Link | InertialLink
+    link2: Link | InertialLink
+    joint1: Joint | JointSide
+    joint2: Joint | JointSide
     payload_mass: float = 0.0
+    description: str = "bars"
 
     @property
-    def joints(self) -> tuple[Joint, Joint]:
+    def joints(self) -> tuple[Joint | JointSide, ...]:
+        """The joints, in order."""
         return (self.joint1, self.joint2)
 
 
@@ -259,11 +294,16 @@ def _kind_name(kinds: tuple[type, ...]) -> str:
     return " or ".join(names.get(k, k.__name__) for k in kinds)
 
 
-def _friction(table: _Table, key: str) -> Friction:
+def _friction(table: _Table, key: str, default: Any = _REQUIRED) -> Friction:
+    """A friction coefficient: `{positive, negative}`, or (joint-side tables) one number for both."""
+    if default is not _REQUIRED and key not in table.raw:
+        return Friction(default, default)
+    if not isinstance(table.raw.get(key), dict) and default is not _REQUIRED:
+        value = table.non_negative(key, high=LIMITS["friction"])
+        return Friction(value, value)
     sub = table.table(key)
-    friction = Friction(
-        sub.non_negative("positive", high=LIMITS["friction"]), sub.non_negative("negative", high=LIMITS["friction"])
-    )
+    limit = LIMITS["friction"]
+    friction = Friction(sub.non_negative("positive", high=limit), sub.non_negative("negative", high=limit))
     sub.done()
     return friction
 
@@ -293,20 +333,91 @@ def _joint(table: _Table) -> Joint:
     return joint
 
 
+def _com(table: _Table) -> float:
+    """`com` along the link [m]; a table {x, y} is accepted only on the link's line (y = 0)."""
+    if not isinstance(table.raw.get("com"), dict):
+        return table.number("com", _REQUIRED, -LIMITS["length"], LIMITS["length"])
+    sub = table.table("com")
+    x = sub.number("x", _REQUIRED, -LIMITS["length"], LIMITS["length"])
+    y = sub.number("y", 0.0, -LIMITS["length"], LIMITS["length"])
+    sub.done()
+    if y != 0:
+        raise InputError(
+            f"{table.path}: key 'y' in [{sub.where}]: a centre of mass off the link's line (y = {y:g} m) is not "
+            "supported yet; the grouped parameters assume y = 0"
+        )
+    return x
+
+
+def _inertial_link(table: _Table) -> InertialLink:
+    link = InertialLink(
+        length=table.positive("length", high=LIMITS["length"]),
+        mass=table.positive("mass", high=LIMITS["mass"]),
+        com=_com(table),
+        inertia=table.non_negative("inertia", high=LIMITS["inertia"]),
+    )
+    table.done()
+    return link
+
+
+def _joint_side(table: _Table) -> JointSide:
+    side = table.take("side", str)
+    if side != "joint":
+        raise InputError(f"{table.path}: key 'side' in [{table.where}] must be \"joint\" for inertial links")
+    joint = JointSide(
+        viscous_friction=_friction(table, "viscous_friction", 0.0),
+        coulomb_friction=_friction(table, "coulomb_friction", 0.0),
+        rotor_inertia=table.non_negative("rotor_inertia", 0.0, high=LIMITS["inertia"]),
+        torque_constant=table.number("torque_constant", None, 0.0, LIMITS["torque_constant"], open_low=True)
+        if "torque_constant" in table.raw
+        else None,
+        gear_ratio=table.number("gear_ratio", None, 0.0, LIMITS["gear_ratio"], open_low=True)
+        if "gear_ratio" in table.raw
+        else None,
+    )
+    table.done()
+    return joint
+
+
+#: Keys that tell the two per-link descriptions apart (a file uses exactly one).
+_BAR_KEYS, _INERTIAL_KEYS = {"width", "height", "density"}, {"mass", "com", "inertia"}
+
+
+def _description(table: _Table) -> str:
+    """ "bars" or "inertials", from the keys of [robot.link1] and [robot.link2]; mixing them is an error."""
+    kinds = set()
+    for name in ("link1", "link2"):
+        keys = set(table.raw.get(name, {})) if isinstance(table.raw.get(name), dict) else set()
+        if keys & _BAR_KEYS and keys & _INERTIAL_KEYS:
+            raise InputError(
+                f"{table.path}: [robot.{name}] mixes a bar ({', '.join(sorted(keys & _BAR_KEYS))}) and measured "
+                f"inertials ({', '.join(sorted(keys & _INERTIAL_KEYS))}); use one description"
+            )
+        kinds.add("inertials" if keys & _INERTIAL_KEYS else "bars")
+    if len(kinds) > 1:
+        raise InputError(f"{table.path}: [robot.link1] and [robot.link2] use different descriptions; use one")
+    return kinds.pop()
+
+
 def _robot(table: _Table) -> Robot:
-    convention = table.take("convention", str)
+    description = _description(table)
+    default = "physical" if description == "inertials" else _REQUIRED
+    convention = table.take("convention", str, default)
     if convention not in ("physical", "paper"):
         raise InputError(
-            f'{table.path}: key \'convention\' in [robot] must be "physical" or "paper", got {convention!r}'
+            f'{table.path}: key \'convention\' in [robot] must be "physical" or "paper", got {_excerpt(convention)}'
         )
+    if description == "inertials" and convention != "physical":
+        raise InputError(f"{table.path}: key 'convention' in [robot]: measured inertials are read \"physical\" only")
     gravity = table.positive("gravity", high=LIMITS["gravity"])
-    link1, link2 = _link(table.table("link1")), _link(table.table("link2"))
-    joint1, joint2 = _joint(table.table("joint1")), _joint(table.table("joint2"))
+    link, joint = (_inertial_link, _joint_side) if description == "inertials" else (_link, _joint)
+    link1, link2 = link(table.table("link1")), link(table.table("link2"))
+    joint1, joint2 = joint(table.table("joint1")), joint(table.table("joint2"))
     payload = table.table("payload", required=False)
     payload_mass = payload.non_negative("mass", 0.0, high=LIMITS["mass"])
     payload.done()
     table.done()
-    return Robot(gravity, convention, link1, link2, joint1, joint2, payload_mass)
+    return Robot(gravity, convention, link1, link2, joint1, joint2, payload_mass, description)
 
 
 def _relative(base: Path, value: str) -> Path:
