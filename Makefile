@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PROBLEM ?= problems/tudor_2dof.toml
 
-.PHONY: identify test lint bench codegen audit clean-venv
+.PHONY: identify test lint bench codegen audit calibration clean-venv
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -15,13 +15,13 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 ## The main job: every step on the real MERIt/TUDOR trials; tables, figures and reports into results/.
+## Each report records what it wrote and results/README.md is rebuilt from those records: any order works.
 identify: $(STAMP)
 	$(BIN)/ident-opt audit    --problem problems/tudor_2dof_paper.toml --out results
 	$(BIN)/ident-opt compare  --problem $(PROBLEM) --out results --json results/compare.json
 	$(BIN)/ident-opt online   --problem $(PROBLEM) --out results --json results/online.json
 	$(BIN)/ident-opt diagnose --problem $(PROBLEM) --data data/merit/exp1.csv --data data/merit/exp2.csv \
 	    --out results/diagnosis --json results/diagnosis/diagnosis.json
-	# last: its results/README.md indexes the reports above
 	$(BIN)/ident-opt identify --problem $(PROBLEM) --out results --json results/identify.json
 
 ## The whole test suite (2 workers).
@@ -39,6 +39,12 @@ codegen: $(STAMP)
 
 audit: $(STAMP)
 	$(BIN)/ident-opt audit --problem problems/tudor_2dof_paper.toml --out results
+
+## The simulator's default trial against the real exp1 (results/simulator_calibration.md); col10-col13 are
+## the MERIt trials' strain gauges.
+calibration: $(STAMP)
+	$(BIN)/ident-opt calibrate --problem problems/tudor_sim.toml --real $(PROBLEM) \
+	    --channel col10 --channel col11 --channel col12 --channel col13 --out results
 
 ## Benchmarks: each prints ratios measured side by side in one run; the output is kept in results/benchmarks/.
 bench: $(STAMP)

@@ -56,7 +56,7 @@ def write_index(root: Path) -> Path:
     manifests = _manifests(root)
     main = [m for m in manifests if m["readme_head"] or m["readme_tail"]]
     others = [m for m in manifests if not (m["readme_head"] or m["readme_tail"])]
-    parts = [m["readme_head"] for m in main if m["readme_head"]] or ["# Results", ""]
+    parts = [m["readme_head"] for m in main if m["readme_head"]] or ["# Results"]
     if others:
         parts += ["", "Other reports in this folder:" if main else "Reports in this folder:", ""]
         parts += [f"- [{m['files'][0]}]({m['files'][0]}): {m['title']}" for m in others]

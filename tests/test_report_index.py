@@ -1,0 +1,75 @@
+"""results/README.md is rebuilt from what every report recorded, whatever order the commands ran in; the
+estimator registry is the one list of estimators."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+from ident_opt.cli import build_parser
+from ident_opt.identify import estimators
+from ident_opt.report import MANIFESTS, record
+
+
+def _write(folder, name: str) -> str:
+    (folder / name).parent.mkdir(parents=True, exist_ok=True)
+    (folder / name).write_text("x")
+    return name
+
+
+@pytest.mark.parametrize("order", list(itertools.permutations(["identify", "audit", "online", "diagnosis"])))
+def test_index_is_the_same_whatever_the_order(tmp_path, order):
+    out = tmp_path / "results"
+    out.mkdir()
+    steps = {
+        "identify": lambda: record(
+            out,
+            "identify",
+            "all models",
+            [_write(out, "identify_metrics.md")],
+            readme_head="# Head",
+            readme_tail="## Tail",
+        ),
+        "audit": lambda: record(out, "audit", "the audit", [_write(out, "paper_audit.md")]),
+        "online": lambda: record(out, "online", "online", [_write(out, "online.md"), _write(out, "online.json")]),
+        "diagnosis": lambda: record(
+            out / "diagnosis", "diagnosis", "the diagnosis", [_write(out / "diagnosis", "d.md")]
+        ),
+    }
+    (out / MANIFESTS).mkdir()  # a results folder that has been written to before
+    for step in order:
+        steps[step]()
+    text = (out / "README.md").read_text()
+    assert text == (
+        "# Head\n\nOther reports in this folder:\n\n- [paper_audit.md](paper_audit.md): the audit\n"
+        "- [diagnosis/d.md](diagnosis/d.md): the diagnosis\n- [online.md](online.md): online\n## Tail\n"
+    )
+    assert not (out / "diagnosis" / "README.md").exists()
+
+
+def test_index_without_a_head_and_without_removed_reports(tmp_path):
+    record(tmp_path, "compare", "comparison", [_write(tmp_path, "compare.md")])
+    record(tmp_path, "audit", "the audit", [tmp_path / _write(tmp_path, "paper_audit.md")])
+    (tmp_path / "compare.md").unlink()
+    readme = record(tmp_path, "online", "online", [_write(tmp_path, "online.md")])
+    assert readme.read_text() == (
+        "# Results\n\nReports in this folder:\n\n- [paper_audit.md](paper_audit.md): the audit\n"
+        "- [online.md](online.md): online\n"
+    )
+
+
+def test_a_file_outside_the_output_folder_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="not inside"):
+        record(tmp_path / "a", "x", "x", [tmp_path / "elsewhere.md"])
+
+
+def test_unknown_estimator_is_named():
+    with pytest.raises(ValueError, match="unknown estimator 'lasso'; known: ols, constrained"):
+        estimators.estimator("lasso")
+
+
+def test_codegen_offers_exactly_the_registered_estimators():
+    codegen = build_parser()._subparsers._group_actions[0].choices["codegen"]
+    choices = next(a.choices for a in codegen._actions if a.dest == "estimator")
+    assert set(choices) == set(estimators.ESTIMATORS)
