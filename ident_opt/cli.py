@@ -12,6 +12,7 @@ import argparse
 import importlib
 import sys
 
+from ident_opt import __version__
 from ident_opt.errors import InputError
 
 #: subcommand -> one-line help. Each lives in ident_opt.commands.<name> with add_arguments() and run().
@@ -41,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="ident-opt", description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, summary in COMMANDS.items():
         module = _module(name)
@@ -57,12 +58,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _module(name: str):
     return importlib.import_module(f"ident_opt.commands.{name}")
-
-
-def _version() -> str:
-    from ident_opt import __version__
-
-    return __version__
 
 
 def main(argv: list[str] | None = None) -> int:

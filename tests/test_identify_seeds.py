@@ -10,10 +10,8 @@ from ident_opt.identify.stats import Stats
 from ident_opt.metrics import rmse
 from ident_opt.problem import SplitSpec
 from ident_opt.report.figures import seed_heatmap
-from ident_opt.robot import ArmModel
+from ident_opt.robot import RIGID
 from ident_opt.studies.seeds import deviation_from_mean, rmse_table, seed_study
-
-RIGID = ArmModel()
 
 
 def test_seed_study_matches_direct_fits(exp1, tmp_path):

@@ -1,4 +1,4 @@
-"""`ident-opt online`: the --json contract of spec/cli.md, the outputs, bad usage → exit 2."""
+"""`ident-opt online`: the --json contract of docs/cli.md, the outputs, bad usage → exit 2."""
 
 from __future__ import annotations
 

@@ -13,7 +13,6 @@ import argparse
 
 from ident_opt.commands.common import output_dir
 from ident_opt.errors import InputError
-from ident_opt.problem import load_problem
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
     """Load both problems, calibrate, write the report, print it."""
     # Deferred: the study loads NumPy, SciPy and CasADi (the simulator), the report matplotlib; `ident-opt
     # --help` builds every subcommand's parser and stays fast only if that waits until a command runs.
+    from ident_opt.problem import load_problem
     from ident_opt.report import calibration as report
     from ident_opt.studies.calibration import calibrate
 

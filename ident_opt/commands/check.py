@@ -17,8 +17,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def summary(trial) -> dict:
     """A JSON-able description of one loaded trial."""
-    import numpy as np
-
     return {
         "source": trial.source,
         "samples": trial.n,
@@ -28,7 +26,7 @@ def summary(trial) -> dict:
         "dropped_rows": trial.dropped_rows,
         "extra_columns": list(trial.extra.columns),
         "ranges": {
-            name: [[float(np.min(arr[:, j])), float(np.max(arr[:, j]))] for j in range(2)]
+            name: [[float(arr[:, j].min()), float(arr[:, j].max())] for j in range(2)]
             for name, arr in (("q", trial.q), ("dq", trial.dq), ("ddq", trial.ddq), ("tau", trial.tau))
         },
     }

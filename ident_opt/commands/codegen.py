@@ -15,7 +15,6 @@ import sys
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
 from ident_opt.errors import InputError
-from ident_opt.problem import load_problem
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -54,17 +53,25 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from ident_opt import codegen
+    from ident_opt.problem import load_problem
     from ident_opt.report import codegen as report
+    from ident_opt.robot import ArmModel
     from ident_opt.studies import ship
 
     problem = load_problem(args.problem)
     out = output_dir(args, problem)
     compiler = codegen.find_compiler()  # fail before any fitting when there is none
     saved = ship.read_parameters(args.parameters) if args.parameters else None
-    model = _model(args.extension if args.extension is not None else (saved or {}).get("extensions", []))
+    extensions = args.extension if args.extension is not None else (saved or {}).get("extensions", [])
+    try:
+        model = ArmModel(extensions=tuple(dict.fromkeys(extensions)))
+    except ValueError as exc:
+        raise InputError(f"codegen: {exc}") from None
     trials = load(args).trials if saved is None or saved.get("gmr") is None else []
     train = trials[0] if trials else None
-    shipped = _shipped(args, problem, model, saved, train)
+    if not (saved and saved.get("gmr")):
+        _announce_gmr(problem.residual, args.components, train)
+    shipped = ship.prepare(model, train, problem.residual, args.estimator, args.components, saved)
     print(
         f"ident-opt codegen: {len(model.names)} parameters ({shipped.estimator}), GMR with "
         f"{len(shipped.gmr.weights_)} components; generating C in {out}",
@@ -81,36 +88,13 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _shipped(args: argparse.Namespace, problem, model, saved: dict | None, train):
-    """π and the GMR: loaded from --parameters where it has them, else identified / fitted on `train`."""
-    from ident_opt.studies import ship  # deferred with run's imports
-
-    if saved is not None:
-        pi, estimator = ship.saved_vector(saved, model), f"{saved['estimator']} (loaded from {args.parameters})"
-        status = saved.get("estimator_status", "")
-    else:
-        pi, estimator, status = ship.identify(model, train, args.estimator)
-    if saved and saved.get("gmr"):
-        gmr = ship.gmr_from_saved(saved["gmr"])
-    else:
-        if args.components is not None and args.components < 1:
-            raise InputError(f"codegen: --components must be >= 1, got {args.components}")
-        spec = problem.residual
-        k = args.components if args.components is not None else spec.components
-        print(
-            f"ident-opt codegen: fitting the GMR residual ({k or 'K chosen among ' + str(list(spec.candidates))}"
-            f" components) on {train.n} samples",
-            flush=True,
-        )
-        gmr = ship.fit_residual(model, pi, train, spec, args.components)
-    return ship.Shipped(model, pi, estimator, status, gmr)
-
-
-def _model(extensions):
-    """The ArmModel with the chosen extensions (an unknown name is an input error)."""
-    from ident_opt.robot import ArmModel  # deferred with run's imports
-
-    try:
-        return ArmModel(extensions=tuple(dict.fromkeys(extensions)))
-    except ValueError as exc:
-        raise InputError(f"codegen: {exc}") from None
+def _announce_gmr(spec, components: int | None, train) -> None:
+    """Check --components and say what is about to be fitted (the GMR is the slow part)."""
+    if components is not None and components < 1:
+        raise InputError(f"codegen: --components must be >= 1, got {components}")
+    k = components if components is not None else spec.components
+    print(
+        f"ident-opt codegen: fitting the GMR residual ({k or 'K chosen among ' + str(list(spec.candidates))}"
+        f" components) on {train.n} samples",
+        flush=True,
+    )

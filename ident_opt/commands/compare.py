@@ -13,7 +13,6 @@ import argparse
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
 from ident_opt.errors import InputError
-from ident_opt.problem import load_problem
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,13 +59,18 @@ def run(args: argparse.Namespace) -> int:
     """Run the comparison (or the constraints study), write the files, print a summary."""
     # Deferred: the studies load NumPy, pandas, CasADi and cvxpy; `ident-opt --help` builds every subcommand's
     # parser and stays fast (0.1 s instead of over 2 s) only if that waits until a command runs.
+    from ident_opt.problem import load_problem
     from ident_opt.report import compare as report
     from ident_opt.report import constraints as constraints_report
+    from ident_opt.robot import ArmModel
     from ident_opt.studies import compare, constraints
 
     if args.margin < 0:
         raise InputError(f"--margin must be ≥ 0 (got {args.margin})")
-    model = _model(args.extension)
+    try:
+        model = ArmModel(tuple(args.extension))
+    except ValueError as exc:
+        raise InputError(f"--extension: {exc}") from None
     if args.constraints_study is not None:
         if args.constraints_study < 1:
             raise InputError("--constraints-study needs a positive number of trials")
@@ -95,13 +99,3 @@ def run(args: argparse.Namespace) -> int:
     print(report.to_terminal(result))
     print(f"wrote {', '.join(files)} to {out.resolve()}")
     return 0
-
-
-def _model(extensions: list[str]):
-    """The fitted model: the rigid arm with the --extension terms (an unknown name is an input error)."""
-    from ident_opt.robot import ArmModel  # deferred with the studies (CasADi)
-
-    try:
-        return ArmModel(tuple(extensions))
-    except ValueError as exc:
-        raise InputError(f"--extension: {exc}") from None

@@ -39,16 +39,13 @@ def write(c: Calibration, out: Path, command: str) -> str:
 def markdown(c: Calibration, command: str) -> str:
     """simulator_calibration.md (every number from the study, so the text always matches the table); `command`
     reproduces it."""
-    summaries, effects = c.summaries, c.effects
-    real, sim, before = c.real, c.sim, c.before
-    catalogue = "\n".join(f"- `{e}`" for e in effects if parse_effect(e)[0] not in BACKGROUND)
-    background = "\n".join(f"- `{e}`" for e in effects if parse_effect(e)[0] in BACKGROUND)
-    holds, needs = c.holding
-    mid_real, mid_sim = band_share(real, 0.6, 2.0), band_share(sim, 0.6, 2.0)
-    hf_real, hf_sim = band_share(real, 10.0, 50.0), band_share(sim, 10.0, 50.0)
-    line_real, line_sim = peak(real.f, real.psd, 35.0, 50.0), peak(sim.f, sim.psd, 35.0, 50.0)
-    nmse = lambda s: s.residual.var(0) / s.data.tau.var(0)  # noqa: E731
-    std = lambda s: s.data.tau.std(0)  # noqa: E731
+    return _setup(c, command) + _targets(c) + _how_close(c)
+
+
+def _setup(c: Calibration, command: str) -> str:
+    """What was compared, the simulated default's effects and measurement model."""
+    catalogue = "\n".join(f"- `{e}`" for e in c.effects if parse_effect(e)[0] not in BACKGROUND)
+    background = "\n".join(f"- `{e}`" for e in c.effects if parse_effect(e)[0] in BACKGROUND)
     return f"""# Simulator calibration: the default simulated trial vs the real exp1
 
 Reproduce: `{command}` (writes this file and
@@ -70,12 +67,18 @@ plus the measurement model: white torque noise with the real trial's σ at rest 
 part of its spread that changes from sample to sample), a 4096-count encoder per motor revolution, 100 Hz
 logging, dq/ddq estimated from the logged angles (zero-phase Butterworth at 15 Hz, central differences).
 
-## Targets (issue 3)
+"""
+
+
+def _targets(c: Calibration) -> str:
+    """The calibration targets, and every number side by side."""
+    summaries = c.summaries
+    return f"""## Targets (issue 3)
 
 Rigid-fit residual RMS per joint within ±{RMS_TOLERANCE:.0%} of exp1's; share of its power below {LOW_HZ:g} Hz
 within ±{100 * LOW_SHARE_TOLERANCE:.0f} percentage points of exp1's.
 
-{targets(real, summaries[4:5] + summaries[2:4])}
+{targets(c.real, summaries[4:5] + summaries[2:4])}
 
 ## Everything, side by side
 
@@ -83,7 +86,19 @@ within ±{100 * LOW_SHARE_TOLERANCE:.0f} percentage points of exp1's.
 
 ![residual and strain spectra, real vs simulated](figures/simulator_calibration.png)
 
-## How close it is
+"""
+
+
+def _how_close(c: Calibration) -> str:
+    """What matches and what does not, in numbers."""
+    real, sim, before = c.real, c.sim, c.before
+    holds, needs = c.holding
+    mid_real, mid_sim = band_share(real, 0.6, 2.0), band_share(sim, 0.6, 2.0)
+    hf_real, hf_sim = band_share(real, 10.0, 50.0), band_share(sim, 10.0, 50.0)
+    line_real, line_sim = peak(real.f, real.psd, 35.0, 50.0), peak(sim.f, sim.psd, 35.0, 50.0)
+    nmse = lambda s: s.residual.var(0) / s.data.tau.var(0)  # noqa: E731
+    std = lambda s: s.data.tau.std(0)  # noqa: E731
+    return f"""## How close it is
 
 - **Size and slow content: matched.** The rigid-fit residual went from {rms(before)[0]:.2f} / {rms(before)[1]:.2f}
   to {rms(sim)[0]:.2f} / {rms(sim)[1]:.2f} N·m (exp1: {rms(real)[0]:.2f} / {rms(real)[1]:.2f}), and its share

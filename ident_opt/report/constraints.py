@@ -41,50 +41,31 @@ def _numbers(values: dict) -> str:
     return ", ".join(f"{k}: {v:.3g}" if isinstance(v, float) else f"{k}: {v}" for k, v in values.items())
 
 
+#: The summary table's rows: label, and the cell from a `StudyResult.summary`.
+SUMMARY_ROWS = (
+    ("trials", lambda s: f"{s['trials']}"),
+    ("OLS physically inconsistent", lambda s: f"{s['ols_inconsistent']} / {s['trials']}"),
+    ("constrained inconsistent", lambda s: f"{s['constrained_inconsistent']} / {s['trials']}"),
+    ("trials where the two fits differ", lambda s: f"{s['fits_differ']}"),
+    ("constrained closer to the truth", lambda s: f"{s['constrained_wins']} / {s['trials']}"),
+    ("win rate where the fits differ", lambda s: f"{s['win_rate_where_differ']:.2f}"),
+    ("median parameter error, OLS", lambda s: f"{s['median_error_ols']:.3g}"),
+    ("median parameter error, constrained", lambda s: f"{s['median_error_constrained']:.3g}"),
+    ("median error ratio constrained / OLS, all trials", lambda s: f"{s['median_error_ratio']:.3g}"),
+    ("median error ratio where the fits differ", lambda s: f"{s['median_error_ratio_where_differ']:.3g}"),
+    (
+        "median error over excited parameters, OLS / constrained",
+        lambda s: f"{s['median_error_ols_excited']:.3g} / {s['median_error_constrained_excited']:.3g}",
+    ),
+)
+
+
 def study_markdown(results: StudyResult | list[StudyResult], rich: dict | None = None) -> str:
     """`results/constraints_study.md`: what was run, the summary in numbers per trial source, per-trial tables."""
     results = [results] if isinstance(results, StudyResult) else list(results)
-    cfg = results[0].settings
-    lines = [
-        "# Where the physical-consistency constraints matter",
-        "",
-        f"Short trials ({cfg['durations_s'][0]:g}–{cfg['durations_s'][1]:g} s at {cfg['rate_hz']:g} Hz) with a "
-        f"known truth ({cfg['truth']}); fitted model: {', '.join(cfg['model'])}. OLS vs constrained = "
-        f"M(q) ⪰ {cfg['margin']:g}·I ∀q, friction ≥ 0 and armature ≥ 0 (from the sufficient statistics; Clarabel). "
-        "Parameter error = RMS over parameters of (π̂ − π)/|π|. Trial sources:",
-        "",
-        *[
-            f"- **{r.settings['source']}**: {STUDY_SOURCES[r.settings['source']]}"
-            + (
-                f" (σ = {r.settings['noise_nm'][0]:g} / {r.settings['noise_nm'][1]:g} N·m)"
-                if r.settings["source"] == "multisine"
-                else ""
-            )
-            + "."
-            for r in results
-        ],
-        "",
-        "| quantity | " + " | ".join(r.settings["source"] for r in results) + " |",
-        "|---|" + "---|" * len(results),
-    ]
-    rows = [
-        ("trials", lambda s: f"{s['trials']}"),
-        ("OLS physically inconsistent", lambda s: f"{s['ols_inconsistent']} / {s['trials']}"),
-        ("constrained inconsistent", lambda s: f"{s['constrained_inconsistent']} / {s['trials']}"),
-        ("trials where the two fits differ", lambda s: f"{s['fits_differ']}"),
-        ("constrained closer to the truth", lambda s: f"{s['constrained_wins']} / {s['trials']}"),
-        ("win rate where the fits differ", lambda s: f"{s['win_rate_where_differ']:.2f}"),
-        ("median parameter error, OLS", lambda s: f"{s['median_error_ols']:.3g}"),
-        ("median parameter error, constrained", lambda s: f"{s['median_error_constrained']:.3g}"),
-        ("median error ratio constrained / OLS, all trials", lambda s: f"{s['median_error_ratio']:.3g}"),
-        ("median error ratio where the fits differ", lambda s: f"{s['median_error_ratio_where_differ']:.3g}"),
-        (
-            "median error over excited parameters, OLS / constrained",
-            lambda s: f"{s['median_error_ols_excited']:.3g} / {s['median_error_constrained_excited']:.3g}",
-        ),
-    ]
-    for label, cell in rows:
-        lines.append(f"| {label} | " + " | ".join(cell(r.summary) for r in results) + " |")
+    lines = [*_setup(results), "", "| quantity | " + " | ".join(r.settings["source"] for r in results) + " |"]
+    lines.append("|---|" + "---|" * len(results))
+    lines += [f"| {label} | " + " | ".join(cell(r.summary) for r in results) + " |" for label, cell in SUMMARY_ROWS]
     lines += [
         "",
         "Reading: short trials leave some columns unexcited (e.g. a still joint's friction) and others barely "
@@ -107,3 +88,23 @@ def study_markdown(results: StudyResult | list[StudyResult], rich: dict | None =
     for r in results:
         lines += [f"## Per trial: {r.settings['source']}", "", markdown_table(r.rows.set_index("trial"), digits=3), ""]
     return "\n".join(lines)
+
+
+def _setup(results: list[StudyResult]) -> list[str]:
+    """The title and what was run: trial lengths, truth, model, constraints, each trial source."""
+    cfg = results[0].settings
+    lines = [
+        "# Where the physical-consistency constraints matter",
+        "",
+        f"Short trials ({cfg['durations_s'][0]:g}–{cfg['durations_s'][1]:g} s at {cfg['rate_hz']:g} Hz) with a "
+        f"known truth ({cfg['truth']}); fitted model: {', '.join(cfg['model'])}. OLS vs constrained = "
+        f"M(q) ⪰ {cfg['margin']:g}·I ∀q, friction ≥ 0 and armature ≥ 0 (from the sufficient statistics; Clarabel). "
+        "Parameter error = RMS over parameters of (π̂ − π)/|π|. Trial sources:",
+        "",
+    ]
+    for r in results:
+        source = r.settings["source"]
+        noise = r.settings["noise_nm"]
+        sigma = f" (σ = {noise[0]:g} / {noise[1]:g} N·m)" if source == "multisine" else ""
+        lines.append(f"- **{source}**: {STUDY_SOURCES[source]}{sigma}.")
+    return lines

@@ -330,7 +330,7 @@ def readme_parts(
     lines += [f"- [{path.name}]({path.name}) (CSV beside it)" for path in tables.values()]
     lines += ["- [identify.json](identify.json): the machine-readable result (`spec/cli.md`)"]
     back = ["", "## Figures", ""]
-    for name, (path, sentence) in _figure_sentences(result, paper, cross).items():
+    for name, (path, sentence) in _figure_sentences(paper, cross).items():
         if name in made:
             rel = made[name].relative_to(out) if made[name].is_relative_to(out) else path
             back += [f"### {sentence[0]}", "", f"![{sentence[0]}]({rel})", "", sentence[1], ""]
@@ -390,50 +390,14 @@ def _reproduction(result: IdentifyResult) -> list[str]:
 
 def _findings(result, paper, chrono, cross, has_c) -> list[str]:
     """Measured statements, each computed from this run's numbers."""
-    f = []
-    top = max(result.gmr_candidates, default=None)
-    at_top = bool(paper.components) and all(k == top for k in paper.components.values())
-    f.append(
-        f"- GMR components chosen on validation data (first seed; candidates {list(result.gmr_candidates)}): "
-        f"{', '.join(f'{k}: {v}' for k, v in paper.components.items())}"
-        + (
-            " — all the largest candidate: with shuffled samples the validation data have near-copies in "
-            "training, so more components always look better."
-            if at_top
-            else "."
-        )
-    )
-    for name, p in (("chronological", chrono), ("cross-trial", cross)):
-        if p is not None and p.components:
-            f.append(
-                f"- Components chosen for the {name} protocol: "
-                f"{', '.join(f'{k}: {v}' for k, v in p.components.items())}."
-            )
+    f = _component_findings(result, paper, chrono, cross)
     f.append(
         f"- DM (paper's convention) vs DM (physical convention), no fitting at all: `nmse` "
         f"{_v(paper, 'dm', 0)} / {_v(paper, 'dm', 1)} vs {_v(paper, 'dm_physical', 0)} / "
         f"{_v(paper, 'dm_physical', 1)} (joint 1 / joint 2), against PBR's {_v(paper, 'pbr', 0)} / "
         f"{_v(paper, 'pbr', 1)}: reading the datasheet physically removes most of Model 2's joint-1 error."
     )
-    one, diag = result.variants.get("one_component"), result.variants.get("diagonal_covariance")
-    f.append(
-        f"- A full-covariance GMR on DM's residual brings DM's joint-1 `nmse_range` from "
-        f"{_v(paper, 'dm', 0, 'nmse_range')} to {_v(paper, 'dm+gmr', 0, 'nmse_range')} (paper: "
-        f"{NMSE_RANGE['dm'][0]:#.4g} → {NMSE_RANGE['dm+gmr'][0]:#.4g})"
-        + (
-            f"; with a single component (a linear correction) already {_v(one[1], 'dm+gmr', 0, 'nmse_range')}"
-            if one
-            else ""
-        )
-        + (
-            f"; with diagonal covariances {_v(diag[1], 'dm+gmr', 0, 'nmse_range')}, since each component then "
-            f"predicts a constant — nearer the paper's {NMSE_RANGE['dm+gmr'][0]:.3g}, whose GMR settings are not "
-            "given (for the other GMR rows diagonal covariances move away from the paper's numbers: see the table)"
-            if diag
-            else ""
-        )
-        + "."
-    )
+    f.append(_dm_gmr_finding(result, paper))
     gains = [
         f"{p.metrics['nmse']['pbr+gmr'][1] / p.metrics['nmse']['pbr'][1] - 1:+.0%} under the {name} protocol"
         for name, p in (("paper's", paper), ("chronological", chrono), ("cross-trial", cross))
@@ -462,6 +426,52 @@ def _findings(result, paper, chrono, cross, has_c) -> list[str]:
             + "."
         )
     return f
+
+
+def _component_findings(result, paper, chrono, cross) -> list[str]:
+    """The GMR components chosen under each protocol."""
+    top = max(result.gmr_candidates, default=None)
+    at_top = bool(paper.components) and all(k == top for k in paper.components.values())
+    f = [
+        f"- GMR components chosen on validation data (first seed; candidates {list(result.gmr_candidates)}): "
+        f"{', '.join(f'{k}: {v}' for k, v in paper.components.items())}"
+        + (
+            " — all the largest candidate: with shuffled samples the validation data have near-copies in "
+            "training, so more components always look better."
+            if at_top
+            else "."
+        )
+    ]
+    for name, p in (("chronological", chrono), ("cross-trial", cross)):
+        if p is not None and p.components:
+            f.append(
+                f"- Components chosen for the {name} protocol: "
+                f"{', '.join(f'{k}: {v}' for k, v in p.components.items())}."
+            )
+    return f
+
+
+def _dm_gmr_finding(result, paper) -> str:
+    """What a GMR does to DM's joint 1, with the GMR variants, beside the paper's row."""
+    one, diag = result.variants.get("one_component"), result.variants.get("diagonal_covariance")
+    return (
+        f"- A full-covariance GMR on DM's residual brings DM's joint-1 `nmse_range` from "
+        f"{_v(paper, 'dm', 0, 'nmse_range')} to {_v(paper, 'dm+gmr', 0, 'nmse_range')} (paper: "
+        f"{NMSE_RANGE['dm'][0]:#.4g} → {NMSE_RANGE['dm+gmr'][0]:#.4g})"
+        + (
+            f"; with a single component (a linear correction) already {_v(one[1], 'dm+gmr', 0, 'nmse_range')}"
+            if one
+            else ""
+        )
+        + (
+            f"; with diagonal covariances {_v(diag[1], 'dm+gmr', 0, 'nmse_range')}, since each component then "
+            f"predicts a constant — nearer the paper's {NMSE_RANGE['dm+gmr'][0]:.3g}, whose GMR settings are not "
+            "given (for the other GMR rows diagonal covariances move away from the paper's numbers: see the table)"
+            if diag
+            else ""
+        )
+        + "."
+    )
 
 
 def _error_sentence(split, j: int, rest_speed: float = 0.05) -> str:
@@ -502,10 +512,44 @@ def _seed_sentence(paper: ProtocolResult) -> str:
     )
 
 
-def _figure_sentences(result, paper, cross) -> dict[str, tuple[str, tuple[str, str]]]:
+def _figure_sentences(paper, cross) -> dict[str, tuple[str, tuple[str, str]]]:
     """figure name -> (default relative path, (title, one sentence on what it shows))."""
     m = paper.metrics["nmse"]
-    s = {
+    s = _time_figure_sentences(m, paper)
+    s.update(
+        {
+            "parity": (
+                "figures/identify_parity.png",
+                (
+                    "Parity plots, 2 × 3 (paper's protocol)",
+                    "Points on the diagonal are perfect predictions: with GMR, joint 1's nmse is at most "
+                    f"{fmt(max(m[k + '+gmr'][0] for k in ('rr', 'dm', 'pbr')), 2)} for the three models, joint 2's "
+                    f"at least {fmt(min(m[k + '+gmr'][1] for k in ('rr', 'dm', 'pbr')), 2)} (a visibly wider "
+                    "cloud).",
+                ),
+            ),
+            "interval": (
+                "figures/identify_interval_pbr.png",
+                (
+                    "PBR + GMR with 95 % intervals (paper's protocol)",
+                    f"The interval covers {paper.coverage['pbr+gmr'][0]:.0%} / "
+                    f"{paper.coverage['pbr+gmr'][1]:.0%} of held-out joint-1 / joint-2 torques.",
+                ),
+            ),
+            "seeds": (
+                "figures/identify_seeds.png",
+                ("Grouped parameters over the paper's 10 seeds", _seed_sentence(paper)),
+            ),
+        }
+    )
+    if cross is not None:
+        s.update(_cross_figure_sentences(m, cross))
+    return s
+
+
+def _time_figure_sentences(m: dict, paper: ProtocolResult) -> dict[str, tuple[str, tuple[str, str]]]:
+    """The torque and error figures over time: name -> (default relative path, (title, sentence))."""
+    return {
         "torque_j1": (
             "figures/identify_torque_j1.png",
             (
@@ -531,56 +575,38 @@ def _figure_sentences(result, paper, cross) -> dict[str, tuple[str, tuple[str, s
             "figures/identify_error_j2.png",
             ("Joint 2 torque error over time (paper's protocol)", _error_sentence(paper.example, 1)),
         ),
-        "parity": (
-            "figures/identify_parity.png",
-            (
-                "Parity plots, 2 × 3 (paper's protocol)",
-                "Points on the diagonal are perfect predictions: with GMR, joint 1's nmse is at most "
-                f"{fmt(max(m[k + '+gmr'][0] for k in ('rr', 'dm', 'pbr')), 2)} for the three models, joint 2's "
-                f"at least {fmt(min(m[k + '+gmr'][1] for k in ('rr', 'dm', 'pbr')), 2)} (a visibly wider "
-                "cloud).",
-            ),
-        ),
-        "interval": (
-            "figures/identify_interval_pbr.png",
-            (
-                "PBR + GMR with 95 % intervals (paper's protocol)",
-                f"The interval covers {paper.coverage['pbr+gmr'][0]:.0%} / "
-                f"{paper.coverage['pbr+gmr'][1]:.0%} of held-out joint-1 / joint-2 torques.",
-            ),
-        ),
-        "seeds": (
-            "figures/identify_seeds.png",
-            ("Grouped parameters over the paper's 10 seeds", _seed_sentence(paper)),
-        ),
     }
-    if cross is not None:
-        mc = cross.metrics["nmse"]
-        s["cross_j1"] = (
-            "figures/identify_cross_trial_j1.png",
-            (
-                "Joint 1 on the unseen trial (cross-trial)",
-                f"Identified on exp1, predicted on exp2: PBR nmse {fmt(mc['pbr'][0], 2)}, "
-                f"PBR + GMR {fmt(mc['pbr+gmr'][0], 2)}.",
-            ),
-        )
-        s["cross_j2"] = (
-            "figures/identify_cross_trial_j2.png",
-            (
-                "Joint 2 on the unseen trial (cross-trial)",
-                f"Joint 2 on a new trial: PBR nmse {fmt(mc['pbr'][1], 2)} → PBR + GMR "
-                f"{fmt(mc['pbr+gmr'][1], 2)}, against {fmt(m['pbr'][1], 2)} → {fmt(m['pbr+gmr'][1], 2)} "
-                "on the paper's shuffled splits.",
-            ),
-        )
-        s["cross_interval"] = (
-            "figures/identify_cross_trial_interval_pbr.png",
-            (
-                "PBR + GMR with 95 % intervals on the unseen trial (cross-trial)",
-                f"On the unseen trial the interval covers {cross.coverage['pbr+gmr'][0]:.0%} / "
-                f"{cross.coverage['pbr+gmr'][1]:.0%} of the torques.",
-            ),
-        )
+
+
+def _cross_figure_sentences(m: dict, cross: ProtocolResult) -> dict[str, tuple[str, tuple[str, str]]]:
+    """The cross-trial figures: name -> (default relative path, (title, sentence)); `m`: the paper's nmse."""
+    s = {}
+    mc = cross.metrics["nmse"]
+    s["cross_j1"] = (
+        "figures/identify_cross_trial_j1.png",
+        (
+            "Joint 1 on the unseen trial (cross-trial)",
+            f"Identified on exp1, predicted on exp2: PBR nmse {fmt(mc['pbr'][0], 2)}, "
+            f"PBR + GMR {fmt(mc['pbr+gmr'][0], 2)}.",
+        ),
+    )
+    s["cross_j2"] = (
+        "figures/identify_cross_trial_j2.png",
+        (
+            "Joint 2 on the unseen trial (cross-trial)",
+            f"Joint 2 on a new trial: PBR nmse {fmt(mc['pbr'][1], 2)} → PBR + GMR "
+            f"{fmt(mc['pbr+gmr'][1], 2)}, against {fmt(m['pbr'][1], 2)} → {fmt(m['pbr+gmr'][1], 2)} "
+            "on the paper's shuffled splits.",
+        ),
+    )
+    s["cross_interval"] = (
+        "figures/identify_cross_trial_interval_pbr.png",
+        (
+            "PBR + GMR with 95 % intervals on the unseen trial (cross-trial)",
+            f"On the unseen trial the interval covers {cross.coverage['pbr+gmr'][0]:.0%} / "
+            f"{cross.coverage['pbr+gmr'][1]:.0%} of the torques.",
+        ),
+    )
     return s
 
 

@@ -159,28 +159,7 @@ def constraints_study(
     for i in tqdm(range(n_trials), desc=f"constraints study ({source})", disable=not progress):
         duration = float(rng.uniform(*durations))
         trial, pi_true, described = _study_trial(source, robot, model, pi_sheet, i, duration, seed, noise, rate_hz)
-        st = Stats.from_data(model, trial.q, trial.dq, trial.ddq, trial.tau)
-        ols = estimators.fit("ols", st, model)
-        con = estimators.fit("constrained", st, model, margin=margin)
-        excited = np.array([name not in ols.unexcited for name in model.names])
-        rows.append(
-            {
-                "trial": i,
-                "duration_s": duration,
-                **described,
-                "rank": ols.rank,
-                "ols_consistent": ols.consistent,
-                "ols_min_eig": ols.min_mass_eigenvalue,
-                "constrained_consistent": bool(con.min_mass_eigenvalue >= margin * (1 - 1e-6) and con.consistent),
-                "constrained_min_eig": con.min_mass_eigenvalue,
-                "active": " ".join(con.active),
-                "err_ols": relative_error(ols.pi, pi_true),
-                "err_constrained": relative_error(con.pi, pi_true),
-                # the same over the parameters whose columns the trial excites at all
-                "err_ols_excited": relative_error(ols.pi[excited], pi_true[excited]),
-                "err_constrained_excited": relative_error(con.pi[excited], pi_true[excited]),
-            }
-        )
+        rows.append({"trial": i, "duration_s": duration, **described, **_both_fits(trial, model, pi_true, margin)})
     settings = {
         "n_trials": n_trials,
         "source": source,
@@ -193,6 +172,27 @@ def constraints_study(
         "truth": "physical-convention datasheet π with joint-2 armature",
     }
     return StudyResult(pd.DataFrame(rows), settings)
+
+
+def _both_fits(trial: Dataset, model: ArmModel, pi_true: np.ndarray, margin: float) -> dict:
+    """OLS and the constrained fit on one trial: rank, consistency, active constraints, parameter errors."""
+    st = Stats.from_data(model, trial.q, trial.dq, trial.ddq, trial.tau)
+    ols = estimators.fit("ols", st, model)
+    con = estimators.fit("constrained", st, model, margin=margin)
+    excited = np.array([name not in ols.unexcited for name in model.names])
+    return {
+        "rank": ols.rank,
+        "ols_consistent": ols.consistent,
+        "ols_min_eig": ols.min_mass_eigenvalue,
+        "constrained_consistent": bool(con.min_mass_eigenvalue >= margin * (1 - 1e-6) and con.consistent),
+        "constrained_min_eig": con.min_mass_eigenvalue,
+        "active": " ".join(con.active),
+        "err_ols": relative_error(ols.pi, pi_true),
+        "err_constrained": relative_error(con.pi, pi_true),
+        # the same over the parameters whose columns the trial excites at all
+        "err_ols_excited": relative_error(ols.pi[excited], pi_true[excited]),
+        "err_constrained_excited": relative_error(con.pi[excited], pi_true[excited]),
+    }
 
 
 def rich_agreement(

@@ -43,6 +43,28 @@ class Shipped:
     gmr: GMR
 
 
+def prepare(
+    model: ArmModel,
+    train: Dataset | None,
+    residual: ResidualSpec,
+    estimator: str,
+    components: int | None = None,
+    saved: dict | None = None,
+) -> Shipped:
+    """π and the GMR: taken from `saved` (`read_parameters`) where it has them, else identified by `estimator` /
+    fitted with the problem's `residual` settings (`components`: a fixed K) on `train`."""
+    if saved is not None:
+        pi, label = saved_vector(saved, model), f"{saved['estimator']} (loaded from {saved['path']})"
+        status = saved.get("estimator_status", "")
+    else:
+        pi, label, status = identify(model, train, estimator)
+    if saved and saved.get("gmr"):
+        gmr = gmr_from_saved(saved["gmr"])
+    else:
+        gmr = fit_residual(model, pi, train, residual, components)
+    return Shipped(model, pi, label, status, gmr)
+
+
 def identify(model: ArmModel, train: Dataset, estimator: str) -> tuple[np.ndarray, str, str]:
     """(π, estimator name, solver status) from the training trial, by the chosen estimator."""
     stats = Stats.from_data(model, train.q, train.dq, train.ddq, train.tau)
