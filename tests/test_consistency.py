@@ -14,7 +14,6 @@ import pytest
 
 from ident_opt import codegen
 from ident_opt.arm import Arm
-from ident_opt.compare import multisine_trial
 from ident_opt.consistency import (
     Bound,
     Consistency,
@@ -31,6 +30,7 @@ from ident_opt.identify.fit import fit_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.parameters import Parameter
 from ident_opt.robot import EXTENSIONS, RIGID, ArmModel, TwoLinkArm
+from ident_opt.studies.constraints import multisine_trial
 
 ARM = ArmModel(("armature",))
 #: A parameter no name rule could know: a made-up quadratic drag k·dq1·|dq1| on joint 1, of kind friction.
