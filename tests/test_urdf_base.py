@@ -1,0 +1,53 @@
+"""Base parameters of a URDF arm: their number is the numerical rank, they reproduce τ, OLS recovers them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ident_opt.identify.base import base_parameters, fit_base_ols, random_regressor
+from ident_opt.identify.stats import Stats
+from ident_opt.urdf_arm import UrdfArm
+
+KUKA = Path(__file__).resolve().parents[1] / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"
+
+
+@pytest.fixture(scope="module")
+def kuka() -> UrdfArm:
+    return UrdfArm(str(KUKA), tuple(f"lwr_{i}_joint" for i in range(7)), offsets=True)
+
+
+def test_count_is_the_numerical_rank(kuka):
+    base = base_parameters(kuka)
+    W = random_regressor(kuka, 150, seed=7)  # other states than the ones the base was found on
+    assert base.rank == np.linalg.matrix_rank(W) == 69
+    assert len(base.names) == base.rank == len(set(base.names))
+    # The structure: the first joint (vertical axis) sees only izz of link 1, with its own armature
+    assert base.definitions()["izz_lwr_1_link"] == "izz_lwr_1_link + 1·izz_lwr_2_link + 1·ia_lwr_0_joint"
+    assert "m_lwr_1_link" not in base.names
+
+
+def test_base_regressor_reproduces_torques(kuka):
+    base = base_parameters(kuka)
+    W = random_regressor(kuka, 50, seed=11)
+    pi = np.random.default_rng(2).normal(size=kuka.n_params)
+    np.testing.assert_allclose(W[:, base.independent] @ base.project(pi), W @ pi, atol=1e-10)
+    np.testing.assert_allclose(W @ base.standard(base.project(pi)), W @ pi, atol=1e-10)
+
+
+def test_ols_on_base_parameters_recovers_them(kuka):
+    rng = np.random.default_rng(3)
+    q, dq, ddq = (rng.uniform(-2, 2, (400, 7)) for _ in range(3))
+    truth = kuka.cad_parameters()
+    truth[kuka.n_link_params :] = rng.uniform(0.1, 1.0, kuka.n_params - kuka.n_link_params)
+    tau = kuka.predict(truth, q, dq, ddq)
+    noisy = tau + 0.01 * rng.standard_normal(tau.shape)
+    fit = fit_base_ols(Stats.from_regressor(kuka.regressor(q, dq, ddq), noisy), kuka)
+    base = fit.base
+    err = np.abs(fit.fit.pi - base.project(truth))
+    assert np.all(err < 6 * fit.fit.se + 1e-12)  # within 6 SE of the truth, every one of them
+    assert np.all(fit.fit.se > 0) and np.all(fit.fit.se < 0.1)
+    summary = fit.summary()
+    assert set(summary) == set(base.names) and {"value", "se", "definition"} <= set(summary["izz_lwr_1_link"])
