@@ -1,0 +1,68 @@
+"""Consistency of a URDF arm's fits: pseudo-inertias ⪰ 0, the constrained fit equals OLS where nothing binds,
+the plausible fit stays near the CAD model."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ident_opt.identify.base import fit_base_ols
+from ident_opt.identify.constrained import fit_constrained
+from ident_opt.identify.physical import fit_physical, log_det_divergence
+from ident_opt.identify.stats import Stats
+from ident_opt.urdf_arm import UrdfArm
+
+KUKA = Path(__file__).resolve().parents[1] / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"
+
+
+@pytest.fixture(scope="module")
+def kuka() -> UrdfArm:
+    return UrdfArm(str(KUKA), tuple(f"lwr_{i}_joint" for i in range(7)), offsets=True)
+
+
+@pytest.fixture(scope="module")
+def simulated(kuka):
+    """Statistics of 300 random states of a consistent arm (CAD inertials, positive joint terms)."""
+    rng = np.random.default_rng(4)
+    q, dq, ddq = (rng.uniform(-2, 2, (300, 7)) for _ in range(3))
+    truth = kuka.cad_parameters()
+    truth[kuka.n_link_params :] = rng.uniform(0.1, 1.0, kuka.n_params - kuka.n_link_params)
+    tau = kuka.predict(truth, q, dq, ddq)
+    return truth, Stats.from_regressor(kuka.regressor(q, dq, ddq), tau)
+
+
+def test_constrained_equals_ols_where_nothing_binds(kuka, simulated):
+    truth, stats = simulated
+    ols = fit_base_ols(stats, kuka)
+    fit = fit_constrained(stats, kuka)
+    base = ols.base
+    # The least-norm OLS π is not consistent (its unseen directions are 0), so the solver runs; the data
+    # come from a consistent arm, so it reaches the same base parameters (the same torques).
+    assert fit.status == "Solved"
+    np.testing.assert_allclose(base.project(fit.pi), ols.fit.pi, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(ols.fit.pi, base.project(truth), atol=1e-8)
+    assert kuka.min_mass_eigenvalue(fit.pi) >= 0
+
+
+def test_plausible_fit_is_consistent_and_near_the_cad_masses(kuka, simulated):
+    truth, stats = simulated
+    fit = fit_physical(stats, kuka)
+    assert np.linalg.eigvalsh(kuka.pseudo_inertias(fit.pi))[:, 0].min() > 0
+    assert fit.consistent
+    cad = kuka.link_masses(truth)
+    for link, mass in fit.details["link_masses"].items():
+        assert 0.5 * cad[link] - 1e-6 <= mass <= 1.5 * cad[link] + 1e-6
+    # noise-free data of a consistent arm: the fit reproduces the torques (the prior only moves unseen directions)
+    np.testing.assert_allclose(fit.rss, 0.0, atol=1e-6 * stats.s.max())
+
+
+def test_a_heavy_prior_returns_the_cad_inertials(kuka, simulated):
+    _, stats = simulated
+    cad = kuka.cad_parameters()
+    fit = fit_physical(stats, kuka, prior_weight=1e2, mass_range=None, com_box=None)
+    np.testing.assert_allclose(fit.pi[: kuka.n_link_params], cad[: kuka.n_link_params], rtol=1e-3, atol=1e-5)
+    J0 = kuka.pseudo_inertias(cad)
+    assert log_det_divergence(J0[0], J0[0]) == pytest.approx(0.0, abs=1e-12)
+    assert log_det_divergence(2 * J0[0], J0[0]) == pytest.approx(4 - 4 * np.log(2))
