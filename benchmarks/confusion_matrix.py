@@ -24,6 +24,7 @@ import numpy as np
 
 from ident_opt.diagnose import CAUSES
 from ident_opt.effects import CATALOGUE
+from ident_opt.report import record
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -162,6 +163,12 @@ def main(argv: list[str] | None = None) -> int:
     command = "python benchmarks/confusion_matrix.py " + " ".join(argv if argv is not None else sys.argv[1:])
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(table(results, command.strip()))
+    record(
+        Path(args.out).parent,
+        "confusion",
+        "the diagnosis on simulated trials with hidden effects (confusion matrix)",
+        [Path(args.out).name],
+    )
     print(f"wrote {args.out}")
     return 0
 

@@ -12,6 +12,7 @@ import numpy as np
 from ident_opt.diagnose import scoring, signals
 from ident_opt.diagnose.diagnosis import Diagnosis
 from ident_opt.effects import CATALOGUE
+from ident_opt.report import record
 
 
 def num(x: float, unit: str = "", digits: int = 3) -> str:
@@ -269,4 +270,10 @@ def write(d: Diagnosis, out: Path) -> list[str]:
     out.mkdir(parents=True, exist_ok=True)
     files = figures(d, out)
     (out / "diagnosis.md").write_text(markdown(d, files))
+    record(
+        out,
+        "diagnosis",
+        "what the rigid model gets wrong, why, and the held-out gain of the fix",
+        ["diagnosis.md", *files],
+    )
     return [*files, "diagnosis.md"]
