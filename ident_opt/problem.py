@@ -17,6 +17,7 @@ from typing import Any
 
 from ident_opt.effects import parse_effect
 from ident_opt.errors import InputError
+from ident_opt.urdf_problem import UrdfRobot, data_columns, parse_urdf_robot
 
 _REQUIRED = object()
 
@@ -399,7 +400,9 @@ def _description(table: _Table) -> str:
     return kinds.pop()
 
 
-def _robot(table: _Table) -> Robot:
+def _robot(table: _Table) -> Robot | UrdfRobot:
+    if "urdf" in table.raw:  # an n-joint arm from a URDF: ident_opt.urdf_problem
+        return parse_urdf_robot(table, table.path.resolve().parent)
     description = _description(table)
     default = "physical" if description == "inertials" else _REQUIRED
     convention = table.take("convention", str, default)
@@ -444,7 +447,8 @@ def _column(table: _Table, key: str) -> tuple[str | int, tuple[float, float] | N
     return source, conversion
 
 
-def _data(table: _Table, base: Path) -> DataSpec:
+def _data(table: _Table, base: Path, n_joints: int = 2) -> DataSpec:
+    known = DATA_COLUMNS if n_joints == 2 else data_columns(n_joints)
     trials = table.take("trials", list, [])
     for i, trial in enumerate(trials):
         if not isinstance(trial, str):
@@ -453,9 +457,9 @@ def _data(table: _Table, base: Path) -> DataSpec:
     columns: dict[str, str | int] = {}
     conversions: dict[str, tuple[float, float]] = {}
     for key in list(columns_table.raw):
-        if key not in DATA_COLUMNS:
+        if key not in known:
             raise InputError(
-                f"{table.path}: unknown column '{key}' in [data.columns]; known: {', '.join(DATA_COLUMNS)}"
+                f"{table.path}: unknown column '{key}' in [data.columns]; known: {', '.join(known)}"
             )
         columns[key], conversion = _column(columns_table, key)
         if conversion is not None:
@@ -563,7 +567,7 @@ def load_problem(path: str | Path) -> Problem:
     base = path.resolve().parent
     name = top.take("name", str)
     robot = _robot(top.table("robot"))
-    data = _data(top.table("data", required=False), base)
+    data = _data(top.table("data", required=False), base, getattr(robot, "n_joints", 2))
     split = _split(top.table("split", required=False))
     residual = _residual(top.table("residual", required=False))
     simulate = _simulate(top.table("simulate")) if "simulate" in top.raw else None

@@ -1,0 +1,187 @@
+"""The comparison on an n-joint arm from a URDF: OLS on the base parameters, the plain consistent fit, the
+plausible consistent fit (the default) and the URDF's CAD inertials, scored on held-out data.
+
+Split: the test trials when given (`cross_trial`: another recording), else each trial's first
+`train_fraction` in time trains and the rest tests (`chronological`). Everything is fitted from the
+training statistics (`identify.stats.Stats`). Returned as one JSON-ready dict (`docs/cli.md`):
+
+- `parameters.<estimator>`: standard parameters by name (`ident_opt.urdf_arm`); `base_parameters.ols`:
+  each base parameter's value, SE and definition (`identify.base`);
+- `metrics.<protocol>.<estimator>`: held-out `rmse` [N m] and `nmse` per joint (by URDF joint name);
+- `consistency.<estimator>`: each link's pseudo-inertia λ_min [kg m²], the active constraints;
+- `mass.<estimator>`: total and per-link masses [kg] next to the URDF's (`mass.urdf`);
+- `base`: the number of base parameters, the rank tolerance, the condition number on the training data.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ident_opt import metrics
+from ident_opt.data import Dataset, chronological_split, load_dataset
+from ident_opt.errors import InputError
+from ident_opt.identify.base import fit_base_ols
+from ident_opt.identify.constrained import fit_constrained
+from ident_opt.identify.fit import LinearFit
+from ident_opt.identify.physical import fit_physical
+from ident_opt.identify.stats import Stats
+from ident_opt.urdf_arm import UrdfArm
+
+#: The estimators of the comparison, in report order.
+ESTIMATORS = ("ols", "constrained", "consistent", "cad")
+#: What each is, for the report.
+MEANING = {
+    "ols": "least squares on the base parameters (dependent standard parameters set to 0)",
+    "constrained": "consistent least squares: every pseudo-inertia ⪰ 0, friction and armature ≥ 0, no prior",
+    "consistent": "the default: consistent, CAD mass range and centre-of-mass box, log-det prior to the URDF",
+    "cad": "the URDF's CAD inertials, no friction, armature or offsets",
+}
+#: A pseudo-inertia whose λ_min is below this [kg m²] is reported active (the constrained fit's margin is 1e-6).
+ACTIVE_EIGENVALUE = 1e-5
+_JOINT_COLUMN = re.compile(r"(q|dq|ddq|tau|i)(\d+)")
+
+
+def load_trials(paths: list[Path], problem, **options) -> list[Dataset]:
+    """The trials at `paths` for a URDF problem; InputError naming the file when its joint count is not the arm's."""
+    n = problem.robot.n_joints
+    trials = []
+    for path in paths:
+        trial = load_dataset(path, problem.data, problem.robot, **options)
+        extra = [int(m.group(2)) for c in trial.extra.columns if (m := _JOINT_COLUMN.fullmatch(str(c)))]
+        if extra and max(extra) > n:
+            raise InputError(
+                f"{path}: the data have joint columns up to joint {max(extra)}, the URDF arm {problem.robot.urdf} "
+                f"has {n} joints ({', '.join(problem.robot.joints)})"
+            )
+        trials.append(trial)
+    return trials
+
+
+def split(trials: list[Dataset], test: list[Dataset], train_fraction: float) -> tuple[str, list, list]:
+    """(protocol, training sets, test sets): the test trials if any, else a time split of every trial."""
+    if test:
+        return "cross_trial", trials, test
+    train, held = [], []
+    for trial in trials:
+        first, rest = chronological_split(trial.n, train_fraction)
+        train.append(trial.subset(first))
+        held.append(trial.subset(rest))
+    return "chronological", train, held
+
+
+def _stats(arm: UrdfArm, trials: list[Dataset]) -> Stats:
+    total = Stats.zeros(arm.n_params, arm.n_joints)
+    for trial in trials:
+        total += Stats.from_data(arm, trial.q, trial.dq, trial.ddq, trial.tau)
+    return total
+
+
+def _consistency(arm: UrdfArm, pi: np.ndarray, fit: LinearFit | None) -> dict:
+    """Each link's pseudo-inertia λ_min [kg m²], whether all are ≥ 0 and the signs hold, what is active."""
+    lam = np.linalg.eigvalsh(arm.pseudo_inertias(pi))[:, 0]
+    active_links = [link for link, v in zip(arm.links, lam) if v < ACTIVE_EIGENVALUE]
+    return {
+        "pseudo_inertia_min_eigenvalue": dict(zip(arm.links, lam.tolist())),
+        "consistent": bool(lam.min() >= 0 and (fit is None or not fit.sign_violations)),
+        "active_pseudo_inertias": active_links,
+        "active": list(fit.active) if fit is not None else [],
+    }
+
+
+def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None = None) -> dict:
+    """The comparison of the module doc for a URDF problem; returns the JSON-ready result."""
+    robot = problem.robot
+    arm: UrdfArm = robot.arm
+    protocol, train, held = split(trials, test, problem.split.train_fraction)
+    t0 = time.perf_counter()
+    stats = _stats(arm, train)
+    stats_seconds = time.perf_counter() - t0
+    fits: dict[str, LinearFit | None] = {}
+    seconds: dict[str, float] = {}
+    t0 = time.perf_counter()
+    base_fit = fit_base_ols(stats, arm, weights=weights)
+    seconds["ols"] = time.perf_counter() - t0
+    fits["ols"] = base_fit.fit
+    pis = {"ols": base_fit.pi}
+    t0 = time.perf_counter()
+    fits["constrained"] = fit_constrained(stats, arm, weights=weights)
+    seconds["constrained"] = time.perf_counter() - t0
+    pis["constrained"] = fits["constrained"].pi
+    t0 = time.perf_counter()
+    fits["consistent"] = fit_physical(
+        stats,
+        arm,
+        prior_weight=robot.prior_weight,
+        mass_range=robot.mass_range,
+        com_box=robot.com_box,
+        weights=weights,
+    )
+    seconds["consistent"] = time.perf_counter() - t0
+    pis["consistent"] = fits["consistent"].pi
+    pis["cad"] = arm.cad_parameters()
+    fits["cad"] = None
+    tau = np.concatenate([t.tau for t in held])
+    q, dq, ddq = (np.concatenate([getattr(t, a) for t in held]) for a in ("q", "dq", "ddq"))
+    Y = arm.regressor(q, dq, ddq)
+    scores = {}
+    for name, pi in pis.items():
+        hat = Y @ pi
+        scores[name] = {
+            "rmse": dict(zip(robot.joints, metrics.rmse(tau, hat).tolist())),
+            "nmse": dict(zip(robot.joints, metrics.nmse(tau, hat).tolist())),
+        }
+    urdf_masses = arm.link_masses(pis["cad"])
+    return {
+        "problem": problem.name,
+        "robot": {
+            "urdf": str(robot.urdf),
+            "joints": list(robot.joints),
+            "links": list(arm.links),
+            "n_params": arm.n_params,
+            "gravity": list(robot.gravity),
+        },
+        "split": {
+            "protocol": protocol,
+            "train": [t.source for t in trials],
+            "test": [t.source for t in test] if test else [f"last {1 - problem.split.train_fraction:.0%} of each"],
+            "train_samples": int(stats.n),
+            "test_samples": len(tau),
+        },
+        "base": {
+            "count": base_fit.base.rank,
+            "rank_tolerance": base_fit.base.tolerance,
+            "random_states": base_fit.base.n_states,
+            "condition_number": base_fit.fit.cond,
+            "rank_on_training_data": base_fit.fit.rank,
+        },
+        "estimators": {name: MEANING[name] for name in ESTIMATORS},
+        "prior": {"weight": robot.prior_weight, "mass_range": robot.mass_range, "com_box_m": robot.com_box},
+        "parameters": {name: arm.as_dict(pi) for name, pi in pis.items()},
+        "se": {name: fit.se_dict() for name, fit in fits.items() if fit is not None and name != "ols"},
+        "base_parameters": {"ols": base_fit.summary()},
+        "metrics": {protocol: scores},
+        "consistency": {name: _consistency(arm, pi, fits[name]) for name, pi in pis.items()},
+        "mass": {
+            "urdf": {"total": sum(urdf_masses.values()), "links": urdf_masses},
+            **{
+                name: {"total": sum(arm.link_masses(pi).values()), "links": arm.link_masses(pi)}
+                for name, pi in pis.items()
+                if name != "cad"
+            },
+        },
+        "within_10_percent_of_ols": _within(scores, robot.joints),
+        "seconds": {"statistics": stats_seconds, **seconds},
+    }
+
+
+def _within(scores: dict, joints: tuple[str, ...]) -> dict:
+    """Per joint: is OLS better than the CAD prior, and is the consistent fit's RMSE within 10 % of OLS's?"""
+    out = {}
+    for j in joints:
+        ols, cad, con = (scores[k]["rmse"][j] for k in ("ols", "cad", "consistent"))
+        out[j] = {"ols_better_than_cad": ols < cad, "ratio_to_ols": con / ols, "within": con <= 1.1 * ols}
+    return out

@@ -1,0 +1,78 @@
+"""Problem files of URDF arms: the shipped ones load; bad URDFs and mismatched data exit 2 naming the culprit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ident_opt.cli import main
+from ident_opt.errors import InputError
+from ident_opt.problem import load_problem
+from ident_opt.studies import urdf as study
+from ident_opt.urdf_problem import UrdfRobot
+
+ROOT = Path(__file__).resolve().parents[1]
+KUKA_PROBLEM = ROOT / "problems" / "kuka_lwr4.toml"
+URDF = ROOT / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"
+JOINTS = [f"lwr_{i}_joint" for i in range(7)]
+
+
+def _problem(tmp_path: Path, urdf: Path | str, joints: list[str], extra: str = "") -> Path:
+    path = tmp_path / "arm.toml"
+    names = ", ".join(f'"{j}"' for j in joints)
+    path.write_text(f'name = "t"\n[robot]\nurdf = "{urdf}"\njoints = [{names}]\ngravity = 9.81\n{extra}')
+    return path
+
+
+def test_kuka_problem_loads():
+    problem = load_problem(KUKA_PROBLEM)
+    assert isinstance(problem.robot, UrdfRobot)
+    assert problem.robot.joints == tuple(JOINTS) and problem.robot.gravity == (0.0, 0.0, -9.81)
+    assert problem.robot.arm.n_params == 7 * 14 and problem.robot.offsets
+    assert [p.name for p in problem.data.trials] == ["measurements_1.csv.gz", "measurements_3.csv.gz"]
+
+
+@pytest.mark.parametrize(
+    ("urdf_text", "joints", "expected"),
+    [
+        ("<robot><link name='a'>", JOINTS, ["broken.urdf", "XML"]),
+        (None, [*JOINTS[:6], "lwr_9_joint"], ["broken.urdf", "'lwr_9_joint'"]),
+        (None, [JOINTS[0], JOINTS[2]], ["broken.urdf", "<joint name='lwr_2_joint'>", "serial chain"]),
+    ],
+)
+def test_bad_urdf_exits_2_naming_file_and_element(tmp_path, capsys, urdf_text, joints, expected):
+    urdf = tmp_path / "broken.urdf"
+    urdf.write_text(URDF.read_text() if urdf_text is None else urdf_text)
+    assert main(["check", "--problem", str(_problem(tmp_path, urdf, joints))]) == 2
+    err = capsys.readouterr().err
+    for text in expected:
+        assert text in err
+
+
+def test_unknown_robot_key_and_missing_urdf(tmp_path):
+    with pytest.raises(InputError, match="unknown key"):
+        load_problem(_problem(tmp_path, URDF, JOINTS, "frobnicate = 1\n"))
+    with pytest.raises(InputError, match=r"nowhere\.urdf"):
+        load_problem(_problem(tmp_path, tmp_path / "nowhere.urdf", JOINTS))
+
+
+def _trial(tmp_path: Path, n_joints: int) -> Path:
+    rng = np.random.default_rng(0)
+    cols = {"t": np.arange(200) * 0.01}
+    for s in ("q", "dq", "ddq", "tau"):
+        cols.update({f"{s}{j + 1}": rng.normal(size=200) * 0.1 for j in range(n_joints)})
+    path = tmp_path / f"trial{n_joints}.csv"
+    pd.DataFrame(cols).to_csv(path, index=False)
+    return path
+
+
+@pytest.mark.parametrize("n_joints", [6, 8])
+def test_data_with_another_joint_count_is_refused(tmp_path, n_joints):
+    problem = load_problem(_problem(tmp_path, URDF, JOINTS))
+    with pytest.raises(InputError) as info:
+        study.load_trials([_trial(tmp_path, n_joints)], problem)
+    assert f"trial{n_joints}.csv" in str(info.value)
+    assert "7" in str(info.value)
