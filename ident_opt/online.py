@@ -38,6 +38,7 @@ import copy
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import casadi as ca
 import numpy as np
 
 from ident_opt.errors import InputError
@@ -237,8 +238,6 @@ def batch_theta(estimator: Estimator, stats: Stats, theta_fixed: np.ndarray | No
 def arm_design_jacobian(model) -> Callable[[np.ndarray], np.ndarray]:
     """x = [q dq ddq] (6,) -> ∂Y/∂x (2, 6, P) of an `ArmModel`'s regressor, from its CasADi expressions
     (exact; sign(dq) columns have derivative 0, where a finite difference would blow up at dq = 0)."""
-    import casadi as ca
-
     s = model.symbols
     x = ca.vertcat(s["q"], s["dq"], s["ddq"])
     # τ = Y(x) π is linear in π, so ∂τ/∂x evaluated at π = e_p is column p of ∂Y/∂x.

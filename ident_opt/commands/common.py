@@ -55,15 +55,15 @@ class Loaded:
 
 def load(args: argparse.Namespace, min_samples: int | None = None) -> Loaded:
     """The problem file and its data (from --data, the problem's [data] trials, or its [simulate] section)."""
+    # Deferred: the data loader brings pandas and SciPy (1.5 s); every subcommand's parser imports this module.
+    from ident_opt import simulate  # its integrator loads on first use only
     from ident_opt.data import load_dataset
     from ident_opt.problem import load_problem
 
     problem = load_problem(args.problem)
     paths = [Path(p) for p in (getattr(args, "data", None) or [])] or list(problem.data.trials)
     if not paths and problem.simulate is not None:
-        from ident_opt.simulate import problem_trials  # generated on first use, cached
-
-        paths = problem_trials(problem)
+        paths = simulate.problem_trials(problem)  # generated on first use, cached
     if not paths:
         raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
     kwargs = {"allow_implausible": args.allow_implausible, "drop_invalid": args.drop_invalid}
