@@ -17,7 +17,8 @@ from ident_opt.studies.online_replay import Replay
 GRAY_BOX = "pbr"
 #: The models whose parameter trajectories are drawn.
 DRAWN = ("pbr", "cpbr")
-FILES = ("online.md", "online_metrics.csv", "online_parameters.csv", "online_trajectories.png", "online.json")
+FIGURE = "online_trajectories.png"
+FILES = ("online.md", "online_metrics.csv", "online_parameters.csv", FIGURE, "online.json")
 
 
 def payload(r: Replay, problem, source: str, cross_covariance: bool) -> dict:
@@ -98,7 +99,7 @@ def write(r: Replay, data: dict, out: Path, json_path: str | Path | None = None)
     drawn = [k for k in DRAWN if k in r.theta]
     if drawn:
         theta0 = {k: r.starts[k].theta0 for k in drawn}
-        online_trajectories_figure(r.starts[drawn[0]].names, {k: r.theta[k] for k in drawn}, theta0, out / FILES[3])
+        online_trajectories_figure(r.starts[drawn[0]].names, {k: r.theta[k] for k in drawn}, theta0, out / FIGURE)
     record(out, "online", "online adaptation: exact re-solves after every sample, online vs frozen", FILES)
     write_json(json_path, data)
 
