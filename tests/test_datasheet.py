@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from ident_opt import paper
 from ident_opt.datasheet import datasheet_pi, rigid_body
 
 
@@ -30,18 +31,7 @@ def test_paper_convention_reproduces_dynamic_parameter_table(paper_problem):
 
 def test_paper_convention_reproduces_pi_true_column(paper_problem):
     pi = datasheet_pi(paper_problem.robot, "paper")
-    printed = {
-        "a1": 0.36571,
-        "a2": 0.016914,
-        "a3": 0.010752,
-        "b1": 8.2331,
-        "b2": 0.38588,
-        "fv1": 1.86e-5,
-        "fv2": 2.45e-6,
-        "fc1": 2.25e-3,
-        "fc2": 1.95e-3,
-    }
-    for name, value in printed.items():
+    for name, value in paper.PI_TRUE.items():
         assert rel(pi[name], value) < 0.01, name
     assert "ia2" not in pi
 
