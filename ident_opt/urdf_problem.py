@@ -8,7 +8,7 @@
     friction = true                               # fv_<joint>, fc_<joint> (default true)
     armature = true                               # ia_<joint> (default true)
     offsets = false                               # off_<joint>: constant torque offsets (default false)
-    prior_weight = 1e-5                           # λ of the log-det prior of the plausible fit
+    prior_weight = 1e-7                           # λ of the log-det prior of the plausible fit
     mass_range = 0.5                              # each link's mass within ± 50 % of the URDF's (or false)
     com_box = 0.1                                 # centre of mass within ± 0.1 m of the URDF's (or false)
     [robot.lwr_0_joint]                           # optional, per joint
@@ -61,7 +61,7 @@ class UrdfRobot:
     friction: bool = True
     armature: bool = True
     offsets: bool = False
-    prior_weight: float = 1e-5
+    prior_weight: float = 1e-7
     mass_range: float | None = 0.5
     com_box: float | None = 0.1
     drives: dict[str, UrdfJointSpec] = field(default_factory=dict)
@@ -129,7 +129,7 @@ def parse_urdf_robot(table: Any, base_dir: Path) -> UrdfRobot:
         friction=table.take("friction", bool, True),
         armature=table.take("armature", bool, True),
         offsets=table.take("offsets", bool, False),
-        prior_weight=table.positive("prior_weight", 1e-5, high=1e6),
+        prior_weight=table.positive("prior_weight", 1e-7, high=1e6),
         mass_range=_optional_fraction(table, "mass_range", 0.5),
         com_box=_optional_fraction(table, "com_box", 0.1),
         drives=drives,

@@ -29,7 +29,7 @@ import warnings
 
 import numpy as np
 
-from ident_opt.consistency import MARGIN, Consistency
+from ident_opt.consistency import MARGIN, Bound, Consistency
 from ident_opt.identify.constrained import ACTIVE_TOL
 from ident_opt.identify.fit import LinearFit, check_stats, finish, joint_weights, normal_equations
 from ident_opt.identify.stats import Stats
@@ -37,10 +37,12 @@ from ident_opt.rnea import N_LINK
 from ident_opt.urdf_arm import UrdfArm
 
 #: The default weight λ of the log-det prior (dimensionless, module doc).
-PRIOR_WEIGHT = 1e-5
+PRIOR_WEIGHT = 1e-7
 #: The default relative mass range r around the CAD masses, and centre-of-mass box half-width δ [m].
 MASS_RANGE = 0.5
 COM_BOX = 0.1
+#: A bound missed by at most this (the parameter's unit) is solver round-off: the value is set to the bound.
+ROUND_OFF = 1e-8
 #: Solver tolerances, tight first.
 TOLERANCES = (1e-9, 1e-7)
 
@@ -145,7 +147,7 @@ def fit_physical(
     if pi.value is None or status not in ("optimal", "optimal_inaccurate"):
         raise RuntimeError(f"plausible fit failed: solver status {status}")
     seconds = time.perf_counter() - t0
-    value = np.asarray(pi.value, dtype=float)
+    value = _onto_bounds(np.asarray(pi.value, dtype=float), Consistency.of(arm, margin))
     slacks = Consistency.of(arm, margin).slacks(value)
     active = [name for name, v in slacks.items() if v < ACTIVE_TOL]
     fit = finish(stats, arm, value, w, "consistent", status, active, seconds)
@@ -159,6 +161,15 @@ def fit_physical(
         link_masses=arm.link_masses(value),
     )
     return fit
+
+
+def _onto_bounds(pi: np.ndarray, consistency: Consistency) -> np.ndarray:
+    """π with the sign and box bounds it misses by solver round-off (≤ `ROUND_OFF`) set to the bound exactly."""
+    out = pi.copy()
+    for c in consistency.constraints:
+        if isinstance(c, Bound) and -ROUND_OFF <= c.slack(out) < 0:
+            out[c.index] = c.value
+    return out
 
 
 def log_det_divergence(J: np.ndarray, J0: np.ndarray) -> float:
