@@ -25,6 +25,7 @@ COMMANDS = {
     "online": "offline fit, then exact sequential updates on the rest of the trial (or a stream)",
     "check": "validate a problem file and its data; summarise each trial",
     "audit": "the paper audit: its datasheet model under both conventions against its own fit",
+    "excite": "design the trajectory to run next: a Fourier excitation optimised by IPOPT within [limits]",
     "calibrate": "how close the simulator's default trial is to a real one (residual size, spectrum, strain)",
 }
 

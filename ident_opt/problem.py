@@ -195,6 +195,20 @@ class SimulateSpec:
 
 
 @dataclass(frozen=True)
+class Limits:
+    """The `[limits]` section: what an excitation design must respect, per joint (tuples of n values).
+
+    Joint angles in [position_min, position_max] [rad], |dq| ≤ velocity [rad/s], |ddq| ≤ acceleration
+    [rad/s²] and, when given, |τ| ≤ torque [N m] (τ from the datasheet model)."""
+
+    position_min: tuple[float, ...]
+    position_max: tuple[float, ...]
+    velocity: tuple[float, ...]
+    acceleration: tuple[float, ...]
+    torque: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
 class Problem:
     """A parsed, validated problem file."""
 
@@ -206,6 +220,7 @@ class Problem:
     residual: ResidualSpec = field(default_factory=ResidualSpec)
     simulate: SimulateSpec | None = None
     output_dir: Path | None = None
+    limits: Limits | None = None
 
 
 class _Table:
@@ -554,6 +569,44 @@ def _simulate(table: _Table) -> SimulateSpec:
     return spec
 
 
+#: Sane magnitudes of the `[limits]` keys: angle [rad], speed [rad/s], acceleration [rad/s²], torque [N m].
+_LIMIT_RANGES = {"position": 100.0, "velocity": 1e3, "acceleration": 1e5, "torque": 1e5}
+
+
+def _per_joint(table: _Table, key: str, low: float, high: float, *, open_low: bool) -> tuple[float, ...]:
+    """A list of one finite number per joint (2) in [low, high] (or (low, high] with `open_low`)."""
+    value = table.take(key, list)
+    ok = len(value) == 2 and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+    ok = ok and all(math.isfinite(v) and (v > low if open_low else v >= low) and v <= high for v in value)
+    if not ok:
+        what = f"{'(' if open_low else '['}{low:g}, {high:g}]"
+        raise InputError(f"{table._name(key)} must be a list of 2 finite numbers in {what}, got {_excerpt(value)}")
+    return tuple(float(v) for v in value)
+
+
+def _limits(table: _Table) -> Limits:
+    angle = _LIMIT_RANGES["position"]
+    low = _per_joint(table, "position_min", -angle, angle, open_low=False)
+    high = _per_joint(table, "position_max", -angle, angle, open_low=False)
+    for j, (a, b) in enumerate(zip(low, high)):
+        if not a < b:
+            raise InputError(
+                f"{table.path}: keys 'position_min' and 'position_max' in [limits]: joint {j + 1} has "
+                f"min {a:g} ≥ max {b:g} rad"
+            )
+    limits = Limits(
+        position_min=low,
+        position_max=high,
+        velocity=_per_joint(table, "velocity", 0.0, _LIMIT_RANGES["velocity"], open_low=True),
+        acceleration=_per_joint(table, "acceleration", 0.0, _LIMIT_RANGES["acceleration"], open_low=True),
+        torque=_per_joint(table, "torque", 0.0, _LIMIT_RANGES["torque"], open_low=True)
+        if "torque" in table.raw
+        else None,
+    )
+    table.done()
+    return limits
+
+
 def load_problem(path: str | Path) -> Problem:
     """Read and validate a problem file; raise `InputError` naming the file and key on any fault."""
     path = Path(path)
@@ -571,6 +624,7 @@ def load_problem(path: str | Path) -> Problem:
     split = _split(top.table("split", required=False))
     residual = _residual(top.table("residual", required=False))
     simulate = _simulate(top.table("simulate")) if "simulate" in top.raw else None
+    limits = _limits(top.table("limits")) if "limits" in top.raw else None
     output = top.table("output", required=False)
     out_dir = output.take("dir", str, None)
     output.done()
@@ -584,4 +638,5 @@ def load_problem(path: str | Path) -> Problem:
         residual=residual,
         simulate=simulate,
         output_dir=_relative(base, out_dir) if out_dir else None,
+        limits=limits,
     )

@@ -1,0 +1,136 @@
+"""`ident-opt excite`: design the trajectory to run next, a periodic Fourier excitation optimised by IPOPT.
+
+Per joint a finite Fourier series with an offset (Swevers style), at rest at its start and end, within the
+problem's [limits] (joint angles, speeds, accelerations, the datasheet model's torque), checked on a 1 kHz
+grid. Criteria: d (D-optimal: the largest log det of the base parameters' information matrix; noise: the
+datasheet model's RMS residual per joint on the problem's first trial, or 1 N m without data), cond (the
+smallest condition number of the column-equilibrated regressor), discriminate (T-optimal: the largest
+difference between two causes' predicted torques, --between CAUSE_A,CAUSE_B). Several random starts, the
+best kept. Writes OUT.csv (t, q, dq, ddq at the controller rate and the feed-forward torque tau_ff),
+OUT.png and OUT.json (criteria, limits' margins); `ident-opt simulate --trajectory-file OUT.csv` follows it.
+
+Examples:
+  ident-opt excite --problem problems/tudor_2dof.toml --out traj.csv --duration 20 --criterion d
+  ident-opt excite --problem problems/tudor_2dof.toml --out disc.csv --criterion discriminate \\
+      --between asymmetric_coulomb,elasticity
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from ident_opt.commands.common import add_problem_arguments
+from ident_opt.errors import InputError
+
+#: Accepted ranges of the numeric flags.
+DURATION = (2.0, 3600.0)  # s
+MAX_HARMONICS = 20
+MAX_STARTS = 100
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """--problem/--data/--json plus the design's flags."""
+    add_problem_arguments(parser)
+    parser.add_argument("--out", required=True, metavar="T.csv", help="the trajectory to write (CSV)")
+    parser.add_argument("--duration", type=float, default=20.0, metavar="S", help="trajectory length [s] (default 20)")
+    parser.add_argument(
+        "--criterion",
+        choices=("d", "cond", "discriminate"),
+        default="d",
+        help="d: D-optimal (default); cond: least condition number; discriminate: T-optimal between --between",
+    )
+    parser.add_argument("--between", metavar="A,B", help="the two causes a discriminating design tells apart")
+    parser.add_argument("--seed", type=int, default=0, help="random seed of the starts (default 0)")
+    parser.add_argument("--starts", type=int, default=6, metavar="K", help="random starts (default 6)")
+    parser.add_argument("--harmonics", type=int, default=5, metavar="H", help="harmonics per joint (default 5)")
+    parser.add_argument(
+        "--base-hz",
+        type=float,
+        metavar="HZ",
+        help="base frequency (default: near 0.1 Hz with a whole number of periods in the duration)",
+    )
+    parser.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="output rate (default 1000 Hz)")
+    parser.add_argument(
+        "--extension",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="design for an extended model (armature, asymmetric_coulomb, stribeck, offset); repeatable",
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _check(args: argparse.Namespace) -> None:
+    """InputError for a flag out of range."""
+    if not (math.isfinite(args.duration) and DURATION[0] <= args.duration <= DURATION[1]):
+        raise InputError(f"--duration must be between {DURATION[0]:g} and {DURATION[1]:g} s, got {args.duration:g}")
+    if not 1 <= args.harmonics <= MAX_HARMONICS:
+        raise InputError(f"--harmonics must be an integer in [1, {MAX_HARMONICS}], got {args.harmonics}")
+    if not 1 <= args.starts <= MAX_STARTS:
+        raise InputError(f"--starts must be an integer in [1, {MAX_STARTS}], got {args.starts}")
+    if args.seed < 0:
+        raise InputError(f"--seed must be ≥ 0, got {args.seed}")
+    if not (math.isfinite(args.rate) and 10.0 <= args.rate <= 10000.0):
+        raise InputError(f"--rate must be between 10 and 10000 Hz, got {args.rate:g}")
+    if args.base_hz is not None:
+        periods = args.base_hz * args.duration
+        if not (math.isfinite(periods) and periods >= 1 and abs(periods - round(periods)) < 1e-6):
+            raise InputError("--base-hz must give a whole number (≥ 1) of periods in --duration")
+    if (args.criterion == "discriminate") != (args.between is not None):
+        raise InputError("--between A,B goes with --criterion discriminate (and it needs it)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Design, write the CSV, figure and JSON, print a summary."""
+    # Deferred: the study loads NumPy, CasADi and pandas; `ident-opt --help` stays fast.
+    from ident_opt.data import load_dataset
+    from ident_opt.problem import load_problem
+    from ident_opt.report import excitation as report
+    from ident_opt.studies import excitation
+
+    _check(args)
+    problem = load_problem(args.problem)
+    if problem.limits is None:
+        raise InputError(
+            f"{problem.path}: section [limits] is required to design an excitation (docs/problem-files.md)"
+        )
+    report.paths(args.out)  # a bad name fails before the work
+    data = args.data or [str(p) for p in problem.data.trials]
+    kwargs = {"allow_implausible": args.allow_implausible, "drop_invalid": args.drop_invalid}
+    trial = load_dataset(data[0], problem.data, problem.robot, **kwargs) if data else None
+    try:
+        setup = excitation.make_setup(
+            problem.robot,
+            problem.limits,
+            args.duration,
+            harmonics=args.harmonics,
+            base_hz=args.base_hz,
+            extensions=tuple(args.extension),
+            trial=trial,
+        )
+    except ValueError as exc:  # an unknown extension
+        raise InputError(f"--extension: {exc}") from None
+    except InputError as exc:
+        raise InputError(f"{problem.path}: {exc}") from None
+    if args.criterion == "discriminate":
+        from ident_opt.studies import discrimination
+
+        design = discrimination.design(
+            setup,
+            problem.robot,
+            trial,
+            args.between,
+            starts=args.starts,
+            seed=args.seed,
+            rate=args.rate,
+            progress=not args.no_progress,
+        )
+    else:
+        design = excitation.design(
+            setup, args.criterion, starts=args.starts, seed=args.seed, rate=args.rate, progress=not args.no_progress
+        )
+    files = report.write(design, setup, args.out, args.json)
+    print(report.terminal(design))
+    print("wrote " + ", ".join(str(f) for f in files))
+    return 0
