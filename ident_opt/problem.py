@@ -158,7 +158,7 @@ class DataSpec:
     header: bool = True
     sheet: str | None = None
     columns: dict[str, str | int] = field(default_factory=dict)
-    derivative_cutoff_hz: float = 15.0
+    derivative_cutoff_hz: float | str = 15.0  # Hz, or "auto"
     conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
     standard_by_name: bool = True
 
@@ -462,6 +462,14 @@ def _column(table: _Table, key: str) -> tuple[str | int, tuple[float, float] | N
     return source, conversion
 
 
+def _cutoff(table: _Table) -> float | str:
+    """`derivative_cutoff_hz`: a number [Hz] or "auto" (chosen from each trial's spectrum, `data.choose_cutoff`)."""
+    if table.raw.get("derivative_cutoff_hz") == "auto":
+        table.raw.pop("derivative_cutoff_hz")
+        return "auto"
+    return table.positive("derivative_cutoff_hz", DataSpec.derivative_cutoff_hz, high=LIMITS["rate_hz"])
+
+
 def _data(table: _Table, base: Path, n_joints: int = 2) -> DataSpec:
     known = DATA_COLUMNS if n_joints == 2 else data_columns(n_joints)
     trials = table.take("trials", list, [])
@@ -473,9 +481,7 @@ def _data(table: _Table, base: Path, n_joints: int = 2) -> DataSpec:
     conversions: dict[str, tuple[float, float]] = {}
     for key in list(columns_table.raw):
         if key not in known:
-            raise InputError(
-                f"{table.path}: unknown column '{key}' in [data.columns]; known: {', '.join(known)}"
-            )
+            raise InputError(f"{table.path}: unknown column '{key}' in [data.columns]; known: {', '.join(known)}")
         columns[key], conversion = _column(columns_table, key)
         if conversion is not None:
             conversions[key] = conversion
@@ -484,9 +490,7 @@ def _data(table: _Table, base: Path, n_joints: int = 2) -> DataSpec:
         header=table.take("header", bool, True),
         sheet=table.take("sheet", str, None),
         columns=columns,
-        derivative_cutoff_hz=table.positive(
-            "derivative_cutoff_hz", DataSpec.derivative_cutoff_hz, high=LIMITS["rate_hz"]
-        ),
+        derivative_cutoff_hz=_cutoff(table),
         conversions=conversions,
         standard_by_name=table.take("standard_by_name", bool, True),
     )
