@@ -199,11 +199,19 @@ class UrdfArm:
     friction: bool = True
     armature: bool = True
     offsets: bool = False
+    couplings: tuple[tuple[str, str, float], ...] = ()
     _parsed: tuple = field(default=(), compare=False, hash=False, repr=False)
 
     def __post_init__(self):
         object.__setattr__(self, "joints", tuple(self.joints))
         object.__setattr__(self, "gravity", tuple(float(g) for g in self.gravity))
+        object.__setattr__(self, "couplings", tuple((str(a), str(b), float(r)) for a, b, r in self.couplings))
+        for a, b, _ in self.couplings:
+            for name in (a, b):
+                if name not in self.joints:
+                    raise InputError(
+                        f"{self.urdf}: coupling names joint {name!r}, which is not among {list(self.joints)}"
+                    )
         path = Path(self.urdf)
         text, joints, links = parse_urdf(path)
         base = check_chain(path, joints, self.joints, self.base)
@@ -258,6 +266,15 @@ class UrdfArm:
         """The per-joint term prefixes this arm has, in π's order (of fv, fc, ia, off)."""
         chosen = {"fv": self.friction, "fc": self.friction, "ia": self.armature, "off": self.offsets}
         return tuple(k for k in JOINT_TERMS if chosen[k])
+
+    @cached_property
+    def drive_matrix(self) -> np.ndarray:
+        """C (n, n): drive m turns at C[m] · dq (joint-side units) and its torque f_m reaches joint j as
+        C[m, j] f_m. The identity, plus each coupling (m, j, r): C[m, j] = r (a coupled wrist's motor)."""
+        C = np.eye(self.n_joints)
+        for a, b, r in self.couplings:
+            C[self.joints.index(a), self.joints.index(b)] = r
+        return C
 
     @cached_property
     def parameters(self) -> tuple[Parameter, ...]:
@@ -331,10 +348,16 @@ class UrdfArm:
         regressor = pin.computeJointTorqueRegressor
         for k in range(N):
             Y[k, :, :L] = regressor(model, data, q[k], dq[k], ddq[k])
-        columns = {"fv": dq, "fc": np.sign(dq), "ia": ddq, "off": np.ones_like(dq)}
+        C = self.drive_matrix
+        v, a = dq @ C.T, ddq @ C.T  # each drive's joint-side velocity and acceleration
+        columns = {"fv": v, "fc": np.sign(v), "ia": a}
         rows = np.arange(n)
         for t, term in enumerate(self.joint_terms):
-            Y[:, rows, L + t * n + rows] = columns[term]
+            if term == "off":
+                Y[:, rows, L + t * n + rows] = 1.0
+                continue
+            for m, j in zip(*np.nonzero(C)):
+                Y[:, j, L + t * n + m] = C[m, j] * columns[term][:, m]
         return Y
 
     def predict(self, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
@@ -359,7 +382,8 @@ class UrdfArm:
             out[k] = np.triu(M) + np.triu(M, 1).T
         if "ia" in self.joint_terms:
             start = self.n_link_params + self.joint_terms.index("ia") * self.n_joints
-            out += np.diag(pi[start : start + self.n_joints])
+            C = self.drive_matrix
+            out += C.T @ np.diag(pi[start : start + self.n_joints]) @ C
         return out
 
     # ------------------------------------------------------------------ consistency
@@ -405,12 +429,20 @@ class UrdfArm:
         """τ (n×1) as a CasADi expression of q, dq, ddq (n×1) and π (P×1): RNEA plus the joint terms."""
         n, L = self.n_joints, self.n_link_params
         tau = rnea(self.chain, q, dq, ddq, pi[:L], np.asarray(self.gravity))
-        columns = {"fv": lambda j: dq[j], "fc": lambda j: ca.sign(dq[j]), "ia": lambda j: ddq[j], "off": lambda j: 1}
+        C = self.drive_matrix
+        v = [sum(C[m, k] * dq[k] for k in range(n) if C[m, k]) for m in range(n)]
+        a = [sum(C[m, k] * ddq[k] for k in range(n) if C[m, k]) for m in range(n)]
+        columns = {"fv": lambda m: v[m], "fc": lambda m: ca.sign(v[m]), "ia": lambda m: a[m]}
         terms = []
         for j in range(n):
             extra = 0
             for t, term in enumerate(self.joint_terms):
-                extra = extra + pi[L + t * n + j] * columns[term](j)
+                if term == "off":
+                    extra = extra + pi[L + t * n + j]
+                    continue
+                for m in range(n):
+                    if C[m, j]:
+                        extra = extra + C[m, j] * pi[L + t * n + m] * columns[term](m)
             terms.append(tau[j] + extra)
         return ca.vertcat(*terms)
 

@@ -8,6 +8,7 @@
     friction = true                               # fv_<joint>, fc_<joint> (default true)
     armature = true                               # ia_<joint> (default true)
     offsets = false                               # off_<joint>: constant torque offsets (default false)
+    couplings = [["joint_6", "joint_5", 1.0]]     # optional: joint_6's drive also turns with joint_5 × 1.0
     prior_weight = 1e-7                           # λ of the log-det prior of the plausible fit
     mass_range = 0.5                              # each link's mass within ± 50 % of the URDF's (or false)
     com_box = 0.1                                 # centre of mass within ± 0.1 m of the URDF's (or false)
@@ -65,6 +66,7 @@ class UrdfRobot:
     mass_range: float | None = 0.5
     com_box: float | None = 0.1
     drives: dict[str, UrdfJointSpec] = field(default_factory=dict)
+    couplings: tuple[tuple[str, str, float], ...] = ()
     description: str = "urdf"
 
     @property
@@ -77,7 +79,16 @@ class UrdfRobot:
         """The `UrdfArm` (built once; InputError naming the file and element on a bad URDF)."""
         from ident_opt.urdf_arm import UrdfArm  # deferred: Pinocchio and CasADi are heavy imports
 
-        return UrdfArm(str(self.urdf), self.joints, self.gravity, self.base, self.friction, self.armature, self.offsets)
+        return UrdfArm(
+            str(self.urdf),
+            self.joints,
+            self.gravity,
+            self.base,
+            self.friction,
+            self.armature,
+            self.offsets,
+            self.couplings,
+        )
 
 
 def _optional_fraction(table: Any, key: str, default: float) -> float | None:
@@ -99,6 +110,21 @@ def _gravity(table: Any) -> tuple[float, float, float]:
             raise InputError(f"{table.path}: key 'gravity' in [robot]: components above 100 m/s²")
         return tuple(float(g) for g in value)  # type: ignore[return-value]
     return (0.0, 0.0, -table.positive("gravity", high=100.0))
+
+
+def _couplings(table: Any, joints: list[str]) -> tuple[tuple[str, str, float], ...]:
+    """`couplings`: [[drive joint, other joint, ratio], ...]: that drive turns at dq_drive + ratio · dq_other."""
+    out = []
+    for entry in table.take("couplings", list, []):
+        ok = isinstance(entry, list) and len(entry) == 3 and all(isinstance(e, str) for e in entry[:2])
+        ok = ok and isinstance(entry[2], (int, float)) and not isinstance(entry[2], bool) and abs(entry[2]) <= 1e3
+        if not ok or entry[0] not in joints or entry[1] not in joints or entry[0] == entry[1]:
+            raise InputError(
+                f"{table.path}: key 'couplings' in [robot]: each entry must be [drive joint, other joint, ratio] with "
+                f"two different joints of 'joints' and |ratio| ≤ 1000, got {entry!r}"
+            )
+        out.append((entry[0], entry[1], float(entry[2])))
+    return tuple(out)
 
 
 def parse_urdf_robot(table: Any, base_dir: Path) -> UrdfRobot:
@@ -133,6 +159,7 @@ def parse_urdf_robot(table: Any, base_dir: Path) -> UrdfRobot:
         mass_range=_optional_fraction(table, "mass_range", 0.5),
         com_box=_optional_fraction(table, "com_box", 0.1),
         drives=drives,
+        couplings=_couplings(table, joints),
     )
     table.done()
     robot.arm  # noqa: B018  (build it now: a bad URDF is an error of the problem file)

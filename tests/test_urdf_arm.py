@@ -54,6 +54,19 @@ def kuka() -> UrdfArm:
     return UrdfArm(str(KUKA), KUKA_JOINTS, offsets=True)
 
 
+@pytest.fixture(scope="module")
+def panda() -> UrdfArm:
+    path = ROOT / "data" / "franka_panda" / "panda.urdf"
+    return UrdfArm(str(path), tuple(f"panda_joint{i}" for i in range(1, 8)), offsets=True)
+
+
+@pytest.fixture(scope="module")
+def tx40() -> UrdfArm:
+    path = ROOT / "data" / "staubli_tx40" / "tx40.urdf"
+    joints = tuple(f"joint_{i}" for i in range(1, 7))
+    return UrdfArm(str(path), joints, offsets=True, couplings=(("joint_6", "joint_5", 1.0),))
+
+
 def _states(arm: UrdfArm, n: int, seed: int = 0):
     rng = np.random.default_rng(seed)
     size = (n, arm.n_joints)
@@ -68,7 +81,7 @@ def _random_pi(arm: UrdfArm, seed: int = 1) -> np.ndarray:
     return pi
 
 
-@pytest.mark.parametrize("which", ["twisted", "kuka"])
+@pytest.mark.parametrize("which", ["twisted", "kuka", "panda", "tx40"])
 def test_casadi_rnea_matches_pinocchio(which, request):
     arm = request.getfixturevalue(which)
     pi = _random_pi(arm)
@@ -164,3 +177,24 @@ def test_missing_inertial_is_named_when_a_prior_is_needed(tmp_path):
     arm = UrdfArm(_write(tmp_path, text), ("a", "b", "c"))
     with pytest.raises(InputError, match="l4"):
         arm.cad_parameters()
+
+
+def test_coupled_drive_terms(tmp_path):
+    """A coupled wrist: drive c also turns with joint b (ratio 0.7), so its friction and armature act on
+    both joints' rows, in the NumPy regressor, the CasADi model and M(q) alike."""
+    path = tmp_path / "twisted.urdf"
+    path.write_text(TWISTED)
+    arm = UrdfArm(str(path), ("a", "b", "c"), offsets=True, couplings=(("c", "b", 0.7),))
+    pi = _random_pi(arm)
+    q, dq, ddq = _states(arm, 10, seed=5)
+    Y = arm.regressor(q, dq, ddq)
+    fY, fM = arm.function("Y"), arm.function("M")
+    col = arm.names.index("fv_c")
+    np.testing.assert_allclose(Y[:, 1, col], 0.7 * (dq[:, 2] + 0.7 * dq[:, 1]))
+    np.testing.assert_allclose(Y[:, 2, col], dq[:, 2] + 0.7 * dq[:, 1])
+    M = arm.mass_matrices(pi, q)
+    for k in range(len(q)):
+        np.testing.assert_allclose(Y[k], np.asarray(fY(q[k], dq[k], ddq[k], pi)), atol=1e-10)
+        np.testing.assert_allclose(M[k], np.asarray(fM(q[k], dq[k], ddq[k], pi)), atol=1e-10)
+    with pytest.raises(InputError, match="'z'"):
+        UrdfArm(str(path), ("a", "b", "c"), couplings=(("c", "z", 1.0),))

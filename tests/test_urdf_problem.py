@@ -35,6 +35,14 @@ def test_kuka_problem_loads():
     assert [p.name for p in problem.data.trials] == ["measurements_1.csv.gz", "measurements_3.csv.gz"]
 
 
+def test_panda_and_tx40_problems_load():
+    panda = load_problem(ROOT / "problems" / "franka_panda.toml")
+    assert panda.robot.arm.n_joints == 7 and panda.data.derivative_cutoff_hz == 10.0
+    tx40 = load_problem(ROOT / "problems" / "staubli_tx40.toml")
+    C = tx40.robot.arm.drive_matrix
+    assert C[5, 4] == 1.0 and np.count_nonzero(C - np.eye(6)) == 1
+
+
 @pytest.mark.parametrize(
     ("urdf_text", "joints", "expected"),
     [

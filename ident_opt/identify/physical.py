@@ -12,7 +12,7 @@ model knows, on the standard parameters, with the base-parameter fit (the same s
                m_i (c_i0 − δ) ≤ h_i ≤ m_i (c_i0 + δ)                          centre of mass in a box [m]
 
 The prior is the log-det (geometric) divergence of Lee, Wensing & Park (2020) between each link's
-pseudo-inertia and the CAD one J_i0: zero at the CAD link, invariant to the frame and the units, and a
+pseudo-inertia and the CAD one J_i0 (its eigenvalues floored at 1e-3 of its largest, for point masses): zero at the CAD link, invariant to the frame and the units, and a
 barrier that keeps J_i ≻ 0. Its weight λ (`prior_weight`) is dimensionless: Ē = Σ_j w_j s_j / n is the mean
 measured torque energy per sample [N² m²], so at λ = 1 a unit divergence costs as much as all the
 measured torque. r (`mass_range`) and δ (`com_box`, metres per axis) are optional (None: no bound).
@@ -43,6 +43,8 @@ MASS_RANGE = 0.5
 COM_BOX = 0.1
 #: A bound missed by at most this (the parameter's unit) is solver round-off: the value is set to the bound.
 ROUND_OFF = 1e-8
+#: Eigenvalue floor of a CAD pseudo-inertia in the prior, relative to its largest eigenvalue.
+PRIOR_FLOOR = 1e-3
 #: Solver tolerances, tight first.
 TOLERANCES = (1e-9, 1e-7)
 
@@ -122,7 +124,7 @@ def fit_physical(
     R, d = _square_root(H / n, h / n)
     par["R"].value, par["d"].value = R, d
     par["weight"].value = prior_weight * float(w @ stats.s) / n
-    J0 = arm.pseudo_inertias(prior)
+    J0 = np.array([_regularised(J) for J in arm.pseudo_inertias(prior)])
     masses = prior[: arm.n_link_params : N_LINK]
     com0 = prior[: arm.n_link_params].reshape(-1, N_LINK)[:, 1:4] / np.maximum(masses, 1e-12)[:, None]
     for i, J in enumerate(J0):
@@ -161,6 +163,13 @@ def fit_physical(
         link_masses=arm.link_masses(value),
     )
     return fit
+
+
+def _regularised(J0: np.ndarray) -> np.ndarray:
+    """A CAD pseudo-inertia with its eigenvalues floored at `PRIOR_FLOOR` × the largest: a point mass or a
+    rod (rank-deficient J0, e.g. a URDF's zero inertia tensor) has no log-det divergence otherwise."""
+    lam, V = np.linalg.eigh(J0)
+    return (V * np.maximum(lam, PRIOR_FLOOR * max(lam.max(), 1e-12))) @ V.T
 
 
 def _onto_bounds(pi: np.ndarray, consistency: Consistency) -> np.ndarray:
