@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from ident_opt.datasheet import datasheet_pi, rigid_body
-from ident_opt.effects import BACKGROUND, CATALOGUE
+from ident_opt.effects import BACKGROUND, CATALOGUE, EXTENSIONS
 from ident_opt.problem import Robot
 from ident_opt.robot import PHYSICAL, ArmModel
 
@@ -60,13 +60,15 @@ class Truth:
 
     @property
     def pi_rigid(self) -> dict[str, float]:
-        """π in `TRUTH_MODEL`'s names (Coulomb as the mean of the per-direction levels)."""
+        """π in `TRUTH_MODEL`'s names; a name an extension replaced is the mean of the parameters standing in
+        for it (`Effect.fallback`: e.g. the Coulomb level fc1 as the mean of the per-direction fc1p, fc1n)."""
         p = self.model.as_dict(self.pi)
-        out = {name: p[name] for name in TRUTH_MODEL.names if name in p}
-        for j in ("1", "2"):
-            if "fc" + j not in out:
-                out["fc" + j] = 0.5 * (p["fc" + j + "p"] + p["fc" + j + "n"])
-        return {name: out[name] for name in TRUTH_MODEL.names}
+        stand_ins = {name: rigid for ext in self.model.extensions for name, rigid in EXTENSIONS[ext].fallback.items()}
+        out = {}
+        for name in TRUTH_MODEL.names:
+            parts = [p[n] for n, rigid in stand_ins.items() if rigid == name]
+            out[name] = p[name] if name in p else sum(parts) / len(parts)
+        return out
 
     def logged_torque(self, t: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """The torque channel as logged at the control ticks t [s]: the applied τ (N, 2) [N m] through the
