@@ -73,7 +73,8 @@ def split(trials: list[Dataset], test: list[Dataset], train_fraction: float) -> 
     return "chronological", train, held
 
 
-def _stats(arm: UrdfArm, trials: list[Dataset]) -> Stats:
+def stats_of(arm: UrdfArm, trials: list[Dataset]) -> Stats:
+    """The sufficient statistics of the arm's regressor over the trials."""
     total = Stats.zeros(arm.n_params, arm.n_joints)
     for trial in trials:
         total += Stats.from_data(arm, trial.q, trial.dq, trial.ddq, trial.tau)
@@ -98,7 +99,7 @@ def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None
     arm: UrdfArm = robot.arm
     protocol, train, held = split(trials, test, problem.split.train_fraction)
     t0 = time.perf_counter()
-    stats = _stats(arm, train)
+    stats = stats_of(arm, train)
     stats_seconds = time.perf_counter() - t0
     fits: dict[str, LinearFit | None] = {}
     seconds: dict[str, float] = {}
