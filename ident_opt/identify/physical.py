@@ -12,10 +12,12 @@ model knows, on the standard parameters, with the base-parameter fit (the same s
                m_i (c_i0 − δ) ≤ h_i ≤ m_i (c_i0 + δ)                          centre of mass in a box [m]
 
 The prior is the log-det (geometric) divergence of Lee, Wensing & Park (2020) between each link's
-pseudo-inertia and the CAD one J_i0 (its eigenvalues floored at 1e-3 of its largest, for point masses): zero at the CAD link, invariant to the frame and the units, and a
-barrier that keeps J_i ≻ 0. Its weight λ (`prior_weight`) is dimensionless: Ē = Σ_j w_j s_j / n is the mean
-measured torque energy per sample [N² m²], so at λ = 1 a unit divergence costs as much as all the
-measured torque. r (`mass_range`) and δ (`com_box`, metres per axis) are optional (None: no bound).
+pseudo-inertia and the CAD one J_i0 (its eigenvalues floored at 1e-6 of its largest, for point masses):
+zero at the CAD link, invariant to the frame and the units, and a barrier that keeps J_i ≻ 0. Its weight λ
+(`prior_weight`) is dimensionless: Ē = Σ_j w_j s_j / n is the mean measured torque energy per sample
+[N² m²], so at λ = 1 a unit divergence costs as much as all the measured torque. A small λ (default 1e-7)
+is enough to pin the directions the data do not see. r (`mass_range`) and δ (`com_box`, metres per axis)
+are optional (None: no bound).
 
 Solved with Clarabel through cvxpy (the PSD and exponential cones of the log-det), compiled once per arm and
 options (data, prior and bounds enter as cvxpy Parameters).
@@ -44,7 +46,7 @@ COM_BOX = 0.1
 #: A bound missed by at most this (the parameter's unit) is solver round-off: the value is set to the bound.
 ROUND_OFF = 1e-8
 #: Eigenvalue floor of a CAD pseudo-inertia in the prior, relative to its largest eigenvalue.
-PRIOR_FLOOR = 1e-3
+PRIOR_FLOOR = 1e-6
 #: Solver tolerances, tight first.
 TOLERANCES = (1e-9, 1e-7)
 
