@@ -35,7 +35,16 @@ def true_residual(trial):
 
 
 def test_background_terms_are_not_in_the_diagnosis_catalogue():
-    names = {"armature", "asymmetric_coulomb", "stribeck", "elasticity", "payload", "delay", "joint_offset"}
+    names = {
+        "armature",
+        "asymmetric_coulomb",
+        "stribeck",
+        "elasticity",
+        "payload",
+        "delay",
+        "joint_offset",
+        "torque_scale",
+    }
     assert set(CATALOGUE) == names
     assert set(BACKGROUND) == {"stiction", "drift", "ripple"} and not set(BACKGROUND) & names
     assert parse_effect("stiction:breakaway=[0.5,0.4]") == ("stiction", {"breakaway": (0.5, 0.4)})

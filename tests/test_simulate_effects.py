@@ -145,3 +145,14 @@ def test_elasticity_puts_residual_power_at_the_stated_frequency(robot, kind, joi
     e = trial.truth["effects"]["elasticity"]
     assert e["joint"] == joint and e["frequency_hz"] == frequency and e["kind"] == kind
     assert f"deflection{joint}" in trial.frame
+
+
+def test_torque_scale_divides_the_logged_torque_by_the_factor(robot, clean):
+    """The true joint torque is s × the logged one; the motion is the clean trial's (the loop never sees it)."""
+    trial = simulate_trial(robot, effects=["torque_scale:scale=[1.2,0.9]"], **EXACT)
+    tau, true = trial.dataset().tau, clean.dataset().tau
+    np.testing.assert_allclose(tau * np.array([1.2, 0.9]), true, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(trial.dataset().q, clean.dataset().q)
+    assert trial.truth["effects"]["torque_scale"] == {"scale": [1.2, 0.9]}
+    untouched = simulate_trial(robot, effects=["torque_scale:scale=[1,1]"], **EXACT)
+    pd.testing.assert_frame_equal(untouched.frame, clean.frame, check_exact=True)
