@@ -84,3 +84,30 @@ def test_data_with_another_joint_count_is_refused(tmp_path, n_joints):
         study.load_trials([_trial(tmp_path, n_joints)], problem)
     assert f"trial{n_joints}.csv" in str(info.value)
     assert "7" in str(info.value)
+
+
+def test_comparison_on_a_time_split_keeps_the_json_contract(tmp_path):
+    problem = load_problem(KUKA_PROBLEM)
+    trials = study.load_trials([problem.data.trials[0]], problem)
+    result = study.run(problem, trials, [])
+    assert result["split"]["protocol"] == "chronological"
+    scores = result["metrics"]["chronological"]
+    assert set(scores) == {"ols", "constrained", "consistent", "cad"}
+    assert set(scores["ols"]["rmse"]) == set(JOINTS) and set(scores["ols"]["nmse"]) == set(JOINTS)
+    params = result["parameters"]["consistent"]
+    for name in (
+        "m_lwr_1_link",
+        "mx_lwr_7_link",
+        "ixy_lwr_3_link",
+        "fv_lwr_0_joint",
+        "ia_lwr_6_joint",
+        "off_lwr_6_joint",
+    ):
+        assert name in params
+    base = result["base_parameters"]["ols"]
+    assert len(base) == result["base"]["count"] == 69
+    assert base["izz_lwr_1_link"]["definition"].startswith("izz_lwr_1_link + 1·izz_lwr_2_link")
+    assert result["consistency"]["consistent"]["consistent"] and result["consistency"]["constrained"]["consistent"]
+    masses = result["mass"]["consistent"]["links"]
+    cad = result["mass"]["urdf"]["links"]
+    assert all(0.5 * cad[k] - 1e-6 <= v <= 1.5 * cad[k] + 1e-6 for k, v in masses.items())

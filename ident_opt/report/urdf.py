@@ -1,0 +1,134 @@
+"""The report of the URDF comparison (`ident_opt.studies.urdf`): compare.md and compare.json in the output
+folder, recorded in the folder's index."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ident_opt.report import record, write_json
+
+#: Estimator → its column title.
+TITLES = {
+    "ols": "OLS (base)",
+    "constrained": "consistent, no prior",
+    "consistent": "consistent (default)",
+    "cad": "URDF CAD",
+}
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    return lines + ["| " + " | ".join(row) + " |" for row in rows]
+
+
+def markdown(result: dict) -> str:
+    """compare.md: split, base parameters, held-out errors per joint, masses, consistency, the 10 % check."""
+    protocol = result["split"]["protocol"]
+    scores = result["metrics"][protocol]
+    joints = result["robot"]["joints"]
+    names = [n for n in TITLES if n in scores]
+    base = result["base"]
+    prior = result["prior"]
+    lines = [
+        f"# {result['problem']}: OLS, consistent and CAD parameters of an arm from a URDF",
+        "",
+        f"URDF `{Path(result['robot']['urdf']).name}`, {len(joints)} joints, {result['robot']['n_params']} standard "
+        f"parameters; {base['count']} base parameters (pivoted QR of the regressor at {base['random_states']} random "
+        f"states, rank tolerance {base['rank_tolerance']:g}); condition number of the base regressor on the "
+        f"training data {base['condition_number']:.1f}.",
+        "",
+        f"Split `{protocol}`: trained on {', '.join(Path(t).name for t in result['split']['train'])} "
+        f"({result['split']['train_samples']} samples), tested on "
+        f"{', '.join(Path(t).name for t in result['split']['test'])} ({result['split']['test_samples']} samples).",
+        "",
+        f"The default consistent fit: log-det prior toward the URDF's inertials with weight λ = {prior['weight']:g} "
+        f"(dimensionless, relative to the measured torque energy), link masses within ±{prior['mass_range']} of "
+        f"the URDF's, centres of mass within ±{prior['com_box_m']} m.",
+        "",
+        "## Held-out torque error per joint",
+        "",
+    ]
+    rows = [[j] + [f"{scores[n]['rmse'][j]:.3f} / {scores[n]['nmse'][j]:.3f}" for n in names] for j in joints]
+    lines += _table(["joint: RMSE [N m] / nMSE"] + [TITLES[n] for n in names], rows)
+    lines += ["", "## Consistent fit against OLS (within 10 % of OLS's RMSE where OLS beats the CAD prior)", ""]
+    check = result["within_10_percent_of_ols"]
+    rows = [
+        [j, "yes" if c["ols_better_than_cad"] else "no", f"{c['ratio_to_ols']:.3f}", "yes" if c["within"] else "NO"]
+        for j, c in check.items()
+    ]
+    lines += _table(["joint", "OLS beats CAD", "RMSE consistent / OLS", "within 10 %"], rows)
+    lines += ["", "## Masses [kg]", ""]
+    mass = result["mass"]
+    links = result["robot"]["links"]
+    cols = ["urdf"] + [n for n in ("ols", "constrained", "consistent") if n in mass]
+    rows = [[link] + [f"{mass[c]['links'][link]:.3f}" for c in cols] for link in links]
+    rows.append(["**total**"] + [f"**{mass[c]['total']:.2f}**" for c in cols])
+    lines += _table(["link"] + [TITLES.get(c, "URDF") for c in cols], rows)
+    lines += [
+        "",
+        "OLS identifies base parameters only: its standard parameters set the dependent ones to 0, so its masses "
+        "are not estimates.",
+        "",
+        "## Physical consistency",
+        "",
+    ]
+    cons = result["consistency"]
+    rows = [
+        [
+            TITLES[n],
+            "yes" if cons[n]["consistent"] else "no",
+            f"{min(cons[n]['pseudo_inertia_min_eigenvalue'].values()):.3g}",
+            ", ".join(cons[n]["active_pseudo_inertias"]) or "none",
+        ]
+        for n in names
+    ]
+    lines += _table(["estimator", "consistent", "min λ(pseudo-inertia) [kg m²]", "active pseudo-inertias"], rows)
+    lines += ["", "## Base parameters (OLS, with standard errors)", ""]
+    rows = [
+        [name, f"{b['value']:.5g}", f"{b['se']:.2g}", f"`{b['definition']}`"]
+        for name, b in result["base_parameters"]["ols"].items()
+    ]
+    lines += _table(["base parameter", "value", "SE", "definition"], rows)
+    secs = result["seconds"]
+    lines += [
+        "",
+        "Timings [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in secs.items()) + ".",
+        "",
+        "Estimators: " + "; ".join(f"**{TITLES[k]}**: {v}" for k, v in result["estimators"].items()) + ".",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def write(result: dict, out_dir: Path, json_path: str | Path | None = None) -> Path:
+    """compare.md and compare.json in `out_dir` (and `json_path` if given); returns the report's path."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    report = out_dir / "compare.md"
+    report.write_text(markdown(result), encoding="utf-8")
+    write_json(out_dir / "compare.json", result)
+    if json_path:
+        write_json(json_path, result)
+    record(out_dir, "urdf_compare", f"{result['problem']}: OLS, consistent and CAD fits of a URDF arm", [report])
+    return report
+
+
+def terminal(result: dict) -> str:
+    """A short summary: held-out RMSE per joint and estimator, masses, the 10 % check."""
+    protocol = result["split"]["protocol"]
+    scores = result["metrics"][protocol]
+    lines = [
+        f"{result['problem']}: {result['base']['count']} base parameters, condition number "
+        f"{result['base']['condition_number']:.1f}; held-out ({protocol}) RMSE [N m] per joint:"
+    ]
+    for name in TITLES:
+        if name in scores:
+            values = " ".join(f"{v:7.3f}" for v in scores[name]["rmse"].values())
+            mass = result["mass"].get(name, result["mass"]["urdf"] if name == "cad" else None)
+            total = f"  total mass {mass['total']:.2f} kg" if mass and name != "ols" else ""
+            lines.append(f"  {TITLES[name]:22s} {values}{total}")
+    failed = [j for j, c in result["within_10_percent_of_ols"].items() if c["ols_better_than_cad"] and not c["within"]]
+    lines.append(
+        "consistent fit within 10 % of OLS on every joint where OLS beats the CAD prior"
+        if not failed
+        else f"consistent fit NOT within 10 % of OLS on {', '.join(failed)} (see compare.md)"
+    )
+    return "\n".join(lines)
