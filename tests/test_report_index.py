@@ -7,9 +7,11 @@ import itertools
 
 import pytest
 
-from ident_opt.cli import build_parser
+from ident_opt.cli import build_parser, main
 from ident_opt.identify import estimators
 from ident_opt.report import MANIFESTS, record
+
+from .conftest import PROBLEMS
 
 
 def _write(folder, name: str) -> str:
@@ -73,3 +75,9 @@ def test_codegen_offers_exactly_the_registered_estimators():
     codegen = build_parser()._subparsers._group_actions[0].choices["codegen"]
     choices = next(a.choices for a in codegen._actions if a.dest == "estimator")
     assert set(choices) == set(estimators.ESTIMATORS)
+
+
+def test_calibrate_needs_a_simulate_section(capsys):
+    problem = str(PROBLEMS / "tudor_2dof.toml")
+    assert main(["calibrate", "--problem", problem, "--real", problem]) == 2
+    assert "no [simulate] section" in capsys.readouterr().err
