@@ -9,6 +9,7 @@ import pytest
 
 from ident_opt.identify.base import base_parameters, fit_base_ols, random_regressor
 from ident_opt.identify.stats import Stats
+from ident_opt.studies.urdf import necessarily_nonnegative
 from ident_opt.urdf_arm import UrdfArm
 
 KUKA = Path(__file__).resolve().parents[1] / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"
@@ -51,3 +52,29 @@ def test_ols_on_base_parameters_recovers_them(kuka):
     assert np.all(fit.fit.se > 0) and np.all(fit.fit.se < 0.1)
     summary = fit.summary()
     assert set(summary) == set(base.names) and {"value", "se", "definition"} <= set(summary["izz_lwr_1_link"])
+
+
+def _random_consistent(arm: UrdfArm, rng) -> np.ndarray:
+    """π of random point-mass bodies (a density, so every pseudo-inertia ⪰ 0) with positive joint terms."""
+    pi = np.zeros(arm.n_params)
+    for i in range(arm.n_joints):
+        m = rng.uniform(0.1, 2.0, 5)
+        r = rng.normal(scale=0.2, size=(5, 3))
+        h = m @ r
+        inertia = sum(mk * (rk @ rk * np.eye(3) - np.outer(rk, rk)) for mk, rk in zip(m, r))
+        pi[10 * i : 10 * i + 10] = [m.sum(), *h, inertia[0, 0], inertia[0, 1], inertia[1, 1], inertia[0, 2],
+                                    inertia[1, 2], inertia[2, 2]]  # fmt: skip
+    pi[arm.n_link_params :] = rng.uniform(0.0, 1.0, arm.n_params - arm.n_link_params)
+    return pi
+
+
+def test_necessarily_nonnegative_base_parameters(kuka):
+    base = base_parameters(kuka)
+    definite = necessarily_nonnegative(kuka, base.K)
+    names = dict(zip(base.names, definite))
+    assert names["izz_lwr_1_link"] and not names["mx_lwr_7_link"] and not names["off_lwr_0_joint"]
+    rng = np.random.default_rng(8)
+    values = np.array([base.project(_random_consistent(kuka, rng)) for _ in range(300)])
+    assert np.all(values[:, definite] >= -1e-12)
+    # and the test is not vacuous: some of the other base parameters do go negative for consistent arms
+    assert np.any(values[:, ~definite] < 0)

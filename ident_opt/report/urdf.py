@@ -57,6 +57,19 @@ def markdown(result: dict) -> str:
         for j, c in check.items()
     ]
     lines += _table(["joint", "OLS beats CAD", "RMSE consistent / OLS", "within 10 %"], rows)
+    impossible = result.get("ols_impossible_base_values", {})
+    if impossible:
+        lines += [
+            "",
+            "OLS uses values no physical arm can have (what a consistent fit cannot follow): these base "
+            "parameters are non-negative for every consistent arm (their coefficients are in the dual of the "
+            "pseudo-inertia and sign cone), yet OLS makes them negative:",
+            "",
+        ]
+        rows = [
+            [name, f"{v['value']:.4g}", f"{v['se']:.2g}", f"{v['se_below_zero']:.1f}"] for name, v in impossible.items()
+        ]
+        lines += _table(["base parameter", "OLS value", "SE", "SE below 0"], rows)
     lines += ["", "## Masses [kg]", ""]
     mass = result["mass"]
     links = result["robot"]["links"]

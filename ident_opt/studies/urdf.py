@@ -29,6 +29,7 @@ from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.physical import fit_physical
 from ident_opt.identify.stats import Stats
+from ident_opt.rnea import N_LINK
 from ident_opt.urdf_arm import UrdfArm
 
 #: The estimators of the comparison, in report order.
@@ -164,6 +165,7 @@ def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None
         "parameters": {name: arm.as_dict(pi) for name, pi in pis.items()},
         "se": {name: fit.se_dict() for name, fit in fits.items() if fit is not None and name != "ols"},
         "base_parameters": {"ols": base_fit.summary()},
+        "ols_impossible_base_values": impossible_base_values(arm, base_fit),
         "metrics": {protocol: scores},
         "consistency": {name: _consistency(arm, pi, fits[name]) for name, pi in pis.items()},
         "mass": {
@@ -177,6 +179,42 @@ def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None
         "within_10_percent_of_ols": _within(scores, robot.joints),
         "seconds": {"statistics": stats_seconds, **seconds},
     }
+
+
+def necessarily_nonnegative(arm: UrdfArm, K: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """For each row k of K (B, P): is K_k · π ≥ 0 for every consistent π (pseudo-inertias ⪰ 0, friction and
+    armature ≥ 0)? The consistent set is a cone, so that holds exactly when K_k is in its dual: on each link,
+    the symmetric S_i with K_k,i · π_i = tr(S_i J_i(π_i)) is ⪰ 0 (the 10 pseudo-inertia maps span the 4×4
+    symmetric matrices); on the joint terms, coefficients ≥ 0 for friction and armature, 0 for the others."""
+    A = arm.pseudo_inertia_map()
+    rows, cols = np.triu_indices(4)
+    scale = np.where(rows == cols, 1.0, 2.0)  # tr(S A) = Σ_upper scale · S_rc A_rc
+    basis = A[:, rows, cols] * scale  # (10, 10): K_p = basis[p] · upper(S)
+    L = arm.n_link_params
+    signed = np.array([p.kind in ("friction", "armature") for p in arm.parameters[L:]])
+    out = []
+    for k in K:
+        ok = bool(np.all(k[L:][signed] >= -tol) and np.all(np.abs(k[L:][~signed]) <= tol))
+        for i in range(arm.n_joints):
+            upper = np.linalg.solve(basis, k[N_LINK * i : N_LINK * (i + 1)])
+            S = np.zeros((4, 4))
+            S[rows, cols] = upper
+            S = S + np.triu(S, 1).T
+            ok = ok and np.linalg.eigvalsh(S)[0] >= -tol * max(1.0, np.abs(S).max())
+        out.append(ok)
+    return np.array(out)
+
+
+def impossible_base_values(arm: UrdfArm, base_fit) -> dict[str, dict]:
+    """The OLS base parameters that no consistent arm can have negative, yet are negative: name → value, SE,
+    and how many SE below 0. What a consistent fit cannot follow (module doc of `identify.physical`)."""
+    base = base_fit.base
+    sign_definite = necessarily_nonnegative(arm, base.K)
+    out = {}
+    for name, definite, value, se in zip(base.names, sign_definite, base_fit.fit.pi, base_fit.fit.se):
+        if definite and value < 0:
+            out[name] = {"value": float(value), "se": float(se), "se_below_zero": float(-value / max(se, 1e-300))}
+    return out
 
 
 def _within(scores: dict, joints: tuple[str, ...]) -> dict:
