@@ -142,3 +142,32 @@ def test_command_writes_trajectory_figure_and_json(tmp_path):
     payload = json.loads(out.with_suffix(".json").read_text())
     assert {"log_det", "cond"} <= set(payload["criteria"]) and payload["noise"]["sigma"] == [1.0, 1.0]
     assert set(payload["margins"]) == {"position", "velocity", "acceleration", "torque"}
+
+
+# ---------------------------------------------------------------------------------------------- discrimination
+def test_between_is_checked(tmp_path, capsys):
+    args = ["excite", "--problem", str(problem_file(tmp_path)), "--out", str(tmp_path / "t.csv")]
+    assert main([*args, "--criterion", "discriminate", "--between", "elasticity,gravity_wave"]) == 2
+    assert "gravity_wave" in capsys.readouterr().err
+    assert main([*args, "--criterion", "discriminate", "--between", "elasticity"]) == 2
+    assert main([*args, "--criterion", "discriminate"]) == 2  # --between missing
+    # No data to fit the causes on: said so.
+    assert main([*args, "--criterion", "discriminate", "--between", "asymmetric_coulomb,elasticity"]) == 2
+    assert "needs data" in capsys.readouterr().err
+
+
+def test_discrimination_design_beats_its_start_within_limits(physical_problem, exp1):
+    from ident_opt.studies import discrimination
+
+    s = excitation.make_setup(physical_problem.robot, physical_problem.limits, 8.0, harmonics=8, base_hz=0.5)
+    d = discrimination.design(
+        s, physical_problem.robot, exp1, "asymmetric_coulomb,elasticity", starts=1, seed=0, progress=False, max_iter=25
+    )
+    _respects(s, d)
+    gaps = d.criteria
+    assert gaps["discrimination"] == min(gaps["gap_asymmetric_coulomb_true"], gaps["gap_elasticity_true"])
+    assert gaps["discrimination"] > 1.1 * d.start_criteria["discrimination"]
+    # Fast motion separates an elastic mode at ~3 Hz from asymmetric friction far better than the first 8 s of
+    # the data (mostly a rest): the design's gap is the larger.
+    assert d.discrimination["ratio_same_duration"] > 2
+    assert d.discrimination["candidates"]["elasticity"]["theta"]["frequency_hz"] == pytest.approx(3.1, abs=0.3)

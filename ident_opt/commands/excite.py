@@ -43,12 +43,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--between", metavar="A,B", help="the two causes a discriminating design tells apart")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the starts (default 0)")
     parser.add_argument("--starts", type=int, default=6, metavar="K", help="random starts (default 6)")
-    parser.add_argument("--harmonics", type=int, default=5, metavar="H", help="harmonics per joint (default 5)")
+    parser.add_argument("--harmonics", type=int, metavar="H", help="harmonics per joint (default 5; discriminate: 16)")
     parser.add_argument(
         "--base-hz",
         type=float,
         metavar="HZ",
-        help="base frequency (default: near 0.1 Hz with a whole number of periods in the duration)",
+        help="base frequency (default: near 0.1 Hz, discriminate: near 0.25 Hz, with a whole number of periods "
+        "in the duration)",
     )
     parser.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="output rate (default 1000 Hz)")
     parser.add_argument(
@@ -87,8 +88,13 @@ def run(args: argparse.Namespace) -> int:
     from ident_opt.data import load_dataset
     from ident_opt.problem import load_problem
     from ident_opt.report import excitation as report
-    from ident_opt.studies import excitation
+    from ident_opt.studies import discrimination, excitation
+    from ident_opt.trajectory import default_base_hz
 
+    if args.criterion == "discriminate":
+        args.harmonics = args.harmonics or discrimination.HARMONICS
+        args.base_hz = args.base_hz or default_base_hz(args.duration, discrimination.BASE_HZ)
+    args.harmonics = args.harmonics or 5
     _check(args)
     problem = load_problem(args.problem)
     if problem.limits is None:
@@ -114,8 +120,6 @@ def run(args: argparse.Namespace) -> int:
     except InputError as exc:
         raise InputError(f"{problem.path}: {exc}") from None
     if args.criterion == "discriminate":
-        from ident_opt.studies import discrimination
-
         design = discrimination.design(
             setup,
             problem.robot,

@@ -247,6 +247,11 @@ def _objective_functions(setup: Setup) -> tuple[ca.Function, ca.Function]:
 
 
 # ---------------------------------------------------------------------------------------------- the NLP
+def constraint_rate(setup: Setup) -> float:
+    """The NLP's limit grid [Hz]: `CONSTRAINT_HZ`, or 12 samples per period of the highest harmonic if faster."""
+    return max(CONSTRAINT_HZ, 12.0 * setup.fourier.harmonics * setup.fourier.base_hz)
+
+
 def _grid(setup: Setup, rate: float) -> np.ndarray:
     """Times over one period [s] at `rate` [Hz]."""
     period = setup.fourier.period
@@ -281,12 +286,13 @@ def _limit_bounds(setup: Setup, n: int) -> tuple[list, list, list[str]]:
 
 
 def build_nlp(
-    setup: Setup, objective: Callable[[ca.MX], ca.MX], max_iter: int = MAX_ITER
+    setup: Setup, objective: Callable[[ca.MX], ca.MX], max_iter: int = MAX_ITER, expand: bool = True
 ) -> tuple[ca.Function, list, list]:
-    """(IPOPT solver, lbg, ubg) for minimising `objective(x)` within the limits and at rest at t = 0."""
+    """(IPOPT solver, lbg, ubg) for minimising `objective(x)` within the limits and at rest at t = 0
+    (`expand`: evaluate as SX, faster; not possible with a callback in the objective)."""
     f = setup.fourier
     x = ca.MX.sym("x", f.size)
-    tc = _grid(setup, CONSTRAINT_HZ)
+    tc = _grid(setup, constraint_rate(setup))
     q, dq, ddq = _trajectory_mx(setup, x, tc)
     tau = None
     if setup.limits.torque is not None:
@@ -311,7 +317,7 @@ def build_nlp(
         "ipopt.acceptable_tol": 1e-3,
         "ipopt.acceptable_iter": 5,
         "ipopt.hessian_approximation": "limited-memory",
-        "expand": True,
+        "expand": expand,
     }
     solver = ca.nlpsol("excite", "ipopt", {"x": x, "f": objective(x), "g": ca.vertcat(*g)}, opts)
     return solver, lbg, ubg
@@ -371,7 +377,7 @@ def into_limits(setup: Setup, x: np.ndarray, target: float = 0.8) -> np.ndarray:
     """x's harmonics scaled per joint so that position deviation, speed and acceleration use at most `target` of
     their limits, then all together down until the torque fits too (when it can)."""
     f, lim = setup.fourier, setup.limits
-    t = _grid(setup, CONSTRAINT_HZ)
+    t = _grid(setup, constraint_rate(setup))
     q, dq, ddq = f.evaluate(x, t)
     centre = np.array([x[f.joint_slice(j)][0] for j in range(f.n_joints)])
     room = np.minimum(centre - np.array(lim.position_min), np.array(lim.position_max) - centre)
@@ -385,7 +391,7 @@ def into_limits(setup: Setup, x: np.ndarray, target: float = 0.8) -> np.ndarray:
     )
     x = f.scaled(x, target / np.maximum(ratio, 1e-12))
     for _ in range(30):
-        if feasible(setup, x, CONSTRAINT_HZ):
+        if feasible(setup, x, constraint_rate(setup)):
             break
         x = f.scaled(x, 0.8)
     return x
@@ -433,6 +439,7 @@ def design(
     evaluate: Callable[[np.ndarray, np.ndarray, np.ndarray], dict] | None = None,
     progress: bool = True,
     max_iter: int = MAX_ITER,
+    expand: bool = True,
 ) -> Design:
     """The best of `starts` IPOPT runs from random feasible starts (seeded by `seed`), sampled at `rate` [Hz].
 
@@ -443,11 +450,11 @@ def design(
         raise InputError(f"--criterion {criterion!r}: known criteria are {', '.join(CRITERIA)}")
     t0 = time.perf_counter()
     evaluate = evaluate or (lambda q, dq, ddq: criteria(setup, q, dq, ddq))
-    solver, lbg, ubg = build_nlp(setup, objective or information_objective(setup, criterion), max_iter)
+    solver, lbg, ubg = build_nlp(setup, objective or information_objective(setup, criterion), max_iter, expand)
     rng = np.random.default_rng([seed, 15])
     centre = 0.5 * (np.array(setup.limits.position_min) + np.array(setup.limits.position_max))
     centre = _rest_pose(setup, centre)
-    grid = _grid(setup, 100.0)
+    grid = np.arange(round(setup.duration * 100.0)) / 100.0  # criteria on the whole duration at 100 Hz
     best, records = None, []
     for k in tqdm(range(starts), desc=f"excite ({criterion})", disable=not progress, leave=False):
         x0 = into_limits(setup, setup.fourier.random(rng, centre))
@@ -467,6 +474,8 @@ def design(
         }
         if x is not None:
             record["criteria"] = evaluate(*setup.fourier.evaluate(x, grid))
+            if _score(criterion, start_values) > _score(criterion, record["criteria"]) and feasible(setup, x0):
+                x, record["criteria"], record["kept_start"] = x0, start_values, True  # IPOPT ended worse
             if best is None or _score(criterion, record["criteria"]) > _score(criterion, best[1]["criteria"]):
                 best = (x, record)
         records.append(record)

@@ -1,0 +1,255 @@
+"""Discrimination design: the excitation that best tells two suspected causes apart (T-optimal design).
+
+The two causes' candidate models are the diagnosis's own (`diagnose.candidates`: each cause's families,
+refitted with every π of the nominal structure, baseline ``rigid_fit``), fitted on the problem's first trial
+(the data the diagnosis could not separate well), each cause's best family kept. On a trajectory, with A
+true: τ_A is A's prediction, and B fitted to it (weighted least squares on B's columns, its nonlinear
+parameters θ held where the data put them) leaves a lack of fit LOF_j(A→B) per joint. With independent
+Gaussian noise σ_j² per joint (the rigid fit's residual variance on the data, the diagnosis's joint
+weights), the diagnosis's expected score gap between the true cause and the other is
+
+    gap(A true) = (n/2) Σ_j ln(1 + LOF_j(A→B) / (n σ_j²)) − ((k_B − k_A)/2) ln n
+
+(`diagnose.scoring`: held-out log-likelihood gain with a BIC penalty; n samples at the data's rate over the
+design's duration). The design maximises the geometric mean of gap(A true) and gap(B true), in the same limits
+as every design; its value, the smaller of the two, is reported against the first `duration` seconds of the
+trial the data came from, and the whole of it.
+
+The objective is computed in NumPy (the diagnosis's columns: filters, indicators), so IPOPT sees it through a
+CasADi callback with central finite differences (a step of `FD_STEP` in the coefficients, wide enough to
+average over the sign changes of Coulomb columns); the limits stay exact CasADi expressions.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ident_opt.data import Dataset
+from ident_opt.datasheet import datasheet_pi, rigid_body
+from ident_opt.diagnose import candidates as cands
+from ident_opt.diagnose import linear, signals
+from ident_opt.diagnose.diagnosis import prepare, rigid_fit
+from ident_opt.effects import CATALOGUE
+from ident_opt.errors import InputError
+from ident_opt.problem import Robot
+from ident_opt.studies import excitation
+from ident_opt.studies.excitation import Design, Setup
+
+#: The series a discriminating design uses unless told otherwise: harmonics of about 0.25 Hz up to 4 Hz. Causes
+#: told apart by their dynamics (a mode searched in 1.5–12 Hz, a delay) show only in fast motion; 5 harmonics of
+#: 0.1 Hz (the identification default) leave a 3 Hz mode unexcited and the two causes indistinguishable.
+HARMONICS, BASE_HZ = 16, 0.25
+#: Sharpness of the soft minimum of the two log gaps (1/k of log 2 above the minimum at most).
+SOFTMIN = 4.0
+#: Finite-difference step in the Fourier coefficients [rad/s; rad for offsets].
+FD_STEP = 1e-3
+#: IPOPT iterations per start (each gradient is 2 × size objective evaluations).
+MAX_ITER = 60
+
+
+@dataclass
+class Rival:
+    """One cause's fitted candidate: its family, its nonlinear parameters θ, its predictor and added count."""
+
+    cause: str
+    family: cands.Family
+    theta: dict
+    candidate: cands.Candidate
+
+    @property
+    def n_added(self) -> int:
+        return self.candidate.n_added
+
+
+@dataclass
+class Rivals:
+    """The two causes' candidates, the diagnosis context they were fitted in, the data's step dt [s]."""
+
+    a: Rival
+    b: Rival
+    ctx: cands.Context
+    dt: float
+
+
+def parse_between(text: str) -> tuple[str, str]:
+    """ "A,B" -> (A, B), two different catalogue causes; `InputError` naming --between otherwise."""
+    names = [n.strip() for n in text.split(",")]
+    if len(names) != 2 or names[0] == names[1] or not all(names):
+        raise InputError(f"--between {text!r}: give two different causes, CAUSE_A,CAUSE_B")
+    unknown = [n for n in names if n not in CATALOGUE]
+    if unknown:
+        raise InputError(f"--between: unknown cause(s) {', '.join(unknown)}; known: {', '.join(CATALOGUE)}")
+    return names[0], names[1]
+
+
+def fit_rivals(robot: Robot, trial: Dataset, causes: tuple[str, str], torque_filter_hz: float = 15.0) -> Rivals:
+    """Each cause's best family (least weighted training cost) fitted on the whole `trial` against the refitted
+    nominal model, in the diagnosis's context (`diagnose.diagnosis.prepare`, `rigid_fit` weights)."""
+    data = prepare(trial, torque_filter_hz)
+    dt = float(np.median(np.diff(data.t)))
+    _, weights = rigid_fit(data)
+    ctx = cands.Context(
+        robot,
+        data,
+        data,
+        weights,
+        datasheet_pi(robot, "physical"),
+        dt,
+        signals.rest_runs(data.dq),
+        rigid_body(robot, "physical").armature,
+    )
+    rivals = []
+    for cause in causes:
+        best = None
+        for family in CATALOGUE[cause].families(robot):
+            if "rigid_fit" not in family.baselines:
+                continue
+            cand = cands.fit(family, "rigid_fit", ctx)
+            r = signals.demean_runs(data.tau - cand.predict(data), ctx.rest)
+            cost = float(weights @ np.sum(r**2, axis=0))
+            if best is None or cost < best[0]:
+                theta = {k: cand.parameters[k] for k in (a.name for a in family.axes(1.0 / dt))}
+                best = (cost, Rival(cause, family, theta, cand))
+        if best is None:
+            raise InputError(f"--between: {cause} has no candidate against the refitted nominal model")
+        rivals.append(best[1])
+    return Rivals(rivals[0], rivals[1], ctx, dt)
+
+
+def trajectory_dataset(t: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> Dataset:
+    """A motion as a Dataset (no torque): what the candidates' columns are built from."""
+    return Dataset("design", t, q, dq, ddq, np.zeros_like(q))
+
+
+def lack_of_fit(rivals: Rivals, true: Rival, other: Rival, ds: Dataset) -> np.ndarray:
+    """LOF_j (n,) [N² m²]: the RSS per joint of `other` fitted to `true`'s prediction on the motion `ds`."""
+    tau = true.candidate.predict(ds)
+    o, X, _ = cands.design(other.family, ds, other.theta, "rigid_fit", rivals.ctx)
+    return linear.solve(o, X, tau, rivals.ctx.weights, with_se=False).rss
+
+
+def expected_gaps(rivals: Rivals, ds: Dataset, samples: int | None = None) -> dict:
+    """The diagnosis's expected score gap with A true and with B true on `ds` (module docstring), and its
+    smaller one ("discrimination"). `samples`: n of the trial `ds` stands for (its lack of fit scaled by
+    samples / ds.n: a whole number of periods of a periodic motion), default ds.n."""
+    n = samples or ds.n
+    sigma2 = 1.0 / rivals.ctx.weights
+    out = {}
+    for true, other in ((rivals.a, rivals.b), (rivals.b, rivals.a)):
+        lof = lack_of_fit(rivals, true, other, ds) * (n / ds.n)
+        gain = 0.5 * n * float(np.sum(np.log1p(lof / (n * sigma2))))
+        out[f"gap_{true.cause}_true"] = gain - 0.5 * (other.n_added - true.n_added) * math.log(n)
+        out[f"lof_{true.cause}_true"] = lof.tolist()
+    gaps = [out[f"gap_{r.cause}_true"] for r in (rivals.a, rivals.b)]
+    out["discrimination"] = min(gaps)
+    out["samples"] = n
+    return out
+
+
+def _objective_value(rivals: Rivals, setup: Setup, t: np.ndarray, samples: int, x: np.ndarray) -> float:
+    """−softmin(log gap_A, log gap_B) of coefficients x on times t standing for `samples` (gaps floored at 1e-3):
+    the smaller gap is what a diagnosis risks, the soft minimum keeps the objective smooth."""
+    q, dq, ddq = setup.fourier.evaluate(x, t)
+    gaps = expected_gaps(rivals, trajectory_dataset(t, q, dq, ddq), samples)
+    logs = np.log(np.maximum([gaps[f"gap_{r.cause}_true"] for r in (rivals.a, rivals.b)], 1e-3))
+    k = SOFTMIN
+    return float(np.log(np.sum(np.exp(-k * (logs - logs.min())))) / k - logs.min())
+
+
+class _Callback(ca.Callback):
+    """The NumPy objective as a CasADi function of x, differentiated by central finite differences."""
+
+    def __init__(self, fn, size: int):
+        ca.Callback.__init__(self)
+        self._fn, self._size = fn, size
+        opts = {"enable_fd": True, "fd_method": "central", "fd_options": {"h": FD_STEP, "h_iter": 0}}
+        self.construct("discrimination", opts)
+
+    def get_n_in(self) -> int:
+        return 1
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(self._size, 1)
+
+    def get_sparsity_out(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(1, 1)
+
+    def eval(self, arg):
+        return [self._fn(np.array(arg[0]).ravel())]
+
+
+def reference_gaps(rivals: Rivals, trial: Dataset, duration: float) -> dict:
+    """Expected gaps on the trial the data came from: its first `duration` seconds, and the whole of it."""
+    first = trial.subset(np.flatnonzero(trial.t - trial.t[0] < duration))
+    return {"same_duration": expected_gaps(rivals, first), "whole_trial": expected_gaps(rivals, trial)}
+
+
+def design(
+    setup: Setup,
+    robot: Robot,
+    trial: Dataset | None,
+    between: str,
+    *,
+    starts: int = 3,
+    seed: int = 0,
+    rate: float = excitation.CHECK_HZ,
+    progress: bool = True,
+    max_iter: int = MAX_ITER,
+) -> Design:
+    """The T-optimal design between the two causes of `between` ("A,B"), fitted on `trial` (required)."""
+    causes = parse_between(between)
+    if trial is None:
+        raise InputError(
+            "--criterion discriminate needs data (the problem's [data] trials or --data) to fit the causes"
+        )
+    rivals = fit_rivals(robot, trial, causes)
+    t = np.arange(round(setup.duration / rivals.dt)) * rivals.dt  # the data's rate: the diagnosis's samples
+    # The NLP sees the first two periods (the start from rest, then the steady state), standing for all of them.
+    t_nlp = t[t < min(setup.duration, 2 * setup.fourier.period)]
+    callback = _Callback(lambda x: _objective_value(rivals, setup, t_nlp, len(t), x), setup.fourier.size)
+
+    def evaluate(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> dict:
+        # Criteria on the data's rate over the duration (q etc. may come at another rate: resample by time).
+        tt = np.linspace(0.0, setup.duration, len(q), endpoint=False)
+        qi, dqi, ddqi = (np.column_stack([np.interp(t, tt, v[:, j]) for j in range(v.shape[1])]) for v in (q, dq, ddq))
+        return {**excitation.criteria(setup, q, dq, ddq), **expected_gaps(rivals, trajectory_dataset(t, qi, dqi, ddqi))}
+
+    d = excitation.design(
+        setup,
+        "discriminate",
+        starts=starts,
+        seed=seed,
+        rate=rate,
+        objective=lambda x: callback(x),
+        evaluate=evaluate,
+        progress=progress,
+        max_iter=max_iter,
+        expand=False,
+    )
+    ref = reference_gaps(rivals, trial, setup.duration)
+    same, mine = ref["same_duration"]["discrimination"], d.criteria["discrimination"]
+    ratio = mine / same if same > 0 else float("inf")
+    d.discrimination = {
+        "between": list(causes),
+        "candidates": {
+            r.cause: {"theta": r.theta, "parameters": r.candidate.parameters, "added_parameters": r.n_added}
+            for r in (rivals.a, rivals.b)
+        },
+        "noise_sigma": np.sqrt(1.0 / rivals.ctx.weights).tolist(),
+        "noise_source": f"residual of the refitted nominal model on {trial.source} (the diagnosis's joint weights)",
+        "design": {k: v for k, v in d.criteria.items() if k not in ("log_det", "cond", "rank")},
+        "reference": ref,
+        "ratio_same_duration": ratio,
+        "summary": (
+            f"expected score gap {mine:.3g} vs {same:.3g} on the first {setup.duration:g} s of {trial.source} "
+            f"({ratio:.2f}×; whole trial: {ref['whole_trial']['discrimination']:.3g})"
+        ),
+    }
+    return d
