@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+import json
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +11,7 @@ import pandas as pd
 import pytest
 
 from ident_opt.cli import main
+from ident_opt.commands import urdf as commands
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from ident_opt.studies import urdf as study
@@ -111,3 +114,15 @@ def test_comparison_on_a_time_split_keeps_the_json_contract(tmp_path):
     masses = result["mass"]["consistent"]["links"]
     cad = result["mass"]["urdf"]["links"]
     assert all(0.5 * cad[k] - 1e-6 <= v <= 1.5 * cad[k] + 1e-6 for k, v in masses.items())
+
+
+def test_identify_writes_its_report(tmp_path):
+    problem = load_problem(KUKA_PROBLEM)
+    args = argparse.Namespace(
+        data=[str(problem.data.trials[0])], allow_implausible=False, drop_invalid=False, weights="ols",
+        out=str(tmp_path), json=None,
+    )  # fmt: skip
+    assert commands.identify(args, problem) == 0
+    result = json.loads((tmp_path / "identify.json").read_text())
+    assert set(result["metrics"]["fit"]) == {"ols", "constrained", "consistent", "cad"}
+    assert "m_lwr_1_link" in result["se"]["consistent"] and (tmp_path / "identify.md").is_file()

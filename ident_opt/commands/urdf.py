@@ -103,3 +103,24 @@ def codegen(args: argparse.Namespace, problem) -> int:
         print(f"ident-opt codegen: the compiled code disagrees with the Python model: {bad}", file=sys.stderr)
         return 1
     return 0
+
+
+def identify(args: argparse.Namespace, problem) -> int:
+    """Every estimator on all the problem's trials (or --data): identify.md and identify.json."""
+    from ident_opt.report import urdf as report  # deferred: NumPy, Pinocchio, CasADi, cvxpy
+    from ident_opt.studies import urdf as study
+
+    paths = [Path(p) for p in (getattr(args, "data", None) or [])] or list(problem.data.trials)
+    if not paths:
+        raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
+    trials = study.load_trials(paths, problem, allow_implausible=args.allow_implausible, drop_invalid=args.drop_invalid)
+    result = study.identify(problem, trials, weights=None if getattr(args, "weights", "ols") == "ols" else "wls")
+    out = output_dir(args, problem)
+    path = report.write_identify(result, out, getattr(args, "json", None))
+    masses = {name: m["total"] for name, m in result["mass"].items() if name != "ols"}
+    print(
+        f"{result['problem']}: {result['base']['count']} base parameters, {result['samples']} samples; total mass [kg] "
+        + ", ".join(f"{k} {v:.2f}" for k, v in masses.items())
+    )
+    print(f"wrote {path.name} and identify.json to {out.resolve()}")
+    return 0

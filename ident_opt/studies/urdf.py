@@ -24,7 +24,7 @@ import numpy as np
 from ident_opt import metrics
 from ident_opt.data import Dataset, chronological_split, load_dataset
 from ident_opt.errors import InputError
-from ident_opt.identify.base import fit_base_ols
+from ident_opt.identify.base import BaseFit, fit_base_ols
 from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.physical import fit_physical
@@ -94,14 +94,9 @@ def _consistency(arm: UrdfArm, pi: np.ndarray, fit: LinearFit | None) -> dict:
     }
 
 
-def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None = None) -> dict:
-    """The comparison of the module doc for a URDF problem; returns the JSON-ready result."""
-    robot = problem.robot
+def fit_all(robot, stats: Stats, weights: str | None = None) -> tuple[dict, dict, BaseFit, dict]:
+    """(fits, π, the base OLS fit, seconds) of every estimator (`ESTIMATORS`) from the statistics."""
     arm: UrdfArm = robot.arm
-    protocol, train, held = split(trials, test, problem.split.train_fraction)
-    t0 = time.perf_counter()
-    stats = stats_of(arm, train)
-    stats_seconds = time.perf_counter() - t0
     fits: dict[str, LinearFit | None] = {}
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -112,7 +107,6 @@ def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None
     t0 = time.perf_counter()
     fits["constrained"] = fit_constrained(stats, arm, weights=weights)
     seconds["constrained"] = time.perf_counter() - t0
-    pis["constrained"] = fits["constrained"].pi
     t0 = time.perf_counter()
     fits["consistent"] = fit_physical(
         stats,
@@ -123,19 +117,16 @@ def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None
         weights=weights,
     )
     seconds["consistent"] = time.perf_counter() - t0
-    pis["consistent"] = fits["consistent"].pi
-    pis["cad"] = arm.cad_parameters()
+    pis.update(constrained=fits["constrained"].pi, consistent=fits["consistent"].pi, cad=arm.cad_parameters())
     fits["cad"] = None
-    tau = np.concatenate([t.tau for t in held])
-    q, dq, ddq = (np.concatenate([getattr(t, a) for t in held]) for a in ("q", "dq", "ddq"))
-    Y = arm.regressor(q, dq, ddq)
-    scores = {}
-    for name, pi in pis.items():
-        hat = Y @ pi
-        scores[name] = {
-            "rmse": dict(zip(robot.joints, metrics.rmse(tau, hat).tolist())),
-            "nmse": dict(zip(robot.joints, metrics.nmse(tau, hat).tolist())),
-        }
+    return fits, pis, base_fit, seconds
+
+
+def summary(problem, fits: dict, pis: dict, base_fit: BaseFit) -> dict:
+    """What both the comparison and the identification report: the robot, base parameters, each estimator's
+    standard parameters (and SEs), consistency and masses against the URDF's."""
+    robot = problem.robot
+    arm: UrdfArm = robot.arm
     urdf_masses = arm.link_masses(pis["cad"])
     return {
         "problem": problem.name,
@@ -145,13 +136,6 @@ def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None
             "links": list(arm.links),
             "n_params": arm.n_params,
             "gravity": list(robot.gravity),
-        },
-        "split": {
-            "protocol": protocol,
-            "train": [t.source for t in trials],
-            "test": [t.source for t in test] if test else [f"last {1 - problem.split.train_fraction:.0%} of each"],
-            "train_samples": int(stats.n),
-            "test_samples": len(tau),
         },
         "base": {
             "count": base_fit.base.rank,
@@ -166,7 +150,6 @@ def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None
         "se": {name: fit.se_dict() for name, fit in fits.items() if fit is not None and name != "ols"},
         "base_parameters": {"ols": base_fit.summary()},
         "ols_impossible_base_values": impossible_base_values(arm, base_fit),
-        "metrics": {protocol: scores},
         "consistency": {name: _consistency(arm, pi, fits[name]) for name, pi in pis.items()},
         "mass": {
             "urdf": {"total": sum(urdf_masses.values()), "links": urdf_masses},
@@ -176,8 +159,62 @@ def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None
                 if name != "cad"
             },
         },
+    }
+
+
+def _scores(arm: UrdfArm, joints: tuple[str, ...], pis: dict, sets: list[Dataset]) -> dict:
+    """rmse [N m] and nmse per joint of every π on the data sets."""
+    tau = np.concatenate([t.tau for t in sets])
+    q, dq, ddq = (np.concatenate([getattr(t, a) for t in sets]) for a in ("q", "dq", "ddq"))
+    Y = arm.regressor(q, dq, ddq)
+    out = {}
+    for name, pi in pis.items():
+        hat = Y @ pi
+        out[name] = {
+            "rmse": dict(zip(joints, metrics.rmse(tau, hat).tolist())),
+            "nmse": dict(zip(joints, metrics.nmse(tau, hat).tolist())),
+        }
+    return out
+
+
+def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None = None) -> dict:
+    """The comparison of the module doc for a URDF problem; returns the JSON-ready result."""
+    robot = problem.robot
+    arm: UrdfArm = robot.arm
+    protocol, train, held = split(trials, test, problem.split.train_fraction)
+    t0 = time.perf_counter()
+    stats = stats_of(arm, train)
+    stats_seconds = time.perf_counter() - t0
+    fits, pis, base_fit, seconds = fit_all(robot, stats, weights)
+    scores = _scores(arm, robot.joints, pis, held)
+    return {
+        **summary(problem, fits, pis, base_fit),
+        "split": {
+            "protocol": protocol,
+            "train": [t.source for t in trials],
+            "test": [t.source for t in test] if test else [f"last {1 - problem.split.train_fraction:.0%} of each"],
+            "train_samples": int(stats.n),
+            "test_samples": sum(t.n for t in held),
+        },
+        "metrics": {protocol: scores},
         "within_10_percent_of_ols": _within(scores, robot.joints),
         "seconds": {"statistics": stats_seconds, **seconds},
+    }
+
+
+def identify(problem, trials: list[Dataset], weights: str | None = None) -> dict:
+    """Every estimator on all the trials (no held-out data): parameters, SEs, base parameters, consistency,
+    masses, and the in-sample rmse/nmse per joint (`metrics.fit`)."""
+    robot = problem.robot
+    arm: UrdfArm = robot.arm
+    stats = stats_of(arm, trials)
+    fits, pis, base_fit, seconds = fit_all(robot, stats, weights)
+    return {
+        **summary(problem, fits, pis, base_fit),
+        "trials": [t.source for t in trials],
+        "samples": int(stats.n),
+        "metrics": {"fit": _scores(arm, robot.joints, pis, trials)},
+        "seconds": seconds,
     }
 
 
