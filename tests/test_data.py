@@ -1,4 +1,4 @@
-"""Data loading per spec/data-format.md: formats, remapping, currents, derivatives, splits, bad input."""
+"""Data loading per docs/data-format.md: formats, remapping, currents, derivatives, splits, bad input."""
 
 from __future__ import annotations
 
