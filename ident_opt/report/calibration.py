@@ -54,7 +54,7 @@ simulated ones (`{shown(c.sim_problem)}`, seeds 0 and 1) get the same treatment:
 parameters, physical gravity) fitted by OLS on the whole trial, then the residual τ − Y π̂ per joint.
 "before" is seed 0 with the catalogue effects only (the default until the background terms were added).
 
-The default effects of `{shown(c.sim_problem)}`, from the diagnosis catalogue (`spec/diagnose.md`):
+The default effects of `{shown(c.sim_problem)}`, from the diagnosis catalogue (`docs/effects.md`):
 
 {catalogue}
 

@@ -328,7 +328,7 @@ def readme_parts(
     lines += _findings(result, paper, chrono, cross, "cpbr" in paper.metrics["rmse"])
     lines += ["", "## Tables", ""]
     lines += [f"- [{path.name}]({path.name}) (CSV beside it)" for path in tables.values()]
-    lines += ["- [identify.json](identify.json): the machine-readable result (`spec/cli.md`)"]
+    lines += ["- [identify.json](identify.json): the machine-readable result (`docs/cli.md`)"]
     back = ["", "## Figures", ""]
     for name, (path, sentence) in _figure_sentences(paper, cross).items():
         if name in made:
