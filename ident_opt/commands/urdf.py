@@ -13,6 +13,15 @@ from ident_opt.commands.common import output_dir
 from ident_opt.errors import InputError
 
 
+def urdf_problem(args: argparse.Namespace):
+    """The problem of `--problem` when its robot is an arm from a URDF (these paths apply), else None."""
+    from ident_opt.problem import load_problem  # deferred like every command's imports (light: TOML only)
+    from ident_opt.urdf_problem import UrdfRobot
+
+    problem = load_problem(args.problem)
+    return problem if isinstance(problem.robot, UrdfRobot) else None
+
+
 def compare(args: argparse.Namespace, problem) -> int:
     """OLS on base parameters, consistent, plausible and CAD fits, scored on --test-data (or a time split)."""
     from ident_opt.report import urdf as report  # deferred: NumPy, Pinocchio, CasADi, cvxpy

@@ -78,7 +78,7 @@ def stats_of(arm: UrdfArm, trials: list[Dataset]) -> Stats:
     """The sufficient statistics of the arm's regressor over the trials."""
     total = Stats.zeros(arm.n_params, arm.n_joints)
     for trial in trials:
-        total += Stats.from_data(arm, trial.q, trial.dq, trial.ddq, trial.tau)
+        total += Stats.from_data(arm, trial.q, trial.dq, trial.ddq, trial.tau, chunk=4096)  # Y: 4096 × n × P
     return total
 
 
