@@ -11,12 +11,12 @@ from pathlib import Path
 
 from ident_opt.commands.common import output_dir
 from ident_opt.errors import InputError
+from ident_opt.urdf_problem import UrdfRobot
 
 
 def urdf_problem(args: argparse.Namespace):
     """The problem of `--problem` when its robot is an arm from a URDF (these paths apply), else None."""
-    from ident_opt.problem import load_problem  # deferred like every command's imports (light: TOML only)
-    from ident_opt.urdf_problem import UrdfRobot
+    from ident_opt.problem import load_problem  # deferred: it loads the effect catalogue; --help must stay fast
 
     problem = load_problem(args.problem)
     return problem if isinstance(problem.robot, UrdfRobot) else None
