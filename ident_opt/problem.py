@@ -324,26 +324,38 @@ def _friction(table: _Table, key: str, default: Any = _REQUIRED) -> Friction:
     return friction
 
 
+#: The numeric keys of a bar link and of a datasheet joint: key -> (sign rule, the `LIMITS` unit of its range).
+_BAR_FIELDS = {
+    "length": ("positive", "length"),
+    "width": ("positive", "length"),
+    "height": ("positive", "length"),
+    "density": ("positive", "density"),
+}
+_DATASHEET_FIELDS = {
+    "torque_constant": ("positive", "torque_constant"),
+    "gear_ratio": ("positive", "gear_ratio"),
+    "rotor_inertia": ("non_negative", "inertia"),
+    "motor_diameter": ("positive", "length"),
+    "actuator_mass": ("non_negative", "mass"),
+}
+
+
+def _numbers(table: _Table, fields: dict[str, tuple[str, str]]) -> dict[str, float]:
+    """Each key of `fields` read as a finite number with its sign rule and its unit's range."""
+    return {key: getattr(table, sign)(key, high=LIMITS[unit]) for key, (sign, unit) in fields.items()}
+
+
 def _link(table: _Table) -> Link:
-    link = Link(
-        length=table.positive("length", high=LIMITS["length"]),
-        width=table.positive("width", high=LIMITS["length"]),
-        height=table.positive("height", high=LIMITS["length"]),
-        density=table.positive("density", high=LIMITS["density"]),
-    )
+    link = Link(**_numbers(table, _BAR_FIELDS))
     table.done()
     return link
 
 
 def _joint(table: _Table) -> Joint:
     joint = Joint(
-        torque_constant=table.positive("torque_constant", high=LIMITS["torque_constant"]),
-        gear_ratio=table.positive("gear_ratio", high=LIMITS["gear_ratio"]),
-        rotor_inertia=table.non_negative("rotor_inertia", high=LIMITS["inertia"]),
         viscous_friction=_friction(table, "viscous_friction"),
         coulomb_friction=_friction(table, "coulomb_friction"),
-        motor_diameter=table.positive("motor_diameter", high=LIMITS["length"]),
-        actuator_mass=table.non_negative("actuator_mass", high=LIMITS["mass"]),
+        **_numbers(table, _DATASHEET_FIELDS),
     )
     table.done()
     return joint
@@ -500,19 +512,24 @@ def _data(table: _Table, base: Path, n_joints: int = 2) -> DataSpec:
     return spec
 
 
+def _int_list(table: _Table, key: str, default: list[int], low: int, high: int, longest: int) -> tuple[int, ...]:
+    """A list of 1 to `longest` integers, each in [low, high] (booleans refused)."""
+    values = table.take(key, list, default)
+    if not 0 < len(values) <= longest or not all(
+        isinstance(v, int) and not isinstance(v, bool) and low <= v <= high for v in values
+    ):
+        raise InputError(
+            f"{table._name(key)} must be a list of 1 to {longest} integers in [{low}, {high}], got {_excerpt(values)}"
+        )
+    return tuple(values)
+
+
 def _split(table: _Table) -> SplitSpec:
     # Both parts of a split must hold enough samples to fit and to score: 5 % .. 95 %.
     fraction = table.number("train_fraction", SplitSpec.train_fraction, 0.05, 0.95)
-    seeds = table.take("seeds", list, list(SplitSpec.seeds))
-    if not 0 < len(seeds) <= MAX_SEEDS or not all(
-        isinstance(s, int) and not isinstance(s, bool) and 0 <= s <= MAX_SEED for s in seeds
-    ):
-        raise InputError(
-            f"{table.path}: key 'seeds' in [split] must be a list of 1 to {MAX_SEEDS} integers in [0, {MAX_SEED}], "
-            f"got {_excerpt(seeds)}"
-        )
+    seeds = _int_list(table, "seeds", list(SplitSpec.seeds), 0, MAX_SEED, MAX_SEEDS)
     table.done()
-    return SplitSpec(fraction, tuple(seeds))
+    return SplitSpec(fraction, seeds)
 
 
 def _residual(table: _Table) -> ResidualSpec:
@@ -524,20 +541,13 @@ def _residual(table: _Table) -> ResidualSpec:
             f"{table.path}: key 'components' in [residual] must be \"auto\" or an integer in [1, {MAX_COMPONENTS}], "
             f"got {_excerpt(components)}"
         )
-    candidates = table.take("candidates", list, list(ResidualSpec.candidates))
-    if not 0 < len(candidates) <= MAX_COMPONENTS or not all(
-        isinstance(k, int) and not isinstance(k, bool) and 1 <= k <= MAX_COMPONENTS for k in candidates
-    ):
-        raise InputError(
-            f"{table.path}: key 'candidates' in [residual] must be a list of 1 to {MAX_COMPONENTS} integers in "
-            f"[1, {MAX_COMPONENTS}], got {_excerpt(candidates)}"
-        )
+    candidates = _int_list(table, "candidates", list(ResidualSpec.candidates), 1, MAX_COMPONENTS, MAX_COMPONENTS)
     covariance = table.take("covariance", str, ResidualSpec.covariance)
     if covariance not in ("full", "diag"):
         raise InputError(f'{table.path}: key \'covariance\' in [residual] must be "full" or "diag"')
     spec = ResidualSpec(
         components=components,
-        candidates=tuple(candidates),
+        candidates=candidates,
         covariance=covariance,
         reg_covar=table.positive("reg_covar", ResidualSpec.reg_covar, high=1e3),
         max_train_samples=table.integer("max_train_samples", ResidualSpec.max_train_samples, 100, 10**7),
