@@ -19,8 +19,9 @@ zero at the CAD link, invariant to the frame and the units, and a barrier that k
 is enough to pin the directions the data do not see. r (`mass_range`) and δ (`com_box`, metres per axis)
 are optional (None: no bound).
 
-Solved with Clarabel through cvxpy (the PSD and exponential cones of the log-det), compiled once per arm and
-options (data, prior and bounds enter as cvxpy Parameters).
+Solved by Clarabel (PSD and exponential cones: log det J = max Σ_j log Z_jj over [[J, Z], [Zᵀ, diag Z]] ⪰ 0,
+Z lower triangular), stated directly with its constraint rows cached per arm and options; the same program
+through cvxpy (compiled once, data as Parameters) is the tests' oracle (`backend="cvxpy"`).
 """
 
 from __future__ import annotations
@@ -28,10 +29,13 @@ from __future__ import annotations
 import functools
 import time
 import warnings
+from typing import NamedTuple
 
+import clarabel
 import numpy as np
+from scipy import sparse
 
-from ident_opt.consistency import MARGIN, Bound, Consistency
+from ident_opt.consistency import MARGIN, Bound, Consistency, svec
 from ident_opt.identify.constrained import ACTIVE_TOL
 from ident_opt.identify.fit import LinearFit, check_stats, finish, joint_weights, normal_equations
 from ident_opt.identify.stats import Stats
@@ -96,6 +100,19 @@ def _program(arm: UrdfArm, margin: float, mass: bool, com: bool):
     return problem, pi, par
 
 
+class _Data(NamedTuple):
+    """The numbers of one solve: data term (H/n, h/n), the prior's weight w·Ē and each CAD J0⁻¹, the bounds."""
+
+    H: np.ndarray  # (P, P) [N² m² per unit²] per sample
+    h: np.ndarray  # (P,)
+    weight: float
+    J0inv: np.ndarray  # (links, 4, 4)
+    m_lo: np.ndarray  # (links,) [kg]
+    m_hi: np.ndarray
+    c_lo: np.ndarray  # (links, 3) [m]
+    c_hi: np.ndarray
+
+
 def fit_physical(
     stats: Stats,
     arm: UrdfArm,
@@ -106,52 +123,47 @@ def fit_physical(
     com_box: float | None = COM_BOX,
     margin: float = MARGIN,
     weights: str | np.ndarray | None = None,
+    backend: str = "clarabel",
 ) -> LinearFit:
     """The plausible consistent fit of the module doc from the statistics of `arm`'s regressor.
 
     prior (P,) = the URDF's inertials (`UrdfArm.cad_parameters`); prior_weight λ > 0 [dimensionless];
     mass_range r (± fraction of each CAD mass) and com_box δ [m] (None: unbounded); margin: J_i ⪰ margin·I.
-    `details` holds the prior's weight, each link's divergence from the CAD link and its mass [kg].
+    backend "clarabel" (the conic program stated directly, cached per arm: tens of ms) or "cvxpy" (the same
+    program through cvxpy: the tests' oracle). `details` holds the prior's weight, each link's divergence
+    from the CAD link and its mass [kg].
     """
-    import cvxpy as cp  # deferred: see `_program`
-
     check_stats(stats, arm)
     if prior_weight <= 0:
         raise ValueError("prior_weight must be > 0 (the log-det prior is what makes this fit plausible)")
+    if backend not in ("clarabel", "cvxpy"):
+        raise ValueError(f"backend must be 'clarabel' or 'cvxpy', not {backend!r}")
     prior = arm.cad_parameters() if prior is None else np.asarray(prior, dtype=float)
     w = joint_weights(stats, weights)
     H, h = normal_equations(stats, w)
     n = max(stats.n, 1)
-    problem, pi, par = _program(arm, float(margin), mass_range is not None, com_box is not None)
-    R, d = _square_root(H / n, h / n)
-    par["R"].value, par["d"].value = R, d
-    par["weight"].value = prior_weight * float(w @ stats.s) / n
     J0 = np.array([_regularised(J) for J in arm.pseudo_inertias(prior)])
     masses = prior[: arm.n_link_params : N_LINK]
     com0 = prior[: arm.n_link_params].reshape(-1, N_LINK)[:, 1:4] / np.maximum(masses, 1e-12)[:, None]
-    for i, J in enumerate(J0):
-        par["J0inv"][i].value = np.linalg.inv(J)
     r = 0.0 if mass_range is None else float(mass_range)
     delta = 0.0 if com_box is None else float(com_box)
-    par["m_lo"].value, par["m_hi"].value = (1 - r) * masses, (1 + r) * masses
-    par["c_lo"].value, par["c_hi"].value = com0 - delta, com0 + delta
+    data = _Data(
+        H / n,
+        h / n,
+        prior_weight * float(w @ stats.s) / n,
+        np.linalg.inv(J0),
+        (1 - r) * masses,
+        (1 + r) * masses,
+        com0 - delta,
+        com0 + delta,
+    )
     t0 = time.perf_counter()
-    status = "not solved"
-    for tol in TOLERANCES:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", UserWarning)
-                problem.solve(solver="CLARABEL", tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, max_iter=500)
-        except cp.error.SolverError as exc:
-            status = f"solver error: {exc}"
-            continue
-        status = str(problem.status)
-        if pi.value is not None and status == "optimal":
-            break
-    if pi.value is None or status not in ("optimal", "optimal_inaccurate"):
+    solve = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
+    pi, status = solve(arm, float(margin), mass_range is not None, com_box is not None, data)
+    if pi is None:
         raise RuntimeError(f"plausible fit failed: solver status {status}")
     seconds = time.perf_counter() - t0
-    value = _onto_bounds(np.asarray(pi.value, dtype=float), Consistency.of(arm, margin))
+    value = _onto_bounds(pi, Consistency.of(arm, margin))
     slacks = Consistency.of(arm, margin).slacks(value)
     active = [name for name, v in slacks.items() if v < ACTIVE_TOL]
     fit = finish(stats, arm, value, w, "consistent", status, active, seconds)
@@ -165,6 +177,131 @@ def fit_physical(
         link_masses=arm.link_masses(value),
     )
     return fit
+
+
+def _solve_cvxpy(arm: UrdfArm, margin: float, mass: bool, com: bool, data: _Data) -> tuple[np.ndarray | None, str]:
+    """The program through cvxpy (compiled once per arm and options): (π or None, status)."""
+    import cvxpy as cp  # deferred: see `_program`
+
+    problem, pi, par = _program(arm, margin, mass, com)
+    par["R"].value, par["d"].value = _square_root(data.H, data.h)
+    par["weight"].value = data.weight
+    for i, Jinv in enumerate(data.J0inv):
+        par["J0inv"][i].value = 0.5 * (Jinv + Jinv.T)
+    par["m_lo"].value, par["m_hi"].value = data.m_lo, data.m_hi
+    par["c_lo"].value, par["c_hi"].value = data.c_lo, data.c_hi
+    status = "not solved"
+    for tol in TOLERANCES:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)
+                problem.solve(solver="CLARABEL", tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, max_iter=500)
+        except cp.error.SolverError as exc:
+            status = f"solver error: {exc}"
+            continue
+        status = str(problem.status)
+        if pi.value is not None and status == "optimal":
+            break
+    if pi.value is None or status not in ("optimal", "optimal_inaccurate"):
+        return None, status
+    return np.asarray(pi.value, dtype=float), status
+
+
+# ---------------------------------------------------------------------------------------------- Clarabel
+#: Per link, the extra variables of the log-det: the lower triangle of Z (10) and u (4), log Z_jj ≥ u_j.
+_EXTRA = 14
+_TRIL = tuple((r, c) for c in range(4) for r in range(c, 4))  # Z's lower-triangle entries, in x's order
+
+
+@functools.lru_cache(maxsize=8)
+def _conic(arm: UrdfArm, margin: float, mass: bool, com: bool) -> tuple:
+    """What Clarabel needs that depends on the arm and options only: the fixed constraint rows (A, b), their
+    cones, and per link the column of each variable (module doc: log det J = max Σ_j u_j over
+    [[J, Z], [Zᵀ, diag Z]] ⪰ 0 with Z lower triangular and (u_j, 1, Z_jj) in the exponential cone)."""
+    P, links = arm.n_params, arm.n_joints
+    nx = P + _EXTRA * links
+    blocks, cones = [], []
+    for blk in Consistency.of(arm, margin).blocks():  # pseudo-inertias ⪰ margin, friction and armature ≥ 0
+        blocks.append((np.hstack([blk.A, np.zeros((blk.A.shape[0], nx - P))]), blk.b))
+        cones.append(clarabel.PSDTriangleConeT(blk.size) if blk.cone == "psd" else clarabel.NonnegativeConeT(blk.size))
+    A_link = arm.pseudo_inertia_map()
+    for i in range(links):
+        C = np.zeros((nx, 8, 8))  # [[J, Z], [Zᵀ, diag Z]] = Σ_v x_v C_v
+        C[N_LINK * i : N_LINK * (i + 1), :4, :4] = A_link
+        z0 = P + _EXTRA * i
+        for k, (r, c) in enumerate(_TRIL):
+            C[z0 + k, r, 4 + c] = C[z0 + k, 4 + c, r] = 1.0
+            if r == c:
+                C[z0 + k, 4 + c, 4 + c] = 1.0
+        blocks.append((-svec(C).T, np.zeros(36)))
+        cones.append(clarabel.PSDTriangleConeT(8))
+        for j in range(4):
+            rows = np.zeros((3, nx))
+            rows[0, z0 + 10 + j] = -1.0  # s = (u_j, 1, Z_jj)
+            rows[2, z0 + _TRIL.index((j, j))] = -1.0
+            blocks.append((rows, np.array([0.0, 1.0, 0.0])))
+            cones.append(clarabel.ExponentialConeT())
+    A = np.vstack([a for a, _ in blocks])
+    b = np.concatenate([v for _, v in blocks])
+    settings = []
+    for tol in TOLERANCES:
+        st = clarabel.DefaultSettings()
+        st.verbose = False
+        st.tol_gap_abs = st.tol_gap_rel = st.tol_feas = tol
+        st.max_iter = 500
+        settings.append(st)
+    return A, b, tuple(cones), tuple(settings)
+
+
+def _bound_rows(arm: UrdfArm, mass: bool, com: bool, data: _Data, nx: int) -> tuple[np.ndarray, np.ndarray]:
+    """The mass and centre-of-mass rows (s = b − A x ≥ 0): m_lo ≤ m ≤ m_hi, m c_lo ≤ h ≤ m c_hi."""
+    rows, rhs = [], []
+    for i in range(arm.n_joints):
+        m = N_LINK * i
+        if mass:
+            lo, hi = np.zeros(nx), np.zeros(nx)
+            lo[m], hi[m] = -1.0, 1.0
+            rows += [lo, hi]
+            rhs += [-data.m_lo[i], data.m_hi[i]]
+        if com:
+            for k in range(3):
+                lo, hi = np.zeros(nx), np.zeros(nx)
+                lo[m + 1 + k], lo[m] = -1.0, data.c_lo[i, k]
+                hi[m + 1 + k], hi[m] = 1.0, -data.c_hi[i, k]
+                rows += [lo, hi]
+                rhs += [0.0, 0.0]
+    return np.array(rows).reshape(-1, nx), np.array(rhs)
+
+
+def _solve_clarabel(arm: UrdfArm, margin: float, mass: bool, com: bool, data: _Data) -> tuple[np.ndarray | None, str]:
+    """min ½ xᵀ Q x + qᵀ x over x = [π; Z, u per link] with Clarabel directly: (π or None, status).
+
+    Q = 2 H/n on π; q = −2 h/n + w·Ē tr(J0⁻¹ A_p) on the link parameters and −w·Ē on every u (module doc)."""
+    A_fixed, b_fixed, cones, settings = _conic(arm, margin, mass, com)
+    P, nx = arm.n_params, A_fixed.shape[1]
+    A_bounds, b_bounds = _bound_rows(arm, mass, com, data, nx)
+    A = sparse.csc_matrix(np.vstack([A_fixed, A_bounds]))
+    b = np.concatenate([b_fixed, b_bounds])
+    all_cones = [*cones, clarabel.NonnegativeConeT(len(b_bounds))] if len(b_bounds) else list(cones)
+    Q = np.zeros((nx, nx))
+    Q[:P, :P] = 2.0 * data.H
+    q = np.zeros(nx)
+    q[:P] = -2.0 * data.h
+    A_link = arm.pseudo_inertia_map()
+    for i, Jinv in enumerate(data.J0inv):
+        q[N_LINK * i : N_LINK * (i + 1)] += data.weight * np.einsum("ij,pji->p", Jinv, A_link)
+        z0 = P + _EXTRA * i
+        q[z0 + 10 : z0 + _EXTRA] = -data.weight
+    Qs = sparse.triu(sparse.csc_matrix(Q), format="csc")
+    status = "not solved"
+    for st in settings:
+        solution = clarabel.DefaultSolver(Qs, q, A, b, all_cones, st).solve()
+        status = str(solution.status)
+        if status == "Solved":
+            break
+    if status not in ("Solved", "AlmostSolved"):
+        return None, status
+    return np.asarray(solution.x[:P], dtype=float), status
 
 
 def _regularised(J0: np.ndarray) -> np.ndarray:
