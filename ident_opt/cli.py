@@ -12,8 +12,14 @@ import argparse
 import importlib
 import sys
 
-from ident_opt import __version__
+from ident_opt import __version__, outputs
+from ident_opt.arguments import validate_numbers
 from ident_opt.errors import InputError
+
+#: Flags (by dest) that name input files, and output files; `--out` is a file for these subcommands, else a folder.
+INPUT_FLAGS = ("problem", "data", "test_data", "parameters", "real")
+OUTPUT_FLAGS = ("json", "final")
+FILE_OUT = ("simulate", "excite")
 
 #: subcommand -> one-line help. Each lives in ident_opt.commands.<name> with add_arguments() and run().
 COMMANDS = {
@@ -54,7 +60,23 @@ def build_parser() -> argparse.ArgumentParser:
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
         module.add_arguments(p)
+        validate_numbers(name, p)
     return parser
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Before any work: every output path usable, none of them an input file (`outputs`)."""
+    for dest in INPUT_FLAGS:
+        value = getattr(args, dest, None)
+        outputs.declare_inputs([value] if isinstance(value, str) else value or [])
+    for dest in OUTPUT_FLAGS:
+        if getattr(args, dest, None):
+            outputs.check_file_output(getattr(args, dest), "--" + dest)
+    out = getattr(args, "out", None)
+    if out and args.command in FILE_OUT:
+        outputs.check_file_output(out, "--out")
+    elif out:
+        outputs.check_folder_output(out, "--out")
 
 
 def _module(name: str):
@@ -69,7 +91,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.command is None:
             parser.print_help()
             return 2
-        return int(_module(args.command).run(args) or 0)
+        with outputs.run():
+            check_outputs(args)
+            return int(_module(args.command).run(args) or 0)
     except InputError as exc:
         print(f"ident-opt: error: {exc}", file=sys.stderr)
         return 2

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ident_opt import outputs
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
 from ident_opt.errors import InputError
 
@@ -44,6 +45,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--components", metavar="K", type=int, help="GMR components (default: the problem's [residual] setting)"
     )
     parser.add_argument("--no-forward", action="store_true", help="do not generate ddq_hat (forward dynamics)")
+    parser.add_argument(
+        "--force", action="store_true", help="overwrite files in --out that an earlier codegen run did not write"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,7 +63,6 @@ def run(args: argparse.Namespace) -> int:
     from ident_opt.studies import ship
 
     problem = load_problem(args.problem)
-    out = output_dir(args, problem)
     compiler = codegen.find_compiler()  # fail before any fitting when there is none
     saved = ship.read_parameters(args.parameters) if args.parameters else None
     extensions = args.extension if args.extension is not None else (saved or {}).get("extensions", [])
@@ -67,10 +70,16 @@ def run(args: argparse.Namespace) -> int:
         model = ArmModel(extensions=tuple(dict.fromkeys(extensions)))
     except ValueError as exc:
         raise InputError(f"codegen: {exc}") from None
+    if saved is not None:
+        ship.saved_vector(saved, model)  # every parameter present and numeric, before --out is touched
     trials = load(args).trials if saved is None or saved.get("gmr") is None else []
     train = trials[0] if trials else None
     if not (saved and saved.get("gmr")):
         _announce_gmr(problem.residual, args.components, train)
+    out = output_dir(args, problem)  # only once every input is read and checked
+    written = [f"{codegen.NAME}.c", f"{codegen.NAME}.h", codegen.library_name(), "main.c", "README.md"]
+    written.append("parameters.json")
+    outputs.guard_owned(out, written, force=args.force)
     shipped = ship.prepare(model, train, problem.residual, args.estimator, args.components, saved)
     print(
         f"ident-opt codegen: {len(model.names)} parameters ({shipped.estimator}), GMR with "
@@ -81,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     errors = ship.check(built.library, shipped, train, built.names, np.random.default_rng(0))
     data = report.payload(shipped, built, errors, problem, [t.source for t in trials])
     print(report.write(data, built, out, getattr(args, "json", None)))
+    outputs.remember_owned(out, written)
     bad = {name: err for name, err in errors.items() if not err <= ship.TOLERANCE[name]}
     if bad:
         print(f"ident-opt codegen: the compiled code disagrees with the Python model: {bad}", file=sys.stderr)

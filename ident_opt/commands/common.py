@@ -9,8 +9,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ident_opt import outputs
 from ident_opt.errors import InputError
 from ident_opt.report import write_json  # noqa: F401  (every command's --json goes through it)
+
+#: The largest |value| (SI units) of q, dq, ddq or τ that a fit can take: the regressor's products of four
+#: such values stay far from overflow. Far beyond any arm (1e8 rad/s, 1e8 N·m), so --allow-implausible keeps it.
+MAX_MAGNITUDE = 1e8
 
 
 def add_problem_arguments(parser: argparse.ArgumentParser, data: bool = True, json_out: bool = True) -> None:
@@ -53,8 +58,9 @@ class Loaded:
         return self.trials[1] if len(self.trials) > 1 else None
 
 
-def load(args: argparse.Namespace, min_samples: int | None = None) -> Loaded:
-    """The problem file and its data (from --data, the problem's [data] trials, or its [simulate] section)."""
+def load(args: argparse.Namespace, min_samples: int | None = None, fit: bool = True) -> Loaded:
+    """The problem file and its data (from --data, the problem's [data] trials, or its [simulate] section).
+    `fit`: the trials will be fitted, so a joint whose torque never varies is an error (else a warning)."""
     # Deferred: the data loader brings pandas and SciPy (1.5 s); every subcommand's parser imports this module.
     from ident_opt import simulate  # its integrator loads on first use only
     from ident_opt.data import load_dataset
@@ -69,17 +75,43 @@ def load(args: argparse.Namespace, min_samples: int | None = None) -> Loaded:
     kwargs = {"allow_implausible": args.allow_implausible, "drop_invalid": args.drop_invalid}
     if min_samples is not None:
         kwargs["min_samples"] = min_samples
+    outputs.declare_inputs(paths)
     trials = [load_dataset(p, problem.data, problem.robot, **kwargs) for p in paths]
     for trial in trials:
         if trial.dropped_rows:
             print(f"note: {trial.source}: dropped {trial.dropped_rows} invalid row(s)", file=sys.stderr)
+        fittable(trial, fit)
     return Loaded(problem, trials)
+
+
+def fittable(trial, fit: bool = True) -> None:
+    """InputError when `trial` cannot be fitted in double precision (a value beyond `MAX_MAGNITUDE`) or, with
+    `fit`, when a joint's torque never varies (its NMSE would be 0/0); without `fit` the latter is a warning."""
+    for name, values in (("q", trial.q), ("dq", trial.dq), ("ddq", trial.ddq), ("tau", trial.tau)):
+        worst = float(abs(values).max()) if values.size else 0.0
+        if not worst <= MAX_MAGNITUDE:
+            raise InputError(
+                f"{trial.source}: |{name}| reaches {worst:.3g} (SI units), beyond {MAX_MAGNITUDE:.0e}: no fit is "
+                "possible in double precision; check the column's unit (--allow-implausible does not lift this)"
+            )
+    for j in range(trial.tau.shape[1]):
+        column = trial.tau[:, j]
+        if column.size and float(column.max() - column.min()) == 0.0:
+            message = (
+                f"{trial.source}: the torque of joint {j + 1} is constant ({float(column[0]):g} N·m in every row): "
+                "nothing to identify on that joint, and its NMSE would be 0/0; check the column mapping"
+            )
+            if fit:
+                raise InputError(message)
+            print(f"warning: {message}", file=sys.stderr)
 
 
 def output_dir(args: argparse.Namespace, problem, default: Path | None = None) -> Path:
     """--out, else the problem's [output] dir, else `default` (the project's results/)."""
     out = getattr(args, "out", None)
     path = Path(out) if out else (problem.output_dir or default or Path("results"))
+    outputs.check_folder_output(path, "--out")
+    outputs.watch_folder(path)  # created here, so a failed run removes it again
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -14,13 +14,14 @@ between them, in `ORDER`, each as its first file with its title.
 from __future__ import annotations
 
 import json
+import math
 import os
-import tempfile
+import sys
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from ident_opt.errors import InputError
+from ident_opt import outputs
 
 #: Where the manifests live inside an output folder.
 MANIFESTS = ".manifest"
@@ -46,7 +47,7 @@ def record(
     manifest = {"study": study, "title": title, "files": rel, "readme_head": readme_head, "readme_tail": readme_tail}
     folder = out_dir / MANIFESTS
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / f"{study}.json").write_text(json.dumps(manifest, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+    outputs.write_text(folder / f"{study}.json", json.dumps(manifest, indent=1, ensure_ascii=False) + "\n")
     root = out_dir.parent if (out_dir.parent / MANIFESTS).is_dir() else out_dir
     return write_index(root)
 
@@ -62,8 +63,7 @@ def write_index(root: Path) -> Path:
         parts += [f"- [{m['files'][0]}]({m['files'][0]}): {m['title']}" for m in others]
     parts += [m["readme_tail"] for m in main if m["readme_tail"]]
     path = root / "README.md"
-    path.write_text("\n".join(parts) + "\n", encoding="utf-8")
-    return path
+    return outputs.write_text(path, "\n".join(parts) + "\n")
 
 
 def _manifests(root: Path) -> list[dict]:
@@ -99,20 +99,32 @@ def shown(path: str | Path) -> str:
 
 
 def write_json(path: str | Path | None, payload: dict) -> None:
-    """Write `payload` as JSON atomically (a temporary file renamed into place): never half a file. NumPy
-    scalars and arrays and paths are written as plain values. Nothing when `path` is None."""
+    """Write `payload` as strict JSON atomically (`outputs.write_text`): never half a file, never NaN or
+    Infinity. NumPy scalars and arrays and paths are written as plain values; a non-finite number becomes
+    null with a warning on standard error naming its keys. Nothing when `path` is None."""
     if not path:
         return
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        with os.fdopen(fd, "w") as fh:
-            json.dump(payload, fh, indent=2, default=_plain)
-            fh.write("\n")
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot write the JSON output ({exc.strerror})") from None
+    clean, bad = strict(payload)
+    if bad:
+        shown_keys = ", ".join(bad[:5]) + (f" and {len(bad) - 5} more" if len(bad) > 5 else "")
+        print(f"warning: {path}: {len(bad)} non-finite value(s) written as null: {shown_keys}", file=sys.stderr)
+    text = json.dumps(clean, indent=2, allow_nan=False) + "\n"
+    outputs.write_text(path, text)
+
+
+def strict(value: Any, where: str = "", bad: list[str] | None = None) -> tuple[Any, list[str]]:
+    """`value` made of plain JSON types (NumPy values and paths converted), each non-finite number replaced by
+    None; with the keys (`a.b[2]`) where that happened."""
+    bad = [] if bad is None else bad
+    value = _plain(value)
+    if isinstance(value, dict):
+        return {str(k): strict(v, f"{where}.{k}" if where else str(k), bad)[0] for k, v in value.items()}, bad
+    if isinstance(value, (list, tuple)):
+        return [strict(v, f"{where}[{i}]", bad)[0] for i, v in enumerate(value)], bad
+    if isinstance(value, float) and not math.isfinite(value):
+        bad.append(where or "(top level)")
+        return None, bad
+    return value, bad
 
 
 def _plain(value: Any) -> Any:
@@ -121,4 +133,6 @@ def _plain(value: Any) -> Any:
         return value.tolist()
     if isinstance(value, Path):
         return str(value)
+    if value is None or isinstance(value, (str, int, float, bool, dict, list, tuple)):
+        return value
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")

@@ -89,11 +89,17 @@ def read_parameters(path: str) -> dict:
         raise InputError(f"{path}: cannot read the parameters file ({exc})") from None
     if not isinstance(raw, dict) or not isinstance(raw.get("parameters"), dict):
         raise InputError(f"{path}: not a parameters file (expected an object with a 'parameters' object)")
+    model = raw.get("model") or {}
+    extensions = model.get("extensions", []) if isinstance(model, dict) else None
+    if not isinstance(extensions, list) or not all(isinstance(e, str) for e in extensions):
+        raise InputError(f"{path}: key 'model' must be an object whose 'extensions' is a list of names")
+    if raw.get("gmr") is not None and not isinstance(raw["gmr"], dict):
+        raise InputError(f"{path}: key 'gmr' must be an object (weights, means, covariances) or absent")
     return {
         "parameters": raw["parameters"],
         "estimator": str(raw.get("estimator", "unknown")),
         "estimator_status": str(raw.get("estimator_status", "")),
-        "extensions": list((raw.get("model") or {}).get("extensions", [])),
+        "extensions": extensions,
         "gmr": raw.get("gmr"),
         "path": path,
     }
