@@ -126,3 +126,18 @@ def test_identify_writes_its_report(tmp_path):
     result = json.loads((tmp_path / "identify.json").read_text())
     assert set(result["metrics"]["fit"]) == {"ols", "constrained", "consistent", "cad"}
     assert "m_lwr_1_link" in result["se"]["consistent"] and (tmp_path / "identify.md").is_file()
+
+
+def test_optional_robot_keys(tmp_path):
+    extra = (
+        'base = "lwr_base_link"\nfriction = false\narmature = false\noffsets = true\nmass_range = false\n'
+        "com_box = 0.05\nprior_weight = 1e-4\n[robot.lwr_0_joint]\ngear_ratio = 100.0\n"
+    )
+    path = _problem(tmp_path, URDF, JOINTS, extra).read_text().replace("gravity = 9.81", "gravity = [0.0, 0.5, -9.8]")
+    (tmp_path / "b.toml").write_text(path)
+    robot = load_problem(tmp_path / "b.toml").robot
+    assert robot.gravity == (0.0, 0.5, -9.8) and robot.mass_range is None and robot.com_box == 0.05
+    assert robot.arm.joint_terms == ("off",) and robot.arm.n_params == 7 * 11
+    assert robot.drives["lwr_0_joint"].gear_ratio == 100.0
+    with pytest.raises(InputError, match="couplings"):
+        load_problem(_problem(tmp_path, URDF, JOINTS, 'couplings = [["lwr_6_joint", "nope", 1.0]]\n'))
