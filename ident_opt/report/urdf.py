@@ -33,8 +33,10 @@ def _head(result: dict, title: str) -> list[str]:
         f"training data {base['condition_number']:.1f}.",
         "",
         f"The default consistent fit: log-det prior toward the URDF's inertials with weight λ = {prior['weight']:g} "
-        f"(dimensionless, relative to the measured torque energy), link masses within ±{prior['mass_range']} of "
-        f"the URDF's, centres of mass within ±{prior['com_box_m']} m.",
+        f"(dimensionless, relative to the measured torque energy); link masses "
+        + (f"within ±{prior['mass_range']:.0%} of the URDF's" if prior["mass_range"] else "unbounded")
+        + "; centres of mass "
+        + (f"within ±{prior['com_box_m']:g} m of the URDF's." if prior["com_box_m"] else "unbounded."),
     ]
 
 
