@@ -355,7 +355,7 @@ def load_dataset(
         _check_time(t, path, spec)
     n = len(t)
     if n < max(min_samples, 2):
-        raise InputError(f"{path}: only {n} valid samples, fewer than the {max(min_samples, 2)} parameters to identify")
+        raise InputError(f"{path}: only {n} valid samples, fewer than the {max(min_samples, 2)} this command needs")
 
     signals = {kind: np.column_stack([values[c] for c in group]) for kind, group in names.items() if group[0] in values}
     if not allow_implausible:
@@ -465,6 +465,7 @@ def estimate_derivatives(
 # ---------------------------------------------------------------------------------------------- splits
 def shuffled_split(n: int, train_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """The paper's protocol: shuffle the samples, then train on `train_fraction` of them."""
+    _nonempty_parts(n, int(train_fraction * n))
     train, test = train_test_split(np.arange(n), train_size=train_fraction, random_state=seed, shuffle=True)
     return np.sort(train), np.sort(test)
 
@@ -472,4 +473,14 @@ def shuffled_split(n: int, train_fraction: float, seed: int) -> tuple[np.ndarray
 def chronological_split(n: int, train_fraction: float) -> tuple[np.ndarray, np.ndarray]:
     """The honest protocol within one trial: the first part in time trains, the rest tests."""
     cut = round(train_fraction * n)
+    _nonempty_parts(n, cut)
     return np.arange(cut), np.arange(cut, n)
+
+
+def _nonempty_parts(n: int, n_train: int) -> None:
+    """InputError when a split of `n` samples with `n_train` training samples leaves a part empty."""
+    if not 0 < n_train < n:
+        raise InputError(
+            f"a split of {n} samples into {n_train} training and {n - n_train} test samples leaves a part empty; "
+            "give more samples or a [split] train_fraction nearer 0.5"
+        )

@@ -33,7 +33,7 @@ def summary(trial) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    loaded = load(args)
+    loaded = load(args, fit=False)  # a constant torque is a warning here: nothing is fitted
     reports = [summary(trial) for trial in loaded.trials]
     print(
         f"problem {loaded.problem.name!r} ({loaded.problem.path}): robot convention {loaded.problem.robot.convention!r}"
