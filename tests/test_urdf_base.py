@@ -9,6 +9,7 @@ import pytest
 
 from ident_opt.identify.base import base_parameters, fit_base_ols, random_regressor
 from ident_opt.identify.stats import Stats
+from ident_opt.problem import load_problem
 from ident_opt.studies.urdf import necessarily_nonnegative
 from ident_opt.urdf_arm import UrdfArm
 
@@ -78,3 +79,10 @@ def test_necessarily_nonnegative_base_parameters(kuka):
     assert np.all(values[:, definite] >= -1e-12)
     # and the test is not vacuous: some of the other base parameters do go negative for consistent arms
     assert np.any(values[:, ~definite] < 0)
+
+
+@pytest.mark.parametrize(("problem", "count"), [("kuka_lwr4", 69), ("franka_panda", 69), ("staubli_tx40", 58)])
+def test_count_is_the_numerical_rank_on_the_shipped_robots(problem, count):
+    arm = load_problem(Path(__file__).resolve().parents[1] / "problems" / f"{problem}.toml").robot.arm
+    W = random_regressor(arm, 150, seed=3)
+    assert base_parameters(arm).rank == np.linalg.matrix_rank(W) == count
