@@ -68,7 +68,7 @@ def codegen(args: argparse.Namespace, problem) -> int:
         raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
     trials = study.load_trials(paths, problem, allow_implausible=args.allow_implausible, drop_invalid=args.drop_invalid)
     stats = study.stats_of(arm, trials)
-    estimator = getattr(args, "estimator", "consistent")
+    estimator = getattr(args, "estimator", None) or "consistent"
     if estimator == "ols":
         pi = fit_base_ols(stats, arm).pi
     elif estimator == "constrained":
