@@ -143,7 +143,7 @@ BAD = {
         ["'t'", "not strictly increasing", "repeats", "data row 31"],
     ),
     "t goes back": (with_cell(trial_frame(), 40, "t", 0.1), ["'t'", "goes back", "data row 41"]),
-    "too few samples": (trial_frame(5), ["only 5", "parameters"]),
+    "too few samples": (trial_frame(5), ["only 5", "this command needs"]),
     "both pairs": (trial_frame().assign(i1=1.0, i2=1.0), ["both torques", "currents"]),
     "neither pair": (trial_frame().drop(columns=["tau1", "tau2"]), ["neither torques"]),
     "half a pair": (trial_frame().drop(columns=["tau2"]), ["'tau2'", "pairs"]),
