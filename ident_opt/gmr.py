@@ -252,6 +252,44 @@ def conditional(
     return mean, cov
 
 
+def input_log_density(gmr: GMR, X: np.ndarray, chunk: int = 16384) -> np.ndarray:
+    """log p(x) (N,) of a fitted GMR's own input marginal p(x) = Σ_k w_k N(x; μx_k, Σxx_k) [nats, in the
+    units of x]: where the mixture has seen data (high) and where it is guessing (low)."""
+    X = _check_x(X, gmr)
+    c = conditioning(gmr.weights_, gmr.means_, gmr.covariances_, gmr.n_inputs)
+    K, d, _ = c.W.shape
+    W_all = np.swapaxes(c.W, 0, 1).reshape(d, K * d)
+    offs = np.einsum("ki,kij->kj", c.mu_x, c.W).reshape(K * d)
+    out = np.empty(len(X))
+    for s in range(0, len(X), chunk):
+        Z = (X[s : s + chunk] @ W_all - offs).reshape(-1, K, d)
+        log_p = c.log_norm - 0.5 * np.einsum("nkd,nkd->nk", Z, Z)
+        top = log_p.max(axis=1)
+        out[s : s + chunk] = top + np.log(np.exp(log_p - top[:, None]).sum(axis=1))
+    return out
+
+
+@dataclass(frozen=True)
+class Support:
+    """Where a GMR residual may be trusted: x is inside its training support when log p(x) of the GMR's input
+    marginal (`input_log_density`) is at least `threshold` [nats], the `quantile` of the training inputs' own
+    log-densities. Outside, the residual's weight s = exp(−(threshold − log p) / `width`) falls toward 0."""
+
+    threshold: float
+    width: float = 1.0
+    quantile: float = 0.005
+
+    @classmethod
+    def fit(cls, gmr: GMR, X: np.ndarray, quantile: float = 0.005, width: float = 1.0) -> Support:
+        """The support of `gmr` on its training inputs X (N, d)."""
+        return cls(float(np.quantile(input_log_density(gmr, X), quantile)), width, quantile)
+
+    def weight(self, log_p: float) -> float:
+        """s in (0, 1]: 1 inside the support, exp(−deficit / width) outside."""
+        deficit = self.threshold - log_p
+        return 1.0 if deficit <= 0 else float(np.exp(-deficit / self.width))
+
+
 # ---------------------------------------------------------------------------------------------- threads
 @lru_cache(maxsize=1)
 def _blas_controller():

@@ -42,6 +42,7 @@ import casadi as ca
 import numpy as np
 
 from ident_opt.errors import InputError
+from ident_opt.gmr import Support, conditioning, input_log_density
 from ident_opt.identify import estimators
 from ident_opt.identify.bounded import Bounds, WarmBoundedLS, WarmConsistentLS, default_bounds
 from ident_opt.identify.stats import Stats
@@ -50,6 +51,8 @@ from ident_opt.robot import RIGID
 
 #: z-value of the central 95 % interval of a Gaussian.
 Z95 = 1.959963984540054
+#: Samples over which the parametric model's one-step residual variance is averaged (exponential weights).
+PARAMETRIC_MEMORY = 500.0
 
 #: (q (N, 2), dq (N, 2), ddq (N, 2)) -> design (N, 2, P): τ = D θ per sample.
 Design = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
@@ -58,11 +61,13 @@ Design = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 @dataclass
 class Prediction:
     """One sample's predicted torque [N m] (2,), its parametric part, and the predictive standard
-    deviation [N m] (2,) (GMR's Cov[r | x], or the residual RMS of the fit when there is no GMR)."""
+    deviation [N m] (2,) (GMR's Cov[r | x], or the residual RMS of the fit when there is no GMR);
+    `extrapolating`: x lies outside the GMR's training support (`gmr.Support`; only with a guard)."""
 
     tau: np.ndarray
     parametric: np.ndarray
     std: np.ndarray
+    extrapolating: bool = False
 
     @property
     def lower(self) -> np.ndarray:
@@ -118,6 +123,7 @@ class OnlineIdentifier:
         gmr=None,
         cross_covariance: bool = False,
         design_jacobian: Callable[[np.ndarray], np.ndarray] | None = None,
+        support: Support | None = None,
     ):
         self.design = design
         self.estimator = estimator
@@ -142,6 +148,11 @@ class OnlineIdentifier:
                 self._jac_at_means = np.stack([design_jacobian(m) for m in mu_x])  # (K, 2, 6, P)
         if self._solve is not None:
             self.theta = self._solve(self._H, self._h)  # the offline solution, by this estimator
+        self.support = support
+        self._fast = _FastGMR(gmr) if gmr is not None and not cross_covariance else None
+        # The parametric model's own one-step residual variance per joint [N² m²]: starts at the offline fit's
+        # mean square, then follows the one-step residuals (EW, ~`PARAMETRIC_MEMORY` samples).
+        self.parametric_var = np.maximum(self._stats.rss(self.theta), 0.0) / max(self._stats.n, 1)
 
     # ------------------------------------------------------------------ state
     @property
@@ -171,14 +182,32 @@ class OnlineIdentifier:
 
     # ------------------------------------------------------------------ prediction and update
     def predict(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, design: np.ndarray | None = None) -> Prediction:
-        """The current model's torque for one sample (each (2,)); `design` (2, P) if already computed."""
+        """The current model's torque for one sample (each (2,)); `design` (2, P) if already computed.
+
+        With a `support` (extrapolation guard): outside the GMR's training support the prediction is the
+        mixture of the GMR's (weight s) and the parametric model's alone (weight 1 − s, the residual 0 with
+        the parametric model's own one-step residual variance): mean s·E[r|x], variance
+        s·(Var[r|x] + E²) + (1 − s)·σ_par² − (s·E)²."""
         D = self.design(q[None], dq[None], ddq[None])[0] if design is None else design
         parametric = D @ self.theta
         if self._gmr is None:
             return Prediction(parametric, parametric, self.residual_std())
-        x = np.concatenate([q, dq, ddq])[None]
-        mean, cov = self._gmr.predict(x)
-        return Prediction(parametric + mean[0], parametric, np.sqrt(np.diagonal(cov[0])))
+        x = np.concatenate([q, dq, ddq])
+        if self._fast is not None:
+            mean, var, log_p = self._fast.predict(x, self._gmr.means_)
+        else:
+            m, cov = self._gmr.predict(x[None])
+            mean, var, log_p = m[0], np.diagonal(cov[0]).copy(), None
+        if self.support is None:
+            return Prediction(parametric + mean, parametric, np.sqrt(var))
+        if log_p is None:
+            log_p = float(input_log_density(self._gmr, x[None])[0])
+        s = self.support.weight(log_p)
+        if s < 1.0:
+            shrunk = s * mean
+            var = s * (var + mean * mean) + (1.0 - s) * self.parametric_var - shrunk * shrunk
+            mean = shrunk
+        return Prediction(parametric + mean, parametric, np.sqrt(np.maximum(var, 0.0)), log_p < self.support.threshold)
 
     def update(
         self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, tau: np.ndarray, design: np.ndarray | None = None
@@ -191,18 +220,25 @@ class OnlineIdentifier:
         return prediction
 
     def add(self, D: np.ndarray, tau: np.ndarray) -> None:
-        """Fold one sample (design D (2, P), τ (2,)) into the statistics and re-solve θ exactly."""
+        """Fold one sample (design D (2, P), τ (2,)) into the statistics and re-solve θ exactly. All or nothing:
+        when the re-solve fails (raises) or gives a non-finite θ, nothing changes and `FloatingPointError`
+        (or the solver's error) is raised."""
+        r = tau - D @ self.theta  # the parametric model's one-step residual
+        if self._solve is not None:
+            # The combined normal equations (the same rank-2 term as the per-joint Stats), committed only after
+            # the re-solve succeeded.
+            H = self._H + D.T @ D
+            h = self._h + D.T @ tau
+            theta = self._solve(H, h)
+            if not np.isfinite(theta).all():
+                raise FloatingPointError("the re-solve gave a non-finite θ; the sample was not folded in")
+            self._H, self._h, self.theta = H, h, theta
+        self.parametric_var += (r * r - self.parametric_var) / PARAMETRIC_MEMORY
         self._pending.append((D, tau))
         self.n_updates += 1
         if len(self._pending) >= 4096:  # bounded memory: fold the pending samples into the statistics
             _ = self.stats
-        if self._solve is None:
-            return
-        # The combined normal equations, updated in place (the same rank-2 term as the per-joint Stats).
-        self._H += D.T @ D
-        self._h += D.T @ tau
-        self.theta = self._solve(self._H, self._h)
-        if self._gmr is not None:
+        if self._solve is not None and self._gmr is not None:
             self._transform(self.theta - self.theta0)
 
     def _transform(self, delta: np.ndarray) -> None:
@@ -219,6 +255,37 @@ class OnlineIdentifier:
         self._gmr.covariances_[:, d:, :d] = Srx - JSxx
         self._gmr.covariances_[:, :d, d:] = np.swapaxes(Srx - JSxx, 1, 2)
         self._gmr.covariances_[:, d:, d:] = Srr - J @ np.swapaxes(Srx, 1, 2) - Srx @ Jt + JSxx @ Jt
+
+
+class _FastGMR:
+    """One-sample GMR conditioning with the terms that do not change online precomputed (the mean-only
+    consistency transform moves only the output means μr_k): E[r | x], diag Cov[r | x] and log p(x) of the
+    input marginal, the same formulas as `gmr.conditional` without re-deriving Cholesky factors each call."""
+
+    def __init__(self, gmr):
+        c = conditioning(gmr.weights_, gmr.means_, gmr.covariances_, gmr.n_inputs)
+        K, d, _ = c.W.shape
+        self.K, self.d, self.o = K, d, c.A.shape[1]
+        self.W_all = np.ascontiguousarray(np.swapaxes(c.W, 0, 1).reshape(d, K * d))
+        self.offs = np.einsum("ki,kij->kj", c.mu_x, c.W).reshape(K * d)
+        self.log_norm = c.log_norm
+        self.A_all = np.ascontiguousarray(np.transpose(c.A, (2, 0, 1)).reshape(d, K * self.o))
+        self.A_mu = np.einsum("kod,kd->ko", c.A, c.mu_x)  # (K, o)
+        self.C_diag = np.einsum("kii->ki", c.C)  # (K, o)
+
+    def predict(self, x: np.ndarray, means: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """(E[r | x] (o,), diag Cov[r | x] (o,), log p(x)) for one x (d,), with the current `means` (K, d + o)."""
+        z = (x @ self.W_all - self.offs).reshape(self.K, self.d)
+        log_p = self.log_norm - 0.5 * np.einsum("kd,kd->k", z, z)
+        top = log_p.max()
+        e = np.exp(log_p - top)
+        total = e.sum()
+        h = e / total
+        m = (x @ self.A_all).reshape(self.K, self.o) + (means[:, self.d :] - self.A_mu)
+        mean = h @ m
+        dev = m - mean
+        var = h @ (self.C_diag + dev * dev)
+        return mean, var, float(top + np.log(total))
 
 
 def batch_theta(estimator: Estimator, stats: Stats, theta_fixed: np.ndarray | None = None) -> np.ndarray:
@@ -323,13 +390,18 @@ def _ridge_start(train) -> Start:
     return Start("rr", kinematic_design, Estimator("ridge", penalty=penalty), theta0, names, _kinematic_jacobian)
 
 
-def start_identifier(start: Start, train, gmr=None, cross_covariance: bool = False) -> OnlineIdentifier:
+def start_identifier(
+    start: Start, train, gmr=None, cross_covariance: bool = False, guard: bool = False
+) -> OnlineIdentifier:
     """The online identifier of `start` with the statistics of the training trial; `gmr` (unfitted, e.g.
-    `models.make_gmr(problem.residual)`) is fitted here on x = [q dq ddq] → r = τ − Dθ0."""
+    `models.make_gmr(problem.residual)`) is fitted here on x = [q dq ddq] → r = τ − Dθ0; `guard`: the
+    extrapolation guard (`gmr.Support` of the GMR on the training inputs; `OnlineIdentifier.predict`)."""
     D = start.design(train.q, train.dq, train.ddq)
     stats0 = Stats.from_regressor(D, train.tau)
+    support = None
     if gmr is not None:
         gmr.fit(features(train), train.tau - D @ start.theta0)
+        support = Support.fit(gmr, features(train)) if guard else None
     online = OnlineIdentifier(
         start.design,
         start.estimator,
@@ -338,6 +410,7 @@ def start_identifier(start: Start, train, gmr=None, cross_covariance: bool = Fal
         gmr=gmr,
         cross_covariance=cross_covariance,
         design_jacobian=start.jacobian if cross_covariance else None,
+        support=support,
     )
     if start.estimator.kind == "ridge":
         # The recursive ridge reproduces the offline ridge on the same data exactly (a check, not a fit).
@@ -347,14 +420,19 @@ def start_identifier(start: Start, train, gmr=None, cross_covariance: bool = Fal
 
 
 def serving_identifier(
-    model: str, problem, train, components: int | None = None, cross_covariance: bool = False
+    model: str,
+    problem,
+    train,
+    components: int | None = None,
+    cross_covariance: bool = False,
+    guard: bool = True,
 ) -> tuple[Start, OnlineIdentifier]:
     """The identifier `ident-opt online --stream` serves, fitted offline on `train`: `model` is a key of
     `MODEL_KEYS`, with ``+gmr`` for its GMR residual (K = `components`, else the problem's; chosen on blocked
-    validation: the model will predict later motions)."""
+    validation: the model will predict later motions); `guard`: the GMR's extrapolation guard."""
     key, _, extra = model.partition("+")
     if key not in MODEL_KEYS or extra not in ("", "gmr"):
         raise InputError(f"--model must be one of {', '.join(MODEL_KEYS)}, optionally with +gmr; got {model!r}")
     start = offline_start(key, problem, train)
     gmr = make_gmr(problem.residual, components=components, validation="blocked") if extra else None
-    return start, start_identifier(start, train, gmr, cross_covariance=cross_covariance)
+    return start, start_identifier(start, train, gmr, cross_covariance=cross_covariance, guard=guard)

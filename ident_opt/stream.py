@@ -1,20 +1,18 @@
-"""Streaming mode: the online identifier as a service for a controller process.
+"""Streaming mode: the online identifier as a service for a controller process (docs/online.md).
 
-Input on a text stream (standard input), one sample per line, either
-- CSV with a header line naming the columns (any order, extra columns ignored), or
-- JSON lines: one object per line, e.g. {"t": 0.01, "q1": 0.1, "q2": 0.2, "dq1": 0, ..., "tau2": 0.3}.
-The format is detected from the first non-empty line ("{" starts JSON). Needed: q1 q2 dq1 dq2 ddq1 ddq2
-[rad, rad/s, rad/s²] (no derivative estimation here: the data format's zero-phase filter needs future
-samples); tau1 tau2 [N m] — or motor currents i1 i2 [A], converted with the problem's torque constant ×
-gear ratio — when present make the sample update the model (without them the line is a pure prediction
-request); t [s] is echoed when present.
+Input on standard input, one sample per line: CSV with a header line (any order, extra columns ignored), CSV
+without a header when the problem's `[data] header = false` maps column indices, or JSON lines. The first
+non-empty line decides. The problem's `[data.columns]` mapping and its `{column, scale, offset}` conversions
+apply as in the batch loader. Each sample needs q1 q2 [rad]; dq1 dq2 ddq1 ddq2 [rad/s, rad/s²] when given,
+else estimated causally from q and t (`CausalDerivatives`: a linear-phase FIR whose delay is stated, the
+torque delayed to match); tau1 tau2 [N m] or motor currents i1 i2 [A] make the sample an update.
 
-Output, one JSON line per sample (flushed at once):
-    {"n": 17, "t": 0.17, "tau": [τ1, τ2], "lower": [..], "upper": [..], "std": [..], "parametric": [..]}
-(the one-step-ahead prediction made before the sample's torque is used, with its 95 % interval), a line
-{"snapshot": {"n": ..., "parameters": {...}}} every `snapshot_every` updates, and on end of input,
-SIGINT or SIGTERM a last line {"final": {"n": ..., "parameters": {...}}} (also written to `final_path`).
-A malformed line gets {"error": ..., "line": k} on the error stream and is skipped; the stream goes on.
+Guards (nothing on the input kills the stream): lines that are not UTF-8, not parseable, with numbers that
+overflow, missing fields or values outside the batch loader's plausibility limits (`data.PLAUSIBLE`) are
+reported on the error stream as {"error", "kind", "line"} and skipped; a sample whose one-step residual is
+beyond `outlier_k` robust standard deviations is answered but updates nothing (counted); a failed update
+changes nothing. Output is strict JSON (no NaN or Infinity). A header or mapping error is an `InputError`
+(exit status 2, one message), raised before any output.
 """
 
 from __future__ import annotations
@@ -22,93 +20,326 @@ from __future__ import annotations
 import json
 import math
 import signal
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TextIO
 
 import numpy as np
 
+from ident_opt.data import PLAUSIBLE
+from ident_opt.errors import InputError
 from ident_opt.online import OnlineIdentifier, Prediction
 
-#: Columns every sample needs, and the torque columns that make it an update.
-INPUTS = ("q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
+Q, DQ, DDQ = ("q1", "q2"), ("dq1", "dq2"), ("ddq1", "ddq2")
 TORQUES = ("tau1", "tau2")
 CURRENTS = ("i1", "i2")
+#: Every standard name the stream reads.
+STANDARD = ("t", *Q, *DQ, *DDQ, *TORQUES, *CURRENTS)
+#: Columns every sample with logged derivatives needs (kept for callers).
+INPUTS = (*Q, *DQ, *DDQ)
+#: Default robust outlier threshold: residuals beyond this many robust standard deviations update nothing.
+OUTLIER_K = 10.0
+#: Memory (samples) of the robust residual scale; an outlier moves it by 1/`OUTLIER_MEMORY` of its clipped square.
+OUTLIER_MEMORY = 500.0
 
 
 class BadLine(ValueError):
-    """A line that is not a valid sample (reported on the error stream, then skipped)."""
+    """A line that is not a valid sample (reported on the error stream, then skipped); `kind` says why."""
+
+    def __init__(self, message: str, kind: str = "parse"):
+        super().__init__(message)
+        self.kind = kind
+
+
+@dataclass
+class Mapping:
+    """How stream columns become standard names: `columns` {standard name: column name or 0-based index},
+    `conversions` {standard name: (scale, offset)} (value = scale × raw + offset), `header`: whether a CSV
+    stream is expected to start with a header line (the problem's `[data] header`)."""
+
+    columns: dict[str, str | int] = field(default_factory=dict)
+    conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
+    header: bool = True
+
+    @classmethod
+    def from_spec(cls, spec) -> Mapping:
+        """From a problem's `DataSpec`, restricted to the names the stream reads."""
+        cols = {k: v for k, v in spec.columns.items() if k in STANDARD}
+        conv = {k: v for k, v in spec.conversions.items() if k in cols}
+        return cls(cols, conv, bool(spec.header))
+
+    def resolve_header(self, header: list[str]) -> tuple[dict[str, int], dict[str, tuple[float, float]]]:
+        """{standard name: position} for a CSV header, and the conversions that apply; `InputError` when
+        the header lacks q1 q2 (or a mapped column). Rules of the batch loader: a mapping whose names are all
+        in the header is applied as written; else a header with the standard names is read by name."""
+        names = [c.strip() for c in header]
+        if len(set(names)) != len(names):
+            twice = next(n for n in names if names.count(n) > 1)
+            raise InputError(f"stream: column '{twice}' appears twice in the CSV header")
+        fits = bool(self.columns) and all(isinstance(v, str) and v in names for v in self.columns.values())
+        if fits:
+            found = {k: names.index(v) for k, v in self.columns.items()}
+            found.update({n: names.index(n) for n in STANDARD if n in names and n not in found})
+            return found, dict(self.conversions)
+        if set(Q) <= set(names):
+            return {n: names.index(n) for n in STANDARD if n in names}, {}
+        found = {}
+        for k, v in self.columns.items():
+            if isinstance(v, int):
+                if v >= len(names):
+                    raise InputError(
+                        f"stream: [data.columns] maps '{k}' to column {v}, beyond the header's {len(names)} columns"
+                    )
+                found[k] = v
+            elif v in names:
+                found[k] = names.index(v)
+        missing = [n for n in Q if n not in found]
+        if missing:
+            raise InputError(
+                f"stream: the CSV header ({', '.join(names[:20])}) lacks {', '.join(missing)}; "
+                "name them so, or map them with [data.columns] in the problem file"
+            )
+        return found, {k: v for k, v in self.conversions.items() if k in found}
+
+    def by_index(self, width: int) -> tuple[dict[str, int], dict[str, tuple[float, float]]]:
+        """{standard name: position} for a header-less CSV stream from the mapping's column indices."""
+        found = {k: v for k, v in self.columns.items() if isinstance(v, int)}
+        missing = [n for n in Q if n not in found]
+        if missing:
+            raise InputError(
+                "stream: the first line is data, not a header, and [data.columns] maps no column index for "
+                f"{', '.join(missing)}; start the stream with a header line"
+            )
+        beyond = [k for k, v in found.items() if v >= width]
+        if beyond:
+            raise InputError(
+                f"stream: [data.columns] maps '{beyond[0]}' to column {found[beyond[0]]}, beyond the line's "
+                f"{width} fields"
+            )
+        return found, {k: v for k, v in self.conversions.items() if k in found}
+
+
+def _number(text: str) -> float:
+    """A JSON number token as a float: huge integers become ±inf (caught as not finite), never OverflowError."""
+    try:
+        return float(text)
+    except (OverflowError, ValueError):
+        return math.inf
+
+
+def _no_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a number JSON allows")
 
 
 @dataclass
 class LineParser:
-    """Turns lines into {column: float}; learns the format (and the CSV header) from the first line."""
+    """Turns lines into {standard name: float} (SI, conversions applied, currents as torques); learns the
+    format, and the CSV header, from the first non-empty line."""
 
     format: str | None = None  # "csv" or "json", decided by the first non-empty line
     header: list[str] = field(default_factory=list)
     current_to_torque: tuple[float, float] | None = None  # N m / A per joint, for i1 i2 samples
+    mapping: Mapping = field(default_factory=Mapping)
+    positions: dict[str, int] = field(default_factory=dict)
+    conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
+    width: int = 0
 
     def parse(self, line: str) -> dict[str, float] | None:
-        """The sample on `line`, or None for a blank line or the CSV header; raises BadLine."""
+        """The sample on `line`, or None for a blank line or the CSV header; raises BadLine (a bad sample) or
+        InputError (a header or mapping the stream cannot be read with)."""
         text = line.strip()
         if not text:
             return None
         if self.format is None:
             self.format = "json" if text.startswith("{") else "csv"
             if self.format == "csv":
-                self.header = [c.strip() for c in text.split(",")]
-                missing = [c for c in INPUTS if c not in self.header]
-                if missing:
-                    self.format = None  # still waiting for a usable header
-                    raise BadLine(f"CSV header lacks column(s) {', '.join(missing)}")
-                return None
+                cells = [c.strip() for c in text.split(",")]
+                if not self.mapping.header and all(_is_number(c) for c in cells):
+                    self.positions, self.conversions = self.mapping.by_index(len(cells))
+                    self.width = len(cells)
+                    self._check_time_column()
+                else:
+                    self.header = cells
+                    self.positions, self.conversions = self.mapping.resolve_header(cells)
+                    self.width = len(cells)
+                    self._check_time_column()
+                    return None
         if self.format == "json":
-            try:
-                raw = json.loads(text)
-            except json.JSONDecodeError as exc:
-                raise BadLine(f"not JSON ({exc.msg})") from None
-            if not isinstance(raw, dict):
-                raise BadLine("a JSON line must be an object")
+            raw = self._json(text)
         else:
             cells = [c.strip() for c in text.split(",")]
-            if len(cells) != len(self.header):
-                raise BadLine(f"{len(cells)} fields, the header has {len(self.header)}")
-            raw = dict(zip(self.header, cells))
-        return _sample(raw, self.current_to_torque)
+            if len(cells) != self.width:
+                raise BadLine(f"{len(cells)} fields, the {'header' if self.header else 'first line'} has {self.width}")
+            raw = {name: cells[i] for name, i in self.positions.items()}
+        return _sample(raw, self.current_to_torque, self.conversions)
+
+    def _check_time_column(self) -> None:
+        """Without dq and ddq columns the derivatives are estimated, which needs t: else an `InputError`."""
+        derivatives = all(n in self.positions for n in (*DQ, *DDQ))
+        if not derivatives and "t" not in self.positions:
+            raise InputError(
+                "stream: the CSV columns give neither dq1 dq2 ddq1 ddq2 nor t; the derivatives are estimated from "
+                "q and t, so t [s] is needed"
+            )
+
+    def _json(self, text: str) -> dict:
+        try:
+            raw = json.loads(text, parse_int=_number, parse_float=_number, parse_constant=_no_constant)
+        except json.JSONDecodeError as exc:
+            raise BadLine(f"not JSON ({exc.msg})") from None
+        except (ValueError, RecursionError) as exc:
+            raise BadLine(f"not a valid JSON sample ({type(exc).__name__})") from None
+        if not isinstance(raw, dict):
+            raise BadLine("a JSON line must be an object")
+        out = {}
+        for name in STANDARD:  # a mapped key first (with its conversion), else the standard name
+            source = self.mapping.columns.get(name)
+            if isinstance(source, str) and source in raw:
+                out[name] = raw[source]
+                if name in self.mapping.conversions:
+                    self.conversions[name] = self.mapping.conversions[name]
+            elif name in raw:
+                out[name] = raw[name]
+                self.conversions.pop(name, None)
+        return out
 
 
-def _sample(raw: dict, current_to_torque: tuple[float, float] | None = None) -> dict[str, float]:
-    """The numeric fields of a sample, checked: inputs present, every used value a finite number;
-    currents i1 i2 become torques tau1 tau2 [N m]."""
-    missing = [c for c in INPUTS if c not in raw]
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+def _sample(
+    raw: dict, current_to_torque: tuple[float, float] | None = None, conversions: dict | None = None
+) -> dict[str, float]:
+    """The numeric fields of a sample, checked: q present, dq and ddq both or neither, every used value a finite
+    number within `data.PLAUSIBLE`; conversions applied; currents i1 i2 become torques tau1 tau2 [N m]."""
+
+    def present(name):
+        return name in raw and raw[name] not in ("", None)
+
+    missing = [c for c in Q if not present(c)]
     if missing:
         raise BadLine(f"missing field(s) {', '.join(missing)}")
-    torques = [c for c in TORQUES if c in raw and raw[c] not in ("", None)]
-    currents = [c for c in CURRENTS if c in raw and raw[c] not in ("", None)]
-    if len(torques) == 1 or len(currents) == 1:
-        raise BadLine("give both tau1 and tau2 (or both i1 and i2), or neither")
-    if torques and currents:
+    groups = {g: [c for c in names if present(c)] for g, names in (("dq", DQ), ("ddq", DDQ), ("tau", TORQUES))}
+    groups["i"] = [c for c in CURRENTS if present(c)]
+    if any(len(v) == 1 for v in groups.values()):
+        raise BadLine("joint signals come in pairs: give both joints (tau1 and tau2, dq1 and dq2, ...) or neither")
+    if groups["tau"] and groups["i"]:
         raise BadLine("give torques tau1 tau2 or currents i1 i2, not both")
-    if currents and current_to_torque is None:
+    if groups["i"] and current_to_torque is None:
         raise BadLine("currents i1 i2 need the problem's torque constants and gear ratios")
-    out = {}
-    for name in (*INPUTS, *torques, *currents, *(["t"] if raw.get("t") not in (None, "") else [])):
-        value = raw[name]
-        if isinstance(value, bool):
-            raise BadLine(f"{name} is not a number")
-        try:
-            number = float(value)
-        except (TypeError, ValueError):
-            raise BadLine(f"{name} is not a number: {value!r}") from None
-        if not math.isfinite(number):
-            raise BadLine(f"{name} is not finite: {value!r}")
-        out[name] = number
-    if currents:
+    used = [*Q, *groups["dq"], *groups["ddq"], *groups["tau"], *groups["i"], *(["t"] if present("t") else [])]
+    out = {name: _value(name, raw[name], conversions) for name in used}
+    if groups["i"]:
         out["tau1"] = out.pop("i1") * current_to_torque[0]
         out["tau2"] = out.pop("i2") * current_to_torque[1]
     return out
 
 
+def _value(name: str, value, conversions: dict | None) -> float:
+    """One field as a finite, plausible float in SI units (its conversion applied); raises BadLine."""
+    if isinstance(value, bool):
+        raise BadLine(f"{name} is not a number")
+    try:
+        number = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise BadLine(f"{name} is not a number: {str(value)[:40]!r}") from None
+    if conversions and name in conversions:
+        scale, offset = conversions[name]
+        number = scale * number + offset
+    if not math.isfinite(number):
+        raise BadLine(f"{name} is not finite: {str(value)[:40]!r}")
+    kind = name.rstrip("0123456789")
+    if kind in PLAUSIBLE and abs(number) > PLAUSIBLE[kind]:
+        limit = PLAUSIBLE[kind]
+        raise BadLine(f"{name} = {number:.6g} is implausible: |{kind}| > {limit:g} in SI units", "implausible")
+    return number
+
+
+# ---------------------------------------------------------------------------------------------- derivatives
+def derivative_kernels(dt: float, cutoff_hz: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """FIR kernels (oldest sample first) giving dq [rad/s] and ddq [rad/s²] at the window's centre, and the
+    delay in samples.
+
+    The batch loader's recipe (low-pass, central difference, low-pass, central difference), with the zero-phase
+    Butterworth replaced by a symmetric (linear-phase) windowed-sinc low-pass h of 2m + 1 taps at `cutoff_hz`
+    (Hamming window, unit DC gain, m = ⌈0.8 / (cutoff · dt)⌉, at least 2): dq = (g∗h)∗q, ddq = (g∗h)∗(g∗h)∗q with
+    g the central difference. Symmetric kernels have no phase distortion, only a pure delay of 2m + 2 samples.
+    """
+    fc = min(cutoff_hz * dt, 0.45)  # cycles per sample
+    m = max(2, math.ceil(0.8 / fc))
+    n = np.arange(-m, m + 1)
+    h = 2 * fc * np.sinc(2 * fc * n) * np.hamming(2 * m + 1)
+    h /= h.sum()
+    gh = np.convolve(h, [0.5, 0.0, -0.5]) / dt  # one smoothed central difference, 2m + 3 taps
+    k2 = np.convolve(gh, gh)  # 4m + 5 taps, centre 2m + 2
+    k1 = np.zeros_like(k2)
+    k1[m + 1 : m + 1 + gh.size] = gh  # the same centre
+    # np.convolve kernels act on a time series newest-last as conv(x, k)[n] = Σ k[i] x[n − i]: reversed for a dot
+    # product with the buffer (oldest first). Both kernels are antisymmetric/symmetric, reversal only flips signs.
+    return k1[::-1].copy(), k2[::-1].copy(), 2 * m + 2
+
+
+class CausalDerivatives:
+    """dq and ddq estimated online from q and t, `delay` samples late (`derivative_kernels`), with the rest of
+    the sample (torque, t) delayed to match. `push` returns the completed sample `delay` pushes later, or
+    None while the window fills. A time step off the nominal one by more than 25 % (a gap, jitter) restarts
+    the window: the samples in it are lost (counted in `lost`). The nominal step is the stream's first."""
+
+    def __init__(self, cutoff_hz: float):
+        self.cutoff_hz = cutoff_hz
+        self.dt: float | None = None
+        self.k1 = self.k2 = None
+        self.delay = 0
+        self.window: deque = deque()
+        self.pushed = 0
+        self.completed = 0
+        self.restarts = 0
+        self.last_t: float | None = None
+
+    @property
+    def lost(self) -> int:
+        """Samples pushed that no output completed (the last `delay` at the end, and those lost to restarts)."""
+        return self.pushed - self.completed
+
+    def delay_seconds(self) -> float | None:
+        """The stated delay [s] (None before the second sample sets the rate)."""
+        return None if self.dt is None else self.delay * self.dt
+
+    def push(self, sample: dict[str, float]) -> dict[str, float] | None:
+        """Add one sample (with t and q1 q2); raises BadLine when t does not increase."""
+        t = sample["t"]
+        if self.last_t is not None:
+            step = t - self.last_t
+            if step <= 0:
+                raise BadLine(f"t = {t!r} does not increase (last {self.last_t!r})", "time")
+            if self.dt is None:
+                self.dt = step
+                self.k1, self.k2, self.delay = derivative_kernels(step, self.cutoff_hz)
+            elif abs(step - self.dt) > 0.25 * self.dt:
+                self.window.clear()
+                self.restarts += 1
+        self.last_t = t
+        self.pushed += 1
+        self.window.append(sample)
+        if self.k2 is None or len(self.window) < self.k2.size:
+            return None
+        if len(self.window) > self.k2.size:
+            self.window.popleft()
+        q = np.array([[s["q1"], s["q2"]] for s in self.window])
+        centre = dict(self.window[self.delay])
+        dq, ddq = self.k1 @ q, self.k2 @ q
+        centre.update(dq1=float(dq[0]), dq2=float(dq[1]), ddq1=float(ddq[0]), ddq2=float(ddq[1]))
+        self.completed += 1
+        return centre
+
+
+# ---------------------------------------------------------------------------------------------- the service
 def prediction_record(n: int, sample: dict[str, float], p: Prediction) -> dict:
     """The output line for one sample (n = updates so far, t echoed when given)."""
     record: dict = {"n": n}
@@ -120,12 +351,152 @@ def prediction_record(n: int, sample: dict[str, float], p: Prediction) -> dict:
         upper=p.upper.tolist(),
         std=p.std.tolist(),
         parametric=p.parametric.tolist(),
+        extrapolating=bool(p.extrapolating),
     )
     return record
 
 
+@dataclass
+class Counts:
+    """What the stream did, for the final line."""
+
+    lines: int = 0
+    samples: int = 0
+    updates: int = 0
+    predictions: int = 0
+    outliers: int = 0
+    extrapolating: int = 0
+    skipped: dict[str, int] = field(default_factory=dict)
+
+    def skip(self, kind: str) -> None:
+        self.skipped[kind] = self.skipped.get(kind, 0) + 1
+
+
+@dataclass
+class StreamOptions:
+    """How `serve` reads and guards: the column `mapping`, `current_to_torque` [N m/A per joint],
+    `cutoff_hz` of the causal derivative filter (used when dq/ddq are not given), `outlier_k` (0: no residual
+    test), `snapshot_every` updates."""
+
+    mapping: Mapping = field(default_factory=Mapping)
+    current_to_torque: tuple[float, float] | None = None
+    cutoff_hz: float = 15.0
+    outlier_k: float = OUTLIER_K
+    snapshot_every: int = 1000
+
+
 class _Stop(Exception):
     """SIGTERM or SIGINT while waiting for input."""
+
+
+class Service:
+    """One stream's state: parser, causal derivatives, robust residual scale, counts."""
+
+    def __init__(self, identifier: OnlineIdentifier, names: tuple[str, ...], options: StreamOptions):
+        self.ident, self.names, self.options = identifier, names, options
+        self.parser = LineParser(current_to_torque=options.current_to_torque, mapping=options.mapping)
+        self.derivatives = CausalDerivatives(options.cutoff_hz)
+        self.counts = Counts()
+        self.scale2: np.ndarray | None = None  # robust residual variance per joint [N² m²]
+
+    def line(self, raw: str | bytes, lineno: int) -> list[dict]:
+        """The output records for one input line; raises BadLine or InputError."""
+        if isinstance(raw, bytes):
+            try:
+                raw = raw.decode("utf-8")
+            except UnicodeDecodeError:
+                raise BadLine("not valid UTF-8", "encoding") from None
+        sample = self.parser.parse(raw)
+        if sample is None:
+            return []
+        self.counts.samples += 1
+        if "dq1" not in sample or "ddq1" not in sample:
+            if "t" not in sample:
+                raise BadLine("t is needed to estimate dq and ddq (the sample gives neither both)")
+            sample = self.derivatives.push(sample)
+            if sample is None:
+                return []
+            for name in (*DQ, *DDQ):
+                kind = name.rstrip("12")
+                if not abs(sample[name]) <= PLAUSIBLE[kind]:
+                    raise BadLine(f"estimated {name} = {sample[name]:.6g} is implausible", "implausible")
+        return self.step(sample)
+
+    def step(self, sample: dict[str, float]) -> list[dict]:
+        """Predict one complete sample and, when it has a torque that passes the residual test, fold it in."""
+        q = np.array([sample["q1"], sample["q2"]])
+        dq = np.array([sample["dq1"], sample["dq2"]])
+        ddq = np.array([sample["ddq1"], sample["ddq2"]])
+        D = self.ident.design(q[None], dq[None], ddq[None])[0]
+        p = self.ident.predict(q, dq, ddq, D)
+        if not (np.isfinite(p.tau).all() and np.isfinite(p.std).all()):
+            raise BadLine("the prediction is not finite for this sample", "numeric")
+        self.counts.extrapolating += bool(p.extrapolating)
+        out = []
+        if "tau1" in sample:
+            tau = np.array([sample["tau1"], sample["tau2"]])
+            if self._outlier(tau - p.parametric):
+                self.counts.outliers += 1
+                record = prediction_record(self.ident.n_updates, sample, p)
+                record["outlier"] = True
+                return [record]
+            try:
+                self.ident.add(D, tau)
+            except (FloatingPointError, RuntimeError, np.linalg.LinAlgError, ValueError) as exc:
+                raise BadLine(f"update failed, sample not used ({type(exc).__name__}: {exc})", "numeric") from None
+            self.counts.updates += 1
+            out.append(prediction_record(self.ident.n_updates, sample, p))
+            every = self.options.snapshot_every
+            if every and self.ident.n_updates % every == 0:
+                out.append({"snapshot": self.parameters()})
+        else:
+            self.counts.predictions += 1
+            out.append(prediction_record(self.ident.n_updates, sample, p))
+        return out
+
+    def _outlier(self, r: np.ndarray) -> bool:
+        """Robust residual test on the parametric model's one-step residual r = τ − Dθ [N m]: |r_j| > k·s_j for a
+        joint j, with s² a winsorised running mean square of past residuals (each clipped at (k s)², so one
+        spike barely moves it and a lasting change is accepted after a few samples), started at the offline
+        fit's residual mean square. The GMR is left out: where it extrapolates, its error is not the sample's."""
+        k = self.options.outlier_k
+        if not k:
+            return False
+        if self.scale2 is None:
+            self.scale2 = np.maximum(self.ident.parametric_var.copy(), 1e-12)
+        r2 = r * r
+        outlier = bool(np.any(r2 > k * k * self.scale2))
+        self.scale2 += (np.minimum(r2, k * k * self.scale2) - self.scale2) / OUTLIER_MEMORY
+        return outlier
+
+    def parameters(self) -> dict:
+        """{"n", "parameters"} of the current θ."""
+        return {"n": self.ident.n_updates, "parameters": dict(zip(self.names, map(float, self.ident.theta)))}
+
+    def final(self) -> dict:
+        """The final record."""
+        c = self.counts
+        estimated = self.derivatives.dt is not None
+        return {
+            "final": {
+                **self.parameters(),
+                "lines": c.lines,
+                "samples": c.samples,
+                "updates": c.updates,
+                "predictions": c.predictions,
+                "outliers": c.outliers,
+                "extrapolating": c.extrapolating,
+                "skipped": dict(c.skipped),
+                "derivatives": {
+                    "estimated": estimated,
+                    "delay_samples": self.derivatives.delay if estimated else 0,
+                    "delay_s": self.derivatives.delay_seconds() if estimated else 0.0,
+                    "cutoff_hz": self.derivatives.cutoff_hz if estimated else None,
+                    "lost": self.derivatives.lost,
+                    "restarts": self.derivatives.restarts,
+                },
+            }
+        }
 
 
 def serve(
@@ -137,14 +508,20 @@ def serve(
     snapshot_every: int = 1000,
     on_final: Callable[[dict], None] | None = None,
     current_to_torque: tuple[float, float] | None = None,
+    options: StreamOptions | None = None,
 ) -> dict:
     """Run the stream until end of input, SIGINT or SIGTERM; returns (and writes) the final record.
 
-    names: the parameter names of `identifier` (for the snapshots); on_final: called with the final
-    record (e.g. to write it to a file) after it has been printed; current_to_torque: N m / A per joint
-    (torque constant × gear ratio) for samples that give motor currents.
+    names: the parameter names of `identifier` (for the snapshots); instream: text or binary (bytes are
+    decoded as strict UTF-8 per line); on_final: called with the final record (e.g. to write it to a file)
+    after it has been printed; current_to_torque: N m / A per joint for samples that give motor currents
+    (overrides `options`). A header or mapping error raises `InputError` before any output.
     """
-    parser = LineParser(current_to_torque=current_to_torque)
+    options = options or StreamOptions()
+    options.snapshot_every = snapshot_every
+    if current_to_torque is not None:
+        options.current_to_torque = current_to_torque
+    service = Service(identifier, names, options)
     state = {"reading": False, "stop": False}
 
     def on_term(signum, frame):
@@ -155,53 +532,68 @@ def serve(
             raise _Stop
 
     previous = {sig: _install(sig, on_term) for sig in (signal.SIGTERM, signal.SIGINT)}
-    lineno = 0
     try:
-        while not state["stop"]:
-            state["reading"] = True
-            try:
-                line = instream.readline()
-            finally:
-                state["reading"] = False
-            if not line:
-                break
-            lineno += 1
-            try:
-                sample = parser.parse(line)
-            except BadLine as exc:
-                _emit(errstream, {"error": str(exc), "line": lineno})
-                continue
-            if sample is None:
-                continue
-            q = np.array([sample["q1"], sample["q2"]])
-            dq = np.array([sample["dq1"], sample["dq2"]])
-            ddq = np.array([sample["ddq1"], sample["ddq2"]])
-            if "tau1" in sample:
-                p = identifier.update(q, dq, ddq, np.array([sample["tau1"], sample["tau2"]]))
-            else:
-                p = identifier.predict(q, dq, ddq)
-            _emit(outstream, prediction_record(identifier.n_updates, sample, p))
-            if "tau1" in sample and snapshot_every and identifier.n_updates % snapshot_every == 0:
-                _emit(outstream, {"snapshot": _parameters(identifier, names)})
+        _loop(service, instream, outstream, errstream, state)
     except (KeyboardInterrupt, _Stop):
         pass
     finally:
         for sig, handler in previous.items():
             _install(sig, signal.SIG_DFL if handler is None else handler)
-    final = {"final": _parameters(identifier, names)}
+    final = service.final()
     _emit(outstream, final)
     if on_final is not None:
         on_final(final)
     return final
 
 
-def _parameters(identifier: OnlineIdentifier, names: tuple[str, ...]) -> dict:
-    return {"n": identifier.n_updates, "parameters": dict(zip(names, map(float, identifier.theta)))}
+def _loop(service: Service, instream, outstream: TextIO, errstream: TextIO, state: dict) -> None:
+    lineno = 0
+    while not state["stop"]:
+        state["reading"] = True
+        try:
+            line = instream.readline()
+        except UnicodeDecodeError:  # a text stream with strict decoding: report and go on
+            line = b"\xff"
+        finally:
+            state["reading"] = False
+        if not line:
+            break
+        lineno += 1
+        service.counts.lines += 1
+        try:
+            records = service.line(line, lineno)
+        except InputError:
+            raise
+        except BadLine as exc:
+            service.counts.skip(exc.kind)
+            _emit(errstream, {"error": str(exc), "kind": exc.kind, "line": lineno})
+            continue
+        except Exception as exc:  # the stream never dies on input: report, skip, go on
+            service.counts.skip("internal")
+            _emit(errstream, {"error": f"{type(exc).__name__}: {exc}", "kind": "internal", "line": lineno})
+            continue
+        for record in records:
+            _emit(outstream, record)
 
 
 def _emit(stream: TextIO, record: dict) -> None:
-    stream.write(json.dumps(record) + "\n")
+    """One strict-JSON line (no NaN or Infinity: a non-finite value becomes null), flushed."""
+    try:
+        text = json.dumps(record, allow_nan=False)
+    except ValueError:
+        text = json.dumps(_finite(record), allow_nan=False)
+    stream.write(text + "\n")
     stream.flush()
+
+
+def _finite(value):
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
 
 
 def _install(signum, handler):

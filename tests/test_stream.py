@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from ident_opt.data import chronological_split
+from ident_opt.errors import InputError
 from ident_opt.online import offline_start, start_identifier
 from ident_opt.stream import BadLine, LineParser, serve
 
@@ -70,8 +71,8 @@ def test_parser_formats_and_bad_lines():
     ):
         with pytest.raises(BadLine):
             j.parse(bad)
-    with pytest.raises(BadLine):
-        LineParser().parse("a,b,c\n")  # a header without the needed columns
+    with pytest.raises(InputError):
+        LineParser().parse("a,b,c\n")  # a header without the needed columns: the stream cannot be read
 
 
 def test_serve_equals_replay_and_skips_bad_lines(physical_problem, small):
@@ -159,7 +160,9 @@ def test_cli_stream_equals_cli_replay(physical_problem, small, tmp_path):
     result = replay(
         physical_problem, train, test.subset(np.arange(n)), keys=("pbr",), components=2, checks=0, progress=False
     )
-    proc = _start_stream(small, "--model", "pbr+gmr", "--final", str(tmp_path / "final.json"))
+    proc = _start_stream(
+        small, "--model", "pbr+gmr", "--final", str(tmp_path / "final.json"), "--no-guard", "--outlier-k", "0"
+    )
     lines = [json.dumps({k: float(v) for k, v in row.items()}) for row in _rows(test, n)]
     lines.insert(10, "{broken")
     out, err = proc.communicate("\n".join(lines) + "\n", timeout=120)

@@ -42,6 +42,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--final", metavar="F", help="--stream: also write the final parameters to F (JSON)")
     parser.add_argument(
+        "--outlier-k",
+        type=float,
+        default=10.0,
+        metavar="K",
+        help="--stream: a sample whose residual is beyond K robust standard deviations updates nothing "
+        "(0: no test; default 10)",
+    )
+    parser.add_argument(
+        "--no-guard",
+        action="store_true",
+        help="--stream: no GMR extrapolation guard (the residual is used even outside its training support)",
+    )
+    parser.add_argument(
         "--cross-covariance", action="store_true", help="also apply the first-order cross-covariance update to the GMRs"
     )
     parser.add_argument(
@@ -63,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--snapshot-every must be ≥ 0")
     if args.checks < 0:
         raise InputError("--checks must be ≥ 0")
+    if not args.outlier_k >= 0:
+        raise InputError("--outlier-k must be ≥ 0")
     if args.components is not None and args.components < 1:
         raise InputError("--components must be ≥ 1")
     # Deferred: the models load NumPy, scikit-learn and CasADi, the report matplotlib; `ident-opt --help` builds
@@ -98,10 +113,20 @@ def run(args: argparse.Namespace) -> int:
 
 def _stream(args: argparse.Namespace, problem, train) -> int:
     """The offline fit of --model, then samples from standard input until its end or a signal."""
+    from ident_opt.data import resolve_cutoff
     from ident_opt.online import serving_identifier
-    from ident_opt.stream import serve
+    from ident_opt.stream import Mapping, StreamOptions, serve
 
-    start, ident = serving_identifier(args.model, problem, train, args.components, args.cross_covariance)
+    start, ident = serving_identifier(
+        args.model, problem, train, args.components, args.cross_covariance, guard=not args.no_guard
+    )
+    cutoff = train.cutoff_hz or resolve_cutoff(problem.data.derivative_cutoff_hz, train.t, train.q)[0]
+    options = StreamOptions(
+        mapping=Mapping.from_spec(problem.data),
+        current_to_torque=tuple(j.current_to_torque for j in problem.robot.joints),
+        cutoff_hz=float(cutoff),
+        outlier_k=args.outlier_k,
+    )
     print(
         f"ident-opt online --stream: {args.model} ready (offline fit on {train.n} samples); reading samples",
         file=sys.stderr,
@@ -110,11 +135,11 @@ def _stream(args: argparse.Namespace, problem, train) -> int:
     serve(
         ident,
         start.names,
-        sys.stdin,
+        getattr(sys.stdin, "buffer", sys.stdin),  # bytes: invalid UTF-8 is a reported line, not a crash
         sys.stdout,
         sys.stderr,
         args.snapshot_every,
         on_final=(lambda record: write_json(args.final, record)) if args.final else None,
-        current_to_torque=tuple(j.current_to_torque for j in problem.robot.joints),
+        options=options,
     )
     return 0
