@@ -41,6 +41,14 @@ class Dataset:
     dropped_rows: int = 0
     notes: list[str] = field(default_factory=list)
     cutoff_hz: float | None = None  # the derivative filter's cut-off actually used (None: derivatives given)
+    #: τ through the same zero-phase low-pass as the angles (parallel filtering), for fits; None: τ as logged
+    tau_filtered: np.ndarray | None = None
+
+    @property
+    def tau_fit(self) -> np.ndarray:
+        """The torque fits use [N m]: filtered like the regressor's inputs when derivatives were estimated, so
+        a fit compares like with like. Scores always use the measured `tau`."""
+        return self.tau if self.tau_filtered is None else self.tau_filtered
 
     @property
     def n(self) -> int:
@@ -60,6 +68,7 @@ class Dataset:
             dq=self.dq[index],
             ddq=self.ddq[index],
             tau=self.tau[index],
+            tau_filtered=None if self.tau_filtered is None else self.tau_filtered[index],
             extra=self.extra.iloc[np.arange(self.n)[index]].reset_index(drop=True),
         )
 
@@ -381,7 +390,52 @@ def load_dataset(
         notes.append(f"dropped {dropped} invalid row(s)")
     extra = _extra_columns(frame, cols, keep)
     cutoff_hz = None if how == "given" else cutoff
-    return Dataset(str(path), t, q, dq, ddq, tau, extra, how, dropped, notes, cutoff_hz)
+    tau_filtered = None if cutoff_hz is None else lowpass(t, tau, cutoff_hz)
+    return Dataset(str(path), t, q, dq, ddq, tau, extra, how, dropped, notes, cutoff_hz, tau_filtered)
+
+
+def refiltered(d: Dataset, cutoff_hz: float) -> Dataset:
+    """The trial with its derivatives (and the fit's filtered torque) estimated again at `cutoff_hz` [Hz], from
+    its angles (and its logged velocities, if the file had them); logged accelerations stay as they are."""
+    logged_dq = d.dq if "velocities as logged" in d.derivatives else None
+    dq, ddq, how = estimate_derivatives(d.t, d.q, cutoff_hz, logged_dq)
+    if "accelerations as logged" in d.derivatives:
+        ddq = d.ddq
+    return replace(d, dq=dq, ddq=ddq, derivatives=how, cutoff_hz=cutoff_hz, tau_filtered=lowpass(d.t, d.tau, cutoff_hz))
+
+
+def concat(trials: list[Dataset]) -> Dataset:
+    """Several trials as one sample set (a pool): their samples one after the other, each with the derivatives
+    estimated in its own file (no filter ran across a join). t is shifted to keep increasing [s]; statistics of
+    the pool equal the sum of each trial's."""
+    if len(trials) == 1:
+        return trials[0]
+    shifted, offset = [], 0.0
+    for d in trials:
+        shifted.append(d.t - d.t[0] + offset)
+        offset = shifted[-1][-1] + float(np.median(np.diff(d.t)))
+    filtered = [d.tau_fit for d in trials]
+    cutoffs = {d.cutoff_hz for d in trials}
+    return Dataset(
+        " + ".join(d.source for d in trials),
+        np.concatenate(shifted),
+        *(np.concatenate([getattr(d, k) for d in trials]) for k in ("q", "dq", "ddq", "tau")),
+        extra=pd.concat([d.extra for d in trials], ignore_index=True),
+        derivatives="; ".join(dict.fromkeys(d.derivatives for d in trials)),
+        dropped_rows=sum(d.dropped_rows for d in trials),
+        cutoff_hz=cutoffs.pop() if len(cutoffs) == 1 else None,
+        tau_filtered=np.concatenate(filtered),
+    )
+
+
+def lowpass(t: np.ndarray, x: np.ndarray, cutoff_hz: float) -> np.ndarray:
+    """`x` (N, J) through the derivative estimate's zero-phase 4th-order Butterworth at `cutoff_hz` (at the
+    median step; unchanged at or above Nyquist or for 30 samples or fewer)."""
+    fs = 1.0 / float(np.median(np.diff(t)))
+    if cutoff_hz >= 0.5 * fs or len(t) <= 30:
+        return x
+    b, a = signal.butter(4, cutoff_hz / (0.5 * fs))
+    return signal.filtfilt(b, a, x, axis=0)
 
 
 # ---------------------------------------------------------------------------------------------- derivatives

@@ -161,6 +161,18 @@ class DataSpec:
     derivative_cutoff_hz: float | str = 15.0  # Hz, or "auto"
     conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
     standard_by_name: bool = True
+    train: tuple[Path, ...] = ()  # training trials (`train = [...]`): their statistics add up
+    test: tuple[Path, ...] = ()  # held-out trials (`test = [...]`), each scored and pooled
+
+    @property
+    def training(self) -> tuple[Path, ...]:
+        """The training trials: `train`, else the first of `trials` (the legacy reading)."""
+        return self.train or self.trials[:1]
+
+    @property
+    def testing(self) -> tuple[Path, ...]:
+        """The held-out trials: `test`, else the second of `trials` (the legacy unseen trial)."""
+        return self.test if self.train or self.test else self.trials[1:2]
 
 
 @dataclass(frozen=True)
@@ -221,6 +233,16 @@ class Problem:
     simulate: SimulateSpec | None = None
     output_dir: Path | None = None
     limits: Limits | None = None
+    reference: Reference | None = None
+
+
+@dataclass(frozen=True)
+class Reference:
+    """`[reference]`: a published identification of the same arm to compare against (not ground truth):
+    `label` and the grouped parameters by name (SI units, `docs/conventions.md`)."""
+
+    label: str
+    parameters: dict[str, float]
 
 
 class _Table:
@@ -482,12 +504,25 @@ def _cutoff(table: _Table) -> float | str:
     return table.positive("derivative_cutoff_hz", DataSpec.derivative_cutoff_hz, high=LIMITS["rate_hz"])
 
 
+def _paths(table: _Table, key: str) -> list[str]:
+    """A list of data files under `key` of [data] (strings), or []."""
+    paths = table.take(key, list, [])
+    for i, trial in enumerate(paths):
+        if not isinstance(trial, str):
+            raise InputError(f"{table.path}: key '{key}' in [data]: entry {i} must be a path string")
+    return paths
+
+
 def _data(table: _Table, base: Path, n_joints: int = 2) -> DataSpec:
     known = DATA_COLUMNS if n_joints == 2 else data_columns(n_joints)
-    trials = table.take("trials", list, [])
-    for i, trial in enumerate(trials):
-        if not isinstance(trial, str):
-            raise InputError(f"{table.path}: key 'trials' in [data]: entry {i} must be a path string")
+    trials, train, test = _paths(table, "trials"), _paths(table, "train"), _paths(table, "test")
+    if trials and (train or test):
+        raise InputError(
+            f"{table.path}: [data] lists both 'trials' and 'train'/'test'; use 'train' and 'test' "
+            "(or 'trials' alone: the first trains, the second is held out)"
+        )
+    if test and not train:
+        raise InputError(f"{table.path}: key 'test' in [data] needs 'train' (the trials to identify on)")
     columns_table = table.table("columns", required=False)
     columns: dict[str, str | int] = {}
     conversions: dict[str, tuple[float, float]] = {}
@@ -498,7 +533,9 @@ def _data(table: _Table, base: Path, n_joints: int = 2) -> DataSpec:
         if conversion is not None:
             conversions[key] = conversion
     spec = DataSpec(
-        trials=tuple(_relative(base, t) for t in trials),
+        trials=tuple(_relative(base, t) for t in trials) or tuple(_relative(base, t) for t in train + test),
+        train=tuple(_relative(base, t) for t in train),
+        test=tuple(_relative(base, t) for t in test),
         header=table.take("header", bool, True),
         sheet=table.take("sheet", str, None),
         columns=columns,
@@ -639,6 +676,7 @@ def load_problem(path: str | Path) -> Problem:
     residual = _residual(top.table("residual", required=False))
     simulate = _simulate(top.table("simulate")) if "simulate" in top.raw else None
     limits = _limits(top.table("limits")) if "limits" in top.raw else None
+    reference = _reference(top.table("reference")) if "reference" in top.raw else None
     output = top.table("output", required=False)
     out_dir = output.take("dir", str, None)
     output.done()
@@ -653,4 +691,17 @@ def load_problem(path: str | Path) -> Problem:
         simulate=simulate,
         output_dir=_relative(base, out_dir) if out_dir else None,
         limits=limits,
+        reference=reference,
     )
+
+
+def _reference(table: _Table) -> Reference:
+    """`[reference]`: label = "…" and [reference.parameters] name = value (finite numbers, |v| ≤ 10⁶)."""
+    label = table.take("label", str)
+    values = table.table("parameters")
+    params = {str(k): values.number(str(k), None, -1e6, 1e6) for k in list(values.raw)}
+    values.done()
+    table.done()
+    if not params:
+        raise InputError(f"{table.path}: [reference.parameters] is empty; give the parameters by name (a1 = …)")
+    return Reference(label, params)

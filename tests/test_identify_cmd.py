@@ -61,7 +61,7 @@ def run(tmp_path_factory):
         str(problem_file),
         "--data",
         str(trials[0]),
-        "--data",
+        "--test-data",
         str(trials[1]),
         "--out",
         str(out),

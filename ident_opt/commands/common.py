@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +26,13 @@ def add_problem_arguments(parser: argparse.ArgumentParser, data: bool = True, js
             "--data",
             metavar="D",
             action="append",
-            help="data file(s) to use instead of the problem's [data] trials; repeat for a second (unseen) trial",
+            help="a training trial, instead of the problem's [data] trials; repeatable (statistics add up)",
+        )
+        parser.add_argument(
+            "--test-data",
+            metavar="T",
+            action="append",
+            help="a held-out trial, instead of the problem's; repeatable (each is scored, and their pool)",
         )
     if json_out:
         parser.add_argument("--json", metavar="F", help="also write a machine-readable result to F")
@@ -44,18 +50,29 @@ def add_problem_arguments(parser: argparse.ArgumentParser, data: bool = True, js
 
 @dataclass
 class Loaded:
-    """A problem with its trials: `trials[0]` identifies, `trials[1]` (if any) is the unseen trial."""
+    """A problem with its trials: `training` (every --data, or the problem's) and `testing` (every --test-data,
+    or the problem's); `trials` is both, in that order. `train`/`unseen` are the first of each (for a command
+    that takes one trial of each); with no held-out trial, `unseen` is the second training trial (the legacy
+    reading of a repeated --data)."""
 
     problem: Any
     trials: list
+    training: list = field(default_factory=list)
+    testing: list = field(default_factory=list)
+
+    def __post_init__(self):
+        if not self.training and not self.testing:  # built from one list: the first trains, the second is unseen
+            self.training, self.testing = self.trials[:1], self.trials[1:2]
 
     @property
     def train(self):
-        return self.trials[0]
+        return self.training[0]
 
     @property
     def unseen(self):
-        return self.trials[1] if len(self.trials) > 1 else None
+        if self.testing:
+            return self.testing[0]
+        return self.training[1] if len(self.training) > 1 else None
 
 
 def load(args: argparse.Namespace, min_samples: int | None = None, fit: bool = True) -> Loaded:
@@ -67,7 +84,8 @@ def load(args: argparse.Namespace, min_samples: int | None = None, fit: bool = T
     from ident_opt.problem import load_problem
 
     problem = load_problem(args.problem)
-    paths = [Path(p) for p in (getattr(args, "data", None) or [])] or list(problem.data.trials)
+    train, test = _trial_paths(args, problem)
+    paths, n_train = train + test, len(train) or 1
     if not paths and problem.simulate is not None:
         paths = simulate.problem_trials(problem)  # generated on first use, cached
     if not paths:
@@ -81,7 +99,17 @@ def load(args: argparse.Namespace, min_samples: int | None = None, fit: bool = T
         if trial.dropped_rows:
             print(f"note: {trial.source}: dropped {trial.dropped_rows} invalid row(s)", file=sys.stderr)
         fittable(trial, fit)
-    return Loaded(problem, trials)
+    return Loaded(problem, trials, trials[:n_train], trials[n_train:])
+
+
+def _trial_paths(args: argparse.Namespace, problem) -> tuple[list[Path], list[Path]]:
+    """(training, held-out) files: every --data trains and every --test-data is held out; without --data the
+    problem's [data] decides (`train`/`test`, or `trials`: the first trains, the second is held out)."""
+    data = [Path(p) for p in (getattr(args, "data", None) or [])]
+    test = [Path(p) for p in (getattr(args, "test_data", None) or [])]
+    if data:
+        return data, test
+    return list(problem.data.training), test or list(problem.data.testing)
 
 
 def fittable(trial, fit: bool = True) -> None:

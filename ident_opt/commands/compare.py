@@ -10,6 +10,7 @@ machine-readable result. `--constraints-study N` instead runs the study of where
 from __future__ import annotations
 
 import argparse
+import sys
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
 from ident_opt.errors import InputError
@@ -86,16 +87,20 @@ def run(args: argparse.Namespace) -> int:
     loaded = load(args, min_samples=2 * model.n_params)
     out = output_dir(args, loaded.problem)
     result = compare.compare_estimators(
-        loaded.train,
+        loaded.training,
         loaded.problem.robot,
         loaded.problem.split,
-        loaded.unseen,
+        loaded.testing or None,
         model=model,
         margin=args.margin,
         weights=None if args.weights == "ols" else "wls",
         progress=not args.no_progress,
+        reference=loaded.problem.reference,
+        conversions=loaded.problem.data.conversions,
     )
     files = report.write(result, out, args.json)
     print(report.to_terminal(result))
+    for warning in result.trust.warnings:
+        print(warning, file=sys.stderr)
     print(f"wrote {', '.join(files)} to {out.resolve()}")
     return 0

@@ -36,8 +36,12 @@ def run(args: argparse.Namespace) -> int:
     from ident_opt.studies.identify import identify, steps
 
     start = time.perf_counter()
+    from ident_opt.data import concat
+
     loaded = load(args, min_samples=50)
-    problem, trial, unseen = loaded.problem, loaded.train, loaded.unseen
+    # Several training (held-out) trials are pooled: derivatives were estimated per file, so nothing straddles.
+    problem, trial = loaded.problem, concat(loaded.training)
+    unseen = concat(loaded.testing) if loaded.testing else None
     out = output_dir(args, problem)
     total = steps(problem, unseen, not args.no_variants) + report.figure_count(unseen is not None)
     with tqdm(total=total, desc="identify", unit="step", file=sys.stderr, leave=False) as bar:
@@ -52,6 +56,7 @@ def _command(args: argparse.Namespace) -> str:
     """The command line, rebuilt from the parsed flags (for the README)."""
     parts = ["ident-opt identify", f"--problem {args.problem}"]
     parts += [f"--data {d}" for d in (args.data or [])]
+    parts += [f"--test-data {d}" for d in (args.test_data or [])]
     parts += [f"--out {args.out}"] if args.out else []
     parts += [f"--json {args.json}"] if args.json else []
     parts += ["--no-variants"] if args.no_variants else []

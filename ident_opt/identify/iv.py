@@ -55,12 +55,13 @@ class InstrumentStats:
     @classmethod
     def from_data(cls, arm: Arm, data: Dataset, ratio: float = INSTRUMENT_RATIO) -> InstrumentStats:
         """Y from the trial's q, dq, ddq; Z from the same angles differentiated at `ratio` × its cut-off
-        (the trial's own, or for logged derivatives the one `data.choose_cutoff` reads from its spectrum)."""
+        (the trial's own, or for logged derivatives the one `data.choose_cutoff` reads from its spectrum);
+        τ filtered like the regressor's inputs (`Dataset.tau_fit`)."""
         cutoff = data.cutoff_hz if data.cutoff_hz is not None else choose_cutoff(data.t, data.q)
         dq_z, ddq_z, _ = estimate_derivatives(data.t, data.q, ratio * cutoff)
         Y = arm.regressor(data.q, data.dq, data.ddq)
         Z = arm.regressor(data.q, dq_z, ddq_z)
-        return cls.from_regressors(Y, Z, data.tau)
+        return cls.from_regressors(Y, Z, data.tau_fit)
 
     def __add__(self, other: InstrumentStats) -> InstrumentStats:
         """The statistics of both trials together (derivatives never straddle two trials)."""

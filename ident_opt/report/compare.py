@@ -47,6 +47,7 @@ LABELS = {
     "ols": "OLS",
     "constrained": "constrained",
     "nlp_physical": "NLP-physical",
+    "iv": "IV",
 }
 
 
@@ -102,16 +103,14 @@ def _with_se(c: Comparison) -> pd.DataFrame:
                 cells.append(fmt(v))
             else:
                 cells.append(f"{fmt(v)} ± {fmt(se.iloc[i], 2)}")
-        out[LABELS.get(key, key)] = cells
+        out[label(c, key)] = cells
     human = pd.DataFrame(out, index=table.index)
     # The consistency column of the issue, as rows under the parameters: one verdict per estimator.
     consistency = c.consistency()
     extra = {
-        "min eig M(q) [kg m²]": {LABELS.get(k, k): fmt(v["min_mass_eigenvalue"]) for k, v in consistency.items()},
-        "friction ≥ 0": {
-            LABELS.get(k, k): "yes" if v["friction_nonnegative"] else "NO" for k, v in consistency.items()
-        },
-        "physically consistent": {LABELS.get(k, k): "yes" if v["consistent"] else "NO" for k, v in consistency.items()},
+        "min eig M(q) [kg m²]": {label(c, k): fmt(v["min_mass_eigenvalue"]) for k, v in consistency.items()},
+        "friction ≥ 0": {label(c, k): "yes" if v["friction_nonnegative"] else "NO" for k, v in consistency.items()},
+        "physically consistent": {label(c, k): "yes" if v["consistent"] else "NO" for k, v in consistency.items()},
     }
     return pd.concat([human, pd.DataFrame(extra).T.reindex(columns=human.columns)]).rename_axis("parameter")
 
@@ -158,6 +157,58 @@ def findings(c: Comparison) -> list[str]:
     return lines
 
 
+def label(c: Comparison, key: str) -> str:
+    """A column's name for people (the `[reference]`'s own label for "reference")."""
+    if key == "reference" and c.reference_label:
+        return c.reference_label
+    return LABELS.get(key, key)
+
+
+def sensitivity_table(c: Comparison) -> pd.DataFrame:
+    """OLS at ½×, 1× and 2× the derivative cut-off, and IV at 1× (parameters × fits); empty without it."""
+    if not c.trust.sensitivity:
+        return pd.DataFrame()
+    cols = {"OLS ½× cut-off": c.trust.sensitivity[0.5].as_dict(), "OLS": c.fits["ols"].as_dict()}
+    cols["OLS 2× cut-off"] = c.trust.sensitivity[2.0].as_dict()
+    cols["IV"] = c.fits["iv"].as_dict()
+    return pd.DataFrame(cols).rename_axis("parameter")
+
+
+def warnings_json(c: Comparison) -> list[dict[str, str]]:
+    """The `warnings` key: [{"code": …, "sentence": …}]."""
+    return [w.as_dict() for w in c.trust.warnings]
+
+
+def _trust_section(c: Comparison) -> list[str]:
+    """Warnings, the cut-off sensitivity and the fitted direction of gravity, as Markdown lines."""
+    parts = ["## Warnings", ""]
+    parts += [f"- **{w.code}**: {w.sentence}" for w in c.trust.warnings] or ["- none"]
+    parts.append("")
+    if c.trust.cutoffs:
+        cut = ", ".join(f"{x:.3g}" for x in c.trust.cutoffs)
+        parts += [
+            "## Derivative cut-off",
+            "",
+            f"Cut-off per training trial [Hz]: {cut}. The torque of each fit went through the same zero-phase "
+            "filter as the angles (parallel filtering); scores are against the measured torque. OLS with every "
+            "trial's derivatives at ½× and 2× its cut-off, beside IV (instruments at ½× the cut-off):",
+            "",
+            markdown_table(sensitivity_table(c).map(fmt)),
+            "",
+        ]
+    d = c.trust.gravity_direction
+    if d:
+        parts += [
+            "## Angle convention",
+            "",
+            f"The direction of gravity fitted per joint (OLS with sine gravity columns): δ1 = {d['delta1']:+.3f} "
+            f"rad, δ2 = {d['delta2']:+.3f} rad (0 when the data follow ident-opt's convention: q1 from the "
+            "horizontal, q2 relative to link 1, counter-clockwise).",
+            "",
+        ]
+    return parts
+
+
 def to_markdown(c: Comparison, figure: str | None = None) -> str:
     """The comparison as a Markdown report (parameters ± SE, consistency, held-out metrics, seed study)."""
     parts = [
@@ -172,6 +223,7 @@ def to_markdown(c: Comparison, figure: str | None = None) -> str:
         "",
         *[f"- {line}" for line in findings(c)],
         "",
+        *_trust_section(c),
         "## Parameters (± standard error)",
         "",
         markdown_table(_with_se(c)),
@@ -244,4 +296,11 @@ def to_json(c: Comparison) -> dict:
         },
         "model": list(c.model.names),
         "sources": {key: shown(path) for key, path in c.sources.items()},
+        "trials": {key: [shown(p) for p in paths] for key, paths in c.trials.items()},
+        "metrics_by_test_trial": {shown(k): v for k, v in c.by_test_trial.items()},
+        "warnings": warnings_json(c),
+        "cutoff_hz": c.trust.cutoffs,
+        "sensitivity": {f"ols_{f:g}x_cutoff": fit.as_dict() for f, fit in c.trust.sensitivity.items()},
+        "gravity_direction": c.trust.gravity_direction,
+        "reference": c.reference_label,
     }

@@ -14,16 +14,17 @@ from functools import partial
 import numpy as np
 
 from ident_opt.consistency import sign_violations
-from ident_opt.data import Dataset, chronological_split, shuffled_split
+from ident_opt.data import Dataset, chronological_split, concat, shuffled_split
+from ident_opt.errors import InputError
 from ident_opt.identify import estimators
 from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.nlp import fit_physical
-from ident_opt.identify.stats import Stats
 from ident_opt.metrics import all_metrics
 from ident_opt.models import DATASHEETS, datasheet_model
 from ident_opt.robot import RIGID, ArmModel
 from ident_opt.studies import METRICS
 from ident_opt.studies.seeds import FitFn, SplitResults, seed_study, split_fits
+from ident_opt.studies.trust import Trust, checks, iv_fit, stats_of
 
 
 def fitted_estimators(robot, margin: float = 1e-6, weights: str | None = None) -> dict[str, FitFn]:
@@ -45,10 +46,20 @@ def datasheet_models(robot) -> dict[str, tuple[ArmModel, np.ndarray]]:
     return out
 
 
+def reference_model(reference) -> tuple[ArmModel, np.ndarray]:
+    """A problem's `[reference]` (a published identification) as (arm, π): the armature extension when it
+    names ia2; an unknown parameter name is an InputError naming it."""
+    model = ArmModel(("armature",)) if "ia2" in reference.parameters else RIGID
+    unknown = [k for k in reference.parameters if k not in model.names]
+    if unknown:
+        raise InputError(f"[reference.parameters]: unknown parameter '{unknown[0]}'; known: {', '.join(model.names)}")
+    return model, model.vector(reference.parameters)
+
+
 PROTOCOLS = {
     "paper": "shuffled 70/30, mean over the paper's seeds (flattering: test samples have near-copies in training)",
-    "chronological": "first 70 % of the trial in time trains, the rest tests (honest within one trial)",
-    "cross_trial": "identify on the whole first trial, test on the second, unseen trial",
+    "chronological": "first 70 % of the (pooled) training samples in time trains, the rest tests",
+    "cross_trial": "identify on all training trials, test on the held-out trial(s), pooled",
 }
 
 
@@ -64,6 +75,11 @@ class Comparison:
     seeds: SplitResults
     convention: str
     sources: dict[str, str] = field(default_factory=dict)  # "train", "unseen" -> the trial's file
+    trust: Trust = field(default_factory=Trust)  # the checks behind the warnings (`studies.trust`)
+    #: per held-out trial: {file: {metric: {estimator: [joint 1, joint 2]}}} (when there are several)
+    by_test_trial: dict[str, dict[str, dict[str, list[float]]]] = field(default_factory=dict)
+    trials: dict[str, list[str]] = field(default_factory=dict)  # "train", "test" -> files
+    reference_label: str | None = None  # the `[reference]`'s label, keyed "reference"
 
     def parameters(self) -> dict[str, dict[str, float]]:
         """π by estimator: "datasheet" (the problem's convention), both datasheets, and every fit."""
@@ -101,48 +117,75 @@ def _scores(datasets: list[tuple[Dataset, np.ndarray]], model: ArmModel, pi: np.
     return {m: [float(np.mean([p[m][j] for p in per])) for j in range(2)] for m in METRICS}
 
 
+def _held_out(d: Dataset, scored: dict[str, tuple[ArmModel, np.ndarray]]) -> dict[str, dict[str, list[float]]]:
+    """{metric: {key: [joint 1, joint 2]}} of each fixed (arm, π) on every sample of `d` (measured τ)."""
+    out: dict[str, dict[str, list[float]]] = {m: {} for m in METRICS}
+    for key, (arm, pi) in scored.items():
+        for m, v in all_metrics(d.tau, arm.predict(pi, d.q, d.dq, d.ddq)).items():
+            out[m][key] = v
+    return out
+
+
+def _as_list(trials: Dataset | list[Dataset] | None) -> list[Dataset]:
+    if trials is None:
+        return []
+    return [trials] if isinstance(trials, Dataset) else list(trials)
+
+
 def compare_estimators(
-    train: Dataset,
+    train: Dataset | list[Dataset],
     robot,
     split,
-    unseen: Dataset | None = None,
+    unseen: Dataset | list[Dataset] | None = None,
     *,
     model: ArmModel | None = None,
     margin: float = 1e-6,
     weights: str | None = None,
     progress: bool = True,
+    reference=None,
+    conversions: dict[str, tuple[float, float]] | None = None,
 ) -> Comparison:
-    """Fit every estimator, score it on the paper's shuffled protocol, the chronological split and (when
-    `unseen` is given) the unseen trial; score both datasheets on the same test samples. `weights`:
-    None (plain least squares) or "wls" (joints weighted by 1/σ_j², estimated per fit)."""
+    """Fit every estimator on all training trials (statistics add up; IV beside them), score it on the paper's
+    shuffled protocol and the chronological split of the pooled training samples and (when held-out trials are
+    given) on each held-out trial and their pool; score both datasheets (and the problem's `[reference]`) on
+    the same test samples; run the trust checks (`studies.trust`). `weights`: None (plain least squares) or
+    "wls" (joints weighted by 1/σ_j², estimated per fit). Fits use the torque filtered like the regressor's
+    inputs (`Dataset.tau_fit`); every score is against the measured torque."""
     model = model or RIGID
+    trains, tests = _as_list(train), _as_list(unseen)
+    pool, test_pool = concat(trains), (concat(tests) if tests else None)
     fitters = fitted_estimators(robot, margin, weights)
-    whole = Stats.from_data(model, train.q, train.dq, train.ddq, train.tau)
+    whole = stats_of(model, trains)
     fits = {key: fn(whole, model) for key, fn in fitters.items()}
-    seeds = seed_study(train, model, split, fitters, progress=progress)
+    fits["iv"] = iv_fit(model, trains)
+    seeds = seed_study(pool, model, split, fitters, progress=progress)
     metrics: dict[str, dict[str, dict[str, list[float]]]] = {p: {m: {} for m in METRICS} for p in PROTOCOLS}
     for m in METRICS:
         metrics["paper"][m].update(seeds.mean(m))
-    chrono = chronological_split(train.n, split.train_fraction)
-    chrono_res = split_fits(train, model, [chrono], fitters)
+    chrono = chronological_split(pool.n, split.train_fraction)
+    chrono_res = split_fits(pool, model, [chrono], fitters)
     for m in METRICS:
         metrics["chronological"][m].update(chrono_res.mean(m))
     test_sets = {
-        "paper": [(train, shuffled_split(train.n, split.train_fraction, s)[1]) for s in split.seeds],
-        "chronological": [(train, chrono[1])],
+        "paper": [(pool, shuffled_split(pool.n, split.train_fraction, s)[1]) for s in split.seeds],
+        "chronological": [(pool, chrono[1])],
     }
-    if unseen is not None:
-        Y = model.regressor(unseen.q, unseen.dq, unseen.ddq)
-        for key, fit in fits.items():
-            for m, v in all_metrics(unseen.tau, Y @ fit.pi).items():
-                metrics["cross_trial"][m][key] = v
-        test_sets["cross_trial"] = [(unseen, np.arange(unseen.n))]
+    sheets = datasheet_models(robot)
+    if reference is not None:
+        sheets["reference"] = reference_model(reference)
+    by_trial: dict[str, dict[str, dict[str, list[float]]]] = {}
+    if test_pool is not None:
+        scored = {**{k: (model, f.pi) for k, f in fits.items()}, **sheets}
+        metrics["cross_trial"] = _held_out(test_pool, scored)
+        by_trial = {d.source: _held_out(d, scored) for d in tests} if len(tests) > 1 else {}
     else:
         metrics.pop("cross_trial")
-    sheets = datasheet_models(robot)
     for protocol, pairs in test_sets.items():
         for key, (sheet_model, pi) in sheets.items():
             for m, v in _scores(pairs, sheet_model, pi).items():
                 metrics[protocol][m][key] = v
-    sources = {"train": train.source, **({"unseen": unseen.source} if unseen is not None else {})}
-    return Comparison(model, fits, sheets, metrics, seeds, robot.convention, sources)
+    sources = {"train": pool.source, **({"unseen": test_pool.source} if test_pool is not None else {})}
+    trust = checks(model, trains, fits["ols"], fits["iv"], conversions)
+    trials = {"train": [d.source for d in trains], "test": [d.source for d in tests]}
+    label = reference.label if reference is not None else None
+    return Comparison(model, fits, sheets, metrics, seeds, robot.convention, sources, trust, by_trial, trials, label)

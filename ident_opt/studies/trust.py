@@ -1,0 +1,179 @@
+"""How far a fit on measured data can be trusted: the checks behind `compare`'s warnings.
+
+- **OLS against IV.** Noise in estimated accelerations sits inside the regressor and biases least squares
+  toward zero (errors-in-variables); the instrumental-variable estimate (`identify.iv`) is not biased that
+  way. When an inertial, coupling or gravity parameter of the two differs by more than 3 standard errors
+  *and* by more than `OLS_IV_TOLERANCE` of its IV value, the cut-off lets noise into the regressor.
+- **Cut-off sensitivity.** OLS again with every training trial's derivatives at ½× and 2× its cut-off. At 2×
+  more noise enters the regressor: a move beyond 3 SE and `SENSITIVITY_TOLERANCE` of its value means the
+  result depends on the cut-off. The ½× fit is reported, not judged: a cut-off chosen at 1.2× the motion's band
+  edge (`data.choose_cutoff`) halved removes part of the motion itself, and the parameters move for that reason.
+- **Angle convention.** OLS with the `joint_offset` extension's sine gravity columns: the direction of gravity
+  per joint, δ1 = atan2(−b1s, b1), δ1 + δ2 = atan2(−b2s, b2) (`docs/conventions.md`), with derivatives at the
+  motion's own cut-off (`data.choose_cutoff`, if lower than the trial's) so a noisy cut-off cannot hide it. Beyond
+  `CONVENTION_TOLERANCE_RAD` the data's zero is not ident-opt's, and the warning gives the `[data.columns]`
+  offset that fixes it.
+
+Standard errors assume independent residuals (optimistic on densely sampled data), so every rule also asks
+for a relative change: the SE alone would flag every real trial.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ident_opt.data import Dataset, choose_cutoff, refiltered
+from ident_opt.identify import estimators
+from ident_opt.identify.fit import LinearFit
+from ident_opt.identify.iv import InstrumentStats, fit_iv
+from ident_opt.identify.stats import Stats
+from ident_opt.robot import ArmModel
+from ident_opt.warnings import ResultWarning
+
+#: OLS and IV disagree when a judged parameter differs by more than this fraction of its IV value (and 3 SE).
+OLS_IV_TOLERANCE = 0.10
+#: A judged parameter depends on the cut-off when 2× moves it by more than this fraction (and 3 SE).
+SENSITIVITY_TOLERANCE = 0.25
+#: The data's zero is off when the fitted direction of gravity differs from the convention's by more [rad].
+CONVENTION_TOLERANCE_RAD = 0.15
+#: The parameter kinds the checks judge (friction and armature are small and poorly determined on most trials).
+JUDGED_KINDS = ("inertia", "coupling", "gravity")
+#: The cut-off factors of the sensitivity check.
+FACTORS = (0.5, 2.0)
+
+
+@dataclass
+class Trust:
+    """The checks' results: the sensitivity fits {factor: OLS fit}, the fitted gravity directions [rad] and
+    the offsets that would fix them [rad], and the warnings."""
+
+    sensitivity: dict[float, LinearFit] = field(default_factory=dict)
+    cutoffs: list[float] = field(default_factory=list)  # each training trial's cut-off [Hz]
+    gravity_direction: dict[str, float] = field(default_factory=dict)  # "delta1", "delta2" [rad]
+    warnings: list[ResultWarning] = field(default_factory=list)
+
+
+def stats_of(model: ArmModel, trials: list[Dataset]) -> Stats:
+    """Σ of each trial's statistics, with the torque the fits use (`Dataset.tau_fit`)."""
+    total = Stats.zeros(model.n_params, model.n_joints)
+    for d in trials:
+        total += Stats.from_data(model, d.q, d.dq, d.ddq, d.tau_fit)
+    return total
+
+
+def iv_fit(model: ArmModel, trials: list[Dataset]) -> LinearFit:
+    """IDIM-IV on all training trials (instrument statistics added up, each trial's derivatives its own)."""
+    total = InstrumentStats.from_data(model, trials[0])
+    for d in trials[1:]:
+        total = total + InstrumentStats.from_data(model, d)
+    return fit_iv(total, model)
+
+
+def _judged(model: ArmModel) -> list[int]:
+    return [i for i, p in enumerate(model.parameters) if p.kind in JUDGED_KINDS]
+
+
+def _moved(model: ArmModel, a: LinearFit, b: LinearFit, tolerance: float) -> list[tuple[str, float, float]]:
+    """(name, a's value, b's value) of the judged parameters that differ by > 3 SE and > `tolerance` × |b|."""
+    out = []
+    for i in _judged(model):
+        diff = abs(a.pi[i] - b.pi[i])
+        se = math.hypot(a.se[i], b.se[i])
+        if diff > 3 * se and diff > tolerance * abs(b.pi[i]):
+            out.append((model.names[i], float(a.pi[i]), float(b.pi[i])))
+    return out
+
+
+def _listing(moved: list[tuple[str, float, float]]) -> str:
+    return ", ".join(f"{n} {x:.4g} vs {y:.4g}" for n, x, y in moved)
+
+
+def check_ols_iv(model: ArmModel, ols: LinearFit, iv: LinearFit, cutoffs: list[float]) -> list[ResultWarning]:
+    """The OLS-against-IV rule (module doc)."""
+    moved = _moved(model, ols, iv, OLS_IV_TOLERANCE)
+    if not moved:
+        return []
+    where = f"at the derivative cut-off {_hz(cutoffs)}" if cutoffs else "with the logged derivatives"
+    return [
+        ResultWarning(
+            "ols_iv_disagree",
+            f"OLS and the instrumental-variable fit disagree {where} ({_listing(moved)}): noise in the estimated "
+            'accelerations biases OLS toward zero. Lower [data] derivative_cutoff_hz (or set it to "auto"), '
+            "and prefer the IV parameters until the two agree.",
+        )
+    ]
+
+
+def _hz(cutoffs: list[float]) -> str:
+    low, high = min(cutoffs), max(cutoffs)
+    return f"{low:.3g} Hz" if math.isclose(low, high) else f"{low:.3g}–{high:.3g} Hz"
+
+
+def check_cutoff(
+    model: ArmModel, trials: list[Dataset], ols: LinearFit
+) -> tuple[dict[float, LinearFit], list[ResultWarning]]:
+    """OLS at ½× and 2× each trial's cut-off; a warning when 2× moves a judged parameter (module doc)."""
+    if any(d.cutoff_hz is None for d in trials):
+        return {}, []
+    fits = {}
+    for factor in FACTORS:
+        moved_trials = [refiltered(d, factor * d.cutoff_hz) for d in trials]
+        fits[factor] = estimators.fit("ols", stats_of(model, moved_trials), model)
+    moved = _moved(model, fits[2.0], ols, SENSITIVITY_TOLERANCE)
+    if not moved:
+        return fits, []
+    sentence = (
+        f"the parameters depend on the derivative cut-off ({_hz([d.cutoff_hz for d in trials])}): at twice it, "
+        f"{_listing(moved)} (2× vs chosen). The regressor is noisy at this cut-off; lower [data] "
+        'derivative_cutoff_hz or set it to "auto" (the cut-off from where the motion\'s spectrum ends).'
+    )
+    return fits, [ResultWarning("cutoff_sensitivity", sentence)]
+
+
+def check_convention(
+    model: ArmModel, trials: list[Dataset], conversions: dict[str, tuple[float, float]] | None = None
+) -> tuple[dict[str, float], list[ResultWarning]]:
+    """The direction of gravity per joint from OLS with the sine gravity columns; a warning with the
+    `[data.columns]` offsets that fix it when it is off by more than `CONVENTION_TOLERANCE_RAD`."""
+    extended = model if "b1s" in model.names else ArmModel((*model.extensions, "joint_offset"))
+    # Gravity is static: judge it at the motion's own cut-off, so that a noisy cut-off cannot hide the zero.
+    trials = [d if d.cutoff_hz is None else refiltered(d, min(d.cutoff_hz, choose_cutoff(d.t, d.q))) for d in trials]
+    p = estimators.fit("ols", stats_of(extended, trials), extended).as_dict()
+    d1 = math.atan2(-p["b1s"], p["b1"])
+    d12 = math.atan2(-p["b2s"], p["b2"])
+    d2 = math.remainder(d12 - d1, math.tau)
+    direction = {"delta1": d1, "delta2": d2}
+    off = [j for j, d in enumerate((d1, d2)) if abs(d) > CONVENTION_TOLERANCE_RAD]
+    if not off:
+        return direction, []
+    conversions = conversions or {}
+    fixes = []
+    for j in off:
+        scale, offset = conversions.get(f"q{j + 1}", (1.0, 0.0))
+        new = offset + (d1, d2)[j]
+        fixes.append(f"q{j + 1} = {{ column = …, offset = {new:.7g} }}" + (f" (scale {scale:g})" if scale != 1 else ""))
+    sentence = (
+        f"gravity acts as if the angles were off by δ1 = {d1:+.3f} rad, δ2 = {d2:+.3f} rad "
+        f"({math.degrees(d1):+.0f}°, {math.degrees(d2):+.0f}°): the data's zero is not ident-opt's (q1 from the "
+        "horizontal, q2 relative to link 1, counter-clockwise, docs/conventions.md). In [data.columns] set "
+        + "; ".join(fixes)
+        + ", then run again."
+    )
+    return direction, [ResultWarning("angle_convention", sentence)]
+
+
+def checks(
+    model: ArmModel,
+    trials: list[Dataset],
+    ols: LinearFit,
+    iv: LinearFit,
+    conversions: dict[str, tuple[float, float]] | None = None,
+) -> Trust:
+    """Every check on the training trials: the convention first (a wrong zero spoils the others)."""
+    direction, warnings = check_convention(model, trials, conversions)
+    cutoffs = [d.cutoff_hz for d in trials if d.cutoff_hz is not None]
+    sensitivity, cut_warnings = check_cutoff(model, trials, ols)
+    if not warnings:  # with the zero off, every parameter is off: fix the convention first
+        warnings += check_ols_iv(model, ols, iv, cutoffs) + cut_warnings
+    return Trust(sensitivity, cutoffs, direction, warnings)

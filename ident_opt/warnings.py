@@ -1,0 +1,21 @@
+"""Warnings a result carries to the terminal, the reports and the JSON (`warnings`: a list of objects with a
+`code` and a `sentence`). A warning says what is doubtful about a result and what to change."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+
+@dataclass(frozen=True)
+class ResultWarning:
+    """`code`: a stable identifier (e.g. "ols_iv_disagree"); `sentence`: what is wrong and what to change."""
+
+    code: str
+    sentence: str
+
+    def as_dict(self) -> dict[str, str]:
+        """The JSON object: {"code": …, "sentence": …}."""
+        return asdict(self)
+
+    def __str__(self) -> str:
+        return f"warning [{self.code}]: {self.sentence}"

@@ -1,0 +1,162 @@
+"""Several trials (`--data` repeatable, `--test-data`, `[data] train/test`), the problem's `[reference]`, and the
+trust checks of `compare` (OLS against IV, cut-off sensitivity, the angle convention) on the real DFKI C.0
+double pendulum: silent defaults give the makers' held-out accuracy; a bad cut-off or the robot's own zero warn."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from ident_opt.cli import main
+from ident_opt.data import concat, load_dataset
+from ident_opt.identify.stats import Stats
+from ident_opt.problem import load_problem
+from ident_opt.studies.compare import compare_estimators
+
+from .conftest import PROBLEMS
+
+DFKI = PROBLEMS / "dfki_c0.toml"
+DATA = PROBLEMS.parent / "data" / "dfki"
+
+
+def trial(k: int) -> str:
+    return str(DATA / f"trajectory_{k:02d}.csv.gz")
+
+
+def variant(tmp_path, old: str, new: str, name: str = "p.toml"):
+    """The DFKI problem with one text replaced, its paths made absolute."""
+    text = DFKI.read_text(encoding="utf-8").replace('"../data/', f'"{PROBLEMS.parent}/data/')
+    assert old in text
+    path = tmp_path / name
+    path.write_text(text.replace(old, new), encoding="utf-8")
+    return path
+
+
+def compare_json(tmp_path, problem, *flags: str) -> tuple[int, dict]:
+    out = tmp_path / "out"
+    status = main(["compare", "--problem", str(problem), "--out", str(out), "--json", str(out / "c.json"),
+                   "--no-progress", "--extension", "armature", *flags])  # fmt: skip
+    return status, (json.loads((out / "c.json").read_text()) if status == 0 else {})
+
+
+def test_problem_train_and_test_lists():
+    problem = load_problem(DFKI)
+    assert [p.name for p in problem.data.training][-1] == "trajectory_13.csv.gz"
+    assert len(problem.data.training) == 8
+    assert [p.name for p in problem.data.testing] == ["trajectory_12.csv.gz"]
+    assert problem.reference is not None and problem.reference.parameters["b1"] == pytest.approx(2.36545, rel=1e-5)
+    tudor = load_problem(PROBLEMS / "tudor_2dof.toml")  # the legacy reading: first trains, second is held out
+    assert [p.name for p in tudor.data.training] == ["exp1.csv"]
+    assert [p.name for p in tudor.data.testing] == ["exp2.csv"]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "words"),
+    [
+        ("test = [", 'trials = ["a.csv"]\ntest = [', ["'trials'", "'train'"]),
+        ("train = [", "train_ = [", ["'test'", "needs 'train'"]),
+        ("a2 = 0.036234801414394134", "a9 = 1.0", ["a9", "[reference.parameters]"]),
+        ('label = "makers (model_3.0)"', "label = 3", ["'label'", "[reference]"]),
+    ],
+)
+def test_bad_trial_lists_and_references_exit_2_naming_the_key(tmp_path, capsys, old, new, words):
+    problem = variant(tmp_path, old, new)
+    status, _ = compare_json(tmp_path, problem)
+    assert status == 2
+    err = capsys.readouterr().err
+    assert all(w in err for w in words), err
+    assert not (tmp_path / "out" / "c.json").exists() and not (tmp_path / "out" / "compare.md").exists()
+
+
+def test_a_missing_test_trial_exits_2_naming_it(tmp_path, capsys):
+    status, _ = compare_json(tmp_path, DFKI, "--data", trial(0), "--test-data", str(tmp_path / "gone.csv"))
+    assert status == 2
+    assert "gone.csv" in capsys.readouterr().err
+    assert not (tmp_path / "out" / "compare.md").exists()
+
+
+def test_statistics_of_several_trials_add_up_and_nothing_straddles():
+    problem = load_problem(DFKI)
+    a, b = (load_dataset(trial(k), problem.data, problem.robot) for k in (0, 1))
+    pool = concat([a, b])
+    assert pool.n == a.n + b.n and np.all(np.diff(pool.t) > 0)
+    # the pool keeps each file's own derivatives: no filter ran across the join
+    np.testing.assert_array_equal(pool.ddq[a.n :], b.ddq)
+    sa, sb = (Stats.from_data(_rigid(), d.q, d.dq, d.ddq, d.tau) for d in (a, b))
+    whole = Stats.from_data(_rigid(), pool.q, pool.dq, pool.ddq, pool.tau)
+    np.testing.assert_allclose((sa + sb).G, whole.G, rtol=1e-10)
+
+
+def test_parallel_filtering_only_when_derivatives_are_estimated():
+    problem = load_problem(DFKI)
+    d = load_dataset(trial(0), problem.data, problem.robot)
+    assert d.tau_filtered is not None and not np.allclose(d.tau_fit, d.tau)
+    # the filter removes what is above the cut-off: the filtered torque is smoother
+    assert np.abs(np.diff(d.tau_fit, 2, axis=0)).mean() < 0.2 * np.abs(np.diff(d.tau, 2, axis=0)).mean()
+    merit = load_problem(PROBLEMS / "tudor_2dof.toml")
+    m = load_dataset(merit.data.trials[0], merit.data, merit.robot)
+    assert m.tau_filtered is None and m.tau_fit is m.tau  # logged derivatives: τ as measured
+
+
+def _rigid():
+    from ident_opt.robot import RIGID
+
+    return RIGID
+
+
+@pytest.fixture(scope="module")
+def default_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("dfki")
+    return compare_json(tmp, DFKI)
+
+
+def test_dfki_defaults_match_the_makers_held_out_accuracy_without_warnings(default_run):
+    status, result = default_run
+    assert status == 0
+    assert result["warnings"] == []
+    assert result["trials"]["test"][0].endswith("trajectory_12.csv.gz") and len(result["trials"]["train"]) == 8
+    rmse = result["metrics"]["cross_trial"]["rmse"]
+    for j in range(2):
+        assert min(rmse["ols"][j], rmse["iv"][j], rmse["constrained"][j]) <= 1.05 * rmse["reference"][j]
+    makers, iv = result["parameters"]["reference"], result["parameters"]["iv"]
+    for name in ("a1", "a3", "b1", "b2"):  # IV within 15 % of the makers' identification
+        assert iv[name] == pytest.approx(makers[name], rel=0.15)
+    assert set(result["standard_errors"]["iv"]) >= {"a1", "b1"}
+    assert all(2.0 < c < 7.0 for c in result["cutoff_hz"])
+    assert abs(result["gravity_direction"]["delta1"]) < 0.05
+
+
+def test_a_bad_cutoff_warns_and_says_what_to_change(tmp_path, capsys):
+    problem = variant(tmp_path, 'derivative_cutoff_hz = "auto"', "derivative_cutoff_hz = 30.0")
+    status, result = compare_json(tmp_path, problem, "--data", trial(0), "--data", trial(1), "--test-data", trial(12))
+    assert status == 0
+    codes = {w["code"] for w in result["warnings"]}
+    assert {"ols_iv_disagree", "cutoff_sensitivity"} <= codes
+    assert all("derivative_cutoff_hz" in w["sentence"] for w in result["warnings"])
+    assert "warning [ols_iv_disagree]" in capsys.readouterr().err
+    assert "ols_iv_disagree" in (tmp_path / "out" / "compare.md").read_text()
+
+
+def test_the_robots_own_zero_warns_with_the_offset_that_fixes_it(tmp_path, capsys):
+    problem = variant(tmp_path, ", offset = -1.5707963267948966", "")
+    status, result = compare_json(tmp_path, problem, "--data", trial(0), "--data", trial(1), "--test-data", trial(12))
+    assert status == 0
+    warning = next(w for w in result["warnings"] if w["code"] == "angle_convention")
+    offset = float(warning["sentence"].split("offset = ")[1].split()[0])
+    assert offset == pytest.approx(-math.pi / 2, abs=0.05)
+    assert result["gravity_direction"]["delta1"] == pytest.approx(-math.pi / 2, abs=0.05)
+    assert "angle_convention" in capsys.readouterr().err
+
+
+def test_each_held_out_trial_is_scored_and_pooled(tmp_path):
+    problem = load_problem(DFKI)
+    load = [load_dataset(trial(k), problem.data, problem.robot) for k in (0, 1, 12, 13)]
+    c = compare_estimators(load[:2], problem.robot, problem.split, load[2:], progress=False)
+    assert set(c.by_test_trial) == {load[2].source, load[3].source}
+    pooled = c.metrics["cross_trial"]["rmse"]["ols"]
+    each = [c.by_test_trial[d.source]["rmse"]["ols"] for d in load[2:]]
+    for j in range(2):  # the pool's RMSE lies between the trials'
+        assert min(e[j] for e in each) <= pooled[j] <= max(e[j] for e in each)
