@@ -15,9 +15,12 @@ design's duration). The design maximises the geometric mean of gap(A true) and g
 as every design; its value, the smaller of the two, is reported against the first `duration` seconds of the
 trial the data came from, and the whole of it.
 
-The objective is computed in NumPy (the diagnosis's columns: filters, indicators), so IPOPT sees it through a
-CasADi callback with central finite differences (a step of `FD_STEP` in the coefficients, wide enough to
-average over the sign changes of Coulomb columns); the limits stay exact CasADi expressions.
+The other cause's nonlinear parameters (e.g. a mode's frequency and damping) are not held where the data put
+them: the diagnosis searches them, so the lack of fit is the least over a coarse grid of them (`theta_grid`)
+— the T-optimal design's inner minimum. The objective is computed in NumPy (the diagnosis's columns: filters,
+indicators), so IPOPT sees it through a CasADi callback whose gradient is central finite differences (a step
+of `FD_STEP` in the coefficients, wide enough to average over the sign changes of Coulomb columns) with the
+inner minimisers held (envelope theorem); the limits stay exact CasADi expressions.
 """
 
 from __future__ import annotations
@@ -47,6 +50,8 @@ HARMONICS, BASE_HZ = 16, 0.25
 SOFTMIN = 4.0
 #: Finite-difference step in the Fourier coefficients [rad/s; rad for offsets].
 FD_STEP = 1e-3
+#: Most grid points per nonlinear parameter when the design searches a rival's θ as the diagnosis would.
+GRID_POINTS = 6
 #: IPOPT iterations per start (each gradient is 2 × size objective evaluations).
 MAX_ITER = 60
 
@@ -125,22 +130,49 @@ def trajectory_dataset(t: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.nda
     return Dataset("design", t, q, dq, ddq, np.zeros_like(q))
 
 
-def lack_of_fit(rivals: Rivals, true: Rival, other: Rival, ds: Dataset) -> np.ndarray:
-    """LOF_j (n,) [N² m²]: the RSS per joint of `other` fitted to `true`'s prediction on the motion `ds`."""
+def lack_of_fit(rivals: Rivals, true: Rival, other: Rival, ds: Dataset, theta: dict | None = None) -> np.ndarray:
+    """LOF_j (n,) [N² m²]: the RSS per joint of `other` (at its nonlinear parameters `theta`, default where the
+    data put them) fitted to `true`'s prediction on the motion `ds`."""
     tau = true.candidate.predict(ds)
-    o, X, _ = cands.design(other.family, ds, other.theta, "rigid_fit", rivals.ctx)
+    o, X, _ = cands.design(other.family, ds, other.theta if theta is None else theta, "rigid_fit", rivals.ctx)
     return linear.solve(o, X, tau, rivals.ctx.weights, with_se=False).rss
 
 
-def expected_gaps(rivals: Rivals, ds: Dataset, samples: int | None = None) -> dict:
+def theta_grid(rivals: Rivals, rival: Rival) -> list[dict]:
+    """The nonlinear parameters the diagnosis would search for `rival`: its family's axes on a coarse grid (at
+    most `GRID_POINTS` per axis), and where the data put them."""
+    axes = rival.family.axes(1.0 / rivals.dt)
+    grids = [a.grid()[:: max(1, -(-len(a.grid()) // GRID_POINTS))] for a in axes]
+    mesh = np.meshgrid(*grids, indexing="ij") if grids else []
+    points = [dict(zip((a.name for a in axes), map(float, values))) for values in zip(*(m.ravel() for m in mesh))]
+    return [rival.theta, *points]
+
+
+def closest_theta(rivals: Rivals, true: Rival, other: Rival, ds: Dataset) -> dict:
+    """`other`'s nonlinear parameters on `theta_grid` that fit `true`'s prediction best (weighted RSS): the
+    diagnosis searches them, so a design must separate the causes whatever they are."""
+    grid = theta_grid(rivals, other)
+    if len(grid) == 1:
+        return grid[0]
+    costs = [float(rivals.ctx.weights @ lack_of_fit(rivals, true, other, ds, theta)) for theta in grid]
+    return grid[int(np.argmin(costs))]
+
+
+def expected_gaps(
+    rivals: Rivals, ds: Dataset, samples: int | None = None, thetas: dict[str, dict] | None = None
+) -> dict:
     """The diagnosis's expected score gap with A true and with B true on `ds` (module docstring), and its
     smaller one ("discrimination"). `samples`: n of the trial `ds` stands for (its lack of fit scaled by
-    samples / ds.n: a whole number of periods of a periodic motion), default ds.n."""
+    samples / ds.n: a whole number of periods of a periodic motion), default ds.n. `thetas`: the other cause's
+    nonlinear parameters per true cause (default: the closest on the grid, `closest_theta`); returned as
+    "thetas"."""
     n = samples or ds.n
     sigma2 = 1.0 / rivals.ctx.weights
-    out = {}
+    out: dict = {"thetas": {}}
     for true, other in ((rivals.a, rivals.b), (rivals.b, rivals.a)):
-        lof = lack_of_fit(rivals, true, other, ds) * (n / ds.n)
+        theta = thetas[true.cause] if thetas else closest_theta(rivals, true, other, ds)
+        out["thetas"][true.cause] = theta
+        lof = lack_of_fit(rivals, true, other, ds, theta) * (n / ds.n)
         gain = 0.5 * n * float(np.sum(np.log1p(lof / (n * sigma2))))
         out[f"gap_{true.cause}_true"] = gain - 0.5 * (other.n_added - true.n_added) * math.log(n)
         out[f"lof_{true.cause}_true"] = lof.tolist()
@@ -150,24 +182,28 @@ def expected_gaps(rivals: Rivals, ds: Dataset, samples: int | None = None) -> di
     return out
 
 
-def _objective_value(rivals: Rivals, setup: Setup, t: np.ndarray, samples: int, x: np.ndarray) -> float:
-    """−softmin(log gap_A, log gap_B) of coefficients x on times t standing for `samples` (gaps floored at 1e-3):
-    the smaller gap is what a diagnosis risks, the soft minimum keeps the objective smooth."""
+def _objective_value(
+    rivals: Rivals, setup: Setup, t: np.ndarray, samples: int, x: np.ndarray, thetas: dict | None = None
+) -> tuple[float, dict]:
+    """(−softmin(log gap_A, log gap_B), the rivals' closest θ) of coefficients x on times t standing for
+    `samples` (gaps floored at 1e-3): the smaller gap is what a diagnosis risks, the soft minimum keeps the
+    objective smooth. With `thetas` given, the rivals' θ are held there (the gradient's envelope theorem)."""
     q, dq, ddq = setup.fourier.evaluate(x, t)
-    gaps = expected_gaps(rivals, trajectory_dataset(t, q, dq, ddq), samples)
+    gaps = expected_gaps(rivals, trajectory_dataset(t, q, dq, ddq), samples, thetas)
     logs = np.log(np.maximum([gaps[f"gap_{r.cause}_true"] for r in (rivals.a, rivals.b)], 1e-3))
     k = SOFTMIN
-    return float(np.log(np.sum(np.exp(-k * (logs - logs.min())))) / k - logs.min())
+    return float(np.log(np.sum(np.exp(-k * (logs - logs.min())))) / k - logs.min()), gaps["thetas"]
 
 
 class _Callback(ca.Callback):
-    """The NumPy objective as a CasADi function of x, differentiated by central finite differences."""
+    """The NumPy objective as a CasADi function of x. Its gradient: central finite differences with the
+    rivals' θ held at their minimisers at x (the envelope theorem: the minimum's gradient is the gradient at
+    the minimiser), so each gradient costs one θ search, not one per perturbation."""
 
     def __init__(self, fn, size: int):
         ca.Callback.__init__(self)
         self._fn, self._size = fn, size
-        opts = {"enable_fd": True, "fd_method": "central", "fd_options": {"h": FD_STEP, "h_iter": 0}}
-        self.construct("discrimination", opts)
+        self.construct("discrimination", {})
 
     def get_n_in(self) -> int:
         return 1
@@ -182,7 +218,45 @@ class _Callback(ca.Callback):
         return ca.Sparsity.dense(1, 1)
 
     def eval(self, arg):
-        return [self._fn(np.array(arg[0]).ravel())]
+        return [self._fn(np.array(arg[0]).ravel())[0]]
+
+    def has_jacobian(self) -> bool:
+        return True
+
+    def get_jacobian(self, name, inames, onames, opts):
+        self._jacobian = _Gradient(name, self._fn, self._size, opts)  # kept: CasADi holds no Python reference
+        return self._jacobian
+
+
+class _Gradient(ca.Callback):
+    """(x, f) -> ∂f/∂x (1 × size) for `_Callback`."""
+
+    def __init__(self, name: str, fn, size: int, opts: dict):
+        ca.Callback.__init__(self)
+        self._fn, self._size = fn, size
+        self.construct(name, opts)
+
+    def get_n_in(self) -> int:
+        return 2
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(self._size, 1) if i == 0 else ca.Sparsity.dense(1, 1)
+
+    def get_sparsity_out(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(1, self._size)
+
+    def eval(self, arg):
+        x = np.array(arg[0]).ravel()
+        _, thetas = self._fn(x)
+        grad = np.zeros(self._size)
+        for i in range(self._size):
+            e = np.zeros(self._size)
+            e[i] = FD_STEP
+            grad[i] = (self._fn(x + e, thetas)[0] - self._fn(x - e, thetas)[0]) / (2 * FD_STEP)
+        return [ca.DM(grad).T]
 
 
 def reference_gaps(rivals: Rivals, trial: Dataset, duration: float) -> dict:
@@ -213,7 +287,9 @@ def design(
     t = np.arange(round(setup.duration / rivals.dt)) * rivals.dt  # the data's rate: the diagnosis's samples
     # The NLP sees the first two periods (the start from rest, then the steady state), standing for all of them.
     t_nlp = t[t < min(setup.duration, 2 * setup.fourier.period)]
-    callback = _Callback(lambda x: _objective_value(rivals, setup, t_nlp, len(t), x), setup.fourier.size)
+    callback = _Callback(
+        lambda x, thetas=None: _objective_value(rivals, setup, t_nlp, len(t), x, thetas), setup.fourier.size
+    )
 
     def evaluate(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> dict:
         # Criteria on the data's rate over the duration (q etc. may come at another rate: resample by time).
@@ -239,7 +315,12 @@ def design(
     d.discrimination = {
         "between": list(causes),
         "candidates": {
-            r.cause: {"theta": r.theta, "parameters": r.candidate.parameters, "added_parameters": r.n_added}
+            r.cause: {
+                "estimate": r.candidate.estimate,
+                "theta": r.theta,
+                "parameters": r.candidate.parameters,
+                "added_parameters": r.n_added,
+            }
             for r in (rivals.a, rivals.b)
         },
         "noise_sigma": np.sqrt(1.0 / rivals.ctx.weights).tolist(),
