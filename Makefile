@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PROBLEM ?= problems/tudor_2dof.toml
 
-.PHONY: identify test lint bench codegen audit calibration clean-venv
+.PHONY: identify test lint bench codegen audit calibration clean-venv fuzz
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +27,14 @@ identify: $(STAMP)
 ## The whole test suite (2 workers).
 test: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
+
+## The long hostile-input fuzz (tests/test_fuzz.py; the suite runs 80 cases per property): FUZZ_EXAMPLES cases per
+## property (5 properties, >= 3,000 cases in all), each logged to build/fuzz.log, then summed up.
+FUZZ_EXAMPLES ?= 800
+fuzz: $(STAMP)
+	mkdir -p build && rm -f build/fuzz.log
+	IDENT_OPT_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) IDENT_OPT_FUZZ_LOG=build/fuzz.log $(BIN)/python -m pytest -n 2 -q tests/test_fuzz.py
+	$(BIN)/python -m tests.test_fuzz build/fuzz.log
 
 ## Style: ruff's lint rules (with complexity limits, see pyproject.toml) and its formatter, checked not applied.
 lint: $(STAMP)

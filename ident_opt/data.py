@@ -271,7 +271,7 @@ def _check_time(t: np.ndarray, path: Path, spec: DataSpec) -> None:
         kind = "repeats" if steps[row - 1] == 0 else "goes back"
         raise InputError(
             f"{path}: column 't' is not strictly increasing: it {kind} at "
-            f"{_row_label(path, row, spec)} ({t[row - 1]!r} then {t[row]!r})"
+            f"{_row_label(path, row, spec)} ({float(t[row - 1])!r} then {float(t[row])!r})"
         )
 
 
