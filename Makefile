@@ -14,7 +14,8 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test]'
 	touch $(STAMP)
 
-## The main job: every step on the real MERIt/TUDOR trials; tables, figures and reports into results/.
+## The main job: every step on the real MERIt/TUDOR trials; tables, figures and reports into results/; then the
+## DFKI double pendulum (a second real robot: train on 8 trajectories, test on a swing-up) into results/dfki/.
 ## Each report records what it wrote and results/README.md is rebuilt from those records: any order works.
 identify: $(STAMP)
 	$(BIN)/ident-opt audit    --problem problems/tudor_2dof_paper.toml --out results
@@ -23,6 +24,9 @@ identify: $(STAMP)
 	$(BIN)/ident-opt diagnose --problem $(PROBLEM) --data data/merit/exp1.csv --data data/merit/exp2.csv \
 	    --out results/diagnosis --json results/diagnosis/diagnosis.json
 	$(BIN)/ident-opt identify --problem $(PROBLEM) --out results --json results/identify.json
+	$(BIN)/ident-opt compare  --problem problems/dfki_c0.toml --extension armature --no-progress \
+	    --json results/dfki/compare.json
+	$(BIN)/ident-opt identify --problem problems/dfki_c0.toml --no-variants --json results/dfki/identify.json
 
 ## The whole test suite (2 workers).
 test: $(STAMP)

@@ -160,3 +160,13 @@ def test_each_held_out_trial_is_scored_and_pooled(tmp_path):
     each = [c.by_test_trial[d.source]["rmse"]["ols"] for d in load[2:]]
     for j in range(2):  # the pool's RMSE lies between the trials'
         assert min(e[j] for e in each) <= pooled[j] <= max(e[j] for e in each)
+
+
+def test_merit_logged_derivatives_and_its_own_zero_raise_no_warning(tmp_path):
+    # Logged derivatives: no cut-off to judge, no OLS-IV rule; its joint-2 sine column (δ2 ≈ 0.9 rad, not near a
+    # quarter turn) absorbs another effect and is reported, not warned about.
+    status, result = compare_json(tmp_path, PROBLEMS / "tudor_2dof.toml")
+    assert status == 0
+    assert result["warnings"] == [] and result["cutoff_hz"] == [] and result["sensitivity"] == {}
+    assert 0.5 < result["gravity_direction"]["delta2"] < 1.3
+    assert "iv" in result["parameters"] and "iv" in result["metrics"]["cross_trial"]["rmse"]
