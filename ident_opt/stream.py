@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import TextIO
 
 import numpy as np
+from scipy import signal as dsp
 
 from ident_opt.data import PLAUSIBLE
 from ident_opt.errors import InputError
@@ -40,6 +41,10 @@ STANDARD = ("t", *Q, *DQ, *DDQ, *TORQUES, *CURRENTS)
 INPUTS = (*Q, *DQ, *DDQ)
 #: Default robust outlier threshold: residuals beyond this many robust standard deviations update nothing.
 OUTLIER_K = 10.0
+#: Share of the zero-phase filter's impulse response left out by the causal FIR (`derivative_kernels`).
+TAIL = 0.02
+#: Estimated speeds below this [rad/s] are rest (0): a 10⁻⁴ rad encoder step over the filter's half second.
+REST = 1e-4
 #: Memory (samples) of the robust residual scale; an outlier moves it by 1/`OUTLIER_MEMORY` of its clipped square.
 OUTLIER_MEMORY = 500.0
 
@@ -262,26 +267,36 @@ def _value(name: str, value, conversions: dict | None) -> float:
 
 
 # ---------------------------------------------------------------------------------------------- derivatives
-def derivative_kernels(dt: float, cutoff_hz: float) -> tuple[np.ndarray, np.ndarray, int]:
+def derivative_kernels(dt: float, cutoff_hz: float, tail: float = TAIL) -> tuple[np.ndarray, np.ndarray, int]:
     """FIR kernels (oldest sample first) giving dq [rad/s] and ddq [rad/s²] at the window's centre, and the
     delay in samples.
 
-    The batch loader's recipe (low-pass, central difference, low-pass, central difference), with the zero-phase
-    Butterworth replaced by a symmetric (linear-phase) windowed-sinc low-pass h of 2m + 1 taps at `cutoff_hz`
-    (Hamming window, unit DC gain, m = ⌈0.8 / (cutoff · dt)⌉, at least 2): dq = (g∗h)∗q, ddq = (g∗h)∗(g∗h)∗q with
-    g the central difference. Symmetric kernels have no phase distortion, only a pure delay of 2m + 2 samples.
-    """
-    fc = min(cutoff_hz * dt, 0.45)  # cycles per sample
-    m = max(2, math.ceil(0.8 / fc))
-    n = np.arange(-m, m + 1)
-    h = 2 * fc * np.sinc(2 * fc * n) * np.hamming(2 * m + 1)
-    h /= h.sum()
+    The batch loader's recipe (`data.estimate_derivatives`: low-pass, central difference, low-pass, central
+    difference) with its zero-phase filter made causal: forward-backward filtering with the 4th-order
+    Butterworth b at `cutoff_hz` is convolution with b's autocorrelation h (symmetric, the same magnitude
+    response |B(f)|², no phase). h is truncated to ±m samples, m the smallest with less than `tail` of h's
+    absolute mass beyond, and renormalised to unit DC gain; then dq = (g∗h)∗q and ddq = (g∗h)∗(g∗h)∗q with g
+    the central difference. Symmetric kernels have no phase distortion: a pure delay of 2m + 2 samples
+    (0.26 s at 100 Hz and 15 Hz)."""
+    fc = cutoff_hz * dt * 2  # fraction of Nyquist
+    if fc >= 1.0:  # cut-off at or above Nyquist: no smoothing, as the batch loader
+        h = np.ones(1)
+    else:
+        b, a = dsp.butter(4, fc)
+        n = 20 * math.ceil(1.0 / fc) + 50
+        impulse = dsp.lfilter(b, a, np.r_[1.0, np.zeros(n - 1)])
+        ac = np.correlate(impulse, impulse, "full")
+        centre = n - 1
+        mass = np.abs(ac[centre:])[::-1].cumsum()[::-1] / np.abs(ac).sum()  # mass at lag ≥ k (one side)
+        m = max(1, int(np.argmax(mass < tail / 2)))
+        h = ac[centre - m : centre + m + 1]
+        h = h / h.sum()
+    m = h.size // 2
     gh = np.convolve(h, [0.5, 0.0, -0.5]) / dt  # one smoothed central difference, 2m + 3 taps
     k2 = np.convolve(gh, gh)  # 4m + 5 taps, centre 2m + 2
     k1 = np.zeros_like(k2)
     k1[m + 1 : m + 1 + gh.size] = gh  # the same centre
-    # np.convolve kernels act on a time series newest-last as conv(x, k)[n] = Σ k[i] x[n − i]: reversed for a dot
-    # product with the buffer (oldest first). Both kernels are antisymmetric/symmetric, reversal only flips signs.
+    # np.convolve(x, k)[n] = Σ k[i] x[n − i] (newest last): reversed for a dot product with the buffer, oldest first.
     return k1[::-1].copy(), k2[::-1].copy(), 2 * m + 2
 
 
@@ -331,9 +346,12 @@ class CausalDerivatives:
             return None
         if len(self.window) > self.k2.size:
             self.window.popleft()
-        q = np.array([[s["q1"], s["q2"]] for s in self.window])
         centre = dict(self.window[self.delay])
+        # Relative to the centre sample (the kernels sum to 0): a joint at rest (q repeated) gives exactly 0, not
+        # rounding noise whose sign would decide the Coulomb friction column.
+        q = np.array([[s["q1"], s["q2"]] for s in self.window]) - [centre["q1"], centre["q2"]]
         dq, ddq = self.k1 @ q, self.k2 @ q
+        dq[np.abs(dq) < REST] = 0.0  # unresolvable: at rest (the Coulomb column's sign is 0, not noise)
         centre.update(dq1=float(dq[0]), dq2=float(dq[1]), ddq1=float(ddq[0]), ddq2=float(ddq[1]))
         self.completed += 1
         return centre
