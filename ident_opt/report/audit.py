@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ident_opt import paper
+from ident_opt import outputs, paper
 from ident_opt.report import record, write_json
 from ident_opt.report.figures import audit_torque_figure
 from ident_opt.report.tables import markdown_table, write_table
@@ -53,7 +53,7 @@ def write(audit: Audit, out: Path, json_path: str | Path | None = None) -> None:
     write_table(audit.parameters, out / "paper_audit_parameters.csv")
     write_table(audit.data.table, out / "paper_audit_data.csv")
     audit_torque_figure(audit.train, audit.data.predictions, out / FIGURE)
-    (out / "paper_audit.md").write_text(markdown(audit), encoding="utf-8")
+    outputs.write_text(out / "paper_audit.md", markdown(audit))
     files = ("paper_audit.md", "paper_audit_parameters.csv", "paper_audit_data.csv", FIGURE)
     record(out, "audit", "the paper audit: its datasheet model under both conventions", files)
     write_json(json_path, payload(audit))

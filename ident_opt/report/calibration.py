@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt import outputs
 from ident_opt.effects import BACKGROUND, parse_effect
 from ident_opt.report import record, shown
 from ident_opt.report.figures import calibration_figure
@@ -31,7 +32,7 @@ def write(c: Calibration, out: Path, command: str) -> str:
     """The report and its figure into `out`; returns the Markdown."""
     calibration_figure(c.summaries, out / FIGURE)
     text = markdown(c, command)
-    (out / "simulator_calibration.md").write_text(text)
+    outputs.write_text(out / "simulator_calibration.md", text)
     record(out, "calibration", "the simulator against the real trial", ("simulator_calibration.md", FIGURE))
     return text
 

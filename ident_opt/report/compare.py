@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ident_opt import outputs
 from ident_opt.report import record, shown, write_json
 from ident_opt.report.figures import seed_heatmap
 from ident_opt.report.tables import fmt, markdown_table, write_table
@@ -35,7 +36,7 @@ def write(c: Comparison, out: Path, json_path: str | Path | None = None) -> list
     metrics = pd.concat({m: metrics_table(c, m) for m in METRICS}, names=["metric"])
     write_table(metrics, out / "compare_metrics.csv")
     write_table(rmse_table(c.seeds), out / "compare_seeds.csv")
-    (out / "compare.md").write_text(to_markdown(c, figure.name))
+    outputs.write_text(out / "compare.md", to_markdown(c, figure.name))
     record(out, "compare", "constrained vs OLS vs datasheet parameters", FILES)
     write_json(json_path, {**to_json(c), "files": list(FILES)})  # "files": in the output folder
     return list(FILES)

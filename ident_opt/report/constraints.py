@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from ident_opt import outputs
 from ident_opt.report import record, write_json
 from ident_opt.report.tables import markdown_table, write_table
 from ident_opt.studies.constraints import STUDY_SOURCES, StudyResult
@@ -16,7 +17,7 @@ FILES = ("constraints_study.md", "constraints_study.csv")
 
 def write(results: list[StudyResult], rich: dict | None, out: Path, json_path: str | Path | None = None) -> None:
     """The study's Markdown and CSV into `out`, the JSON payload to `json_path`."""
-    (out / "constraints_study.md").write_text(study_markdown(results, rich))
+    outputs.write_text(out / "constraints_study.md", study_markdown(results, rich))
     rows = pd.concat([r.rows.assign(source=r.settings["source"]) for r in results], ignore_index=True)
     write_table(rows.set_index(["source", "trial"]), out / "constraints_study.csv")
     record(out, "constraints", "when the physical constraints matter", FILES)

@@ -19,6 +19,7 @@ matplotlib.use("Agg")  # files only, never a window
 
 import matplotlib.pyplot as plt
 
+from ident_opt import outputs
 from ident_opt.studies.protocols import SplitResult
 from ident_opt.studies.seeds import SplitResults, deviation_from_mean
 
@@ -32,9 +33,11 @@ PAPER_MODELS = (
 
 
 def _save(fig, path: Path, dpi: int = 110) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    try:
+        with outputs.atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format=path.suffix.lstrip(".") or "png")
+    finally:
+        plt.close(fig)
     return path
 
 

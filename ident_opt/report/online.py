@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from ident_opt import outputs
 from ident_opt.report import record, shown, write_json
 from ident_opt.report.figures import online_trajectories_figure
 from ident_opt.report.tables import markdown_table, write_table
@@ -94,7 +95,7 @@ def write(r: Replay, data: dict, out: Path, json_path: str | Path | None = None)
         for name, a, b in zip(p["names"], p["initial"], p["final"])
     ]
     write_table(pd.DataFrame(params).set_index(["model", "parameter"]), out / "online_parameters.csv")
-    (out / "online.md").write_text(markdown(data, table.loc["nmse"]), encoding="utf-8")
+    outputs.write_text(out / "online.md", markdown(data, table.loc["nmse"]))
     write_json(out / "online.json", data)
     drawn = [k for k in DRAWN if k in r.theta]
     if drawn:

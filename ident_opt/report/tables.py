@@ -6,6 +6,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from ident_opt import outputs
+
 
 def fmt(value: object, digits: int = 4) -> str:
     """A number with `digits` significant digits (scientific when very large or small); text as is."""
@@ -28,5 +30,5 @@ def markdown_table(frame: pd.DataFrame, digits: int = 4, index: bool = True) -> 
 
 def write_table(frame: pd.DataFrame, path: Path) -> None:
     """Write `frame` as CSV at `path` (full precision)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    frame.to_csv(path, float_format="%.10g")
+    with outputs.atomic_path(path) as tmp:
+        frame.to_csv(tmp, float_format="%.10g")

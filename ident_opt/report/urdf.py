@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ident_opt import outputs
 from ident_opt.report import record, write_json
 
 #: Estimator → its column title.
@@ -155,7 +156,7 @@ def write(result: dict, out_dir: Path, json_path: str | Path | None = None) -> P
     """compare.md and compare.json in `out_dir` (and `json_path` if given); returns the report's path."""
     out_dir.mkdir(parents=True, exist_ok=True)
     report = out_dir / "compare.md"
-    report.write_text(markdown(result), encoding="utf-8")
+    outputs.write_text(report, markdown(result))
     write_json(out_dir / "compare.json", result)
     if json_path:
         write_json(json_path, result)
@@ -167,7 +168,7 @@ def write_identify(result: dict, out_dir: Path, json_path: str | Path | None = N
     """identify.md and identify.json in `out_dir` (and `json_path` if given); returns the report's path."""
     out_dir.mkdir(parents=True, exist_ok=True)
     report = out_dir / "identify.md"
-    report.write_text(identify_markdown(result), encoding="utf-8")
+    outputs.write_text(report, identify_markdown(result))
     write_json(out_dir / "identify.json", result)
     if json_path:
         write_json(json_path, result)
