@@ -170,3 +170,24 @@ def test_merit_logged_derivatives_and_its_own_zero_raise_no_warning(tmp_path):
     assert result["warnings"] == [] and result["cutoff_hz"] == [] and result["sensitivity"] == {}
     assert 0.5 < result["gravity_direction"]["delta2"] < 1.3
     assert "iv" in result["parameters"] and "iv" in result["metrics"]["cross_trial"]["rmse"]
+
+
+def test_identify_reports_about_the_users_robot_not_the_papers(tmp_path, capsys):
+    problem = variant(tmp_path, "seeds = [0, 1, 2]", "seeds = [0]")
+    text = problem.read_text().replace("candidates = [1, 2, 4]\nmax_train_samples = 4000", "candidates = [1]")
+    problem.write_text(text.replace("candidates = [1]", "candidates = [1]\nmax_train_samples = 500"), encoding="utf-8")
+    out = tmp_path / "id"
+    argv = ["identify", "--problem", str(problem), "--data", trial(0), "--test-data", trial(12), "--out", str(out),
+            "--no-variants", "--json", str(out / "identify.json")]  # fmt: skip
+    assert main(argv) == 0
+    terminal = capsys.readouterr().out
+    assert "Reproduction" not in terminal and "target(s) missed" not in terminal
+    assert not (out / "identify_reproduction.md").exists()
+    readme = (out / "README.md").read_text()
+    assert "Reproduction of the paper" not in readme and "exp1" not in readme and "Model 2" not in readme
+    assert "trajectory_12" in readme
+    params = (out / "identify_parameters.csv").read_text()
+    assert "paper π_True" not in params and "paper π̂" not in params
+    assert "paper mean" not in (out / "identify_seeds.csv").read_text()
+    result = json.loads((out / "identify.json").read_text())
+    assert result["trials"]["unseen"].endswith("trajectory_12.csv.gz")

@@ -27,6 +27,8 @@ PARAMETER_NOTE = (
     "reports joint 2's as ia2. The paper's π̂ was fitted with its printed gravity regressor, so its b1 reads "
     "as b1 − b2 physically (b1 + b2 = 4.00 N·m)."
 )
+#: The first two sentences of `PARAMETER_NOTE`: what holds for every robot (the rest is about the paper's π̂).
+PARAMETER_NOTE_ANY = PARAMETER_NOTE.split(" The paper's π̂")[0]
 MODEL_NAMES = {
     "rr": "RR (ridge, black box)",
     "dm": "DM (datasheet, paper's convention)",
@@ -35,6 +37,22 @@ MODEL_NAMES = {
     "cpbr": "CPBR (constrained, consistent)",
 }
 PROTOCOL_TITLES = {"paper": "Paper's protocol", "chronological": "Chronological split", "cross_trial": "Cross-trial"}
+
+
+def dm_key(result: IdentifyResult) -> str:
+    """The datasheet model the figures and sentences show: the paper's Model 2 for the paper's robot, else the
+    problem's own datasheet read physically."""
+    return "dm" if result.paper_robot else "dm_physical"
+
+
+def figure_models(result: IdentifyResult) -> tuple[tuple[str, str], ...]:
+    """(key, label) of the models drawn in the paper's figures, with this problem's own datasheet model."""
+    if result.paper_robot:
+        return figures.PAPER_MODELS
+    return tuple(
+        (key, "Datasheet model of this problem (DM, physical)") if key == "dm" else (key, label)
+        for key, label in figures.PAPER_MODELS
+    )
 
 
 def model_name(key: str) -> str:
@@ -112,7 +130,7 @@ def seeds_frame(result: IdentifyResult) -> pd.DataFrame:
     for key, values in per.items():
         arr = np.asarray(values)
         for j in range(2):
-            ref = RMSE.get(key)
+            ref = RMSE.get(key) if result.paper_robot else None
             rows.append(
                 {
                     "model": key,
@@ -123,7 +141,8 @@ def seeds_frame(result: IdentifyResult) -> pd.DataFrame:
                     "paper std": ref[j][1] if ref else np.nan,
                 }
             )
-    return pd.DataFrame(rows).set_index(["model", "joint"])
+    frame = pd.DataFrame(rows).set_index(["model", "joint"])
+    return frame if result.paper_robot else frame.drop(columns=["paper mean", "paper std"])
 
 
 def parameters_frame(result: IdentifyResult) -> pd.DataFrame:
@@ -140,8 +159,9 @@ def parameters_frame(result: IdentifyResult) -> pd.DataFrame:
         frame[labels.get(est, est)] = [values.get(n, np.nan) for n in names]
         if est in result.standard_errors:
             frame[f"{est} se"] = [result.standard_errors[est].get(n, np.nan) for n in names]
-    frame["paper π_True"] = [PI_TRUE.get(n, np.nan) for n in names]
-    frame["paper π̂"] = [PI_HAT.get(n, np.nan) for n in names]
+    if result.paper_robot:  # the paper's published parameters are about its robot only
+        frame["paper π_True"] = [PI_TRUE.get(n, np.nan) for n in names]
+        frame["paper π̂"] = [PI_HAT.get(n, np.nan) for n in names]
     return frame
 
 
@@ -170,13 +190,14 @@ def write_tables(result: IdentifyResult, out: Path) -> dict[str, Path]:
         "identify_reproduction": (reproduction_frame(result), "Reproduction of the paper (paper's protocol)", ""),
         "identify_seeds": (
             seeds_frame(result),
-            "Test RMSE over the paper's seeds (paper's protocol)",
+            "Test RMSE over the shuffled splits' seeds (paper's protocol)",
             "Mean and standard deviation (ddof = 1) of the test RMSE over the shuffled splits.",
         ),
         "identify_parameters": (
             parameters_frame(result),
             "Parameters (identified on the whole first trial)",
-            PARAMETER_NOTE + " Smallest eigenvalue of M(q) over all q (> 0: physically "
+            (PARAMETER_NOTE if result.paper_robot else PARAMETER_NOTE_ANY)
+            + " Smallest eigenvalue of M(q) over all q (> 0: physically "
             "consistent): " + ", ".join(f"{k} {v:.3g} kg·m²" for k, v in result.consistency.items()) + ".",
         ),
         "identify_ridge": (
@@ -192,6 +213,8 @@ def write_tables(result: IdentifyResult, out: Path) -> dict[str, Path]:
             "(mixture variance, including the spread between components); 0.95 is ideal.",
         ),
     }
+    if not result.paper_robot:  # the reproduction targets are the paper's robot's
+        frames.pop("identify_reproduction")
     written = {}
     for name, (frame, title, note) in frames.items():
         write_table(frame, out / f"{name}.csv")
@@ -247,13 +270,14 @@ def draw_figures(result: IdentifyResult, fig_dir: Path, tick) -> dict[str, Path]
     """The paper's figures on the first split of its protocol, the seed heatmap, and (cross-trial) the unseen
     trial's predictions: name -> path."""
     example = result.protocols["paper"].example
+    models = figure_models(result)
     made = {}
     for j in (0, 1):
-        made[f"torque_j{j + 1}"] = figures.torque_figure(example, j, fig_dir / f"identify_torque_j{j + 1}.png")
+        made[f"torque_j{j + 1}"] = figures.torque_figure(example, j, fig_dir / f"identify_torque_j{j + 1}.png", models)
         tick()
-        made[f"error_j{j + 1}"] = figures.error_figure(example, j, fig_dir / f"identify_error_j{j + 1}.png")
+        made[f"error_j{j + 1}"] = figures.error_figure(example, j, fig_dir / f"identify_error_j{j + 1}.png", models)
         tick()
-    made["parity"] = figures.parity_figure(example, fig_dir / "identify_parity.png")
+    made["parity"] = figures.parity_figure(example, fig_dir / "identify_parity.png", models)
     tick()
     made["interval"] = figures.interval_figure(example, fig_dir / "identify_interval_pbr.png")
     tick()
@@ -324,14 +348,14 @@ def readme_parts(
     P = result.protocols
     paper, chrono, cross = P["paper"], P.get("chronological"), P.get("cross_trial")
     lines = _readme_intro(result, command, seconds)
-    lines += _reproduction(result)
+    lines += _reproduction(result) if result.paper_robot else []
     lines += ["", "## Findings", ""]
     lines += _findings(result, paper, chrono, cross, "cpbr" in paper.metrics["rmse"])
     lines += ["", "## Tables", ""]
     lines += [f"- [{path.name}]({path.name}) (CSV beside it)" for path in tables.values()]
     lines += ["- [identify.json](identify.json): the machine-readable result (`docs/cli.md`)"]
     back = ["", "## Figures", ""]
-    for name, (path, sentence) in _figure_sentences(paper, cross).items():
+    for name, (path, sentence) in _figure_sentences(paper, cross, result).items():
         if name in made:
             rel = made[name].relative_to(out) if made[name].is_relative_to(out) else path
             back += [f"### {sentence[0]}", "", f"![{sentence[0]}]({rel})", "", sentence[1], ""]
@@ -392,6 +416,28 @@ def _reproduction(result: IdentifyResult) -> list[str]:
 def _findings(result, paper, chrono, cross, has_c) -> list[str]:
     """Measured statements, each computed from this run's numbers."""
     f = _component_findings(result, paper, chrono, cross)
+    if not result.paper_robot:
+        f.append(
+            f"- The datasheet model of this problem (physical convention), no fitting at all: `nmse` "
+            f"{_v(paper, 'dm_physical', 0)} / {_v(paper, 'dm_physical', 1)} (joint 1 / joint 2), against PBR's "
+            f"{_v(paper, 'pbr', 0)} / {_v(paper, 'pbr', 1)}."
+        )
+    else:
+        f += _paper_dm_findings(result, paper)
+    f += _gmr_findings(paper, chrono, cross)
+    if has_c:
+        f.append(
+            f"- CPBR vs PBR on the paper's protocol: `nmse` {_v(paper, 'cpbr', 0)} / {_v(paper, 'cpbr', 1)} "
+            f"vs {_v(paper, 'pbr', 0)} / {_v(paper, 'pbr', 1)}; min eigenvalue of M(q) over q: "
+            + ", ".join(f"{k} {v:.3g} kg·m²" for k, v in result.consistency.items())
+            + "."
+        )
+    return f
+
+
+def _paper_dm_findings(result, paper) -> list[str]:
+    """The paper's Model 2 under both conventions, and what a GMR does to it (the paper's robot only)."""
+    f = []
     f.append(
         f"- DM (paper's convention) vs DM (physical convention), no fitting at all: `nmse` "
         f"{_v(paper, 'dm', 0)} / {_v(paper, 'dm', 1)} vs {_v(paper, 'dm_physical', 0)} / "
@@ -399,6 +445,12 @@ def _findings(result, paper, chrono, cross, has_c) -> list[str]:
         f"{_v(paper, 'pbr', 1)}: reading the datasheet physically removes most of Model 2's joint-1 error."
     )
     f.append(_dm_gmr_finding(result, paper))
+    return f
+
+
+def _gmr_findings(paper, chrono, cross) -> list[str]:
+    """What the GMR residual does under each protocol."""
+    f = []
     gains = [
         f"{p.metrics['nmse']['pbr+gmr'][1] / p.metrics['nmse']['pbr'][1] - 1:+.0%} under the {name} protocol"
         for name, p in (("paper's", paper), ("chronological", chrono), ("cross-trial", cross))
@@ -418,13 +470,6 @@ def _findings(result, paper, chrono, cross, has_c) -> list[str]:
             f"RR + GMR {_v(p, 'rr+gmr', 0)} / {_v(p, 'rr+gmr', 1)}; 95 % coverage of PBR + GMR "
             f"{p.coverage['pbr+gmr'][0]:.1%} / {p.coverage['pbr+gmr'][1]:.1%} "
             f"(paper's protocol: {paper.coverage['pbr+gmr'][0]:.1%} / {paper.coverage['pbr+gmr'][1]:.1%})."
-        )
-    if has_c:
-        f.append(
-            f"- CPBR vs PBR on the paper's protocol: `nmse` {_v(paper, 'cpbr', 0)} / {_v(paper, 'cpbr', 1)} "
-            f"vs {_v(paper, 'pbr', 0)} / {_v(paper, 'pbr', 1)}; min eigenvalue of M(q) over q: "
-            + ", ".join(f"{k} {v:.3g} kg·m²" for k, v in result.consistency.items())
-            + "."
         )
     return f
 
@@ -475,7 +520,7 @@ def _dm_gmr_finding(result, paper) -> str:
     )
 
 
-def _error_sentence(split, j: int, rest_speed: float = 0.05) -> str:
+def _error_sentence(split, j: int, rest_speed: float = 0.05, dm: str = "dm") -> str:
     """The error's size while moving and at rest (both |dq| < `rest_speed` rad/s), without and with GMR."""
     if split is None:
         return ""
@@ -488,7 +533,7 @@ def _error_sentence(split, j: int, rest_speed: float = 0.05) -> str:
     parts = [
         f"{k.upper()} {rms(k, ~rest)} → {rms(k + '+gmr', ~rest)} moving, {rms(k, rest)} → "
         f"{rms(k + '+gmr', rest)} at rest"
-        for k in ("rr", "dm", "pbr")
+        for k in ("rr", dm, "pbr")
     ]
     return (
         f"RMS of the joint-{j + 1} error [N·m] without → with GMR on this split ({rest.mean():.0%} of the "
@@ -496,7 +541,7 @@ def _error_sentence(split, j: int, rest_speed: float = 0.05) -> str:
     )
 
 
-def _seed_sentence(paper: ProtocolResult) -> str:
+def _seed_sentence(paper: ProtocolResult, paper_robot: bool = True) -> str:
     """How far the OLS parameters move over the shuffled splits, from this run's per-seed fits."""
     fits = paper.params_per_split.get("pbr", [])
     if len(fits) < 2:
@@ -508,15 +553,16 @@ def _seed_sentence(paper: ProtocolResult) -> str:
     worst = ", ".join(f"{names[i]} up to {dev[i]:.0f} %" for i in order[::-1][:2])
     return (
         f"Over the shuffled splits most OLS parameters stay within {np.median(dev):.0f} % of their mean "
-        f"(median of the largest deviations); the least determined are {worst} (the paper: α2 and fv2 "
-        "within 15 %)."
+        f"(median of the largest deviations); the least determined are {worst}"
+        + (" (the paper: α2 and fv2 within 15 %)." if paper_robot else ".")
     )
 
 
-def _figure_sentences(paper, cross) -> dict[str, tuple[str, tuple[str, str]]]:
+def _figure_sentences(paper, cross, result: IdentifyResult) -> dict[str, tuple[str, tuple[str, str]]]:
     """figure name -> (default relative path, (title, one sentence on what it shows))."""
     m = paper.metrics["nmse"]
-    s = _time_figure_sentences(m, paper)
+    dm = dm_key(result)
+    s = _time_figure_sentences(m, paper, dm)
     s.update(
         {
             "parity": (
@@ -524,8 +570,8 @@ def _figure_sentences(paper, cross) -> dict[str, tuple[str, tuple[str, str]]]:
                 (
                     "Parity plots, 2 × 3 (paper's protocol)",
                     "Points on the diagonal are perfect predictions: with GMR, joint 1's nmse is at most "
-                    f"{fmt(max(m[k + '+gmr'][0] for k in ('rr', 'dm', 'pbr')), 2)} for the three models, joint 2's "
-                    f"at least {fmt(min(m[k + '+gmr'][1] for k in ('rr', 'dm', 'pbr')), 2)} (a visibly wider "
+                    f"{fmt(max(m[k + '+gmr'][0] for k in ('rr', dm, 'pbr')), 2)} for the three models, joint 2's "
+                    f"at least {fmt(min(m[k + '+gmr'][1] for k in ('rr', dm, 'pbr')), 2)} (a visibly wider "
                     "cloud).",
                 ),
             ),
@@ -539,16 +585,20 @@ def _figure_sentences(paper, cross) -> dict[str, tuple[str, tuple[str, str]]]:
             ),
             "seeds": (
                 "figures/identify_seeds.png",
-                ("Grouped parameters over the paper's 10 seeds", _seed_sentence(paper)),
+                (
+                    f"Grouped parameters over the {len(result.seeds.labels) if result.seeds else 10} seeds of the "
+                    "paper's protocol",
+                    _seed_sentence(paper, result.paper_robot),
+                ),
             ),
         }
     )
     if cross is not None:
-        s.update(_cross_figure_sentences(m, cross))
+        s.update(_cross_figure_sentences(m, cross, shown(result.trial), shown(result.unseen)))
     return s
 
 
-def _time_figure_sentences(m: dict, paper: ProtocolResult) -> dict[str, tuple[str, tuple[str, str]]]:
+def _time_figure_sentences(m: dict, paper: ProtocolResult, dm: str = "dm") -> dict[str, tuple[str, tuple[str, str]]]:
     """The torque and error figures over time: name -> (default relative path, (title, sentence))."""
     return {
         "torque_j1": (
@@ -556,8 +606,9 @@ def _time_figure_sentences(m: dict, paper: ProtocolResult) -> dict[str, tuple[st
             (
                 "Joint 1 torque predictions (paper's protocol)",
                 f"RR and PBR follow the measured joint-1 torque closely (nmse {fmt(m['rr'][0], 2)}, "
-                f"{fmt(m['pbr'][0], 2)}) while the paper's datasheet model is offset "
-                f"(nmse {fmt(m['dm'][0], 2)}) until the GMR removes it.",
+                f"{fmt(m['pbr'][0], 2)}) while the "
+                + ("paper's datasheet model" if dm == "dm" else "datasheet model")
+                + f" has nmse {fmt(m[dm][0], 2)} (with GMR {fmt(m[dm + '+gmr'][0], 2)}).",
             ),
         ),
         "torque_j2": (
@@ -570,16 +621,18 @@ def _time_figure_sentences(m: dict, paper: ProtocolResult) -> dict[str, tuple[st
         ),
         "error_j1": (
             "figures/identify_error_j1.png",
-            ("Joint 1 torque error over time (paper's protocol)", _error_sentence(paper.example, 0)),
+            ("Joint 1 torque error over time (paper's protocol)", _error_sentence(paper.example, 0, dm=dm)),
         ),
         "error_j2": (
             "figures/identify_error_j2.png",
-            ("Joint 2 torque error over time (paper's protocol)", _error_sentence(paper.example, 1)),
+            ("Joint 2 torque error over time (paper's protocol)", _error_sentence(paper.example, 1, dm=dm)),
         ),
     }
 
 
-def _cross_figure_sentences(m: dict, cross: ProtocolResult) -> dict[str, tuple[str, tuple[str, str]]]:
+def _cross_figure_sentences(
+    m: dict, cross: ProtocolResult, trial: str = "exp1", unseen: str = "exp2"
+) -> dict[str, tuple[str, tuple[str, str]]]:
     """The cross-trial figures: name -> (default relative path, (title, sentence)); `m`: the paper's nmse."""
     s = {}
     mc = cross.metrics["nmse"]
@@ -587,7 +640,7 @@ def _cross_figure_sentences(m: dict, cross: ProtocolResult) -> dict[str, tuple[s
         "figures/identify_cross_trial_j1.png",
         (
             "Joint 1 on the unseen trial (cross-trial)",
-            f"Identified on exp1, predicted on exp2: PBR nmse {fmt(mc['pbr'][0], 2)}, "
+            f"Identified on {trial}, predicted on {unseen}: PBR nmse {fmt(mc['pbr'][0], 2)}, "
             f"PBR + GMR {fmt(mc['pbr+gmr'][0], 2)}.",
         ),
     )
@@ -612,21 +665,26 @@ def _cross_figure_sentences(m: dict, cross: ProtocolResult) -> dict[str, tuple[s
 
 
 # ---------------------------------------------------------------------------------------------- terminal
-def terminal(result: IdentifyResult, out: Path, json_path: str | Path | None, seconds: float) -> str:
-    """The reproduction rows, nmse per model and protocol, PBR + GMR's coverage, and where the files went."""
-    lines = [
-        f"ident-opt identify: {result.problem_name} on {shown(result.trial)}"
-        + (f" (unseen: {shown(result.unseen)})" if result.unseen else ""),
-        "",
-        "Reproduction (paper's protocol: shuffled 70/30, mean over seeds)   ours    paper   diff   target",
-    ]
+def _terminal_reproduction(result: IdentifyResult) -> list[str]:
+    """The reproduction rows for the terminal (the paper's robot only; the GMR variants stay in the tables)."""
+    lines = ["", "Reproduction (paper's protocol: shuffled 70/30, mean over seeds)   ours    paper   diff   target"]
     for (metric, key, joint), row in reproduction_frame(result).iterrows():
-        if "(" in metric:  # the GMR variants: in the tables, not the terminal
+        if "(" in metric:
             continue
         lines.append(
             f"  {metric:<12} {key:<8} J{joint}  {fmt(row['ours'], 4):>28} {fmt(row['paper'], 4):>8} "
             f"{row['difference']:>7} {row['met']:>8}"
         )
+    return lines
+
+
+def terminal(result: IdentifyResult, out: Path, json_path: str | Path | None, seconds: float) -> str:
+    """The reproduction rows, nmse per model and protocol, PBR + GMR's coverage, and where the files went."""
+    lines = [
+        f"ident-opt identify: {result.problem_name} on {shown(result.trial)}"
+        + (f" (unseen: {shown(result.unseen)})" if result.unseen else ""),
+    ]
+    lines += _terminal_reproduction(result) if result.paper_robot else []
     lines += ["", "nmse (÷ variance) J1 / J2 per protocol:"]
     lines.append("  " + f"{'model':<16}" + "".join(f"{name:>24}" for name in result.protocols))
     for key in result.protocols["paper"].metrics["nmse"]:

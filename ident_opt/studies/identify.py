@@ -13,6 +13,7 @@ import numpy as np
 from ident_opt.data import Dataset
 from ident_opt.datasheet import datasheet_pi
 from ident_opt.models import DATASHEETS, FITTED, RidgeModel, RigidModel
+from ident_opt.paper import PI_TRUE
 from ident_opt.problem import Problem
 from ident_opt.robot import RIGID
 from ident_opt.studies.protocols import ProtocolResult, chronological_protocol, cross_trial_protocol, paper_protocol
@@ -41,6 +42,21 @@ class IdentifyResult:
     ridge: dict = field(default_factory=dict)  # Model 1 on the whole first trial: alpha, intercept, coef
     reg_covar: float = float("nan")  # the GMR's covariance regulariser (standardised units)
     seeds: SplitResults | None = None  # OLS over the paper's seeds (the seed figure)
+    #: the problem describes the paper's robot: its reproduction table, π columns and sentences belong in the report
+    paper_robot: bool = True
+
+
+#: A problem describes the paper's robot when its datasheet, read in the paper's convention, gives the paper's
+#: π_True within this relative tolerance (inertial and gravity parameters).
+PAPER_ROBOT_TOLERANCE = 0.02
+
+
+def is_paper_robot(problem: Problem) -> bool:
+    """Whether `problem` is the paper's arm (TUDOR): bars and motors whose paper-convention π is the paper's."""
+    if getattr(problem.robot, "description", "bars") != "bars":
+        return False
+    pi = datasheet_pi(problem.robot, "paper")
+    return all(abs(pi[k] / PI_TRUE[k] - 1) <= PAPER_ROBOT_TOLERANCE for k in ("a1", "a2", "a3", "b1", "b2"))
 
 
 def steps(problem: Problem, unseen: Dataset | None, variants: bool = True) -> int:
@@ -76,6 +92,7 @@ def identify(
         ridge=ridge_weights(trial),
         reg_covar=problem.residual.reg_covar,
         seeds=seed_study(trial, RIGID, problem.split),
+        paper_robot=is_paper_robot(problem),
     )
     bar.update()
     return result
