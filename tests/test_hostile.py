@@ -322,3 +322,17 @@ def test_too_few_samples_does_not_misname_them_as_parameters(work, capsys):
     (work / "tiny.csv").write_text("\n".join(lines) + "\n")
     err = exits_2(capsys, ["compare", "--problem", "p.toml", "--data", "tiny.csv"], "tiny.csv", "10 valid samples")
     assert "parameters" not in err
+
+
+def test_simulated_trial_follows_the_umask_and_never_overwrites_the_problem(work, capsys):
+    old = os.umask(0o002)
+    try:
+        argv = ["simulate", "--problem", "p.toml", "--duration", "1", "--no-noise"]
+        assert main([*argv, "--out", "s.csv"]) == 0
+    finally:
+        os.umask(old)
+    for name in ("s.csv", "s.truth.json"):
+        assert stat.S_IMODE((work / name).stat().st_mode) == 0o664
+    before = snapshot(work)
+    exits_2(capsys, [*argv, "--out", "p.toml"], "input")
+    assert snapshot(work) == before

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -12,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ident_opt import outputs
 from ident_opt.data import Dataset
 from ident_opt.datasheet import datasheet_pi, rigid_body
 from ident_opt.effects import CATALOGUE, is_active, normalise
@@ -80,15 +79,10 @@ def truth_path(csv_path: str | Path) -> Path:
 
 
 def _atomic(path: Path, write) -> None:
-    """`write(tmp_path)` to a temporary file beside `path`, then rename it into place."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    """`write(tmp_path)` to a temporary file beside `path`, then rename it into place (`outputs.atomic_path`:
+    the user's umask, the temporary file removed on failure, undone if the command fails)."""
+    with outputs.atomic_path(path) as tmp:
+        write(tmp)
 
 
 def simulate_trial(
