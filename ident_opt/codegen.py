@@ -316,3 +316,92 @@ def forward_backward_error(
     )
     scale[scale == 0] = 1.0
     return float(np.max(np.abs(residual).max(axis=1) / scale))
+
+
+# ---------------------------------------------------------------------------------------------- pi_update
+#: Base names of the generated online update: pi_update.c/.h (statistics + active-set solver, from the template
+#: in `codegen_files/`), pi_update_casadi.c/.h (the CasADi-generated regressor), libpi_update.so, the example.
+UPDATE = "pi_update"
+UPDATE_EXAMPLE = "pi_update_main.c"
+
+
+@dataclass(frozen=True)
+class UpdateState:
+    """What the generated update starts from: the combined normal equations H (P, P), h (P,) of the offline data,
+    θ (P,), its active set (P,) (−1 lower, +1 upper, 0 free), the sample count, and the box bounds (P,) each."""
+
+    H: np.ndarray
+    h: np.ndarray
+    theta: np.ndarray
+    state: np.ndarray
+    n: int
+    lower: np.ndarray
+    upper: np.ndarray
+
+
+def _c_numbers(values) -> str:
+    out = []
+    for v in np.asarray(values, dtype=float).ravel():
+        out.append("INFINITY" if v == np.inf else "-INFINITY" if v == -np.inf else f"{v:.17g}")
+    return ", ".join(out)
+
+
+def generate_pi_update(model: Arm, start: UpdateState, out_dir: Path, kkt_tol: float) -> list[Path]:
+    """Write pi_update.c/.h (the template with `start` baked in) and pi_update_casadi.c/.h (the regressor
+    Y(q, dq, ddq) (J×P, dense) by CasADi's code generator) into `out_dir`; returns the paths."""
+    out_dir = Path(out_dir)
+    s = model.symbols
+    Y = ca.densify(s["Y"])
+    f = ca.Function("pi_regressor", [s["q"], s["dq"], s["ddq"]], [Y], ["q", "dq", "ddq"], ["Y"])
+    casadi_c, casadi_h = generate_sources([f], out_dir, name=f"{UPDATE}_casadi")
+    values = {
+        "n_params": model.n_params,
+        "n_joints": model.n_joints,
+        "kkt_tol": f"{kkt_tol:.17g}",
+        "lower": _c_numbers(start.lower),
+        "upper": _c_numbers(start.upper),
+        "H0": _c_numbers(start.H),
+        "h0": _c_numbers(start.h),
+        "theta0": _c_numbers(start.theta),
+        "state0": ", ".join(str(int(v)) for v in start.state),
+        "n0": str(int(start.n)),
+        "names": ", ".join(f'"{n}"' for n in model.names),
+    }
+    paths = [casadi_c, casadi_h]
+    for suffix in ("c", "h"):
+        text = Template((FILES / f"{UPDATE}.{suffix}.in").read_text(encoding="utf-8")).substitute(values)
+        path = out_dir / f"{UPDATE}.{suffix}"
+        path.write_text(text, encoding="utf-8")
+        paths.append(path)
+    paths.append(Path(shutil.copyfile(FILES / UPDATE_EXAMPLE, out_dir / UPDATE_EXAMPLE)))
+    return paths
+
+
+def compile_pi_update(out_dir: Path, compiler: list[str] | None = None) -> tuple[Path, Path]:
+    """The shared library libpi_update.so and the example program `pi_update_example`, built with `CFLAGS`."""
+    compiler = list(compiler or find_compiler())
+    out_dir = Path(out_dir)
+    sources = [str(out_dir / f"{UPDATE}.c"), str(out_dir / f"{UPDATE}_casadi.c")]
+    lib = out_dir / library_name(UPDATE)
+    exe = out_dir / f"{UPDATE}_example"
+    for cmd in (
+        [*compiler, *CFLAGS, "-shared", *sources, "-o", str(lib), "-lm"],
+        [
+            *compiler,
+            "-O2",
+            "-std=c99",
+            "-D_POSIX_C_SOURCE=199309L",
+            str(out_dir / UPDATE_EXAMPLE),
+            *sources,
+            "-o",
+            str(exe),
+            "-lm",
+        ],
+    ):
+        try:
+            done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        except OSError as exc:
+            raise InputError(f"cannot run the C compiler {compiler[0]!r} ({exc.strerror})") from None
+        if done.returncode != 0:
+            raise InputError(f"the C compiler failed on the online update (exit {done.returncode}):\n{done.stderr}")
+    return lib, exe

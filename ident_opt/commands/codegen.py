@@ -46,6 +46,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--no-forward", action="store_true", help="do not generate ddq_hat (forward dynamics)")
     parser.add_argument(
+        "--no-update",
+        action="store_true",
+        help="do not generate pi_update (the online statistics update and bounded least-squares re-solve in C)",
+    )
+    parser.add_argument(
         "--force", action="store_true", help="overwrite files in --out that an earlier codegen run did not write"
     )
 
@@ -79,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     out = output_dir(args, problem)  # only once every input is read and checked
     written = [f"{codegen.NAME}.c", f"{codegen.NAME}.h", codegen.library_name(), "main.c", "README.md"]
     written.append("parameters.json")
+    if not args.no_update and trials:
+        written += UPDATE_FILES
     outputs.guard_owned(out, written, force=args.force)
     shipped = ship.prepare(model, train, problem.residual, args.estimator, args.components, saved)
     print(
@@ -89,13 +96,46 @@ def run(args: argparse.Namespace) -> int:
     built = report.build(shipped, out, compiler, forward=not args.no_forward)
     errors = ship.check(built.library, shipped, train, built.names, np.random.default_rng(0))
     data = report.payload(shipped, built, errors, problem, [t.source for t in trials])
+    update = _pi_update(args, problem, trials, out, compiler)
+    if update is not None:
+        data["pi_update"] = update
+        errors["pi_update"] = update["max_relative_difference"] if not update["failures"] else float("inf")
     print(report.write(data, built, out, getattr(args, "json", None)))
+    if update is not None:
+        print(
+            f"  pi_update: generated C vs the Python online path over {update['samples']} samples, max relative "
+            f"difference {update['max_relative_difference']:.2e} (limit {ship.TOLERANCE['pi_update']:.0e}); "
+            f"{update['c_ns_per_update']:.0f} ns per update from a C loop"
+        )
     outputs.remember_owned(out, written)
     bad = {name: err for name, err in errors.items() if not err <= ship.TOLERANCE[name]}
     if bad:
         print(f"ident-opt codegen: the compiled code disagrees with the Python model: {bad}", file=sys.stderr)
         return 1
     return 0
+
+
+#: What the online update adds to DIR (`ident_opt.codegen.generate_pi_update`, `compile_pi_update`, the check).
+UPDATE_FILES = [
+    "pi_update.c",
+    "pi_update.h",
+    "pi_update_casadi.c",
+    "pi_update_casadi.h",
+    "pi_update_main.c",
+    "libpi_update.so",
+    "pi_update_example",
+    "pi_update_samples.csv",
+]
+
+
+def _pi_update(args: argparse.Namespace, problem, trials: list, out, compiler) -> dict | None:
+    """pi_update generated, compiled and checked on the first trial's online part (none without a trial)."""
+    if args.no_update or not trials:
+        return None
+    from ident_opt.studies import online_codegen  # deferred with the rest of the heavy imports
+
+    print("ident-opt codegen: generating pi_update (the online update) and checking it against Python", flush=True)
+    return online_codegen.verify(problem, trials[0], out, compiler)
 
 
 def _announce_gmr(spec, components: int | None, train) -> None:

@@ -25,7 +25,7 @@ from ident_opt.robot import ArmModel
 #: The solver status written for estimators that have none to report.
 STATUS = {"ols": "least squares (no constraints)"}
 #: Largest accepted relative difference between the compiled library and the Python model.
-TOLERANCE = {"tau_hat": 1e-12, "tau_hat_gmr": 1e-10, "ddq_hat": 1e-12}
+TOLERANCE = {"tau_hat": 1e-12, "tau_hat_gmr": 1e-10, "ddq_hat": 1e-12, "pi_update": 1e-9}
 #: What is compared: τ with the NumPy model (+ GMR), ddq by how well it solves M ddq = τ − C dq − G − F.
 MEASURE = {"tau_hat": "max_relative_error", "tau_hat_gmr": "max_relative_error", "ddq_hat": "max_backward_error"}
 #: Random states for the check, in addition to the training states.

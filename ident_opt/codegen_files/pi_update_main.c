@@ -1,0 +1,77 @@
+/* Example: replay a CSV of samples through the generated online update, without Python.
+ *
+ *   cc -O2 -std=c99 -D_POSIX_C_SOURCE=199309L pi_update_main.c pi_update.c pi_update_casadi.c -o pi_update_example -lm
+ *   ./pi_update_example samples.csv [thetas.csv]
+ *
+ * samples.csv: a header line, then rows q1,q2,dq1,dq2,ddq1,ddq2,tau1,tau2 [rad, rad/s, rad/s^2, N m] (the
+ * columns in this order; any further columns ignored). Starts from the offline fit baked into pi_update.c,
+ * folds every row in, and prints one JSON line: samples, updates, failures, the time per update measured
+ * over the loop alone (ns) and the final parameters. thetas.csv (optional): the parameters after each row.
+ * Every buffer is static: no dynamic allocation. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+
+#include "pi_update.h"
+
+#define MAX_ROWS 200000
+#define COLS 8
+
+static double rows[MAX_ROWS][COLS];
+static double thetas[MAX_ROWS][PI_UPDATE_P];
+
+int main(int argc, char **argv) {
+  if (argc < 2) {
+    fprintf(stderr, "usage: %s samples.csv [thetas.csv]\n", argv[0]);
+    return 2;
+  }
+  FILE *in = fopen(argv[1], "r");
+  if (!in) {
+    perror(argv[1]);
+    return 2;
+  }
+  char line[4096];
+  long n = 0;
+  if (!fgets(line, sizeof line, in)) return 2; /* the header */
+  while (n < MAX_ROWS && fgets(line, sizeof line, in)) {
+    char *p = line, *end;
+    int c;
+    for (c = 0; c < COLS; ++c) {
+      rows[n][c] = strtod(p, &end);
+      if (end == p) break;
+      p = (*end == ',') ? end + 1 : end;
+    }
+    if (c == COLS) ++n;
+  }
+  fclose(in);
+
+  static pi_update_state s;
+  pi_update_initial(&s);
+  long failed = 0;
+  struct timespec t0, t1;
+  clock_gettime(CLOCK_MONOTONIC, &t0);
+  for (long k = 0; k < n; ++k) {
+    const double *r = rows[k];
+    if (pi_update(&s, r, r + 2, r + 4, r + 6) != 0) ++failed;
+    for (int p = 0; p < PI_UPDATE_P; ++p) thetas[k][p] = s.theta[p];
+  }
+  clock_gettime(CLOCK_MONOTONIC, &t1);
+  double ns = ((t1.tv_sec - t0.tv_sec) * 1e9 + (t1.tv_nsec - t0.tv_nsec)) / (n > 0 ? n : 1);
+
+  if (argc > 2) {
+    FILE *out = fopen(argv[2], "w");
+    if (!out) {
+      perror(argv[2]);
+      return 2;
+    }
+    for (int p = 0; p < PI_UPDATE_P; ++p) fprintf(out, "%s%s", PI_UPDATE_NAMES[p], p + 1 < PI_UPDATE_P ? "," : "\n");
+    for (long k = 0; k < n; ++k)
+      for (int p = 0; p < PI_UPDATE_P; ++p) fprintf(out, "%.17g%s", thetas[k][p], p + 1 < PI_UPDATE_P ? "," : "\n");
+    fclose(out);
+  }
+  printf("{\"samples\": %ld, \"updates\": %ld, \"failed\": %ld, \"ns_per_update\": %.1f, \"parameters\": {", n,
+         n - failed, failed, ns);
+  for (int p = 0; p < PI_UPDATE_P; ++p)
+    printf("\"%s\": %.17g%s", PI_UPDATE_NAMES[p], s.theta[p], p + 1 < PI_UPDATE_P ? ", " : "}}\n");
+  return failed ? 1 : 0;
+}

@@ -1,0 +1,127 @@
+"""The online update on the robot: `pi_update` (statistics update + warm-started bounded least squares) as
+generated C, checked against the Python online path and timed from a C loop.
+
+The online PBR of `ident-opt online` (rigid model, `identify.bounded.default_bounds`) is started from its
+offline fit on the first `[split] train_fraction` of the trial; the generated code has that start baked in.
+Both then fold in the rest of the trial sample by sample; the parameters after every step are compared (largest
+relative difference per parameter, 0/0 counting as 0). The example program replays the same samples from a CSV
+and times its loop (best of `repeats` runs).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ident_opt import codegen
+from ident_opt.data import Dataset, chronological_split
+from ident_opt.identify.bounded import KKT_TOL
+from ident_opt.online import OnlineIdentifier, offline_start, start_identifier
+from ident_opt.studies.online_replay import _relative
+
+
+def update_state(ident: OnlineIdentifier) -> codegen.UpdateState:
+    """The state of a bounded online identifier, for `codegen.generate_pi_update`."""
+    solver = ident._solve.__self__  # WarmBoundedLS: its last active set
+    bounds = ident.estimator.bounds
+    return codegen.UpdateState(
+        ident._H.copy(),
+        ident._h.copy(),
+        ident.theta.copy(),
+        solver.last.state.copy(),
+        ident.stats.n,
+        bounds.lower,
+        bounds.upper,
+    )
+
+
+class CUpdate:
+    """The compiled `pi_update` through ctypes (for the checks and the benchmark)."""
+
+    def __init__(self, library: Path, n_params: int):
+        P = n_params
+
+        class State(ctypes.Structure):
+            _fields_ = [
+                ("H", ctypes.c_double * (P * P)),
+                ("h", ctypes.c_double * P),
+                ("theta", ctypes.c_double * P),
+                ("state", ctypes.c_byte * P),
+                ("n", ctypes.c_long),
+                ("iterations", ctypes.c_long),
+            ]
+
+        self.lib = ctypes.CDLL(str(Path(library).resolve()))
+        self.state = State()
+        self.lib.pi_update_initial(ctypes.byref(self.state))
+        self._ref = ctypes.byref(self.state)
+        self._buffers = [(ctypes.c_double * 2)() for _ in range(4)]
+        self._fn = self.lib.pi_update
+        self._fn.restype = ctypes.c_int
+
+    def update(self, q, dq, ddq, tau) -> int:
+        """Fold one sample in; 0 on success."""
+        b = self._buffers
+        for buf, values in zip(b, (q, dq, ddq, tau)):
+            buf[0], buf[1] = values[0], values[1]
+        return self._fn(self._ref, b[0], b[1], b[2], b[3])
+
+    @property
+    def theta(self) -> np.ndarray:
+        """The current parameters."""
+        return np.array(self.state.theta[:])
+
+
+def verify(problem, trial: Dataset, out_dir: Path, compiler: list[str] | None = None, repeats: int = 5) -> dict:
+    """Generate, compile, check and time `pi_update` on `trial` (module doc); returns the figures."""
+    out_dir = Path(out_dir)
+    train_idx, test_idx = chronological_split(trial.n, problem.split.train_fraction)
+    train, test = trial.subset(train_idx), trial.subset(test_idx)
+    start = offline_start("pbr", problem, train)
+    ident = start_identifier(start, train)
+    state = update_state(ident)
+    from ident_opt.robot import RIGID  # the online PBR's model
+
+    paths = codegen.generate_pi_update(RIGID, state, out_dir, KKT_TOL)
+    library, example = codegen.compile_pi_update(out_dir, compiler)
+    c = CUpdate(library, RIGID.n_params)
+    D = start.design(test.q, test.dq, test.ddq)
+    py, cc, failures = np.empty((test.n, RIGID.n_params)), np.empty((test.n, RIGID.n_params)), 0
+    clock, python_seconds = time.perf_counter, 0.0
+    for i in range(test.n):
+        t0 = clock()
+        ident.add(D[i], test.tau[i])
+        python_seconds += clock() - t0
+        py[i] = ident.theta
+        failures += c.update(test.q[i], test.dq[i], test.ddq[i], test.tau[i]) != 0
+        cc[i] = c.theta
+    worst = max(_relative(cc[i], py[i]) for i in range(test.n))
+    csv = out_dir / "pi_update_samples.csv"
+    rows = np.hstack([test.q, test.dq, test.ddq, test.tau])
+    header = "q1,q2,dq1,dq2,ddq1,ddq2,tau1,tau2"
+    np.savetxt(csv, rows, delimiter=",", header=header, comments="", fmt="%.17g")
+    runs = [_run_example(example, csv) for _ in range(repeats)]
+    return {
+        "samples": int(test.n),
+        "offline_samples": int(train.n),
+        "max_relative_difference": float(worst),
+        "failures": int(failures),
+        "c_ns_per_update": min(r["ns_per_update"] for r in runs),
+        "c_ns_per_update_runs": [r["ns_per_update"] for r in runs],
+        "python_us_per_update": python_seconds / test.n * 1e6,
+        "final_python": dict(zip(RIGID.names, map(float, py[-1]))),
+        "final_c_example": runs[-1]["parameters"],
+        "files": [p.name for p in paths] + [library.name, example.name, csv.name],
+    }
+
+
+def _run_example(example: Path, csv: Path) -> dict:
+    done = subprocess.run([str(example), str(csv)], capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"{example.name} failed ({done.returncode}): {done.stderr or done.stdout}")
+    return json.loads(done.stdout)
