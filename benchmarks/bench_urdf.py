@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     regressor_s = best_time(
         lambda: [arm.regressor(q[s : s + chunk], dq[s : s + chunk], ddq[s : s + chunk]) for s in starts], repeats=3
     )
-    stats = study.stats_of(arm, study.load_trials(list(problem.data.trials), problem))
+    stats = study.stats_of(arm, study.load_trials(list(problem.data.training), problem))
     robot = problem.robot
     options = {"prior_weight": robot.prior_weight, "mass_range": robot.mass_range, "com_box": robot.com_box}
     consistent = fit_physical(stats, arm, **options)  # first call: cvxpy compiles the program

@@ -35,7 +35,8 @@ def test_kuka_problem_loads():
     assert isinstance(problem.robot, UrdfRobot)
     assert problem.robot.joints == tuple(JOINTS) and problem.robot.gravity == (0.0, 0.0, -9.81)
     assert problem.robot.arm.n_params == 7 * 14 and problem.robot.offsets
-    assert [p.name for p in problem.data.trials] == ["measurements_1.csv.gz", "measurements_3.csv.gz"]
+    assert [p.name for p in problem.data.training] == ["measurements_1.csv.gz", "measurements_3.csv.gz"]
+    assert [p.name for p in problem.data.testing] == ["measurements_2.csv.gz"]
 
 
 def test_panda_and_tx40_problems_load():
@@ -91,7 +92,7 @@ def test_data_with_another_joint_count_is_refused(tmp_path, n_joints):
 
 def test_comparison_on_a_time_split_keeps_the_json_contract(tmp_path):
     problem = load_problem(KUKA_PROBLEM)
-    trials = study.load_trials([problem.data.trials[0]], problem)
+    trials = study.load_trials([problem.data.training[0]], problem)
     result = study.run(problem, trials, [])
     assert result["split"]["protocol"] == "chronological"
     scores = result["metrics"]["chronological"]
@@ -119,7 +120,7 @@ def test_comparison_on_a_time_split_keeps_the_json_contract(tmp_path):
 def test_identify_writes_its_report(tmp_path):
     problem = load_problem(KUKA_PROBLEM)
     args = argparse.Namespace(
-        data=[str(problem.data.trials[0])], allow_implausible=False, drop_invalid=False, weights="ols",
+        data=[str(problem.data.training[0])], allow_implausible=False, drop_invalid=False, weights="ols",
         out=str(tmp_path), json=None,
     )  # fmt: skip
     assert commands.identify(args, problem) == 0

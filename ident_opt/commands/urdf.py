@@ -22,17 +22,28 @@ def urdf_problem(args: argparse.Namespace):
     return problem if isinstance(problem.robot, UrdfRobot) else None
 
 
+def trial_paths(args: argparse.Namespace, problem) -> tuple[list[Path], list[Path]]:
+    """(training, held-out) files, as every command reads them: every --data trains and every --test-data is
+    held out; without --data the problem's [data] decides (`train`/`test`, or `trials`: the first trains, the
+    second is held out)."""
+    data = [Path(p) for p in (getattr(args, "data", None) or [])]
+    test = [Path(p) for p in (getattr(args, "test_data", None) or [])]
+    if not data:
+        data, test = list(problem.data.training), test or list(problem.data.testing)
+    if not data:
+        raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
+    return data, test
+
+
 def compare(args: argparse.Namespace, problem) -> int:
     """OLS on base parameters, consistent, plausible and CAD fits, scored on --test-data (or a time split)."""
     from ident_opt.report import urdf as report  # deferred: NumPy, Pinocchio, CasADi, cvxpy
     from ident_opt.studies import urdf as study
 
     options = {"allow_implausible": args.allow_implausible, "drop_invalid": args.drop_invalid}
-    paths = [Path(p) for p in (getattr(args, "data", None) or [])] or list(problem.data.trials)
-    if not paths:
-        raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
+    paths, held = trial_paths(args, problem)
     trials = study.load_trials(paths, problem, **options)
-    test = study.load_trials([Path(p) for p in (getattr(args, "test_data", None) or [])], problem, **options)
+    test = study.load_trials(held, problem, **options)
     weights = None if getattr(args, "weights", "ols") == "ols" else "wls"
     result = study.run(problem, trials, test, weights=weights)
     out = output_dir(args, problem)
@@ -63,9 +74,7 @@ def codegen(args: argparse.Namespace, problem) -> int:
     arm = robot.arm
     out = output_dir(args, problem)
     compiler = cg.find_compiler()
-    paths = [Path(p) for p in (getattr(args, "data", None) or [])] or list(problem.data.trials)
-    if not paths:
-        raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
+    paths, _ = trial_paths(args, problem)
     trials = study.load_trials(paths, problem, allow_implausible=args.allow_implausible, drop_invalid=args.drop_invalid)
     stats = study.stats_of(arm, trials)
     estimator = getattr(args, "estimator", None) or "consistent"
@@ -119,9 +128,7 @@ def identify(args: argparse.Namespace, problem) -> int:
     from ident_opt.report import urdf as report  # deferred: NumPy, Pinocchio, CasADi, cvxpy
     from ident_opt.studies import urdf as study
 
-    paths = [Path(p) for p in (getattr(args, "data", None) or [])] or list(problem.data.trials)
-    if not paths:
-        raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
+    paths, _ = trial_paths(args, problem)
     trials = study.load_trials(paths, problem, allow_implausible=args.allow_implausible, drop_invalid=args.drop_invalid)
     result = study.identify(problem, trials, weights=None if getattr(args, "weights", "ols") == "ols" else "wls")
     out = output_dir(args, problem)
