@@ -377,31 +377,31 @@ def generate_pi_update(model: Arm, start: UpdateState, out_dir: Path, kkt_tol: f
     return paths
 
 
+def compile_shared(sources: list[str], library: Path, compiler: list[str]) -> Path:
+    """Compile C `sources` into the shared `library` with `CFLAGS`; `InputError` when the compiler fails."""
+    _run_compiler([*compiler, *CFLAGS, "-shared", *sources, "-o", str(library), "-lm"], compiler[0])
+    return Path(library)
+
+
+def _run_compiler(cmd: list[str], name: str) -> None:
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    except OSError as exc:
+        raise InputError(f"cannot run the C compiler {name!r} ({exc.strerror})") from None
+    if done.returncode != 0:
+        raise InputError(f"the C compiler failed on the online update (exit {done.returncode}):\n{done.stderr}")
+
+
 def compile_pi_update(out_dir: Path, compiler: list[str] | None = None) -> tuple[Path, Path]:
     """The shared library libpi_update.so and the example program `pi_update_example`, built with `CFLAGS`."""
     compiler = list(compiler or find_compiler())
     out_dir = Path(out_dir)
     sources = [str(out_dir / f"{UPDATE}.c"), str(out_dir / f"{UPDATE}_casadi.c")]
-    lib = out_dir / library_name(UPDATE)
+    lib = compile_shared(sources, out_dir / library_name(UPDATE), compiler)
     exe = out_dir / f"{UPDATE}_example"
-    for cmd in (
-        [*compiler, *CFLAGS, "-shared", *sources, "-o", str(lib), "-lm"],
-        [
-            *compiler,
-            "-O2",
-            "-std=c99",
-            "-D_POSIX_C_SOURCE=199309L",
-            str(out_dir / UPDATE_EXAMPLE),
-            *sources,
-            "-o",
-            str(exe),
-            "-lm",
-        ],
-    ):
-        try:
-            done = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        except OSError as exc:
-            raise InputError(f"cannot run the C compiler {compiler[0]!r} ({exc.strerror})") from None
-        if done.returncode != 0:
-            raise InputError(f"the C compiler failed on the online update (exit {done.returncode}):\n{done.stderr}")
+    example = str(out_dir / UPDATE_EXAMPLE)
+    _run_compiler(
+        [*compiler, "-O2", "-std=c99", "-D_POSIX_C_SOURCE=199309L", example, *sources, "-o", str(exe), "-lm"],
+        compiler[0],
+    )
     return lib, exe

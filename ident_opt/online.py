@@ -53,6 +53,7 @@ from ident_opt.robot import RIGID
 Z95 = 1.959963984540054
 #: Samples over which the parametric model's one-step residual variance is averaged (exponential weights).
 PARAMETRIC_MEMORY = 500.0
+ALPHA = 1.0 / PARAMETRIC_MEMORY
 
 #: (q (N, 2), dq (N, 2), ddq (N, 2)) -> design (N, 2, P): τ = D θ per sample.
 Design = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
@@ -153,6 +154,7 @@ class OnlineIdentifier:
         # The parametric model's own one-step residual variance per joint [N² m²]: starts at the offline fit's
         # mean square, then follows the one-step residuals (EW, ~`PARAMETRIC_MEMORY` samples).
         self.parametric_var = np.maximum(self._stats.rss(self.theta), 0.0) / max(self._stats.n, 1)
+        self._kernel = None  # the generated C update, when attached (`use_kernel`)
 
     # ------------------------------------------------------------------ state
     @property
@@ -223,6 +225,15 @@ class OnlineIdentifier:
         """Fold one sample (design D (2, P), τ (2,)) into the statistics and re-solve θ exactly. All or nothing:
         when the re-solve fails (raises) or gives a non-finite θ, nothing changes and `FloatingPointError`
         (or the solver's error) is raised."""
+        if self._kernel is not None:  # the generated C update (`online_kernel`): statistics, re-solve, residual
+            k = self._kernel
+            k.D[...], k.tau[...] = D, tau  # into the kernel's fixed buffers (their addresses are cached)
+            status = k.rows(k.address, k.D_address, k.tau_address, self._pv_address, ALPHA)
+            if status:
+                raise FloatingPointError(f"the compiled update refused the sample (code {status}); nothing changed")
+            self.theta = self._kernel.theta.copy()
+            self._fold(D, tau)
+            return
         r = tau - D @ self.theta  # the parametric model's one-step residual
         if self._solve is not None:
             # The combined normal equations (the same rank-2 term as the per-joint Stats), committed only after
@@ -233,13 +244,24 @@ class OnlineIdentifier:
             if not np.isfinite(theta).all():
                 raise FloatingPointError("the re-solve gave a non-finite θ; the sample was not folded in")
             self._H, self._h, self.theta = H, h, theta
-        self.parametric_var += (r * r - self.parametric_var) / PARAMETRIC_MEMORY
+        self.parametric_var += (r * r - self.parametric_var) * ALPHA
+        self._fold(D, tau)
+
+    def _fold(self, D: np.ndarray, tau: np.ndarray) -> None:
+        """Book-keeping after an accepted sample: the per-joint statistics (lazily), the count, the GMR transform."""
         self._pending.append((D, tau))
         self.n_updates += 1
         if len(self._pending) >= 4096:  # bounded memory: fold the pending samples into the statistics
             _ = self.stats
         if self._solve is not None and self._gmr is not None:
             self._transform(self.theta - self.theta0)
+
+    def use_kernel(self, kernel) -> None:
+        """Let `add` run in generated C (`online_kernel.attach`): H, h become views of the C state."""
+        self._kernel = kernel
+        self._H, self._h = kernel.H, kernel.h
+        self.parametric_var = np.ascontiguousarray(self.parametric_var, dtype=float)
+        self._pv_address = self.parametric_var.ctypes.data
 
     def _transform(self, delta: np.ndarray) -> None:
         """Consistency transform for θ = θ0 + Δθ, from the offline GMR (module doc)."""
@@ -426,13 +448,20 @@ def serving_identifier(
     components: int | None = None,
     cross_covariance: bool = False,
     guard: bool = True,
+    compiled: bool = True,
 ) -> tuple[Start, OnlineIdentifier]:
     """The identifier `ident-opt online --stream` serves, fitted offline on `train`: `model` is a key of
     `MODEL_KEYS`, with ``+gmr`` for its GMR residual (K = `components`, else the problem's; chosen on blocked
-    validation: the model will predict later motions); `guard`: the GMR's extrapolation guard."""
+    validation: the model will predict later motions); `guard`: the GMR's extrapolation guard; `compiled`: the
+    bounded update in generated C (`online_kernel.attach`) when a C compiler is available."""
     key, _, extra = model.partition("+")
     if key not in MODEL_KEYS or extra not in ("", "gmr"):
         raise InputError(f"--model must be one of {', '.join(MODEL_KEYS)}, optionally with +gmr; got {model!r}")
     start = offline_start(key, problem, train)
     gmr = make_gmr(problem.residual, components=components, validation="blocked") if extra else None
-    return start, start_identifier(start, train, gmr, cross_covariance=cross_covariance, guard=guard)
+    ident = start_identifier(start, train, gmr, cross_covariance=cross_covariance, guard=guard)
+    if compiled:
+        from ident_opt.online_kernel import attach  # deferred: imports the code generator (CasADi codegen)
+
+        attach(ident, RIGID)
+    return start, ident

@@ -169,11 +169,12 @@ def test_cli_stream_equals_cli_replay(physical_problem, small, tmp_path):
     assert proc.returncode == 0, err
     records = [json.loads(x) for x in out.splitlines()]
     taus = np.array([r["tau"] for r in records if "tau" in r])
-    np.testing.assert_array_equal(taus, result.pred["pbr+gmr"])
-    np.testing.assert_array_equal(np.array([r["std"] for r in records if "tau" in r]), result.std["pbr+gmr"])
+    # The service's update runs in generated C (the same exact solve; rounding differs at 1e-14).
+    np.testing.assert_allclose(taus, result.pred["pbr+gmr"], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.array([r["std"] for r in records if "tau" in r]), result.std["pbr+gmr"], rtol=1e-9)
     final = json.loads((tmp_path / "final.json").read_text())
     assert final == records[-1]
-    assert list(final["final"]["parameters"].values()) == result.theta["pbr"][-1].tolist()
+    np.testing.assert_allclose(list(final["final"]["parameters"].values()), result.theta["pbr"][-1], rtol=1e-9)
     assert '"line": 11' in err
 
 
