@@ -16,6 +16,7 @@ from scipy import signal
 from scipy.interpolate import CubicSpline
 from sklearn.model_selection import train_test_split
 
+from ident_opt import rosbag
 from ident_opt.datasheet import PI_NAMES
 from ident_opt.errors import InputError
 from ident_opt.problem import DataSpec, Robot
@@ -81,6 +82,13 @@ class Dataset:
 
 
 # ---------------------------------------------------------------------------------------------- reading
+def _read(path: Path, spec: DataSpec) -> pd.DataFrame:
+    """The raw table of a data file, or of a ROS 2 bag (`ident_opt.rosbag`: already in the data format's names)."""
+    if path.exists() and rosbag.is_bag(path):
+        return rosbag.read_bag(path, spec.ros_topic, spec.ros_joints)
+    return _read_table(path, spec)
+
+
 def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
     """The raw table of a CSV / Parquet / Excel file, every cell as read (no conversion yet)."""
     if not path.exists():
@@ -99,7 +107,9 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
         elif name.endswith(".xlsx"):
             frame = pd.read_excel(path, sheet_name=spec.sheet or 0, header=header)
         else:
-            raise InputError(f"{path}: unsupported file type; ident-opt reads .csv, .csv.gz, .parquet and .xlsx")
+            raise InputError(
+                f"{path}: unsupported file type; ident-opt reads .csv, .csv.gz, .parquet, .xlsx and ROS 2 bags"
+            )
     except InputError:
         raise
     except pd.errors.EmptyDataError:
@@ -347,7 +357,7 @@ def load_dataset(
     path = Path(path)
     n_joints = len(robot.joints)
     names = channel_names(n_joints)
-    frame = _read_table(path, spec)
+    frame = _read(path, spec)
     frame, spec = _standard_layout(frame, spec)
     _check_unique_header(frame, path, spec)
     cols = _locate(frame, spec, path, n_joints)

@@ -163,6 +163,8 @@ class DataSpec:
     standard_by_name: bool = True
     train: tuple[Path, ...] = ()  # training trials (`train = [...]`): their statistics add up
     test: tuple[Path, ...] = ()  # held-out trials (`test = [...]`), each scored and pooled
+    ros_topic: str = "/joint_states"  # a ROS 2 bag's topic of sensor_msgs/msg/JointState messages
+    ros_joints: tuple[str, ...] = ()  # a bag's joint names, base to tip: joint k is the k-th (`ident_opt.rosbag`)
 
     @property
     def training(self) -> tuple[Path, ...]:
@@ -513,6 +515,19 @@ def _paths(table: _Table, key: str) -> list[str]:
     return paths
 
 
+def _names(table: _Table, key: str, n_joints: int) -> list[str]:
+    """`key` of [data]: a list of exactly `n_joints` distinct strings (joint names), or [] when absent."""
+    names = table.take(key, list, [])
+    if names and (
+        len(names) != n_joints or not all(isinstance(n, str) and n for n in names) or len(set(names)) < n_joints
+    ):
+        raise InputError(
+            f"{table.path}: key '{key}' in [data] must list {n_joints} distinct joint names, base to tip, "
+            f"got {_excerpt(names)}"
+        )
+    return names
+
+
 def _data(table: _Table, base: Path, n_joints: int = 2) -> DataSpec:
     known = DATA_COLUMNS if n_joints == 2 else data_columns(n_joints)
     trials, train, test = _paths(table, "trials"), _paths(table, "train"), _paths(table, "test")
@@ -542,6 +557,8 @@ def _data(table: _Table, base: Path, n_joints: int = 2) -> DataSpec:
         derivative_cutoff_hz=_cutoff(table),
         conversions=conversions,
         standard_by_name=table.take("standard_by_name", bool, True),
+        ros_topic=table.take("ros_topic", str, DataSpec.ros_topic),
+        ros_joints=tuple(_names(table, "ros_joints", n_joints)),
     )
     if not spec.header and any(isinstance(v, str) for v in columns.values()):
         raise InputError(f"{table.path}: [data] header = false needs 0-based column indices in [data.columns]")

@@ -1,0 +1,92 @@
+"""ROS 2 bags as trials: `/joint_states`-style messages (sensor_msgs/msg/JointState: name, position, velocity,
+effort) read with the `rosbags` library (no ROS installation), joints picked by name.
+
+A bag is the folder `ros2 bag record` writes (metadata.yaml beside one .mcap or .db3 file, MCAP or SQLite3
+storage); giving that .mcap/.db3 file is the same. `[data] ros_joints` names the joints, base to tip (joint k of
+the model is the k-th name); `ros_topic` the topic (default "/joint_states"). The trial comes out in the data
+format's names: t [s] from the messages' header stamps (the bag's receive time when a stamp is zero), relative
+to the first; q_k = position, dq_k = velocity (when the messages carry velocities), tau_k = effort. Units are
+ROS's: rad, rad/s, N m. `[data.columns]` can still convert them (`q1 = { column = "q1", offset = … }`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ident_opt.errors import InputError
+
+#: File names of a ROS 2 bag's storage (its folder holds metadata.yaml beside them).
+BAG_SUFFIXES = (".mcap", ".db3")
+
+
+def is_bag(path: Path) -> bool:
+    """A ROS 2 bag: a folder with metadata.yaml, or a .mcap / .db3 storage file."""
+    return (path.is_dir() and (path / "metadata.yaml").is_file()) or path.name.lower().endswith(BAG_SUFFIXES)
+
+
+def read_bag(path: Path, topic: str, joints: tuple[str, ...]) -> pd.DataFrame:
+    """The bag's `topic` as a table t, q1…qn, dq1…dqn (if logged), tau1…taun for the named `joints`."""
+    # Deferred: rosbags (and its message type store) is needed only for bags.
+    from rosbags.highlevel import AnyReader, AnyReaderError
+
+    if not joints:
+        raise InputError(f'{path}: a ROS bag needs [data] ros_joints = ["…", "…"] (its joint names, base to tip)')
+    folder = path.parent if path.is_file() else path
+    if not (folder / "metadata.yaml").is_file():
+        raise InputError(f"{path}: not a ROS 2 bag: its folder has no metadata.yaml (give the bag's folder)")
+    rows: list[tuple[float, np.ndarray, np.ndarray | None, np.ndarray]] = []
+    try:
+        with AnyReader([folder]) as reader:
+            connections = [c for c in reader.connections if c.topic == topic]
+            if not connections:
+                have = ", ".join(sorted(reader.topics)) or "none"
+                raise InputError(f"{path}: the bag has no topic '{topic}' ([data] ros_topic); its topics: {have}")
+            for connection, stamp, raw in reader.messages(connections=connections):
+                rows.append(_sample(path, reader.deserialize(raw, connection.msgtype), stamp, joints, len(rows)))
+    except InputError:
+        raise
+    except (AnyReaderError, OSError, ValueError, KeyError, AttributeError) as exc:
+        raise InputError(f"{path}: cannot read the ROS bag ({type(exc).__name__}: {exc})") from None
+    if not rows:
+        raise InputError(f"{path}: the topic '{topic}' has no messages")
+    return _frame(rows, len(joints))
+
+
+def _sample(path: Path, msg, stamp_ns: int, joints: tuple[str, ...], index: int):
+    """(t [s], q, dq or None, tau) of one JointState message, in the order of `joints`."""
+    names = list(getattr(msg, "name", []))
+    missing = [j for j in joints if j not in names]
+    if missing:
+        raise InputError(
+            f"{path}: message {index} has no joint '{missing[0]}' ([data] ros_joints); "
+            f"its joints: {', '.join(names) or 'none'}"
+        )
+    at = [names.index(j) for j in joints]
+    position, velocity, effort = (np.asarray(getattr(msg, k), dtype=float) for k in ("position", "velocity", "effort"))
+    if len(effort) != len(names):
+        raise InputError(f"{path}: message {index} has no effort for its joints (tau comes from effort)")
+    if len(position) != len(names):
+        raise InputError(f"{path}: message {index} has no position for its joints (q comes from position)")
+    header = getattr(msg, "header", None)
+    t = header.stamp.sec + 1e-9 * header.stamp.nanosec if header is not None else 0.0
+    t = t if t > 0 else 1e-9 * stamp_ns
+    dq = velocity[at] if len(velocity) == len(names) else None
+    return t, position[at], dq, effort[at]
+
+
+def _frame(rows: list, n: int) -> pd.DataFrame:
+    """The samples as the data format's columns (t relative to the first sample)."""
+    t = np.array([r[0] for r in rows])
+    cols: dict[str, np.ndarray] = {"t": t - t[0]}
+    q, tau = np.array([r[1] for r in rows]), np.array([r[3] for r in rows])
+    with_dq = all(r[2] is not None for r in rows)
+    dq = np.array([r[2] for r in rows]) if with_dq else None
+    for j in range(n):
+        cols[f"q{j + 1}"] = q[:, j]
+        if dq is not None:
+            cols[f"dq{j + 1}"] = dq[:, j]
+        cols[f"tau{j + 1}"] = tau[:, j]
+    return pd.DataFrame(cols)
