@@ -469,7 +469,7 @@ def choose_cutoff(t: np.ndarray, q: np.ndarray) -> float:
     fs = 1.0 / float(np.median(steps))
     grid = np.arange(t[0], t[-1] + 0.5 / fs, 1.0 / fs)
     qg = CubicSpline(t, q, axis=0)(grid) if np.ptp(steps) > 1e-6 / fs else q
-    f, P = signal.welch(signal.detrend(qg, axis=0), fs=fs, nperseg=min(len(grid), int(4 * fs)), axis=0)
+    f, P = signal.welch(signal.detrend(qg, axis=0), fs=fs, nperseg=min(len(grid), max(int(4 * fs), 8)), axis=0)
     edges = [f[np.flatnonzero(P[:, j] >= MOTION_DYNAMIC_RANGE * P[:, j].max())[-1]] for j in range(P.shape[1])]
     return float(np.clip(CUTOFF_MARGIN * max(edges), CUTOFF_MIN_HZ, CUTOFF_MAX_FRACTION * fs))
 

@@ -336,3 +336,11 @@ def test_simulated_trial_follows_the_umask_and_never_overwrites_the_problem(work
     before = snapshot(work)
     exits_2(capsys, [*argv, "--out", "p.toml"], "input")
     assert snapshot(work) == before
+
+
+def test_time_in_megaseconds_with_allow_implausible_does_not_crash(work, capsys):
+    """Found by the fuzz: t × 1e6 gave a 0-sample Welch segment (ValueError) in the derivative cut-off."""
+    edit_columns(work / "small.csv", work / "slow.csv", lambda c: [f"{float(c[0]) * 1e6:.9g}", *c[1:]])
+    argv = ["compare", "--problem", "p.toml", "--data", "slow.csv", "--allow-implausible", "--json", "r.json"]
+    assert main([*argv, "--no-progress"]) == 0
+    json.loads((work / "r.json").read_text(), parse_constant=pytest.fail)
