@@ -155,6 +155,8 @@ class OnlineIdentifier:
         # mean square, then follows the one-step residuals (EW, ~`PARAMETRIC_MEMORY` samples).
         self.parametric_var = np.maximum(self._stats.rss(self.theta), 0.0) / max(self._stats.n, 1)
         self._kernel = None  # the generated C update, when attached (`use_kernel`)
+        self._predictor = None  # the generated C prediction, when attached (`use_predictor`)
+        self._stale = False  # the GMR's means lag θ (only with a compiled predictor)
 
     # ------------------------------------------------------------------ state
     @property
@@ -176,6 +178,9 @@ class OnlineIdentifier:
     @property
     def gmr(self):
         """The current (consistency-transformed) GMR, or None."""
+        if self._stale:
+            self._transform(self.theta - self.theta0)
+            self._stale = False
         return self._gmr
 
     def residual_std(self) -> np.ndarray:
@@ -227,12 +232,14 @@ class OnlineIdentifier:
         (or the solver's error) is raised."""
         if self._kernel is not None:  # the generated C update (`online_kernel`): statistics, re-solve, residual
             k = self._kernel
-            k.D[...], k.tau[...] = D, tau  # into the kernel's fixed buffers (their addresses are cached)
+            if D is not k.D:  # `step` wrote the regressor into the kernel's buffer already
+                k.D[...] = D
+            k.tau[...] = tau  # into the kernel's fixed buffers (their addresses are cached)
             status = k.rows(k.address, k.D_address, k.tau_address, self._pv_address, ALPHA)
             if status:
                 raise FloatingPointError(f"the compiled update refused the sample (code {status}); nothing changed")
-            self.theta = self._kernel.theta.copy()
-            self._fold(D, tau)
+            self.theta = k.theta.copy()
+            self._fold(k.D.copy(), k.tau.copy())  # the buffers are reused: the pending statistics keep copies
             return
         r = tau - D @ self.theta  # the parametric model's one-step residual
         if self._solve is not None:
@@ -254,7 +261,26 @@ class OnlineIdentifier:
         if len(self._pending) >= 4096:  # bounded memory: fold the pending samples into the statistics
             _ = self.stats
         if self._solve is not None and self._gmr is not None:
-            self._transform(self.theta - self.theta0)
+            if self._predictor is None:
+                self._transform(self.theta - self.theta0)
+            else:  # the compiled prediction reads θ itself: the GMR's means are brought up to date when asked for
+                self._stale = True
+
+    def use_predictor(self, predictor) -> None:
+        """Let `step` predict in generated C (`online_kernel.Predictor`: regressor, prediction, interval, guard)."""
+        self._predictor = predictor
+
+    def step(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> tuple[Prediction, np.ndarray]:
+        """(the prediction, the design D (2, P)) of one sample: `predict` with the design computed here, in
+        generated C when a predictor is attached (the same formulas)."""
+        f = self._predictor
+        if f is None:
+            D = self.design(q[None], dq[None], ddq[None])[0]
+            return self.predict(q, dq, ddq, D), D
+        if f(q, dq, ddq) != 0:
+            raise FloatingPointError("the compiled prediction failed")
+        extrapolating = self.support is not None and f.logp[0] < self.support.threshold
+        return Prediction(f.tau.copy(), f.par.copy(), f.std.copy(), bool(extrapolating)), f.Yt
 
     def use_kernel(self, kernel) -> None:
         """Let `add` run in generated C (`online_kernel.attach`): H, h become views of the C state."""

@@ -15,10 +15,12 @@ import shutil
 import tempfile
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 
 from ident_opt import codegen
 from ident_opt.errors import InputError
+from ident_opt.gmr import conditioning
 from ident_opt.identify.bounded import KKT_TOL
 
 
@@ -52,6 +54,88 @@ class Kernel:
         self.D_address, self.tau_address = self.D.ctypes.data, self.tau.ctypes.data
 
 
+def predictor_function(identifier, model) -> ca.Function:
+    """pi_step(q, dq, ddq, theta, pvar) -> (Yt, tau, std, logp, parametric): one sample's regressor (as Yᵀ, P×J, i.e.
+    Y row-major), the hybrid prediction with its standard deviation and the GMR input log-density, exactly the
+    formulas of `OnlineIdentifier.predict` (mean-only consistency transform from θ, extrapolation guard if any),
+    as a CasADi expression for code generation. The identifier must have a GMR (without cross-covariance)."""
+    s = model.symbols
+    q, dq, ddq = s["q"], s["dq"], s["ddq"]
+    theta, pvar = ca.SX.sym("theta", model.n_params), ca.SX.sym("pvar", model.n_joints)
+    Y = ca.densify(s["Y"])
+    parametric = ca.mtimes(Y, theta)
+    fast, gmr = identifier._fast, identifier.gmr0
+    d = gmr.n_inputs
+    c = conditioning(gmr.weights_, gmr.means_, gmr.covariances_, d)
+    x = ca.vertcat(q, dq, ddq)
+    delta = theta - ca.DM(identifier.theta0)
+    logs, means = [], []
+    for k in range(fast.K):
+        dx = x - ca.DM(c.mu_x[k])
+        z = ca.mtimes(ca.DM(c.W[k]).T, dx)
+        logs.append(c.log_norm[k] - 0.5 * ca.sumsqr(z))
+        mu_r = ca.DM(c.mu_r[k]) - ca.mtimes(ca.DM(identifier._design_at_means[k]), delta)
+        means.append(mu_r + ca.mtimes(ca.DM(c.A[k]), dx))
+    top = logs[0]
+    for lk in logs[1:]:
+        top = ca.fmax(top, lk)
+    e = [ca.exp(lk - top) for lk in logs]
+    total = sum(e[1:], e[0])
+    mean = sum((ek * mk for ek, mk in zip(e[1:], means[1:])), e[0] * means[0]) / total
+    var = (
+        sum(
+            (ek * (ca.DM(fast.C_diag[k]) + (mk - mean) ** 2) for k, (ek, mk) in enumerate(zip(e, means))),
+            ca.DM.zeros(2),
+        )
+        / total
+    )
+    logp = top + ca.log(total)
+    support = identifier.support
+    if support is not None:
+        w = ca.if_else(logp >= support.threshold, 1.0, ca.exp(-(support.threshold - logp) / support.width))
+        shrunk = w * mean
+        var = w * (var + mean * mean) + (1 - w) * pvar - shrunk * shrunk
+        mean = shrunk
+    std = ca.sqrt(ca.fmax(var, 0.0))
+    return ca.Function(
+        "pi_step",
+        [q, dq, ddq, theta, pvar],
+        [Y.T, parametric + mean, std, logp, parametric],
+        ["q", "dq", "ddq", "theta", "pvar"],
+        ["Yt", "tau", "std", "logp", "parametric"],
+    )
+
+
+class Predictor:
+    """The generated `pi_step` (`predictor_function`) bound to a kernel's θ and an identifier's residual variance:
+    `__call__(q, dq, ddq)` fills `Yt` (one sample's regressor, row-major), `tau`, `std`, `logp`, `parametric`."""
+
+    def __init__(self, lib: ctypes.CDLL, kernel: Kernel, pvar: np.ndarray):
+        self.fn = lib.pi_step
+        self.fn.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
+        self.fn.restype = ctypes.c_int
+        P, J = kernel.theta.size, kernel.tau.size
+        self.x = np.zeros(3 * J)
+        self.Yt, self.tau, self.std, self.logp, self.par = kernel.D, np.zeros(J), np.zeros(J), np.zeros(1), np.zeros(J)
+        self.J = J
+        ins = [self.x.ctypes.data + 8 * J * i for i in range(3)] + [kernel.theta.ctypes.data, pvar.ctypes.data]
+        outs = [a.ctypes.data for a in (self.Yt, self.tau, self.std, self.logp, self.par)]
+        self._keep = [np.array(ins, dtype=np.uintp), np.array(outs, dtype=np.uintp)]
+        sizes = (ctypes.c_longlong * 4)()
+        lib.pi_step_work(
+            ctypes.byref(sizes, 0), ctypes.byref(sizes, 8), ctypes.byref(sizes, 16), ctypes.byref(sizes, 24)
+        )
+        self.iw = np.zeros(max(int(sizes[2]), 1), dtype=np.int64)
+        self.w = np.zeros(max(int(sizes[3]), 1))
+        self.args = (self._keep[0].ctypes.data, self._keep[1].ctypes.data, self.iw.ctypes.data, self.w.ctypes.data, 0)
+        self.assert_P = P
+
+    def __call__(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> int:
+        J = self.J
+        self.x[:J], self.x[J : 2 * J], self.x[2 * J :] = q, dq, ddq
+        return self.fn(*self.args)
+
+
 def attach(identifier, model, compiler: list[str] | None = None) -> bool:
     """Give a bounded `OnlineIdentifier` (on `model`'s regressor) the generated C update; False (and nothing
     changed) when the estimator is not bounded or no C compiler is available."""
@@ -76,6 +160,10 @@ def attach(identifier, model, compiler: list[str] | None = None) -> bool:
     try:
         codegen.generate_pi_update(model, start, folder, KKT_TOL)
         sources = [str(folder / f"{codegen.UPDATE}.c"), str(folder / f"{codegen.UPDATE}_casadi.c")]
+        predicts = identifier._fast is not None and model.n_joints == 2
+        if predicts:
+            step_c, _ = codegen.generate_sources([predictor_function(identifier, model)], folder, name="pi_step")
+            sources.append(str(step_c))
         library = codegen.compile_shared(sources, folder / codegen.library_name(codegen.UPDATE), compiler)
         kernel = Kernel(library, model.n_params, model.n_joints)  # loaded: the file may go
     except InputError:
@@ -83,4 +171,6 @@ def attach(identifier, model, compiler: list[str] | None = None) -> bool:
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     identifier.use_kernel(kernel)
+    if predicts:
+        identifier.use_predictor(Predictor(kernel.lib, kernel, identifier.parametric_var))
     return True

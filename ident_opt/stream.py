@@ -445,8 +445,7 @@ class Service:
         q = np.array([sample["q1"], sample["q2"]])
         dq = np.array([sample["dq1"], sample["dq2"]])
         ddq = np.array([sample["ddq1"], sample["ddq2"]])
-        D = self.ident.design(q[None], dq[None], ddq[None])[0]
-        p = self.ident.predict(q, dq, ddq, D)
+        p, D = self.ident.step(q, dq, ddq)
         if not (np.isfinite(p.tau).all() and np.isfinite(p.std).all()):
             raise BadLine("the prediction is not finite for this sample", "numeric")
         self.counts.extrapolating += bool(p.extrapolating)

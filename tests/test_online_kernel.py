@@ -65,3 +65,41 @@ def test_attach_declines_other_estimators():
         RIGID.regressor, Estimator("ridge", penalty=np.full(9, 1e-3)), np.zeros(9), Stats.from_regressor(Y, tau)
     )
     assert not attach(ident, RIGID)
+
+
+def test_compiled_step_predicts_as_python_with_the_guard():
+    from ident_opt.gmr import GMR, Support
+
+    rng = np.random.default_rng(2)
+    n = 3000
+    q, dq, ddq = rng.uniform(-3, 3, (n, 2)), rng.normal(0, 1, (n, 2)), rng.normal(0, 3, (n, 2))
+    Y = RIGID.regressor(q, dq, ddq)
+    tau = Y @ PI + 0.2 * np.sin(3 * q) + 0.05 * rng.standard_normal((n, 2))
+    X = np.hstack([q, dq, ddq])
+    est = Estimator("bounded", bounds=default_bounds(RIGID))
+    theta0 = OnlineIdentifier(RIGID.regressor, est, np.zeros(9), Stats.from_regressor(Y[:2000], tau[:2000])).theta
+    gmr = GMR(n_components=3).fit(X[:2000], tau[:2000] - Y[:2000] @ theta0)
+    ref = OnlineIdentifier(
+        RIGID.regressor,
+        est,
+        theta0,
+        Stats.from_regressor(Y[:2000], tau[:2000]),
+        gmr=gmr,
+        support=Support.fit(gmr, X[:2000]),
+    )
+    fast = copy.deepcopy(ref)
+    assert attach(fast, RIGID) and fast._predictor is not None
+    far = 0
+    for k in range(2000, n):
+        x = (q[k], dq[k], ddq[k]) if k % 7 else (q[k], 20 * dq[k], 30 * ddq[k])  # some far outside
+        p1, D1 = fast.step(*x)
+        p2, D2 = ref.step(*x)
+        np.testing.assert_allclose(D1, D2, rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(p1.tau, p2.tau, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(p1.std, p2.std, rtol=1e-9, atol=1e-12)
+        assert p1.extrapolating == p2.extrapolating
+        far += p1.extrapolating
+        fast.add(D1, tau[k])
+        ref.add(D2, tau[k])
+    assert far > 100
+    np.testing.assert_allclose(fast.gmr.means_, ref.gmr.means_, rtol=1e-9, atol=1e-12)  # the lazy transform

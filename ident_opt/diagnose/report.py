@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt import outputs
 from ident_opt.diagnose import scoring, signals
 from ident_opt.diagnose.diagnosis import Diagnosis
 from ident_opt.effects import CATALOGUE
@@ -94,7 +95,8 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
     axes[-1].set_xlabel("time [s] (held-out part)")
     fig.suptitle("Torque residual τ − τ̂ on held-out data")
     fig.tight_layout()
-    fig.savefig(out / "residual_before_after.png", dpi=120)
+    with outputs.atomic_path(out / "residual_before_after.png") as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
 
     dt = 1.0 / d.rate_hz
@@ -111,7 +113,8 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
         ax.legend(fontsize=8)
     fig.suptitle("Residual spectrum on held-out data")
     fig.tight_layout()
-    fig.savefig(out / "spectrum_before_after.png", dpi=120)
+    with outputs.atomic_path(out / "spectrum_before_after.png") as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
     return ["residual_before_after.png", "spectrum_before_after.png"]
 
@@ -269,7 +272,7 @@ def write(d: Diagnosis, out: Path) -> list[str]:
     """Write the figures and `diagnosis.md` to `out`; returns the files written."""
     out.mkdir(parents=True, exist_ok=True)
     files = figures(d, out)
-    (out / "diagnosis.md").write_text(markdown(d, files))
+    outputs.write_text(out / "diagnosis.md", markdown(d, files))
     record(
         out,
         "diagnosis",
