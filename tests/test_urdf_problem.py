@@ -142,3 +142,17 @@ def test_optional_robot_keys(tmp_path):
     assert robot.drives["lwr_0_joint"].gear_ratio == 100.0
     with pytest.raises(InputError, match="couplings"):
         load_problem(_problem(tmp_path, URDF, JOINTS, 'couplings = [["lwr_6_joint", "nope", 1.0]]\n'))
+
+
+def test_compare_cli_on_the_kuka(tmp_path):
+    out = tmp_path / "out"
+    assert main(["compare", "--problem", str(KUKA_PROBLEM), "--out", str(out), "--json", str(tmp_path / "r.json")]) == 0
+    result = json.loads((tmp_path / "r.json").read_text())
+    assert result["split"]["protocol"] == "cross_trial" and (out / "compare.md").is_file()
+    assert set(result["metrics"]["cross_trial"]["consistent"]["rmse"]) == set(JOINTS)
+
+
+def test_compare_cli_refuses_data_of_another_joint_count(tmp_path, capsys):
+    path = _trial(tmp_path, 6)
+    assert main(["compare", "--problem", str(KUKA_PROBLEM), "--data", str(path), "--out", str(tmp_path)]) == 2
+    assert "trial6.csv" in capsys.readouterr().err

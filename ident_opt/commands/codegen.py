@@ -14,6 +14,7 @@ import argparse
 import sys
 
 from ident_opt import outputs
+from ident_opt.commands import urdf
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
 from ident_opt.errors import InputError
 
@@ -31,8 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--estimator",
-        choices=("constrained", "ols"),  # the names of ident_opt.identify.estimators.ESTIMATORS
-        default="constrained",
+        choices=("constrained", "ols", "consistent"),  # ESTIMATORS; consistent: the URDF arms' plausible fit
+        default=None,
         help="how π is identified (default: the physically consistent fit)",
     )
     parser.add_argument(
@@ -68,6 +69,11 @@ def run(args: argparse.Namespace) -> int:
     from ident_opt.studies import ship
 
     problem = load_problem(args.problem)
+    if isinstance(problem.robot, urdf.UrdfRobot):  # an n-joint arm from a URDF: ident_opt.commands.urdf
+        return urdf.codegen(args, problem)
+    if args.estimator == "consistent":
+        raise InputError("codegen: --estimator consistent is the fit of arms from a URDF; use constrained or ols")
+    args.estimator = args.estimator or "constrained"
     compiler = codegen.find_compiler()  # fail before any fitting when there is none
     saved = ship.read_parameters(args.parameters) if args.parameters else None
     extensions = args.extension if args.extension is not None else (saved or {}).get("extensions", [])

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ident_opt.commands import urdf
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
 from ident_opt.errors import InputError
 
@@ -66,6 +67,9 @@ def run(args: argparse.Namespace) -> int:
     from ident_opt.robot import ArmModel
     from ident_opt.studies import compare, constraints
 
+    urdf_problem = urdf.urdf_problem(args)
+    if urdf_problem is not None:  # an n-joint arm from a URDF: ident_opt.commands.urdf
+        return urdf.compare(args, urdf_problem)
     if args.margin < 0:
         raise InputError(f"--margin must be ≥ 0 (got {args.margin})")
     try:

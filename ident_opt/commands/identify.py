@@ -12,6 +12,7 @@ import argparse
 import sys
 import time
 
+from ident_opt.commands import urdf
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
 
 
@@ -35,6 +36,9 @@ def run(args: argparse.Namespace) -> int:
     from ident_opt.report import identify as report
     from ident_opt.studies.identify import identify, steps
 
+    urdf_problem = urdf.urdf_problem(args)
+    if urdf_problem is not None:  # an n-joint arm from a URDF: ident_opt.commands.urdf
+        return urdf.identify(args, urdf_problem)
     start = time.perf_counter()
     from ident_opt.data import concat
 

@@ -9,6 +9,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from ident_opt import outputs
 from ident_opt.commands.common import output_dir
 from ident_opt.errors import InputError
 from ident_opt.urdf_problem import UrdfRobot
@@ -88,6 +89,8 @@ def codegen(args: argparse.Namespace, problem) -> int:
             stats, arm, prior_weight=robot.prior_weight, mass_range=robot.mass_range, com_box=robot.com_box
         ).pi
     forward = not getattr(args, "no_forward", False)
+    written = [f"{cg.NAME}.c", f"{cg.NAME}.h", cg.library_name(), "README.md", "parameters.json"]
+    outputs.guard_owned(out, written, force=getattr(args, "force", False))  # the output rules of every command
     functions = cg.build_functions(arm, pi, forward=forward)
     source, header = cg.generate_sources(functions, out)
     library = cg.compile_library(source, out, compiler)
@@ -113,6 +116,7 @@ def codegen(args: argparse.Namespace, problem) -> int:
     }
     write_json(out / "parameters.json", payload)
     write_json(getattr(args, "json", None), payload)
+    outputs.remember_owned(out, written)  # a later run may overwrite what this one wrote
     names = ", ".join(p.name for p in (source, header, library, readme))
     print(f"ident-opt codegen: {arm.n_joints} joints, {arm.n_params} parameters ({estimator}); wrote {names}")
     print("check against Python: " + ", ".join(f"{k} {v:.2g}" for k, v in errors.items()))
