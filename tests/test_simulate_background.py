@@ -44,6 +44,7 @@ def test_background_terms_are_not_in_the_diagnosis_catalogue():
         "delay",
         "joint_offset",
         "torque_scale",
+        "load_friction",
     }
     assert set(CATALOGUE) == names
     assert set(BACKGROUND) == {"stiction", "drift", "ripple"} and not set(BACKGROUND) & names

@@ -42,11 +42,13 @@ def fit(trial, model=MODEL):
         "armature:scale=0",
         "armature:inertia=[0,0]",
         "asymmetric_coulomb:scale=0",
-        "stribeck:static=[0,0]",
+        "stribeck:scale=0",
         "elasticity:scale=0",
         "payload:mass=0",
         "delay:seconds=0",
         "joint_offset:offset=[0,0]",
+        "load_friction:coefficient=[0,0]",
+        "load_friction:scale=0",
     ],
 )
 def test_magnitude_zero_reproduces_the_clean_trial_exactly(robot, effect):
@@ -90,10 +92,13 @@ def test_asymmetric_coulomb_is_recovered_by_the_asymmetric_model(robot):
 
 
 def test_stribeck_is_recovered_by_the_stribeck_model(robot):
-    trial = simulate_trial(robot, effects=["stribeck:static=[0.4,0.15],velocity=[0.1,0.08]"], **EXACT)
+    """`static` is the breakaway level fs itself; the model's fs1 fs2 are its excess over the Coulomb level."""
+    trial = simulate_trial(robot, effects=["stribeck:static=[0.9,0.65],velocity=[0.1,0.08]"], **EXACT)
     got = fit(trial, ArmModel(("armature", "stribeck"), stribeck_velocity=(0.1, 0.08)))
-    assert [got["fs1"], got["fs2"]] == pytest.approx([0.4, 0.15], rel=1e-6)
-    assert trial.truth["effects"]["stribeck"]["static"] == [0.4, 0.15]
+    fc = [trial.truth["pi"]["fc1"], trial.truth["pi"]["fc2"]]
+    assert [got["fs1"], got["fs2"]] == pytest.approx([0.9 - fc[0], 0.65 - fc[1]], rel=1e-6)
+    assert [got["fc1"] + got["fs1"], got["fc2"] + got["fs2"]] == pytest.approx([0.9, 0.65], rel=1e-6)
+    assert trial.truth["effects"]["stribeck"]["static"] == [0.9, 0.65]
     assert trial.truth["effects"]["stribeck"]["velocity"] == [0.1, 0.08]
 
 
@@ -156,3 +161,22 @@ def test_torque_scale_divides_the_logged_torque_by_the_factor(robot, clean):
     assert trial.truth["effects"]["torque_scale"] == {"scale": [1.2, 0.9]}
     untouched = simulate_trial(robot, effects=["torque_scale:scale=[1,1]"], **EXACT)
     pd.testing.assert_frame_equal(untouched.frame, clean.frame, check_exact=True)
+
+
+def test_load_friction_adds_mu_times_the_link_torque_to_the_coulomb_level(robot):
+    """Exact data: τ − Y π_true = μ_j sgn(dq_j) |τ_load,j| with τ_load the link-side rigid torque (inertial
+    without the rotor inertia, Coriolis, gravity), so regressing the residual on that column gives back μ."""
+    from ident_opt.datasheet import datasheet_pi, rigid_body
+    from ident_opt.simulate.truth import link_pi
+
+    trial = simulate_trial(robot, effects=["load_friction:coefficient=[0.15,0.05]"], **EXACT)
+    d = trial.dataset()
+    pi = MODEL.vector(datasheet_pi(robot, "physical"))
+    residual = d.tau - MODEL.predict(pi, d.q, d.dq, d.ddq)
+    load = MODEL.predict(link_pi(MODEL, pi, rigid_body(robot, "physical").armature), d.q, d.dq, d.ddq)
+    column = np.sign(d.dq) * np.abs(load)
+    moving = np.abs(d.dq) > 1e-3
+    for j, mu in enumerate((0.15, 0.05)):
+        x, r = column[moving[:, j], j], residual[moving[:, j], j]
+        assert float(x @ r / (x @ x)) == pytest.approx(mu, rel=0.02)
+    assert trial.truth["effects"]["load_friction"] == {"coefficient": [0.15, 0.05]}

@@ -92,6 +92,11 @@ class Family:
     estimate: Callable[[dict, dict, Context], tuple[dict, dict]] = lambda p, se, ctx: ({}, {})
     polish: Callable | None = None
     refine: Callable | None = None
+    #: `center(ctx, baseline)`: θ values the search axes are centred on (added to each axis' bounds), or None.
+    center: Callable | None = None
+    #: Names of the columns `extra` adds, and θ held fixed (set by `compose` for earlier causes).
+    fixed: dict = field(default_factory=dict)
+    members: tuple = ()  # (cause, Family) of a composed family, in the order the causes were added
 
 
 def nominal(theta: dict) -> ArmModel:
@@ -140,9 +145,17 @@ def design(
     return offset, X, names
 
 
+def search_axes(family: Family, baseline: str, ctx: Context) -> list[linear.Axis]:
+    """The family's θ axes, centred where its `center` says (e.g. an offset read from the gravity columns)."""
+    axes = family.axes(1.0 / ctx.dt)
+    if family.center is None:
+        return axes
+    c = family.center(ctx, baseline)
+    return [linear.Axis(a.name, a.low + c[a.name], a.high + c[a.name], a.points, a.log) for a in axes]
+
+
 def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     """Fit one family against one baseline on the training part (θ by variable projection, β by WLS)."""
-    rate = 1.0 / ctx.dt
     stride = max(1, -(-ctx.train.n // SEARCH_ROWS))  # ceil: at most SEARCH_ROWS rows
     # A delay needs a uniform grid: stride by whole samples and delay on the strided grid.
     rows = slice(None, None, stride)
@@ -160,8 +173,8 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
         o, X, names = design(family, ctx.train, theta, baseline, ctx, rows)
         return solve(o, X, names, train_sub, rest_sub, False).cost
 
-    axes = family.axes(rate)
-    theta = linear.search(cost, axes) if axes else {}
+    axes = search_axes(family, baseline, ctx)
+    theta = {**family.fixed, **(linear.search(lambda th: cost({**family.fixed, **th}), axes) if axes else {})}
     o, X, names = design(family, ctx.train, theta, baseline, ctx)
     ls = solve(o, X, names, ctx.train.tau, ctx.rest, True)
     proposal, nlp = None, None
@@ -173,6 +186,7 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
         nlp["before"] = family.estimate(searched, dict.fromkeys(searched, 0.0), ctx)
         nlp["cost_before"], nlp["kept"] = ls.cost, False
         if proposal is not None:
+            proposal = {**theta, **proposal}
             o2, X2, _ = design(family, ctx.train, proposal, baseline, ctx)
             ls2 = solve(o2, X2, names, ctx.train.tau, ctx.rest, True)
             nlp["cost_after"] = ls2.cost
@@ -201,6 +215,73 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
         return o + np.einsum("njk,k->nj", X, beta)
 
     return Candidate(family.cause, baseline, estimate, params, se, n_added, predict, detail)
+
+
+# ---------------------------------------------------------------------------------------------- composition
+def merged_model(models: list[ArmModel]) -> ArmModel:
+    """One ArmModel with every extension of `models` (the Stribeck velocities of the one that has them)."""
+    extensions: list[str] = []
+    velocity = NOMINAL.stribeck_velocity
+    for m in models:
+        extensions += [e for e in m.extensions if e not in extensions]
+        if "stribeck" in m.extensions:
+            velocity = m.stribeck_velocity
+    order = list(CATALOGUE)
+    extensions.sort(key=lambda e: order.index(e) if e in order else -1)
+    if tuple(extensions) == NOMINAL.extensions:
+        return NOMINAL
+    return ArmModel(tuple(extensions), stribeck_velocity=velocity)
+
+
+def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
+    """One family for several causes: the earlier ones (each with its θ held) and `new` (searched, polished).
+
+    Columns: the union of the models' extensions, every family's extra columns (the new one's last, so its
+    polish sees them where it expects), the angle shift of the one that has one, every transform in
+    catalogue order. Baselines: those every member allows. The estimate is the new cause's; each cause's
+    estimate in the joint fit is `detail["members"]`."""
+    fams = [f for f, _ in earlier] + [new]
+    fixed = {**{k: v for _, th in earlier for k, v in th.items()}, **new.fixed}
+    extras = [f.extra for f in fams if f.extra is not None]
+    shifts = [f.angles for f in fams if f.angles is not None]
+    transforms = [f.transform for f in sorted(fams, key=lambda f: list(CATALOGUE).index(f.cause)) if f.transform]
+    frees = [f.free for f in fams if f.free is not None]
+
+    def model(theta: dict) -> ArmModel:
+        return merged_model([f.model(theta) for f in fams])
+
+    def extra(ds, theta, dt, ctx):
+        parts = [e(ds, theta, dt, ctx) for e in extras]
+        return np.concatenate([p[0] for p in parts], axis=2), [n for p in parts for n in p[1]]
+
+    def transform(o, X, names, theta, step):
+        for t in transforms:
+            o, X, names = t(o, X, names, theta, step)
+        return o, X, names
+
+    def estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+        members = {f.cause: f.estimate(p, se, ctx) for f in fams}
+        est, det = members[new.cause]
+        return est, {**det, "members": {c: e for c, (e, _) in members.items()}}
+
+    baselines = tuple(b for b in new.baselines if all(b in f.baselines for f in fams))
+    return Family(
+        new.cause,
+        model,
+        tuple(n for fr in frees for n in fr) if frees else None,
+        extra=extra if extras else None,
+        angles=shifts[-1] if shifts else None,
+        transform=transform if transforms else None,
+        axes=new.axes,
+        baselines=baselines,
+        nonnegative=tuple(n for f in fams for n in f.nonnegative),
+        estimate=estimate,
+        polish=new.polish if not earlier or (new.extra is not None and not transforms) else None,
+        refine=new.refine,
+        center=new.center,
+        fixed=fixed,
+        members=tuple((f.cause, f) for f in fams),
+    )
 
 
 # ---------------------------------------------------------------------------------------------- families

@@ -30,6 +30,24 @@ REST_FRACTION = 0.01
 REST_WINDOW_S = 0.01
 #: Fewest held-out / training samples that make a diagnosis meaningful.
 MIN_SAMPLES = 200
+#: Most causes one diagnosis names (rounds of the loop).
+MAX_CAUSES = 4
+
+
+@dataclass
+class Fitted:
+    """One fitted model: the causes it has (in the order named), its fit kind (`baseline`), the candidate
+    (None for a nominal model), its held-out MSE [N² m²] and prediction, and its penalised held-out gain over
+    the datasheet with every fitted parameter counted (`common`, the one footing all models are ranked on)."""
+
+    causes: tuple
+    baseline: str
+    cand: cands.Candidate | None
+    mse: np.ndarray
+    pred: np.ndarray
+    common: float
+    family: cands.Family | None
+    theta: dict
 
 
 @dataclass
@@ -49,7 +67,10 @@ class Diagnosis:
     nominal: dict[str, dict]  # "datasheet" / "rigid_fit" -> {"pi": {...}, "nmse": [...]}
     test: Dataset
     predictions: dict[str, np.ndarray]  # held-out torque predictions: "before", "after"
-    nmse_raw: list[list[float]] = field(default_factory=list)  # before, after: without the rest projection
+    nmse_raw: list[list[float]] = field(default_factory=list)  # before, after: filtered τ, no rest projection
+    nmse_filtered: list[list[float]] = field(default_factory=list)  # before, after: as scored
+    causes: list[dict] = field(default_factory=list)  # the chain, in the order named (`docs/effects.md`)
+    dropped: list[dict] = field(default_factory=list)  # causes a later one made redundant
     timings: dict[str, float] = field(default_factory=dict)
 
     def as_json(self) -> dict:
@@ -71,17 +92,22 @@ class Diagnosis:
             "baseline": self.baseline,
             "nmse_before": self.nmse_before,
             "nmse_after": self.nmse_after,
+            "causes": self.causes,
             "candidates": self.candidates,
-            "score": "held-out log-likelihood gain over the candidate's baseline minus (k/2) ln n; a cause "
-            f"is named when its score > 0 and, on some joint, it removes >= {scoring.MARGIN:.0%} of the "
-            f"baseline's held-out MSE and >= {scoring.MARGIN_VARIANCE:.2%} of the torque variance "
-            + scoring.rules_note(),
-            "nmse_definition": "MSE ÷ variance of the measured torque, per joint, on the held-out part; "
-            "within "
-            "each stretch where a joint rests, its residual's mean is removed first (stiction "
-            "holds a level no model predicts); nmse_raw_before/after: without that",
+            "score": "held-out log-likelihood gain over the round's reference model (the best model so far: "
+            "in the first round the better nominal model), (n/2) Σ_j ln(MSE_ref,j / MSE_cand,j) − (Δk/2) ln n "
+            "with Δk the difference in fitted parameters (a refitted π counts 10); every candidate of a round "
+            f"against the same reference. A cause is named when its score > 0 and, on some joint, it removes "
+            f">= {scoring.MARGIN:.0%} of the held-out MSE of the same kind of fit without it and "
+            f">= {scoring.MARGIN_VARIANCE:.2%} of the torque variance " + scoring.rules_note(),
+            "nmse_definition": "MSE ÷ variance of the measured torque (unfiltered, as compare and identify use "
+            "it), per joint, on the held-out part; nmse_filtered_*: the scored variant (torque low-passed like "
+            "the derivatives, each rest stretch's residual mean removed); nmse_raw_*: filtered, no rest removal",
+            "nmse_filtered_before": self.nmse_filtered[0] if self.nmse_filtered else None,
+            "nmse_filtered_after": self.nmse_filtered[1] if self.nmse_filtered else None,
             "nmse_raw_before": self.nmse_raw[0] if self.nmse_raw else None,
             "nmse_raw_after": self.nmse_raw[1] if self.nmse_raw else None,
+            "dropped": self.dropped,
             "split": self.split,
             "rate_hz": self.rate_hz,
             "nominal": self.nominal,
@@ -89,6 +115,144 @@ class Diagnosis:
             "evidence": self.evidence,
             "timings_s": self.timings,
         }
+
+
+def _row(v: Fitted, score: float, current: dict, raw_tau: np.ndarray, test: Dataset, rest, var, dt: float) -> dict:
+    """A candidate's JSON row: its score against the round's reference, held-out nMSE, estimate, and whether
+    it may be named: resolved, clearing the margin against the same kind of fit without it
+    (`current[baseline]`), and, when it holds the datasheet's π while a refitted π does better, explaining
+    at least `scoring.RECOVER` of the refit's log-gain (`recovers`)."""
+    c = v.cand
+    without = current.get(v.baseline) or max(current.values(), key=lambda w: w.common)
+    ok = scoring.resolved(c.cause, c.estimate, dt)
+    share = scoring.recovered(without.mse, v.mse, current["rigid_fit"].mse) if _refit_better(v, current) else None
+    return {
+        "cause": c.cause,
+        "score": score,
+        "score_vs_datasheet": v.common,
+        "nmse_after": nmse(raw_tau, v.pred).tolist(),
+        "nmse_after_filtered": scoring.nmse(test.tau, v.pred, rest),
+        "baseline": v.baseline,
+        "estimate": c.estimate,
+        "added_parameters": c.n_added,
+        "resolved": ok,
+        "recovers": share,
+        "clears_margin": ok
+        and scoring.clears_margin(without.mse, v.mse, score, var)
+        and (share is None or share >= scoring.RECOVER),
+        **({"polish": c.detail["polish"]} if "polish" in c.detail else {}),
+    }
+
+
+def _refit_better(v: Fitted, current: dict) -> bool:
+    """Whether `v` holds the datasheet's π while the current model with π refitted scores higher."""
+    return (
+        v.baseline == "datasheet"
+        and "rigid_fit" in current
+        and "datasheet" in current
+        and current["rigid_fit"].common > current["datasheet"].common
+    )
+
+
+def _frozen(family: cands.Family, theta: dict) -> cands.Family:
+    """`family` with its θ held at `theta`: no search, no polish (a cause refitted linearly only)."""
+    return replace(family, axes=lambda rate: [], polish=None, refine=None, center=None, fixed=dict(theta))
+
+
+def _prune(named: list, chain: list, current: dict, ctx, version, var) -> tuple[list, list, dict, list]:
+    """Drop earlier causes the newest one made redundant: refit the chain without each (θ held, same fit
+    kind as the newest); a cause whose removal does not lose the margin or the score is dropped."""
+    gone = []
+    if len(named) < 2:
+        return named, chain, current, gone
+    full = max(current.values(), key=lambda w: w.common)
+    for i in range(len(named) - 2, -1, -1):
+        rest = [named[k] for k in range(len(named)) if k != i]
+        family = cands.compose([(_frozen(f, t), t) for f, t in rest[:-1]], _frozen(*rest[-1]))
+        if full.baseline not in family.baselines:
+            continue
+        cand = cands.fit(family, full.baseline, ctx)
+        without = version(cand, full.baseline, cand.predict(ctx.test), tuple(f.cause for f, _ in rest), *rest[-1])
+        gain = full.common - without.common
+        if gain <= 0 or not scoring.clears_margin(without.mse, full.mse, gain, var):
+            gone.append({"cause": named[i][0].cause, "dropped_in_round": len(chain) + len(gone), "score": gain})
+            named, chain = rest, [c for c in chain if c["cause"] != named[i][0].cause]
+            current, full = {full.baseline: without}, without
+    return named, chain, current, gone
+
+
+def _rounds(robot: Robot, ctx, current: dict, version, row, var, progress: bool) -> tuple:
+    """The loop of question 2: name the best cause, extend the model with it, ask again against the extended
+    model, until nothing clears the margin (at most `MAX_CAUSES`). Every candidate of a round is scored
+    against the same reference (the best model so far). Returns (chain, versions of the final model, the
+    first round's candidate rows, dropped causes)."""
+    chain: list[dict] = []
+    named: list[tuple[cands.Family, dict]] = []  # each cause's own family and its θ, in the order named
+    candidates: list[dict] = []
+    dropped: list[dict] = []
+    promising = None  # after the first round: the causes that gained over the same kind of fit without them
+    bar = tqdm(desc="diagnose: fitting candidates", unit="fit", disable=not progress, leave=False)
+    for round_ in range(MAX_CAUSES):
+        # The round's reference: the current model with the datasheet's π where it has that version.
+        ref = current.get("datasheet") or max(current.values(), key=lambda v: v.common)
+        fits = _fit_round(robot, ctx, named, ref, version, bar, promising)
+        if promising is None:
+            promising = {v.cand.cause for v in fits if _promising(v, current[v.baseline])}
+        best: dict[str, Fitted] = {}
+        for v in fits:
+            if v.cand.cause not in best or v.common > best[v.cand.cause].common:
+                best[v.cand.cause] = v
+        ranked = sorted(best.values(), key=lambda v: v.common, reverse=True)
+        rows = [row(v, v.common - ref.common, current) for v in ranked]
+        if round_ == 0:
+            candidates = rows
+        top = next((v for v, r in zip(ranked, rows) if r["clears_margin"]), None)
+        if top is None:
+            break
+        named.append((top.family, top.theta))
+        chain.append({"cause": top.cand.cause, "score": top.common - ref.common, "fitted": top, "round": round_ + 1})
+        current = {v.baseline: v for v in fits if v.family is top.family}
+        named, chain, current, gone = _prune(named, chain, current, ctx, version, var)
+        dropped += gone
+    bar.close()
+    return chain, current, candidates, dropped
+
+
+def _promising(v: Fitted, without: Fitted) -> bool:
+    """Whether a first-round fit is worth refitting in later rounds: it gains (penalised, held out) over the
+    same kind of fit without it and removes at least half the naming margin of its MSE on some joint."""
+    return v.common > without.common and bool(np.any(without.mse - v.mse >= 0.5 * scoring.MARGIN * without.mse))
+
+
+def _fit_round(robot: Robot, ctx, named: list, ref: Fitted, version, bar, promising: set | None) -> list[Fitted]:
+    """Every cause not yet named, composed with those named, fitted against every baseline it allows. After
+    the first round only the `promising` causes are refitted (`_promising`). This keeps the later rounds cheap; a cause
+    wholly masked by another in the first round would be missed."""
+    taken = {f.cause for f, _ in named}
+    fits = []
+    for family in cands.families(robot):
+        if family.cause in taken or (promising is not None and family.cause not in promising):
+            continue
+        composed = cands.compose(named, family)
+        for baseline in composed.baselines:
+            cand = cands.fit(composed, baseline, ctx)
+            bar.update()
+            theta = {a.name: cand.parameters[a.name] for a in family.axes(1.0 / ctx.dt)}
+            fits.append(version(cand, baseline, cand.predict(ctx.test), (*ref.causes, family.cause), family, theta))
+    return fits
+
+
+def _forward_after(final: Fitted | None, baseline: str, ds_pi: dict, pi_rigid, test: Dataset, dt: float) -> list:
+    """Question 4's motion error of the extended model: its rigid part (π refitted or the datasheet's)
+    integrated, the rest of its torque teacher-forced along the measured motion (`evidence.forward_error`).
+    Without a cause: the baseline's own error."""
+    model = cands.NOMINAL
+    if final is None:
+        pi = model.vector(ds_pi) if baseline == "datasheet" else pi_rigid
+        return evidence.forward_error(model, pi, test, dt)
+    pi = model.vector({**ds_pi, **final.cand.parameters})
+    rigid = model.predict(pi, test.q, test.dq, test.ddq)
+    return evidence.forward_error(model, pi, test, dt, extension=final.pred - rigid)
 
 
 def _finite(value):
@@ -186,6 +350,7 @@ def diagnose(
     """Diagnose `trial` (and `unseen`, if given, as the held-out data); see the module docstring.
     `torque_filter_hz`: see `prepare` (the problem's derivative cut-off is the natural choice)."""
     t0 = time.perf_counter()
+    _, raw_test, _ = split(trial, unseen, train_fraction)  # the measured torque, as compare and identify see it
     trial = prepare(trial, torque_filter_hz)
     unseen = prepare(unseen, torque_filter_hz) if unseen is not None else None
     train, test, how = split(trial, unseen, train_fraction)
@@ -231,56 +396,48 @@ def diagnose(
     }
     t_nominal = time.perf_counter()
 
-    jobs = [(f, b) for f in cands.families(robot) for b in f.baselines]
-    fitted: list[tuple[cands.Candidate, float, np.ndarray, np.ndarray]] = []
-    for family, baseline in tqdm(
-        jobs, desc="diagnose: fitting candidates", unit="fit", disable=not progress, leave=False
-    ):
-        cand = cands.fit(family, baseline, ctx)
-        pred = cand.predict(test)
+    var = np.var(test.tau, axis=0)
+
+    def version(cand, baseline: str, pred: np.ndarray, causes: tuple, family, theta: dict) -> Fitted:
         after = scoring.mse(test.tau, pred, rest_test)
-        fitted.append((cand, scoring.score(nominal_mse[baseline], after, test.n, cand.n_added), after, pred))
+        k = (cand.n_added if cand is not None else 0) + (len(cands.NOMINAL.names) if baseline == "rigid_fit" else 0)
+        common = scoring.score(nominal_mse["datasheet"], after, test.n, k)
+        return Fitted(causes, baseline, cand, after, pred, common, family, theta)
+
+    def row(v: Fitted, score: float, current: dict) -> dict:
+        return _row(v, score, current, raw_test.tau, test, rest_test, var, dt)
+
+    current = {b: version(None, b, nominal_pred[b], (), None, {}) for b in nominal_pred}
+    chain, current, candidates, dropped = _rounds(robot, ctx, current, version, row, var, progress)
     t_fit = time.perf_counter()
 
-    # One version per cause: the datasheet-based or the refitted extension, whichever is better on a common
-    # footing (its gain over the datasheet, every fitted parameter penalised: the refit's π counts too).
-    def common(item) -> float:
-        refit = len(cands.NOMINAL.names) if item[0].baseline == "rigid_fit" else 0
-        return scoring.score(nominal_mse["datasheet"], item[2], test.n, item[0].n_added + refit)
-
-    best: dict[str, tuple] = {}
-    for item in fitted:
-        if item[0].cause not in best or common(item) > common(best[item[0].cause]):
-            best[item[0].cause] = item
-    ranked = sorted(best.values(), key=lambda it: it[1], reverse=True)
-    candidates = [
-        {
-            "cause": c.cause,
-            "score": s,
-            "score_vs_datasheet": common((c, s, after, pred)),
-            "nmse_after": scoring.nmse(test.tau, pred, rest_test),
-            "baseline": c.baseline,
-            "estimate": c.estimate,
-            "added_parameters": c.n_added,
-            "resolved": scoring.resolved(c.cause, c.estimate, dt),
-            "clears_margin": scoring.resolved(c.cause, c.estimate, dt)
-            and scoring.clears_margin(nominal_mse[c.baseline], after, s, np.var(test.tau, axis=0)),
-            # The IPOPT polish (elasticity, joint offsets): estimates before/after it, whether it was kept.
-            **({"polish": c.detail["polish"]} if "polish" in c.detail else {}),
-        }
-        for c, s, after, pred in ranked
-    ]
-    nameable = [it for it in ranked if scoring.resolved(it[0].cause, it[0].estimate, dt)]
-    top = nameable[0] if nameable else None
-    if top is not None and scoring.clears_margin(
-        nominal_mse[top[0].baseline], top[2], top[1], np.var(test.tau, axis=0)
-    ):
-        named, after_pred = top[0], top[3]
-        cause, estimate, baseline = named.cause, named.estimate, named.baseline
+    final = max(current.values(), key=lambda v: v.common)
+    if chain:
+        baseline = chain[0]["fitted"].baseline
+        after_pred = final.pred
     else:
-        baseline = min(nominal_mse, key=lambda b: float(np.sum(nominal_mse[b] / np.var(test.tau, axis=0))))
-        named, cause, estimate, after_pred = None, "none", {}, nominal_pred[baseline]
+        baseline = final.baseline
+        after_pred = nominal_pred[baseline]
+    members = final.cand.detail.get("members", {}) if final.cand is not None else {}
+    if final.cand is not None and not members:
+        members = {final.cand.cause: final.cand.estimate}
+    causes = [
+        {
+            "cause": c["cause"],
+            "estimate": members.get(c["cause"], c["fitted"].cand.estimate),
+            "score": c["score"],
+            "nmse_after": nmse(raw_test.tau, c["fitted"].pred).tolist(),
+            "nmse_after_filtered": scoring.nmse(test.tau, c["fitted"].pred, rest_test),
+            "baseline": c["fitted"].baseline,
+            "round": c["round"],
+            "estimate_when_added": c["fitted"].cand.estimate,
+        }
+        for c in chain
+    ]
+    cause = causes[0]["cause"] if causes else "none"
+    estimate = causes[0]["estimate"] if causes else {}
     before_pred = nominal_pred[baseline]
+    named_cand = final.cand if chain else None
 
     ev = {b: evidence.residual_evidence(test, p, dt) for b, p in nominal_pred.items()}
     ev["forward_error_rad"] = {
@@ -288,20 +445,24 @@ def diagnose(
         "rigid_fit": evidence.forward_error(cands.NOMINAL, pi_rigid, test, dt),
     }
     ev["after"] = evidence.residual_evidence(test, after_pred, dt)
+    ev["forward_error_rad"]["after"] = _forward_after(final if chain else None, baseline, ds_pi, pi_rigid, test, dt)
     ev["other_channels"] = evidence.channel_peaks(test if unseen is None else trial, dt)
     t_end = time.perf_counter()
     return Diagnosis(
         cause=cause,
         estimate=estimate,
         baseline=baseline,
-        nmse_before=scoring.nmse(test.tau, before_pred, rest_test),
-        nmse_after=scoring.nmse(test.tau, after_pred, rest_test),
+        nmse_before=nmse(raw_test.tau, before_pred).tolist(),
+        nmse_after=nmse(raw_test.tau, after_pred).tolist(),
         nmse_raw=[nmse(test.tau, before_pred).tolist(), nmse(test.tau, after_pred).tolist()],
+        nmse_filtered=[scoring.nmse(test.tau, before_pred, rest_test), scoring.nmse(test.tau, after_pred, rest_test)],
+        causes=causes,
+        dropped=dropped,
         candidates=candidates,
         evidence=ev,
         split=how,
         rate_hz=1.0 / dt,
-        named=named,
+        named=named_cand,
         nominal=nominal,
         test=test,
         predictions={"before": before_pred, "after": after_pred},

@@ -100,10 +100,21 @@ def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float) -> dict:
     return out
 
 
-def forward_error(model: ArmModel, pi: np.ndarray, ds: Dataset, dt: float, window_s: float = 0.5) -> list[float]:
+def forward_error(
+    model: ArmModel,
+    pi: np.ndarray,
+    ds: Dataset,
+    dt: float,
+    window_s: float = 0.5,
+    extension: np.ndarray | None = None,
+) -> list[float]:
     """RMS joint-angle error [rad] at the end of short windows of forward simulation driven by the measured
     torque: M(q) q̈ = τ − C(q, q̇)q̇ − G(q) − F(q̇), semi-implicit Euler at the data rate, each window
-    restarted from the measured state (so drift does not swamp the comparison). All windows run at once."""
+    restarted from the measured state (so drift does not swamp the comparison). All windows run at once.
+
+    `extension` (N, 2) [N m]: an extended model's torque beyond the rigid model `pi`, evaluated along the
+    measured motion (a mode, a delay, friction shapes: teacher-forced, since some depend on the history);
+    it is subtracted from the driving torque while the rigid part is integrated."""
     L = max(2, round(window_s / dt))
     starts = np.arange(0, ds.n - L, L)
     if len(starts) == 0:
@@ -112,7 +123,7 @@ def forward_error(model: ArmModel, pi: np.ndarray, ds: Dataset, dt: float, windo
     zero = np.zeros_like(q)
     with np.errstate(all="ignore"):
         for step in range(L):
-            tau = ds.tau[starts + step]
+            tau = ds.tau[starts + step] - (extension[starts + step] if extension is not None else 0.0)
             bias = model.predict(pi, q, dq, zero)
             M = model.mass_matrix(pi, q[:, 1])
             ddq = np.linalg.solve(M, (tau - bias)[..., None])[..., 0]

@@ -29,6 +29,8 @@ from ident_opt.effects import CATALOGUE
 MARGIN = 0.05
 #: Least fraction of the measured torque's variance (on the same joint) it must remove.
 MARGIN_VARIANCE = 1e-4
+#: Least share of a refitted π's log-gain a cause fitted with the datasheet's π must explain.
+RECOVER = 0.8
 
 
 def mse(tau: np.ndarray, tau_hat: np.ndarray, rest: np.ndarray | None = None) -> np.ndarray:
@@ -49,6 +51,14 @@ def score(mse_before: np.ndarray, mse_after: np.ndarray, n: int, k: int) -> floa
     """Penalised held-out log-likelihood gain (see the module docstring)."""
     gain = 0.5 * n * float(np.sum(np.log(np.asarray(mse_before) / np.asarray(mse_after))))
     return gain - 0.5 * k * float(np.log(n))
+
+
+def recovered(mse_base: np.ndarray, mse_cand: np.ndarray, mse_refit: np.ndarray) -> float:
+    """Share of the refit's held-out log-gain over `mse_base` that the candidate achieves:
+    Σ_j ln(MSE_base,j / MSE_cand,j) ÷ Σ_j ln(MSE_base,j / MSE_refit,j)."""
+    whole = float(np.sum(np.log(np.asarray(mse_base) / np.asarray(mse_refit))))
+    part = float(np.sum(np.log(np.asarray(mse_base) / np.asarray(mse_cand))))
+    return part / whole if whole > 0 else float("inf")
 
 
 def resolved(cause: str, estimate: dict, dt: float) -> bool:

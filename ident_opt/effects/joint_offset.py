@@ -8,13 +8,29 @@ IPOPT jointly with π (`offsets`), against both nominal models.
 
 from __future__ import annotations
 
+import math
 import time
 
-from ident_opt.effects.base import Effect, Key, ca, cands, elastic_nlp, linear, nlp, np, relative_error, report, signals
+from ident_opt.effects.base import (
+    Effect,
+    Key,
+    ca,
+    cands,
+    elastic_nlp,
+    linear,
+    nlp,
+    np,
+    relative_error,
+    report,
+    robot_model,
+    signals,
+)
 from ident_opt.parameters import Parameter
 
 #: A hidden offset is found when the estimate is within this [rad] or this relative error.
 OFFSET_TOL = (0.01, 0.20)
+#: Most linear fits that centre the offset search (`gravity_rotation`).
+CENTRE_ITERATIONS = 6
 
 
 class JointOffset(Effect):
@@ -58,6 +74,7 @@ class JointOffset(Effect):
             self.family(
                 angles=lambda th: np.array([th["delta1"], th["delta2"]]),
                 axes=lambda rate: [linear.Axis("delta1", -0.1, 0.1, 21), linear.Axis("delta2", -0.1, 0.1, 21)],
+                center=gravity_rotation,
                 estimate=lambda p, se, ctx: ({"offset": [p["delta1"], p["delta2"]]}, {}),
                 polish=_polish,
             )
@@ -82,11 +99,38 @@ class JointOffset(Effect):
         return checks
 
 
+def gravity_rotation(ctx, baseline: str) -> dict:
+    """Where the offset search is centred [rad], any size: the rotation of gravity read from linear fits.
+
+    G1 = b1 cos(q1 + δ1) + b2 cos(q1 + q2 + δ1 + δ2) = b1 cos δ1 cos q1 − b1 sin δ1 sin q1 + …, so the rigid
+    model with the offset extension's sin columns (b1s, b2s) fitted by least squares gives
+    δ1 = atan2(−b1s, b1) and δ1 + δ2 = atan2(−b2s, b2), however large the offset (a quarter turn included).
+    The inertia terms see q2 + δ2 too, so the fit is repeated at the shifted angles until the correction is
+    below 1 mrad (at most `CENTRE_ITERATIONS`). Per-direction Coulomb levels are fitted alongside: an
+    asymmetric friction would otherwise leak into the gravity columns. The search then refines ±0.1 rad
+    around the centre and IPOPT polishes within ±2π."""
+    tr = ctx.train
+    model = robot_model.ArmModel((*cands.NOMINAL.extensions, "asymmetric_coulomb", "joint_offset"))
+    tau = signals.demean_runs(tr.tau, ctx.rest)
+    delta = np.zeros(2)
+    for _ in range(CENTRE_ITERATIONS):
+        Y = signals.demean_runs(model.regressor(tr.q + delta, tr.dq, tr.ddq), ctx.rest)
+        p = dict(zip(model.names, linear.solve(np.zeros_like(tau), Y, tau, ctx.weights, False).beta))
+        d1 = math.atan2(-p["b1s"], p["b1"])
+        d12 = math.atan2(-p["b2s"], p["b2"])
+        step = np.array([d1, math.remainder(d12 - d1, 2 * math.pi)])
+        delta = delta + step
+        if np.max(np.abs(step)) < 1e-3:
+            break
+    return {"delta1": float(delta[0]), "delta2": float(delta[1])}
+
+
 def _polish(baseline: str, ctx, o, X, beta, theta: dict, bounds: dict) -> tuple[dict | None, dict]:
-    """(δ1, δ2) jointly by IPOPT, with π when it is refitted (`offsets`)."""
+    """(δ1, δ2) jointly by IPOPT, with π when it is refitted (`offsets`), within a half turn."""
     tr, model = ctx.train, cands.NOMINAL
     held = model.vector(ctx.datasheet) if baseline == "datasheet" else None
-    return offsets(model, tr.q, tr.dq, tr.ddq, tr.tau, ctx.rest, ctx.weights, held, beta, theta, bounds["delta1"])
+    wide = (-2 * math.pi, 2 * math.pi)
+    return offsets(model, tr.q, tr.dq, tr.ddq, tr.tau, ctx.rest, ctx.weights, held, beta, theta, wide)
 
 
 def offsets(

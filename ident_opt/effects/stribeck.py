@@ -1,15 +1,35 @@
-"""``stribeck``: a friction excess fs sgn(dq) exp(−(dq/vs)²) above the Coulomb level at low speed.
+"""``stribeck``: friction that falls from a static (breakaway) level fs to the Coulomb level fc as speed rises.
 
-Model extension ``stribeck``: fs1 fs2, with the Stribeck velocities vs given (`ArmModel.stribeck_velocity`).
-Simulator: that friction. Diagnosis: fs1 fs2 ≥ 0 linear, vs1 vs2 [rad/s] searched by variable projection,
-then polished by IPOPT (`polish`), against both nominal models. It shows only where the joints move slowly
-for a while, so its hidden trials follow the smooth `fourier` reference.
+The friction is fc sgn(dq) + (fs − fc) sgn(dq) exp(−(dq/vs)²). The effect's keys and estimate give the
+static level fs itself [N m]; the model extension's parameters fs1 fs2 are the excess fs − fc (linear).
+Model extension ``stribeck``: fs1 fs2 (excess), with the Stribeck velocities vs given
+(`ArmModel.stribeck_velocity`). Simulator: that friction, the excess over the true plant's mean Coulomb
+level. Diagnosis: the excess ≥ 0 linear, vs1 vs2 [rad/s] searched by variable projection, then polished by
+IPOPT (`polish`), against both nominal models; the estimate adds the fitted (or datasheet) Coulomb level.
+It shows only where the joints move slowly for a while, so its hidden trials follow the smooth `fourier`
+reference.
 """
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, ca, cands, linear, nlp, np, report, robot_model
+from ident_opt.effects.base import Effect, Key, ca, cands, datasheet, linear, nlp, np, report, robot_model
 from ident_opt.parameters import Parameter
+
+#: The default excess of the static level over the datasheet's mean Coulomb level [N m], per joint.
+DEFAULT_EXCESS = (0.3, 0.2)
+
+
+def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
+    """The datasheet's symmetric Coulomb level per joint [N m]."""
+    return [0.5 * (a + b) for a, b in zip(*coulomb)]
+
+
+def plant_coulomb(pi: dict, j: int) -> float:
+    """The mean Coulomb level [N m] of joint j (1-based) in a parameter dict (per-direction levels averaged)."""
+    k = str(j)
+    if "fc" + k + "p" in pi:
+        return 0.5 * (pi["fc" + k + "p"] + pi["fc" + k + "n"])
+    return pi["fc" + k]
 
 
 class Stribeck(Effect):
@@ -17,9 +37,22 @@ class Stribeck(Effect):
     summary = "friction excess fs sgn(dq) exp(-(dq/vs)^2) above the Coulomb level at low speed"
     order = 3
     keys = {  # noqa: RUF012
-        "static": Key("pair", (0.3, 0.2), "N m, static excess fs over the Coulomb level, per joint", magnitude=True),
+        "static": Key("pair", None, "N m, static (breakaway) level fs per joint (default: datasheet fc + [0.3,0.2])"),
         "velocity": Key("pair", (0.05, 0.05), "rad/s, Stribeck velocity vs, per joint", 0.0, True),
     }
+
+    def default(self, key: str, coulomb: tuple[tuple, tuple]) -> object:
+        if key == "static":
+            return tuple(m + e for m, e in zip(_mean(coulomb), DEFAULT_EXCESS))
+        return self.keys[key].default
+
+    def scaled(self, p: dict, s: float, coulomb: tuple[tuple, tuple]) -> dict:
+        # The magnitude is the excess over the datasheet's mean Coulomb level.
+        p["static"] = tuple(m + s * (v - m) for m, v in zip(_mean(coulomb), p["static"]))
+        return p
+
+    def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
+        return any(v != m for m, v in zip(_mean(coulomb), p["static"]))
 
     # ------------------------------------------------------------------ model: fsj sgn(dq_j) exp(−(dq_j/vs_j)²)
     parameters = tuple(
@@ -41,13 +74,13 @@ class Stribeck(Effect):
     # ------------------------------------------------------------------ simulator: the model extension's friction
     def true_plant(self, plant, p: dict) -> None:
         plant.extensions.append(self.name)
-        plant.pi["fs1"], plant.pi["fs2"] = p["static"]
+        for j in (1, 2):  # the model's fs is the excess over the plant's mean Coulomb level
+            plant.pi[f"fs{j}"] = p["static"][j - 1] - plant_coulomb(plant.pi, j)
         plant.options["stribeck_velocity"] = tuple(p["velocity"])
 
     def truth_entry(self, truth, p: dict) -> dict:
-        # The static level fs is above the true plant's (mean) Coulomb level.
-        levels = [truth.pi_rigid["fc1"], truth.pi_rigid["fc2"]]
-        return {**p, "static_level": [c + s for c, s in zip(levels, p["static"])]}
+        excess = truth.model.as_dict(truth.pi)
+        return {**p, "static_excess": [excess[f"fs{j}"] for j in (1, 2)]}
 
     # ------------------------------------------------------------------ diagnosis
     reference = "fourier"
@@ -76,24 +109,34 @@ class Stribeck(Effect):
         e, ev, pair = d.estimate, d.evidence[d.baseline], report.pair
         return (
             f"Friction rises at low speed beyond the Coulomb level (low-speed excess of the residual "
-            f"{pair(ev['low_speed_excess'], 'N m')}): a Stribeck excess fs = {pair(e['static'], 'N m')} "
+            f"{pair(ev['low_speed_excess'], 'N m')}): a static level fs = {pair(e['static'], 'N m')} "
             f"falling off over vs = {pair(e['velocity'], 'rad/s')} explains it; {gain}"
         )
 
     def draw(self, rng, robot) -> dict:
-        u = rng.uniform
-        return {"static": (u(0.2, 0.4), u(0.15, 0.3)), "velocity": (u(0.03, 0.1), u(0.03, 0.1))}
+        u, fc = rng.uniform, datasheet.rigid_body(robot, "physical").fc
+        return {"static": (fc[0] + u(0.2, 0.4), fc[1] + u(0.15, 0.3)), "velocity": (u(0.03, 0.1), u(0.03, 0.1))}
 
 
 def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+    """The static level fs = the fitted (or datasheet) mean Coulomb level + the fitted excess."""
     static, velocity = [], []
-    for j in ("1", "2"):
-        fs, s = p["fs" + j], se["fs" + j]
+    for j in (1, 2):
+        k = str(j)
+        fs, s = p["fs" + k], se["fs" + k]
         # A joint whose excess is not resolved from zero is "untouched": report 0 for both keys.
         resolved = fs > 3.0 * s
-        static.append(fs if resolved else 0.0)
-        velocity.append(p["vs" + j] if resolved else 0.0)
-    return {"static": static, "velocity": velocity}, {"se_static": [se["fs1"], se["fs2"]]}
+        fc = (
+            plant_coulomb({**ctx.datasheet, **p}, j)
+            if ("fc" + k in p or "fc" + k + "p" in p)
+            else ctx.datasheet["fc" + k]
+        )
+        static.append(fc + fs if resolved else 0.0)
+        velocity.append(p["vs" + k] if resolved else 0.0)
+    return {"static": static, "velocity": velocity}, {
+        "se_static": [se["fs1"], se["fs2"]],
+        "excess": [p["fs1"], p["fs2"]],
+    }
 
 
 def polish(

@@ -42,6 +42,7 @@ class PlantSpec:
     armature: list[float]  # reflected rotor inertia per joint [kg m²] (a1 holds joint 1's, ia2 is joint 2's)
     offset: list[float]  # encoder zero offsets δ [rad]: the true angle is the logged (encoder) angle + δ
     channel: list[Callable]  # the logged torque: (t_tick [s], τ (N, 2) [N m]) -> τ as logged, in order
+    load_friction: list[float] = field(default_factory=lambda: [0.0, 0.0])  # μ per joint (see `link_torque`)
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,7 @@ class Truth:
     background: dict = field(default_factory=dict)  # background realism terms (`ident_opt.effects.background`)
     armature: tuple[float, float] = (0.0, 0.0)  # reflected rotor inertia per joint [kg m²]
     channel: tuple[Callable, ...] = ()  # see `PlantSpec.channel`
+    load_friction: tuple[float, float] = (0.0, 0.0)  # μ per joint: Coulomb level fc + μ |τ_load|
 
     @property
     def pi_rigid(self) -> dict[str, float]:
@@ -115,6 +117,7 @@ def build_truth(robot: Robot, effects: dict[str, dict]) -> Truth:
         background,
         tuple(spec.armature),
         tuple(spec.channel),
+        tuple(spec.load_friction),
     )
 
 
@@ -126,6 +129,37 @@ def solve_forward(model: ArmModel, pi, q, dq, tau) -> ca.SX:
     M = ca.jacobian(expr, a)
     h = ca.substitute(expr, a, ca.DM.zeros(2))
     return ca.solve(M, tau - h)
+
+
+def link_pi(model: ArmModel, pi: np.ndarray, armature) -> np.ndarray:
+    """π of the link side: friction zeroed and the rotors' reflected inertia (`armature` [kg m²]) removed, so
+    that τ = Y π is the link-side rigid-body torque (inertial, Coriolis/centrifugal, gravity)."""
+    out = np.where([p.kind == "friction" for p in model.parameters], 0.0, np.asarray(pi, dtype=float))
+    names = list(model.names)
+    out[names.index("a1")] -= armature[0]
+    if "ia2" in names:
+        out[names.index("ia2")] -= armature[1]
+    return out
+
+
+#: Fixed-point passes that solve the load-dependent friction's implicit dependence on the acceleration.
+LOAD_FRICTION_PASSES = 4
+
+
+def _forward(truth: Truth, q, dq, tau) -> ca.SX:
+    """ddq of the rigid plant; with load-dependent friction (Coulomb level fc + μ |τ_load|, τ_load the
+    link-side rigid torque, which depends on ddq) by fixed-point passes from the friction-free-of-load answer
+    (a contraction for μ·(link inertia ÷ joint inertia) < 1)."""
+    ddq = solve_forward(truth.model, ca.DM(truth.pi), q, dq, tau)
+    if not any(truth.load_friction):
+        return ddq
+    link = ca.DM(link_pi(truth.model, truth.pi, truth.armature))
+    mu = ca.DM(truth.load_friction)
+    for _ in range(LOAD_FRICTION_PASSES):
+        load = truth.model.tau_expression(q, dq, ddq, link)
+        extra = mu * ca.sign(dq) * ca.fabs(load)
+        ddq = solve_forward(truth.model, ca.DM(truth.pi), q, dq, tau - extra)
+    return ddq
 
 
 def friction_only(model: ArmModel, pi: np.ndarray, joint: int) -> np.ndarray:
@@ -151,7 +185,7 @@ def plant(truth: Truth) -> ca.Function:
         return truth.elastic.plant(truth)
     x, tau = ca.SX.sym("x", 4), ca.SX.sym("tau", 2)
     q, dq = x[:2], x[2:]
-    ddq = solve_forward(truth.model, ca.DM(truth.pi), q, dq, tau)
+    ddq = _forward(truth, q, dq, tau)
     xdot = ca.vertcat(dq, ddq)
     y = ca.vertcat(q - ca.DM(truth.offset), dq, ddq, 0)
     return ca.Function("plant", [x, tau], [xdot, y], ["x", "tau"], ["xdot", "y"])

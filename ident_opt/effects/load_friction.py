@@ -1,0 +1,83 @@
+"""``load_friction``: Coulomb friction that grows with the torque the gears transmit, fc + μ·|τ_load|.
+
+τ_load is the link-side rigid-body torque of the joint: inertial (without the rotor's reflected inertia),
+Coriolis/centrifugal and gravity, friction excluded. μ is dimensionless, one per joint (0: untouched).
+Simulator: the plant's friction gains μ_j sgn(dq_j) |τ_load,j(q, dq, ddq)|, solved with the acceleration
+it depends on (`simulate.truth`). Diagnosis: the columns sgn(dq_j)|τ_load,j| with τ_load from the
+datasheet's link-side π at the measured motion, μ ≥ 0 linear, against both nominal models.
+"""
+
+from __future__ import annotations
+
+from ident_opt.effects.base import Effect, Key, cands, np, report, sim
+
+#: A hidden coefficient is found within this relative error (or within `ZERO_TOL` of an untouched 0).
+COEFFICIENT_TOL = 0.25
+#: Largest |μ| [-] that still reads as an untouched joint.
+ZERO_TOL = 0.02
+
+
+class LoadFriction(Effect):
+    name = "load_friction"
+    summary = "Coulomb friction that grows with the transmitted torque: fc + mu |tau_load|"
+    order = 9
+    keys = {  # noqa: RUF012
+        "coefficient": Key("pair", (0.1, 0.1), "mu per joint, dimensionless", magnitude=True),
+    }
+
+    # ------------------------------------------------------------------ simulator: friction on the link torque
+    def true_plant(self, plant, p: dict) -> None:
+        plant.load_friction = [a + b for a, b in zip(plant.load_friction, p["coefficient"])]
+
+    # ------------------------------------------------------------------ diagnosis
+    judged = ("coefficient",)
+
+    def families(self, robot) -> list:
+        return [self.family(extra=_columns, nonnegative=("mu1", "mu2"), estimate=_estimate)]
+
+    def sentence(self, d, base: str, gain: str) -> str:
+        return (
+            f"Friction grows with the torque the joints transmit: a Coulomb level fc + μ·|τ_load| with "
+            f"μ = {report.pair(d.estimate['coefficient'])} explains the residual; {gain}"
+        )
+
+    def draw(self, rng, robot) -> dict:
+        mu = [0.0, 0.0]
+        for j in ((0,), (1,), (0, 1))[int(rng.integers(3))]:
+            mu[j] = rng.uniform(0.08, 0.25)
+        return {"coefficient": tuple(mu)}
+
+    def judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        checks = []
+        for e, t in zip(estimate["coefficient"], truth["coefficient"]):
+            if t == 0:
+                checks.append((abs(e) <= ZERO_TOL, abs(e)))
+            else:
+                rel = abs(e - t) / abs(t)
+                checks.append((rel <= COEFFICIENT_TOL, rel))
+        return checks
+
+
+def link_torque(ds, ctx) -> np.ndarray:
+    """τ_load (N, 2) [N m]: the datasheet's link-side rigid torque at the measured motion (friction and the
+    rotors' reflected inertia removed)."""
+    model = cands.NOMINAL
+    pi = sim.link_pi(model, model.vector(ctx.datasheet), ctx.armature)
+    return model.predict(pi, ds.q, ds.dq, ds.ddq)
+
+
+def _columns(ds, theta: dict, dt: float, ctx) -> tuple[np.ndarray, list[str]]:
+    """sgn(dq_j)·|τ_load,j| on joint j's row (coefficient μ_j)."""
+    load = np.abs(link_torque(ds, ctx)) * np.sign(ds.dq)
+    X = np.zeros((ds.n, 2, 2))
+    X[:, 0, 0], X[:, 1, 1] = load[:, 0], load[:, 1]
+    return X, ["mu1", "mu2"]
+
+
+def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+    """μ per joint; a joint whose μ is not resolved from zero (≤ 3 standard errors) reports 0."""
+    mu = [p[k] if p[k] > 3.0 * se[k] else 0.0 for k in ("mu1", "mu2")]
+    return {"coefficient": mu}, {"se": [se["mu1"], se["mu2"]]}
+
+
+EFFECT = LoadFriction()
