@@ -89,11 +89,13 @@ def _masses_and_consistency(result: dict) -> list[str]:
             "yes" if cons[n]["consistent"] else "no",
             f"{min(cons[n]['pseudo_inertia_min_eigenvalue'].values()):.3g}",
             ", ".join(cons[n]["active_pseudo_inertias"]) or "none",
+            ", ".join(cons[n].get("violated_pseudo_inertias", [])) or "none",
         ]
         for n in TITLES
         if n in cons
     ]
-    return lines + _table(["estimator", "consistent", "min λ(pseudo-inertia) [kg m²]", "active pseudo-inertias"], rows)
+    header = ["estimator", "consistent", "min λ(pseudo-inertia) [kg m²]", "active pseudo-inertias", "violated"]
+    return lines + _table(header, rows)
 
 
 def _tail(result: dict) -> list[str]:

@@ -83,13 +83,14 @@ def stats_of(arm: UrdfArm, trials: list[Dataset]) -> Stats:
 
 
 def _consistency(arm: UrdfArm, pi: np.ndarray, fit: LinearFit | None) -> dict:
-    """Each link's pseudo-inertia λ_min [kg m²], whether all are ≥ 0 and the signs hold, what is active."""
+    """Each link's pseudo-inertia λ_min [kg m²], whether all are ≥ 0 and the signs hold, which are active
+    (0 ≤ λ_min < `ACTIVE_EIGENVALUE`) and which violated (λ_min < 0), the fit's active constraints."""
     lam = np.linalg.eigvalsh(arm.pseudo_inertias(pi))[:, 0]
-    active_links = [link for link, v in zip(arm.links, lam) if v < ACTIVE_EIGENVALUE]
     return {
         "pseudo_inertia_min_eigenvalue": dict(zip(arm.links, lam.tolist())),
         "consistent": bool(lam.min() >= 0 and (fit is None or not fit.sign_violations)),
-        "active_pseudo_inertias": active_links,
+        "active_pseudo_inertias": [link for link, v in zip(arm.links, lam) if 0 <= v < ACTIVE_EIGENVALUE],
+        "violated_pseudo_inertias": [link for link, v in zip(arm.links, lam) if v < 0],
         "active": list(fit.active) if fit is not None else [],
     }
 
