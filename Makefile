@@ -52,6 +52,11 @@ codegen: $(STAMP)
 audit: $(STAMP)
 	$(BIN)/ident-opt audit --problem problems/tudor_2dof_paper.toml --out results
 
+## Excitation design, proved in the simulator (not part of `identify`: about a quarter of an hour on 2 cores):
+## D-, cond-optimal and discriminating 20 s trajectories against MERIt-like and random ones, 10 noise seeds each.
+excitation: $(STAMP)
+	$(BIN)/ident-opt excite --problem $(PROBLEM) --proof 10 --out results/excitation.md --no-progress
+
 ## The simulator's default trial against the real exp1 (results/simulator_calibration.md); col10-col13 are
 ## the MERIt trials' strain gauges.
 calibration: $(STAMP)

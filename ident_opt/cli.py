@@ -17,7 +17,7 @@ from ident_opt.arguments import validate_numbers
 from ident_opt.errors import InputError
 
 #: Flags (by dest) that name input files, and output files; `--out` is a file for these subcommands, else a folder.
-INPUT_FLAGS = ("problem", "data", "test_data", "parameters", "real")
+INPUT_FLAGS = ("problem", "data", "test_data", "parameters", "real", "trajectory_file")
 OUTPUT_FLAGS = ("json", "final")
 FILE_OUT = ("simulate", "excite")
 

@@ -171,3 +171,65 @@ def test_discrimination_design_beats_its_start_within_limits(physical_problem, e
     # the data (mostly a rest): the design's gap is the larger.
     assert d.discrimination["ratio_same_duration"] > 2
     assert d.discrimination["candidates"]["elasticity"]["theta"]["frequency_hz"] == pytest.approx(3.1, abs=0.3)
+
+
+def test_proof_report_and_index(setup, tmp_path):
+    from ident_opt.report import excitation as report
+    from ident_opt.studies import excitation_proof as proof
+
+    d = excitation.design(setup, "d", starts=1, seed=1, rate=100.0, progress=False, max_iter=20)
+    ident = pd.DataFrame(
+        [
+            {"trajectory": label, "seed": s, "cond": 3.0, "log_det": 1.0, **{f"error_{k}": e * (1 + s) for k in KINDS}}
+            for label, e in zip(proof.IDENTIFICATION, (0.01, 0.02, 0.1, 0.03))
+            for s in range(2)
+        ]
+    )
+    disc = pd.DataFrame(
+        [
+            {"true cause": c, "trajectory": t, "seed": 0, "margin": m, "named right": True}
+            for c in ("asymmetric_coulomb", "elasticity")
+            for t, m in ((proof.BASELINE, 100.0), ("discriminating design", 300.0))
+        ]
+    )
+    p = proof.Proof(
+        20.0,
+        2,
+        ("asymmetric_coulomb", "elasticity"),
+        {"asymmetric_coulomb": "asymmetric_coulomb", "elasticity": "elasticity"},
+        {"d": d, "cond": d, "discriminate": d},
+        setup,
+        setup,
+        ident,
+        disc,
+    )
+    assert p.improvement()["D-optimal design"]["ols"] == pytest.approx(10.0)
+    assert p.gap_ratio() == {"asymmetric_coulomb": pytest.approx(3.0), "elasticity": pytest.approx(3.0)}
+    files = report.write_proof(p, tmp_path / "excitation.md")
+    assert "excitation/d.csv" in files and (tmp_path / "excitation_identification.csv").exists()
+    text = (tmp_path / "excitation.md").read_text()
+    assert "10× smaller" in text and "3× the MERIt-like" in text
+    assert "excitation.md" in (tmp_path / "README.md").read_text()
+
+
+KINDS = ("ols", "constrained", "ols (rests 0)", "constrained (rests 0)")
+
+
+def test_simulator_follows_a_designed_trajectory(setup, tmp_path, capsys):
+    from ident_opt.report import excitation as report
+
+    d = excitation.design(setup, "d", starts=1, seed=1, rate=1000.0, progress=False, max_iter=20)
+    traj = tmp_path / "traj.csv"
+    report.write(d, setup, traj)
+    problem = problem_file(tmp_path)
+    run = tmp_path / "run.csv"
+    args = ["simulate", "--problem", str(problem), "--trajectory-file", str(traj), "--no-noise", "--out", str(run)]
+    assert main([*args, "--duration", "10"]) == 0
+    logged = pd.read_csv(run)
+    reference = np.column_stack([np.interp(logged["t"], d.t, d.q[:, j]) for j in range(2)])
+    assert np.abs(logged[["q1", "q2"]].to_numpy() - reference).max() < 0.02  # tracking error of the 1 kHz loop
+    assert main([*args, "--duration", "30"]) == 2  # the file covers 10 s only
+    assert "covers" in capsys.readouterr().err
+    pd.read_csv(traj).drop(columns=["ddq2"]).to_csv(traj, index=False)
+    assert main([*args, "--duration", "10"]) == 2
+    assert "ddq2" in capsys.readouterr().err

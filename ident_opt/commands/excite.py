@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 from ident_opt.commands.common import add_problem_arguments
 from ident_opt.errors import InputError
@@ -32,7 +33,9 @@ MAX_STARTS = 100
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """--problem/--data/--json plus the design's flags."""
     add_problem_arguments(parser)
-    parser.add_argument("--out", required=True, metavar="T.csv", help="the trajectory to write (CSV)")
+    parser.add_argument(
+        "--out", required=True, metavar="T.csv", help="the trajectory to write (CSV); with --proof, the report (*.md)"
+    )
     parser.add_argument("--duration", type=float, default=20.0, metavar="S", help="trajectory length [s] (default 20)")
     parser.add_argument(
         "--criterion",
@@ -59,6 +62,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="design for an extended model (armature, asymmetric_coulomb, stribeck, offset); repeatable",
     )
+    parser.add_argument(
+        "--proof",
+        type=int,
+        metavar="N",
+        help="instead: design D-, cond-optimal and discriminating (--between, default asymmetric_coulomb,elasticity) "
+        "trajectories and prove them in the simulator with N noise seeds each; the report to --out (*.md)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -78,6 +88,10 @@ def _check(args: argparse.Namespace) -> None:
         periods = args.base_hz * args.duration
         if not (math.isfinite(periods) and periods >= 1 and abs(periods - round(periods)) < 1e-6):
             raise InputError("--base-hz must give a whole number (≥ 1) of periods in --duration")
+    if args.proof is not None:
+        if not 1 <= args.proof <= MAX_STARTS:
+            raise InputError(f"--proof must be a number of seeds in [1, {MAX_STARTS}], got {args.proof}")
+        return
     if (args.criterion == "discriminate") != (args.between is not None):
         raise InputError("--between A,B goes with --criterion discriminate (and it needs it)")
 
@@ -101,10 +115,12 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             f"{problem.path}: section [limits] is required to design an excitation (docs/problem-files.md)"
         )
-    report.paths(args.out)  # a bad name fails before the work
     data = args.data or [str(p) for p in problem.data.trials]
     kwargs = {"allow_implausible": args.allow_implausible, "drop_invalid": args.drop_invalid}
     trial = load_dataset(data[0], problem.data, problem.robot, **kwargs) if data else None
+    if args.proof is not None:
+        return _proof(args, problem, trial)
+    report.paths(args.out)  # a bad name fails before the work
     try:
         setup = excitation.make_setup(
             problem.robot,
@@ -137,4 +153,30 @@ def run(args: argparse.Namespace) -> int:
     files = report.write(design, setup, args.out, args.json)
     print(report.terminal(design))
     print("wrote " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def _proof(args: argparse.Namespace, problem, trial) -> int:
+    """The simulator proof (`studies.excitation_proof`): the report --out (*.md) and its files beside it."""
+    # Deferred like run()'s: the simulator and the diagnosis load CasADi, SciPy and pandas.
+    from ident_opt.report import excitation as report
+    from ident_opt.studies import excitation_proof
+
+    if trial is None:
+        raise InputError(
+            f"{problem.path}: --proof needs data (the problem's [data] trials or --data): the noise "
+            "model and the discriminated causes are fitted on it"
+        )
+    report.proof_paths(args.out)  # a bad name fails before the work
+    proof = excitation_proof.run(
+        problem,
+        trial,
+        duration=args.duration,
+        seeds=args.proof,
+        between=args.between or "asymmetric_coulomb,elasticity",
+        starts=args.starts,
+        progress=not args.no_progress,
+    )
+    report.write_proof(proof, args.out)
+    print(report.proof_terminal(proof, Path(args.out)))
     return 0

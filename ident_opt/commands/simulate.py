@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 
 from ident_opt.commands.common import add_problem_arguments, write_json
+from ident_opt.errors import InputError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -57,6 +58,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("tud01", "fourier"),
         help="tud01: point-to-point moves with rests like MERIt's TUD01 (default); fourier: a Swevers-style excitation",
     )
+    parser.add_argument(
+        "--trajectory-file",
+        metavar="T.csv",
+        help="follow this trajectory instead (t, q1, q2, dq1, dq2, ddq1, ddq2; e.g. from ident-opt excite); "
+        "it must cover --duration",
+    )
     parser.add_argument("--current", action="store_true", help="log motor currents i1, i2 [A] instead of torques")
     parser.add_argument("--no-noise", action="store_true", help="no encoder quantisation and no torque noise")
     parser.add_argument(
@@ -70,13 +77,15 @@ def run(args: argparse.Namespace) -> int:
     from ident_opt.problem import SimulateSpec, load_problem
     from ident_opt.simulate import simulate_trial, truth_path
 
+    if args.trajectory and args.trajectory_file:
+        raise InputError("give --trajectory or --trajectory-file, not both")
     problem = load_problem(args.problem)
     spec = problem.simulate or SimulateSpec()
     effects = args.effect if args.effect is not None else list(spec.effects)
     output = "current" if args.current else spec.output
     trial = simulate_trial(
         problem.robot,
-        trajectory=args.trajectory or spec.trajectory,
+        trajectory=args.trajectory_file or args.trajectory or spec.trajectory,
         duration=args.duration if args.duration is not None else spec.duration,
         rate_hz=args.rate if args.rate is not None else spec.rate_hz,
         seed=args.seed if args.seed is not None else spec.seed,

@@ -5,6 +5,9 @@
   of 0.2–2 s, many of them moving a single joint.
 - ``fourier``: a Swevers-style excitation, q_i(t) = q0_i + Σ_l a_il/(l ω_f) sin(l ω_f t) − b_il/(l ω_f)
   cos(l ω_f t), faded in smoothly from rest and scaled to the joint, speed and acceleration limits.
+- a trajectory file (a path ending in .csv, e.g. written by `ident-opt excite`): columns t, q1, q2, dq1, dq2,
+  ddq1, ddq2 [s, rad, rad/s, rad/s²] (other columns ignored), interpolated linearly onto the controller's grid;
+  it must cover the duration.
 
 Limits are those measured on the real exp1 trial (q1 in [0.23, 3.17], q2 in [−1.43, 1.40] rad,
 |dq| up to about 1.2 / 1.35 rad/s, |ddq| up to about 4.5 / 6.6 rad/s²).
@@ -13,8 +16,10 @@ Limits are those measured on the real exp1 trial (q1 in [0.23, 3.17], q2 in [−
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from ident_opt.errors import InputError
 
@@ -40,12 +45,39 @@ class Reference:
 
 
 def reference(name: str, duration: float, seed: int, dt: float) -> Reference:
-    """The reference `name` ("tud01" or "fourier") over [0, duration] s sampled every dt s."""
-    if name not in TRAJECTORIES:
-        raise InputError(f"trajectory {name!r}: unknown; known: {', '.join(TRAJECTORIES)}")
+    """The reference `name` ("tud01", "fourier" or a trajectory file *.csv) over [0, duration] s every dt s."""
     t = np.arange(round(duration / dt)) * dt
+    if str(name).lower().endswith(".csv"):
+        return from_file(Path(name), t)
+    if name not in TRAJECTORIES:
+        raise InputError(f"trajectory {name!r}: unknown; known: {', '.join(TRAJECTORIES)}, or a *.csv file")
     rng = np.random.default_rng([seed, 7])  # the trajectory's own stream, independent of the noise
     return (tud01 if name == "tud01" else fourier)(t, rng)
+
+
+#: The columns a trajectory file must have.
+FILE_COLUMNS = ("t", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
+
+
+def from_file(path: Path, t: np.ndarray) -> Reference:
+    """The trajectory in the CSV file `path` (columns `FILE_COLUMNS`, t from 0, increasing) at times t [s]."""
+    try:
+        frame = pd.read_csv(path)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: cannot read the trajectory file ({exc})") from None
+    missing = [c for c in FILE_COLUMNS if c not in frame.columns]
+    if missing:
+        raise InputError(f"{path}: the trajectory file lacks column(s) {', '.join(missing)}")
+    values = frame[list(FILE_COLUMNS)].to_numpy(dtype=float)
+    if len(values) < 2 or not np.all(np.isfinite(values)) or np.any(np.diff(values[:, 0]) <= 0):
+        raise InputError(f"{path}: the trajectory file needs finite values and increasing times t")
+    tf = values[:, 0]
+    if tf[0] > t[0] + 1e-9 or tf[-1] < t[-1] - 1e-9:
+        raise InputError(
+            f"{path}: the trajectory covers [{tf[0]:g}, {tf[-1]:g}] s, not the {t[-1] + (t[1] - t[0]):g} s asked for"
+        )
+    q, dq, ddq = (np.column_stack([np.interp(t, tf, values[:, k + j]) for j in range(2)]) for k in (1, 3, 5))
+    return Reference(t, q, dq, ddq)
 
 
 def _trapezoid(tau: np.ndarray, distance: float, vmax: float, amax: float) -> tuple[np.ndarray, ...]:
