@@ -427,7 +427,7 @@ def concat(trials: list[Dataset]) -> Dataset:
     filtered = [d.tau_fit for d in trials]
     cutoffs = {d.cutoff_hz for d in trials}
     return Dataset(
-        " + ".join(d.source for d in trials),
+        " + ".join([trials[0].source, *(Path(d.source).name for d in trials[1:])]),  # the first in full
         np.concatenate(shifted),
         *(np.concatenate([getattr(d, k) for d in trials]) for k in ("q", "dq", "ddq", "tau")),
         extra=pd.concat([d.extra for d in trials], ignore_index=True),

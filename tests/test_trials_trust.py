@@ -191,3 +191,21 @@ def test_identify_reports_about_the_users_robot_not_the_papers(tmp_path, capsys)
     assert "paper mean" not in (out / "identify_seeds.csv").read_text()
     result = json.loads((out / "identify.json").read_text())
     assert result["trials"]["unseen"].endswith("trajectory_12.csv.gz")
+
+
+def test_another_robots_results_get_their_own_readme_linked_from_the_parent(tmp_path):
+    from ident_opt.report import record
+
+    (tmp_path / "main.md").write_text("x")
+    record(tmp_path, "identify", "main", ["main.md"], readme_head="# Results for `paper`")
+    sub = tmp_path / "dfki"
+    sub.mkdir()
+    (sub / "compare.md").write_text("x")
+    record(sub, "compare", "the comparison", ["compare.md"])
+    assert "dfki/compare.md" in (tmp_path / "README.md").read_text()  # no main report there yet: merged
+    (sub / "identify.md").write_text("x")
+    record(sub, "identify", "every model", ["identify.md"], readme_head="# Results for `dfki-c0`")
+    parent, own = (tmp_path / "README.md").read_text(), (sub / "README.md").read_text()
+    assert parent.startswith("# Results for `paper`") and "Results for `dfki-c0`" not in parent.split("\n")[0]
+    assert "[dfki/README.md](dfki/README.md)" in parent and "# Results for `dfki-c0`" not in parent
+    assert own.startswith("# Results for `dfki-c0`") and "[compare.md](compare.md)" in own

@@ -48,8 +48,20 @@ def record(
     folder = out_dir / MANIFESTS
     folder.mkdir(parents=True, exist_ok=True)
     outputs.write_text(folder / f"{study}.json", json.dumps(manifest, indent=1, ensure_ascii=False) + "\n")
-    root = out_dir.parent if (out_dir.parent / MANIFESTS).is_dir() else out_dir
-    return write_index(root)
+    in_parent = (out_dir.parent / MANIFESTS).is_dir()
+    own = write_index(out_dir) if _has_main(out_dir) or not in_parent else None
+    parent = write_index(out_dir.parent) if in_parent else None
+    return own or parent
+
+
+def _has_main(folder: Path) -> bool:
+    """Whether `folder` holds a main report (a manifest with a README head or tail): it then has its own README
+    (another robot's results, e.g. results/dfki), linked from the parent's instead of merged into it."""
+    for path in folder.glob(f"{MANIFESTS}/*.json"):
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+        if manifest.get("readme_head") or manifest.get("readme_tail"):
+            return True
+    return False
 
 
 def write_index(root: Path) -> Path:
@@ -70,14 +82,33 @@ def _manifests(root: Path) -> list[dict]:
     """Every manifest in `root` and its subfolders, its files made relative to `root`, in `ORDER`; those whose
     main file is gone are left out."""
     found = []
+    own_roots = {p.parent.parent for p in root.glob(f"*/{MANIFESTS}/*.json") if _has_main(p.parent.parent)}
+    for sub in sorted(own_roots):
+        head = next((m for m in map(_load, sub.glob(f"{MANIFESTS}/*.json")) if m.get("readme_head")), {})
+        title = next(iter((head.get("readme_head") or "").splitlines()), "").lstrip("# ") or sub.name
+        found.append(
+            {
+                "study": sub.name,
+                "title": title,
+                "files": [f"{sub.name}/README.md"],
+                "readme_head": "",
+                "readme_tail": "",
+            }
+        )
     for path in [*root.glob(f"{MANIFESTS}/*.json"), *root.glob(f"*/{MANIFESTS}/*.json")]:
-        manifest = json.loads(path.read_text(encoding="utf-8"))
+        if path.parent.parent in own_roots:
+            continue
+        manifest = _load(path)
         prefix = path.parent.parent.relative_to(root)
         manifest["files"] = [(prefix / f).as_posix() for f in manifest["files"]]
         if manifest["files"] and (root / manifest["files"][0]).exists():
             found.append(manifest)
     rank = {study: i for i, study in enumerate(ORDER)}
     return sorted(found, key=lambda m: (rank.get(m["study"], len(ORDER)), m["study"]))
+
+
+def _load(path: Path) -> dict:
+    return json.loads(path.read_text(encoding="utf-8"))
 
 
 def _relative(path: Path, out_dir: Path) -> str:

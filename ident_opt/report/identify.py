@@ -190,7 +190,7 @@ def write_tables(result: IdentifyResult, out: Path) -> dict[str, Path]:
         "identify_reproduction": (reproduction_frame(result), "Reproduction of the paper (paper's protocol)", ""),
         "identify_seeds": (
             seeds_frame(result),
-            "Test RMSE over the shuffled splits' seeds (paper's protocol)",
+            "Test RMSE over the paper's seeds (paper's protocol)",
             "Mean and standard deviation (ddof = 1) of the test RMSE over the shuffled splits.",
         ),
         "identify_parameters": (
@@ -586,7 +586,9 @@ def _figure_sentences(paper, cross, result: IdentifyResult) -> dict[str, tuple[s
             "seeds": (
                 "figures/identify_seeds.png",
                 (
-                    f"Grouped parameters over the {len(result.seeds.labels) if result.seeds else 10} seeds of the "
+                    "Grouped parameters over the paper's 10 seeds"
+                    if result.paper_robot
+                    else f"Grouped parameters over the {len(paper.rmse_per_split.get('pbr', []))} seeds of the "
                     "paper's protocol",
                     _seed_sentence(paper, result.paper_robot),
                 ),
@@ -606,9 +608,12 @@ def _time_figure_sentences(m: dict, paper: ProtocolResult, dm: str = "dm") -> di
             (
                 "Joint 1 torque predictions (paper's protocol)",
                 f"RR and PBR follow the measured joint-1 torque closely (nmse {fmt(m['rr'][0], 2)}, "
-                f"{fmt(m['pbr'][0], 2)}) while the "
-                + ("paper's datasheet model" if dm == "dm" else "datasheet model")
-                + f" has nmse {fmt(m[dm][0], 2)} (with GMR {fmt(m[dm + '+gmr'][0], 2)}).",
+                f"{fmt(m['pbr'][0], 2)}) while "
+                + (
+                    f"the paper's datasheet model is offset (nmse {fmt(m['dm'][0], 2)}) until the GMR removes it."
+                    if dm == "dm"
+                    else f"the datasheet model has nmse {fmt(m[dm][0], 2)} (with GMR {fmt(m[dm + '+gmr'][0], 2)})."
+                ),
             ),
         ),
         "torque_j2": (
