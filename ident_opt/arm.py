@@ -110,3 +110,28 @@ class Arm(Protocol):
     def min_mass_eigenvalue(self, pi: np.ndarray) -> float:
         """min over all q of λ_min(M(q)) [kg m²] (or the arm's best lower bound): > 0 means consistent."""
         ...
+
+
+def symbol_table(q, dq, ddq, pi, M, C, G, F, tau=None) -> dict[str, ca.SX]:
+    """An arm's `symbols`: the inputs q, dq, ddq (n×1) and pi (P×1), M, C, G, F, tau (default
+    M ddq + C dq + G + F; an arm with its own expression of τ passes it) and the regressor Y = ∂τ/∂π —
+    one home for what every implementation returns."""
+    tau = M @ ddq + C @ dq + G + F if tau is None else tau
+    return {
+        "q": q,
+        "dq": dq,
+        "ddq": ddq,
+        "pi": pi,
+        "M": M,
+        "C": C,
+        "G": G,
+        "F": F,
+        "tau": tau,
+        "Y": ca.jacobian(tau, pi),
+    }
+
+
+def casadi_function(symbols: Mapping[str, ca.SX], what: str) -> ca.Function:
+    """A CasADi Function of (q, dq, ddq, pi) for one of an arm's symbols (M, C, G, F, tau, Y)."""
+    s = symbols
+    return ca.Function(what, [s["q"], s["dq"], s["ddq"], s["pi"]], [s[what]], ["q", "dq", "ddq", "pi"], [what])

@@ -24,25 +24,33 @@ from ident_opt.gmr import conditioning
 from ident_opt.identify.bounded import KKT_TOL
 
 
+def load_pi_update(library: Path, n_params: int) -> tuple[ctypes.CDLL, ctypes.Structure]:
+    """The compiled `pi_update` library and its state, initialised to the offline start: the C struct
+    {H (P×P), h (P), θ (P), active-set state (P), n, iterations} as ctypes, in one place."""
+    P = n_params
+
+    class State(ctypes.Structure):
+        _fields_ = [
+            ("H", ctypes.c_double * (P * P)),
+            ("h", ctypes.c_double * P),
+            ("theta", ctypes.c_double * P),
+            ("state", ctypes.c_byte * P),
+            ("n", ctypes.c_long),
+            ("iterations", ctypes.c_long),
+        ]
+
+    lib = ctypes.CDLL(str(Path(library).resolve()))
+    state = State()
+    lib.pi_update_initial(ctypes.byref(state))
+    return lib, state
+
+
 class Kernel:
     """A loaded `pi_update` library and its state (a ctypes structure the caller owns)."""
 
     def __init__(self, library: Path, n_params: int, n_joints: int = 2):
         P = n_params
-
-        class State(ctypes.Structure):
-            _fields_ = [
-                ("H", ctypes.c_double * (P * P)),
-                ("h", ctypes.c_double * P),
-                ("theta", ctypes.c_double * P),
-                ("state", ctypes.c_byte * P),
-                ("n", ctypes.c_long),
-                ("iterations", ctypes.c_long),
-            ]
-
-        self.lib = ctypes.CDLL(str(Path(library).resolve()))
-        self.state = State()
-        self.lib.pi_update_initial(ctypes.byref(self.state))
+        self.lib, self.state = load_pi_update(library, P)
         self.address = ctypes.addressof(self.state)
         self.rows = self.lib.pi_update_rows
         self.rows.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double]

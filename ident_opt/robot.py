@@ -27,6 +27,7 @@ import casadi as ca
 import numpy as np
 
 from ident_opt import effects as catalogue
+from ident_opt.arm import casadi_function, symbol_table
 from ident_opt.datasheet import PI_NAMES
 from ident_opt.parameters import Parameter
 
@@ -159,24 +160,11 @@ class ArmModel:
         q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
         pi = ca.SX.sym("pi", self.n_params)
         M, C, G, F = self._terms(q, dq, pi)
-        tau = M @ ddq + C @ dq + G + F
-        return {
-            "q": q,
-            "dq": dq,
-            "ddq": ddq,
-            "pi": pi,
-            "M": M,
-            "C": C,
-            "G": G,
-            "F": F,
-            "tau": tau,
-            "Y": ca.jacobian(tau, pi),
-        }
+        return symbol_table(q, dq, ddq, pi, M, C, G, F)
 
     def function(self, what: str) -> ca.Function:
         """A CasADi Function for one of M, C, G, F, tau, Y, with inputs (q, dq, ddq, pi)."""
-        s = self.symbols
-        return ca.Function(what, [s["q"], s["dq"], s["ddq"], s["pi"]], [s[what]], ["q", "dq", "ddq", "pi"], [what])
+        return casadi_function(self.symbols, what)
 
     def tau_expression(self, q, dq, ddq, pi):
         """τ as a CasADi expression of any (symbolic or numeric) q, dq, ddq and π."""

@@ -38,6 +38,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from ident_opt.arm import casadi_function, symbol_table
 from ident_opt.errors import InputError
 from ident_opt.parameters import Parameter
 from ident_opt.rnea import N_LINK, ChainJoint, rnea
@@ -463,20 +464,8 @@ class UrdfArm:
         F = tau - M @ ddq - rigid_bias
         coriolis = rigid_bias - rigid_static
         C = 0.5 * ca.jacobian(coriolis, dq)
-        return {
-            "q": q,
-            "dq": dq,
-            "ddq": ddq,
-            "pi": pi,
-            "M": M,
-            "C": C,
-            "G": rigid_static,
-            "F": F,
-            "tau": tau,
-            "Y": ca.jacobian(tau, pi),
-        }
+        return symbol_table(q, dq, ddq, pi, M, C, rigid_static, F, tau=tau)
 
     def function(self, what: str) -> ca.Function:
         """A CasADi Function of (q, dq, ddq, pi) for one of M, C, G, F, tau, Y."""
-        s = self.symbols
-        return ca.Function(what, [s["q"], s["dq"], s["ddq"], s["pi"]], [s[what]], ["q", "dq", "ddq", "pi"], [what])
+        return casadi_function(self.symbols, what)

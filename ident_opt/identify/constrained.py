@@ -367,7 +367,6 @@ def _solve_cvxpy(
     structure: _Structure, H: np.ndarray, h: np.ndarray, n: int, Dp: np.ndarray, prior: np.ndarray
 ) -> tuple[np.ndarray | None, str, float]:
     """Fill the cached program's parameters and solve it with Clarabel: (π or None, status, solver s)."""
-    import cvxpy as cp  # deferred: see `_program`
 
     problem, pi, par = _program(structure)
     P = H.shape[0]
@@ -379,8 +378,20 @@ def _solve_cvxpy(
     par["prior_term"].value = par["sqrt_dp"].value * prior  # √D (π − π0) = √D π − √D π0 stays DPP
     # Data that leave directions free: the tie-break makes the minimiser unique (see `tie_break`).
     par["sqrt_ridge"].value = np.sqrt(tie_break(H) * scale)
+    pi_hat, status = solve_cvxpy(problem, pi)
+    if pi_hat is None:
+        return None, status, float("nan")
+    return pi_hat, status, float(problem.solver_stats.solve_time or np.nan)
+
+
+def solve_cvxpy(problem, pi, tolerances: tuple[float, ...] = ()) -> tuple[np.ndarray | None, str]:
+    """Solve a cvxpy `problem` in the variable `pi` with Clarabel: tight tolerances first (the answer should
+    match OLS to 1e-8 when nothing binds), looser ones if a badly conditioned problem cannot reach them.
+    `tolerances` default to this module's `TOLERANCES`. Returns (π or None, the solver's status)."""
+    import cvxpy as cp  # heavy (about a second): only the tests' oracle and the URDF prior need it
+
     status = "not solved"
-    for tol in TOLERANCES:
+    for tol in tolerances or TOLERANCES:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)  # "may be inaccurate": judged by status below
@@ -392,5 +403,5 @@ def _solve_cvxpy(
         if pi.value is not None and status == "optimal":
             break
     if pi.value is None or status not in ("optimal", "optimal_inaccurate"):
-        return None, status, float("nan")
-    return np.asarray(pi.value, dtype=float), status, float(problem.solver_stats.solve_time or np.nan)
+        return None, status
+    return np.asarray(pi.value, dtype=float), status

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import functools
 import time
-import warnings
 from typing import NamedTuple
 
 import clarabel
@@ -36,7 +35,7 @@ import numpy as np
 from scipy import sparse
 
 from ident_opt.consistency import MARGIN, Bound, Consistency, svec
-from ident_opt.identify.constrained import ACTIVE_TOL
+from ident_opt.identify.constrained import ACTIVE_TOL, solve_cvxpy
 from ident_opt.identify.fit import LinearFit, check_stats, finish, joint_weights, normal_equations
 from ident_opt.identify.stats import Stats
 from ident_opt.rnea import N_LINK
@@ -181,7 +180,6 @@ def fit_physical(
 
 def _solve_cvxpy(arm: UrdfArm, margin: float, mass: bool, com: bool, data: _Data) -> tuple[np.ndarray | None, str]:
     """The program through cvxpy (compiled once per arm and options): (π or None, status)."""
-    import cvxpy as cp  # deferred: see `_program`
 
     problem, pi, par = _program(arm, margin, mass, com)
     par["R"].value, par["d"].value = _square_root(data.H, data.h)
@@ -190,21 +188,7 @@ def _solve_cvxpy(arm: UrdfArm, margin: float, mass: bool, com: bool, data: _Data
         par["J0inv"][i].value = 0.5 * (Jinv + Jinv.T)
     par["m_lo"].value, par["m_hi"].value = data.m_lo, data.m_hi
     par["c_lo"].value, par["c_hi"].value = data.c_lo, data.c_hi
-    status = "not solved"
-    for tol in TOLERANCES:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", UserWarning)
-                problem.solve(solver="CLARABEL", tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, max_iter=500)
-        except cp.error.SolverError as exc:
-            status = f"solver error: {exc}"
-            continue
-        status = str(problem.status)
-        if pi.value is not None and status == "optimal":
-            break
-    if pi.value is None or status not in ("optimal", "optimal_inaccurate"):
-        return None, status
-    return np.asarray(pi.value, dtype=float), status
+    return solve_cvxpy(problem, pi, TOLERANCES)
 
 
 # ---------------------------------------------------------------------------------------------- Clarabel

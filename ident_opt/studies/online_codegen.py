@@ -22,6 +22,7 @@ from ident_opt import codegen
 from ident_opt.data import Dataset, chronological_split
 from ident_opt.identify.bounded import KKT_TOL
 from ident_opt.online import OnlineIdentifier, offline_start, start_identifier
+from ident_opt.online_kernel import load_pi_update
 from ident_opt.studies.online_replay import _relative
 
 
@@ -45,20 +46,7 @@ class CUpdate:
 
     def __init__(self, library: Path, n_params: int):
         P = n_params
-
-        class State(ctypes.Structure):
-            _fields_ = [
-                ("H", ctypes.c_double * (P * P)),
-                ("h", ctypes.c_double * P),
-                ("theta", ctypes.c_double * P),
-                ("state", ctypes.c_byte * P),
-                ("n", ctypes.c_long),
-                ("iterations", ctypes.c_long),
-            ]
-
-        self.lib = ctypes.CDLL(str(Path(library).resolve()))
-        self.state = State()
-        self.lib.pi_update_initial(ctypes.byref(self.state))
+        self.lib, self.state = load_pi_update(library, P)
         self._ref = ctypes.byref(self.state)
         self._buffers = [(ctypes.c_double * 2)() for _ in range(4)]
         self._fn = self.lib.pi_update
