@@ -688,27 +688,19 @@ def load_problem(path: str | Path) -> Problem:
     base = path.resolve().parent
     name = top.take("name", str)
     robot = _robot(top.table("robot"))
-    data = _data(top.table("data", required=False), base, getattr(robot, "n_joints", 2))
-    split = _split(top.table("split", required=False))
-    residual = _residual(top.table("residual", required=False))
-    simulate = _simulate(top.table("simulate")) if "simulate" in top.raw else None
-    limits = _limits(top.table("limits")) if "limits" in top.raw else None
-    reference = _reference(top.table("reference")) if "reference" in top.raw else None
+    sections = {  # each section fills the `Problem` field of its name, read in this order
+        "data": _data(top.table("data", required=False), base, getattr(robot, "n_joints", 2)),
+        "split": _split(top.table("split", required=False)),
+        "residual": _residual(top.table("residual", required=False)),
+    }
+    for key, parse in _OPTIONAL_SECTIONS.items():
+        sections[key] = parse(top.table(key)) if key in top.raw else None
     output = top.table("output", required=False)
     out_dir = output.take("dir", str, None)
     output.done()
     top.done()
     return Problem(
-        name=name,
-        path=path,
-        robot=robot,
-        data=data,
-        split=split,
-        residual=residual,
-        simulate=simulate,
-        output_dir=_relative(base, out_dir) if out_dir else None,
-        limits=limits,
-        reference=reference,
+        name=name, path=path, robot=robot, output_dir=_relative(base, out_dir) if out_dir else None, **sections
     )
 
 
@@ -722,3 +714,7 @@ def _reference(table: _Table) -> Reference:
     if not params:
         raise InputError(f"{table.path}: [reference.parameters] is empty; give the parameters by name (a1 = …)")
     return Reference(label, params)
+
+
+#: The sections a problem file may leave out (its `Problem` field is then None): name -> parser.
+_OPTIONAL_SECTIONS = {"simulate": _simulate, "limits": _limits, "reference": _reference}

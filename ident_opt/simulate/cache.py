@@ -39,6 +39,20 @@ def settings_key(robot, spec, seed: int) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def spec_trial(robot, spec, seed: int, effects: list[str] | None = None):
+    """The trial (`SimTrial`) a `[simulate]` section `spec` describes for `robot` at `seed`; `effects`
+    (effect strings) instead of the section's own when given."""
+    return simulate_trial(
+        robot,
+        trajectory=spec.trajectory,
+        duration=spec.duration,
+        rate_hz=spec.rate_hz,
+        seed=seed,
+        effects=list(spec.effects) if effects is None else effects,
+        output=spec.output,
+    )
+
+
 def problem_trials(problem) -> list[Path]:
     """The problem's two simulated trials (seeds s and s + 1) as CSV paths, simulating any not yet cached."""
     spec = problem.simulate
@@ -50,15 +64,7 @@ def problem_trials(problem) -> list[Path]:
         path = folder / f"{problem.name}-seed{seed}-{settings_key(problem.robot, spec, seed)}.csv"
         if not path.is_file():
             try:
-                trial = simulate_trial(
-                    problem.robot,
-                    trajectory=spec.trajectory,
-                    duration=spec.duration,
-                    rate_hz=spec.rate_hz,
-                    seed=seed,
-                    effects=list(spec.effects),
-                    output=spec.output,
-                )
+                trial = spec_trial(problem.robot, spec, seed)
             except InputError as exc:  # name the file and section the bad setting came from
                 raise InputError(f"{problem.path}: [simulate]: {exc}") from None
             trial.write(path)

@@ -20,7 +20,7 @@ from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import Problem
 from ident_opt.robot import RIGID
-from ident_opt.simulate.trial import simulate_trial
+from ident_opt.simulate.cache import spec_trial
 
 #: The simulator's spring-deflection columns (one per elastic joint or link it simulates).
 DEFLECTION = ("deflection1", "deflection2")
@@ -122,15 +122,7 @@ def calibrate(real: Problem, sim: Problem, channels: Sequence[str] = ()) -> Cali
         (f"sim s{spec.seed + 1}", spec.seed + 1, list(spec.effects)),
         (f"before s{spec.seed}", spec.seed, catalogue_only),
     ):
-        trial = simulate_trial(
-            sim.robot,
-            trajectory=spec.trajectory,
-            duration=spec.duration,
-            rate_hz=spec.rate_hz,
-            seed=seed,
-            effects=effects,
-            output=spec.output,
-        )
+        trial = spec_trial(sim.robot, spec, seed, effects)
         summaries.append(summarise(label, trial.dataset(), DEFLECTION))
     d = summaries[0].data
     rest = d.t < FIRST_REST_S
