@@ -245,13 +245,7 @@ def compile_library(source: Path, out_dir: Path, compiler: list[str] | None = No
     `compiler` is a command (program and leading arguments), by default `find_compiler()`."""
     compiler = list(compiler or find_compiler())
     lib = Path(out_dir) / library_name(name)
-    cmd = [*compiler, *CFLAGS, "-shared", str(source), "-o", str(lib), "-lm"]
-    try:
-        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    except OSError as exc:
-        raise InputError(f"cannot run the C compiler {compiler[0]!r} ({exc.strerror})") from None
-    if done.returncode != 0:
-        raise InputError(f"the C compiler failed on {source} (exit {done.returncode}):\n{done.stderr.strip()}")
+    _run_compiler([*compiler, *CFLAGS, "-shared", str(source), "-o", str(lib), "-lm"], compiler[0], str(source))
     if not lib.is_file():
         raise InputError(
             f"the C compiler {compiler[0]!r} reported success but wrote no {lib.name}: is it a C compiler?"
@@ -383,13 +377,14 @@ def compile_shared(sources: list[str], library: Path, compiler: list[str]) -> Pa
     return Path(library)
 
 
-def _run_compiler(cmd: list[str], name: str) -> None:
+def _run_compiler(cmd: list[str], name: str, what: str = "the online update") -> None:
+    """Run the compiler command `cmd` (its program `name`) on `what`; `InputError` when it cannot run or fails."""
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     except OSError as exc:
         raise InputError(f"cannot run the C compiler {name!r} ({exc.strerror})") from None
     if done.returncode != 0:
-        raise InputError(f"the C compiler failed on the online update (exit {done.returncode}):\n{done.stderr}")
+        raise InputError(f"the C compiler failed on {what} (exit {done.returncode}):\n{done.stderr.strip()}")
 
 
 def compile_pi_update(out_dir: Path, compiler: list[str] | None = None) -> tuple[Path, Path]:

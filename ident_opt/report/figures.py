@@ -43,36 +43,43 @@ def _save(fig, path: Path, dpi: int = 110) -> Path:
 
 def torque_figure(split: SplitResult, joint: int, path: Path, models=PAPER_MODELS, title: str = "") -> Path:
     """Measured vs predicted torque of one joint (0 or 1) over time, one panel per model."""
-    t, tau = split.test.t, split.test.tau[:, joint]
-    fig, axes = plt.subplots(len(models), 1, figsize=(11, 2.6 * len(models)), sharex=True, squeeze=False)
-    for ax, (key, name) in zip(axes[:, 0], models):
+
+    def draw(ax, t, tau, parametric, corrected, key):
         ax.plot(t, tau, color=MEASURED, lw=0.8, label="measured")
-        ax.plot(t, split.predictions[key][:, joint], color=PARAMETRIC, lw=0.8, label=f"{key.upper()} (parametric)")
-        ax.plot(t, split.predictions[key + "+gmr"][:, joint], color=CORRECTED, lw=0.8, label=f"{key.upper()} + GMR")
-        ax.set_title(name, fontsize=10)
-        ax.set_ylabel(f"τ{joint + 1} [N·m]")
-        ax.legend(loc="upper right", fontsize=8, ncol=3)
-    axes[-1, 0].set_xlabel("time [s]")
-    fig.suptitle(title or f"Joint {joint + 1} torque predictions (test samples)")
-    fig.tight_layout()
-    return _save(fig, path)
+        ax.plot(t, parametric, color=PARAMETRIC, lw=0.8, label=f"{key} (parametric)")
+        ax.plot(t, corrected, color=CORRECTED, lw=0.8, label=f"{key} + GMR")
+
+    title = title or f"Joint {joint + 1} torque predictions (test samples)"
+    return _model_panels(split, joint, path, models, draw, (2.6, False), f"τ{joint + 1} [N·m]", title)
 
 
 def error_figure(split: SplitResult, joint: int, path: Path, models=PAPER_MODELS, title: str = "") -> Path:
     """Torque error (measured − predicted) of one joint over time: parametric red, with GMR green."""
-    t, tau = split.test.t, split.test.tau[:, joint]
-    fig, axes = plt.subplots(len(models), 1, figsize=(11, 2.4 * len(models)), sharex=True, sharey=True, squeeze=False)
-    for ax, (key, name) in zip(axes[:, 0], models):
-        ax.plot(t, tau - split.predictions[key][:, joint], color=PARAMETRIC, lw=0.7, label=f"{key.upper()}")
-        ax.plot(
-            t, tau - split.predictions[key + "+gmr"][:, joint], color=CORRECTED, lw=0.7, label=f"{key.upper()} + GMR"
-        )
+
+    def draw(ax, t, tau, parametric, corrected, key):
+        ax.plot(t, tau - parametric, color=PARAMETRIC, lw=0.7, label=f"{key}")
+        ax.plot(t, tau - corrected, color=CORRECTED, lw=0.7, label=f"{key} + GMR")
         ax.axhline(0, color="gray", lw=0.5)
+
+    title = title or f"Joint {joint + 1} torque error, measured − predicted (test samples)"
+    return _model_panels(split, joint, path, models, draw, (2.4, True), f"error τ{joint + 1} [N·m]", title)
+
+
+def _model_panels(split: SplitResult, joint: int, path: Path, models, draw, layout, ylabel: str, title: str) -> Path:
+    """One panel per model over the test samples' time: `draw(ax, t, τ, parametric, GMR-corrected, KEY)`
+    plots joint `joint`'s curves; `layout` = (panel height [in], shared y axis); a one-row legend."""
+    t, tau = split.test.t, split.test.tau[:, joint]
+    height, sharey = layout
+    fig, axes = plt.subplots(
+        len(models), 1, figsize=(11, height * len(models)), sharex=True, sharey=sharey, squeeze=False
+    )
+    for ax, (key, name) in zip(axes[:, 0], models):
+        draw(ax, t, tau, split.predictions[key][:, joint], split.predictions[key + "+gmr"][:, joint], key.upper())
         ax.set_title(name, fontsize=10)
-        ax.set_ylabel(f"error τ{joint + 1} [N·m]")
-        ax.legend(loc="upper right", fontsize=8, ncol=2)
+        ax.set_ylabel(ylabel)
+        ax.legend(loc="upper right", fontsize=8, ncol=len(ax.get_legend_handles_labels()[1]))
     axes[-1, 0].set_xlabel("time [s]")
-    fig.suptitle(title or f"Joint {joint + 1} torque error, measured − predicted (test samples)")
+    fig.suptitle(title)
     fig.tight_layout()
     return _save(fig, path)
 

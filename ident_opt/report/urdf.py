@@ -156,25 +156,25 @@ def identify_markdown(result: dict) -> str:
 
 def write(result: dict, out_dir: Path, json_path: str | Path | None = None) -> Path:
     """compare.md and compare.json in `out_dir` (and `json_path` if given); returns the report's path."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    report = out_dir / "compare.md"
-    outputs.write_text(report, markdown(result))
-    write_json(out_dir / "compare.json", result)
-    if json_path:
-        write_json(json_path, result)
-    record(out_dir, "urdf_compare", f"{result['problem']}: OLS, consistent and CAD fits of a URDF arm", [report])
-    return report
+    title = f"{result['problem']}: OLS, consistent and CAD fits of a URDF arm"
+    return _write(result, out_dir, json_path, "compare", markdown(result), title)
 
 
 def write_identify(result: dict, out_dir: Path, json_path: str | Path | None = None) -> Path:
     """identify.md and identify.json in `out_dir` (and `json_path` if given); returns the report's path."""
+    title = f"{result['problem']}: identified parameters of a URDF arm"
+    return _write(result, out_dir, json_path, "identify", identify_markdown(result), title)
+
+
+def _write(result: dict, out_dir: Path, json_path: str | Path | None, stem: str, text: str, title: str) -> Path:
+    """`stem`.md (`text`) and `stem`.json in `out_dir` (and `json_path` if given), recorded as urdf_`stem`."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    report = out_dir / "identify.md"
-    outputs.write_text(report, identify_markdown(result))
-    write_json(out_dir / "identify.json", result)
+    report = out_dir / f"{stem}.md"
+    outputs.write_text(report, text)
+    write_json(out_dir / f"{stem}.json", result)
     if json_path:
         write_json(json_path, result)
-    record(out_dir, "urdf_identify", f"{result['problem']}: identified parameters of a URDF arm", [report])
+    record(out_dir, f"urdf_{stem}", title, [report])
     return report
 
 
