@@ -12,7 +12,6 @@ from ident_opt.parameters import Parameter
 
 
 class Armature(Effect):
-    name = "armature"
     summary = "extra reflected rotor inertia on the diagonal of M, beyond the datasheet's"
     order = 1
     keys = {  # noqa: RUF012

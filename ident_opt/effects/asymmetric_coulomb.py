@@ -18,7 +18,6 @@ def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
 
 
 class AsymmetricCoulomb(Effect):
-    name = "asymmetric_coulomb"
     summary = "Coulomb friction that differs by direction (replaces the datasheet mean)"
     order = 2
     keys = {  # noqa: RUF012

@@ -95,11 +95,19 @@ class Effect:
     `coulomb` below is the datasheet's per-direction Coulomb levels (positive, negative) [N m, joint side]:
     the nominal friction an effect may depart from."""
 
+    #: The effect's name in the syntax and the reports: its module's (see `__init_subclass__`).
     name: str = ""
     summary: str = ""
     keys: dict[str, Key] = {}  # noqa: RUF012 (read-only class tables)
     #: The effect's place in the catalogue (listings, `--help`, the causes' order).
     order: int = 0
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        """An effect is named after its module: the catalogue lists the modules (`discover`), so the one name
+        stands for both."""
+        super().__init_subclass__(**kwargs)
+        if cls.__module__ != __name__ and "name" not in cls.__dict__:
+            cls.name = cls.__module__.rpartition(".")[2]
 
     # ------------------------------------------------------------------ syntax
     def key(self, key: str, where: str) -> Key:
@@ -341,6 +349,14 @@ def discover(package: str, path: Sequence[str], skip: tuple[str, ...] = ()) -> d
         if info.name not in skip
     ]
     return {e.name: e for e in sorted(found, key=lambda e: e.order)}
+
+
+def per_joint_draw(rng, untouched: float, draw) -> tuple[float, float]:
+    """A hidden per-joint value: joint 1, joint 2 or both (equally likely) take `draw()`, the others `untouched`."""
+    values = [untouched, untouched]
+    for j in ((0,), (1,), (0, 1))[int(rng.integers(3))]:
+        values[j] = draw()
+    return tuple(values)
 
 
 def relative_error(estimate: float, true: float) -> float:

@@ -26,7 +26,6 @@ DELAY_TOL = (0.002, 0.20)
 
 
 class Delay(Effect):
-    name = "delay"
     summary = "the torque (or current) channel lags the encoder channel"
     order = 6
     keys = {"seconds": Key("float", 0.02, "s", magnitude=True)}  # noqa: RUF012

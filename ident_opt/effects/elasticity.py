@@ -161,7 +161,6 @@ def flexible(plant, j: int, f: float, zeta: float) -> Elastic:
 
 
 class Elasticity(Effect):
-    name = "elasticity"
     summary = "a lightly damped mode: an elastic joint (two-mass, motor angle logged) or a flexible link"
     order = 4
     keys = {  # noqa: RUF012

@@ -34,7 +34,6 @@ CENTRE_ITERATIONS = 6
 
 
 class JointOffset(Effect):
-    name = "joint_offset"
     summary = "encoder zero offsets: the true angle is the logged q + offset"
     order = 7
     keys = {"offset": Key("pair", (0.02, -0.03), "rad, per joint", None, magnitude=True)}  # noqa: RUF012

@@ -9,7 +9,7 @@ datasheet's link-side π at the measured motion, μ ≥ 0 linear, against both n
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, cands, np, report, sim
+from ident_opt.effects.base import Effect, Key, cands, np, per_joint_draw, report, sim
 
 #: A hidden coefficient is found within this relative error (or within `ZERO_TOL` of an untouched 0).
 COEFFICIENT_TOL = 0.25
@@ -18,7 +18,6 @@ ZERO_TOL = 0.02
 
 
 class LoadFriction(Effect):
-    name = "load_friction"
     summary = "Coulomb friction that grows with the transmitted torque: fc + mu |tau_load|"
     order = 9
     keys = {  # noqa: RUF012
@@ -42,10 +41,7 @@ class LoadFriction(Effect):
         )
 
     def draw(self, rng, robot) -> dict:
-        mu = [0.0, 0.0]
-        for j in ((0,), (1,), (0, 1))[int(rng.integers(3))]:
-            mu[j] = rng.uniform(0.08, 0.25)
-        return {"coefficient": tuple(mu)}
+        return {"coefficient": per_joint_draw(rng, 0.0, lambda: rng.uniform(0.08, 0.25))}
 
     def judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         checks = []

@@ -12,7 +12,6 @@ from ident_opt.effects.base import Effect, Key, cands, datasheet, report
 
 
 class Payload(Effect):
-    name = "payload"
     summary = "an unmodelled point mass at the tip of link 2"
     order = 5
     keys = {"mass": Key("float", 0.2, "kg", magnitude=True)}  # noqa: RUF012

@@ -33,7 +33,6 @@ def plant_coulomb(pi: dict, j: int) -> float:
 
 
 class Stribeck(Effect):
-    name = "stribeck"
     summary = "friction excess fs sgn(dq) exp(-(dq/vs)^2) above the Coulomb level at low speed"
     order = 3
     keys = {  # noqa: RUF012

@@ -14,14 +14,13 @@ from __future__ import annotations
 
 from functools import partial
 
-from ident_opt.effects.base import Effect, Key, np, relative_error, report
+from ident_opt.effects.base import Effect, Key, np, per_joint_draw, relative_error, report
 
 #: A hidden factor is found when the estimate is within this of it, per joint.
 SCALE_TOL = 0.02
 
 
 class TorqueScale(Effect):
-    name = "torque_scale"
     summary = "the logged torque is off by a factor per joint: the true joint torque is s x the logged one"
     order = 8
     keys = {  # noqa: RUF012
@@ -56,11 +55,11 @@ class TorqueScale(Effect):
         )
 
     def draw(self, rng, robot) -> dict:
-        s = [1.0, 1.0]
-        for j in ((0,), (1,), (0, 1))[int(rng.integers(3))]:
-            x = rng.uniform(0.0, 0.35)  # uniform over [0.8, 0.95] ∪ [1.05, 1.25]
-            s[j] = 0.8 + x if x < 0.15 else 1.05 + (x - 0.15)
-        return {"scale": tuple(s)}
+        def factor() -> float:  # uniform over [0.8, 0.95] ∪ [1.05, 1.25]
+            x = rng.uniform(0.0, 0.35)
+            return 0.8 + x if x < 0.15 else 1.05 + (x - 0.15)
+
+        return {"scale": per_joint_draw(rng, 1.0, factor)}
 
     def judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         return [(abs(e - t) <= SCALE_TOL, relative_error(e, t)) for e, t in zip(estimate["scale"], truth["scale"])]

@@ -15,7 +15,6 @@ from ident_opt.effects.base import Background, Key, np
 
 
 class Drift(Background):
-    name = "drift"
     summary = "a slow torque disturbance on the joints (cable drag, thermal): an Ornstein-Uhlenbeck process"
     order = 2
     keys = {  # noqa: RUF012

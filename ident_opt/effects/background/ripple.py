@@ -12,7 +12,6 @@ from ident_opt.effects.base import Background, Key, ca
 
 
 class Ripple(Background):
-    name = "ripple"
     summary = "current (torque) ripple locked to the motor angle, amplitude ∝ joint speed: a v sin(c N q)"
     order = 3
     keys = {  # noqa: RUF012

@@ -22,7 +22,6 @@ MAX_SPEED = 3.0
 
 
 class Stiction(Background):
-    name = "stiction"
     summary = (
         "presliding (Dahl) friction: F = σ0 z, dz/dt = v − σ0 |v| z / Fb; a resting joint holds a torque that "
         "depends on how it came to rest; adds Fb to the sliding friction"
