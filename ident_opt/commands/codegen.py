@@ -15,7 +15,7 @@ import sys
 
 from ident_opt import outputs
 from ident_opt.commands import urdf
-from ident_opt.commands.common import add_problem_arguments, load, output_dir
+from ident_opt.commands.common import add_components, add_problem_arguments, add_switches, load, output_dir
 from ident_opt.errors import InputError
 
 
@@ -42,17 +42,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="use the parameters (and GMR, if present) of a parameters.json from an earlier run "
         "instead of identifying them",
     )
-    parser.add_argument(
-        "--components", metavar="K", type=int, help="GMR components (default: the problem's [residual] setting)"
-    )
-    parser.add_argument("--no-forward", action="store_true", help="do not generate ddq_hat (forward dynamics)")
-    parser.add_argument(
-        "--no-update",
-        action="store_true",
-        help="do not generate pi_update (the online statistics update and bounded least-squares re-solve in C)",
-    )
-    parser.add_argument(
-        "--force", action="store_true", help="overwrite files in --out that an earlier codegen run did not write"
+    add_components(parser)
+    add_switches(
+        parser,
+        {
+            "--no-forward": "do not generate ddq_hat (forward dynamics)",
+            "--no-update": "do not generate pi_update (the online statistics update and bounded least-squares "
+            "re-solve in C)",
+            "--force": "overwrite files in --out that an earlier codegen run did not write",
+        },
     )
 
 

@@ -36,15 +36,25 @@ def add_problem_arguments(parser: argparse.ArgumentParser, data: bool = True, js
         )
     if json_out:
         parser.add_argument("--json", metavar="F", help="also write a machine-readable result to F")
-    parser.add_argument(
-        "--allow-implausible",
-        action="store_true",
-        help="proceed when values look like the wrong unit (e.g. |q| > 100 rad)",
+    add_switches(
+        parser,
+        {
+            "--allow-implausible": "proceed when values look like the wrong unit (e.g. |q| > 100 rad)",
+            "--drop-invalid": "skip rows with non-numeric/NaN/inf cells or non-increasing t (the count is reported)",
+        },
     )
+
+
+def add_switches(parser: argparse.ArgumentParser, switches: dict[str, str]) -> None:
+    """On/off flags (off unless given), flag -> help, added in this order."""
+    for flag, text in switches.items():
+        parser.add_argument(flag, action="store_true", help=text)
+
+
+def add_components(parser: argparse.ArgumentParser) -> None:
+    """--components K, the number of GMR components, the same in every subcommand that fits a GMR."""
     parser.add_argument(
-        "--drop-invalid",
-        action="store_true",
-        help="skip rows with non-numeric/NaN/inf cells or non-increasing t (the count is reported)",
+        "--components", type=int, metavar="K", help="GMR components (default: the problem's [residual] setting)"
     )
 
 

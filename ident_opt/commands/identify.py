@@ -13,17 +13,15 @@ import sys
 import time
 
 from ident_opt.commands import urdf
-from ident_opt.commands.common import add_problem_arguments, load, output_dir
+from ident_opt.commands.common import add_problem_arguments, add_switches, load, output_dir
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """--problem, --data, --json, --out, plus --no-variants."""
     add_problem_arguments(parser)
     parser.add_argument("--out", metavar="DIR", help="output folder (default: the problem's [output] dir)")
-    parser.add_argument(
-        "--no-variants",
-        action="store_true",
-        help="skip the GMR variants of the paper's protocol (diagonal covariances; one component)",
+    add_switches(
+        parser, {"--no-variants": "skip the GMR variants of the paper's protocol (diagonal covariances; one component)"}
     )
 
 

@@ -16,18 +16,21 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ident_opt.commands.common import add_problem_arguments, load, output_dir, write_json
+from ident_opt.commands.common import (
+    add_components,
+    add_problem_arguments,
+    add_switches,
+    load,
+    output_dir,
+    write_json,
+)
 from ident_opt.errors import InputError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_problem_arguments(parser)
     parser.add_argument("--out", metavar="DIR", help="output folder (default: the problem's, else results/)")
-    parser.add_argument(
-        "--stream",
-        action="store_true",
-        help="serve samples from standard input (CSV with header or JSON lines) instead",
-    )
+    add_switches(parser, {"--stream": "serve samples from standard input (CSV with header or JSON lines) instead"})
     parser.add_argument(
         "--model",
         default="pbr+gmr",
@@ -49,13 +52,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="--stream: a sample whose residual is beyond K robust standard deviations updates nothing "
         "(0: no test; default 10)",
     )
-    parser.add_argument(
-        "--no-guard",
-        action="store_true",
-        help="--stream: no GMR extrapolation guard (the residual is used even outside its training support)",
-    )
-    parser.add_argument(
-        "--cross-covariance", action="store_true", help="also apply the first-order cross-covariance update to the GMRs"
+    add_switches(
+        parser,
+        {
+            "--no-guard": "--stream: no GMR extrapolation guard (the residual is used even outside its training "
+            "support)",
+            "--cross-covariance": "also apply the first-order cross-covariance update to the GMRs",
+        },
     )
     parser.add_argument(
         "--checks",
@@ -65,9 +68,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="random steps at which the online parameters are checked against a batch "
         "re-solve (plus the last step; default 10)",
     )
-    parser.add_argument(
-        "--components", type=int, metavar="K", help="GMR components (default: the problem's [residual] setting)"
-    )
+    add_components(parser)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -22,9 +22,23 @@ The catalogue, with default magnitudes:
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
-from ident_opt.commands.common import add_problem_arguments, write_json
+from ident_opt.commands.common import add_problem_arguments, add_switches, write_json
 from ident_opt.errors import InputError
+
+#: The flags that override a key of the problem's [simulate] section: flag -> (key, type, metavar, help).
+OVERRIDES = {
+    "--seed": ("seed", int, None, "random seed (trajectory and noise); default: the problem's or 0"),
+    "--duration": ("duration", float, "S", "trial length in seconds (default 80)"),
+    "--rate": (
+        "rate_hz",
+        float,
+        "HZ",
+        "logging rate: a divisor of the 1 kHz control rate, or faster up to 5 kHz (the loop then runs at "
+        "the logging rate); default 100",
+    ),
+}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -44,15 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME[:key=value,...]",
         help="hide an effect from the catalogue below (repeatable)",
     )
-    parser.add_argument("--seed", type=int, help="random seed (trajectory and noise); default: the problem's or 0")
-    parser.add_argument("--duration", type=float, metavar="S", help="trial length in seconds (default 80)")
-    parser.add_argument(
-        "--rate",
-        type=float,
-        metavar="HZ",
-        help="logging rate: a divisor of the 1 kHz control rate, or faster up to 5 kHz (the loop then runs at "
-        "the logging rate); default 100",
-    )
+    for flag, (_, kind, metavar, text) in OVERRIDES.items():
+        parser.add_argument(flag, type=kind, metavar=metavar, help=text)
     parser.add_argument(
         "--trajectory",
         choices=("tud01", "fourier"),
@@ -64,12 +71,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="follow this trajectory instead (t, q1, q2, dq1, dq2, ddq1, ddq2; e.g. from ident-opt excite); "
         "it must cover --duration",
     )
-    parser.add_argument("--current", action="store_true", help="log motor currents i1, i2 [A] instead of torques")
-    parser.add_argument("--no-noise", action="store_true", help="no encoder quantisation and no torque noise")
-    parser.add_argument(
-        "--exact-derivatives",
-        action="store_true",
-        help="log the true dq and ddq instead of estimating them from the logged angles",
+    add_switches(
+        parser,
+        {
+            "--current": "log motor currents i1, i2 [A] instead of torques",
+            "--no-noise": "no encoder quantisation and no torque noise",
+            "--exact-derivatives": "log the true dq and ddq instead of estimating them from the logged angles",
+        },
     )
 
 
@@ -81,14 +89,16 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give --trajectory or --trajectory-file, not both")
     problem = load_problem(args.problem)
     spec = problem.simulate or SimulateSpec()
+    given = {key: getattr(args, flag[2:]) for flag, (key, *_) in OVERRIDES.items()}
+    spec = replace(spec, **{key: value for key, value in given.items() if value is not None})
     effects = args.effect if args.effect is not None else list(spec.effects)
     output = "current" if args.current else spec.output
     trial = simulate_trial(
         problem.robot,
         trajectory=args.trajectory_file or args.trajectory or spec.trajectory,
-        duration=args.duration if args.duration is not None else spec.duration,
-        rate_hz=args.rate if args.rate is not None else spec.rate_hz,
-        seed=args.seed if args.seed is not None else spec.seed,
+        duration=spec.duration,
+        rate_hz=spec.rate_hz,
+        seed=spec.seed,
         effects=effects,
         output=output,
         noise=not args.no_noise,
