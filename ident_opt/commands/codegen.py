@@ -63,7 +63,6 @@ def run(args: argparse.Namespace) -> int:
     from ident_opt import codegen
     from ident_opt.problem import load_problem
     from ident_opt.report import codegen as report
-    from ident_opt.robot import ArmModel
     from ident_opt.studies import ship
 
     problem = load_problem(args.problem)
@@ -74,22 +73,13 @@ def run(args: argparse.Namespace) -> int:
     args.estimator = args.estimator or "constrained"
     compiler = codegen.find_compiler()  # fail before any fitting when there is none
     saved = ship.read_parameters(args.parameters) if args.parameters else None
-    extensions = args.extension if args.extension is not None else (saved or {}).get("extensions", [])
-    try:
-        model = ArmModel(extensions=tuple(dict.fromkeys(extensions)))
-    except ValueError as exc:
-        raise InputError(f"codegen: {exc}") from None
-    if saved is not None:
-        ship.saved_vector(saved, model)  # every parameter present and numeric, before --out is touched
+    model = _model(args.extension, saved)
     trials = load(args).trials if saved is None or saved.get("gmr") is None else []
     train = trials[0] if trials else None
     if not (saved and saved.get("gmr")):
         _announce_gmr(problem.residual, args.components, train)
     out = output_dir(args, problem)  # only once every input is read and checked
-    written = [f"{codegen.NAME}.c", f"{codegen.NAME}.h", codegen.library_name(), "main.c", "README.md"]
-    written.append("parameters.json")
-    if not args.no_update and trials:
-        written += UPDATE_FILES
+    written = _written(args, trials)
     outputs.guard_owned(out, written, force=args.force)
     shipped = ship.prepare(model, train, problem.residual, args.estimator, args.components, saved)
     print(
@@ -106,17 +96,40 @@ def run(args: argparse.Namespace) -> int:
         errors["pi_update"] = update["max_relative_difference"] if not update["failures"] else float("inf")
     print(report.write(data, built, out, getattr(args, "json", None)))
     if update is not None:
-        print(
-            f"  pi_update: generated C vs the Python online path over {update['samples']} samples, max relative "
-            f"difference {update['max_relative_difference']:.2e} (limit {ship.TOLERANCE['pi_update']:.0e}); "
-            f"{update['c_ns_per_update']:.0f} ns per update from a C loop"
-        )
+        print(_update_line(update, ship.TOLERANCE["pi_update"]))
     outputs.remember_owned(out, written)
     bad = {name: err for name, err in errors.items() if not err <= ship.TOLERANCE[name]}
     if bad:
         print(f"ident-opt codegen: the compiled code disagrees with the Python model: {bad}", file=sys.stderr)
         return 1
     return 0
+
+
+def _model(extension: list[str] | None, saved: dict | None):
+    """The `ArmModel` to ship: the --extension ones, else the saved parameters' (with their parameters checked:
+    every one present and numeric, before --out is touched)."""
+    from ident_opt.robot import ArmModel
+    from ident_opt.studies import ship
+
+    extensions = extension if extension is not None else (saved or {}).get("extensions", [])
+    try:
+        model = ArmModel(extensions=tuple(dict.fromkeys(extensions)))
+    except ValueError as exc:
+        raise InputError(f"codegen: {exc}") from None
+    if saved is not None:
+        ship.saved_vector(saved, model)
+    return model
+
+
+def _written(args: argparse.Namespace, trials: list) -> list[str]:
+    """The files this run writes to DIR (the online update's only with a trial to check it on)."""
+    from ident_opt import codegen
+
+    written = [f"{codegen.NAME}.c", f"{codegen.NAME}.h", codegen.library_name(), "main.c", "README.md"]
+    written.append("parameters.json")
+    if not args.no_update and trials:
+        written += UPDATE_FILES
+    return written
 
 
 #: What the online update adds to DIR (`ident_opt.codegen.generate_pi_update`, `compile_pi_update`, the check).
@@ -140,6 +153,15 @@ def _pi_update(args: argparse.Namespace, problem, trials: list, out, compiler) -
 
     print("ident-opt codegen: generating pi_update (the online update) and checking it against Python", flush=True)
     return online_codegen.verify(problem, trials[0], out, compiler)
+
+
+def _update_line(update: dict, limit: float) -> str:
+    """The terminal line on the pi_update check (`limit`: its tolerance)."""
+    return (
+        f"  pi_update: generated C vs the Python online path over {update['samples']} samples, max relative "
+        f"difference {update['max_relative_difference']:.2e} (limit {limit:.0e}); "
+        f"{update['c_ns_per_update']:.0f} ns per update from a C loop"
+    )
 
 
 def _announce_gmr(spec, components: int | None, train) -> None:
