@@ -53,19 +53,32 @@ class deferred:  # lower case: used like the module it stands for
         return getattr(importlib.import_module(self._module), attr)
 
 
-# What the hooks reach, each imported on first use (see `deferred`).
-np = deferred("numpy")
-ca = deferred("casadi")
-cands = deferred("ident_opt.diagnose.candidates")
-datasheet = deferred("ident_opt.datasheet")
-elastic_nlp = deferred("ident_opt.diagnose.elastic_nlp")
-flexible_link = deferred("ident_opt.simulate.flexible_link")
-linear = deferred("ident_opt.diagnose.linear")
-nlp = deferred("ident_opt.identify.nlp")
-report = deferred("ident_opt.diagnose.report")
-robot_model = deferred("ident_opt.robot")
-signals = deferred("ident_opt.diagnose.signals")
-sim = deferred("ident_opt.simulate.truth")
+#: What the hooks reach, name -> module, each imported on first use: an effect module's
+#: ``from ident_opt.effects.base import np`` gives a `deferred` (see `__getattr__`).
+DEFERRED = {
+    "np": "numpy",
+    "ca": "casadi",
+    "cands": "ident_opt.diagnose.candidates",
+    "datasheet": "ident_opt.datasheet",
+    "elastic_nlp": "ident_opt.diagnose.elastic_nlp",
+    "flexible_link": "ident_opt.simulate.flexible_link",
+    "linear": "ident_opt.diagnose.linear",
+    "nlp": "ident_opt.identify.nlp",
+    "report": "ident_opt.diagnose.report",
+    "robot_model": "ident_opt.robot",
+    "signals": "ident_opt.diagnose.signals",
+    "sim": "ident_opt.simulate.truth",
+}
+
+
+def __getattr__(name: str) -> deferred:
+    """The names of `DEFERRED`, each a `deferred` of its module (PEP 562: asked only for names not defined)."""
+    if name in DEFERRED:
+        return deferred(DEFERRED[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+np, cands = deferred(DEFERRED["np"]), deferred(DEFERRED["cands"])  # the two this module's own hooks use
 
 #: Relative tolerance on a hidden magnitude (the default `Effect.judge`).
 MAGNITUDE_TOL = 0.15
