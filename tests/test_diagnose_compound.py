@@ -38,6 +38,13 @@ def _within(d, trial) -> None:
         (["payload:mass=0.3", "delay:seconds=0.025"], {"seed": 4}),
         (["torque_scale:scale=[1.0,1.12]", "delay:seconds=0.02"], {"seed": 5}),
         (["stribeck", "payload:mass=0.3"], {"seed": 5, "trajectory": "fourier"}),
+        # Two datasheet-side causes, neither of which explains what a refitted π gains on its own.
+        (["armature:inertia=[0.3,0.03]", "payload:mass=0.25"], {"seed": 11, "rate_hz": 200.0}),
+        # A weak mode under a strong friction asymmetry: masked in the first round, found in the second.
+        (
+            ["asymmetric_coulomb:positive=[0.75,0.3],negative=[0.3,0.7]", "elasticity:joint=2,frequency_hz=7"],
+            {"seed": 12},
+        ),
     ],
 )
 def test_two_hidden_effects_are_both_named(physical_problem, effects, kwargs):

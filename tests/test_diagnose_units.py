@@ -8,6 +8,7 @@ import pytest
 from ident_opt.data import Dataset
 from ident_opt.diagnose import linear, scoring, signals
 from ident_opt.diagnose.diagnosis import at_rest
+from ident_opt.effects.elasticity import ELASTIC_BAND_HZ
 
 
 def test_delayed_shifts_a_ramp_by_a_fraction_of_a_sample():
@@ -87,6 +88,11 @@ def test_naming_rule_needs_score_and_both_margins():
     assert scoring.score(before, before, 1000, 2) < 0
     assert not scoring.resolved("delay", {"seconds": 0.001}, 0.01)
     assert scoring.resolved("delay", {"seconds": 0.02}, 0.01)
+    # A mode where the search stopped (an edge of the band) is not a resonance; one inside it is.
+    lo, hi = ELASTIC_BAND_HZ
+    assert not scoring.resolved("elasticity", {"joint": 1, "frequency_hz": hi}, 0.01)
+    assert not scoring.resolved("elasticity", {"joint": 2, "frequency_hz": lo}, 0.01)
+    assert scoring.resolved("elasticity", {"joint": 2, "frequency_hz": 0.5 * (lo + hi)}, 0.01)
 
 
 def test_at_rest_zeroes_filter_ringing_but_not_a_smooth_reversal():

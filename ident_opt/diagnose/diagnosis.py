@@ -117,15 +117,24 @@ class Diagnosis:
         }
 
 
-def _row(v: Fitted, score: float, current: dict, raw_tau: np.ndarray, test: Dataset, rest, var, dt: float) -> dict:
+def _row(
+    v: Fitted, score: float, current: dict, raw_tau: np.ndarray, test: Dataset, rest, var, dt: float, gap=None
+) -> dict:
     """A candidate's JSON row: its score against the round's reference, held-out nMSE, estimate, and whether
     it may be named: resolved, clearing the margin against the same kind of fit without it
     (`current[baseline]`), and, when it holds the datasheet's π while a refitted π does better, explaining
-    at least `scoring.RECOVER` of the refit's log-gain (`recovers`)."""
+    at least `scoring.RECOVER` of the refit's log-gain (`recovers`). `gap`: (datasheet, rigid_fit) versions
+    the share is measured between (default: the current model's), for a cause that completes a partner's.
+    `needs_partner`: clears the margin but explains less than `RECOVER` alone (`_rounds`)."""
     c = v.cand
     without = current.get(v.baseline) or max(current.values(), key=lambda w: w.common)
     ok = scoring.resolved(c.cause, c.estimate, dt)
-    share = scoring.recovered(without.mse, v.mse, current["rigid_fit"].mse) if _refit_better(v, current) else None
+    share = None
+    if gap is not None and v.baseline == "datasheet":
+        share = scoring.recovered(gap[0].mse, v.mse, gap[1].mse)
+    elif _refit_better(v, current):
+        share = scoring.recovered(without.mse, v.mse, current["rigid_fit"].mse)
+    margin = ok and scoring.clears_margin(without.mse, v.mse, score, var)
     return {
         "cause": c.cause,
         "score": score,
@@ -137,9 +146,8 @@ def _row(v: Fitted, score: float, current: dict, raw_tau: np.ndarray, test: Data
         "added_parameters": c.n_added,
         "resolved": ok,
         "recovers": share,
-        "clears_margin": ok
-        and scoring.clears_margin(without.mse, v.mse, score, var)
-        and (share is None or share >= scoring.RECOVER),
+        "clears_margin": margin and (share is None or share >= scoring.RECOVER),
+        "needs_partner": bool(margin and share is not None and scoring.PARTNER <= share < scoring.RECOVER),
         **({"polish": c.detail["polish"]} if "polish" in c.detail else {}),
     }
 
@@ -190,32 +198,57 @@ def _rounds(robot: Robot, ctx, current: dict, version, row, var, progress: bool)
     named: list[tuple[cands.Family, dict]] = []  # each cause's own family and its θ, in the order named
     candidates: list[dict] = []
     dropped: list[dict] = []
-    promising = None  # after the first round: the causes that gained over the same kind of fit without them
+    searched = None  # after the first round: each cause's θ where it is held (`_fit_round`)
+    tentative, gap = None, None  # a cause taken on trial (the state before it), and the gap it must close
     bar = tqdm(desc="diagnose: fitting candidates", unit="fit", disable=not progress, leave=False)
     for round_ in range(MAX_CAUSES):
         # The round's reference: the current model with the datasheet's π where it has that version.
         ref = current.get("datasheet") or max(current.values(), key=lambda v: v.common)
-        fits = _fit_round(robot, ctx, named, ref, version, bar, promising)
-        if promising is None:
-            promising = {v.cand.cause for v in fits if _promising(v, current[v.baseline])}
+        fits = _fit_round(robot, ctx, named, ref, version, bar, searched)
         best: dict[str, Fitted] = {}
         for v in fits:
             if v.cand.cause not in best or v.common > best[v.cand.cause].common:
                 best[v.cand.cause] = v
+        if searched is None:
+            searched = {c: None if _promising(v, current[v.baseline]) else (v.theta or None) for c, v in best.items()}
         ranked = sorted(best.values(), key=lambda v: v.common, reverse=True)
-        rows = [row(v, v.common - ref.common, current) for v in ranked]
+        rows = [row(v, v.common - ref.common, current, gap) for v in ranked]
         if round_ == 0:
             candidates = rows
-        top = next((v for v, r in zip(ranked, rows) if r["clears_margin"]), None)
+        top, on_trial = _pick(ranked, rows, tentative is not None)
         if top is None:
             break
+        if on_trial:
+            tentative = (list(named), list(chain), current, list(dropped))
+            gap = (current["datasheet"], current["rigid_fit"])
+        else:
+            tentative, gap = None, None
         named.append((top.family, top.theta))
         chain.append({"cause": top.cand.cause, "score": top.common - ref.common, "fitted": top, "round": round_ + 1})
         current = {v.baseline: v for v in fits if v.family is top.family}
         named, chain, current, gone = _prune(named, chain, current, ctx, version, var)
         dropped += gone
+    if tentative is not None:  # a cause on trial found no partner: back to the model before the trial
+        named, chain, current, dropped = tentative
     bar.close()
     return chain, current, candidates, dropped
+
+
+def _pick(ranked: list[Fitted], rows: list[dict], on_trial: bool) -> tuple[Fitted | None, bool]:
+    """(The cause this round adds, whether it is taken on trial.)
+
+    The best candidate that clears the margin; while a cause is on trial, only a datasheet-side partner
+    counts (the pair must close the refit's gap together). Failing that, two datasheet-side causes (a
+    payload and extra rotor inertia, say) can each explain too little of what a refitted π gains to be
+    named alone, yet together all of it: the best one that `needs_partner` is taken on trial, and kept only
+    if the next round finds a partner that makes the pair recover `scoring.RECOVER` of the same gap."""
+    top = next(
+        (v for v, r in zip(ranked, rows) if r["clears_margin"] and (not on_trial or v.baseline == "datasheet")),
+        None,
+    )
+    if top is not None or on_trial:
+        return top, False
+    return next((v for v, r in zip(ranked, rows) if r["needs_partner"]), None), True
 
 
 def _promising(v: Fitted, without: Fitted) -> bool:
@@ -224,21 +257,27 @@ def _promising(v: Fitted, without: Fitted) -> bool:
     return v.common > without.common and bool(np.any(without.mse - v.mse >= 0.5 * scoring.MARGIN * without.mse))
 
 
-def _fit_round(robot: Robot, ctx, named: list, ref: Fitted, version, bar, promising: set | None) -> list[Fitted]:
-    """Every cause not yet named, composed with those named, fitted against every baseline it allows. After
-    the first round only the `promising` causes are refitted (`_promising`). This keeps the later rounds cheap; a cause
-    wholly masked by another in the first round would be missed."""
+def _fit_round(robot: Robot, ctx, named: list, ref: Fitted, version, bar, searched: dict | None) -> list[Fitted]:
+    """Every cause not yet named, composed with those named, fitted against every baseline it allows.
+
+    After the first round (`searched` given) a cause whose first-round fit was `_promising` is searched
+    again in full; any other is refitted with its θ held at the first-round value (`searched[cause]`): only
+    its linear coefficients move. A cause masked by a larger one in the first round (a weak mode under a
+    strong friction asymmetry) thus still gets its chance once the larger one is in the model, while the
+    costly searches and polishes run only where they can change the answer."""
     taken = {f.cause for f, _ in named}
     fits = []
     for family in cands.families(robot):
-        if family.cause in taken or (promising is not None and family.cause not in promising):
+        if family.cause in taken:
             continue
-        composed = cands.compose(named, family)
+        held = searched.get(family.cause) if searched is not None else None
+        own = _frozen(family, held) if held is not None else family
+        composed = cands.compose(named, own)
         for baseline in composed.baselines:
             cand = cands.fit(composed, baseline, ctx)
             bar.update()
-            theta = {a.name: cand.parameters[a.name] for a in family.axes(1.0 / ctx.dt)}
-            fits.append(version(cand, baseline, cand.predict(ctx.test), (*ref.causes, family.cause), family, theta))
+            theta = held if held is not None else {a.name: cand.parameters[a.name] for a in family.axes(1.0 / ctx.dt)}
+            fits.append(version(cand, baseline, cand.predict(ctx.test), (*ref.causes, family.cause), own, theta))
     return fits
 
 
@@ -404,8 +443,8 @@ def diagnose(
         common = scoring.score(nominal_mse["datasheet"], after, test.n, k)
         return Fitted(causes, baseline, cand, after, pred, common, family, theta)
 
-    def row(v: Fitted, score: float, current: dict) -> dict:
-        return _row(v, score, current, raw_test.tau, test, rest_test, var, dt)
+    def row(v: Fitted, score: float, current: dict, gap=None) -> dict:
+        return _row(v, score, current, raw_test.tau, test, rest_test, var, dt, gap)
 
     current = {b: version(None, b, nominal_pred[b], (), None, {}) for b in nominal_pred}
     chain, current, candidates, dropped = _rounds(robot, ctx, current, version, row, var, progress)

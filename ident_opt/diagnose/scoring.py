@@ -31,6 +31,9 @@ MARGIN = 0.05
 MARGIN_VARIANCE = 1e-4
 #: Least share of a refitted π's log-gain a cause fitted with the datasheet's π must explain.
 RECOVER = 0.8
+#: Least share a datasheet-side cause must explain alone to be taken on trial, completed by a partner
+#: to `RECOVER` in the next round (`diagnosis._rounds`).
+PARTNER = 0.5
 
 
 def mse(tau: np.ndarray, tau_hat: np.ndarray, rest: np.ndarray | None = None) -> np.ndarray:
