@@ -1,5 +1,6 @@
 """An n-joint arm from a URDF (serial chain of revolute joints, fixed base): the `ident_opt.arm.Arm`
-interface, numerically through Pinocchio and symbolically through a CasADi recursive Newton–Euler.
+interface, numerically through Pinocchio and symbolically through a CasADi recursive Newton–Euler. The
+regressor rows are the CasADi model compiled to C once per machine (cached), Pinocchio's when no C compiler works.
 
 Parameters π, each declared once with its kind (`ident_opt.parameters`), named by the URDF's names:
 
@@ -28,6 +29,9 @@ joint the file lacks or that is not revolute, joints that are not one serial cha
 
 from __future__ import annotations
 
+import hashlib
+import os
+import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -63,6 +67,8 @@ JOINT_TERMS = {
     "ia": ("kg m^2", "armature", "rotor inertia (armature) reflected to the joint"),
     "off": ("N m", "other", "constant torque offset"),
 }
+#: Samples per call of the compiled regressor: its input and output buffers (~4 kB a sample) stay cache-sized.
+REGRESSOR_CHUNK = 512
 #: Revolute joint types of the URDF format.
 REVOLUTE = ("revolute", "continuous")
 #: Gravity along −z of the base [m/s²] unless the problem file says otherwise.
@@ -183,6 +189,58 @@ def _as_revolute(text: str) -> str:
             if joint.find("limit") is None:
                 ET.SubElement(joint, "limit", effort="1e6", lower="-1e6", upper="1e6", velocity="1e6")
     return ET.tostring(root, encoding="unicode")
+
+
+class CompiledRows:
+    """A CasADi Function of one sample's x (k×1) to one dense output (r×c), as generated C compiled into a shared
+    library and mapped over `chunk` samples: `rows(X)` for X (N, k) gives (N, c, r), i.e. each sample's output
+    transposed, read through CasADi's buffers (no copies into CasADi matrices, which cost more than the C).
+
+    The library is cached in `folder` under the hash of its source, so a machine compiles each model once;
+    it is written under a temporary name and renamed, so parallel processes never load a half-written file."""
+
+    def __init__(self, function: ca.Function, folder: Path, chunk: int = REGRESSOR_CHUNK):
+        from ident_opt import codegen  # the compiler helpers; imported only when a regressor is compiled
+
+        self.n_in = function.size1_in(0)
+        self.shape = (function.size2_out(0), function.size1_out(0))
+        self.chunk = chunk
+        name = function.name()
+        with tempfile.TemporaryDirectory() as tmp:
+            source, _ = codegen.generate_sources([function], Path(tmp), name)
+            key = hashlib.sha256(source.read_bytes() + " ".join(codegen.CFLAGS).encode()).hexdigest()[:16]
+            lib = Path(folder) / codegen.library_name(f"{name}_{key}")
+            if not lib.is_file():
+                built = codegen.compile_library(source, Path(tmp), name=name)
+                lib.parent.mkdir(parents=True, exist_ok=True)
+                partial = lib.with_name(f"{lib.name}.{os.getpid()}.part")
+                partial.write_bytes(built.read_bytes())
+                os.replace(partial, lib)
+        self.mapped = codegen.load_external(lib, name).map(chunk, "serial")
+        self._buffer, self._run = self.mapped.buffer()
+        self._x = np.zeros((chunk, self.n_in))  # the last, partial chunk goes through these
+        self._y = np.empty((chunk, *self.shape))
+
+    def _call(self, x: np.ndarray, y: np.ndarray) -> None:
+        """Evaluate one full chunk: x (chunk, k) C-contiguous into y (chunk, c, r) C-contiguous."""
+        self._buffer.set_arg(0, memoryview(x))
+        self._buffer.set_res(0, memoryview(y))
+        self._run()
+        if self._buffer.ret() != 0:
+            raise RuntimeError(f"the compiled {self.mapped.name()} failed (status {self._buffer.ret()})")
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        """(N, c, r): each sample's output, transposed, for X (N, k)."""
+        X = np.ascontiguousarray(X, dtype=float)
+        out = np.empty((len(X), *self.shape))
+        full = len(X) - len(X) % self.chunk
+        for s in range(0, full, self.chunk):
+            self._call(X[s : s + self.chunk], out[s : s + self.chunk])
+        if full < len(X):
+            self._x[: len(X) - full] = X[full:]
+            self._call(self._x, self._y)
+            out[full:] = self._y[: len(X) - full]
+        return out
 
 
 @dataclass(frozen=True)
@@ -337,18 +395,22 @@ class UrdfArm:
 
     # ------------------------------------------------------------------ numeric (Pinocchio)
     def regressor(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
-        """Y (N, n, P) with τ[k] = Y[k] @ π [N m]: Pinocchio's joint torque regressor per sample, then the
-        joint terms (dq_j, sign dq_j, ddq_j, 1 on row j)."""
+        """Y (N, n, P) with τ[k] = Y[k] @ π [N m]: the rigid chain's columns (Pinocchio's joint torque
+        regressor), then the joint terms (dq_j, sign dq_j, ddq_j, 1 on row j, through the drive couplings).
+        Evaluated by the compiled CasADi model (`_compiled_regressor`), else by Pinocchio per sample."""
         q, dq, ddq = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (q, dq, ddq))
         N, n = q.shape
         if n != self.n_joints:
             raise ValueError(f"{n} joint columns given, the arm {self.urdf} has {self.n_joints} joints")
+        compiled = self._compiled_regressor
+        if compiled is not None:
+            return compiled(np.hstack((q, dq, ddq)))
         L = self.n_link_params
         Y = np.empty((N, n, self.n_params))
         Y[:, :, L:] = 0.0
         model, data = self._model, self._model.createData()
         regressor = pin.computeJointTorqueRegressor
-        for k in range(N):  # Pinocchio's C++ per sample: the Python loop is most of the cost (~10 µs/sample)
+        for k in range(N):  # Pinocchio's C++ per sample: the Python loop is most of the cost (~4 µs/sample)
             Y[k, :, :L] = regressor(model, data, q[k], dq[k], ddq[k])
         C = self.drive_matrix
         v, a = dq @ C.T, ddq @ C.T  # each drive's joint-side velocity and acceleration
@@ -361,6 +423,27 @@ class UrdfArm:
             for m, j in zip(*np.nonzero(C)):
                 Y[:, j, L + t * n + m] = C[m, j] * columns[term][:, m]
         return Y
+
+    @cached_property
+    def _compiled_regressor(self) -> CompiledRows | None:
+        """Y = ∂τ/∂π of the CasADi model (`tau_expression`, checked against Pinocchio) as generated C, called on
+        chunks of samples (`CompiledRows`): several times faster than Pinocchio's regressor called per sample
+        from Python, whose call overhead dominates. None when no C compiler works (`IDENT_OPT_REGRESSOR=pinocchio`
+        also asks for that): Y then comes from Pinocchio."""
+        if os.environ.get("IDENT_OPT_REGRESSOR", "").strip().lower() == "pinocchio":
+            return None
+        from ident_opt.simulate.cache import cache_dir  # the project's cache folder (or $IDENT_OPT_CACHE)
+
+        n = self.n_joints
+        q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
+        pi = ca.SX.sym("pi", self.n_params)
+        Y = ca.jacobian(self.tau_expression(q, dq, ddq, pi), pi)  # τ is linear in π: Y is free of it
+        # Yᵀ, dense: CasADi writes column-major, so each sample's block is Y (n, P) row-major, as NumPy reads it
+        rows = ca.Function("urdf_regressor", [ca.vertcat(q, dq, ddq)], [ca.densify(Y).T])
+        try:
+            return CompiledRows(rows, cache_dir(Path(self.urdf)).with_name("regressor"))
+        except (InputError, OSError):
+            return None
 
     def predict(self, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
         """τ (N, n) [N m] for parameters π."""
