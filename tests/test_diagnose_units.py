@@ -93,6 +93,10 @@ def test_naming_rule_needs_score_and_both_margins():
     assert not scoring.resolved("elasticity", {"joint": 1, "frequency_hz": hi}, 0.01)
     assert not scoring.resolved("elasticity", {"joint": 2, "frequency_hz": lo}, 0.01)
     assert scoring.resolved("elasticity", {"joint": 2, "frequency_hz": 0.5 * (lo + hi)}, 0.01)
+    # A Stribeck "dip" that never falls off (vs at the fit's upper bound) is a Coulomb step; none resolved: nothing.
+    assert not scoring.resolved("stribeck", {"static": [0.0, 0.37], "velocity": [0.0, 1.0]}, 0.01)
+    assert not scoring.resolved("stribeck", {"static": [0.0, 0.0], "velocity": [0.0, 0.0]}, 0.01)
+    assert scoring.resolved("stribeck", {"static": [0.8, 0.0], "velocity": [0.05, 0.0]}, 0.01)
 
 
 def test_at_rest_zeroes_filter_ringing_but_not_a_smooth_reversal():

@@ -82,6 +82,14 @@ np, cands = deferred(DEFERRED["np"]), deferred(DEFERRED["cands"])  # the two thi
 
 #: Relative tolerance on a hidden magnitude (the default `Effect.judge`).
 MAGNITUDE_TOL = 0.15
+#: A nonlinear parameter fitted this close (relative) to a bound of its search is the search stopped by the
+#: bound, not a feature of the data: causes whose estimate sits there are not named (`Effect.resolved`).
+SEARCH_EDGE = 0.02
+
+
+def inside(value: float, low: float, high: float) -> bool:
+    """Whether `value` lies inside (low, high) and not within `SEARCH_EDGE` (relative) of either bound."""
+    return low * (1 + SEARCH_EDGE) < value < high * (1 - SEARCH_EDGE)
 
 
 @dataclass(frozen=True)

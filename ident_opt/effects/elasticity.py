@@ -25,11 +25,13 @@ import math
 from dataclasses import dataclass
 
 from ident_opt.effects.base import (
+    SEARCH_EDGE,
     Effect,
     Key,
     ca,
     elastic_nlp,
     flexible_link,
+    inside,
     linear,
     np,
     relative_error,
@@ -46,8 +48,6 @@ Q2_RANGE = (0.0, 1.4)
 ELASTIC_BAND_HZ = (1.5, 12.0)
 #: Relative tolerance on a hidden mode's frequency.
 FREQUENCY_TOL = 0.20
-#: A fitted mode this close (relative) to an edge of ELASTIC_BAND_HZ is the search at its bound, not a peak.
-EDGE = 0.02
 
 
 @dataclass(frozen=True)
@@ -209,13 +209,12 @@ class Elasticity(Effect):
     judged = ("joint", "frequency_hz")
     resolution = (
         f"elastic modes at an edge of the searched band ({ELASTIC_BAND_HZ[0]:g} to {ELASTIC_BAND_HZ[1]:g} Hz, "
-        f"within {EDGE:.0%}) are not named",
+        f"within {SEARCH_EDGE:.0%}) are not named",
         "the search ran out of range: the residual has no resonance inside the band",
     )
 
     def resolved(self, estimate: dict, dt: float) -> bool:
-        lo, hi = ELASTIC_BAND_HZ
-        return lo * (1 + EDGE) < estimate["frequency_hz"] < hi * (1 - EDGE)
+        return inside(estimate["frequency_hz"], *ELASTIC_BAND_HZ)
 
     def families(self, robot) -> list:
         return [

@@ -12,7 +12,20 @@ reference.
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, ca, cands, datasheet, linear, nlp, np, report, robot_model
+from ident_opt.effects.base import (
+    SEARCH_EDGE,
+    Effect,
+    Key,
+    ca,
+    cands,
+    datasheet,
+    inside,
+    linear,
+    nlp,
+    np,
+    report,
+    robot_model,
+)
 from ident_opt.parameters import Parameter
 
 #: The default excess of the static level over the datasheet's mean Coulomb level [N m], per joint.
@@ -30,6 +43,10 @@ def plant_coulomb(pi: dict, j: int) -> float:
     if "fc" + k + "p" in pi:
         return 0.5 * (pi["fc" + k + "p"] + pi["fc" + k + "n"])
     return pi["fc" + k]
+
+
+#: Where the Stribeck velocity vs [rad/s] is fitted (IPOPT's bounds; the grid search spans 0.005 to 0.5).
+VS_RANGE = (0.002, 1.0)
 
 
 class Stribeck(Effect):
@@ -84,6 +101,15 @@ class Stribeck(Effect):
     # ------------------------------------------------------------------ diagnosis
     reference = "fourier"
     judged = ("static", "velocity")
+    resolution = (
+        f"Stribeck friction whose velocity vs sits at a bound of its fit ({VS_RANGE[0]:g} to {VS_RANGE[1]:g} rad/s, "
+        f"within {SEARCH_EDGE:.0%}) or with no joint's excess resolved is not named",
+        "an excess that does not fall off within the range is a Coulomb step, already a candidate of its own",
+    )
+
+    def resolved(self, estimate: dict, dt: float) -> bool:
+        vs = [v for s, v in zip(estimate["static"], estimate["velocity"]) if s > 0]
+        return bool(vs) and all(inside(v, *VS_RANGE) for v in vs)
 
     def families(self, robot) -> list:
         extended = (*cands.NOMINAL.extensions, self.name)
@@ -180,8 +206,8 @@ def polish(
             [dq[moving, j][::every]],
             target[::every],
             x0=x0,
-            lb=[0.0, 0.002],
-            ub=[np.inf, 1.0],
+            lb=[0.0, VS_RANGE[0]],
+            ub=[np.inf, VS_RANGE[1]],
             names=[f"fs{j + 1}", f"vs{j + 1}"],
             options={"ipopt.max_iter": 100},
         )
