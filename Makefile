@@ -24,7 +24,7 @@ identify: $(STAMP)
 	$(BIN)/ident-opt diagnose --problem $(PROBLEM) --data data/merit/exp1.csv --data data/merit/exp2.csv \
 	    --out results/diagnosis --json results/diagnosis/diagnosis.json
 	$(BIN)/ident-opt identify --problem $(PROBLEM) --out results --json results/identify.json
-	$(BIN)/ident-opt compare  --problem problems/dfki_c0.toml --extension armature --no-progress \
+	$(BIN)/ident-opt compare  --problem problems/dfki_c0.toml --no-progress \
 	    --json results/dfki/compare.json
 	$(BIN)/ident-opt identify --problem problems/dfki_c0.toml --no-variants --json results/dfki/identify.json
 

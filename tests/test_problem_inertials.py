@@ -107,3 +107,13 @@ def test_currents_need_a_torque_constant_for_every_joint(tmp_path):
     np.savetxt(data, np.column_stack([t, 0.1 * t, 0.2 * t, t, t]), delimiter=",", header="t,q1,q2,i1,i2", comments="")
     with pytest.raises(InputError, match=r"\[robot.joint1\] gives no torque_constant"):
         load_dataset(data, DataSpec(), robot)
+
+
+def test_compare_frees_the_rotor_inertia_of_a_geared_inertials_robot_by_default():
+    from ident_opt.studies.compare import default_model
+
+    model, why = default_model(load_problem(PROBLEMS / "dfki_c0.toml").robot)
+    assert "ia2" in model.names and "rotor inertia" in why
+    # The paper's bars-and-cylinders datasheet keeps the paper's rigid model.
+    model, why = default_model(load_problem(PROBLEMS / "tudor_2dof.toml").robot)
+    assert "ia2" not in model.names and why is None

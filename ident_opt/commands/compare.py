@@ -39,7 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="NAME",
-        help="fit an extended model (armature, asymmetric_coulomb, stribeck, offset); repeatable",
+        help="fit an extended model (armature, asymmetric_coulomb, stribeck, offset); repeatable (default: the "
+        "rigid model, plus armature for a robot given by its inertials with a rotor inertia)",
     )
     parser.add_argument(
         "--constraints-study",
@@ -76,6 +77,10 @@ def run(args: argparse.Namespace) -> int:
         model = ArmModel(tuple(args.extension))
     except ValueError as exc:
         raise InputError(f"--extension: {exc}") from None
+    if not args.extension:
+        model, why = compare.default_model(load_problem(args.problem).robot)
+        if why is not None:
+            print(f"model: rigid + {why} (--extension chooses another)", file=sys.stderr)
     if args.constraints_study is not None:
         if args.constraints_study < 1:
             raise InputError("--constraints-study needs a positive number of trials")

@@ -46,6 +46,19 @@ def datasheet_models(robot) -> dict[str, tuple[ArmModel, np.ndarray]]:
     return out
 
 
+def default_model(robot) -> tuple[ArmModel, str | None]:
+    """(The model `compare` fits when no --extension is given, why, or None for the plain rigid model).
+
+    A robot described by its inertials with a reflected rotor inertia on a joint (a geared drive) carries
+    that inertia on the diagonal of M: the model then frees it (`armature`, ia2 apart from α1) instead of
+    folding a wrong fixed value into the other parameters. Bars-and-cylinder datasheets (the paper's form)
+    keep the paper's rigid model."""
+    joints = getattr(robot, "joints", ())
+    if getattr(robot, "description", "") == "inertials" and any(j.rotor_inertia > 0 for j in joints):
+        return ArmModel(("armature",)), "armature, as the robot states a rotor inertia behind a gear"
+    return RIGID, None
+
+
 def reference_model(reference) -> tuple[ArmModel, np.ndarray]:
     """A problem's `[reference]` (a published identification) as (arm, π): the armature extension when it
     names ia2; an unknown parameter name is an InputError naming it."""
