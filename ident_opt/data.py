@@ -369,6 +369,9 @@ def load_dataset(
         bad |= _non_increasing(values["t"], bad)
     keep = ~bad
     values = {name: convert(v[keep], *spec.conversions.get(name, (1.0, 0.0))) for name, v in values.items()}
+    # A URDF's angle zero and axis sign are the file's, not ident-opt's: the robot maps them (urdf_planar).
+    to_tool = getattr(robot, "column_map", {})
+    values = {name: convert(v, *to_tool.get(name, (1.0, 0.0))) for name, v in values.items()}
     t = values["t"]
     if not drop_invalid:
         _check_time(t, path, spec)

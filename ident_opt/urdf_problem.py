@@ -20,6 +20,12 @@
 Reading it builds the arm (`ident_opt.urdf_arm.UrdfArm`), so a URDF that does not parse, names joints the
 file lacks, or is not a serial chain of revolute joints is refused at load time, naming the file and the
 element. The data columns of such a problem are t, q1…qn, dq1…dqn, ddq1…ddqn, tau1…taun, i1…in.
+
+Two joints with parallel axes (link 1's centre of mass on the line between them, gravity not along them) are
+the two-link planar arm instead: `ident_opt.urdf_planar` builds the measured-inertials `Robot` from the URDF
+(keys urdf, joints, gravity, base, [robot.joint1], [robot.joint2]), and the two-link pipeline runs on it.
+`form = "n-joint"` keeps such an arm on the n-joint path; `form = "planar"` makes a URDF that is not one an
+error naming the reason (default "auto": planar when it is one, else n-joint).
 """
 
 from __future__ import annotations
@@ -27,9 +33,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ident_opt.errors import InputError
+
+if TYPE_CHECKING:  # problem.py imports this module: the two-link Robot is named for the type checker only
+    from ident_opt.problem import Robot
 
 #: The per-sample signals of an n-joint data file, each with one column per joint.
 SIGNALS = ("q", "dq", "ddq", "tau", "i")
@@ -127,16 +136,53 @@ def _couplings(table: Any, joints: list[str]) -> tuple[tuple[str, str, float], .
     return tuple(out)
 
 
-def parse_urdf_robot(table: Any, base_dir: Path) -> UrdfRobot:
-    """The URDF `[robot]` section from problem.py's checked table (`take`, `positive`, `table`, `done`), the
-    URDF's path relative to `base_dir`; builds the arm to check it (module doc)."""
-    urdf = Path(table.take("urdf", str))
-    urdf = urdf if urdf.is_absolute() else base_dir / urdf
+#: `form` in [robot]: which model a URDF becomes ("auto": planar when the URDF is a planar two-link arm).
+FORMS = ("auto", "planar", "n-joint")
+
+
+def _joint_names(table: Any) -> list[str]:
+    """`joints`: 1 to `MAX_JOINTS` distinct, non-empty joint names."""
     joints = table.take("joints", list)
     if not 0 < len(joints) <= MAX_JOINTS or not all(isinstance(j, str) and j for j in joints):
         raise InputError(f"{table.path}: key 'joints' in [robot] must be a list of 1 to {MAX_JOINTS} joint names")
     if len(set(joints)) != len(joints):
         raise InputError(f"{table.path}: key 'joints' in [robot] names a joint twice")
+    return joints
+
+
+def _planar(table: Any, urdf: Path, joints: list[str], gravity: tuple[float, float, float], base: str | None):
+    """The planar two-link robot (`ident_opt.urdf_planar`) when `form` asks for it or allows it and the URDF
+    is one; None for the n-joint path. A URDF that is not planar is an error only under form = "planar"."""
+    form = table.take("form", str, "auto")
+    if form not in FORMS:
+        raise InputError(f"{table.path}: key 'form' in [robot] must be one of {', '.join(FORMS)}, got {form!r}")
+    if form == "n-joint" or (form == "auto" and len(joints) != 2):
+        return None
+    if len(joints) != 2:
+        raise InputError(f'{table.path}: form = "planar" in [robot] needs exactly two joints, got {len(joints)}')
+    from ident_opt import urdf_planar  # deferred: it imports ident_opt.problem, which imports this module
+
+    try:
+        geometry = urdf_planar.planar_geometry(urdf, tuple(joints), gravity, base)
+    except urdf_planar.NotPlanar:
+        if form == "planar":
+            raise
+        return None
+    return urdf_planar.planar_robot(table, urdf, tuple(joints), geometry)
+
+
+def parse_urdf_robot(table: Any, base_dir: Path) -> Robot | UrdfRobot:
+    """The URDF `[robot]` section from problem.py's checked table (`take`, `positive`, `table`, `done`), the
+    URDF's path relative to `base_dir`; builds the arm to check it (module doc). Two revolute joints with
+    parallel axes give the planar two-link `Robot` (`ident_opt.urdf_planar.UrdfPlanarRobot`), unless
+    form = "n-joint"; anything else the n-joint `UrdfRobot`."""
+    urdf = Path(table.take("urdf", str))
+    urdf = urdf if urdf.is_absolute() else base_dir / urdf
+    joints = _joint_names(table)
+    gravity, base = _gravity(table), table.take("base", str, None)
+    planar = _planar(table, urdf, joints, gravity, base)
+    if planar is not None:
+        return planar
     drives = {}
     for joint in joints:
         if joint in table.raw:
@@ -150,8 +196,8 @@ def parse_urdf_robot(table: Any, base_dir: Path) -> UrdfRobot:
     robot = UrdfRobot(
         urdf=urdf,
         joints=tuple(joints),
-        gravity=_gravity(table),
-        base=table.take("base", str, None),
+        gravity=gravity,
+        base=base,
         friction=table.take("friction", bool, True),
         armature=table.take("armature", bool, True),
         offsets=table.take("offsets", bool, False),
