@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 
 from ident_opt.commands.common import add_problem_arguments, load, write_json
+from ident_opt.urdf_problem import UrdfRobot
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,7 +27,7 @@ def summary(trial) -> dict:
         "dropped_rows": trial.dropped_rows,
         "extra_columns": list(trial.extra.columns),
         "ranges": {
-            name: [[float(arr[:, j].min()), float(arr[:, j].max())] for j in range(2)]
+            name: [[float(arr[:, j].min()), float(arr[:, j].max())] for j in range(arr.shape[1])]
             for name, arr in (("q", trial.q), ("dq", trial.dq), ("ddq", trial.ddq), ("tau", trial.tau))
         },
     }
@@ -35,16 +36,23 @@ def summary(trial) -> dict:
 def run(args: argparse.Namespace) -> int:
     loaded = load(args, fit=False)  # a constant torque is a warning here: nothing is fitted
     reports = [summary(trial) for trial in loaded.trials]
-    print(
-        f"problem {loaded.problem.name!r} ({loaded.problem.path}): robot convention {loaded.problem.robot.convention!r}"
-    )
+    extra = {}
+    if isinstance(loaded.problem.robot, UrdfRobot):  # an n-joint arm: its summary is ident_opt.studies.urdf's
+        from ident_opt.studies import urdf as study
+
+        extra["robot"] = study.check_summary(loaded.problem)
+        print("\n".join(study.check_lines(loaded.problem, extra["robot"])))
+    else:
+        problem = loaded.problem
+        print(f"problem {problem.name!r} ({problem.path}): robot convention {problem.robot.convention!r}")
     units = {"q": "rad", "dq": "rad/s", "ddq": "rad/s²", "tau": "N·m"}
     for rep in reports:
         print(
             f"{rep['source']}: {rep['samples']} samples, {rep['duration_s']:.2f} s at {rep['rate_hz']:.6g} Hz; "
             f"derivatives {rep['derivatives']}; dropped rows: {rep['dropped_rows']}"
         )
-        for name, ((lo1, hi1), (lo2, hi2)) in rep["ranges"].items():
-            print(f"  {name:>3} [{units[name]}]: joint 1 [{lo1:.4g}, {hi1:.4g}], joint 2 [{lo2:.4g}, {hi2:.4g}]")
-    write_json(args.json, {"problem": loaded.problem.name, "trials": reports})
+        for name, ranges in rep["ranges"].items():
+            joints = ", ".join(f"joint {j} [{lo:.4g}, {hi:.4g}]" for j, (lo, hi) in enumerate(ranges, 1))
+            print(f"  {name:>3} [{units[name]}]: {joints}")
+    write_json(args.json, {"problem": loaded.problem.name, **extra, "trials": reports})
     return 0

@@ -24,7 +24,7 @@ import numpy as np
 from ident_opt import metrics
 from ident_opt.data import Dataset, chronological_split, load_dataset
 from ident_opt.errors import InputError
-from ident_opt.identify.base import BaseFit, fit_base_ols
+from ident_opt.identify.base import BaseFit, base_parameters, fit_base_ols
 from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.physical import fit_physical
@@ -217,6 +217,48 @@ def identify(problem, trials: list[Dataset], weights: str | None = None) -> dict
         "metrics": {"fit": _scores(arm, robot.joints, pis, trials)},
         "seconds": seconds,
     }
+
+
+def check_summary(problem) -> dict:
+    """What `ident-opt check` reports of a URDF problem's robot (JSON-ready): the file, its joints and moving
+    links, gravity [m/s²], the joint terms and couplings, the number of standard and base parameters, and the
+    URDF's total mass [kg] (None when a link has no <inertial>, which `missing_inertials` names)."""
+    robot = problem.robot
+    arm: UrdfArm = robot.arm  # builds Pinocchio's model: a URDF fault shows here, naming the element
+    mass = None if arm.missing_inertials else sum(arm.link_masses(arm.cad_parameters()).values())
+    return {
+        "urdf": str(robot.urdf),
+        "joints": list(robot.joints),
+        "links": list(arm.links),
+        "gravity": list(robot.gravity),
+        "joint_terms": list(arm.joint_terms),
+        "couplings": [list(c) for c in robot.couplings],
+        "parameters": arm.n_params,
+        "base_parameters": base_parameters(arm).rank,
+        "urdf_mass_kg": mass,
+        "missing_inertials": list(arm.missing_inertials),
+    }
+
+
+def check_lines(problem, robot: dict) -> list[str]:
+    """`check_summary` as the lines `ident-opt check` prints before the trials."""
+    n = len(robot["joints"])
+    terms = ", ".join(robot["joint_terms"]) or "none"
+    mass = (
+        f"{robot['urdf_mass_kg']:.3f} kg"
+        if robot["urdf_mass_kg"] is not None
+        else f"unknown: no <inertial> on {', '.join(robot['missing_inertials'])}"
+    )
+    lines = [
+        f"problem {problem.name!r} ({problem.path}): {n}-joint arm from the URDF {robot['urdf']}",
+        f"  joints: {', '.join(robot['joints'])}",
+        f"  gravity [m/s²]: ({', '.join(f'{g:g}' for g in robot['gravity'])})",
+        f"  parameters: {robot['parameters']} standard ({N_LINK} per link, joint terms: {terms}), "
+        f"{robot['base_parameters']} base",
+        f"  URDF mass of the moving links: {mass}",
+    ]
+    lines += [f"  coupling: drive {a} also acts on {b} (ratio {r:g})" for a, b, r in robot["couplings"]]
+    return lines
 
 
 def necessarily_nonnegative(arm: UrdfArm, K: np.ndarray, tol: float = 1e-9) -> np.ndarray:
