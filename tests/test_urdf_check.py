@@ -1,4 +1,5 @@
-"""`ident-opt check` on arms from a URDF (robot summary, n-joint data ranges, exit 0)."""
+"""`ident-opt check` on arms from a URDF (robot summary, n-joint data ranges, exit 0), and the commands that
+model the two-link arm only refusing a URDF problem with one sentence and exit 2, never a traceback."""
 
 from __future__ import annotations
 
@@ -59,3 +60,27 @@ def test_check_as_a_console_command():
 def test_check_names_the_coupled_drive(capsys):
     assert main(["check", "--problem", str(PROBLEMS / "staubli_tx40.toml")]) == 0
     assert "coupling: drive joint_6 also acts on joint_5 (ratio 1)" in capsys.readouterr().out
+
+
+def _arguments(command: str, problem: Path, tmp_path: Path) -> list[str]:
+    """The command's minimal arguments on `problem` (outputs under tmp_path)."""
+    out = tmp_path / ("trial.csv" if command in ("simulate", "excite") else "out")
+    extra = ["--real", str(PROBLEMS / "tudor_2dof.toml")] if command == "calibrate" else []
+    return [command, "--problem", str(problem), *extra, "--out", str(out)]
+
+
+@pytest.mark.parametrize("command", ["diagnose", "simulate", "online", "audit", "excite", "calibrate"])
+def test_two_joint_commands_refuse_a_urdf_arm(command, tmp_path, capsys):
+    problem = PROBLEMS / "kuka_lwr4.toml"
+    assert main(_arguments(command, problem, tmp_path)) == 2
+    err = capsys.readouterr().err
+    assert f"{command} supports two-joint problems only; {problem} describes a 7-joint URDF arm" in err
+    assert "Traceback" not in err and err.count("\n") == 1
+    assert not list(tmp_path.iterdir())  # refused before any work
+
+
+def test_calibrate_refuses_a_urdf_arm_as_the_real_problem(tmp_path, capsys):
+    real = PROBLEMS / "staubli_tx40.toml"
+    args = ["calibrate", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--real", str(real)]
+    assert main([*args, "--out", str(tmp_path / "out")]) == 2
+    assert f"{real} describes a 6-joint URDF arm" in capsys.readouterr().err

@@ -12,6 +12,7 @@ import argparse
 from pathlib import Path
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
+from ident_opt.studies.scope import two_joint_only
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -21,6 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Load, audit, write the report, print the summary."""
+    two_joint_only("audit", args.problem)  # its models are two-link: refuse a URDF arm up front
     # Deferred: the study loads NumPy, pandas and CasADi, the report matplotlib; `ident-opt --help` builds
     # every subcommand's parser and stays fast only if that waits until a command runs.
     from ident_opt.report import audit as report

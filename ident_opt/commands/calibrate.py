@@ -13,6 +13,7 @@ import argparse
 
 from ident_opt.commands.common import output_dir
 from ident_opt.errors import InputError
+from ident_opt.studies.scope import two_joint_only
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,6 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Load both problems, calibrate, write the report, print it."""
+    two_joint_only("calibrate", args.problem, args.real)  # its models are two-link: refuse a URDF arm up front
     # Deferred: the study loads NumPy, SciPy and CasADi (the simulator), the report matplotlib; `ident-opt
     # --help` builds every subcommand's parser and stays fast only if that waits until a command runs.
     from ident_opt.problem import load_problem

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 
 from ident_opt.commands.common import add_problem_arguments
+from ident_opt.studies.scope import two_joint_only
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -20,6 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    two_joint_only("diagnose", args.problem)  # its models are two-link: refuse a URDF arm up front
     import sys
 
     from ident_opt.commands.common import load, output_dir, write_json

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from ident_opt.commands.common import add_problem_arguments
 from ident_opt.errors import InputError
+from ident_opt.studies.scope import two_joint_only
 
 #: Accepted ranges of the numeric flags.
 DURATION = (2.0, 3600.0)  # s
@@ -98,6 +99,7 @@ def _check(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Design, write the CSV, figure and JSON, print a summary."""
+    two_joint_only("excite", args.problem)  # its models are two-link: refuse a URDF arm up front
     # Deferred: the study loads NumPy, CasADi and pandas; `ident-opt --help` stays fast.
     from ident_opt.data import load_dataset
     from ident_opt.problem import load_problem

@@ -25,6 +25,7 @@ from ident_opt.commands.common import (
     write_json,
 )
 from ident_opt.errors import InputError
+from ident_opt.studies.scope import two_joint_only
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -73,6 +74,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Check the flags, load, split in time; serve the stream or replay and write the report."""
+    two_joint_only("online", args.problem)  # its models are two-link: refuse a URDF arm up front
     if args.snapshot_every < 0:
         raise InputError("--snapshot-every must be ≥ 0")
     if args.checks < 0:

@@ -26,6 +26,7 @@ from dataclasses import replace
 
 from ident_opt.commands.common import add_problem_arguments, add_switches, write_json
 from ident_opt.errors import InputError
+from ident_opt.studies.scope import two_joint_only
 
 #: The flags that override a key of the problem's [simulate] section: flag -> (key, type, metavar, help).
 OVERRIDES = {
@@ -82,6 +83,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    two_joint_only("simulate", args.problem)  # its models are two-link: refuse a URDF arm up front
     from ident_opt.problem import SimulateSpec, load_problem
     from ident_opt.simulate import simulate_trial, truth_path
 
