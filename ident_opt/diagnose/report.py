@@ -140,7 +140,7 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
     for j, ax in enumerate(axes):
         for r, lab in ((before, "before"), (after, label_after)):
             f, p = signals.spectrum(r[:, j], dt)
-            ax.semilogy(f[1:], p[1:], lw=0.8, label=lab)
+            ax.loglog(f[1:], p[1:], lw=0.8, label=lab)  # log frequency: slow drifts and modes both legible
         marker = CATALOGUE[d.cause].spectrum_marker(d.estimate, j) if d.cause in CATALOGUE else None
         if marker is not None:
             ax.axvline(marker, color="k", ls=":", lw=0.8, label="identified mode")
@@ -278,7 +278,9 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "MSE of the same kind of fit without it and at least 0.01 % of the torque's variance; a cause holding "
         f"the datasheet's π must also explain {scoring.RECOVER:.0%} of what a refitted π gains over it"
         + "".join(f"; {rule} ({reason})" for rule, reason in scoring.rules())
-        + ". The best such cause is added to the model and the question is asked again.",
+        + ". The best such cause is added to the model and the question is asked again (a datasheet-side cause that"
+        f" explains {scoring.PARTNER:.0%} to {scoring.RECOVER:.0%} of the refit's gain is tried with a partner, kept"
+        f" only if the pair explains {scoring.RECOVER:.0%}).",
         "",
         "| cause | score | baseline | added parameters | held-out nMSE after | estimate |",
         "|---|---|---|---|---|---|",

@@ -223,12 +223,12 @@ def calibration_figure(summaries: list, path: Path) -> Path:
     colours = ["C0", "C0", "C3", "C3", "0.5"]
     for s, ls, c in zip(summaries, styles, colours):
         for j in range(2):
-            ax[0, j].semilogy(s.f, s.psd[:, j], ls, color=c, label=s.label, lw=1)
+            ax[0, j].loglog(s.f, s.psd[:, j], ls, color=c, label=s.label, lw=1)
         if s.strain_psd is not None and not s.label.startswith("before"):
-            ax[1, 0].semilogy(s.strain_f, s.strain_psd.mean(1), ls, color=c, label=s.label, lw=1)
+            ax[1, 0].loglog(s.strain_f, s.strain_psd.mean(1), ls, color=c, label=s.label, lw=1)
     for j in range(2):
         ax[0, j].set(
-            xlim=(0, 20),
+            xlim=(0.1, 20),
             xlabel="frequency [Hz]",
             ylabel="PSD [N² m² / Hz]",
             title=f"joint {j + 1}: rigid-fit residual spectrum",
