@@ -9,6 +9,7 @@ rotated joint origins and a tilted plane, with and without a flipped elbow axis;
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -289,3 +290,46 @@ def test_bad_input_exits_2_naming_the_culprit(tmp_path, capsys, case, expected):
     for text in expected:
         assert text in err, (text, err)
     assert sorted(tmp_path.iterdir()) == before  # nothing written
+
+
+def _trial(model: pin.Model, path: Path, seed: int) -> Path:
+    """A noise-free trial logged in the URDF's convention: q, dq, ddq of a multisine, τ from Pinocchio's RNEA with
+    the file's friction and joint 1's rotor inertia (joint 2's, ia2, is not in the rigid model compare fits)."""
+    t = np.arange(0.0, 20.0, 0.01)
+    rng = np.random.default_rng(seed)
+    amp, freq, phase = rng.uniform(0.3, 1.0, (3, 2)), rng.uniform(0.2, 0.8, (3, 2)), rng.uniform(0, 6, (3, 2))
+    arg = 2 * np.pi * freq[None] * t[:, None, None] + phase[None]
+    q = (amp * np.sin(arg)).sum(axis=1)
+    dq = (amp * 2 * np.pi * freq * np.cos(arg)).sum(axis=1)
+    ddq = -(amp * (2 * np.pi * freq) ** 2 * np.sin(arg)).sum(axis=1)
+    data = model.createData()
+    tau = np.array([pin.rnea(model, data, *state) for state in zip(q, dq, ddq)])
+    tau += np.array([0.03, 0.0]) * ddq + np.array([0.02, 0.05]) * dq + np.array([0.15, 0.0]) * np.sign(dq)
+    cols = {"t": t}
+    for name, arr in (("q", q), ("dq", dq), ("ddq", ddq), ("tau", tau)):
+        cols.update({f"{name}{j + 1}": arr[:, j] for j in range(2)})
+    pd.DataFrame(cols).to_csv(path, index=False)
+    return path
+
+
+def test_compare_on_urdf_data_recovers_the_urdf_and_states_the_offsets(planar, tmp_path):
+    """Data logged in the URDF's convention: compare maps them, OLS finds the URDF's π, and compare.md and the
+    JSON state the offsets applied."""
+    robot, model, _ = planar
+    train, test = _trial(model, tmp_path / "train.csv", 1), _trial(model, tmp_path / "test.csv", 2)
+    problem = tmp_path / "arm.toml"
+    problem.write_text(
+        Path(robot.urdf.parent / "arm.toml").read_text().replace('urdf = "arm.urdf"', f'urdf = "{robot.urdf}"')
+        + f'[data]\ntrain = ["{train}"]\ntest = ["{test}"]\n[split]\nseeds = [0]\n'
+    )
+    out = tmp_path / "out"
+    assert (
+        main(["compare", "--problem", str(problem), "--out", str(out), "--json", str(out / "c.json"), "--no-progress"])
+        == 0
+    )
+    payload = json.loads((out / "c.json").read_text())
+    truth, ols = payload["parameters"]["datasheet"], payload["parameters"]["ols"]
+    for name in ("a1", "a2", "a3", "b1", "b2", "fv1", "fv2", "fc1", "fc2"):
+        assert ols[name] == pytest.approx(truth[name], rel=1e-6, abs=1e-8), name
+    assert payload["robot"] == list(robot.statement)
+    assert "## Robot" in (out / "compare.md").read_text() and robot.statement[1] in (out / "compare.md").read_text()

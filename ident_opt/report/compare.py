@@ -197,6 +197,8 @@ def _trust_section(c: Comparison) -> list[str]:
             markdown_table(sensitivity_table(c).map(fmt)),
             "",
         ]
+    if c.robot_statement:  # a URDF arm: the offsets and signs its data went through
+        parts += ["## Robot", "", "```", *c.robot_statement, "```", ""]
     d = c.trust.gravity_direction
     if d:
         parts += [
@@ -278,7 +280,7 @@ def to_terminal(c: Comparison) -> str:
 
 def to_json(c: Comparison) -> dict:
     """The `compare --json` payload (`docs/cli.md`): parameters, standard errors, consistency, metrics."""
-    return {
+    out = {
         "parameters": c.parameters(),
         "standard_errors": {key: fit.se_dict() for key, fit in c.fits.items()},
         "consistency": c.consistency(),
@@ -305,3 +307,6 @@ def to_json(c: Comparison) -> dict:
         "gravity_direction": c.trust.gravity_direction,
         "reference": c.reference_label,
     }
+    if c.robot_statement:  # only a URDF arm has one: other problems' JSON is unchanged
+        out["robot"] = list(c.robot_statement)
+    return out

@@ -93,6 +93,8 @@ class Comparison:
     by_test_trial: dict[str, dict[str, dict[str, list[float]]]] = field(default_factory=dict)
     trials: dict[str, list[str]] = field(default_factory=dict)  # "train", "test" -> files
     reference_label: str | None = None  # the `[reference]`'s label, keyed "reference"
+    #: what the tool applied to read the robot (a URDF arm's angle offsets and signs, `UrdfPlanarRobot.statement`)
+    robot_statement: tuple[str, ...] = ()
 
     def parameters(self) -> dict[str, dict[str, float]]:
         """π by estimator: "datasheet" (the problem's convention), both datasheets, and every fit."""
@@ -201,4 +203,7 @@ def compare_estimators(
     trust = checks(model, trains, fits["ols"], fits["iv"], conversions)
     trials = {"train": [d.source for d in trains], "test": [d.source for d in tests]}
     label = reference.label if reference is not None else None
-    return Comparison(model, fits, sheets, metrics, seeds, robot.convention, sources, trust, by_trial, trials, label)
+    statement = tuple(getattr(robot, "statement", ()))  # a URDF arm's: the angle offsets applied to its data
+    return Comparison(
+        model, fits, sheets, metrics, seeds, robot.convention, sources, trust, by_trial, trials, label, statement
+    )
