@@ -84,3 +84,15 @@ def test_calibrate_refuses_a_urdf_arm_as_the_real_problem(tmp_path, capsys):
     args = ["calibrate", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--real", str(real)]
     assert main([*args, "--out", str(tmp_path / "out")]) == 2
     assert f"{real} describes a 6-joint URDF arm" in capsys.readouterr().err
+
+
+def test_a_two_joint_urdf_on_the_n_joint_path_is_refused_too(tmp_path, capsys):
+    """Two joints of the KUKA (axes not parallel): the n-joint path, which the two-link commands cannot take;
+    the sentence says why a two-joint problem is refused."""
+    urdf = ROOT / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"
+    problem = tmp_path / "two.toml"
+    robot = f'urdf = "{urdf.as_posix()}"\njoints = ["lwr_0_joint", "lwr_1_joint"]\ngravity = 9.81\n'
+    problem.write_text(f'name = "two"\n[robot]\n{robot}')
+    assert main(["diagnose", "--problem", str(problem), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "describes a 2-joint URDF arm on the n-joint path (its axes are not parallel" in err

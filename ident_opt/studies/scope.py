@@ -1,6 +1,7 @@
-"""Which commands take an n-joint arm from a URDF: `identify`, `compare`, `codegen` and `check`. The others
-model the two-link arm only (datasheet, simulator, online updates, diagnosis), so they refuse a URDF problem
-with one sentence (exit 2) before any work, instead of failing inside with a traceback.
+"""Which commands take an n-joint arm from a URDF (`UrdfRobot`): `identify`, `compare`, `codegen` and `check`.
+The others model the two-link arm only (datasheet, simulator, online updates, diagnosis), so they refuse such a
+problem with one sentence (exit 2) before any work, instead of failing inside with a traceback. A planar
+two-joint URDF becomes the two-link robot (`ident_opt.urdf_planar`) and passes.
 
 Light on purpose: every command calls `two_joint_only` first, and a two-link run must not pay for loading
 Pinocchio or the URDF studies.
@@ -24,8 +25,9 @@ def two_joint_only(command: str, *problem_paths: str | None) -> None:
         if path is None:
             continue
         robot = load_problem(path).robot
-        if isinstance(robot, UrdfRobot):
+        if isinstance(robot, UrdfRobot):  # a planar two-joint URDF is a two-link Robot, not this
+            how = ' on the n-joint path (its axes are not parallel, or form = "n-joint")' if robot.n_joints == 2 else ""
             raise InputError(
-                f"{command} supports two-joint problems only; {path} describes a {robot.n_joints}-joint URDF arm "
+                f"{command} supports two-joint problems only; {path} describes a {robot.n_joints}-joint URDF arm{how} "
                 f"(the commands for URDF arms: {', '.join(URDF_COMMANDS)})"
             )
