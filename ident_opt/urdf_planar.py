@@ -49,7 +49,7 @@ import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
@@ -57,6 +57,9 @@ import pinocchio as pin
 from ident_opt.errors import InputError
 from ident_opt.problem import LIMITS, InertialLink, JointSide, Robot, _friction
 from ident_opt.urdf_arm import _as_revolute, check_chain, parse_urdf
+
+if TYPE_CHECKING:  # only a type here: pandas is a heavy import that loading a problem does not need
+    import pandas as pd
 
 #: Largest angle between the two joint axes [rad] still read as parallel (a URDF's rounded rpy, e.g.
 #: 1.5708 for π/2, is off by 4e-6 rad).
@@ -116,6 +119,15 @@ class UrdfPlanarRobot(Robot):
         for j, (s, off) in enumerate(zip(self.angle_signs, self.angle_offsets)):
             out[f"q{j + 1}"] = (s, off)
             out.update({f"{kind}{j + 1}": (s, 0.0) for kind in _SIGNED})
+        return out
+
+    def to_urdf(self, frame: pd.DataFrame) -> pd.DataFrame:
+        """A data frame in the tool's convention written back in the URDF's (the inverse of `column_map`:
+        value_urdf = (value − offset) / scale), so that reading it again maps it to what it was."""
+        out = frame.copy()
+        for name, (scale, offset) in self.column_map.items():
+            if name in out:
+                out[name] = (out[name] - offset) / scale
         return out
 
     @property

@@ -112,7 +112,7 @@ def _write(tmp_path: Path, urdf: str, joints=("shoulder", "elbow"), extra: str =
 
 #: What a URDF cannot say, per joint: reflected rotor inertia [kg m²], gear ratio, torque constant [N m/A].
 EXTRAS = (
-    "[robot.joint1]\nrotor_inertia = 0.03\n"
+    "[robot.joint1]\nrotor_inertia = 0.03\ngear_ratio = 10.0\n"
     "[robot.joint2]\nrotor_inertia = 0.011\ngear_ratio = 6.0\ntorque_constant = 0.1\n"
 )
 
@@ -333,3 +333,18 @@ def test_compare_on_urdf_data_recovers_the_urdf_and_states_the_offsets(planar, t
         assert ols[name] == pytest.approx(truth[name], rel=1e-6, abs=1e-8), name
     assert payload["robot"] == list(robot.statement)
     assert "## Robot" in (out / "compare.md").read_text() and robot.statement[1] in (out / "compare.md").read_text()
+
+
+def test_a_simulated_trial_is_written_in_the_urdf_convention(planar, tmp_path):
+    """The simulator's CSV of a URDF arm is logged as the URDF would (read back, it is the simulated trial)."""
+    from ident_opt.problem import SimulateSpec
+    from ident_opt.simulate.cache import spec_trial
+
+    robot, _, _ = planar
+    trial = spec_trial(robot, SimulateSpec(duration=5.0), 0)
+    back = load_dataset(trial.write(tmp_path / "sim.csv"), DataSpec(), robot)
+    truth = trial.dataset()
+    for name in ("q", "dq", "ddq", "tau"):
+        np.testing.assert_allclose(getattr(back, name), getattr(truth, name), atol=1e-12, err_msg=name)
+    logged = pd.read_csv(tmp_path / "sim.csv")
+    np.testing.assert_allclose(robot.angle_signs[1] * logged["q2"] + robot.angle_offsets[1], truth.q[:, 1], atol=1e-12)

@@ -65,7 +65,9 @@ class SimTrial:
         gz = path.name.lower().endswith(".gz")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            _atomic(path, lambda tmp: self.frame.to_csv(tmp, index=False, compression="gzip" if gz else None))
+            # A URDF arm's data are logged in the URDF's angle convention (the loader maps them back).
+            frame = self.robot.to_urdf(self.frame) if hasattr(self.robot, "to_urdf") else self.frame
+            _atomic(path, lambda tmp: frame.to_csv(tmp, index=False, compression="gzip" if gz else None))
             _atomic(truth_path(path), lambda tmp: tmp.write_text(json.dumps(self.truth, indent=2) + "\n"))
         except OSError as exc:
             raise InputError(f"{path}: cannot write the simulated trial ({exc.strerror})") from None
