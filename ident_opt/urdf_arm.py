@@ -32,6 +32,7 @@ from __future__ import annotations
 import hashlib
 import os
 import tempfile
+import threading
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -220,6 +221,7 @@ class CompiledRows:
         self._buffer, self._run = self.mapped.buffer()
         self._x = np.zeros((chunk, self.n_in))  # the last, partial chunk goes through these
         self._y = np.empty((chunk, *self.shape))
+        self._lock = threading.Lock()  # one CasADi buffer and one scratch pair: one caller at a time
 
     def _call(self, x: np.ndarray, y: np.ndarray) -> None:
         """Evaluate one full chunk: x (chunk, k) C-contiguous into y (chunk, c, r) C-contiguous."""
@@ -234,12 +236,13 @@ class CompiledRows:
         X = np.ascontiguousarray(X, dtype=float)
         out = np.empty((len(X), *self.shape))
         full = len(X) - len(X) % self.chunk
-        for s in range(0, full, self.chunk):
-            self._call(X[s : s + self.chunk], out[s : s + self.chunk])
-        if full < len(X):
-            self._x[: len(X) - full] = X[full:]
-            self._call(self._x, self._y)
-            out[full:] = self._y[: len(X) - full]
+        with self._lock:
+            for s in range(0, full, self.chunk):
+                self._call(X[s : s + self.chunk], out[s : s + self.chunk])
+            if full < len(X):
+                self._x[: len(X) - full] = X[full:]
+                self._call(self._x, self._y)
+                out[full:] = self._y[: len(X) - full]
         return out
 
 

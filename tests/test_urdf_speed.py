@@ -67,3 +67,16 @@ def test_compiled_library_is_cached(tmp_path, monkeypatch):
     assert len(libraries) == 1 and libraries[0].name.startswith("liburdf_regressor_")
     monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))  # a compile would now fail
     assert _arm("tx40")._compiled_regressor is not None
+
+
+def test_threads_share_one_compiled_regressor():
+    """The compiled path has one CasADi buffer per arm: concurrent callers take turns and get their own rows."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    arm = _arm("kuka")
+    states = [_states(arm, REGRESSOR_CHUNK + 11, seed=s) for s in range(4)]
+    alone = [arm.regressor(*x) for x in states]
+    with ThreadPoolExecutor(4) as pool:
+        together = list(pool.map(lambda x: arm.regressor(*x), states * 3))
+    for k, Y in enumerate(together):
+        np.testing.assert_array_equal(Y, alone[k % 4])
