@@ -141,9 +141,10 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
         for r, lab in ((before, "before"), (after, label_after)):
             f, p = signals.spectrum(r[:, j], dt)
             ax.loglog(f[1:], p[1:], lw=0.8, label=lab)  # log frequency: slow drifts and modes both legible
-        marker = CATALOGUE[d.cause].spectrum_marker(d.estimate, j) if d.cause in CATALOGUE else None
-        if marker is not None:
-            ax.axvline(marker, color="k", ls=":", lw=0.8, label="identified mode")
+        # Every cause of the chain that has a frequency to show (an elastic mode found in a later round too).
+        markers = [CATALOGUE[c["cause"]].spectrum_marker(c["estimate"], j) for c in d.causes if c["cause"] in CATALOGUE]
+        for marker in (m for m in markers if m is not None):
+            ax.axvline(marker, color="k", ls=":", lw=0.8, label=f"identified mode {marker:.3g} Hz")
         ax.set_xlabel("frequency [Hz]")
         ax.set_ylabel(f"joint {j + 1} residual PSD [(N m)²/Hz]")
         ax.legend(fontsize=8)
