@@ -348,3 +348,21 @@ def test_a_simulated_trial_is_written_in_the_urdf_convention(planar, tmp_path):
         np.testing.assert_allclose(getattr(back, name), getattr(truth, name), atol=1e-12, err_msg=name)
     logged = pd.read_csv(tmp_path / "sim.csv")
     np.testing.assert_allclose(robot.angle_signs[1] * logged["q2"] + robot.angle_offsets[1], truth.q[:, 1], atol=1e-12)
+
+
+def test_identify_states_the_offsets(planar, tmp_path):
+    """identify's README and JSON carry the robot's statement (the offsets applied to its data)."""
+    robot, model, _ = planar
+    train, test = _trial(model, tmp_path / "train.csv", 1), _trial(model, tmp_path / "test.csv", 2)
+    problem = tmp_path / "arm.toml"
+    problem.write_text(
+        Path(robot.urdf.parent / "arm.toml").read_text().replace('urdf = "arm.urdf"', f'urdf = "{robot.urdf}"')
+        + f'[data]\ntrials = ["{train}", "{test}"]\n[split]\nseeds = [0]\n[residual]\ncandidates = [1]\n'
+        + "max_train_samples = 500\n"
+    )
+    out = tmp_path / "out"
+    args = ["identify", "--problem", str(problem), "--out", str(out), "--json", str(out / "i.json")]
+    assert main(args) == 0
+    assert json.loads((out / "i.json").read_text())["robot"] == list(robot.statement)
+    readme = next(p for p in out.rglob("*.md") if robot.statement[1] in p.read_text())
+    assert "what was applied to its data" in readme.read_text()

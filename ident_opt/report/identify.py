@@ -328,6 +328,8 @@ def json_payload(result: IdentifyResult, seconds: float = float("nan")) -> dict:
         "protocols": {name: p.description for name, p in result.protocols.items()},
         "seconds": seconds,
     }
+    if result.robot_statement:  # only a URDF arm has one: other problems' JSON is unchanged
+        payload["robot"] = list(result.robot_statement)
     if result.variants:
         payload["gmr_variants"] = {
             name: {"label": label, "paper": v.as_json()} for name, (label, v) in result.variants.items()
@@ -372,6 +374,8 @@ def _readme_intro(result: IdentifyResult, command: str, seconds: float) -> list[
         "Protocols (every table says which one it uses):",
         "",
     ]
+    if result.robot_statement:  # a URDF arm: the offsets and signs its data went through
+        lines[4:4] = ["The robot, and what was applied to its data:", "", "```", *result.robot_statement, "```", ""]
     return [
         *lines,
         *(f"- **{name}**: {p.description}" for name, p in result.protocols.items()),

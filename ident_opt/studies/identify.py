@@ -44,6 +44,8 @@ class IdentifyResult:
     seeds: SplitResults | None = None  # OLS over the paper's seeds (the seed figure)
     #: the problem describes the paper's robot: its reproduction table, π columns and sentences belong in the report
     paper_robot: bool = True
+    #: what the tool applied to read the robot (a URDF arm's angle offsets and signs, `UrdfPlanarRobot.statement`)
+    robot_statement: tuple[str, ...] = ()
 
 
 #: A problem describes the paper's robot when its datasheet, read in the paper's convention, gives the paper's
@@ -93,6 +95,7 @@ def identify(
         reg_covar=problem.residual.reg_covar,
         seeds=seed_study(trial, RIGID, problem.split),
         paper_robot=is_paper_robot(problem),
+        robot_statement=tuple(getattr(problem.robot, "statement", ())),
     )
     bar.update()
     return result
