@@ -259,6 +259,20 @@ def test_dfki_urdf_gives_the_inertials_robot(tmp_path):
     assert robot.angle_signs == (1.0, 1.0) and robot.gravity == 9.81
 
 
+def test_the_shipped_urdf_example_is_the_inertials_example():
+    """problems/dfki_c0_urdf.toml (the same arm from problems/dfki_c0.urdf) gives dfki_c0.toml's π, and its data
+    columns differ only by the q1 offset the tool now applies itself."""
+    urdf, reference = load_problem(PROBLEMS / "dfki_c0_urdf.toml"), load_problem(PROBLEMS / "dfki_c0.toml")
+    assert isinstance(urdf.robot, UrdfPlanarRobot)
+    ours, theirs = datasheet_pi(urdf.robot), datasheet_pi(reference.robot)
+    assert ours.keys() == theirs.keys()
+    for name in ours:
+        assert ours[name] == pytest.approx(theirs[name], rel=1e-12, abs=1e-15), name
+    assert urdf.robot.joints == reference.robot.joints
+    assert urdf.robot.angle_offsets == pytest.approx((reference.data.conversions["q1"][1], 0.0), abs=1e-15)
+    assert "q1" not in urdf.data.conversions and urdf.data.training == reference.data.training
+
+
 # ---------------------------------------------------------------------------------------- (c) bad input
 BAD = [
     ({"joints": ("shoulder", "nope")}, ["arm.urdf", "'nope'", "not in the URDF"]),
