@@ -130,6 +130,18 @@ class UrdfPlanarRobot(Robot):
                 out[name] = (out[name] - offset) / scale
         return out
 
+    def summary(self) -> dict:
+        """The JSON-able description `ident-opt check --json` gives (key "robot"): the URDF, its joints, the
+        signs and offsets [rad] applied to its data, and the statement's lines."""
+        return {
+            "form": "planar two-link from a URDF",
+            "urdf": str(self.urdf),
+            "joints": list(self.joint_names),
+            "angle_signs": list(self.angle_signs),
+            "angle_offsets_rad": list(self.angle_offsets),
+            "statement": list(self.statement),
+        }
+
     @property
     def statement(self) -> tuple[str, ...]:
         """The lines the tool prints about this robot: the angle offsets and signs it applied, and why."""

@@ -380,3 +380,14 @@ def test_identify_states_the_offsets(planar, tmp_path):
     assert json.loads((out / "i.json").read_text())["robot"] == list(robot.statement)
     readme = next(p for p in out.rglob("*.md") if robot.statement[1] in p.read_text())
     assert "what was applied to its data" in readme.read_text()
+
+
+def test_check_states_the_offset_applied(tmp_path, capsys):
+    """`ident-opt check` prints the offsets and signs a URDF arm's data went through, and puts them in its JSON."""
+    out = tmp_path / "check.json"
+    assert main(["check", "--problem", str(PROBLEMS / "dfki_c0_urdf.toml"), "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "as a planar two-link arm (joints Joint1, Joint2)" in text
+    assert "q1 = q_urdf(Joint1) − 1.570796 rad (-90.00°)" in text and "q2 = q_urdf(Joint2) + 0.000000 rad" in text
+    robot = json.loads(out.read_text())["robot"]
+    assert robot["angle_signs"] == [1.0, 1.0] and robot["angle_offsets_rad"] == pytest.approx([-math.pi / 2, 0.0])

@@ -45,6 +45,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         problem = loaded.problem
         print(f"problem {problem.name!r} ({problem.path}): robot convention {problem.robot.convention!r}")
+        if hasattr(problem.robot, "statement"):  # a two-joint URDF arm: the angle offsets applied to its data
+            extra["robot"] = problem.robot.summary()
+            print("\n".join(problem.robot.statement))
     units = {"q": "rad", "dq": "rad/s", "ddq": "rad/s²", "tau": "N·m"}
     for rep in reports:
         print(
