@@ -1,0 +1,66 @@
+"""Benchmark: `diagnose` on an 80 s, 1 kHz trial, every round of the loop included (target ≤ 45 s on 2 cores).
+
+Run: .venv/bin/python benchmarks/bench_diagnose.py [--duration 80] [--rate 1000]
+Side by side in one run, on simulated trials of the default robot logged at `--rate`: a clean trial (one
+round, nothing named), one hidden cause, and two hidden causes (a weak mode under a strong asymmetric
+Coulomb friction: three rounds, a masked cause found in the second). Each line gives the wall time of the
+whole diagnosis (split: 70 % trains, the rest is held out), its phases, the causes named, and the ratio of
+trial duration to diagnosis time; the same trial at 100 Hz is timed beside it, so the cost of the rate
+is a ratio measured on the same machine at the same moment.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+from ident_opt.diagnose import diagnose
+from ident_opt.problem import load_problem
+from ident_opt.simulate import simulate_trial
+
+ROOT = Path(__file__).resolve().parents[1]
+
+CASES = {
+    "clean": [],
+    "one cause (elasticity, joint 2, 6 Hz)": ["elasticity:joint=2,frequency_hz=6"],
+    "two causes (asymmetric Coulomb + 7 Hz mode)": [
+        "asymmetric_coulomb:positive=[0.75,0.3],negative=[0.3,0.7]",
+        "elasticity:joint=2,frequency_hz=7",
+    ],
+}
+
+
+def run(robot, effects: list[str], duration: float, rate: float, seed: int) -> tuple[float, object]:
+    """(wall time [s] of the diagnosis, the diagnosis) of one simulated trial."""
+    trial = simulate_trial(robot, duration=duration, rate_hz=rate, effects=effects, seed=seed, progress=False)
+    data = trial.dataset()
+    t0 = time.perf_counter()
+    d = diagnose(robot, data, progress=False)
+    return time.perf_counter() - t0, d
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=80.0)
+    parser.add_argument("--rate", type=float, default=1000.0)
+    parser.add_argument("--seed", type=int, default=3)
+    args = parser.parse_args()
+    robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
+    print(f"diagnose on {args.duration:g} s trials; cores available: {os.cpu_count()}, load {os.getloadavg()[0]:.1f}")
+    print(f"{'case':46s} {'rate':>6s} {'seconds':>8s} {'x real':>7s} {'fit s':>6s}  named")
+    worst = 0.0
+    for name, effects in CASES.items():
+        for rate in (100.0, args.rate):
+            seconds, d = run(robot, effects, args.duration, rate, args.seed)
+            named = " → ".join(c["cause"] for c in d.causes) or "none"
+            fits = d.timings["candidates"]
+            print(f"{name:46s} {rate:6g} {seconds:8.2f} {args.duration / seconds:7.1f} {fits:6.1f}  {named}")
+            if rate == args.rate:
+                worst = max(worst, seconds)
+    print(f"slowest at {args.rate:g} Hz: {worst:.1f} s (target <= 45 s on 2 cores)")
+
+
+if __name__ == "__main__":
+    main()
