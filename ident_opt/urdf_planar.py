@@ -25,7 +25,8 @@ locked at 0 and fixed children merged into their parent (as Pinocchio does):
   (3×3, base axes). In the plane: link 1's com = (c1 − p1)·u [m] (its part along v must be 0 within
   `COM_TOLERANCE` m: the two-link model's gravity has no sin q1 term), link 2's lc2 = |(c2 − p2)⊥| [m]
   at the angle φ2 = atan2((c2 − p2)·v, (c2 − p2)·u) from link 1's direction; each inertia about the axis
-  through its centre of mass is nᵀ I_c n [kg m²].
+  through its centre of mass is nᵀ I_c n [kg m²]. Link 2's length is the in-plane distance of its farthest
+  link frame from axis 2 (the tip; lc2 when all its frames sit on the axis).
 
 Angles and torques: the tool's q1 is link 1's direction from the horizontal, q2 the direction of link 2's
 centre of mass relative to link 1 (`ident_opt.robot`), so
@@ -145,7 +146,10 @@ class UrdfPlanarRobot(Robot):
     @property
     def statement(self) -> tuple[str, ...]:
         """The lines the tool prints about this robot: the angle offsets and signs it applied, and why."""
-        lines = [f"robot from the URDF {self.urdf} as a planar two-link arm (joints {', '.join(self.joint_names)})"]
+        from ident_opt.report import shown  # deferred: the report package is not needed to load a problem
+
+        joints = ", ".join(self.joint_names)
+        lines = [f"robot from the URDF {shown(self.urdf)} as a planar two-link arm (joints {joints})"]
         for j, (name, s, off) in enumerate(zip(self.joint_names, self.angle_signs, self.angle_offsets)):
             sign = "" if s > 0 else "−"
             flip = "" if s > 0 else f" (the URDF's axis of {name!r} points against joint 1's: angle and torque flipped)"
@@ -274,12 +278,14 @@ def planar_geometry(
             f"axes of {names[0]!r} and {names[1]!r}; the two-link model needs it on that line (no sin q1 gravity term)"
         )
     lc2 = math.hypot(x2, y2)
-    reach = max([lc2] + [_reach(data, f, n, p2) for f in carried2])
+    # Link 2's length is "axis to the tip": its farthest link frame (the centre of mass may lie beyond it, as
+    # in the makers' DFKI model); a URDF whose link-2 frames all sit on the axis gives lc2 instead.
+    reach = max(_reach(data, f, n, p2) for f in carried2)
     return PlanarGeometry(
         gravity=g_plane,
         gravity_along_axis=float(np.asarray(gravity) @ n),
         l1=l1,
-        reach2=reach if reach > COM_TOLERANCE else l1,
+        reach2=reach if reach > COM_TOLERANCE else (lc2 if lc2 > COM_TOLERANCE else l1),
         bodies=(
             Lumped(in1.mass, x1, float(n @ in1.inertia @ n), tuple(f.name for f in carried1)),
             Lumped(in2.mass, lc2, float(n @ in2.inertia @ n), tuple(f.name for f in carried2)),
@@ -291,7 +297,7 @@ def planar_geometry(
 
 
 def _reach(data: pin.Data, frame: pin.Frame, n: np.ndarray, axis_point: np.ndarray) -> float:
-    """In-plane distance [m] of a link frame's origin from axis 2 (link 2's length: its farthest link)."""
+    """In-plane distance [m] of a link frame's origin from axis 2."""
     offset = data.oMi[frame.parentJoint].act(frame.placement).translation - axis_point
     return float(np.linalg.norm(offset - (offset @ n) * n))
 

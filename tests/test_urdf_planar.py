@@ -248,6 +248,7 @@ def test_dfki_urdf_gives_the_inertials_robot(tmp_path):
         for key in ("mass", "com", "inertia"):
             assert getattr(ours, key) == pytest.approx(getattr(theirs, key), abs=1e-15)
     assert robot.link1.length == pytest.approx(reference.robot.link1.length, abs=1e-15)
+    assert robot.link2.length == pytest.approx(reference.robot.link2.length, abs=1e-15)  # axis 2 to the tip
     assert (robot.joint1, robot.joint2) == (j1, j2)
     ours, theirs = datasheet_pi(robot), datasheet_pi(reference.robot)
     assert ours.keys() == theirs.keys()
@@ -391,3 +392,10 @@ def test_check_states_the_offset_applied(tmp_path, capsys):
     assert "q1 = q_urdf(Joint1) − 1.570796 rad (-90.00°)" in text and "q2 = q_urdf(Joint2) + 0.000000 rad" in text
     robot = json.loads(out.read_text())["robot"]
     assert robot["angle_signs"] == [1.0, 1.0] and robot["angle_offsets_rad"] == pytest.approx([-math.pi / 2, 0.0])
+
+
+def test_link_lengths_are_axis_to_axis_and_axis_to_tip():
+    """Link 2's length is its farthest frame (the DFKI URDF's tip at 0.3 m, with the centre of mass beyond it at
+    0.32127 m, as the makers' model has it), so the physical fit's bounds are dfki_c0.toml's."""
+    robot = load_problem(PROBLEMS / "dfki_c0_urdf.toml").robot
+    assert robot.link1.length == pytest.approx(0.2, abs=1e-15) and robot.link2.length == pytest.approx(0.3, abs=1e-15)
