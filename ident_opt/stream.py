@@ -66,13 +66,17 @@ class Mapping:
     columns: dict[str, str | int] = field(default_factory=dict)
     conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
     header: bool = True
+    #: after the conversions, name -> (scale, offset) to ident-opt's angle convention: a two-joint URDF arm's
+    #: samples come in the URDF's (`UrdfPlanarRobot.column_map`, as `data.load_dataset` applies it)
+    to_tool: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     @classmethod
-    def from_spec(cls, spec) -> Mapping:
-        """From a problem's `DataSpec`, restricted to the names the stream reads."""
+    def from_spec(cls, spec, robot=None) -> Mapping:
+        """From a problem's `DataSpec`, restricted to the names the stream reads (and its robot's map from a
+        URDF's angle convention, if it has one)."""
         cols = {k: v for k, v in spec.columns.items() if k in STANDARD}
         conv = {k: v for k, v in spec.conversions.items() if k in cols}
-        return cls(cols, conv, bool(spec.header))
+        return cls(cols, conv, bool(spec.header), dict(getattr(robot, "column_map", {})))
 
     def resolve_header(self, header: list[str]) -> tuple[dict[str, int], dict[str, tuple[float, float]]]:
         """{standard name: position} for a CSV header, and the conversions that apply; `InputError` when
@@ -177,7 +181,11 @@ class LineParser:
             if len(cells) != self.width:
                 raise BadLine(f"{len(cells)} fields, the {'header' if self.header else 'first line'} has {self.width}")
             raw = {name: cells[i] for name, i in self.positions.items()}
-        return _sample(raw, self.current_to_torque, self.conversions)
+        sample = _sample(raw, self.current_to_torque, self.conversions)
+        for name, (scale, offset) in self.mapping.to_tool.items():  # currents are torques by now: tau's sign
+            if name in sample:
+                sample[name] = scale * sample[name] + offset
+        return sample
 
     def _check_time_column(self) -> None:
         """Without dq and ddq columns the derivatives are estimated, which needs t: else an `InputError`."""

@@ -399,3 +399,17 @@ def test_link_lengths_are_axis_to_axis_and_axis_to_tip():
     0.32127 m, as the makers' model has it), so the physical fit's bounds are dfki_c0.toml's."""
     robot = load_problem(PROBLEMS / "dfki_c0_urdf.toml").robot
     assert robot.link1.length == pytest.approx(0.2, abs=1e-15) and robot.link2.length == pytest.approx(0.3, abs=1e-15)
+
+
+def test_a_stream_in_the_urdf_convention_is_mapped(planar):
+    """`online --stream` reads a URDF arm's samples as the batch loader does: q_t = s q_u + θ, the rest × s."""
+    from ident_opt.stream import LineParser, Mapping
+
+    robot, _, _ = planar
+    parser = LineParser(mapping=Mapping.from_spec(DataSpec(), robot))
+    assert parser.parse("t,q1,q2,dq1,dq2,ddq1,ddq2,tau1,tau2") is None
+    sample = parser.parse("0.0,0.1,-0.2,0.3,0.4,0.5,-0.6,0.7,0.8")
+    s, off = robot.angle_signs, robot.angle_offsets
+    assert sample["q1"] == pytest.approx(s[0] * 0.1 + off[0]) and sample["q2"] == pytest.approx(s[1] * -0.2 + off[1])
+    assert sample["dq2"] == pytest.approx(s[1] * 0.4) and sample["tau2"] == pytest.approx(s[1] * 0.8)
+    assert sample["ddq1"] == pytest.approx(0.5) and sample["t"] == 0.0

@@ -125,7 +125,7 @@ def _stream(args: argparse.Namespace, problem, train) -> int:
     )
     cutoff = train.cutoff_hz or resolve_cutoff(problem.data.derivative_cutoff_hz, train.t, train.q)[0]
     options = StreamOptions(
-        mapping=Mapping.from_spec(problem.data),
+        mapping=Mapping.from_spec(problem.data, problem.robot),
         current_to_torque=tuple(j.current_to_torque for j in problem.robot.joints),
         cutoff_hz=float(cutoff),
         outlier_k=args.outlier_k,

@@ -43,7 +43,7 @@ def derivatives_figures(problem_path: Path) -> dict:
     cols = {"t": 0, "q1": 2, "q2": 3, "i1": 8, "i2": 9}
     text = "t,q1,q2,i1,i2\n" + "".join(",".join(repr(float(r[c])) for c in cols.values()) + "\n" for r in raw)
     options = StreamOptions(
-        mapping=Mapping.from_spec(problem.data),
+        mapping=Mapping.from_spec(problem.data, problem.robot),
         current_to_torque=tuple(j.current_to_torque for j in problem.robot.joints),
         cutoff_hz=float(train.cutoff_hz or problem.data.derivative_cutoff_hz),
     )
