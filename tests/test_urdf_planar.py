@@ -413,3 +413,18 @@ def test_a_stream_in_the_urdf_convention_is_mapped(planar):
     assert sample["q1"] == pytest.approx(s[0] * 0.1 + off[0]) and sample["q2"] == pytest.approx(s[1] * -0.2 + off[1])
     assert sample["dq2"] == pytest.approx(s[1] * 0.4) and sample["tau2"] == pytest.approx(s[1] * 0.8)
     assert sample["ddq1"] == pytest.approx(0.5) and sample["t"] == 0.0
+
+
+def test_codegen_readme_states_the_offsets(planar, tmp_path):
+    """The generated C takes ident-opt's angles: its README and parameters.json carry the URDF arm's offsets."""
+    robot, model, _ = planar
+    problem = tmp_path / "arm.toml"
+    problem.write_text(
+        Path(robot.urdf.parent / "arm.toml").read_text().replace('urdf = "arm.urdf"', f'urdf = "{robot.urdf}"')
+    )
+    out = tmp_path / "cg"
+    args = ["codegen", "--problem", str(problem), "--data", str(_trial(model, tmp_path / "t.csv", 5))]
+    assert main([*args, "--out", str(out), "--components", "1"]) == 0
+    readme = (out / "README.md").read_text()
+    assert "## This robot's angles" in readme and robot.statement[1] in readme
+    assert json.loads((out / "parameters.json").read_text())["robot"] == list(robot.statement)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from ident_opt import codegen
+from ident_opt import codegen, outputs
 from ident_opt.report import write_json
 from ident_opt.studies.ship import MEASURE, TOLERANCE, Shipped
 
@@ -64,13 +64,27 @@ def payload(shipped: Shipped, built: Built, errors: dict[str, float], problem, s
         "functions": built.names,
         "library": built.library.name,
         "check": {name: {MEASURE[name]: err, "limit": TOLERANCE[name]} for name, err in errors.items()},
+        # a two-joint URDF arm: the offsets and signs from its angles to the ones the C code takes
+        **({"robot": list(problem.robot.statement)} if hasattr(problem.robot, "statement") else {}),
     }
+
+
+def _urdf_angles(statement: list[str]) -> str:
+    """The README section of a two-joint URDF arm: its angles are not the C code's; the offsets to apply."""
+    return (
+        "\n## This robot's angles\n\nThe arm comes from a URDF whose angle zero and axis signs are its own. The C "
+        "code takes ident-opt's angles: pass q = sign × q_urdf + offset, and dq, ddq, tau × sign, per joint, as "
+        "ident-opt applied them to the data:\n\n```\n" + "\n".join(statement) + "\n```\n"
+    )
 
 
 def write(data: dict, built: Built, out: Path, json_path: str | Path | None = None) -> str:
     """parameters.json into `out` (and `json_path`); returns the terminal lines: each check, the files."""
     write_json(out / "parameters.json", data)
     write_json(json_path, data)
+    if "robot" in data:  # the README says how this robot's own angles become the ones the C code takes
+        readme = out / "README.md"
+        outputs.write_text(readme, readme.read_text(encoding="utf-8") + _urdf_angles(data["robot"]))
     lines = [
         f"  {name}: compiled vs Python, {MEASURE[name].replace('_', ' ')} {v[MEASURE[name]]:.2e} "
         f"(limit {TOLERANCE[name]:.0e})"
