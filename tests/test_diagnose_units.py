@@ -97,6 +97,9 @@ def test_naming_rule_needs_score_and_both_margins():
     assert not scoring.resolved("stribeck", {"static": [0.0, 0.37], "velocity": [0.0, 1.0]}, 0.01)
     assert not scoring.resolved("stribeck", {"static": [0.0, 0.0], "velocity": [0.0, 0.0]}, 0.01)
     assert scoring.resolved("stribeck", {"static": [0.8, 0.0], "velocity": [0.05, 0.0]}, 0.01)
+    # Levels equal by direction (within 10 % of their mean) are a symmetric Coulomb level, not an asymmetry.
+    assert not scoring.resolved("asymmetric_coulomb", {"positive": [0.36, 0.377], "negative": [0.348, 0.369]}, 0.01)
+    assert scoring.resolved("asymmetric_coulomb", {"positive": [0.36, 0.25], "negative": [0.348, 0.7]}, 0.01)
 
 
 def test_at_rest_zeroes_filter_ringing_but_not_a_smooth_reversal():

@@ -11,6 +11,9 @@ from __future__ import annotations
 from ident_opt.effects.base import Effect, Key, ca, cands, datasheet, np, report, robot_model
 from ident_opt.parameters import Parameter
 
+#: Least direction difference |fc+ − fc−|, relative to the joint's mean level, that makes friction asymmetric.
+ASYMMETRY = 0.1
+
 
 def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
     """The datasheet's symmetric Coulomb level per joint [N m]: the clean trial's friction."""
@@ -74,6 +77,15 @@ class AsymmetricCoulomb(Effect):
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("positive", "negative")
+    resolution = (
+        f"Coulomb levels that differ by direction by less than {ASYMMETRY:.0%} of their mean on every joint are "
+        "not named asymmetric",
+        "that is a symmetric Coulomb level: part of π, not a cause",
+    )
+
+    def resolved(self, estimate: dict, dt: float) -> bool:
+        pairs = zip(estimate["positive"], estimate["negative"])
+        return any(abs(p - n) > ASYMMETRY * 0.5 * (abs(p) + abs(n)) for p, n in pairs)
 
     def families(self, robot) -> list:
         extended = (*cands.NOMINAL.extensions, self.name)
