@@ -11,6 +11,15 @@ or prints (`ident_opt.report` does that, one writer per study).
 | `audit`         | the paper's datasheet model under both conventions, against its own fit                  |
 | `online_replay` | offline fit, then the rest of the trial replayed sample by sample; the batch check       |
 | `calibration`   | the simulator's default trial against the real exp1                                      |
+| `online_codegen`| the generated `pi_update` C against the Python online path, and its cost per update      |
+| `online_service`| the streaming service's figures: stream vs batch, the GMR guard, the C update            |
+| `excitation`    | Fourier excitation designs (D-, cond-optimal) as CasADi NLPs under the problem's limits  |
+| `discrimination`| T-optimal designs that separate two candidate causes                                     |
+| `excitation_proof` | the designs proved in the simulator against MERIt-like and random trajectories        |
+| `trust`         | warnings: cut-off sensitivity, OLS vs IV, the angle convention                           |
+| `urdf`          | an n-joint URDF arm: OLS, constrained, consistent and CAD fits; `check`'s summary        |
+| `scope`         | which commands take which arms (n-joint URDF problems: one sentence, exit 2)             |
+| `ship`          | the model `codegen` ships and its check against Python                                  |
 """
 
 #: The held-out metrics every study reports, per joint (the keys of `ident_opt.metrics.all_metrics`).
