@@ -219,12 +219,12 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
 
 # ---------------------------------------------------------------------------------------------- composition
 def merged_model(models: list[ArmModel]) -> ArmModel:
-    """One ArmModel with every extension of `models` (the Stribeck velocities of the one that has them)."""
+    """One ArmModel with every extension of `models` (the Stribeck velocities of the one that sets them)."""
     extensions: list[str] = []
     velocity = NOMINAL.stribeck_velocity
     for m in models:
         extensions += [e for e in m.extensions if e not in extensions]
-        if "stribeck" in m.extensions:
+        if m.stribeck_velocity != NOMINAL.stribeck_velocity:
             velocity = m.stribeck_velocity
     order = list(CATALOGUE)
     extensions.sort(key=lambda e: order.index(e) if e in order else -1)
