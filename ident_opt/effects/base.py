@@ -92,6 +92,12 @@ def inside(value: float, low: float, high: float) -> bool:
     return low * (1 + SEARCH_EDGE) < value < high * (1 - SEARCH_EDGE)
 
 
+def edge_rule(what: str, bounds: tuple[float, float], unit: str, reason: str) -> tuple[str, str]:
+    """An `Effect.resolution` for a fitted value that must lie `inside` its search's `bounds` [unit]."""
+    where = f"within {SEARCH_EDGE:.0%} of a bound of its search ({bounds[0]:g} to {bounds[1]:g} {unit})"
+    return f"{what} {where} is not named", reason
+
+
 @dataclass(frozen=True)
 class Key:
     """One key of an effect: its kind ("pair", "float", "joint", "choice"), default, meaning and lower bound.

@@ -25,10 +25,10 @@ import math
 from dataclasses import dataclass
 
 from ident_opt.effects.base import (
-    SEARCH_EDGE,
     Effect,
     Key,
     ca,
+    edge_rule,
     elastic_nlp,
     flexible_link,
     inside,
@@ -207,10 +207,8 @@ class Elasticity(Effect):
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("joint", "frequency_hz")
-    resolution = (
-        f"elastic modes at an edge of the searched band ({ELASTIC_BAND_HZ[0]:g} to {ELASTIC_BAND_HZ[1]:g} Hz, "
-        f"within {SEARCH_EDGE:.0%}) are not named",
-        "the search ran out of range: the residual has no resonance inside the band",
+    resolution = edge_rule(
+        "an elastic mode whose frequency lies", ELASTIC_BAND_HZ, "Hz", "the residual has no resonance inside the band"
     )
 
     def resolved(self, estimate: dict, dt: float) -> bool:

@@ -13,12 +13,12 @@ reference.
 from __future__ import annotations
 
 from ident_opt.effects.base import (
-    SEARCH_EDGE,
     Effect,
     Key,
     ca,
     cands,
     datasheet,
+    edge_rule,
     inside,
     linear,
     nlp,
@@ -101,10 +101,11 @@ class Stribeck(Effect):
     # ------------------------------------------------------------------ diagnosis
     reference = "fourier"
     judged = ("static", "velocity")
-    resolution = (
-        f"Stribeck friction whose velocity vs sits at a bound of its fit ({VS_RANGE[0]:g} to {VS_RANGE[1]:g} rad/s, "
-        f"within {SEARCH_EDGE:.0%}) or with no joint's excess resolved is not named",
-        "an excess that does not fall off within the range is a Coulomb step, already a candidate of its own",
+    resolution = edge_rule(
+        "Stribeck friction with no joint's excess resolved, or whose velocity vs lies",
+        VS_RANGE,
+        "rad/s",
+        "an excess that does not fall off within the range is a Coulomb step, a candidate of its own",
     )
 
     def resolved(self, estimate: dict, dt: float) -> bool:
