@@ -237,6 +237,9 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument(
+        "--first-seed", type=int, default=0, help="seeds start here (trials not looked at while tuning: e.g. 100)"
+    )
     parser.add_argument("--duration", type=float, default=80.0)
     parser.add_argument(
         "--trajectory",
@@ -248,13 +251,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pair-seeds", type=int, default=1, help="seeds per pair of hidden effects (0: none)")
     parser.add_argument("--out", default=str(ROOT / "results" / "diagnosis" / "confusion.md"))
     args = parser.parse_args(argv)
-    jobs = [(c, s, args.duration, args.trajectory) for c in args.causes for s in range(args.seeds)]
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    pair_seeds = range(args.first_seed, args.first_seed + args.pair_seeds)
+    jobs = [(c, s, args.duration, args.trajectory) for c in args.causes for s in seeds]
     real = [c for c in args.causes if c != "none"]
     pair_jobs = [
         ((a, b), s, args.duration, args.trajectory)
         for i, a in enumerate(real)
         for b in real[i + 1 :]
-        for s in range(args.pair_seeds)
+        for s in pair_seeds
     ]
     with ProcessPoolExecutor(args.jobs) as pool:
         results = list(tqdm(pool.map(one, jobs), total=len(jobs), desc="hidden-effect trials", file=sys.stderr))
@@ -269,10 +274,11 @@ def main(argv: list[str] | None = None) -> int:
     command = "python benchmarks/confusion_matrix.py " + " ".join(argv if argv is not None else sys.argv[1:])
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(table(results, command.strip(), pairs))
+    seeds_note = f", seeds from {args.first_seed}" if args.first_seed else ""
     record(
         Path(args.out).parent,
-        "confusion",
-        "the diagnosis on simulated trials with hidden effects (confusion matrix)",
+        Path(args.out).stem,  # one index entry per report (a run on other seeds beside the default one)
+        f"the diagnosis on simulated trials with hidden effects (confusion matrix{seeds_note})",
         [Path(args.out).name],
     )
     print(f"wrote {args.out}")
