@@ -33,7 +33,7 @@ MARGIN_VARIANCE = 1e-4
 RECOVER = 0.8
 #: Least share a datasheet-side cause must explain alone to be taken on trial, completed by a partner
 #: to `RECOVER` in the next round (`diagnosis._rounds`).
-PARTNER = 0.5
+PARTNER = 0.2
 
 
 def mse(tau: np.ndarray, tau_hat: np.ndarray, rest: np.ndarray | None = None) -> np.ndarray:
