@@ -47,6 +47,13 @@ def test_fourier_rest_and_derivatives():
     assert np.allclose(q[:-1].mean(0), [1.0, 0.0], atol=1e-9)  # the offsets are the means over whole periods
 
 
+def test_noise_source_is_shown_relative(physical_problem, exp1, monkeypatch):
+    # The committed report names the data as people read it, not by this machine's absolute path.
+    monkeypatch.chdir(ROOT)
+    _, source = excitation.noise_from_data(exp1, physical_problem.robot)
+    assert str(ROOT) not in source and "data/merit/exp1.csv" in source
+
+
 def test_limits_section_parsed(tmp_path):
     limits = load_problem(problem_file(tmp_path)).limits
     assert limits.velocity == (1.2, 1.4) and limits.torque == (15.0, 4.0)

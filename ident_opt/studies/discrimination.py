@@ -39,6 +39,7 @@ from ident_opt.diagnose.diagnosis import prepare, rigid_fit
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
 from ident_opt.problem import Robot
+from ident_opt.report import shown
 from ident_opt.studies import excitation
 from ident_opt.studies.excitation import Design, Setup
 
@@ -310,6 +311,7 @@ def design(
         expand=False,
     )
     ref = reference_gaps(rivals, trial, setup.duration)
+    source = shown(trial.source)
     same, mine = ref["same_duration"]["discrimination"], d.criteria["discrimination"]
     ratio = mine / same if same > 0 else float("inf")
     d.discrimination = {
@@ -324,12 +326,12 @@ def design(
             for r in (rivals.a, rivals.b)
         },
         "noise_sigma": np.sqrt(1.0 / rivals.ctx.weights).tolist(),
-        "noise_source": f"residual of the refitted nominal model on {trial.source} (the diagnosis's joint weights)",
+        "noise_source": f"residual of the refitted nominal model on {source} (the diagnosis's joint weights)",
         "design": {k: v for k, v in d.criteria.items() if k not in ("log_det", "cond", "rank")},
         "reference": ref,
         "ratio_same_duration": ratio,
         "summary": (
-            f"expected score gap {mine:.3g} vs {same:.3g} on the first {setup.duration:g} s of {trial.source} "
+            f"expected score gap {mine:.3g} vs {same:.3g} on the first {setup.duration:g} s of {source} "
             f"({ratio:.2f}×; whole trial: {ref['whole_trial']['discrimination']:.3g})"
         ),
     }

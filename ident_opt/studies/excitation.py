@@ -40,6 +40,7 @@ from ident_opt.datasheet import datasheet_pi
 from ident_opt.errors import InputError
 from ident_opt.identify.fit import base_combinations
 from ident_opt.problem import Limits, Robot
+from ident_opt.report import shown
 from ident_opt.robot import PHYSICAL, ArmModel
 from ident_opt.trajectory import Fourier, default_base_hz
 
@@ -117,7 +118,7 @@ def noise_from_data(trial: Dataset | None, robot: Robot, arm: ArmModel = PHYSICA
     pi = arm.vector(datasheet_pi(robot))
     r = trial.tau - arm.predict(pi, trial.q, trial.dq, trial.ddq)
     sigma = np.sqrt(np.mean(r**2, axis=0))
-    return np.maximum(sigma, 1e-6), f"RMS residual of the datasheet model on {trial.source}"
+    return np.maximum(sigma, 1e-6), f"RMS residual of the datasheet model on {shown(trial.source)}"
 
 
 def random_states(limits: Limits, n: int, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
