@@ -327,16 +327,26 @@ def _trial(model: pin.Model, path: Path, seed: int) -> Path:
     return path
 
 
-def test_compare_on_urdf_data_recovers_the_urdf_and_states_the_offsets(planar, tmp_path):
-    """Data logged in the URDF's convention: compare maps them, OLS finds the URDF's π, and compare.md and the
-    JSON state the offsets applied."""
-    robot, model, _ = planar
+def _problem(robot, model, tmp_path: Path, data: str, extra: str = "") -> Path:
+    """The test arm's problem file with a training and a test trial logged in the URDF's convention; `data`:
+    the [data] keys, with {train} and {test} standing for the two files."""
     train, test = _trial(model, tmp_path / "train.csv", 1), _trial(model, tmp_path / "test.csv", 2)
     problem = tmp_path / "arm.toml"
     problem.write_text(
         Path(robot.urdf.parent / "arm.toml").read_text().replace('urdf = "arm.urdf"', f'urdf = "{robot.urdf}"')
-        + f'[data]\ntrain = ["{train}"]\ntest = ["{test}"]\n[split]\nseeds = [0]\n'
+        + "[data]\n"
+        + data.format(train=train, test=test)
+        + "[split]\nseeds = [0]\n"
+        + extra
     )
+    return problem
+
+
+def test_compare_on_urdf_data_recovers_the_urdf_and_states_the_offsets(planar, tmp_path):
+    """Data logged in the URDF's convention: compare maps them, OLS finds the URDF's π, and compare.md and the
+    JSON state the offsets applied."""
+    robot, model, _ = planar
+    problem = _problem(robot, model, tmp_path, 'train = ["{train}"]\ntest = ["{test}"]\n')
     out = tmp_path / "out"
     assert (
         main(["compare", "--problem", str(problem), "--out", str(out), "--json", str(out / "c.json"), "--no-progress"])
@@ -368,13 +378,8 @@ def test_a_simulated_trial_is_written_in_the_urdf_convention(planar, tmp_path):
 def test_identify_states_the_offsets(planar, tmp_path):
     """identify's README and JSON carry the robot's statement (the offsets applied to its data)."""
     robot, model, _ = planar
-    train, test = _trial(model, tmp_path / "train.csv", 1), _trial(model, tmp_path / "test.csv", 2)
-    problem = tmp_path / "arm.toml"
-    problem.write_text(
-        Path(robot.urdf.parent / "arm.toml").read_text().replace('urdf = "arm.urdf"', f'urdf = "{robot.urdf}"')
-        + f'[data]\ntrials = ["{train}", "{test}"]\n[split]\nseeds = [0]\n[residual]\ncandidates = [1]\n'
-        + "max_train_samples = 500\n"
-    )
+    extra = "[residual]\ncandidates = [1]\nmax_train_samples = 500\n"
+    problem = _problem(robot, model, tmp_path, 'trials = ["{train}", "{test}"]\n', extra)
     out = tmp_path / "out"
     args = ["identify", "--problem", str(problem), "--out", str(out), "--json", str(out / "i.json")]
     assert main(args) == 0
