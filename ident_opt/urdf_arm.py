@@ -192,6 +192,24 @@ def _as_revolute(text: str) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+def chain_model(path: str | Path, text: str, joints: tuple[str, ...]) -> pin.Model:
+    """Pinocchio's model of the URDF `text` (read from `path`) reduced to `joints`, base to tip: every other
+    movable joint of the file locked at 0; InputError naming the file when Pinocchio cannot read it or the
+    joints are not its chain in this order."""
+    try:
+        full = pin.buildModelFromXML(_as_revolute(text))
+    except (RuntimeError, ValueError) as exc:
+        raise InputError(f"{path}: Pinocchio cannot read this URDF ({exc})") from None
+    lock = [full.getJointId(n) for n in full.names[1:] if n not in joints]
+    model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
+    if tuple(model.names[1:]) != tuple(joints) or model.nv != len(joints):
+        raise InputError(
+            f"{path}: the joints {list(joints)} are not the file's chain in this order "
+            f"(Pinocchio reads {list(model.names[1:])})"
+        )
+    return model
+
+
 class CompiledRows:
     """A CasADi Function of one sample's x (k×1) to one dense output (r×c), as generated C compiled into a shared
     library and mapped over `chunk` samples: `rows(X)` for X (N, k) gives (N, c, r), i.e. each sample's output
@@ -283,18 +301,8 @@ class UrdfArm:
     # ------------------------------------------------------------------ structure
     @cached_property
     def _model(self) -> pin.Model:
-        """Pinocchio's model of the chain (every other movable joint of the file locked at 0)."""
-        try:
-            full = pin.buildModelFromXML(_as_revolute(self._parsed[0]))
-        except (RuntimeError, ValueError) as exc:
-            raise InputError(f"{self.urdf}: Pinocchio cannot read this URDF ({exc})") from None
-        lock = [full.getJointId(n) for n in full.names[1:] if n not in self.joints]
-        model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
-        if tuple(model.names[1:]) != self.joints or model.nv != len(self.joints):
-            raise InputError(
-                f"{self.urdf}: the joints {list(self.joints)} are not the file's chain in this order "
-                f"(Pinocchio reads {list(model.names[1:])})"
-            )
+        """Pinocchio's model of the chain (`chain_model`) under this arm's gravity."""
+        model = chain_model(self.urdf, self._parsed[0], self.joints)
         model.gravity = pin.Motion(np.asarray(self.gravity), np.zeros(3))
         return model
 
@@ -435,7 +443,7 @@ class UrdfArm:
         also asks for that): Y then comes from Pinocchio."""
         if os.environ.get("IDENT_OPT_REGRESSOR", "").strip().lower() == "pinocchio":
             return None
-        from ident_opt.simulate.cache import cache_dir  # the project's cache folder (or $IDENT_OPT_CACHE)
+        from ident_opt.simulate.cache import cache_root  # the project's cache folder (or $IDENT_OPT_CACHE)
 
         n = self.n_joints
         q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
@@ -444,7 +452,7 @@ class UrdfArm:
         # Yᵀ, dense: CasADi writes column-major, so each sample's block is Y (n, P) row-major, as NumPy reads it
         rows = ca.Function("urdf_regressor", [ca.vertcat(q, dq, ddq)], [ca.densify(Y).T])
         try:
-            return CompiledRows(rows, cache_dir(Path(self.urdf)).with_name("regressor"))
+            return CompiledRows(rows, cache_root(Path(self.urdf)) / "regressor")
         except (InputError, OSError):
             return None
 

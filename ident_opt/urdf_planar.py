@@ -57,7 +57,7 @@ import pinocchio as pin
 
 from ident_opt.errors import InputError
 from ident_opt.problem import LIMITS, InertialLink, JointSide, Robot, _friction
-from ident_opt.urdf_arm import _as_revolute, check_chain, parse_urdf
+from ident_opt.urdf_arm import chain_model, check_chain, parse_urdf
 
 if TYPE_CHECKING:  # only a type here: pandas is a heavy import that loading a problem does not need
     import pandas as pd
@@ -169,21 +169,6 @@ def _wrap(angle: float) -> float:
     return float(math.pi - (math.pi - angle) % (2 * math.pi))
 
 
-def _model(path: Path, text: str, names: tuple[str, ...]) -> pin.Model:
-    """Pinocchio's model of the two joints, every other movable joint locked at 0 (as `UrdfArm` does)."""
-    try:
-        full = pin.buildModelFromXML(_as_revolute(text))
-    except (RuntimeError, ValueError) as exc:
-        raise InputError(f"{path}: Pinocchio cannot read this URDF ({exc})") from None
-    lock = [full.getJointId(n) for n in full.names[1:] if n not in names]
-    model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
-    if tuple(model.names[1:]) != names or model.nv != 2:
-        raise InputError(
-            f"{path}: the joints {list(names)} are not the file's chain (Pinocchio reads {model.names[1:]})"
-        )
-    return model
-
-
 def _dynamics(path: Path, text: str, name: str) -> tuple[float, float]:
     """(damping [N m s/rad], friction [N m]) of <joint name=…>'s <dynamics>, 0 where absent; InputError naming
     the joint for a value that is not a finite number ≥ 0."""
@@ -256,7 +241,7 @@ def planar_geometry(
     carried link without <inertial>)."""
     text, joints, links = parse_urdf(path)
     check_chain(path, joints, names, base)
-    model = _model(path, text, names)
+    model = chain_model(path, text, names)
     data = model.createData()
     pin.forwardKinematics(model, data, pin.neutral(model))
     n, s2 = _axes(model, data, path, names)

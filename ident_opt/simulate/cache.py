@@ -20,16 +20,22 @@ from ident_opt.simulate.trial import simulate_trial
 SIMULATOR_VERSION = 4  # bump when the simulator's output changes for the same settings
 
 
-def cache_dir(problem_path: Path) -> Path:
-    """Where simulated trials of this problem are cached."""
+def cache_root(path: Path) -> Path:
+    """The cache folder for a file (a problem, a URDF): $IDENT_OPT_CACHE if set, else `.cache` of the project
+    holding it (the nearest folder above with a pyproject.toml), else `.cache` next to it."""
     env = os.environ.get("IDENT_OPT_CACHE")
     if env:
-        return Path(env) / "sim"
-    here = Path(problem_path).resolve().parent
+        return Path(env)
+    here = Path(path).resolve().parent
     for folder in (here, *here.parents):
         if (folder / "pyproject.toml").is_file():
-            return folder / ".cache" / "sim"
-    return here / ".cache" / "sim"
+            return folder / ".cache"
+    return here / ".cache"
+
+
+def cache_dir(problem_path: Path) -> Path:
+    """Where simulated trials of this problem are cached."""
+    return cache_root(problem_path) / "sim"
 
 
 def settings_key(robot, spec, seed: int) -> str:
