@@ -53,8 +53,7 @@ def default_model(robot) -> tuple[ArmModel, str | None]:
     that inertia on the diagonal of M: the model then frees it (`armature`, ia2 apart from α1) instead of
     folding a wrong fixed value into the other parameters. Bars-and-cylinder datasheets (the paper's form)
     keep the paper's rigid model."""
-    joints = getattr(robot, "joints", ())
-    if getattr(robot, "description", "") == "inertials" and any(j.rotor_inertia > 0 for j in joints):
+    if robot.description == "inertials" and any(j.rotor_inertia > 0 for j in robot.joints):
         return ArmModel(("armature",)), "armature, as the robot states a rotor inertia behind a gear"
     return RIGID, None
 
