@@ -227,3 +227,21 @@ def test_offset_polish_recovers_both_offsets_jointly_with_pi(physical_problem):
     theta, info = offsets(NOMINAL, q, dq, ddq, tau, labels, np.ones(2), None, pi * 0.9, start, (-0.1, 0.1))
     assert theta is not None, info
     np.testing.assert_allclose([theta["delta1"], theta["delta2"]], delta, atol=1e-6)
+
+
+def test_an_auto_cutoff_filters_the_torque_at_the_cutoff_the_trial_was_read_with():
+    """A problem with derivative_cutoff_hz = "auto" (DFKI's) hands "auto" to the diagnosis: each trial's own
+    cut-off is used, as if it had been given as a number (this raised a TypeError before)."""
+    from dataclasses import replace
+
+    from ident_opt.diagnose.diagnosis import prepare
+
+    rng = np.random.default_rng(0)
+    t = np.arange(2000) * 0.002
+    q = np.column_stack([np.sin(t), np.cos(2 * t)])
+    tau = q + 0.1 * rng.standard_normal((2000, 2))
+    trial = Dataset("x", t, q, np.gradient(q, t, axis=0), np.zeros((2000, 2)), tau, cutoff_hz=8.0)
+    auto, given = prepare(trial, "auto"), prepare(trial, 8.0)
+    np.testing.assert_array_equal(auto.tau, given.tau)
+    assert not np.allclose(auto.tau, trial.tau)  # it did filter
+    np.testing.assert_array_equal(prepare(replace(trial, cutoff_hz=None), "auto").tau, tau)  # logged derivatives

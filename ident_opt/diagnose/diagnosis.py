@@ -358,9 +358,10 @@ def rigid_fit(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
     return linear.solve(zero, Y, tau, weights).beta, weights
 
 
-def prepare(trial: Dataset, torque_filter_hz: float | None) -> Dataset:
+def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
     """`at_rest`, then the torque low-passed by the zero-phase filter the derivatives are estimated with
-    (4th-order Butterworth at `torque_filter_hz`, forward-backward; None: no filter).
+    (4th-order Butterworth at `torque_filter_hz`, forward-backward; "auto": the cut-off the trial's derivatives
+    were estimated with, `Dataset.cutoff_hz`; None: no filter).
 
     Estimated accelerations are a smoothed version of the true ones (a step in acceleration becomes a ramp
     over tens of ms); the measured torque steps. Filtering τ the same way puts both sides of τ = Y π in the
@@ -369,6 +370,8 @@ def prepare(trial: Dataset, torque_filter_hz: float | None) -> Dataset:
     zero-phase and linear).
     """
     trial = at_rest(trial)
+    if torque_filter_hz == "auto":  # the problem's `derivative_cutoff_hz = "auto"`: the one this trial was read with
+        torque_filter_hz = trial.cutoff_hz
     if torque_filter_hz is None:
         return trial
     dt = float(np.median(np.diff(trial.t)))
@@ -384,7 +387,7 @@ def diagnose(
     unseen: Dataset | None = None,
     train_fraction: float = 0.7,
     progress: bool = True,
-    torque_filter_hz: float | None = 15.0,
+    torque_filter_hz: float | str | None = 15.0,
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data); see the module docstring.
     `torque_filter_hz`: see `prepare` (the problem's derivative cut-off is the natural choice)."""
