@@ -45,6 +45,8 @@ def _within(d, trial) -> None:
             ["asymmetric_coulomb:positive=[0.75,0.3],negative=[0.3,0.7]", "elasticity:joint=2,frequency_hz=7"],
             {"seed": 12},
         ),
+        # Load friction on the rigid joint of an arm with an elastic joint (the elastic plant used to drop it).
+        (["elasticity:joint=2,frequency_hz=6", "load_friction:coefficient=[0.2,0]"], {"seed": 13, "rate_hz": 200.0}),
     ],
 )
 def test_two_hidden_effects_are_both_named(physical_problem, effects, kwargs):
@@ -56,6 +58,8 @@ def test_two_hidden_effects_are_both_named(physical_problem, effects, kwargs):
     assert d.cause == d.causes[0]["cause"] and d.estimate == d.causes[0]["estimate"]
     assert sum(d.causes[-1]["nmse_after"]) < sum(d.nmse_before)
     assert d.nmse_after == d.causes[-1]["nmse_after"]
+    rounds = d.as_json()["rounds"]  # why each cause was or was not named: every round's candidates, best first
+    assert len(rounds) >= len(d.causes) and rounds[0][0]["cause"] == d.candidates[0]["cause"]
 
 
 @pytest.mark.slow

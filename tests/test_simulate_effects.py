@@ -180,3 +180,52 @@ def test_load_friction_adds_mu_times_the_link_torque_to_the_coulomb_level(robot)
         x, r = column[moving[:, j], j], residual[moving[:, j], j]
         assert float(x @ r / (x @ x)) == pytest.approx(mu, rel=0.02)
     assert trial.truth["effects"]["load_friction"] == {"coefficient": [0.15, 0.05]}
+
+
+@pytest.mark.parametrize("kind", ["joint", "link"])
+def test_load_friction_acts_in_the_elastic_plants_too(robot, kind):
+    """An elastic joint or flexible link replaces the rigid plant; the gears' load friction must stay in it
+    (it used to vanish): at a moving state, the generalised forces change by exactly −μ_j sgn(v_j)|τ_load,j|,
+    with τ_load the torque the gears transmit (the spring torque at an elastic joint, the link-side torque at
+    a rigid one), evaluated at the accelerations the plant returns."""
+    import casadi as ca
+
+    from ident_opt.effects import is_active, normalise
+    from ident_opt.simulate import flexible_link
+    from ident_opt.simulate.truth import build_truth, coulomb_levels, friction_only, link_pi, plant
+
+    mu = (0.2, 0.15)
+    elastic = {"elasticity": {"joint": 1, "frequency_hz": 5.0, "kind": kind}}
+    coulomb = coulomb_levels(robot)
+    truths = [
+        build_truth(robot, {n: p for n, p in normalise(e, coulomb).items() if is_active(n, p, coulomb)})
+        for e in (elastic, {**elastic, "load_friction": {"coefficient": mu}})
+    ]
+    x = np.array([0.4, -0.7, 0.41 if kind == "joint" else 0.01, 0.8, -1.1, 0.6])
+    tau = np.array([3.0, -1.0])
+    xdot = [np.asarray(plant(t)(x, tau)[0]).ravel() for t in truths]
+    e = truths[1].elastic
+    if kind == "joint":  # state [q1, q2, θ, dq1, dq2, dθ]; joint 1's gears sit before the spring
+        spring = e.k * (x[2] - x[0]) + e.d * (x[5] - x[3])
+        assert e.B * (xdot[0][5] - xdot[1][5]) == pytest.approx(mu[0] * np.sign(x[5]) * abs(spring), rel=1e-9)
+        # joint 2 is rigid: its link side (joint 1's motor and friction removed) feels −μ2 sgn(dq2)|τ_load,2|
+        model, pi = truths[1].model, np.array(truths[1].pi, dtype=float)
+        link = pi - friction_only(model, pi, 0)
+        link[model.names.index("a1")] -= e.B
+        q, dq = x[None, :2], x[None, 3:5]
+
+        def tau_link(ddq, p=link):
+            return model.predict(p, q, dq, np.asarray(ddq, dtype=float)[None, :])[0]
+
+        M = np.column_stack([tau_link(u) - tau_link([0.0, 0.0]) for u in np.eye(2)])
+        load = tau_link(xdot[1][3:5], link_pi(model, pi, truths[1].armature))[1]
+        expected = [0.0, -mu[1] * np.sign(x[4]) * abs(load)]
+        np.testing.assert_allclose(M @ (xdot[1][3:5] - xdot[0][3:5]), expected, rtol=2e-3, atol=1e-9)
+    else:  # state [q1, q2, φ, dq1, dq2, dφ]: M(ddz_μ − ddz_0) = −[μ sgn(dq) |τ_load|, 0]
+        z, dz, M, h = flexible_link.lagrangian_terms(truths[1].robot, 0, truths[1].armature)
+        Mh = ca.Function("Mh", [z, dz], [M, h])
+        M_x, h_x = (np.asarray(v, dtype=float) for v in Mh(x[:3], x[3:]))
+        a = xdot[1][3:]
+        load = (M_x @ a + h_x.ravel())[:2] - np.asarray(truths[1].armature) * a[:2]
+        expected = -np.array([*(np.asarray(mu) * np.sign(x[3:5]) * np.abs(load)), 0.0])
+        np.testing.assert_allclose(M_x @ (xdot[1][3:] - xdot[0][3:]), expected, rtol=2e-3, atol=1e-6)

@@ -32,6 +32,8 @@ REST_WINDOW_S = 0.01
 MIN_SAMPLES = 200
 #: Most causes one diagnosis names (rounds of the loop).
 MAX_CAUSES = 4
+#: What the JSON's `rounds` keeps of each round's candidate rows (why a cause was, or was not, named).
+ROUND_KEYS = ("cause", "score", "baseline", "nmse_after_filtered", "recovers", "clears_margin", "needs_partner")
 
 
 @dataclass
@@ -71,6 +73,7 @@ class Diagnosis:
     nmse_filtered: list[list[float]] = field(default_factory=list)  # before, after: as scored
     causes: list[dict] = field(default_factory=list)  # the chain, in the order named (`docs/effects.md`)
     dropped: list[dict] = field(default_factory=list)  # causes a later one made redundant
+    rounds: list[list[dict]] = field(default_factory=list)  # every round's candidates, best first (`ROUND_KEYS`)
     timings: dict[str, float] = field(default_factory=dict)
 
     def as_json(self) -> dict:
@@ -108,6 +111,7 @@ class Diagnosis:
             "nmse_raw_before": self.nmse_raw[0] if self.nmse_raw else None,
             "nmse_raw_after": self.nmse_raw[1] if self.nmse_raw else None,
             "dropped": self.dropped,
+            "rounds": self.rounds,
             "split": self.split,
             "rate_hz": self.rate_hz,
             "nominal": self.nominal,
@@ -193,8 +197,9 @@ def _rounds(robot: Robot, ctx, current: dict, version, row, var, progress: bool)
     """The loop of question 2: name the best cause, extend the model with it, ask again against the extended
     model, until nothing clears the margin (at most `MAX_CAUSES`). Every candidate of a round is scored
     against the same reference (the best model so far). Returns (chain, versions of the final model, the
-    first round's candidate rows, dropped causes)."""
+    first round's candidate rows, dropped causes, every round's rows cut to `ROUND_KEYS`)."""
     chain: list[dict] = []
+    history: list[list[dict]] = []
     named: list[tuple[cands.Family, dict]] = []  # each cause's own family and its θ, in the order named
     candidates: list[dict] = []
     dropped: list[dict] = []
@@ -215,6 +220,7 @@ def _rounds(robot: Robot, ctx, current: dict, version, row, var, progress: bool)
         rows = [row(v, v.common - ref.common, current, gap) for v in ranked]
         if round_ == 0:
             candidates = rows
+        history.append([{k: r[k] for k in ROUND_KEYS} for r in rows])
         top, on_trial = _pick(ranked, rows, tentative is not None)
         if top is None:
             break
@@ -231,7 +237,7 @@ def _rounds(robot: Robot, ctx, current: dict, version, row, var, progress: bool)
     if tentative is not None:  # a cause on trial found no partner: back to the model before the trial
         named, chain, current, dropped = tentative
     bar.close()
-    return chain, current, candidates, dropped
+    return chain, current, candidates, dropped, history
 
 
 def _pick(ranked: list[Fitted], rows: list[dict], on_trial: bool) -> tuple[Fitted | None, bool]:
@@ -450,7 +456,7 @@ def diagnose(
         return _row(v, score, current, raw_test.tau, test, rest_test, var, dt, gap)
 
     current = {b: version(None, b, nominal_pred[b], (), None, {}) for b in nominal_pred}
-    chain, current, candidates, dropped = _rounds(robot, ctx, current, version, row, var, progress)
+    chain, current, candidates, dropped, history = _rounds(robot, ctx, current, version, row, var, progress)
     t_fit = time.perf_counter()
 
     final = max(current.values(), key=lambda v: v.common)
@@ -500,6 +506,7 @@ def diagnose(
         nmse_filtered=[scoring.nmse(test.tau, before_pred, rest_test), scoring.nmse(test.tau, after_pred, rest_test)],
         causes=causes,
         dropped=dropped,
+        rounds=history,
         candidates=candidates,
         evidence=ev,
         split=how,

@@ -89,11 +89,24 @@ class Elastic:
         link = pi - sim.friction_only(model, pi, j)  # the link side: no friction and no motor inertia at j
         link[model.names.index("a1" if j == 0 else "ia2")] -= self.B
         spring = self.k * (theta - q[j]) + self.d * (dtheta - dq[j])
-        tau_link = ca.vertcat(spring, tau[1]) if j == 0 else ca.vertcat(tau[0], spring)
-        ddq = sim.solve_forward(model, ca.DM(link), q, dq, tau_link)
         v = ca.vertcat(dtheta, 0) if j == 0 else ca.vertcat(0, dtheta)
         motor_friction = model.tau_expression(q, v, ca.DM.zeros(2), ca.DM(sim.friction_only(model, pi, j)))[j]
-        ddtheta = (tau[j] - spring - motor_friction) / self.B
+        other = 1 - j
+        rigid_side = ca.DM(sim.link_pi(model, pi, truth.armature))
+
+        def solve(extra):  # [ddq (2), ddθ]; the gear friction of joint j acts on its motor, before the spring
+            tau_link = ca.vertcat(spring, tau[1] - extra[1]) if j == 0 else ca.vertcat(tau[0] - extra[0], spring)
+            ddq = sim.solve_forward(model, ca.DM(link), q, dq, tau_link)
+            return ca.vertcat(ddq, (tau[j] - spring - motor_friction - extra[j]) / self.B)
+
+        def load(a):  # joint j's gears transmit the spring torque; the other joint's, its link-side torque
+            rows = [None, None]
+            rows[j], rows[other] = spring, model.tau_expression(q, dq, a[:2], rigid_side)[other]
+            return ca.vertcat(*rows)
+
+        rates = ca.vertcat(dtheta, dq[1]) if j == 0 else ca.vertcat(dq[0], dtheta)
+        acc = sim.with_load_friction(truth, rates, solve, load)
+        ddq, ddtheta = acc[:2], acc[2]
         xdot = ca.vertcat(dq, dtheta, ddq, ddtheta)
         q_enc = ca.vertcat(theta, q[1]) if j == 0 else ca.vertcat(q[0], theta)
         dq_enc = ca.vertcat(dtheta, dq[1]) if j == 0 else ca.vertcat(dq[0], dtheta)
@@ -107,8 +120,15 @@ class Elastic:
         z, dz, M, h = flexible_link.lagrangian_terms(truth.robot, self.index, truth.armature)
         friction_pi = sim.friction_only(model, pi, 0) + sim.friction_only(model, pi, 1)
         F = model.tau_expression(z[:2], dz[:2], ca.DM.zeros(2), ca.DM(friction_pi))
-        Q = ca.vertcat(tau - F, -self.k * z[2] - self.d * dz[2])
-        ddz = ca.solve(M, Q - h)
+        B = ca.DM(truth.armature)
+
+        def solve(extra):  # ddz; the gears' load friction reduces the joint torques
+            return ca.solve(M, ca.vertcat(tau - F - extra, -self.k * z[2] - self.d * dz[2]) - h)
+
+        def load(a):  # the link-side torque at the joints: M a + h without the rotors' B ddq
+            return (ca.mtimes(M, a) + h)[:2] - B * a[:2]
+
+        ddz = sim.with_load_friction(truth, dz[:2], solve, load)
         motion = ca.Function("motion", [z, dz, tau], [ddz])
         ddz_x = motion(x[:3], x[3:], tau)
         xdot = ca.vertcat(x[3:], ddz_x)

@@ -17,7 +17,7 @@ from pathlib import Path
 from ident_opt.errors import InputError
 from ident_opt.simulate.trial import simulate_trial
 
-SIMULATOR_VERSION = 4  # bump when the simulator's output changes for the same settings
+SIMULATOR_VERSION = 5  # bump when the simulator's output changes for the same settings
 
 
 def cache_root(path: Path) -> Path:

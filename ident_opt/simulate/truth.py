@@ -146,20 +146,33 @@ def link_pi(model: ArmModel, pi: np.ndarray, armature) -> np.ndarray:
 LOAD_FRICTION_PASSES = 4
 
 
-def _forward(truth: Truth, q, dq, tau) -> ca.SX:
-    """ddq of the rigid plant; with load-dependent friction (Coulomb level fc + μ |τ_load|, τ_load the
-    link-side rigid torque, which depends on ddq) by fixed-point passes from the friction-free-of-load answer
-    (a contraction for μ·(link inertia ÷ joint inertia) < 1)."""
-    ddq = solve_forward(truth.model, ca.DM(truth.pi), q, dq, tau)
+def with_load_friction(truth: Truth, rates, solve, load) -> ca.SX:
+    """Accelerations of a plant whose gears add load-dependent friction μ_j sgn(v_j) |τ_load,j| (`load_friction`;
+    one home for every plant: rigid, elastic joint, flexible link).
+
+    `solve(extra)`: the plant's accelerations with the joint torques reduced by `extra` (2,) [N m]; `load(a)`:
+    the link-side rigid torque τ_load (2,) [N m] at accelerations `a` (inertial without the rotors, Coriolis,
+    gravity; it depends on a, hence the fixed-point passes from the load-free answer, a contraction for
+    μ·(link inertia ÷ joint inertia) < 1); `rates` (2,) [rad/s]: the gear-side joint rates the friction opposes.
+    """
+    a = solve(ca.DM.zeros(2))
     if not any(truth.load_friction):
-        return ddq
-    link = ca.DM(link_pi(truth.model, truth.pi, truth.armature))
+        return a
     mu = ca.DM(truth.load_friction)
     for _ in range(LOAD_FRICTION_PASSES):
-        load = truth.model.tau_expression(q, dq, ddq, link)
-        extra = mu * ca.sign(dq) * ca.fabs(load)
-        ddq = solve_forward(truth.model, ca.DM(truth.pi), q, dq, tau - extra)
-    return ddq
+        a = solve(mu * ca.sign(rates) * ca.fabs(load(a)))
+    return a
+
+
+def _forward(truth: Truth, q, dq, tau) -> ca.SX:
+    """ddq of the rigid plant, with load-dependent friction if any (`with_load_friction`)."""
+    link = ca.DM(link_pi(truth.model, truth.pi, truth.armature))
+    return with_load_friction(
+        truth,
+        dq,
+        lambda extra: solve_forward(truth.model, ca.DM(truth.pi), q, dq, tau - extra),
+        lambda ddq: truth.model.tau_expression(q, dq, ddq, link),
+    )
 
 
 def friction_only(model: ArmModel, pi: np.ndarray, joint: int) -> np.ndarray:
