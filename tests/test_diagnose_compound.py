@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from ident_opt.diagnose import diagnose, hidden
+from ident_opt.diagnose import diagnose, hidden, report
 
 
 def _run(robot, effects: list[str], **kwargs):
@@ -81,6 +81,8 @@ def test_a_quarter_turn_offset_is_found_not_stopped_at_a_bound(physical_problem)
 def test_clean_trials_away_from_the_defaults_name_nothing(physical_problem, seed, kwargs):
     _, d = _run(physical_problem.robot, [], seed=seed, **kwargs)
     assert d.cause == "none" and d.causes == [], [(c["cause"], c["score"]) for c in d.candidates[:3]]
+    assert f"{d.candidates[0]['cause']}, scores" in report.cause_sentence(d)
+    assert "is not named: " in report.cause_sentence(d)  # and why: the first rule its best candidate fails
 
 
 def test_stribeck_static_is_the_level_itself(physical_problem):

@@ -86,6 +86,20 @@ def test_naming_rule_needs_score_and_both_margins():
     assert not scoring.clears_margin(before, np.array([0.9, 1.0]), -1.0, var)  # penalty wins
     assert not scoring.clears_margin(np.array([1e-3, 1.0]), np.array([0.5e-3, 1.0]), 5.0, var)  # nil vs torque
     assert scoring.score(before, before, 1000, 2) < 0
+    # The reason a candidate is not named is the first rule it fails, and there is none when it is named.
+    cases = [
+        (np.array([0.9, 1.0]), 5.0, True, None),
+        (np.array([0.97, 0.99]), 5.0, True, "3.0% of the held-out MSE"),
+        (np.array([0.9, 1.0]), -1.0, True, "score -1.0"),
+        (np.array([0.9, 1.0]), 5.0, False, "own rule"),
+        (np.array([0.9, 1.0]), 5.0, True, "50% of what refitting"),
+    ]
+    for after, score, resolved, expected in cases:
+        share = 0.5 if expected and "refitting" in expected else None
+        why = scoring.shortfall(before, after, score, var, resolved, share)
+        assert (why is None) == (expected is None) and (expected is None or expected in why), why
+        if share is None and resolved:
+            assert (why is None) == scoring.clears_margin(before, after, score, var)
     assert not scoring.resolved("delay", {"seconds": 0.001}, 0.01)
     assert scoring.resolved("delay", {"seconds": 0.02}, 0.01)
     # A mode where the search stopped (an edge of the band) is not a resonance; one inside it is.

@@ -33,7 +33,16 @@ MIN_SAMPLES = 200
 #: Most causes one diagnosis names (rounds of the loop).
 MAX_CAUSES = 4
 #: What the JSON's `rounds` keeps of each round's candidate rows (why a cause was, or was not, named).
-ROUND_KEYS = ("cause", "score", "baseline", "nmse_after_filtered", "recovers", "clears_margin", "needs_partner")
+ROUND_KEYS = (
+    "cause",
+    "score",
+    "baseline",
+    "nmse_after_filtered",
+    "recovers",
+    "clears_margin",
+    "needs_partner",
+    "shortfall",
+)
 
 
 @dataclass
@@ -151,6 +160,7 @@ def _row(
         "resolved": ok,
         "recovers": share,
         "clears_margin": margin and (share is None or share >= scoring.RECOVER),
+        "shortfall": scoring.shortfall(without.mse, v.mse, score, var, ok, share),
         "needs_partner": bool(margin and share is not None and scoring.PARTNER <= share < scoring.RECOVER),
         **({"polish": c.detail["polish"]} if "polish" in c.detail else {}),
     }

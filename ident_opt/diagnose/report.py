@@ -36,9 +36,10 @@ def cause_sentence(d: Diagnosis) -> str:
     gain = f"held-out nMSE {_gain(d)}."
     if d.cause == "none":
         best = d.candidates[0]
+        why = f" and is not named: {best['shortfall']}" if best.get("shortfall") else ""
         return (
             f"No catalogue effect beats the nominal models by the stated margin: the best candidate, "
-            f"{best['cause']}, scores {best['score']:.1f} against the {best['baseline']} model. "
+            f"{best['cause']}, scores {best['score']:.1f} against the {best['baseline']} model{why}. "
             f"The {base} model stands (held-out nMSE {pair(d.nmse_before)})."
         )
     return CATALOGUE[d.cause].sentence(d, base, gain)
@@ -57,9 +58,12 @@ def chain_sentences(d: Diagnosis) -> list[str]:
             f"against the {c['baseline']} model); estimate `{_rounded(c['estimate'])}`; held-out nMSE {step}."
         )
         before, names = c["nmse_after"], [*names, c["cause"]]
+    last = d.rounds[-1] if len(d.rounds) > len(d.causes) and d.rounds[-1] else []
+    why = last[0]["shortfall"] if last else None
+    closest = f" (the closest, {last[0]['cause']}, is not named: {why})" if why else ""
     out.append(
-        f"Round {d.causes[-1]['round'] + 1}: no further candidate clears the margin; the fully extended model "
-        f"({' + '.join(names)}) has held-out nMSE {pair(d.nmse_after)} against {pair(d.nmse_before)} before."
+        f"Round {d.causes[-1]['round'] + 1}: no further candidate clears the margin{closest}; the fully extended "
+        f"model ({' + '.join(names)}) has held-out nMSE {pair(d.nmse_after)} against {pair(d.nmse_before)} before."
     )
     for g in d.dropped:
         out.append(

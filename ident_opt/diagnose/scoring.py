@@ -86,3 +86,25 @@ def clears_margin(mse_before: np.ndarray, mse_after: np.ndarray, score_value: fl
     before, after = np.asarray(mse_before), np.asarray(mse_after)
     clear = ((before - after) >= MARGIN * before) & ((before - after) >= MARGIN_VARIANCE * np.asarray(variance))
     return bool(score_value > 0 and np.any(clear))
+
+
+def shortfall(
+    mse_before: np.ndarray, mse_after: np.ndarray, score_value: float, variance: np.ndarray, resolved_: bool, share
+) -> str | None:
+    """Why a candidate is not named, in words (None when it passes every rule): the first rule it fails of
+    `resolved`, score > 0, `clears_margin`'s two floors, and `RECOVER` (`share`: the part of a refitted π's
+    gain it explains, or None when that rule does not apply)."""
+    before, after = np.asarray(mse_before), np.asarray(mse_after)
+    removed = (before - after) / before
+    if not resolved_:
+        return "its estimate fails its cause's own rule"
+    if score_value <= 0:
+        return f"its held-out gain does not pay for its parameters (score {score_value:.1f} <= 0)"
+    if not np.any(removed >= MARGIN):
+        most = max(float(removed.max()), 0.0)
+        return f"it removes at most {most:.1%} of the held-out MSE on any joint (margin {MARGIN:.0%})"
+    if not np.any((removed >= MARGIN) & (before - after >= MARGIN_VARIANCE * np.asarray(variance))):
+        return f"what it removes is below {MARGIN_VARIANCE:.2%} of the torque variance"
+    if share is not None and share < RECOVER:
+        return f"it explains {share:.0%} of what refitting π gains (at least {RECOVER:.0%} asked)"
+    return None
