@@ -148,6 +148,7 @@ def _row(
     elif _refit_better(v, current):
         share = scoring.recovered(without.mse, v.mse, current["rigid_fit"].mse)
     margin = ok and scoring.clears_margin(without.mse, v.mse, score, var)
+    why = scoring.shortfall(without.mse, v.mse, score, var, ok, share)
     return {
         "cause": c.cause,
         "score": score,
@@ -159,8 +160,8 @@ def _row(
         "added_parameters": c.n_added,
         "resolved": ok,
         "recovers": share,
-        "clears_margin": margin and (share is None or share >= scoring.RECOVER),
-        "shortfall": scoring.shortfall(without.mse, v.mse, score, var, ok, share),
+        "clears_margin": why is None,
+        "shortfall": why,
         "needs_partner": bool(margin and share is not None and scoring.PARTNER <= share < scoring.RECOVER),
         **({"polish": c.detail["polish"]} if "polish" in c.detail else {}),
     }

@@ -83,9 +83,7 @@ def rules_note() -> str:
 def clears_margin(mse_before: np.ndarray, mse_after: np.ndarray, score_value: float, variance: np.ndarray) -> bool:
     """Whether a candidate beats its baseline clearly enough to be named (`variance`: of the measured
     held-out torque per joint [N² m²])."""
-    before, after = np.asarray(mse_before), np.asarray(mse_after)
-    clear = ((before - after) >= MARGIN * before) & ((before - after) >= MARGIN_VARIANCE * np.asarray(variance))
-    return bool(score_value > 0 and np.any(clear))
+    return shortfall(mse_before, mse_after, score_value, variance, True, None) is None
 
 
 def shortfall(
@@ -95,15 +93,15 @@ def shortfall(
     `resolved`, score > 0, `clears_margin`'s two floors, and `RECOVER` (`share`: the part of a refitted π's
     gain it explains, or None when that rule does not apply)."""
     before, after = np.asarray(mse_before), np.asarray(mse_after)
-    removed = (before - after) / before
+    enough = before - after >= MARGIN * before
     if not resolved_:
         return "its estimate fails its cause's own rule"
     if score_value <= 0:
         return f"its held-out gain does not pay for its parameters (score {score_value:.1f} <= 0)"
-    if not np.any(removed >= MARGIN):
-        most = max(float(removed.max()), 0.0)
+    if not np.any(enough):
+        most = max(float(np.max((before - after) / np.maximum(before, 1e-300))), 0.0)
         return f"it removes at most {most:.1%} of the held-out MSE on any joint (margin {MARGIN:.0%})"
-    if not np.any((removed >= MARGIN) & (before - after >= MARGIN_VARIANCE * np.asarray(variance))):
+    if not np.any(enough & (before - after >= MARGIN_VARIANCE * np.asarray(variance))):
         return f"what it removes is below {MARGIN_VARIANCE:.2%} of the torque variance"
     if share is not None and share < RECOVER:
         return f"it explains {share:.0%} of what refitting π gains (at least {RECOVER:.0%} asked)"
