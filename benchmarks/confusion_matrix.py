@@ -69,19 +69,33 @@ def pair(job: tuple[tuple[str, str], int, float, str]) -> dict:
     }
 
 
-def one(job: tuple[str, int, float, str]) -> dict:
-    """Simulate one hidden-effect trial and diagnose it."""
+def one(job: tuple) -> dict:
+    """Simulate one hidden-effect trial and diagnose it. `job`: (cause, seed, duration, trajectory), and
+    optionally a condition: {"simulate": extra `simulate_trial` keywords (rate, controller bandwidth, noise
+    scale), "magnitude": a factor on the drawn magnitude, "background": background terms to switch on}."""
     from ident_opt.diagnose import diagnose, hidden
     from ident_opt.problem import load_problem
     from ident_opt.simulate import simulate_trial
 
-    cause, seed, duration, trajectory = job
+    cause, seed, duration, trajectory, *rest = job
+    condition = rest[0] if rest else {}
     if trajectory == "auto":  # as the tests: Stribeck friction shows only on a smooth reference
         trajectory = CATALOGUE[cause].reference if cause in CATALOGUE else "tud01"
     robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
     rng = np.random.default_rng([seed, CAUSES.index(cause)])
     effects = {} if cause == "none" else {cause: hidden.draw(cause, rng, robot)}
-    trial = simulate_trial(robot, trajectory=trajectory, duration=duration, seed=seed, effects=effects, progress=False)
+    if cause != "none" and condition.get("magnitude", 1.0) != 1.0:
+        effects[cause] = hidden.scaled(cause, effects[cause], condition["magnitude"], robot)
+    effects.update({name: {} for name in condition.get("background", ())})
+    trial = simulate_trial(
+        robot,
+        trajectory=trajectory,
+        duration=duration,
+        seed=seed,
+        effects=effects,
+        progress=False,
+        **condition.get("simulate", {}),
+    )
     t0 = time.perf_counter()
     d = diagnose(robot, trial.dataset(), progress=False)
     seconds = time.perf_counter() - t0

@@ -21,6 +21,8 @@ RANGES: dict[tuple[str, str] | str, tuple[float, float]] = {
     ("online", "checks"): (0, 10_000),
     ("simulate", "duration"): (1.0, 3600.0),  # s
     ("simulate", "rate"): (1.0, 5000.0),  # Hz
+    ("simulate", "bandwidth"): (1.0, 40.0),  # Hz: simulate.trial.MIN_BANDWIDTH, MAX_BANDWIDTH
+    ("simulate", "noise_scale"): (0.0, 100.0),  # simulate.trial.MAX_NOISE_SCALE
     ("excite", "duration"): (2.0, 3600.0),  # s
     ("excite", "rate"): (10.0, 10_000.0),  # Hz
     ("excite", "starts"): (1, 100),

@@ -20,7 +20,7 @@ from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import DataSpec, load_problem
 from ident_opt.robot import ArmModel
-from ident_opt.simulate import CATALOGUE, parse_effect, simulate_trial
+from ident_opt.simulate import CATALOGUE, measurement, parse_effect, simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "tudor_2dof.toml"
@@ -111,10 +111,41 @@ def test_bad_settings_are_input_errors(robot):
         {"duration": float("inf")},
         {"seed": -1},
         {"seed": 1.5},
+        {"bandwidth_hz": 0.5},
+        {"bandwidth_hz": float("nan")},
+        {"noise_scale": -1.0},
+        {"noise_scale": float("inf")},
     )
     for kwargs in bad:
         with pytest.raises(InputError):
             simulate_trial(robot, progress=False, **{"duration": 1.0, **kwargs})
+
+
+def test_noise_scale_multiplies_the_torque_noise(robot):
+    # Same seed: the trajectory, the loop and the noise draws are the same; only σ differs.
+    runs = {s: simulate_trial(robot, duration=4.0, seed=3, noise_scale=s, progress=False) for s in (0.0, 1.0, 3.0)}
+    clean = runs[0.0].frame[["tau1", "tau2"]].to_numpy()
+    noise = {s: runs[s].frame[["tau1", "tau2"]].to_numpy() - clean for s in (1.0, 3.0)}
+    np.testing.assert_allclose(noise[3.0], 3.0 * noise[1.0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(noise[1.0].std(axis=0), measurement.TORQUE_NOISE, rtol=0.1)
+    assert runs[3.0].truth["measurement"]["torque_noise_std"] == pytest.approx(
+        [3 * s for s in measurement.TORQUE_NOISE]
+    )
+
+
+def test_bandwidth_sets_the_controller_gains_and_the_tracking(robot):
+    # A payload the controller does not know: only the PD corrects it, the stiffer the loop the closer it tracks.
+    trials = {
+        bw: simulate_trial(robot, duration=6.0, seed=2, bandwidth_hz=bw, effects=["payload:mass=0.3"], progress=False)
+        for bw in (3.0, 12.0)
+    }
+    gains = {bw: t.truth["controller"] for bw, t in trials.items()}
+    assert gains[12.0]["bandwidth_hz"] == 12.0
+    # Kp = J ω², Kd = 2 J ω: a 4x bandwidth is 16x the stiffness and 4x the damping.
+    np.testing.assert_allclose(np.array(gains[12.0]["kp"]) / gains[3.0]["kp"], 16.0)
+    np.testing.assert_allclose(np.array(gains[12.0]["kd"]) / gains[3.0]["kd"], 4.0)
+    rms = {bw: np.array(t.truth["tracking"]["rms_error"]) for bw, t in trials.items()}
+    assert np.all(rms[12.0] < 0.5 * rms[3.0])
 
 
 def test_cli_writes_a_trial_the_loader_reads_back(tmp_path, robot):
@@ -151,6 +182,32 @@ def test_cli_bad_effect_exits_2_without_traceback(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "unknown effect 'warp'" in err and "Traceback" not in err
     assert not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--bandwidth", "0"), ("--bandwidth", "100"), ("--noise-scale", "-2")])
+def test_cli_bad_bandwidth_or_noise_scale_exits_2_naming_the_flag(tmp_path, capsys, flag, value):
+    rc = main(["simulate", "--problem", str(PROBLEM), "--out", str(tmp_path / "x.csv"), flag, value])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert flag in err and "Traceback" not in err
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_cli_bandwidth_and_noise_scale_reach_the_truth(tmp_path):
+    out = tmp_path / "t.csv"
+    args = ["simulate", "--problem", str(PROBLEM), "--out", str(out), "--duration", "2"]
+    assert main([*args, "--bandwidth", "10", "--noise-scale", "2"]) == 0
+    truth = json.loads(out.with_name("t.truth.json").read_text())
+    assert truth["settings"]["bandwidth_hz"] == 10.0 and truth["controller"]["bandwidth_hz"] == 10.0
+    assert truth["settings"]["noise_scale"] == 2.0
+
+
+def test_command_line_ranges_match_the_simulator():
+    from ident_opt.arguments import RANGES
+    from ident_opt.simulate import trial
+
+    assert RANGES[("simulate", "bandwidth")] == (trial.MIN_BANDWIDTH, trial.MAX_BANDWIDTH)
+    assert RANGES[("simulate", "noise_scale")] == (0.0, trial.MAX_NOISE_SCALE)
 
 
 def short_sim_problem(tmp_path, duration=3.0):

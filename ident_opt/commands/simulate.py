@@ -72,6 +72,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="follow this trajectory instead (t, q1, q2, dq1, dq2, ddq1, ddq2; e.g. from ident-opt excite); "
         "it must cover --duration",
     )
+    parser.add_argument(
+        "--bandwidth",
+        type=float,
+        metavar="HZ",
+        help="the controller's closed-loop bandwidth, which sets its PD gains (default 6)",
+    )
+    parser.add_argument(
+        "--noise-scale",
+        type=float,
+        metavar="X",
+        help="torque noise as a multiple of the sigma measured on the real robot (default 1)",
+    )
     add_switches(
         parser,
         {
@@ -105,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
         output=output,
         noise=not args.no_noise,
         exact_derivatives=args.exact_derivatives,
+        **{k: v for k, v in (("bandwidth_hz", args.bandwidth), ("noise_scale", args.noise_scale)) if v is not None},
     )
     path = trial.write(args.out)
     hidden = ", ".join(f"{name} {values}" for name, values in trial.truth["effects"].items()) or "none"

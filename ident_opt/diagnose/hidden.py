@@ -21,6 +21,14 @@ def draw(cause: str, rng: np.random.Generator, robot: Robot) -> dict:
     return CATALOGUE[cause].draw(rng, robot)
 
 
+def scaled(cause: str, keys: dict, factor: float, robot: Robot) -> dict:
+    """`keys` of a hidden `cause` with its magnitude multiplied by `factor` (`Effect.scaled`: e.g. a payload's
+    mass, a mode's compliance 1/k, a torque scale's deviation from 1)."""
+    from ident_opt.simulate.truth import coulomb_levels
+
+    return CATALOGUE[cause].scaled(dict(keys), factor, coulomb_levels(robot))
+
+
 def errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
     """(within tolerance, worst relative error) of `estimate` against the simulator's `truth` (both in the
     cause's estimate keys, `docs/effects.md`). Every key the effect touches counts; none may miss."""

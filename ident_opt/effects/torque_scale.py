@@ -38,6 +38,11 @@ class TorqueScale(Effect):
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
         return any(s != 1.0 for s in p["scale"])
 
+    def scaled(self, p: dict, s: float, coulomb: tuple[tuple, tuple]) -> dict:
+        # The magnitude is the factor's deviation from 1 (s = 0: the untouched channel).
+        p["scale"] = tuple(1.0 + s * (v - 1.0) for v in p["scale"])
+        return p
+
     # ------------------------------------------------------------------ simulator: the logged channel / s
     def true_plant(self, plant, p: dict) -> None:
         plant.channel.append(partial(_logged, p["scale"]))

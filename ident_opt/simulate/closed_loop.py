@@ -122,11 +122,12 @@ def run(
     progress: bool = True,
     seed: int = 0,
     control: float = CONTROL_HZ,
+    bandwidth_hz: float = BANDWIDTH_HZ,
 ) -> np.ndarray:
     """Simulate the loop over the reference (sampled at the control rate `control` [Hz]); returns out (N, 9):
     τ, q_enc, dq_enc, ddq_enc, deflection at each tick. `seed` drives the background terms' randomness
-    (external torques, initial states), on streams of their own."""
-    g = gains(robot)
+    (external torques, initial states), on streams of their own; `bandwidth_hz` sets the PD gains (`gains`)."""
+    g = gains(robot, bandwidth_hz)
     step = tick(truth, robot, g, control)
     bg = truth.background
     z0 = background.initial_states(bg, np.random.default_rng([seed, 17]))

@@ -51,6 +51,7 @@ def log(
     rate_hz: float,
     channel: Callable[[np.ndarray, np.ndarray], np.ndarray],
     noise: bool,
+    noise_scale: float = 1.0,
     exact_derivatives: bool,
     output: str,
     rng: np.random.Generator,
@@ -77,7 +78,7 @@ def log(
     if noise:
         step = 2 * np.pi / (ENCODER_COUNTS * np.array([j.gear_ratio for j in robot.joints]))
         q = np.round(q / step) * step
-        tau = tau + rng.normal(size=tau.shape) * np.asarray(TORQUE_NOISE)
+        tau = tau + rng.normal(size=tau.shape) * (noise_scale * np.asarray(TORQUE_NOISE))
     if exact_derivatives:
         dq, ddq = dq_enc[idx], ddq_enc[idx]
     else:

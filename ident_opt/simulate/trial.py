@@ -21,6 +21,11 @@ from ident_opt.simulate.trajectories import reference
 from ident_opt.simulate.truth import TRUTH_MODEL, Truth, build_truth, coulomb_levels
 
 MIN_DURATION, MAX_DURATION = 1.0, 3600.0  # s: enough samples for the derivative filter; memory stays bounded
+#: The controller's closed-loop bandwidth [Hz] a trial may ask for: a sluggish loop still tracks the slow
+#: references; a stiff one stays well below the 1 kHz controller's Nyquist limit.
+MIN_BANDWIDTH, MAX_BANDWIDTH = 1.0, 40.0
+#: Largest torque-noise multiple (of the σ measured on the real robot).
+MAX_NOISE_SCALE = 100.0
 
 
 @dataclass
@@ -99,6 +104,8 @@ def simulate_trial(
     noise: bool = True,
     exact_derivatives: bool = False,
     progress: bool = True,
+    bandwidth_hz: float = closed_loop.BANDWIDTH_HZ,
+    noise_scale: float = 1.0,
 ) -> SimTrial:
     """Simulate one trial of `robot` (datasheet read physically) with hidden `effects`; deterministic.
 
@@ -107,7 +114,8 @@ def simulate_trial(
     of 1 kHz, or faster up to 5 kHz: the controller then runs at that rate), `output` "torque" (tau1, tau2
     [N m]) or "current" (i1, i2 [A]). With `noise=False` the angles are not quantised and no noise is added;
     `exact_derivatives=True` logs the true dq and the ddq the dynamics produce instead of estimating them
-    from the logged angles.
+    from the logged angles. `bandwidth_hz` [Hz]: the controller's closed-loop bandwidth (its PD gains);
+    `noise_scale`: the torque noise's σ as a multiple of the one measured on the real robot (with `noise`).
     """
     if output not in ("torque", "current"):
         raise InputError(f'output {output!r}: must be "torque" or "current"')
@@ -116,13 +124,22 @@ def simulate_trial(
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise InputError(f"seed {seed!r}: must be an integer >= 0")
     measurement.decimation(rate_hz)
+    if not (np.isfinite(bandwidth_hz) and MIN_BANDWIDTH <= bandwidth_hz <= MAX_BANDWIDTH):
+        raise InputError(
+            f"bandwidth {bandwidth_hz!r}: the controller's bandwidth must be between {MIN_BANDWIDTH:g} and "
+            f"{MAX_BANDWIDTH:g} Hz"
+        )
+    if not (np.isfinite(noise_scale) and 0 <= noise_scale <= MAX_NOISE_SCALE):
+        raise InputError(f"noise scale {noise_scale!r}: must be between 0 and {MAX_NOISE_SCALE:g}")
     coulomb = coulomb_levels(robot)
     wanted = normalise(effects, coulomb)
     active = {name: p for name, p in wanted.items() if is_active(name, p, coulomb)}
     truth = build_truth(robot, active)
     control = closed_loop.control_hz(rate_hz)  # 1 kHz unless the log is faster
     ref = reference(trajectory, duration, seed, 1.0 / control)
-    out = closed_loop.run(truth, robot, ref, progress=progress, seed=int(seed), control=control)
+    out = closed_loop.run(
+        truth, robot, ref, progress=progress, seed=int(seed), control=control, bandwidth_hz=bandwidth_hz
+    )
     rng = np.random.default_rng([seed, 11])  # the measurement noise's own stream
     frame = measurement.log(
         out,
@@ -131,6 +148,7 @@ def simulate_trial(
         rate_hz=rate_hz,
         channel=truth.logged_torque,
         noise=noise,
+        noise_scale=noise_scale,
         exact_derivatives=exact_derivatives,
         output=output,
         rng=rng,
@@ -143,6 +161,8 @@ def simulate_trial(
         "seed": int(seed),
         "output": output,
         "noise": bool(noise),
+        "noise_scale": float(noise_scale),
+        "bandwidth_hz": float(bandwidth_hz),
         "exact_derivatives": bool(exact_derivatives),
         "effects_requested": {k: _plain(v) for k, v in wanted.items()},
     }
@@ -166,7 +186,7 @@ def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, 
     physical = asdict(rigid_body(truth.robot, "physical"))  # the true plant's, not the datasheet's
     for name, p in truth.effects.items():
         CATALOGUE[name].true_physical(physical, p)
-    g = closed_loop.gains(robot)
+    g = closed_loop.gains(robot, settings["bandwidth_hz"])
     control = closed_loop.control_hz(settings["rate_hz"])
     error = out[:, 2:4] - q_ref  # encoder angle minus reference, at every control tick
     return _plain(
@@ -184,7 +204,9 @@ def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, 
             "physical": physical,
             "settings": settings,
             "measurement": {
-                "torque_noise_std": list(measurement.TORQUE_NOISE) if settings["noise"] else [0.0, 0.0],
+                "torque_noise_std": [settings["noise_scale"] * s for s in measurement.TORQUE_NOISE]
+                if settings["noise"]
+                else [0.0, 0.0],
                 "encoder_counts_per_motor_rev": measurement.ENCODER_COUNTS if settings["noise"] else None,
                 "derivatives": "exact"
                 if settings["exact_derivatives"]
@@ -192,7 +214,7 @@ def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, 
             },
             "controller": {
                 "control_hz": control,
-                "bandwidth_hz": closed_loop.BANDWIDTH_HZ,
+                "bandwidth_hz": settings["bandwidth_hz"],
                 "kp": list(g.kp),
                 "kd": list(g.kd),
                 "rk4_substeps": closed_loop.substeps(truth, g, robot, control),
