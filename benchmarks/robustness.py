@@ -37,8 +37,12 @@ CONDITIONS = {
     "effects x0.5": ("half the drawn magnitude", 80.0, {"magnitude": 0.5}),
     "effects x2": ("twice the drawn magnitude", 80.0, {"magnitude": 2.0}),
     "short trial": ("30 s instead of 80", 30.0, {}),
+    **{
+        f"background: {name}": (f"the simulator's {name} term on, at its defaults", 80.0, {"background": (name,)})
+        for name in BACKGROUND
+    },
     "background terms": (
-        "the simulator's stiction, drift and ripple on (defaults calibrated on MERIt)",
+        "the simulator's stiction, drift and ripple on together (defaults calibrated on MERIt)",
         80.0,
         {"background": tuple(BACKGROUND)},
     ),
