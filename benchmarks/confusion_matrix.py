@@ -230,8 +230,11 @@ def table(results: list[dict], command: str, pairs: list[dict] | None = None) ->
         "",
         "## Trials",
         "",
-        "| true | seed | named | within tolerance | rel. error | estimate | truth |",
-        "|---|---|---|---|---|---|---|",
+        "`named`: the first cause (the matrix's column); `chain`: every cause named, in order (exact: that one "
+        "cause and nothing else).",
+        "",
+        "| true | seed | named | chain | exact | within tolerance | rel. error | estimate | truth |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
         err = f"{r['error']:.3f}" if r["error"] is not None else "—"
@@ -242,7 +245,11 @@ def table(results: list[dict], command: str, pairs: list[dict] | None = None) ->
             for k, v in (r["truth"] or {}).items()
             if k in judged
         }
-        lines.append(f"| {r['cause']} | {r['seed']} | {r['named']} | {r['ok']} | {err} | `{est}` | `{truth}` |")
+        chain = " → ".join(r["named_set"]) or "none"
+        lines.append(
+            f"| {r['cause']} | {r['seed']} | {r['named']} | {chain} | {r['exact']} | {r['ok']} | {err} | `{est}` "
+            f"| `{truth}` |"
+        )
     return "\n".join(lines) + "\n"
 
 
