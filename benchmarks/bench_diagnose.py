@@ -16,6 +16,8 @@ import os
 import time
 from pathlib import Path
 
+from confusion_matrix import chain
+
 from ident_opt.diagnose import diagnose
 from ident_opt.problem import load_problem
 from ident_opt.simulate import simulate_trial
@@ -54,7 +56,7 @@ def main() -> None:
     for name, effects in CASES.items():
         for rate in (100.0, args.rate):
             seconds, d = run(robot, effects, args.duration, rate, args.seed)
-            named = " → ".join(c["cause"] for c in d.causes) or "none"
+            named = chain([c["cause"] for c in d.causes])
             fits = d.timings["candidates"]
             print(f"{name:46s} {rate:6g} {seconds:8.2f} {args.duration / seconds:7.1f} {fits:6.1f}  {named}")
             if rate == args.rate:

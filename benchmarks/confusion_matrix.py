@@ -124,6 +124,11 @@ def one(job: tuple) -> dict:
     return out
 
 
+def chain(named: list[str]) -> str:
+    """The causes named, in order, as the reports write them ("none" for none)."""
+    return " → ".join(named) or "none"
+
+
 def compound_table(results: list[dict], pairs: list[dict]) -> list[str]:
     """The exact-set summary over single, clean and paired trials, and the paired trials one by one."""
     singles = [r for r in results if r["cause"] != "none"]
@@ -245,10 +250,9 @@ def table(results: list[dict], command: str, pairs: list[dict] | None = None) ->
             for k, v in (r["truth"] or {}).items()
             if k in judged
         }
-        chain = " → ".join(r["named_set"]) or "none"
         lines.append(
-            f"| {r['cause']} | {r['seed']} | {r['named']} | {chain} | {r['exact']} | {r['ok']} | {err} | `{est}` "
-            f"| `{truth}` |"
+            f"| {r['cause']} | {r['seed']} | {r['named']} | {chain(r['named_set'])} | {r['exact']} | {r['ok']} "
+            f"| {err} | `{est}` | `{truth}` |"
         )
     return "\n".join(lines) + "\n"
 

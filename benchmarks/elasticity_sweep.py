@@ -15,6 +15,7 @@ import argparse
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from confusion_matrix import chain
 from tqdm import tqdm
 
 from ident_opt.effects.elasticity import ELASTIC_BAND_HZ, FREQUENCY_TOL
@@ -56,7 +57,7 @@ def markdown(rows: list[dict], command: str) -> str:
     ]
     for r in rows:
         e = r["found"] or {}
-        named = " → ".join(r["named"]) or "none"
+        named = chain(r["named"])
         f_found = f"{e['frequency_hz']:.2f}" if e else "—"
         lines.append(
             f"| {r['kind']} | {r['joint']} | {r['f']:g} | {named} | {e.get('joint', '—')} | {f_found} | "

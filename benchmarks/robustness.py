@@ -20,7 +20,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from confusion_matrix import ROOT, one
+from confusion_matrix import ROOT, chain, one
 
 from ident_opt.diagnose import CAUSES
 from ident_opt.effects import BACKGROUND
@@ -88,9 +88,8 @@ def table(results: dict[str, list[dict]], command: str, seconds: float) -> str:
         for r in rows:
             if r["exact"] and (r["ok"] or r["cause"] == "none"):
                 continue
-            chain = " → ".join(r["named_set"]) or "none"
             err = f"{r['error']:.3f}" if r["error"] is not None else "—"
-            lines.append(f"| {name} | {r['cause']} | {r['seed']} | {chain} | {err} |")
+            lines.append(f"| {name} | {r['cause']} | {r['seed']} | {chain(r['named_set'])} | {err} |")
     return "\n".join(lines) + "\n"
 
 
