@@ -242,6 +242,9 @@ class Elasticity(Effect):
                     linear.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
                     linear.Axis("damping", 0.005, 0.3, 6, True),
                 ],
+                # The spring carries a positive share of the link's inertia: a negative one is no mode (it
+                # is what a filter or timing mismatch, e.g. a delay estimated a millisecond long, leaves).
+                nonnegative=("scale",),
                 estimate=_estimate(joint),
                 polish=_polish(joint),
             )
