@@ -17,6 +17,7 @@ from typing import Any
 
 from ident_opt.effects import parse_effect
 from ident_opt.errors import InputError
+from ident_opt.simulate.trajectories import TRAJECTORIES
 from ident_opt.urdf_problem import UrdfRobot, data_columns, parse_urdf_robot
 
 _REQUIRED = object()
@@ -623,8 +624,9 @@ def _simulate(table: _Table) -> SimulateSpec:
     if output not in ("torque", "current"):
         raise InputError(f'{table.path}: key \'output\' in [simulate] must be "torque" or "current"')
     trajectory = table.take("trajectory", str, SimulateSpec.trajectory)
-    if trajectory not in ("tud01", "fourier"):
-        raise InputError(f'{table.path}: key \'trajectory\' in [simulate] must be "tud01" or "fourier"')
+    if trajectory not in TRAJECTORIES:
+        known = ", ".join(f'"{name}"' for name in TRAJECTORIES)
+        raise InputError(f"{table.path}: key 'trajectory' in [simulate] must be one of {known}")
     spec = SimulateSpec(
         trajectory=trajectory,
         duration=table.positive("duration", SimulateSpec.duration),

@@ -26,6 +26,7 @@ from dataclasses import replace
 
 from ident_opt.commands.common import add_problem_arguments, add_switches, write_json
 from ident_opt.errors import InputError
+from ident_opt.simulate.trajectories import TRAJECTORIES
 from ident_opt.studies.scope import two_joint_only
 
 #: The flags that override a key of the problem's [simulate] section: flag -> (key, type, metavar, help).
@@ -63,8 +64,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument(flag, type=kind, metavar=metavar, help=text)
     parser.add_argument(
         "--trajectory",
-        choices=("tud01", "fourier"),
-        help="tud01: point-to-point moves with rests like MERIt's TUD01 (default); fourier: a Swevers-style excitation",
+        choices=TRAJECTORIES,
+        help="tud01: point-to-point moves with rests like MERIt's TUD01 (default); fourier: a Swevers-style "
+        "excitation; mixed: 10 s blocks of the two in turn",
     )
     parser.add_argument(
         "--trajectory-file",

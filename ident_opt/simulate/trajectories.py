@@ -5,6 +5,9 @@
   of 0.2–2 s, many of them moving a single joint.
 - ``fourier``: a Swevers-style excitation, q_i(t) = q0_i + Σ_l a_il/(l ω_f) sin(l ω_f t) − b_il/(l ω_f)
   cos(l ω_f t), faded in smoothly from rest and scaled to the joint, speed and acceleration limits.
+- ``mixed``: 10 s blocks of the two, alternating (point-to-point first), each starting and ending at rest at
+  the centre pose: the smooth blocks cross low speeds slowly (Stribeck friction shows), the point-to-point
+  ones stop and start (modes ring, a delay shows on every edge). For effects that need both.
 - a trajectory file (a path ending in .csv, e.g. written by `ident-opt excite`): columns t, q1, q2, dq1, dq2,
   ddq1, ddq2 [s, rad, rad/s, rad/s²] (other columns ignored), interpolated linearly onto the controller's grid;
   it must cover the duration.
@@ -31,7 +34,9 @@ A_MAX = np.array([4.0, 5.0])  # rad/s²
 #: limit; these are the real trials' extremes (13.1 and 2.6 N m on exp1) with a margin.
 TAU_MAX = np.array([15.0, 4.0])
 
-TRAJECTORIES = ("tud01", "fourier")
+TRAJECTORIES = ("tud01", "fourier", "mixed")
+#: Length [s] of one block of the `mixed` reference.
+MIXED_BLOCK_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -45,14 +50,15 @@ class Reference:
 
 
 def reference(name: str, duration: float, seed: int, dt: float) -> Reference:
-    """The reference `name` ("tud01", "fourier" or a trajectory file *.csv) over [0, duration] s every dt s."""
+    """The reference `name` ("tud01", "fourier", "mixed" or a trajectory file *.csv) over [0, duration] s every
+    dt s."""
     t = np.arange(round(duration / dt)) * dt
     if str(name).lower().endswith(".csv"):
         return from_file(Path(name), t)
     if name not in TRAJECTORIES:
         raise InputError(f"trajectory {name!r}: unknown; known: {', '.join(TRAJECTORIES)}, or a *.csv file")
     rng = np.random.default_rng([seed, 7])  # the trajectory's own stream, independent of the noise
-    return (tud01 if name == "tud01" else fourier)(t, rng)
+    return {"tud01": tud01, "fourier": fourier, "mixed": mixed}[name](t, rng)
 
 
 #: The columns a trajectory file must have.
@@ -105,38 +111,71 @@ def _trapezoid(tau: np.ndarray, distance: float, vmax: float, amax: float) -> tu
     return s * x, s * v, s * a, T
 
 
-def tud01(t: np.ndarray, rng: np.random.Generator) -> Reference:
-    """Point-to-point moves with rests (see the module docstring); deterministic for the generator."""
+def tud01(t: np.ndarray, rng: np.random.Generator, home: np.ndarray | None = None) -> Reference:
+    """Point-to-point moves with rests (see the module docstring); deterministic for the generator.
+    `home` [rad]: start there and return there, at rest, by the end (else a random start, no return)."""
     n = len(t)
     q, dq, ddq = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
-    pose = rng.uniform(Q_MIN + 0.2, Q_MAX - 0.2)
+    pose = rng.uniform(Q_MIN + 0.2, Q_MAX - 0.2) if home is None else np.array(home, dtype=float)
     q[:] = pose
     duration = t[-1] if n else 0.0
     start = min(0.15 * duration, 12.0)  # the real trial starts with a long rest (15 s of 80)
+
+    def move(j: int, target: float, at: float) -> float:
+        after = t >= at
+        x, v, a, T = _trapezoid(t[after] - at, target - pose[j], V_MAX[j], A_MAX[j])
+        q[after, j] = pose[j] + x
+        dq[after, j], ddq[after, j] = v, a
+        pose[j] = target
+        return at + T
+
+    def lasting(j: int, distance: float) -> float:  # a move's duration [s] (0: no move)
+        return _trapezoid(np.zeros(1), distance, V_MAX[j], A_MAX[j])[3] if abs(distance) > 1e-9 else 0.0
+
     while start < duration:
-        kind = rng.choice(3, p=[0.6, 0.15, 0.25])  # both joints, joint 1 only, joint 2 only
-        moving = [kind in (0, 1), kind in (0, 2)]
+        moving, targets = _next_move(rng, pose)
+        if home is not None:  # the move, then the way home and a rest, must fit
+            ends = start + max(lasting(j, targets[j] - pose[j]) for j in range(2))
+            if ends + max(lasting(j, home[j] - targets[j]) for j in range(2)) + 0.5 > duration:
+                break
         end = start
         for j in range(2):
-            if not moving[j]:
-                continue
-            target = pose[j]
-            while abs(target - pose[j]) < 0.3:
-                target = rng.uniform(Q_MIN[j], Q_MAX[j])
-            after = t >= start
-            x, v, a, T = _trapezoid(t[after] - start, target - pose[j], V_MAX[j], A_MAX[j])
-            q[after, j] = pose[j] + x
-            dq[after, j], ddq[after, j] = v, a
-            pose[j] = target
-            end = max(end, start + T)
+            if moving[j]:
+                end = max(end, move(j, targets[j], start))
         start = end + rng.uniform(0.2, 2.0)
+    if home is not None:
+        at = min(start, duration - 0.5 - max(lasting(j, home[j] - pose[j]) for j in range(2)))
+        for j in range(2):
+            if abs(home[j] - pose[j]) > 1e-9:
+                move(j, float(home[j]), at)
     return Reference(t, q, dq, ddq)
 
 
+def _next_move(rng: np.random.Generator, pose: np.ndarray) -> tuple[list[bool], np.ndarray]:
+    """(which joints move, their targets [rad]): both joints, joint 1 only or joint 2 only, each by ≥ 0.3 rad."""
+    kind = rng.choice(3, p=[0.6, 0.15, 0.25])
+    moving = [kind in (0, 1), kind in (0, 2)]
+    targets = pose.copy()
+    for j in range(2):
+        while moving[j] and abs(targets[j] - pose[j]) < 0.3:
+            targets[j] = rng.uniform(Q_MIN[j], Q_MAX[j])
+    return moving, targets
+
+
 def fourier(
-    t: np.ndarray, rng: np.random.Generator, harmonics: int = 5, base_hz: float = 0.1, fade: float = 2.0
+    t: np.ndarray,
+    rng: np.random.Generator,
+    harmonics: int = 5,
+    base_hz: float = 0.1,
+    fade: float = 2.0,
+    fade_out: bool = False,
 ) -> Reference:
-    """A Swevers-style Fourier excitation (5 harmonics of 0.1 Hz), faded in over `fade` s from rest."""
+    """A Swevers-style Fourier excitation (5 harmonics of 0.1 Hz), faded in over `fade` s from rest at the
+    centre pose (and, with `fade_out`, faded out to rest there over the last `fade` s).
+
+    The scaling to the limits is that of the steady motion; the fade-in's ė·x term comes on top, so the speed
+    can exceed `V_MAX` by up to about 26 % during the first `fade` s (13 % of 600 trials of 12–80 s did;
+    kept, so that trials stay as published). With `fade_out` the whole motion is scaled back inside."""
     w = 2 * np.pi * base_hz
     l = np.arange(1, harmonics + 1)
     a, b = rng.normal(size=(2, 2, harmonics)) / l  # decaying harmonics: smooth, mostly low frequency
@@ -154,13 +193,45 @@ def fourier(
         axis=0,
     )
     x, v, acc = x / ratio, v / ratio, acc / ratio
-    # Smooth fade-in from rest: e(τ) = 10τ³ − 15τ⁴ + 6τ⁵ (zero speed and acceleration at both ends).
-    u = np.clip(t / fade, 0.0, 1.0)[:, None]
-    e = 10 * u**3 - 15 * u**4 + 6 * u**5
-    de = (30 * u**2 - 60 * u**3 + 30 * u**4) / fade * (u < 1)
-    dde = (60 * u - 180 * u**2 + 120 * u**3) / fade**2 * (u < 1)
+    # Smooth fades from and to rest: the envelope g = e(τ_in) e(τ_out), e(τ) = 10τ³ − 15τ⁴ + 6τ⁵ (zero speed
+    # and acceleration at both ends), and q = centre + g x differentiated by the product rule.
+    g, dg, ddg = _fade(t, fade)
+    if fade_out and len(t):
+        g2, dg2, ddg2 = _fade(t[-1] - t, fade)
+        g, dg, ddg = g * g2, dg * g2 - g * dg2, ddg * g2 - 2 * dg * dg2 + g * ddg2
     centre = 0.5 * (Q_MIN + Q_MAX)
-    q = centre + e * x
-    dq = de * x + e * v
-    ddq = dde * x + 2 * de * v + e * acc
+    dev = g * x
+    dq = dg * x + g * v
+    ddq = ddg * x + 2 * dg * v + g * acc
+    if fade_out and len(t):  # the fade-out acts where x is large: scale back into the speed and acceleration limits
+        again = np.maximum(np.max([np.abs(dq).max(0) / (0.9 * V_MAX), np.abs(ddq).max(0) / (0.6 * A_MAX)], axis=0), 1)
+        dev, dq, ddq = dev / again, dq / again, ddq / again
+    return Reference(t, centre + dev, dq, ddq)
+
+
+def _fade(tau: np.ndarray, fade: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """e(τ/fade) = 10u³ − 15u⁴ + 6u⁵ (u clipped to [0, 1]) and its first two derivatives in τ, as (N, 1)."""
+    u = np.clip(tau / fade, 0.0, 1.0)[:, None]
+    inside = u < 1
+    e = 10 * u**3 - 15 * u**4 + 6 * u**5
+    de = (30 * u**2 - 60 * u**3 + 30 * u**4) / fade * inside
+    dde = (60 * u - 180 * u**2 + 120 * u**3) / fade**2 * inside
+    return e, de, dde
+
+
+def mixed(t: np.ndarray, rng: np.random.Generator, block: float = MIXED_BLOCK_S) -> Reference:
+    """`MIXED_BLOCK_S` blocks, point-to-point (`tud01`) and smooth (`fourier`) in turn, each from and to rest
+    at the centre pose (see the module docstring)."""
+    n = len(t)
+    centre = 0.5 * (Q_MIN + Q_MAX)
+    q, dq, ddq = np.tile(centre, (n, 1)), np.zeros((n, 2)), np.zeros((n, 2))
+    duration = t[-1] + (t[1] - t[0] if n > 1 else 0.0) if n else 0.0
+    k = 0
+    while k * block < duration:
+        inside = (t >= k * block) & (t < (k + 1) * block)
+        local = t[inside] - k * block
+        if len(local) > 1:
+            r = tud01(local, rng, home=centre) if k % 2 == 0 else fourier(local, rng, fade_out=True)
+            q[inside], dq[inside], ddq[inside] = r.q, r.dq, r.ddq
+        k += 1
     return Reference(t, q, dq, ddq)

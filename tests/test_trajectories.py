@@ -1,0 +1,72 @@
+"""The simulator's references: limits, continuity and the `mixed` reference's blocks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ident_opt.simulate import trajectories as tr
+
+DT = 0.001
+CENTRE = 0.5 * (tr.Q_MIN + tr.Q_MAX)
+
+
+def _integrates(r: tr.Reference) -> None:
+    """q is the integral of dq, and dq of ddq (trapezoidal rule on the 1 kHz grid): no jump anywhere."""
+    q = r.q[0] + np.concatenate([np.zeros((1, 2)), np.cumsum(0.5 * (r.dq[1:] + r.dq[:-1]) * DT, axis=0)])
+    dq = r.dq[0] + np.concatenate([np.zeros((1, 2)), np.cumsum(0.5 * (r.ddq[1:] + r.ddq[:-1]) * DT, axis=0)])
+    assert np.max(np.abs(q - r.q)) < 2e-3
+    assert np.max(np.abs(dq - r.dq)) < 2e-2
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 10_000), duration=st.floats(12.0, 70.0))
+def test_every_reference_stays_within_the_limits_and_is_continuous(seed, duration):
+    for name in tr.TRAJECTORIES:
+        r = tr.reference(name, duration, seed, DT)
+        assert np.all(np.isfinite(r.q)) and np.all(np.isfinite(r.dq)) and np.all(np.isfinite(r.ddq))
+        assert np.all(r.q >= tr.Q_MIN - 1e-9) and np.all(r.q <= tr.Q_MAX + 1e-9), name
+        # `fourier`'s fade-in acts on a deviation that has grown by then: up to 1.26x the speed limit (its
+        # docstring); the others stay within it.
+        assert np.all(np.abs(r.dq) <= tr.V_MAX * (1.3 if name == "fourier" else 1.0) + 1e-9), name
+        assert np.all(np.abs(r.ddq) <= tr.A_MAX + 1e-9), name
+        _integrates(r)
+
+
+@pytest.mark.parametrize("seed", [0, 7, 123])
+def test_mixed_alternates_point_to_point_and_smooth_blocks_from_rest_at_the_centre(seed):
+    r = tr.reference("mixed", 60.0, seed, DT)
+    block = round(tr.MIXED_BLOCK_S / DT)
+    for k in range(6):
+        edge = k * block
+        np.testing.assert_allclose(r.q[edge], CENTRE, atol=1e-9)  # every block starts at rest at the centre
+        np.testing.assert_allclose(r.dq[edge], 0.0, atol=1e-9)
+        part = slice(edge, edge + block)
+        dq, ddq = r.dq[part], r.ddq[part]
+        moving = np.abs(dq) > 1e-6
+        if k % 2 == 0:  # point-to-point: moves at the velocity plateaus, and rests between them
+            assert np.any(np.isclose(np.abs(dq), tr.V_MAX, rtol=1e-6) | (np.abs(dq) > 0.5 * tr.V_MAX))
+            assert np.all(np.mean(~moving, axis=0) > 0.2)
+        else:  # smooth: moving all the time but at its ends, reversing at low acceleration
+            assert np.all(np.mean(moving, axis=0) > 0.9)
+            assert np.max(np.abs(ddq)) < 0.7 * np.max(tr.A_MAX)
+    np.testing.assert_allclose(r.q[-1], CENTRE, atol=1e-6)  # the last block ends where it started
+
+
+def test_tud01_with_a_home_returns_there_at_rest():
+    home = np.array([1.0, -0.5])
+    t = np.arange(round(15.0 / DT)) * DT
+    r = tr.tud01(t, np.random.default_rng(4), home=home)
+    np.testing.assert_allclose(r.q[0], home)
+    np.testing.assert_allclose(r.q[-1], home, atol=1e-9)
+    np.testing.assert_allclose(r.dq[-round(0.5 / DT) :], 0.0, atol=1e-12)  # at rest for the last half second
+    assert np.max(np.abs(r.q - home)) > 0.3  # and it did move
+
+
+def test_unknown_reference_is_an_input_error():
+    from ident_opt.errors import InputError
+
+    with pytest.raises(InputError, match="mixed"):
+        tr.reference("steps", 10.0, 0, DT)
