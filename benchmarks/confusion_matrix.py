@@ -11,7 +11,8 @@ For every catalogue cause and seed, a simulated trial (the built-in simulator, t
 hides that one effect at a random realistic magnitude (`ident_opt.diagnose.hidden.draw`); `none` trials are
 clean. The reference is the point-to-point `tud01` (like the real trials), except for causes that need slow
 motion (Stribeck friction), which get the reference their module names (`Effect.reference`, here `fourier`;
-`--trajectory auto`). `diagnose` runs on
+`--trajectory auto`); a pair of causes that need different references gets `mixed` (both in turn). `diagnose`
+runs on
 each (chronological 70/30 split); the table counts what it named, and the error column is the median over
 trials of the worst relative error of the estimate (when the cause was named).
 """
@@ -41,8 +42,10 @@ def pair(job: tuple[tuple[str, str], int, float, str]) -> dict:
 
     causes, seed, duration, trajectory = job
     if trajectory == "auto":
+        # Causes that need different motion (Stribeck friction slow reversals, a mode or a delay stops and
+        # starts) share the `mixed` reference, which alternates the two.
         refs = {CATALOGUE[c].reference for c in causes}
-        trajectory = "fourier" if "fourier" in refs else "tud01"
+        trajectory = refs.pop() if len(refs) == 1 else "mixed"
     robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
     rng = np.random.default_rng([seed, *(CAUSES.index(c) for c in causes), 99])
     effects = {c: hidden.draw(c, rng, robot) for c in causes}
@@ -193,7 +196,9 @@ def table(results: list[dict], command: str, pairs: list[dict] | None = None) ->
         "at a random realistic magnitude (`ident_opt/diagnose/hidden.py`) in a simulated trial that follows "
         "the point-to-point `tud01` reference (like the real trials), except Stribeck friction, which is "
         "invisible there (joints cross low speeds in a few ms at 100 Hz) and gets the smooth `fourier` "
-        "reference; the simulator's background terms (stiction, drift, ripple) are off.",
+        "reference; a paired trial whose causes need different motion (Stribeck friction with any other) "
+        "follows the `mixed` reference, 10 s blocks of the two in turn (on `fourier` alone a mode or a delay "
+        "has next to nothing to show); the simulator's background terms (stiction, drift, ripple) are off.",
         "",
         "| true \\ named | " + " | ".join(named) + " | within tolerance | median rel. error |",
         "|---|" + "---|" * (len(named) + 2),
@@ -269,7 +274,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--trajectory",
         default="auto",
-        help="tud01, fourier, or auto: tud01 except fourier for stribeck (as the tests)",
+        help="tud01, fourier, mixed, or auto: tud01 except fourier for stribeck (as the tests) and mixed "
+        "for a pair that needs both",
     )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--causes", nargs="*", default=list(CAUSES))
