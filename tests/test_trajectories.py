@@ -70,3 +70,33 @@ def test_unknown_reference_is_an_input_error():
 
     with pytest.raises(InputError, match="mixed"):
         tr.reference("steps", 10.0, 0, DT)
+
+
+def test_cli_simulates_the_mixed_reference_and_a_problem_file_can_ask_for_it(tmp_path):
+    import json
+    from pathlib import Path
+
+    import pandas as pd
+
+    from ident_opt.cli import main
+    from ident_opt.errors import InputError
+    from ident_opt.problem import load_problem
+
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "trial.csv"
+    args = ["simulate", "--problem", str(root / "problems" / "tudor_2dof.toml"), "--out", str(out)]
+    assert main([*args, "--trajectory", "mixed", "--duration", "21", "--no-noise"]) == 0
+    truth = json.loads(out.with_name("trial.truth.json").read_text())
+    assert truth["settings"]["trajectory"] == "mixed"
+    q = pd.read_csv(out)[["q1", "q2"]].to_numpy()
+    assert np.ptp(q[:1000], axis=0).max() > 0.3 and np.ptp(q[1000:2000], axis=0).max() > 0.3  # both blocks move
+    text = (root / "problems" / "tudor_sim.toml").read_text()
+    assert 'trajectory = "' in text
+    for name, ok in (("mixed", True), ("steps", False)):
+        path = tmp_path / f"{name}.toml"
+        path.write_text(text.replace('trajectory = "tud01"', f'trajectory = "{name}"'))
+        if ok:
+            assert load_problem(path).simulate.trajectory == "mixed"
+        else:
+            with pytest.raises(InputError, match=r"\[simulate\].*mixed"):
+                load_problem(path)
