@@ -122,6 +122,8 @@ def tud01(t: np.ndarray, rng: np.random.Generator, home: np.ndarray | None = Non
     start = min(0.15 * duration, 12.0)  # the real trial starts with a long rest (15 s of 80)
 
     def move(j: int, target: float, at: float) -> float:
+        if abs(target - pose[j]) <= 1e-9:  # already there
+            return at
         after = t >= at
         x, v, a, T = _trapezoid(t[after] - at, target - pose[j], V_MAX[j], A_MAX[j])
         q[after, j] = pose[j] + x
@@ -146,8 +148,7 @@ def tud01(t: np.ndarray, rng: np.random.Generator, home: np.ndarray | None = Non
     if home is not None:
         at = min(start, duration - 0.5 - max(lasting(j, home[j] - pose[j]) for j in range(2)))
         for j in range(2):
-            if abs(home[j] - pose[j]) > 1e-9:
-                move(j, float(home[j]), at)
+            move(j, float(home[j]), at)
     return Reference(t, q, dq, ddq)
 
 
@@ -195,18 +196,18 @@ def fourier(
     x, v, acc = x / ratio, v / ratio, acc / ratio
     # Smooth fades from and to rest: the envelope g = e(τ_in) e(τ_out), e(τ) = 10τ³ − 15τ⁴ + 6τ⁵ (zero speed
     # and acceleration at both ends), and q = centre + g x differentiated by the product rule.
+    fade_out = fade_out and len(t) > 0
     g, dg, ddg = _fade(t, fade)
-    if fade_out and len(t):
+    if fade_out:
         g2, dg2, ddg2 = _fade(t[-1] - t, fade)
         g, dg, ddg = g * g2, dg * g2 - g * dg2, ddg * g2 - 2 * dg * dg2 + g * ddg2
-    centre = 0.5 * (Q_MIN + Q_MAX)
     dev = g * x
     dq = dg * x + g * v
     ddq = ddg * x + 2 * dg * v + g * acc
-    if fade_out and len(t):  # the fade-out acts where x is large: scale back into the speed and acceleration limits
+    if fade_out:  # the fade-out acts where x is large: scale back into the speed and acceleration limits
         again = np.maximum(np.max([np.abs(dq).max(0) / (0.9 * V_MAX), np.abs(ddq).max(0) / (0.6 * A_MAX)], axis=0), 1)
         dev, dq, ddq = dev / again, dq / again, ddq / again
-    return Reference(t, centre + dev, dq, ddq)
+    return Reference(t, 0.5 * (Q_MIN + Q_MAX) + dev, dq, ddq)
 
 
 def _fade(tau: np.ndarray, fade: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -222,16 +223,13 @@ def _fade(tau: np.ndarray, fade: float) -> tuple[np.ndarray, np.ndarray, np.ndar
 def mixed(t: np.ndarray, rng: np.random.Generator, block: float = MIXED_BLOCK_S) -> Reference:
     """`MIXED_BLOCK_S` blocks, point-to-point (`tud01`) and smooth (`fourier`) in turn, each from and to rest
     at the centre pose (see the module docstring)."""
-    n = len(t)
     centre = 0.5 * (Q_MIN + Q_MAX)
-    q, dq, ddq = np.tile(centre, (n, 1)), np.zeros((n, 2)), np.zeros((n, 2))
-    duration = t[-1] + (t[1] - t[0] if n > 1 else 0.0) if n else 0.0
-    k = 0
-    while k * block < duration:
-        inside = (t >= k * block) & (t < (k + 1) * block)
-        local = t[inside] - k * block
-        if len(local) > 1:
+    q, dq, ddq = np.tile(centre, (len(t), 1)), np.zeros((len(t), 2)), np.zeros((len(t), 2))
+    index = np.floor(t / block).astype(int)  # the block each sample falls in
+    for k in np.unique(index):
+        inside = index == k
+        if inside.sum() > 1:
+            local = t[inside] - k * block
             r = tud01(local, rng, home=centre) if k % 2 == 0 else fourier(local, rng, fade_out=True)
             q[inside], dq[inside], ddq[inside] = r.q, r.dq, r.ddq
-        k += 1
     return Reference(t, q, dq, ddq)
