@@ -194,9 +194,10 @@ def test_proof_report_and_index(setup, tmp_path):
     )
     disc = pd.DataFrame(
         [
-            {"true cause": c, "trajectory": t, "seed": 0, "margin": m, "named right": True}
-            for c in ("asymmetric_coulomb", "elasticity")
-            for t, m in ((proof.BASELINE, 100.0), ("discriminating design", 300.0))
+            {"noise": n, "true cause": c, "trajectory": t, "seed": 0, "margin": m * k, "named right": True}
+            for n, k in (("simulator", 1.0), ("real residual", 0.1))
+            for c, r in (("asymmetric_coulomb", 1.0), ("elasticity", 2.0))
+            for t, m in ((proof.BASELINE, 100.0), ("discriminating design", 300.0 * r))
         ]
     )
     p = proof.Proof(
@@ -211,11 +212,12 @@ def test_proof_report_and_index(setup, tmp_path):
         disc,
     )
     assert p.improvement()["D-optimal design"]["ols"] == pytest.approx(10.0)
-    assert p.gap_ratio() == {"asymmetric_coulomb": pytest.approx(3.0), "elasticity": pytest.approx(3.0)}
+    ratios = {"asymmetric_coulomb": pytest.approx(3.0), "elasticity": pytest.approx(6.0)}
+    assert p.gap_ratio() == {"simulator": ratios, "real residual": ratios}
     files = report.write_proof(p, tmp_path / "excitation.md")
     assert "excitation/d.csv" in files and (tmp_path / "excitation_identification.csv").exists()
     text = (tmp_path / "excitation.md").read_text()
-    assert "10× smaller" in text and "3× the MERIt-like" in text
+    assert "10× smaller" in text and "real residual noise, elasticity true" in text and "6× the MERIt-like" in text
     assert "excitation.md" in (tmp_path / "README.md").read_text()
 
 

@@ -115,6 +115,8 @@ def test_bad_settings_are_input_errors(robot):
         {"bandwidth_hz": float("nan")},
         {"noise_scale": -1.0},
         {"noise_scale": float("inf")},
+        {"noise_scale": (1.0, 2.0, 3.0)},
+        {"noise_scale": (1.0, -1.0)},
     )
     for kwargs in bad:
         with pytest.raises(InputError):
@@ -130,6 +132,15 @@ def test_noise_scale_multiplies_the_torque_noise(robot):
     np.testing.assert_allclose(noise[1.0].std(axis=0), measurement.TORQUE_NOISE, rtol=0.1)
     assert runs[3.0].truth["measurement"]["torque_noise_std"] == pytest.approx(
         [3 * s for s in measurement.TORQUE_NOISE]
+    )
+    # One factor per joint: each joint's noise scaled by its own.
+    each = simulate_trial(robot, duration=4.0, seed=3, noise_scale=(2.0, 5.0), progress=False)
+    np.testing.assert_allclose(
+        each.frame[["tau1", "tau2"]].to_numpy() - clean, noise[1.0] * [2.0, 5.0], rtol=1e-9, atol=1e-12
+    )
+    assert each.truth["settings"]["noise_scale"] == [2.0, 5.0]
+    assert each.truth["measurement"]["torque_noise_std"] == pytest.approx(
+        [2 * measurement.TORQUE_NOISE[0], 5 * measurement.TORQUE_NOISE[1]]
     )
 
 

@@ -209,18 +209,26 @@ def proof_markdown(p: Proof, designs: str = "excitation") -> str:
         "velocities as 0, as the diagnosis does) and part its poorer excitation.",
     ]
     a, b = p.between
+    scales = "; ".join(f"{level}: × {', '.join(f'{x:.3g}' for x in scale)}" for level, scale in p.noise_scales.items())
     lines += [
         "",
         f"## Discrimination: {a} or {b}",
         "",
         f"Each cause hidden in turn where the data put it (`{p.hidden[a]}`; `{p.hidden[b]}`); a training and a "
-        "held-out trial per seed, `diagnose` on them. Margin: the true cause's score minus the other's.",
+        "held-out trial per seed, `diagnose` on them. Margin: the true cause's score minus the other's. Two noise "
+        "levels: the simulator's (the sensor noise measured on the real robot at rest), and the real trial's "
+        "residual as the diagnosis weighs it (the level the design was planned for: the noise scaled per joint "
+        f"until a clean simulated trial shows that residual). Torque noise per joint, × the simulator's: {scales}.",
         "",
         markdown_table(p.discrimination_summary(), digits=4),
         "",
     ]
-    for cause, ratio in p.gap_ratio().items():
-        lines.append(f"- {cause} true: the discriminating design's median margin is {ratio:.3g}× the MERIt-like one's.")
+    for level, ratios in p.gap_ratio().items():
+        for cause, ratio in ratios.items():
+            lines.append(
+                f"- {level} noise, {cause} true: the discriminating design's median margin is {ratio:.3g}× the "
+                "MERIt-like one's."
+            )
     disc = p.designs["discriminate"].discrimination or {}
     if disc:
         lines += ["", f"Expected gap on the real data (the design's criterion): {disc['summary']}."]
@@ -250,6 +258,7 @@ def proof_terminal(p: Proof, report: Path) -> str:
         lines.append(
             f"  {label}: parameter error {ratio['ols']:.3g}× (OLS), {ratio['constrained']:.3g}× (constrained) smaller"
         )
-    for cause, ratio in p.gap_ratio().items():
-        lines.append(f"  {cause} true: discrimination margin {ratio:.3g}× the MERIt-like trajectory's")
+    for level, ratios in p.gap_ratio().items():
+        for cause, ratio in ratios.items():
+            lines.append(f"  {level} noise, {cause} true: discrimination margin {ratio:.3g}× the MERIt-like one's")
     return "\n".join(lines)

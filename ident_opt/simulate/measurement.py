@@ -51,7 +51,7 @@ def log(
     rate_hz: float,
     channel: Callable[[np.ndarray, np.ndarray], np.ndarray],
     noise: bool,
-    noise_scale: float = 1.0,
+    noise_scale: float | np.ndarray = 1.0,
     exact_derivatives: bool,
     output: str,
     rng: np.random.Generator,

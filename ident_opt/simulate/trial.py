@@ -105,7 +105,7 @@ def simulate_trial(
     exact_derivatives: bool = False,
     progress: bool = True,
     bandwidth_hz: float = closed_loop.BANDWIDTH_HZ,
-    noise_scale: float = 1.0,
+    noise_scale: float | Sequence[float] = 1.0,
 ) -> SimTrial:
     """Simulate one trial of `robot` (datasheet read physically) with hidden `effects`; deterministic.
 
@@ -115,7 +115,8 @@ def simulate_trial(
     [N m]) or "current" (i1, i2 [A]). With `noise=False` the angles are not quantised and no noise is added;
     `exact_derivatives=True` logs the true dq and the ddq the dynamics produce instead of estimating them
     from the logged angles. `bandwidth_hz` [Hz]: the controller's closed-loop bandwidth (its PD gains);
-    `noise_scale`: the torque noise's σ as a multiple of the one measured on the real robot (with `noise`).
+    `noise_scale`: the torque noise's σ as a multiple of the one measured on the real robot (with `noise`), one
+    factor for both joints or one per joint.
     """
     if output not in ("torque", "current"):
         raise InputError(f'output {output!r}: must be "torque" or "current"')
@@ -129,8 +130,12 @@ def simulate_trial(
             f"bandwidth {bandwidth_hz!r}: the controller's bandwidth must be between {MIN_BANDWIDTH:g} and "
             f"{MAX_BANDWIDTH:g} Hz"
         )
-    if not (np.isfinite(noise_scale) and 0 <= noise_scale <= MAX_NOISE_SCALE):
-        raise InputError(f"noise scale {noise_scale!r}: must be between 0 and {MAX_NOISE_SCALE:g}")
+    scale = np.asarray(noise_scale, dtype=float)
+    if scale.shape not in ((), (2,)) or not np.all(np.isfinite(scale) & (scale >= 0) & (scale <= MAX_NOISE_SCALE)):
+        raise InputError(
+            f"noise scale {noise_scale!r}: must be between 0 and {MAX_NOISE_SCALE:g}, one for both joints or one each"
+        )
+    scale = np.broadcast_to(scale, (2,))
     coulomb = coulomb_levels(robot)
     wanted = normalise(effects, coulomb)
     active = {name: p for name, p in wanted.items() if is_active(name, p, coulomb)}
@@ -148,7 +153,7 @@ def simulate_trial(
         rate_hz=rate_hz,
         channel=truth.logged_torque,
         noise=noise,
-        noise_scale=noise_scale,
+        noise_scale=scale,
         exact_derivatives=exact_derivatives,
         output=output,
         rng=rng,
@@ -161,7 +166,7 @@ def simulate_trial(
         "seed": int(seed),
         "output": output,
         "noise": bool(noise),
-        "noise_scale": float(noise_scale),
+        "noise_scale": float(scale[0]) if np.ndim(noise_scale) == 0 else scale.tolist(),
         "bandwidth_hz": float(bandwidth_hz),
         "exact_derivatives": bool(exact_derivatives),
         "effects_requested": {k: _plain(v) for k, v in wanted.items()},
@@ -204,7 +209,7 @@ def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, 
             "physical": physical,
             "settings": settings,
             "measurement": {
-                "torque_noise_std": [settings["noise_scale"] * s for s in measurement.TORQUE_NOISE]
+                "torque_noise_std": (np.broadcast_to(settings["noise_scale"], (2,)) * measurement.TORQUE_NOISE).tolist()
                 if settings["noise"]
                 else [0.0, 0.0],
                 "encoder_counts_per_motor_rev": measurement.ENCODER_COUNTS if settings["noise"] else None,

@@ -14,7 +14,12 @@ measurement noise, for `seeds` noise seeds each:
   where the data put it (the candidates fitted on the problem's trial: e.g. asymmetric Coulomb at the fitted
   per-direction levels, elasticity at the fitted joint, mode and damping). Each seed simulates a training and a held-out
   trial (noise seeds s and s + 1000), `diagnose` scores every candidate, and the margin is the true cause's
-  score minus the other's.
+  score minus the other's. At two noise levels (`NOISE_LEVELS`): the simulator's own (the sensor noise measured
+  on the real robot at rest), and the level the design was planned for — the real trial's residual as the
+  diagnosis weighs it (the rigid refit's residual σ after the torque filter, `discrimination.fit_rivals`), the
+  noise scaled per joint until a clean simulated trial shows that residual (`residual_noise_scale`). At the
+  simulator's noise the scores are log-saturated (ln(1 + LOF/(nσ²)) with LOF ≫ nσ²); at the real residual
+  level they grow with the lack of fit, as on the real robot.
 """
 
 from __future__ import annotations
@@ -29,13 +34,14 @@ import pandas as pd
 from tqdm import tqdm
 
 from ident_opt.data import Dataset
-from ident_opt.diagnose.diagnosis import at_rest, diagnose
+from ident_opt.diagnose.diagnosis import at_rest, diagnose, prepare, rigid_fit
 from ident_opt.effects import CATALOGUE
 from ident_opt.identify import estimators
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import Problem
 from ident_opt.robot import PHYSICAL
 from ident_opt.simulate import simulate_trial
+from ident_opt.simulate.trial import MAX_NOISE_SCALE
 from ident_opt.studies import discrimination, excitation
 from ident_opt.studies.excitation import Design, Setup
 from ident_opt.trajectory import default_base_hz
@@ -51,6 +57,8 @@ IDENTIFICATION = {
 BASELINE = "MERIt-like (tud01)"
 #: Offset of the held-out trial's noise seed.
 HELD_OUT = 1000
+#: The discrimination's noise levels, in table order: the simulator's sensor noise, the real trial's residual.
+NOISE_LEVELS = ("simulator", "real residual")
 
 
 @dataclass
@@ -67,6 +75,8 @@ class Proof:
     identification: pd.DataFrame
     discrimination: pd.DataFrame
     seconds: dict[str, float] = field(default_factory=dict)
+    #: The torque noise's σ per joint as a multiple of the simulator's, per noise level.
+    noise_scales: dict[str, list[float]] = field(default_factory=dict)
 
     def identification_summary(self) -> pd.DataFrame:
         """Per trajectory kind: medians over the seeds (cond, log det, the two parameter errors)."""
@@ -83,8 +93,9 @@ class Proof:
         }
 
     def discrimination_summary(self) -> pd.DataFrame:
-        """Per true cause and trajectory: median margin, its range, how often the true cause was named."""
-        g = self.discrimination.groupby(["true cause", "trajectory"], sort=False)
+        """Per noise level, true cause and trajectory: median margin, its range, how often the true cause was
+        named."""
+        g = self.discrimination.groupby(["noise", "true cause", "trajectory"], sort=False)
         return pd.DataFrame(
             {
                 "median margin": g["margin"].median(),
@@ -94,11 +105,16 @@ class Proof:
             }
         )
 
-    def gap_ratio(self) -> dict[str, float]:
-        """Per true cause: the discriminating design's median margin ÷ the MERIt-like trajectory's."""
+    def gap_ratio(self) -> dict[str, dict[str, float]]:
+        """Per noise level and true cause: the discriminating design's median margin ÷ the MERIt-like one's."""
         s = self.discrimination_summary()["median margin"]
+        levels = self.discrimination["noise"].unique()
         return {
-            cause: float(s.loc[(cause, "discriminating design")] / s.loc[(cause, BASELINE)]) for cause in self.between
+            level: {
+                cause: float(s.loc[(level, cause, "discriminating design")] / s.loc[(level, cause, BASELINE)])
+                for cause in self.between
+            }
+            for level in levels
         }
 
 
@@ -161,11 +177,15 @@ def run(
         )
     t_design = time.perf_counter()
     hidden = _hidden(designs["discriminate"], causes)
+    sigma = (designs["discriminate"].discrimination or {}).get("noise_sigma")
+    scales = {"simulator": [1.0, 1.0]}
+    if sigma is not None:
+        scales["real residual"] = residual_noise_scale(problem, np.asarray(sigma), duration)
     with tempfile.TemporaryDirectory() as tmp:
         files = {name: _write_design(d, Path(tmp), name) for name, d in designs.items()}
         ident = _identification(problem, setup, files, duration, seeds, progress)
         t_ident = time.perf_counter()
-        disc = _discrimination(problem, files["discriminate"], hidden, duration, seeds, progress)
+        disc = _discrimination(problem, files["discriminate"], hidden, duration, seeds, scales, progress)
     t_end = time.perf_counter()
     return Proof(
         duration,
@@ -178,7 +198,28 @@ def run(
         ident,
         disc,
         {"designs": t_design - t0, "identification": t_ident - t_design, "discrimination": t_end - t_ident},
+        scales,
     )
+
+
+def residual_sigma(problem: Problem, duration: float, scale: float | np.ndarray) -> np.ndarray:
+    """σ_j [N m] of the rigid refit's residual as the diagnosis weighs it (`rigid_fit` after `prepare`'s
+    15 Hz torque filter) on a clean simulated MERIt-like trial (seed 0) with the torque noise scaled by
+    `scale` (0: no sensor noise, the loop's and the derivative filter's own mismatch)."""
+    sim = simulate_trial(
+        problem.robot, trajectory="tud01", duration=duration, seed=0, noise_scale=scale, progress=False
+    )
+    _, weights = rigid_fit(prepare(sim.dataset(), 15.0))
+    return np.sqrt(1.0 / weights)
+
+
+def residual_noise_scale(problem: Problem, sigma: np.ndarray, duration: float) -> list[float]:
+    """The noise scale per joint at which the diagnosis sees a residual σ of `sigma` [N m] per joint: the
+    residual's variance is the mismatch's (scale 0) plus the scale² times the noise's (scale 1 minus scale 0)."""
+    base, unit = residual_sigma(problem, duration, 0.0), residual_sigma(problem, duration, 1.0)
+    noise2 = np.maximum(unit**2 - base**2, 1e-12)
+    scale = np.sqrt(np.maximum(sigma**2 - base**2, 0.0) / noise2)
+    return np.clip(scale, 0.0, MAX_NOISE_SCALE).tolist()
 
 
 def _hidden(design: Design, causes: tuple[str, str]) -> dict[str, str]:
@@ -216,13 +257,19 @@ def _identification(
 
 
 def _discrimination(
-    problem: Problem, design_file: str, hidden: dict[str, str], duration: float, seeds: int, progress: bool
+    problem: Problem,
+    design_file: str,
+    hidden: dict[str, str],
+    duration: float,
+    seeds: int,
+    scales: dict[str, list[float]],
+    progress: bool,
 ) -> pd.DataFrame:
     rows = []
     trajectories = {BASELINE: "tud01", "discriminating design": design_file}
-    jobs = [(cause, label, s) for cause in hidden for label in trajectories for s in range(seeds)]
+    jobs = [(n, c, t, s) for n in scales for c in hidden for t in trajectories for s in range(seeds)]
     causes = list(hidden)
-    for cause, label, seed in tqdm(jobs, desc="excitation: diagnoses", disable=not progress, leave=False):
+    for level, cause, label, seed in tqdm(jobs, desc="excitation: diagnoses", disable=not progress, leave=False):
         train, test = (
             simulate_trial(
                 problem.robot,
@@ -231,6 +278,7 @@ def _discrimination(
                 seed=s,
                 effects=[hidden[cause]],
                 progress=False,
+                noise_scale=scales[level],
             ).dataset()
             for s in (seed, seed + HELD_OUT)
         )
@@ -239,6 +287,7 @@ def _discrimination(
         other = next(c for c in causes if c != cause)
         rows.append(
             {
+                "noise": level,
                 "true cause": cause,
                 "trajectory": label,
                 "seed": seed,
