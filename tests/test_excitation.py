@@ -194,7 +194,15 @@ def test_proof_report_and_index(setup, tmp_path):
     )
     disc = pd.DataFrame(
         [
-            {"noise": n, "true cause": c, "trajectory": t, "seed": 0, "margin": m * k, "named right": True}
+            {
+                "noise": n,
+                "true cause": c,
+                "trajectory": t,
+                "seed": 0,
+                "margin": m * k,
+                "named right": True,
+                "criterion": m,
+            }
             for n, k in (("simulator", 1.0), ("real residual", 0.1))
             for c, r in (("asymmetric_coulomb", 1.0), ("elasticity", 2.0))
             for t, m in ((proof.BASELINE, 100.0), ("discriminating design", 300.0 * r))

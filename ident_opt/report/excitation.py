@@ -218,7 +218,9 @@ def proof_markdown(p: Proof, designs: str = "excitation") -> str:
         "held-out trial per seed, `diagnose` on them. Margin: the true cause's score minus the other's. Two noise "
         "levels: the simulator's (the sensor noise measured on the real robot at rest), and the real trial's "
         "residual as the diagnosis weighs it (the level the design was planned for: the noise scaled per joint "
-        f"until a clean simulated trial shows that residual). Torque noise per joint, × the simulator's: {scales}.",
+        f"until a clean simulated trial shows that residual). Torque noise per joint, × the simulator's: {scales}. "
+        "Criterion: the score gap the design's criterion expects on the same logged motion at the real residual "
+        "level (what the design maximised, checked against the diagnosis it stands for).",
         "",
         markdown_table(p.discrimination_summary(), digits=4),
         "",

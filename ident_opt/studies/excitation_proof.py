@@ -19,7 +19,9 @@ measurement noise, for `seeds` noise seeds each:
   diagnosis weighs it (the rigid refit's residual σ after the torque filter, `discrimination.fit_rivals`), the
   noise scaled per joint until a clean simulated trial shows that residual (`residual_noise_scale`). At the
   simulator's noise the scores are log-saturated (ln(1 + LOF/(nσ²)) with LOF ≫ nσ²); at the real residual
-  level they grow with the lack of fit, as on the real robot.
+  level they grow with the lack of fit, as on the real robot. Beside each margin, the design's own criterion
+  on the same logged motion (`discrimination.expected_gaps` at the real residual level: the score gap the design
+  expects), so the criterion is checked against the diagnosis it stands for.
 """
 
 from __future__ import annotations
@@ -102,6 +104,7 @@ class Proof:
                 "min margin": g["margin"].min(),
                 "max margin": g["margin"].max(),
                 "named right": g["named right"].mean(),
+                "median criterion": g["criterion"].median(),
             }
         )
 
@@ -177,15 +180,14 @@ def run(
         )
     t_design = time.perf_counter()
     hidden = _hidden(designs["discriminate"], causes)
-    sigma = (designs["discriminate"].discrimination or {}).get("noise_sigma")
-    scales = {"simulator": [1.0, 1.0]}
-    if sigma is not None:
-        scales["real residual"] = residual_noise_scale(problem, np.asarray(sigma), duration)
+    rivals = discrimination.fit_rivals(problem.robot, trial, causes)
+    sigma = np.sqrt(1.0 / rivals.ctx.weights)  # the design's noise model: the real trial's residual
+    scales = {"simulator": [1.0, 1.0], "real residual": residual_noise_scale(problem, sigma, duration)}
     with tempfile.TemporaryDirectory() as tmp:
         files = {name: _write_design(d, Path(tmp), name) for name, d in designs.items()}
         ident = _identification(problem, setup, files, duration, seeds, progress)
         t_ident = time.perf_counter()
-        disc = _discrimination(problem, files["discriminate"], hidden, duration, seeds, scales, progress)
+        disc = _discrimination(problem, files["discriminate"], hidden, duration, seeds, scales, rivals, progress)
     t_end = time.perf_counter()
     return Proof(
         duration,
@@ -263,9 +265,10 @@ def _discrimination(
     duration: float,
     seeds: int,
     scales: dict[str, list[float]],
+    rivals: discrimination.Rivals,
     progress: bool,
 ) -> pd.DataFrame:
-    rows = []
+    rows, criterion = [], {}
     trajectories = {BASELINE: "tud01", "discriminating design": design_file}
     jobs = [(n, c, t, s) for n in scales for c in hidden for t in trajectories for s in range(seeds)]
     causes = list(hidden)
@@ -284,6 +287,10 @@ def _discrimination(
         )
         d = diagnose(problem.robot, train, test, progress=False)
         scores = {c["cause"]: c["score"] for c in d.candidates}
+        if (cause, label, seed) not in criterion:  # the same motion at every noise level
+            motion = discrimination.trajectory_dataset(train.t, train.q, train.dq, train.ddq)
+            gaps = discrimination.expected_gaps(rivals, motion)
+            criterion[cause, label, seed] = gaps[f"gap_{cause}_true"]
         other = next(c for c in causes if c != cause)
         rows.append(
             {
@@ -296,6 +303,7 @@ def _discrimination(
                 "margin": scores.get(cause, float("nan")) - scores.get(other, float("nan")),
                 "named": d.cause,
                 "named right": d.cause == cause,
+                "criterion": criterion[cause, label, seed],
             }
         )
     return pd.DataFrame(rows)
