@@ -52,7 +52,7 @@ codegen: $(STAMP)
 audit: $(STAMP)
 	$(BIN)/ident-opt audit --problem problems/tudor_2dof_paper.toml --out results
 
-## Excitation design, proved in the simulator (not part of `identify`: about a quarter of an hour on 2 cores):
+## Excitation design, proved in the simulator (not part of `identify`: about 5 min on 2 cores):
 ## D-, cond-optimal and discriminating 20 s trajectories against MERIt-like and random ones, 10 noise seeds each.
 excitation: $(STAMP)
 	$(BIN)/ident-opt excite --problem $(PROBLEM) --proof 10 --out results/excitation.md --no-progress

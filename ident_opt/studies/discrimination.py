@@ -35,7 +35,7 @@ from ident_opt.data import Dataset
 from ident_opt.datasheet import datasheet_pi, rigid_body
 from ident_opt.diagnose import candidates as cands
 from ident_opt.diagnose import linear, signals
-from ident_opt.diagnose.diagnosis import prepare, rigid_fit
+from ident_opt.diagnose.diagnosis import TORQUE_FILTER_HZ, prepare, rigid_fit
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
 from ident_opt.problem import Robot
@@ -92,7 +92,9 @@ def parse_between(text: str) -> tuple[str, str]:
     return names[0], names[1]
 
 
-def fit_rivals(robot: Robot, trial: Dataset, causes: tuple[str, str], torque_filter_hz: float = 15.0) -> Rivals:
+def fit_rivals(
+    robot: Robot, trial: Dataset, causes: tuple[str, str], torque_filter_hz: float = TORQUE_FILTER_HZ
+) -> Rivals:
     """Each cause's best family (least weighted training cost) fitted on the whole `trial` against the refitted
     nominal model, in the diagnosis's context (`diagnose.diagnosis.prepare`, `rigid_fit` weights)."""
     data = prepare(trial, torque_filter_hz)

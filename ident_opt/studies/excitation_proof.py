@@ -36,7 +36,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from ident_opt.data import Dataset
-from ident_opt.diagnose.diagnosis import at_rest, diagnose, prepare, rigid_fit
+from ident_opt.diagnose.diagnosis import TORQUE_FILTER_HZ, at_rest, diagnose, prepare, rigid_fit
 from ident_opt.effects import CATALOGUE
 from ident_opt.identify import estimators
 from ident_opt.identify.stats import Stats
@@ -206,12 +206,12 @@ def run(
 
 def residual_sigma(problem: Problem, duration: float, scale: float | np.ndarray) -> np.ndarray:
     """σ_j [N m] of the rigid refit's residual as the diagnosis weighs it (`rigid_fit` after `prepare`'s
-    15 Hz torque filter) on a clean simulated MERIt-like trial (seed 0) with the torque noise scaled by
+    torque filter) on a clean simulated MERIt-like trial (seed 0) with the torque noise scaled by
     `scale` (0: no sensor noise, the loop's and the derivative filter's own mismatch)."""
     sim = simulate_trial(
         problem.robot, trajectory="tud01", duration=duration, seed=0, noise_scale=scale, progress=False
     )
-    _, weights = rigid_fit(prepare(sim.dataset(), 15.0))
+    _, weights = rigid_fit(prepare(sim.dataset(), TORQUE_FILTER_HZ))
     return np.sqrt(1.0 / weights)
 
 
