@@ -61,6 +61,17 @@ def test_rest_stretches_are_compared_about_their_mean():
     assert y[:, 1].tolist() == [5.0, 6.0, -1.0, 0.0, 1.0]
 
 
+def test_near_stops_marks_long_rests_and_their_surroundings_only():
+    dt = 0.01
+    dq = np.ones((100, 2))
+    dq[20:50, 0] = 0.0  # a 0.3 s stop of joint 1
+    dq[70:73, 0] = 0.0  # a 30 ms slow instant (a reversal): not a stop
+    near = signals.near_stops(dq, dt, stop_s=0.25, within_s=0.05)
+    np.testing.assert_array_equal(np.flatnonzero(near[:, 0]), np.arange(15, 55))
+    assert not near[:, 1].any()
+    assert not signals.near_stops(dq, dt, stop_s=0.35, within_s=0.05).any()  # shorter than a stop
+
+
 def test_least_squares_recovers_known_coefficients_and_respects_signs():
     rng = np.random.default_rng(1)
     X = rng.normal(size=(500, 2, 3))

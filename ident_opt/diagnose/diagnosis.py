@@ -28,8 +28,6 @@ from ident_opt.problem import Robot
 REST_FRACTION = 0.01
 #: How long [s] a joint must stay slow, before or after a sample, for it to count as at rest.
 REST_WINDOW_S = 0.01
-#: The torque filter's default cut-off [Hz] (`prepare`): the simulator's and the data loader's derivative cut-off.
-TORQUE_FILTER_HZ = 15.0
 #: Fewest held-out / training samples that make a diagnosis meaningful.
 MIN_SAMPLES = 200
 #: Most causes one diagnosis names (rounds of the loop).
@@ -406,7 +404,7 @@ def diagnose(
     unseen: Dataset | None = None,
     train_fraction: float = 0.7,
     progress: bool = True,
-    torque_filter_hz: float | str | None = TORQUE_FILTER_HZ,
+    torque_filter_hz: float | str | None = signals.TORQUE_FILTER_HZ,
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data); see the module docstring.
     `torque_filter_hz`: see `prepare` (the problem's derivative cut-off is the natural choice)."""

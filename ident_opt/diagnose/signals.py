@@ -8,7 +8,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
+from scipy import ndimage, signal
+
+#: The diagnosis's default torque filter cut-off [Hz] (`diagnosis.prepare`): the data loader's and the
+#: simulator's derivative cut-off, so both sides of τ = Y π share one bandwidth.
+TORQUE_FILTER_HZ = 15.0
 
 
 def delayed(x: np.ndarray, seconds: float, dt: float) -> np.ndarray:
@@ -132,6 +136,21 @@ def rest_runs(dq: np.ndarray) -> np.ndarray:
         run = np.cumsum(rest & ~np.concatenate([[False], rest[:-1]])) - 1  # +1 at each stretch's start
         labels[rest, j] = run[rest]
     return labels
+
+
+def near_stops(dq: np.ndarray, dt: float, stop_s: float, within_s: float) -> np.ndarray:
+    """(N, 2) bool: the samples of each joint within `within_s` [s] of a rest stretch (dq = 0 exactly, as
+    `diagnosis.at_rest` leaves it) that lasts at least `stop_s` [s] — a stop or a start, not the slow instant
+    of a reversal."""
+    out = np.zeros(dq.shape, dtype=bool)
+    shortest, reach = max(1, round(stop_s / dt)), round(within_s / dt)
+    for j in range(dq.shape[1]):
+        labels, n = ndimage.label(dq[:, j] == 0)
+        if n == 0:
+            continue
+        long = np.concatenate([[False], np.bincount(labels.ravel())[1:] >= shortest])[labels]
+        out[:, j] = ndimage.binary_dilation(long, iterations=reach) if reach > 0 and long.any() else long
+    return out
 
 
 def demean_runs(x: np.ndarray, labels: np.ndarray) -> np.ndarray:

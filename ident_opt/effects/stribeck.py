@@ -8,6 +8,11 @@ level. Diagnosis: the excess ≥ 0 linear, vs1 vs2 [rad/s] searched by variable 
 IPOPT (`polish`), against both nominal models; the estimate adds the fitted (or datasheet) Coulomb level.
 It shows only where the joints move slowly for a while, so its hidden trials follow the smooth `fourier`
 reference.
+
+Near a stop or a start (`STOP_S` of rest, within one filter length 1/f_c of it) the diagnosis's columns are 0:
+there the estimated velocity and the filtered torque are the zero-phase filters' smoothing of a stick–slip
+transition (the joint sticks or breaks away within a sample or two), not the speed the friction acted at. Read
+there, the excess comes out 5–15 % low and vs too wide (`docs/effects.md`); smooth reversals keep every sample.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from ident_opt.effects.base import (
     nlp,
     np,
     report,
-    robot_model,
+    signals,
 )
 from ident_opt.parameters import Parameter
 
@@ -47,6 +52,22 @@ def plant_coulomb(pi: dict, j: int) -> float:
 
 #: Where the Stribeck velocity vs [rad/s] is fitted (IPOPT's bounds; the grid search spans 0.005 to 0.5).
 VS_RANGE = (0.002, 1.0)
+#: A rest this long [s] is a stop (or a start), not the slow instant of a velocity reversal.
+STOP_S = 0.25
+
+
+def shape(dq, vs: float):
+    """sgn(dq) exp(−(dq/vs)²): the Stribeck excess per N m of fs − fc (dq [rad/s], vs [rad/s])."""
+    return np.sign(dq) * np.exp(-((dq / vs) ** 2))
+
+
+def trusted(ds) -> np.ndarray:
+    """(N, 2) bool: the samples whose estimated velocity can show the Stribeck excess — all but those within
+    one filter length (1/f_c of the data's derivative cut-off, else the diagnosis's torque filter) of a stop or
+    a start (module docstring)."""
+    dt = float(np.median(np.diff(ds.t)))
+    smoothing = 1.0 / (ds.cutoff_hz or signals.TORQUE_FILTER_HZ)
+    return ~signals.near_stops(ds.dq, dt, STOP_S, smoothing)
 
 
 class Stribeck(Effect):
@@ -78,8 +99,8 @@ class Stribeck(Effect):
     def columns(self, model) -> dict:
         zero, vs = np.zeros_like, model.stribeck_velocity
         return {
-            "fs1": lambda q, dq, a: (np.sign(dq[:, 0]) * np.exp(-((dq[:, 0] / vs[0]) ** 2)), zero(dq[:, 0])),
-            "fs2": lambda q, dq, a: (zero(dq[:, 1]), np.sign(dq[:, 1]) * np.exp(-((dq[:, 1] / vs[1]) ** 2))),
+            "fs1": lambda q, dq, a: (shape(dq[:, 0], vs[0]), zero(dq[:, 0])),
+            "fs2": lambda q, dq, a: (zero(dq[:, 1]), shape(dq[:, 1], vs[1])),
         }
 
     def add_terms(self, model, q, dq, p: dict, M: list, G: list, F: list) -> None:
@@ -113,12 +134,10 @@ class Stribeck(Effect):
         return bool(vs) and all(inside(v, *VS_RANGE) for v in vs)
 
     def families(self, robot) -> list:
-        extended = (*cands.NOMINAL.extensions, self.name)
         names = tuple(p.name for p in self.parameters)
         return [
             self.family(
-                lambda th: robot_model.ArmModel(extended, stribeck_velocity=(th["vs1"], th["vs2"])),
-                names,
+                extra=_columns,
                 nonnegative=names,
                 axes=lambda rate: [
                     linear.Axis("vs1", 0.005, 0.5, 11, True),
@@ -126,7 +145,7 @@ class Stribeck(Effect):
                 ],
                 estimate=_estimate,
                 refine=lambda ctx, o, X, names, beta, theta: polish(
-                    ctx.rest, ctx.train.dq, ctx.train.tau, o, X, names, beta, theta
+                    ctx.rest, ctx.train.dq, ctx.train.tau, o, X, names, beta, theta, trusted(ctx.train)
                 ),
             )
         ]
@@ -142,6 +161,15 @@ class Stribeck(Effect):
     def draw(self, rng, robot) -> dict:
         u, fc = rng.uniform, datasheet.rigid_body(robot, "physical").fc
         return {"static": (fc[0] + u(0.2, 0.4), fc[1] + u(0.15, 0.3)), "velocity": (u(0.03, 0.1), u(0.03, 0.1))}
+
+
+def _columns(ds, theta: dict, dt: float, ctx) -> tuple[np.ndarray, list[str]]:
+    """The diagnosis's fs1 fs2 columns (N, 2, 2) at vs1 vs2 of θ: the excess shape where it can be seen
+    (`trusted`), 0 near stops and starts."""
+    cols, keep = np.zeros((ds.n, 2, 2)), trusted(ds)
+    for j in range(2):
+        cols[:, j, j] = shape(ds.dq[:, j], theta[f"vs{j + 1}"]) * keep[:, j]
+    return cols, ["fs1", "fs2"]
 
 
 def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
@@ -174,20 +202,23 @@ def polish(
     names: list[str],
     beta: np.ndarray,
     theta: dict,
+    seen: np.ndarray,
 ) -> tuple[np.ndarray, dict, list[str]]:
-    """(β, θ, IPOPT statuses) with (fs_j, vs_j) polished; inputs as in `candidates.fit` (training part).
+    """(β, θ, IPOPT statuses) with (fs_j, vs_j) polished; inputs as in `candidates.fit` (training part),
+    `seen` (N, 2) the samples the columns show the excess at (`trusted`).
 
     vs enters nonlinearly: IPOPT moves (fs_j, vs_j) jointly, per joint, with every other coefficient held,
-    from the search's answer. Only samples where joint j moves are used: at rest the Stribeck term is zero
-    (dq = 0) and the rest stretches' projection does not touch them, so this is exactly the candidate's
-    objective restricted to (fs_j, vs_j); a joint's polish is kept only if it lowers that objective."""
+    from the search's answer. Only samples where joint j moves and the excess is seen are used: elsewhere the
+    Stribeck column is zero and the rest stretches' projection does not touch those, so this is exactly the
+    candidate's objective restricted to (fs_j, vs_j); a joint's polish is kept only if it lowers that
+    objective."""
     beta, theta, statuses = beta.copy(), dict(theta), []
     fs, vs, v = ca.SX.sym("fs"), ca.SX.sym("vs"), ca.SX.sym("dq")
     expr = fs * ca.sign(v) * ca.exp(-((v / vs) ** 2))  # N m, the excess over the Coulomb level
     f = ca.Function("stribeck", [v, fs, vs], [expr])
     for j in range(2):
         k = names.index(f"fs{j + 1}")
-        moving = rest[:, j] < 0
+        moving = (rest[:, j] < 0) & seen[:, j]
         if moving.sum() < 10:
             continue
         others = beta.copy()

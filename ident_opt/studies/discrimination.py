@@ -35,7 +35,8 @@ from ident_opt.data import Dataset
 from ident_opt.datasheet import datasheet_pi, rigid_body
 from ident_opt.diagnose import candidates as cands
 from ident_opt.diagnose import linear, signals
-from ident_opt.diagnose.diagnosis import TORQUE_FILTER_HZ, prepare, rigid_fit
+from ident_opt.diagnose.diagnosis import prepare, rigid_fit
+from ident_opt.diagnose.signals import TORQUE_FILTER_HZ
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
 from ident_opt.problem import Robot

@@ -36,7 +36,8 @@ import pandas as pd
 from tqdm import tqdm
 
 from ident_opt.data import Dataset
-from ident_opt.diagnose.diagnosis import TORQUE_FILTER_HZ, at_rest, diagnose, prepare, rigid_fit
+from ident_opt.diagnose.diagnosis import at_rest, diagnose, prepare, rigid_fit
+from ident_opt.diagnose.signals import TORQUE_FILTER_HZ
 from ident_opt.effects import CATALOGUE
 from ident_opt.identify import estimators
 from ident_opt.identify.stats import Stats
