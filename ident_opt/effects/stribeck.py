@@ -9,10 +9,11 @@ IPOPT (`polish`), against both nominal models; the estimate adds the fitted (or 
 It shows only where the joints move slowly for a while, so its hidden trials follow the smooth `fourier`
 reference.
 
-Near a stop or a start (`STOP_S` of rest, within one filter length 1/f_c of it) the diagnosis's columns are 0:
-there the estimated velocity and the filtered torque are the zero-phase filters' smoothing of a stick–slip
-transition (the joint sticks or breaks away within a sample or two), not the speed the friction acted at. Read
-there, the excess comes out 5–15 % low and vs too wide (`docs/effects.md`); smooth reversals keep every sample.
+Near a stop or a start (`STOP_S` of rest, within one filter length 1/f_c of it) the diagnosis gives the excess
+a coefficient of its own (fs1_stop, fs2_stop), and the estimate reads fs away from them: there the estimated
+velocity and the filtered torque are the zero-phase filters' smoothing of a stick–slip transition (the joint
+sticks or breaks away within a sample or two), not the speed the friction acted at. Read there, the excess
+comes out 5–15 % low and vs too wide (`docs/effects.md`); smooth reversals keep every sample.
 """
 
 from __future__ import annotations
@@ -50,8 +51,10 @@ def plant_coulomb(pi: dict, j: int) -> float:
     return pi["fc" + k]
 
 
-#: Where the Stribeck velocity vs [rad/s] is fitted (IPOPT's bounds; the grid search spans 0.005 to 0.5).
-VS_RANGE = (0.002, 1.0)
+#: Where the Stribeck velocity vs [rad/s] is searched (the grid) and polished (IPOPT's bounds): one range, so a
+#: vs at its edge is the search stopped by its bound (`resolved`). A hump as wide as 0.5 rad/s, the joints' whole
+#: speed range in a typical trial, no longer falls off within the motion: it is a reshaped Coulomb level.
+VS_RANGE = (0.005, 0.5)
 #: A rest this long [s] is a stop (or a start), not the slow instant of a velocity reversal.
 STOP_S = 0.25
 
@@ -138,10 +141,10 @@ class Stribeck(Effect):
         return [
             self.family(
                 extra=_columns,
-                nonnegative=names,
+                nonnegative=(*names, "fs1_stop", "fs2_stop"),
                 axes=lambda rate: [
-                    linear.Axis("vs1", 0.005, 0.5, 11, True),
-                    linear.Axis("vs2", 0.005, 0.5, 11, True),
+                    linear.Axis("vs1", *VS_RANGE, 11, True),
+                    linear.Axis("vs2", *VS_RANGE, 11, True),
                 ],
                 estimate=_estimate,
                 refine=lambda ctx, o, X, names, beta, theta: polish(
@@ -164,12 +167,14 @@ class Stribeck(Effect):
 
 
 def _columns(ds, theta: dict, dt: float, ctx) -> tuple[np.ndarray, list[str]]:
-    """The diagnosis's fs1 fs2 columns (N, 2, 2) at vs1 vs2 of θ: the excess shape where it can be seen
-    (`trusted`), 0 near stops and starts."""
-    cols, keep = np.zeros((ds.n, 2, 2)), trusted(ds)
+    """The diagnosis's columns (N, 2, 4) at vs1 vs2 of θ: fs1 fs2, the excess shape where it can be seen
+    (`trusted`), and fs1_stop fs2_stop, the same shape near stops and starts with a coefficient of its own."""
+    cols, keep = np.zeros((ds.n, 2, 4)), trusted(ds)
     for j in range(2):
-        cols[:, j, j] = shape(ds.dq[:, j], theta[f"vs{j + 1}"]) * keep[:, j]
-    return cols, ["fs1", "fs2"]
+        f = shape(ds.dq[:, j], theta[f"vs{j + 1}"])
+        cols[:, j, j] = f * keep[:, j]
+        cols[:, j, 2 + j] = f * ~keep[:, j]
+    return cols, ["fs1", "fs2", "fs1_stop", "fs2_stop"]
 
 
 def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
@@ -204,48 +209,49 @@ def polish(
     theta: dict,
     seen: np.ndarray,
 ) -> tuple[np.ndarray, dict, list[str]]:
-    """(β, θ, IPOPT statuses) with (fs_j, vs_j) polished; inputs as in `candidates.fit` (training part),
-    `seen` (N, 2) the samples the columns show the excess at (`trusted`).
+    """(β, θ, IPOPT statuses) with (fs_j, fs_j_stop, vs_j) polished; inputs as in `candidates.fit` (training
+    part), `seen` (N, 2) the samples away from stops and starts (`trusted`).
 
-    vs enters nonlinearly: IPOPT moves (fs_j, vs_j) jointly, per joint, with every other coefficient held,
-    from the search's answer. Only samples where joint j moves and the excess is seen are used: elsewhere the
-    Stribeck column is zero and the rest stretches' projection does not touch those, so this is exactly the
-    candidate's objective restricted to (fs_j, vs_j); a joint's polish is kept only if it lowers that
-    objective."""
+    vs enters nonlinearly: IPOPT moves (fs_j, fs_j_stop, vs_j) jointly, per joint, with every other coefficient
+    held, from the search's answer. Only samples where joint j moves are used: at rest the Stribeck term is
+    zero (dq = 0) and the rest stretches' projection does not touch them, so this is exactly the candidate's
+    objective restricted to those three; a joint's polish is kept only if it lowers that objective."""
     beta, theta, statuses = beta.copy(), dict(theta), []
-    fs, vs, v = ca.SX.sym("fs"), ca.SX.sym("vs"), ca.SX.sym("dq")
-    expr = fs * ca.sign(v) * ca.exp(-((v / vs) ** 2))  # N m, the excess over the Coulomb level
-    f = ca.Function("stribeck", [v, fs, vs], [expr])
+    fs, stop, vs = ca.SX.sym("fs"), ca.SX.sym("fs_stop"), ca.SX.sym("vs")
+    v, away = ca.SX.sym("dq"), ca.SX.sym("away")  # away: 1 away from stops, 0 near them
+    level = fs * away + stop * (1 - away)
+    expr = level * ca.sign(v) * ca.exp(-((v / vs) ** 2))  # N m, the excess over the Coulomb level
+    f = ca.Function("stribeck", [v, away, fs, stop, vs], [expr])
     for j in range(2):
-        k = names.index(f"fs{j + 1}")
-        moving = (rest[:, j] < 0) & seen[:, j]
+        k = [names.index(f"fs{j + 1}"), names.index(f"fs{j + 1}_stop")]
+        moving = rest[:, j] < 0
         if moving.sum() < 10:
             continue
         others = beta.copy()
         others[k] = 0.0
         target = (tau[:, j] - offset[:, j] - X[:, j, :] @ others)[moving]
-        x0 = [beta[k], theta[f"vs{j + 1}"]]
+        data = [dq[moving, j], seen[moving, j].astype(float)]
+        x0 = [beta[k[0]], beta[k[1]], theta[f"vs{j + 1}"]]
         every = max(1, int(moving.sum()) // cands.POLISH_ROWS)
 
-        def cost(p, target=target, moving=moving, j=j):
-            pred = np.array(f(dq[moving, j][None, :], p[0], p[1])).ravel()
-            return float(np.sum((target - pred) ** 2))
+        def cost(p, target=target, data=data):
+            return float(np.sum((target - np.array(f(data[0][None, :], data[1][None, :], *p)).ravel()) ** 2))
 
         fit = nlp.fit_expression(
             expr,
-            ca.vertcat(fs, vs),
-            [v],
-            [dq[moving, j][::every]],
+            ca.vertcat(fs, stop, vs),
+            [v, away],
+            [d[::every] for d in data],
             target[::every],
             x0=x0,
-            lb=[0.0, VS_RANGE[0]],
-            ub=[np.inf, VS_RANGE[1]],
-            names=[f"fs{j + 1}", f"vs{j + 1}"],
+            lb=[0.0, 0.0, VS_RANGE[0]],
+            ub=[np.inf, np.inf, VS_RANGE[1]],
+            names=[f"fs{j + 1}", f"fs{j + 1}_stop", f"vs{j + 1}"],
             options={"ipopt.max_iter": 100},
         )
         statuses.append(f"joint {j + 1}: {fit.status}")
         if fit.success and cost(fit.values) < cost(x0):
-            beta[k], theta[f"vs{j + 1}"] = float(fit.values[0]), float(fit.values[1])
+            beta[k[0]], beta[k[1]], theta[f"vs{j + 1}"] = map(float, fit.values)
     return beta, theta, statuses
 
 
