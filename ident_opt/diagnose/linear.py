@@ -58,7 +58,8 @@ def solve(offset: np.ndarray, X: np.ndarray, tau: np.ndarray, weights: np.ndarra
         return LinearSolve(beta, np.full(k, np.nan), float(weights @ rss), rss)
     dof = max(A.shape[0] - k, 1)
     s2 = float(weights @ rss) / dof
-    cov = s2 * np.linalg.pinv(H) / np.outer(scale, scale)
+    with np.errstate(over="ignore", divide="ignore"):  # a column of norm ~1e-160 carries nothing: se = inf
+        cov = s2 * np.linalg.pinv(H) / np.outer(scale, scale)
     return LinearSolve(beta, np.sqrt(np.clip(np.diag(cov), 0, None)), float(weights @ rss), rss)
 
 
