@@ -59,7 +59,7 @@ VS_RANGE = (0.005, 0.5)
 STOP_S = 0.25
 
 
-def shape(dq, vs: float):
+def shape(dq: np.ndarray, vs: float) -> np.ndarray:
     """sgn(dq) exp(−(dq/vs)²): the Stribeck excess per N m of fs − fc (dq [rad/s], vs [rad/s])."""
     return np.sign(dq) * np.exp(-((dq / vs) ** 2))
 
