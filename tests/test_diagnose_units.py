@@ -72,6 +72,21 @@ def test_near_stops_marks_long_rests_and_their_surroundings_only():
     assert not signals.near_stops(dq, dt, stop_s=0.35, within_s=0.05).any()  # shorter than a stop
 
 
+def test_a_column_below_double_precision_gets_no_coefficient():
+    # A Stribeck shape far from its hump is ~1e-160: fitted, it took a coefficient of ~1e160 that overflowed
+    # on other data. It is held at 0 with an infinite standard error; the other columns fit as without it.
+    rng = np.random.default_rng(0)
+    X = np.zeros((100, 2, 3))
+    X[:, 0, 0], X[:, 1, 2] = np.linspace(-1, 1, 100), rng.normal(size=100)
+    tau = rng.normal(size=(100, 2))
+    without = linear.solve(np.zeros((100, 2)), X[:, :, [0, 2]], tau, np.ones(2))
+    X[:50, 1, 1] = 1e-160
+    ls = linear.solve(np.zeros((100, 2)), X, tau, np.ones(2))
+    assert ls.beta[1] == 0.0 and ls.se[1] == np.inf
+    np.testing.assert_allclose(ls.beta[[0, 2]], without.beta, rtol=1e-12)
+    np.testing.assert_allclose(ls.se[[0, 2]], without.se, rtol=1e-6)
+
+
 def test_least_squares_recovers_known_coefficients_and_respects_signs():
     rng = np.random.default_rng(1)
     X = rng.normal(size=(500, 2, 3))

@@ -44,7 +44,13 @@ def solve(offset: np.ndarray, X: np.ndarray, tau: np.ndarray, weights: np.ndarra
     # Normal equations on unit-norm columns (units differ by orders of magnitude); k is small, so the
     # k×k solve is cheap and the O(N k²) Gram product dominates.
     scale = np.linalg.norm(A, axis=0)
-    scale[scale == 0] = 1.0
+    # A column ~1e-12 of the largest or less (e.g. a Stribeck shape far from its hump) is below what double
+    # precision resolves next to the others: held at β = 0 with an infinite standard error, rather than given
+    # a coefficient of 1e100 that overflows on other data.
+    dead = scale <= 1e-12 * scale.max()
+    if dead.any():
+        A[:, dead] = 0.0  # A is this call's own array (X times the weights)
+        scale[dead] = 1.0
     As = A / scale
     H, h = As.T @ As, As.T @ y
     try:
@@ -56,11 +62,11 @@ def solve(offset: np.ndarray, X: np.ndarray, tau: np.ndarray, weights: np.ndarra
     rss = np.sum(resid**2, axis=0)
     if not with_se:
         return LinearSolve(beta, np.full(k, np.nan), float(weights @ rss), rss)
-    dof = max(A.shape[0] - k, 1)
+    dof = max(A.shape[0] - int(np.count_nonzero(~dead)), 1)
     s2 = float(weights @ rss) / dof
-    with np.errstate(over="ignore", divide="ignore"):  # a column of norm ~1e-160 carries nothing: se = inf
-        cov = s2 * np.linalg.pinv(H) / np.outer(scale, scale)
-    return LinearSolve(beta, np.sqrt(np.clip(np.diag(cov), 0, None)), float(weights @ rss), rss)
+    cov = s2 * np.linalg.pinv(H) / np.outer(scale, scale)
+    se = np.where(dead, np.inf, np.sqrt(np.clip(np.diag(cov), 0, None)))
+    return LinearSolve(beta, se, float(weights @ rss), rss)
 
 
 def solve_nonnegative(
