@@ -85,6 +85,9 @@ def test_a_column_below_double_precision_gets_no_coefficient():
     assert ls.beta[1] == 0.0 and ls.se[1] == np.inf
     np.testing.assert_allclose(ls.beta[[0, 2]], without.beta, rtol=1e-12)
     np.testing.assert_allclose(ls.se[[0, 2]], without.se, rtol=1e-6)
+    # Alone (the datasheet side of a candidate has only its own columns), against the target's size.
+    alone = linear.solve(np.zeros((100, 2)), X[:, :, [1]], tau, np.ones(2))
+    assert alone.beta[0] == 0.0 and alone.se[0] == np.inf
 
 
 def test_least_squares_recovers_known_coefficients_and_respects_signs():

@@ -44,10 +44,10 @@ def solve(offset: np.ndarray, X: np.ndarray, tau: np.ndarray, weights: np.ndarra
     # Normal equations on unit-norm columns (units differ by orders of magnitude); k is small, so the
     # k×k solve is cheap and the O(N k²) Gram product dominates.
     scale = np.linalg.norm(A, axis=0)
-    # A column ~1e-12 of the largest or less (e.g. a Stribeck shape far from its hump) is below what double
-    # precision resolves next to the others: held at β = 0 with an infinite standard error, rather than given
-    # a coefficient of 1e100 that overflows on other data.
-    dead = scale <= 1e-12 * scale.max()
+    # A column of ~1e-12 of the largest column or of the target, or less (e.g. a Stribeck shape far from its
+    # hump), is below what double precision resolves next to them: held at β = 0 with an infinite standard
+    # error, rather than given a coefficient of 1e100 that overflows on other data.
+    dead = scale <= 1e-12 * max(scale.max(), float(np.linalg.norm(y)))
     if dead.any():
         A[:, dead] = 0.0  # A is this call's own array (X times the weights)
         scale[dead] = 1.0
