@@ -14,7 +14,7 @@ measurement noise, for `seeds` noise seeds each:
   where the data put it (the candidates fitted on the problem's trial: e.g. asymmetric Coulomb at the fitted
   per-direction levels, elasticity at the fitted joint, mode and damping). Each seed simulates a training and a held-out
   trial (noise seeds s and s + 1000), `diagnose` scores every candidate, and the margin is the true cause's
-  score minus the other's. At two noise levels (`NOISE_LEVELS`): the simulator's own (the sensor noise measured
+  score minus the other's. At two noise levels: the simulator's own (the sensor noise measured
   on the real robot at rest), and the level the design was planned for — the real trial's residual as the
   diagnosis weighs it (the rigid refit's residual σ after the torque filter, `discrimination.fit_rivals`), the
   noise scaled per joint until a clean simulated trial shows that residual (`residual_noise_scale`). At the
@@ -60,8 +60,6 @@ IDENTIFICATION = {
 BASELINE = "MERIt-like (tud01)"
 #: Offset of the held-out trial's noise seed.
 HELD_OUT = 1000
-#: The discrimination's noise levels, in table order: the simulator's sensor noise, the real trial's residual.
-NOISE_LEVELS = ("simulator", "real residual")
 
 
 @dataclass
