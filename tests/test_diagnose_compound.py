@@ -47,6 +47,11 @@ def _within(d, trial) -> None:
         ),
         # Load friction on the rigid joint of an arm with an elastic joint (the elastic plant used to drop it).
         (["elasticity:joint=2,frequency_hz=6", "load_friction:coefficient=[0.2,0]"], {"seed": 13, "rate_hz": 200.0}),
+        # Beside a torque scale, every other coefficient is read in joint-torque units (not J/s).
+        (["torque_scale:scale=[0.85,1.0]", "armature:inertia=[0.25,0.03]"], {"seed": 14, "rate_hz": 200.0}),
+        (["torque_scale:scale=[1.0,1.2]", "asymmetric_coulomb:positive=[0.3,0.75],negative=[0.7,0.25]"], {"seed": 15}),
+        # A payload is part of the load that load-dependent friction grows with.
+        (["payload:mass=0.35", "load_friction:coefficient=[0,0.15]"], {"seed": 16}),
     ],
 )
 def test_two_hidden_effects_are_both_named(physical_problem, effects, kwargs):

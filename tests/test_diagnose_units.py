@@ -288,3 +288,25 @@ def test_an_auto_cutoff_filters_the_torque_at_the_cutoff_the_trial_was_read_with
     np.testing.assert_array_equal(auto.tau, given.tau)
     assert not np.allclose(auto.tau, trial.tau)  # it did filter
     np.testing.assert_array_equal(prepare(replace(trial, cutoff_hz=None), "auto").tau, tau)  # logged derivatives
+
+
+def test_physical_units_undo_a_torque_scale_exactly_on_one_row_columns():
+    """τ_logged = τ / s: a coefficient on joint j's row alone is fitted as β / s_j and read back as β; a
+    column on both rows gets s averaged by its energy on each row."""
+    from ident_opt.diagnose.candidates import physical_units
+
+    rng = np.random.default_rng(0)
+    n, s = 500, np.array([0.8, 1.25])
+    X = np.zeros((n, 2, 3))
+    X[:, 0, 0] = rng.normal(size=n)  # joint 1's row only
+    X[:, 1, 1] = rng.normal(size=n)  # joint 2's row only
+    X[:, 0, 2], X[:, 1, 2] = rng.normal(size=n), 3.0 * rng.normal(size=n)  # both rows, most energy on row 2
+    fitted = {"a": 0.4 / s[0], "b": 0.04 / s[1], "m": 0.3, "c1": 1 / s[0], "c2": 1 / s[1]}
+    se = dict.fromkeys(fitted, 0.01)
+    p, e = physical_units((s, ("c1", "c2")), X, ["a", "b", "m"], fitted, se, np.ones(2))
+    assert p["a"] == pytest.approx(0.4) and p["b"] == pytest.approx(0.04)
+    assert e["a"] == pytest.approx(0.01 * s[0])
+    share = np.array([1.0, 9.0]) / 10.0  # the energy shares of the two-row column (1 : 9 in expectation)
+    assert p["m"] == pytest.approx(0.3 * (s @ share), rel=0.02)
+    assert p["c1"] == fitted["c1"] and p["c2"] == fitted["c2"]  # the scale's own coefficients are left alone
+    assert fitted["a"] == pytest.approx(0.4 / s[0])  # the input is not modified

@@ -37,6 +37,8 @@ NOMINAL = PHYSICAL
 SEARCH_ROWS = 12000
 #: Most samples an IPOPT polish is set up on (per joint for Stribeck).
 POLISH_ROWS = 6000
+#: Most re-solves of a family whose columns depend on its coefficients (`Family.coupled`).
+COUPLING_STEPS = 5
 
 
 @dataclass
@@ -97,6 +99,14 @@ class Family:
     #: Names of the columns `extra` adds, and θ held fixed (set by `compose` for earlier causes).
     fixed: dict = field(default_factory=dict)
     members: tuple = ()  # (cause, Family) of a composed family, in the order the causes were added
+    #: `units(p)`: (s (2,), own names) when the family rescales the logged torque (torque_scale): every
+    #: other coefficient is then fitted in logged units, and s_j turns one on joint j's row into joint
+    #: torque units (`physical_units`). None: the coefficients are in joint-torque units already.
+    units: Callable[[dict], tuple[np.ndarray, tuple[str, ...]]] | None = None
+    #: `coupled(p)`: θ entries the columns depend on, read from the coefficients of the last solve (a found
+    #: payload adds to the load torque that load-dependent friction scales with); `fit` iterates the solve
+    #: to a fixed point. None: the columns do not depend on the coefficients.
+    coupled: Callable[[dict], dict] | None = None
 
 
 def nominal(theta: dict) -> ArmModel:
@@ -154,6 +164,50 @@ def search_axes(family: Family, baseline: str, ctx: Context) -> list[linear.Axis
     return [linear.Axis(a.name, a.low + c[a.name], a.high + c[a.name], a.points, a.log) for a in axes]
 
 
+def _solve(family: Family, ctx: Context, o, X, names, tau, labels, with_se: bool) -> linear.LinearSolve:
+    """β by WLS (nonnegative where the family says), data and columns compared about each rest stretch's
+    mean (`signals.demean_runs`: within a rest stretch only variations count)."""
+    signed = [i for i, n in enumerate(names) if n in family.nonnegative]
+    target = signals.demean_runs(tau - o, labels)
+    return linear.solve_nonnegative(
+        np.zeros_like(target), signals.demean_runs(X, labels), target, ctx.weights, signed, with_se
+    )
+
+
+def _polish(family: Family, baseline: str, ctx: Context, axes: list, theta: dict, o, X, names, ls) -> tuple:
+    """`family.polish` from the search's answer, kept only if β re-solved at the proposal fits better.
+    Returns (θ, o, X, fit, the polish record or None)."""
+    bounds = {a.name: (a.low, a.high) for a in axes}
+    proposal, nlp = family.polish(baseline, ctx, o, X, ls.beta, theta, bounds)
+    if nlp is None:
+        return theta, o, X, ls, None
+    searched = {**dict(zip(names, map(float, ls.beta))), **theta}
+    nlp["before"] = family.estimate(searched, dict.fromkeys(searched, 0.0), ctx)
+    nlp["cost_before"], nlp["kept"] = ls.cost, False
+    if proposal is not None:
+        proposal = {**theta, **proposal}
+        o2, X2, _ = design(family, ctx.train, proposal, baseline, ctx)
+        ls2 = _solve(family, ctx, o2, X2, names, ctx.train.tau, ctx.rest, True)
+        nlp["cost_after"] = ls2.cost
+        if ls2.cost < ls.cost:  # β re-solved exactly at the polished θ; kept only if it fits better
+            theta, o, X, ls, nlp["kept"] = proposal, o2, X2, ls2, True
+    return theta, o, X, ls, nlp
+
+
+def _couple(family: Family, baseline: str, ctx: Context, theta: dict, o, X, names, ls) -> tuple:
+    """Columns that depend on the coefficients (`Family.coupled`): re-solve until what they read settles.
+    Returns (the coupled θ entries, o, X, fit)."""
+    coupling: dict = {}
+    for _ in range(COUPLING_STEPS):
+        update = family.coupled(dict(zip(names, map(float, ls.beta))))
+        if all(abs(v - coupling.get(k, 0.0)) <= 1e-6 * (1.0 + abs(v)) for k, v in update.items()):
+            break
+        coupling = update
+        o, X, _ = design(family, ctx.train, {**theta, **coupling}, baseline, ctx)
+        ls = _solve(family, ctx, o, X, names, ctx.train.tau, ctx.rest, True)
+    return coupling, o, X, ls
+
+
 def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     """Fit one family against one baseline on the training part (θ by variable projection, β by WLS)."""
     stride = max(1, -(-ctx.train.n // SEARCH_ROWS))  # ceil: at most SEARCH_ROWS rows
@@ -161,42 +215,27 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     rows = slice(None, None, stride)
     train_sub, rest_sub = ctx.train.tau[rows], ctx.rest[rows]
 
-    def solve(o, X, names, tau, labels, with_se):
-        # Within rest stretches only variations count (see `signals.demean_runs`): project data and columns.
-        signed = [i for i, n in enumerate(names) if n in family.nonnegative]
-        target = signals.demean_runs(tau - o, labels)
-        return linear.solve_nonnegative(
-            np.zeros_like(target), signals.demean_runs(X, labels), target, ctx.weights, signed, with_se
-        )
-
     def cost(theta: dict) -> float:
         o, X, names = design(family, ctx.train, theta, baseline, ctx, rows)
-        return solve(o, X, names, train_sub, rest_sub, False).cost
+        return _solve(family, ctx, o, X, names, train_sub, rest_sub, False).cost
 
     axes = search_axes(family, baseline, ctx)
     theta = {**family.fixed, **(linear.search(lambda th: cost({**family.fixed, **th}), axes) if axes else {})}
     o, X, names = design(family, ctx.train, theta, baseline, ctx)
-    ls = solve(o, X, names, ctx.train.tau, ctx.rest, True)
-    proposal, nlp = None, None
+    ls = _solve(family, ctx, o, X, names, ctx.train.tau, ctx.rest, True)
+    nlp = None
     if family.polish is not None:
-        bounds = {a.name: (a.low, a.high) for a in axes}
-        proposal, nlp = family.polish(baseline, ctx, o, X, ls.beta, theta, bounds)
-    if nlp is not None:
-        searched = {**dict(zip(names, map(float, ls.beta))), **theta}
-        nlp["before"] = family.estimate(searched, dict.fromkeys(searched, 0.0), ctx)
-        nlp["cost_before"], nlp["kept"] = ls.cost, False
-        if proposal is not None:
-            proposal = {**theta, **proposal}
-            o2, X2, _ = design(family, ctx.train, proposal, baseline, ctx)
-            ls2 = solve(o2, X2, names, ctx.train.tau, ctx.rest, True)
-            nlp["cost_after"] = ls2.cost
-            if ls2.cost < ls.cost:  # β re-solved exactly at the polished θ; kept only if it fits better
-                theta, o, X, ls, nlp["kept"] = proposal, o2, X2, ls2, True
+        theta, o, X, ls, nlp = _polish(family, baseline, ctx, axes, theta, o, X, names, ls)
+    coupling: dict = {}
+    if family.coupled is not None:
+        coupling, o, X, ls = _couple(family, baseline, ctx, theta, o, X, names, ls)
     beta, polished = ls.beta.copy(), []
     if family.refine is not None:
         beta, theta, polished = family.refine(ctx, o, X, names, beta, theta)
     params = dict(zip(names, map(float, beta)))
     se = dict(zip(names, map(float, ls.se)))
+    if family.units is not None:
+        params, se = physical_units(family.units(params), X, names, params, se, ctx.weights)
     params.update(theta)
     estimate, detail = family.estimate(params, se, ctx)
     if polished:
@@ -209,12 +248,39 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
         detail["polish"] = nlp
     nominal_free = len(NOMINAL.names) if baseline == "rigid_fit" else 0
     n_added = len(names) - nominal_free + len(theta)
+    columns_theta = {**theta, **coupling}
 
     def predict(ds: Dataset) -> np.ndarray:
-        o, X, _ = design(family, ds, theta, baseline, ctx)
+        o, X, _ = design(family, ds, columns_theta, baseline, ctx)
         return o + np.einsum("njk,k->nj", X, beta)
 
     return Candidate(family.cause, baseline, estimate, params, se, n_added, predict, detail)
+
+
+def physical_units(
+    units: tuple[np.ndarray, tuple[str, ...]],
+    X: np.ndarray,
+    names: list[str],
+    params: dict[str, float],
+    se: dict[str, float],
+    weights: np.ndarray,
+) -> tuple[dict, dict]:
+    """Coefficients fitted against a rescaled logged torque, in joint-torque units.
+
+    With τ_logged,j = τ_j / s_j, a coefficient whose column lives on joint j's row only is fitted as β/s_j,
+    so β = s_j × the fitted one (exact). A column on both rows (a payload's mass) is scaled by s averaged
+    over the rows with the share of the column's weighted energy on each (first order in s1 − s2).
+    `units`: (s (2,), the rescaling family's own names, left as they are)."""
+    s, own = units
+    energy = np.einsum("njk,njk,j->jk", X, X, weights)  # (2, K): each column's weighted energy per row
+    total = energy.sum(axis=0)
+    factor = np.where(total > 0, s @ (energy / np.where(total > 0, total, 1.0)), 1.0)
+    params, se = dict(params), dict(se)
+    for k, name in enumerate(names):
+        if name not in own:
+            params[name] *= float(factor[k])
+            se[name] *= float(factor[k])
+    return params, se
 
 
 # ---------------------------------------------------------------------------------------------- composition
@@ -264,6 +330,12 @@ def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
         est, det = members[new.cause]
         return est, {**det, "members": {c: e for c, (e, _) in members.items()}}
 
+    units = next((f.units for f in fams if f.units is not None), None)
+    coupled_parts = [f.coupled for f in fams if f.coupled is not None]
+
+    def coupled(p: dict) -> dict:
+        return {k: v for c in coupled_parts for k, v in c(p).items()}
+
     baselines = tuple(b for b in new.baselines if all(b in f.baselines for f in fams))
     return Family(
         new.cause,
@@ -281,6 +353,8 @@ def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
         center=new.center,
         fixed=fixed,
         members=tuple((f.cause, f) for f in fams),
+        units=units,
+        coupled=coupled if coupled_parts else None,
     )
 
 

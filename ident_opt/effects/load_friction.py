@@ -4,12 +4,14 @@
 Coriolis/centrifugal and gravity, friction excluded. μ is dimensionless, one per joint (0: untouched).
 Simulator: the plant's friction gains μ_j sgn(dq_j) |τ_load,j(q, dq, ddq)|, solved with the acceleration
 it depends on (`simulate.truth`). Diagnosis: the columns sgn(dq_j)|τ_load,j| with τ_load from the
-datasheet's link-side π at the measured motion, μ ≥ 0 linear, against both nominal models.
+datasheet's link-side π at the measured motion, μ ≥ 0 linear, against both nominal models; beside a payload
+the diagnosis has found, τ_load includes the payload's torque (the mass re-read until it settles).
 """
 
 from __future__ import annotations
 
 from ident_opt.effects.base import Effect, Key, cands, np, per_joint_draw, report, sim
+from ident_opt.effects.payload import EFFECT as PAYLOAD
 
 #: A hidden coefficient is found within this relative error (or within `ZERO_TOL` of an untouched 0).
 COEFFICIENT_TOL = 0.25
@@ -63,8 +65,12 @@ def link_torque(ds, ctx) -> np.ndarray:
 
 
 def _columns(ds, theta: dict, dt: float, ctx) -> tuple[np.ndarray, list[str]]:
-    """sgn(dq_j)·|τ_load,j| on joint j's row (coefficient μ_j)."""
-    load = np.abs(link_torque(ds, ctx)) * np.sign(ds.dq)
+    """sgn(dq_j)·|τ_load,j| on joint j's row (coefficient μ_j). A payload the model has found
+    (θ's `payload_mass` [kg], `Family.coupled`) is part of the load the gears transmit."""
+    tau_load = link_torque(ds, ctx)
+    if theta.get("payload_mass", 0.0):
+        tau_load = tau_load + theta["payload_mass"] * PAYLOAD.column(ds, ctx.robot)[:, :, 0]
+    load = np.abs(tau_load) * np.sign(ds.dq)
     X = np.zeros((ds.n, 2, 2))
     X[:, 0, 0], X[:, 1, 1] = load[:, 0], load[:, 1]
     return X, ["mu1", "mu2"]

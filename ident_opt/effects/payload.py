@@ -30,6 +30,8 @@ class Payload(Effect):
                 baselines=("datasheet",),
                 nonnegative=("mass",),
                 estimate=lambda p, se, ctx: ({"mass": p["mass"]}, {"se": se["mass"]}),
+                # the mass found is carried by the joints: load-dependent friction scales with it too
+                coupled=lambda p: {"payload_mass": p["mass"]},
             )
         ]
 

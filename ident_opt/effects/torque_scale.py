@@ -51,7 +51,7 @@ class TorqueScale(Effect):
     judged = ("scale",)
 
     def families(self, robot) -> list:
-        return [self.family(transform=_per_joint, baselines=("datasheet",), estimate=_absolute)]
+        return [self.family(transform=_per_joint, baselines=("datasheet",), estimate=_absolute, units=_units)]
 
     def sentence(self, d, base: str, gain: str) -> str:
         return (
@@ -87,6 +87,13 @@ def _absolute(p: dict, se: dict, ctx) -> tuple[dict, dict]:
     c = np.array([p["c1"], p["c2"]])
     with np.errstate(divide="ignore"):
         return {"scale": (1.0 / c).tolist()}, {"se": (np.array([se["c1"], se["c2"]]) / c**2).tolist()}
+
+
+def _units(p: dict) -> tuple[np.ndarray, tuple[str, ...]]:
+    """s_j = 1/c_j: the factor that turns a coefficient fitted on joint j's logged row into joint-torque
+    units (an armature or a Coulomb level found beside the scale is otherwise reported as J/s, fc/s)."""
+    with np.errstate(divide="ignore"):
+        return 1.0 / np.array([p["c1"], p["c2"]]), ("c1", "c2")
 
 
 EFFECT = TorqueScale()
