@@ -20,7 +20,7 @@ would otherwise cost seconds just to set up).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -133,8 +133,9 @@ def design(
 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """(o, X, names) of `family` at θ on `ds` (rows `rows`), against `baseline` (see the module docstring)."""
     model = family.model(theta)
-    if family.angles is not None:  # the model evaluated at shifted angles (no cache)
-        Y = model.regressor(ds.q[rows] + family.angles(theta), ds.dq[rows], ds.ddq[rows])
+    if family.angles is not None:  # the model, and every extra column, at the true angles q + δ (no cache)
+        ds = replace(ds, q=ds.q + family.angles(theta))
+        Y = model.regressor(ds.q[rows], ds.dq[rows], ds.ddq[rows])
     else:
         Y = _regressor(model, ds, rows)
     n = Y.shape[0]
