@@ -106,6 +106,6 @@ def test_stribeck_static_is_the_level_itself(physical_problem):
 def test_payload_is_read_where_the_joints_move(physical_problem, seed, kwargs):
     """A joint held by its friction logs the controller's feed-forward, not the payload's torque: read from
     every sample the mass came out 3–6 % low; the held samples' own coefficient leaves it within 2 %."""
-    trial, d = _run(physical_problem.robot, ["payload:mass=0.25"], seed=seed, **kwargs)
+    _, d = _run(physical_problem.robot, ["payload:mass=0.25"], seed=seed, **kwargs)
     assert d.cause == "payload" and len(d.causes) == 1, [(c["cause"], c["score"]) for c in d.candidates]
     assert d.estimate["mass"] == pytest.approx(0.25, rel=0.02)

@@ -39,6 +39,8 @@ SEARCH_ROWS = 12000
 POLISH_ROWS = 6000
 #: Most re-solves of a family whose columns depend on its coefficients (`Family.coupled`).
 COUPLING_STEPS = 5
+#: Relative step of the central differences in θ (`joint_errors`).
+THETA_STEP = 1e-4
 
 
 @dataclass
@@ -67,6 +69,10 @@ class Candidate:
     n_added: int
     predict: Callable[[Dataset], np.ndarray]
     detail: dict = field(default_factory=dict)
+    #: `errors()`: standard errors of every coefficient and every θ jointly, residual correlation counted
+    #: (`joint_errors`); `se` holds the coefficients' with θ taken as known and independent residuals (what
+    #: the searches use). Computed on demand: only the reported model needs them.
+    errors: Callable[[], dict[str, float]] | None = None
 
 
 @dataclass
@@ -255,7 +261,79 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
         o, X, _ = design(family, ds, columns_theta, baseline, ctx)
         return o + np.einsum("njk,k->nj", X, beta)
 
-    return Candidate(family.cause, baseline, estimate, params, se, n_added, predict, detail)
+    def errors() -> dict[str, float]:
+        joint = joint_errors(family, baseline, ctx, columns_theta, list(theta), (o, X, names), beta, ls.se)
+        if family.units is None:
+            return joint
+        coefficients = dict(zip(names, map(float, beta)))
+        return physical_units(family.units(coefficients), X, names, coefficients, joint, ctx.weights)[1]
+
+    return Candidate(family.cause, baseline, estimate, params, se, n_added, predict, detail, errors)
+
+
+def joint_errors(
+    family: Family,
+    baseline: str,
+    ctx: Context,
+    theta: dict,
+    keys: list[str],
+    columns: tuple,
+    beta: np.ndarray,
+    se_linear: np.ndarray,
+) -> dict[str, float]:
+    """Standard errors of the coefficients β and of the searched θ (`keys`) together, on the training part.
+
+    Gauss–Newton at the optimum (variable projection's covariance): the Jacobian J of the prediction is X for
+    β and a central difference for each θ, compared about each rest stretch's mean as the fit is. The
+    residuals are not independent (the torque is low-passed, and what the model misses is slow), so the
+    covariance is the Newey–West sandwich H⁻¹ S H⁻¹, H = Jᵀ W J, S the long-run covariance of the per-sample
+    scores g_t = Σ_j w_j J_tj r_tj with Bartlett weights out to `hac_lag` samples. A θ such as an encoder
+    offset thus gets the uncertainty the noise leaves it, and β's errors include what the uncertain θ adds.
+    Columns held at 0 (a sign constraint, a negligible column) keep their conditional error, take no part.
+    Bias from what the model lacks is not noise: no standard error covers it."""
+    o, X, names = columns
+    free = [i for i, e in enumerate(se_linear) if np.isfinite(e) and e > 0]
+    cols = [X[:, :, free]]
+    for k in keys:
+        h = THETA_STEP * max(abs(float(theta[k])), 1e-3)
+        side = []
+        for v in (theta[k] + h, theta[k] - h):
+            ov, Xv, _ = design(family, ctx.train, {**theta, k: v}, baseline, ctx)
+            side.append(ov + np.einsum("njk,k->nj", Xv, beta))
+        cols.append(((side[0] - side[1]) / (2 * h))[:, :, None])
+    J = signals.demean_runs(np.concatenate(cols, axis=2), ctx.rest)
+    r = signals.demean_runs(ctx.train.tau - o - np.einsum("njk,k->nj", X, beta), ctx.rest)
+    w = np.asarray(ctx.weights, dtype=float)
+    scale = np.sqrt(np.einsum("njk,njk,j->k", J, J, w))
+    scale[scale == 0] = 1.0
+    J = J / scale
+    H = np.einsum("njk,njl,j->kl", J, J, w)
+    g = np.einsum("njk,nj,j->nk", J, r, w)  # (N, m) per-sample scores
+    # Bartlett weights out to L lags = the products of sums over windows of L + 1 samples (in O(N m)).
+    width = min(hac_lag(r), len(g) - 1) + 1
+    sums = np.cumsum(np.vstack([np.zeros((1, g.shape[1])), g]), axis=0)
+    B = sums[width:] - sums[:-width]
+    S = B.T @ B / width
+    Hi = np.linalg.pinv(H)
+    cov = Hi @ S @ Hi / np.outer(scale, scale)
+    err = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    out = dict(zip(names, map(float, se_linear)))
+    out.update({names[i]: float(e) for i, e in zip(free, err)})
+    out.update({k: float(e) for k, e in zip(keys, err[len(free) :])})
+    return out
+
+
+def hac_lag(r: np.ndarray) -> int:
+    """Bartlett lag [samples] for `joint_errors`: 3 × the lag at which the residuals' autocorrelation (both
+    joints, averaged) first falls below 1/e, at least 1, at most a tenth of the samples."""
+    x = r - r.mean(axis=0)
+    n = len(x)
+    spectrum = np.fft.rfft(x, 2 * n, axis=0)
+    acf = np.fft.irfft(np.abs(spectrum) ** 2, axis=0)[:n].sum(axis=1)
+    acf = acf / acf[0] if acf[0] > 0 else acf
+    below = np.nonzero(acf < np.exp(-1.0))[0]
+    first = int(below[0]) if below.size else n
+    return int(np.clip(3 * first, 1, max(1, n // 10)))
 
 
 def physical_units(

@@ -311,6 +311,12 @@ def _forward_after(final: Fitted | None, baseline: str, ds_pi: dict, pi_rigid, t
     return evidence.forward_error(model, pi, test, dt, extension=final.pred - rigid)
 
 
+def _with_joint_errors(cand: cands.Candidate) -> cands.Candidate:
+    """The reported model with the standard errors of β and θ together, residual correlation counted
+    (`candidates.joint_errors`), instead of the searches' conditional ones."""
+    return replace(cand, se=cand.errors()) if cand.errors is not None else cand
+
+
 def _finite(value):
     """A JSON-safe copy: NumPy scalars as Python numbers, NaN and ±inf as None (strict JSON has neither)."""
     if isinstance(value, dict):
@@ -496,7 +502,7 @@ def diagnose(
     cause = causes[0]["cause"] if causes else "none"
     estimate = causes[0]["estimate"] if causes else {}
     before_pred = nominal_pred[baseline]
-    named_cand = final.cand if chain else None
+    named_cand = _with_joint_errors(final.cand) if chain else None
 
     ev = {b: evidence.residual_evidence(test, p, dt) for b, p in nominal_pred.items()}
     ev["forward_error_rad"] = {

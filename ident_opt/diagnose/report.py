@@ -307,8 +307,9 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
             lines.append(f"| {name} | {value:.5g} | {shown} |")
         lines += [
             "",
-            "Standard errors assume independent residuals; consecutive samples are correlated, so read them "
-            "as lower bounds.",
+            "Standard errors: every coefficient and every searched parameter together (Gauss–Newton at the "
+            "optimum, on the training part), with the residuals' correlation over time counted (Newey–West). "
+            "They measure what the noise leaves uncertain, not a bias from something the model lacks.",
             "",
         ]
     else:
