@@ -2,7 +2,7 @@
 
 For K = 5, 10, 20 GMR components: identify π (physically consistent fit) and fit the GMR residual on the
 problem's first trial, generate and compile the C code with the timing loop `benchmarks/c/bench_codegen.c`,
-and run it. The same run times the Python path on the same data: `ArmModel.predict` and `GMR.predict_mean`,
+and run it. The same run times the Python path on the same data: `PlanarArm.predict` and `GMR.predict_mean`,
 both vectorised over the whole trial (cost per sample) and called on one sample at a time (cost per call,
 what a Python control loop would pay). Targets (issue 8): tau_hat ≤ 100 ns, tau_hat_gmr at K = 10 ≤ 2 µs.
 
@@ -25,13 +25,13 @@ sys.path.insert(0, str(ROOT))
 from timing import best_time  # noqa: E402
 
 from ident_opt import codegen  # noqa: E402
+from ident_opt.arm.planar import RIGID  # noqa: E402
 from ident_opt.commands.common import write_json  # noqa: E402
 from ident_opt.data import load_dataset  # noqa: E402
 from ident_opt.gmr import GMR  # noqa: E402
 from ident_opt.identify.constrained import fit_constrained  # noqa: E402
 from ident_opt.identify.stats import Stats  # noqa: E402
 from ident_opt.problem import load_problem  # noqa: E402
-from ident_opt.robot import RIGID  # noqa: E402
 
 TIMING_LOOP = ROOT / "benchmarks" / "c" / "bench_codegen.c"
 TARGET_NS = {"tau_hat": 100.0, "tau_hat_gmr@10": 2000.0}

@@ -28,14 +28,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ident_opt.arm import Arm
+from ident_opt.arm.base import Arm
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.data import load_dataset
 from ident_opt.identify.constrained import fit_constrained, solve_constrained
 from ident_opt.identify.fit import fit_ols
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.robot import ArmModel
 
 
 def trial(n: int, seed: int = 0) -> tuple[np.ndarray, ...]:
@@ -51,7 +51,7 @@ def trial(n: int, seed: int = 0) -> tuple[np.ndarray, ...]:
     ddq = -0.5 * (w**2 * np.sin(arg)).sum(-1)
     # a3 < 0 in the generating parameters: the unconstrained fit is inconsistent, the constraints bind.
     pi = np.array([0.3, 0.05, -0.02, 3.7, 0.4, 1.0, 0.15, 0.5, 0.45])
-    tau = ArmModel().predict(pi, q, dq, ddq) + 0.3 * rng.normal(size=(n, 2))
+    tau = PlanarArm().predict(pi, q, dq, ddq) + 0.3 * rng.normal(size=(n, 2))
     return q, dq, ddq, tau
 
 
@@ -135,7 +135,7 @@ def main() -> None:
     parser.add_argument("--sizes", type=float, nargs="+", default=[1e4, 1e5, 1e6])
     parser.add_argument("--repeats", type=int, default=300, help="calls per solve timing")
     args = parser.parse_args()
-    model = ArmModel()
+    model = PlanarArm()
     P = model.n_params
 
     print("1) statistics pass + OLS vs full regressor + numpy.linalg.lstsq")

@@ -34,13 +34,13 @@ from scipy.optimize import lsq_linear  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ident_opt.arm.planar import RIGID  # noqa: E402
 from ident_opt.gmr import GMR, Support  # noqa: E402
 from ident_opt.identify.bounded import WarmConsistentLS, default_bounds  # noqa: E402
 from ident_opt.identify.stats import Stats  # noqa: E402
 from ident_opt.online import Estimator, OnlineIdentifier  # noqa: E402
 from ident_opt.online_kernel import attach  # noqa: E402
 from ident_opt.report import record  # noqa: E402
-from ident_opt.robot import RIGID  # noqa: E402
 
 #: exp1's plain OLS (a3 < 0: not physically consistent), as the data's truth.
 PI_EXP1_OLS = np.array([0.7527, 0.05218, -0.03602, 3.752, 0.3125, 1.568, 0.02847, 0.5806, 0.3739])

@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt.arm.planar import RIGID
 from ident_opt.data import load_dataset
 from ident_opt.problem import load_problem
-from ident_opt.robot import RIGID
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -21,11 +21,7 @@ Constants are printed by CasADi with 17 significant digits, so they round-trip e
 
 from __future__ import annotations
 
-import os
-import shlex
 import shutil
-import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from string import Template
@@ -33,14 +29,19 @@ from string import Template
 import casadi as ca
 import numpy as np
 
-from ident_opt.arm import Arm
+from ident_opt.arm.base import Arm
+from ident_opt.cbuild import (  # noqa: F401  (the toolchain, re-exported for codegen's callers)
+    CFLAGS,
+    NAME,
+    compile_library,
+    compile_shared,
+    find_compiler,
+    generate_sources,
+    library_name,
+    load_external,
+    run_compiler,
+)
 from ident_opt.errors import InputError
-
-#: Base name of the generated files: <NAME>.c, <NAME>.h and lib<NAME>.so (.dylib on macOS).
-NAME = "ident_opt_model"
-#: Flags used to build the shared library (the README repeats them). No -ffast-math: it would change
-#: results (and NaN/inf handling) relative to the Python model.
-CFLAGS = ("-O2", "-std=c99", "-fPIC")
 
 
 def gmr_inputs(n_joints: int) -> tuple[str, ...]:
@@ -204,53 +205,6 @@ def solve_ldl(M: ca.SX, b: ca.SX) -> ca.SX:
 
 
 # ---------------------------------------------------------------------------------------------- C files
-def generate_sources(functions: list[ca.Function], out_dir: Path, name: str = NAME) -> tuple[Path, Path]:
-    """Write <name>.c and <name>.h (CasADi's code generator) into `out_dir`; returns their paths."""
-    out_dir = Path(out_dir)
-    cg = ca.CodeGenerator(f"{name}.c", {"with_header": True, "with_export": True, "verbose": False})
-    for f in functions:
-        cg.add(f)
-    try:
-        cg.generate(str(out_dir) + os.sep)
-    except RuntimeError as exc:
-        raise InputError(f"{out_dir}: CasADi could not write the C code ({exc})") from None
-    return out_dir / f"{name}.c", out_dir / f"{name}.h"
-
-
-def library_name(name: str = NAME) -> str:
-    """lib<name>.so, or .dylib on macOS, .dll on Windows."""
-    suffix = {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
-    return f"lib{name}{suffix}"
-
-
-def find_compiler() -> list[str]:
-    """The C compiler command: $CC if set (split like a shell would, e.g. "ccache gcc"; its program must
-    exist), else gcc, else cc on PATH. `InputError` when there is none."""
-    cc = os.environ.get("CC", "").strip()
-    if cc:
-        words = shlex.split(cc)
-        found = shutil.which(words[0])
-        if not found:
-            raise InputError(f"the C compiler CC={cc!r} was not found; install one or set CC to a C compiler")
-        return [found, *words[1:]]
-    for candidate in ("gcc", "cc"):
-        found = shutil.which(candidate)
-        if found:
-            return [found]
-    raise InputError("no C compiler found (tried gcc and cc on PATH); install one (e.g. apt install gcc) or set CC")
-
-
-def compile_library(source: Path, out_dir: Path, compiler: list[str] | None = None, name: str = NAME) -> Path:
-    """Compile `source` into the shared library `out_dir`/lib<name>.so with `CFLAGS`; returns its path.
-    `compiler` is a command (program and leading arguments), by default `find_compiler()`."""
-    compiler = list(compiler or find_compiler())
-    lib = Path(out_dir) / library_name(name)
-    _run_compiler([*compiler, *CFLAGS, "-shared", str(source), "-o", str(lib), "-lm"], compiler[0], str(source))
-    if not lib.is_file():
-        raise InputError(
-            f"the C compiler {compiler[0]!r} reported success but wrote no {lib.name}: is it a C compiler?"
-        )
-    return lib
 
 
 def write_readme(out_dir: Path, functions: list[ca.Function], name: str = NAME) -> Path:
@@ -276,9 +230,6 @@ def copy_example(out_dir: Path) -> Path:
 
 
 # ---------------------------------------------------------------------------------------------- check
-def load_external(lib: Path, fname: str) -> ca.Function:
-    """A compiled entry point back as a CasADi Function (`casadi.external`), for checks and timing."""
-    return ca.external(fname, str(Path(lib).resolve()))
 
 
 def evaluate(f: ca.Function, *inputs: np.ndarray) -> np.ndarray:
@@ -371,22 +322,6 @@ def generate_pi_update(model: Arm, start: UpdateState, out_dir: Path, kkt_tol: f
     return paths
 
 
-def compile_shared(sources: list[str], library: Path, compiler: list[str]) -> Path:
-    """Compile C `sources` into the shared `library` with `CFLAGS`; `InputError` when the compiler fails."""
-    _run_compiler([*compiler, *CFLAGS, "-shared", *sources, "-o", str(library), "-lm"], compiler[0])
-    return Path(library)
-
-
-def _run_compiler(cmd: list[str], name: str, what: str = "the online update") -> None:
-    """Run the compiler command `cmd` (its program `name`) on `what`; `InputError` when it cannot run or fails."""
-    try:
-        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    except OSError as exc:
-        raise InputError(f"cannot run the C compiler {name!r} ({exc.strerror})") from None
-    if done.returncode != 0:
-        raise InputError(f"the C compiler failed on {what} (exit {done.returncode}):\n{done.stderr.strip()}")
-
-
 def compile_pi_update(out_dir: Path, compiler: list[str] | None = None) -> tuple[Path, Path]:
     """The shared library libpi_update.so and the example program `pi_update_example`, built with `CFLAGS`."""
     compiler = list(compiler or find_compiler())
@@ -395,7 +330,7 @@ def compile_pi_update(out_dir: Path, compiler: list[str] | None = None) -> tuple
     lib = compile_shared(sources, out_dir / library_name(UPDATE), compiler)
     exe = out_dir / f"{UPDATE}_example"
     example = str(out_dir / UPDATE_EXAMPLE)
-    _run_compiler(
+    run_compiler(
         [*compiler, "-O2", "-std=c99", "-D_POSIX_C_SOURCE=199309L", example, *sources, "-o", str(exe), "-lm"],
         compiler[0],
     )

@@ -38,7 +38,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ident_opt.arm import Arm
+from ident_opt.arm.base import Arm
 from ident_opt.parameters import Parameter
 
 #: Kinds whose sign gets its own named constraint "<kind>_<p>": π_p ≥ 0.

@@ -17,11 +17,12 @@ from scipy.interpolate import CubicSpline
 from sklearn.model_selection import train_test_split
 
 from ident_opt import rosbag
-from ident_opt.datasheet import PI_NAMES
+from ident_opt.arm.datasheet import PI_NAMES, PlanarRobot
 from ident_opt.errors import InputError
-from ident_opt.problem import DataSpec, Robot
 
 #: Limits beyond which a value is almost surely in the wrong unit (degrees, encoder counts, mA ...).
+from ident_opt.problem.spec import DataSpec
+
 PLAUSIBLE = {"q": 100.0, "dq": 1e3, "ddq": 1e5, "tau": 1e5, "i": 1e3}
 #: Sampling rates [Hz] a robot log can have: outside, t is almost surely not in seconds.
 PLAUSIBLE_RATE_HZ = (0.1, 1e5)
@@ -320,7 +321,7 @@ def _check_plausible(
             )
 
 
-def _current_to_torque(robot: Robot, path: Path) -> np.ndarray:
+def _current_to_torque(robot: PlanarRobot, path: Path) -> np.ndarray:
     """Joint-side torque per ampere per joint [N m/A]; an error when the problem lacks it for a joint."""
     k = [j.current_to_torque for j in robot.joints]
     missing = [f"joint{i + 1}" for i, v in enumerate(k) if v is None]
@@ -343,7 +344,7 @@ def _extra_columns(frame: pd.DataFrame, cols: dict[str, object], keep: np.ndarra
 def load_dataset(
     path: str | Path,
     spec: DataSpec,
-    robot: Robot,
+    robot: PlanarRobot,
     *,
     allow_implausible: bool = False,
     drop_invalid: bool = False,

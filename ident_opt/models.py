@@ -22,13 +22,13 @@ from typing import Protocol
 import numpy as np
 from sklearn.linear_model import RidgeCV
 
+from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi
+from ident_opt.arm.planar import PAPER, PHYSICAL, RIGID, PlanarArm
 from ident_opt.data import Dataset
-from ident_opt.datasheet import datasheet_pi
 from ident_opt.gmr import GMR
 from ident_opt.identify import estimators
 from ident_opt.identify.stats import Stats
-from ident_opt.problem import ResidualSpec, Robot
-from ident_opt.robot import PAPER, PHYSICAL, RIGID, ArmModel
+from ident_opt.problem.spec import ResidualSpec
 
 #: Ridge penalties searched by (efficient leave-one-out) cross-validation.
 RIDGE_ALPHAS = tuple(np.logspace(-4, 4, 17))
@@ -89,7 +89,7 @@ class RigidModel:
     """
 
     key: str
-    arm: ArmModel = RIGID
+    arm: PlanarArm = RIGID
     pi: np.ndarray | None = None
     estimator: str | None = None
     fit_: object = field(init=False, default=None)
@@ -112,7 +112,7 @@ class RigidModel:
         return self.arm.as_dict(self.pi)
 
 
-def datasheet_model(robot: Robot, convention: str) -> RigidModel:
+def datasheet_model(robot: PlanarRobot, convention: str) -> RigidModel:
     """The datasheet model: the paper's (its printed G, key `dm`) or the physical reading (`dm_physical`)."""
     key, arm = DATASHEETS[convention]
     return RigidModel(key, arm, arm.vector(datasheet_pi(robot, convention)))
@@ -172,7 +172,7 @@ def make_gmr(
     )
 
 
-def parametric_models(robot: Robot, constrained: bool = True) -> list:
+def parametric_models(robot: PlanarRobot, constrained: bool = True) -> list:
     """Fresh, unfitted parametric models in report order: rr, dm, dm_physical, pbr (, cpbr)."""
     fitted = {key: name for key, name in FITTED.items() if constrained or name != "constrained"}
     return [

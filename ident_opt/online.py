@@ -41,13 +41,13 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ident_opt.arm.planar import RIGID
 from ident_opt.errors import InputError
 from ident_opt.gmr import Support, conditioning, input_log_density
 from ident_opt.identify import estimators
 from ident_opt.identify.bounded import Bounds, WarmBoundedLS, WarmConsistentLS, default_bounds
 from ident_opt.identify.stats import Stats
 from ident_opt.models import DATASHEETS, FITTED, RidgeModel, datasheet_model, features, make_gmr
-from ident_opt.robot import RIGID
 
 #: z-value of the central 95 % interval of a Gaussian.
 Z95 = 1.959963984540054
@@ -351,7 +351,7 @@ def batch_theta(estimator: Estimator, stats: Stats, theta_fixed: np.ndarray | No
 
 
 def arm_design_jacobian(model) -> Callable[[np.ndarray], np.ndarray]:
-    """x = [q dq ddq] (6,) -> ∂Y/∂x (2, 6, P) of an `ArmModel`'s regressor, from its CasADi expressions
+    """x = [q dq ddq] (6,) -> ∂Y/∂x (2, 6, P) of an `PlanarArm`'s regressor, from its CasADi expressions
     (exact; sign(dq) columns have derivative 0, where a finite difference would blow up at dq = 0)."""
     s = model.symbols
     x = ca.vertcat(s["q"], s["dq"], s["ddq"])

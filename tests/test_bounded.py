@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
+from ident_opt.arm.planar import RIGID, PlanarArm
 from ident_opt.identify.bounded import Bounds, default_bounds, kkt_residual, solve_bounded
 from ident_opt.identify.stats import Stats
-from ident_opt.robot import RIGID, ArmModel
 
 
 def _data(n: int, seed: int, pi: np.ndarray, noise: float = 0.3):
@@ -73,8 +73,8 @@ def test_any_warm_start_gives_the_same_answer(seed):
 
 
 def test_default_bounds_are_physical():
-    b = default_bounds(ArmModel(extensions=("armature", "asymmetric_coulomb")))
-    names = ArmModel(extensions=("armature", "asymmetric_coulomb")).names
+    b = default_bounds(PlanarArm(extensions=("armature", "asymmetric_coulomb")))
+    names = PlanarArm(extensions=("armature", "asymmetric_coulomb")).names
     lower = dict(zip(names, b.lower))
     assert all(lower[n] == 0 for n in ("a1", "a3", "ia2", "fv1", "fv2", "fc1p", "fc1n", "fc2p", "fc2n"))
     assert all(lower[n] == -np.inf for n in ("a2", "b1", "b2"))

@@ -15,13 +15,13 @@ from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 
 from ident_opt import codegen
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.errors import InputError
 from ident_opt.gmr import GMR
-from ident_opt.robot import ArmModel
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 
-MODEL = ArmModel(extensions=("armature", "asymmetric_coulomb"))
+MODEL = PlanarArm(extensions=("armature", "asymmetric_coulomb"))
 #: A physically plausible π for MODEL (a [kg m²], b [N m], friction ≥ 0), distinct per-direction Coulomb.
 PI = MODEL.vector(
     {

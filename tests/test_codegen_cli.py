@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from ident_opt import codegen
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.cli import main
 from ident_opt.gmr import GMR
-from ident_opt.robot import ArmModel
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = str(ROOT / "problems" / "tudor_2dof.toml")
@@ -44,7 +44,7 @@ def test_cli_writes_the_contract_files(run_dir):
     assert FILES <= {p.name for p in run_dir.iterdir()}
     saved = json.loads((run_dir / "parameters.json").read_text())
     assert saved["estimator"] == "constrained"  # the spec's default: the physically consistent fit
-    assert list(saved["parameters"]) == list(ArmModel().names)
+    assert list(saved["parameters"]) == list(PlanarArm().names)
     assert saved["gmr"]["n_components"] == 3
     check = saved["check"]
     assert check["tau_hat"]["max_relative_error"] <= 1e-12 and check["ddq_hat"]["max_backward_error"] <= 1e-12
@@ -58,7 +58,7 @@ def test_cli_writes_the_contract_files(run_dir):
 def test_cli_library_matches_the_saved_parameters_on_the_data(run_dir, real_slice):
     """What the library computes is the Python model with the parameters.json values (π and GMR)."""
     saved = json.loads((run_dir / "parameters.json").read_text())
-    model = ArmModel()
+    model = PlanarArm()
     pi = model.vector(saved["parameters"])
     raw = np.loadtxt(real_slice, delimiter=",")
     q, dq, ddq = raw[:, [2, 3]], raw[:, [5, 6]], raw[:, [15, 16]]

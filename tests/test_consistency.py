@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 
 from ident_opt import codegen
-from ident_opt.arm import Arm
+from ident_opt.arm.base import Arm
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.planar import EXTENSIONS, RIGID, PlanarArm
 from ident_opt.consistency import (
     Bound,
     Consistency,
@@ -22,17 +24,15 @@ from ident_opt.consistency import (
     sign_constraints,
     sign_violations,
 )
-from ident_opt.datasheet import datasheet_pi
 from ident_opt.identify import constrained
 from ident_opt.identify.bounded import WarmConsistentLS, default_bounds
 from ident_opt.identify.constrained import ACTIVE_TOL, fit_constrained, solve_constrained
 from ident_opt.identify.fit import fit_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.parameters import Parameter
-from ident_opt.robot import EXTENSIONS, RIGID, ArmModel, TwoLinkArm
 from ident_opt.studies.constraints import multisine_trial
 
-ARM = ArmModel(("armature",))
+ARM = PlanarArm(("armature",))
 #: A parameter no name rule could know: a made-up quadratic drag k·dq1·|dq1| on joint 1, of kind friction.
 DRAG = Parameter("kq1", "N m s^2/rad^2", "made-up quadratic drag on joint 1 (test only)", "friction")
 
@@ -41,7 +41,7 @@ DRAG = Parameter("kq1", "N m s^2/rad^2", "made-up quadratic drag on joint 1 (tes
 class DragArm:
     """A second `Arm` (test only): `base` plus the column of DRAG. Nothing outside this class knows it."""
 
-    base: ArmModel = RIGID
+    base: PlanarArm = RIGID
     extra: Parameter = DRAG
 
     @property
@@ -154,7 +154,7 @@ def _block_slack(block, pi: np.ndarray) -> float:
 
 
 def test_arm_model_satisfies_the_arm_protocol():
-    for model in (RIGID, ARM, ArmModel(tuple(EXTENSIONS)), ArmModel(gravity="paper"), DragArm()):
+    for model in (RIGID, ARM, PlanarArm(tuple(EXTENSIONS)), PlanarArm(gravity="paper"), DragArm()):
         assert isinstance(model, Arm)
         assert model.regressor(np.zeros((3, 2)), np.ones((3, 2)), np.ones((3, 2))).shape == (
             3,
@@ -162,7 +162,6 @@ def test_arm_model_satisfies_the_arm_protocol():
             model.n_params,
         )
         assert [p.name for p in model.parameters] == list(model.names)
-    assert TwoLinkArm is ArmModel
     assert not isinstance(object(), Arm)
 
 
@@ -231,7 +230,7 @@ def test_signs_come_from_kinds_not_names():
     lower, upper = physical_bounds(made_up)
     assert lower.tolist() == [0.0, -np.inf, 0.0] and np.all(upper == np.inf)
     # The two-link arm's sign constraints, as before: friction (fv, fc, fs) then armature (ia), by kind.
-    big = ArmModel(tuple(EXTENSIONS))
+    big = PlanarArm(tuple(EXTENSIONS))
     assert list(constrained.sign_constraints(big)) == [
         f"friction_{n}" for n in big.names if n.startswith(("fv", "fc", "fs"))
     ] + ["armature_ia2"]

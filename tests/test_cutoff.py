@@ -7,12 +7,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.planar import PHYSICAL
 from ident_opt.data import choose_cutoff, load_dataset
-from ident_opt.datasheet import datasheet_pi
 from ident_opt.identify.fit import fit_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import DataSpec, load_problem
-from ident_opt.robot import PHYSICAL
 
 from .conftest import PROBLEMS
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from ident_opt import paper
-from ident_opt.datasheet import datasheet_pi, rigid_body
+from ident_opt.arm.datasheet import datasheet_pi, rigid_body
 
 
 def rel(a: float, b: float) -> float:

@@ -179,7 +179,7 @@ def test_residual_evidence_reads_direction_and_pose(physical_problem):
 
 def test_forward_simulation_error_separates_right_from_wrong_parameters(physical_problem):
     """Driven by the measured torque, the true model tracks short windows; a 50 % inertia error does not."""
-    from ident_opt.datasheet import datasheet_pi
+    from ident_opt.arm.datasheet import datasheet_pi
     from ident_opt.diagnose.candidates import NOMINAL
     from ident_opt.diagnose.evidence import forward_error
     from ident_opt.simulate import simulate_trial
@@ -254,7 +254,7 @@ def test_elastic_polish_recovers_the_mode_from_a_wrong_start():
 
 
 def test_offset_polish_recovers_both_offsets_jointly_with_pi(physical_problem):
-    from ident_opt.datasheet import datasheet_pi
+    from ident_opt.arm.datasheet import datasheet_pi
     from ident_opt.diagnose.candidates import NOMINAL
     from ident_opt.effects.joint_offset import offsets
 

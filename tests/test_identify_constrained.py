@@ -5,16 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident_opt.datasheet import datasheet_pi
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.identify import constrained
 from ident_opt.identify.constrained import constraint_slacks, fit_bounded, fit_constrained, solve_constrained
 from ident_opt.identify.fit import fit_ols
 from ident_opt.identify.stats import Stats
-from ident_opt.robot import ArmModel
 from ident_opt.studies.constraints import multisine_trial
 
-RIGID = ArmModel()
-ARM = ArmModel(("armature",))
+RIGID = PlanarArm()
+ARM = PlanarArm(("armature",))
 
 
 def _stats(trial, model):

@@ -5,16 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident_opt.datasheet import datasheet_pi
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import base_combinations, fit_ols
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.parameters import Parameter
-from ident_opt.robot import ArmModel
 from ident_opt.studies.constraints import multisine_trial
 
-RIGID = ArmModel()
+RIGID = PlanarArm()
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +102,7 @@ def test_consistency_is_checked(truth):
 def test_mismatched_statistics_rejected(truth):
     trial = multisine_trial(RIGID, truth, duration=3.0, seed=8)
     with pytest.raises(ValueError):
-        fit_ols(_stats(trial), ArmModel(("armature",)))
+        fit_ols(_stats(trial), PlanarArm(("armature",)))
     with pytest.raises(ValueError):
         fit_ols(_stats(trial), RIGID, weights="nonsense")
 

@@ -6,13 +6,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from ident_opt.datasheet import datasheet_pi
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.identify.nlp import fit_expression, fit_physical
 from ident_opt.identify.stats import Stats
-from ident_opt.robot import ArmModel
 from ident_opt.studies.constraints import multisine_trial
 
-ARM = ArmModel(("armature",))
+ARM = PlanarArm(("armature",))
 
 
 def test_fit_expression_recovers_a_stribeck_velocity():

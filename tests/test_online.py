@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
+from ident_opt.arm.planar import RIGID
 from ident_opt.gmr import GMR
 from ident_opt.identify.bounded import Bounds, default_bounds, solve_bounded
 from ident_opt.identify.stats import Stats
 from ident_opt.online import Estimator, OnlineIdentifier, batch_theta
-from ident_opt.robot import RIGID
 
 
 def _trial(n: int, seed: int, pi: np.ndarray, noise: float = 0.3):

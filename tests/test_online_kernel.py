@@ -8,11 +8,11 @@ import copy
 import numpy as np
 import pytest
 
+from ident_opt.arm.planar import RIGID
 from ident_opt.identify.bounded import default_bounds
 from ident_opt.identify.stats import Stats
 from ident_opt.online import Estimator, OnlineIdentifier
 from ident_opt.online_kernel import attach
-from ident_opt.robot import RIGID
 
 PI = np.array([0.7527, 0.05218, -0.03602, 3.752, 0.3125, 1.568, 0.02847, 0.5806, 0.3739])  # a3 < 0: bound active
 

@@ -11,8 +11,8 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from ident_opt.datasheet import datasheet_pi, grouped, rigid_body
-from ident_opt.robot import EXTENSIONS, RIGID, ArmModel
+from ident_opt.arm.datasheet import datasheet_pi, grouped, rigid_body
+from ident_opt.arm.planar import EXTENSIONS, RIGID, PlanarArm
 
 RNG = np.random.default_rng(7)
 
@@ -44,7 +44,7 @@ def test_rnea_matches_pinocchio(physical_problem):
     body = rigid_body(physical_problem.robot, "physical")
     model = pinocchio_arm(body)
     data = model.createData()
-    arm = ArmModel(("armature",))
+    arm = PlanarArm(("armature",))
     pi = arm.vector(datasheet_pi(physical_problem.robot, "physical"))
     for name in ("fv1", "fv2", "fc1", "fc2"):  # Pinocchio's RNEA has no friction
         pi[arm.names.index(name)] = 0.0
@@ -58,7 +58,7 @@ def test_pinocchio_mass_matrix_matches(physical_problem):
     body = rigid_body(physical_problem.robot, "physical")
     model = pinocchio_arm(body)
     data = model.createData()
-    arm = ArmModel(("armature",))
+    arm = PlanarArm(("armature",))
     pi = arm.vector(datasheet_pi(physical_problem.robot))
     for q in random_states(20)[0]:
         M = pin.crba(model, data, q)
@@ -66,8 +66,8 @@ def test_pinocchio_mass_matrix_matches(physical_problem):
         assert np.allclose(arm.mass_matrix(pi, q[1]), M, atol=1e-12)
 
 
-ALL_MODELS = [ArmModel(ext) for r in range(len(EXTENSIONS) + 1) for ext in itertools.combinations(EXTENSIONS, r)]
-ALL_MODELS.append(ArmModel(gravity="paper"))
+ALL_MODELS = [PlanarArm(ext) for r in range(len(EXTENSIONS) + 1) for ext in itertools.combinations(EXTENSIONS, r)]
+ALL_MODELS.append(PlanarArm(gravity="paper"))
 
 
 @pytest.mark.parametrize("model", ALL_MODELS, ids=lambda m: "+".join(m.extensions) or m.gravity)
@@ -103,7 +103,7 @@ def test_regressor_times_pi_is_the_dynamics(model):
 def test_paper_printed_regressor_columns():
     """The paper's printed Yᵀ (its Eq. for Y), row by row, with g taken out of the gravity columns."""
     q, dq, ddq = random_states(10)
-    Y = ArmModel(gravity="paper").regressor(q, dq, ddq)
+    Y = PlanarArm(gravity="paper").regressor(q, dq, ddq)
     c1, c2, s2, c12 = np.cos(q[:, 0]), np.cos(q[:, 1]), np.sin(q[:, 1]), np.cos(q[:, 0] + q[:, 1])
     printed = np.stack(
         [
@@ -133,7 +133,7 @@ def test_paper_printed_regressor_columns():
 
 
 def test_mass_matrix_spd_and_maps(physical_problem):
-    arm = ArmModel(("armature",))
+    arm = PlanarArm(("armature",))
     pi = arm.vector(datasheet_pi(physical_problem.robot))
     fM = arm.function("M")
     for q in random_states(50)[0]:
@@ -153,7 +153,7 @@ def test_min_eigenvalue_detects_inconsistent_parameters():
 
 
 def test_mdot_minus_2c_is_skew_symmetric():
-    arm = ArmModel(("armature",))
+    arm = PlanarArm(("armature",))
     s = arm.symbols
     Mdot = ca.jtimes(s["M"], s["q"], s["dq"])
     f = ca.Function("N", [s["q"], s["dq"], s["pi"]], [Mdot - 2 * s["C"]])
@@ -199,12 +199,12 @@ def test_free_motion_conserves_energy(physical_problem):
 
 
 def test_vector_and_dict_round_trip():
-    arm = ArmModel(("asymmetric_coulomb", "armature"))
+    arm = PlanarArm(("asymmetric_coulomb", "armature"))
     pi = arm.vector({"a1": 1.0, "fc1": 0.5, "fc2p": 0.7})
     d = arm.as_dict(pi)
     assert d["fc1p"] == 0.5 and d["fc1n"] == 0.5 and d["fc2p"] == 0.7 and d["fc2n"] == 0.0
     assert "fc1" not in arm.names and arm.names[-1] == "ia2"
     with pytest.raises(ValueError):
-        ArmModel(("springs",))
+        PlanarArm(("springs",))
     with pytest.raises(ValueError):
-        ArmModel(("offset",), gravity="paper")
+        PlanarArm(("offset",), gravity="paper")

@@ -11,20 +11,20 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.cli import main
 from ident_opt.data import load_dataset
-from ident_opt.datasheet import datasheet_pi
 from ident_opt.effects import BACKGROUND
 from ident_opt.errors import InputError
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import DataSpec, load_problem
-from ident_opt.robot import ArmModel
 from ident_opt.simulate import CATALOGUE, measurement, parse_effect, simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "tudor_2dof.toml"
-MODEL = ArmModel(("armature",))
+MODEL = PlanarArm(("armature",))
 
 
 @pytest.fixture(scope="module")

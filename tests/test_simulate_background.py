@@ -10,16 +10,16 @@ import pandas as pd
 import pytest
 from scipy import signal
 
+from ident_opt.arm.planar import RIGID, PlanarArm
 from ident_opt.data import load_dataset
 from ident_opt.effects import BACKGROUND, describe
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.robot import RIGID, ArmModel
 from ident_opt.simulate import CATALOGUE, parse_effect, simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
-MODEL = ArmModel(("armature",))
+MODEL = PlanarArm(("armature",))
 EXACT = {"noise": False, "exact_derivatives": True, "progress": False}
 
 

@@ -9,14 +9,14 @@ import pandas as pd
 import pytest
 from scipy import signal
 
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.robot import ArmModel
 from ident_opt.simulate import simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
-MODEL = ArmModel(("armature",))
+MODEL = PlanarArm(("armature",))
 SHORT = {"duration": 6.0, "trajectory": "fourier", "progress": False}
 EXACT = {**SHORT, "noise": False, "exact_derivatives": True}
 
@@ -84,7 +84,7 @@ def test_armature_adds_inertia_on_the_diagonal_only(robot, clean):
 
 def test_asymmetric_coulomb_is_recovered_by_the_asymmetric_model(robot):
     trial = simulate_trial(robot, effects=["asymmetric_coulomb:positive=[0.9,0.3],negative=[0.4,0.6]"], **EXACT)
-    got = fit(trial, ArmModel(("armature", "asymmetric_coulomb")))
+    got = fit(trial, PlanarArm(("armature", "asymmetric_coulomb")))
     assert [got["fc1p"], got["fc2p"]] == pytest.approx([0.9, 0.3], rel=1e-6)
     assert [got["fc1n"], got["fc2n"]] == pytest.approx([0.4, 0.6], rel=1e-6)
     assert trial.truth["effects"]["asymmetric_coulomb"] == {"positive": [0.9, 0.3], "negative": [0.4, 0.6]}
@@ -94,7 +94,7 @@ def test_asymmetric_coulomb_is_recovered_by_the_asymmetric_model(robot):
 def test_stribeck_is_recovered_by_the_stribeck_model(robot):
     """`static` is the breakaway level fs itself; the model's fs1 fs2 are its excess over the Coulomb level."""
     trial = simulate_trial(robot, effects=["stribeck:static=[0.9,0.65],velocity=[0.1,0.08]"], **EXACT)
-    got = fit(trial, ArmModel(("armature", "stribeck"), stribeck_velocity=(0.1, 0.08)))
+    got = fit(trial, PlanarArm(("armature", "stribeck"), stribeck_velocity=(0.1, 0.08)))
     fc = [trial.truth["pi"]["fc1"], trial.truth["pi"]["fc2"]]
     assert [got["fs1"], got["fs2"]] == pytest.approx([0.9 - fc[0], 0.65 - fc[1]], rel=1e-6)
     assert [got["fc1"] + got["fs1"], got["fc2"] + got["fs2"]] == pytest.approx([0.9, 0.65], rel=1e-6)
@@ -105,7 +105,7 @@ def test_stribeck_is_recovered_by_the_stribeck_model(robot):
 def test_joint_offset_rotates_gravity_by_the_offset(robot, clean):
     delta = 0.03
     trial = simulate_trial(robot, effects=[f"joint_offset:offset=[{delta},0]"], **EXACT)
-    got = fit(trial, ArmModel(("armature", "offset")))
+    got = fit(trial, PlanarArm(("armature", "offset")))
     # Gravity at the true angle q + δ: b1 cos(q1 + δ) = b1 cos δ cos q1 − b1 sin δ sin q1 (same for b2).
     assert np.arctan2(-got["b1s"], got["b1"]) == pytest.approx(delta, rel=1e-6)
     assert np.arctan2(-got["b2s"], got["b2"]) == pytest.approx(delta, rel=1e-6)
@@ -166,7 +166,7 @@ def test_torque_scale_divides_the_logged_torque_by_the_factor(robot, clean):
 def test_load_friction_adds_mu_times_the_link_torque_to_the_coulomb_level(robot):
     """Exact data: τ − Y π_true = μ_j sgn(dq_j) |τ_load,j| with τ_load the link-side rigid torque (inertial
     without the rotor inertia, Coriolis, gravity), so regressing the residual on that column gives back μ."""
-    from ident_opt.datasheet import datasheet_pi, rigid_body
+    from ident_opt.arm.datasheet import datasheet_pi, rigid_body
     from ident_opt.simulate.truth import link_pi
 
     trial = simulate_trial(robot, effects=["load_friction:coefficient=[0.15,0.05]"], **EXACT)

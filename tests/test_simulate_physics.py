@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from ident_opt.datasheet import datasheet_pi
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.joints import Friction
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.effects import normalise
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
-from ident_opt.problem import Friction, load_problem
-from ident_opt.robot import ArmModel
+from ident_opt.problem import load_problem
 from ident_opt.simulate import simulate_trial
 from ident_opt.simulate.closed_loop import MAX_TRACKING_ERROR
 from ident_opt.simulate.flexible_link import datasheet_armature, lagrangian_terms
@@ -23,7 +24,7 @@ from ident_opt.simulate.trajectories import TAU_MAX
 from ident_opt.simulate.truth import build_truth, coulomb_levels, plant
 
 ROOT = Path(__file__).resolve().parents[1]
-MODEL = ArmModel(("armature",))
+MODEL = PlanarArm(("armature",))
 FRICTION_MASK = np.array([name.startswith(("fv", "fc")) for name in MODEL.names], dtype=float)
 
 

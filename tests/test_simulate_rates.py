@@ -7,16 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.errors import InputError
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.robot import ArmModel
 from ident_opt.simulate import simulate_trial
 from ident_opt.simulate.closed_loop import MAX_TRACKING_ERROR
 
 PROBLEM = Path(__file__).resolve().parents[1] / "problems" / "tudor_2dof.toml"
-MODEL = ArmModel(("armature",))
+MODEL = PlanarArm(("armature",))
 CLEAN = {"duration": 6.0, "seed": 2, "noise": False, "exact_derivatives": True, "progress": False}
 
 

@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ident_opt.arm.planar import RIGID
 from ident_opt.data import chronological_split, load_dataset
 from ident_opt.errors import InputError
 from ident_opt.identify.fit import finish
 from ident_opt.identify.stats import Stats
 from ident_opt.online import batch_theta, offline_start
-from ident_opt.robot import RIGID
 from ident_opt.stream import REST, CausalDerivatives, LineParser, Mapping, derivative_kernels
 
 ROOT = Path(__file__).resolve().parents[1]

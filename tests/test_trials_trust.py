@@ -102,7 +102,7 @@ def test_parallel_filtering_only_when_derivatives_are_estimated():
 
 
 def _rigid():
-    from ident_opt.robot import RIGID
+    from ident_opt.arm.planar import RIGID
 
     return RIGID
 

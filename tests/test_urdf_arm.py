@@ -8,8 +8,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from ident_opt.arm.chain import ChainArm
 from ident_opt.errors import InputError
-from ident_opt.urdf_arm import UrdfArm
 
 ROOT = Path(__file__).resolve().parents[1]
 KUKA = ROOT / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"
@@ -43,37 +43,37 @@ TWISTED = """<?xml version="1.0"?>
 
 
 @pytest.fixture(scope="module")
-def twisted(tmp_path_factory) -> UrdfArm:
+def twisted(tmp_path_factory) -> ChainArm:
     path = tmp_path_factory.mktemp("urdf") / "twisted.urdf"
     path.write_text(TWISTED)
-    return UrdfArm(str(path), ("a", "b", "c"), gravity=(0.5, -1.0, -9.7), offsets=True)
+    return ChainArm(str(path), ("a", "b", "c"), gravity=(0.5, -1.0, -9.7), offsets=True)
 
 
 @pytest.fixture(scope="module")
-def kuka() -> UrdfArm:
-    return UrdfArm(str(KUKA), KUKA_JOINTS, offsets=True)
+def kuka() -> ChainArm:
+    return ChainArm(str(KUKA), KUKA_JOINTS, offsets=True)
 
 
 @pytest.fixture(scope="module")
-def panda() -> UrdfArm:
+def panda() -> ChainArm:
     path = ROOT / "data" / "franka_panda" / "panda.urdf"
-    return UrdfArm(str(path), tuple(f"panda_joint{i}" for i in range(1, 8)), offsets=True)
+    return ChainArm(str(path), tuple(f"panda_joint{i}" for i in range(1, 8)), offsets=True)
 
 
 @pytest.fixture(scope="module")
-def tx40() -> UrdfArm:
+def tx40() -> ChainArm:
     path = ROOT / "data" / "staubli_tx40" / "tx40.urdf"
     joints = tuple(f"joint_{i}" for i in range(1, 7))
-    return UrdfArm(str(path), joints, offsets=True, couplings=(("joint_6", "joint_5", 1.0),))
+    return ChainArm(str(path), joints, offsets=True, couplings=(("joint_6", "joint_5", 1.0),))
 
 
-def _states(arm: UrdfArm, n: int, seed: int = 0):
+def _states(arm: ChainArm, n: int, seed: int = 0):
     rng = np.random.default_rng(seed)
     size = (n, arm.n_joints)
     return rng.uniform(-np.pi, np.pi, size), rng.uniform(-2, 2, size), rng.uniform(-5, 5, size)
 
 
-def _random_pi(arm: UrdfArm, seed: int = 1) -> np.ndarray:
+def _random_pi(arm: ChainArm, seed: int = 1) -> np.ndarray:
     rng = np.random.default_rng(seed)
     pi = arm.cad_parameters()
     pi[: arm.n_link_params] *= rng.uniform(0.5, 1.5, arm.n_link_params)
@@ -164,7 +164,7 @@ def _write(tmp_path: Path, text: str) -> str:
 )
 def test_bad_urdf_names_file_and_element(tmp_path, text, joints, names):
     with pytest.raises(InputError) as info:
-        UrdfArm(_write(tmp_path, text), joints)
+        ChainArm(_write(tmp_path, text), joints)
     for name in names:
         assert name in str(info.value)
 
@@ -175,7 +175,7 @@ def test_missing_inertial_is_named_when_a_prior_is_needed(tmp_path):
         '    <inertia ixx="0.002" ixy="0.0001" ixz="0" iyy="0.001" iyz="0" izz="0.002"/></inertial></link>',
         '<link name="l4"/>',
     )
-    arm = UrdfArm(_write(tmp_path, text), ("a", "b", "c"))
+    arm = ChainArm(_write(tmp_path, text), ("a", "b", "c"))
     with pytest.raises(InputError, match="l4"):
         arm.cad_parameters()
 
@@ -185,7 +185,7 @@ def test_coupled_drive_terms(tmp_path):
     both joints' rows, in the NumPy regressor, the CasADi model and M(q) alike."""
     path = tmp_path / "twisted.urdf"
     path.write_text(TWISTED)
-    arm = UrdfArm(str(path), ("a", "b", "c"), offsets=True, couplings=(("c", "b", 0.7),))
+    arm = ChainArm(str(path), ("a", "b", "c"), offsets=True, couplings=(("c", "b", 0.7),))
     pi = _random_pi(arm)
     q, dq, ddq = _states(arm, 10, seed=5)
     Y = arm.regressor(q, dq, ddq)
@@ -198,4 +198,4 @@ def test_coupled_drive_terms(tmp_path):
         np.testing.assert_allclose(Y[k], np.asarray(fY(q[k], dq[k], ddq[k], pi)), atol=1e-10)
         np.testing.assert_allclose(M[k], np.asarray(fM(q[k], dq[k], ddq[k], pi)), atol=1e-10)
     with pytest.raises(InputError, match="'z'"):
-        UrdfArm(str(path), ("a", "b", "c"), couplings=(("c", "z", 1.0),))
+        ChainArm(str(path), ("a", "b", "c"), couplings=(("c", "z", 1.0),))

@@ -7,18 +7,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ident_opt.arm.chain import ChainArm
 from ident_opt.identify.base import base_parameters, fit_base_ols, random_regressor
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
 from ident_opt.studies.urdf import necessarily_nonnegative
-from ident_opt.urdf_arm import UrdfArm
 
 KUKA = Path(__file__).resolve().parents[1] / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"
 
 
 @pytest.fixture(scope="module")
-def kuka() -> UrdfArm:
-    return UrdfArm(str(KUKA), tuple(f"lwr_{i}_joint" for i in range(7)), offsets=True)
+def kuka() -> ChainArm:
+    return ChainArm(str(KUKA), tuple(f"lwr_{i}_joint" for i in range(7)), offsets=True)
 
 
 def test_count_is_the_numerical_rank(kuka):
@@ -55,7 +55,7 @@ def test_ols_on_base_parameters_recovers_them(kuka):
     assert set(summary) == set(base.names) and {"value", "se", "definition"} <= set(summary["izz_lwr_1_link"])
 
 
-def _random_consistent(arm: UrdfArm, rng) -> np.ndarray:
+def _random_consistent(arm: ChainArm, rng) -> np.ndarray:
     """π of random point-mass bodies (a density, so every pseudo-inertia ⪰ 0) with positive joint terms."""
     pi = np.zeros(arm.n_params)
     for i in range(arm.n_joints):

@@ -8,18 +8,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ident_opt.arm.chain import ChainArm
 from ident_opt.identify.base import fit_base_ols
 from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.physical import fit_physical, log_det_divergence
 from ident_opt.identify.stats import Stats
-from ident_opt.urdf_arm import UrdfArm
 
 KUKA = Path(__file__).resolve().parents[1] / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"
 
 
 @pytest.fixture(scope="module")
-def kuka() -> UrdfArm:
-    return UrdfArm(str(KUKA), tuple(f"lwr_{i}_joint" for i in range(7)), offsets=True)
+def kuka() -> ChainArm:
+    return ChainArm(str(KUKA), tuple(f"lwr_{i}_joint" for i in range(7)), offsets=True)
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +68,7 @@ def test_a_heavy_prior_returns_the_cad_inertials(kuka, simulated):
     assert log_det_divergence(2 * J0[0], J0[0]) == pytest.approx(4 - 4 * np.log(2))
 
 
-def _objective(arm: UrdfArm, stats: Stats, pi: np.ndarray, weight: float) -> float:
+def _objective(arm: ChainArm, stats: Stats, pi: np.ndarray, weight: float) -> float:
     """The plausible fit's objective (module doc of identify.physical) up to a constant, at π."""
     H, h = stats.combined()[:2]
     J0 = arm.pseudo_inertias(arm.cad_parameters())

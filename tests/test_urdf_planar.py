@@ -1,4 +1,4 @@
-"""A two-joint URDF with parallel axes becomes the planar two-link robot (`ident_opt.urdf_planar`):
+"""A two-joint URDF with parallel axes becomes the planar two-link robot (`ident_opt.arm.planar_urdf`):
 
 (a) its M(q), gravity torque and inverse dynamics equal Pinocchio's RNEA on the same URDF (angles mapped
 through the stated offset and sign) to 1e-10, for a URDF with off-axis centres of mass, fixed child links,
@@ -18,13 +18,13 @@ import pandas as pd
 import pinocchio as pin
 import pytest
 
+from ident_opt.arm.chain import ChainRobot
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.planar import PHYSICAL
+from ident_opt.arm.planar_urdf import UrdfPlanarRobot
 from ident_opt.cli import main
 from ident_opt.data import load_dataset
-from ident_opt.datasheet import datasheet_pi
 from ident_opt.problem import DataSpec, load_problem
-from ident_opt.robot import PHYSICAL
-from ident_opt.urdf_planar import UrdfPlanarRobot
-from ident_opt.urdf_problem import UrdfRobot
 
 from .conftest import PROBLEMS
 
@@ -191,14 +191,14 @@ def test_data_in_the_urdf_convention_are_mapped(planar, tmp_path):
 
 
 def test_not_planar_takes_the_n_joint_path(tmp_path):
-    """Axes not parallel, or link 1's centre of mass off the line between the axes: the n-joint UrdfRobot, as
+    """Axes not parallel, or link 1's centre of mass off the line between the axes: the n-joint ChainRobot, as
     before; form = "n-joint" asks for it on a planar arm too."""
     skew = _write(tmp_path, twisted_planar(elbow_axis=np.array([0.0, 0.3, 1.0])), name="skew")
-    assert isinstance(load_problem(skew).robot, UrdfRobot)
+    assert isinstance(load_problem(skew).robot, ChainRobot)
     off_line = _write(tmp_path, twisted_planar(), name="off_line")  # l1's COM y = 0.05: not on the line
-    assert isinstance(load_problem(off_line).robot, UrdfRobot)
+    assert isinstance(load_problem(off_line).robot, ChainRobot)
     chain = _write(tmp_path, _on_line(twisted_planar()), extra='form = "n-joint"\n', name="chain")
-    assert isinstance(load_problem(chain).robot, UrdfRobot)
+    assert isinstance(load_problem(chain).robot, ChainRobot)
 
 
 # ---------------------------------------------------------------------------------------- (b) the DFKI arm

@@ -10,12 +10,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from ident_opt.arm.chain import ChainRobot
 from ident_opt.cli import main
 from ident_opt.commands import urdf as commands
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from ident_opt.studies import urdf as study
-from ident_opt.urdf_problem import UrdfRobot
 
 ROOT = Path(__file__).resolve().parents[1]
 KUKA_PROBLEM = ROOT / "problems" / "kuka_lwr4.toml"
@@ -32,8 +32,8 @@ def _problem(tmp_path: Path, urdf: Path | str, joints: list[str], extra: str = "
 
 def test_kuka_problem_loads():
     problem = load_problem(KUKA_PROBLEM)
-    assert isinstance(problem.robot, UrdfRobot)
-    assert problem.robot.joints == tuple(JOINTS) and problem.robot.gravity == (0.0, 0.0, -9.81)
+    assert isinstance(problem.robot, ChainRobot)
+    assert problem.robot.joint_names == tuple(JOINTS) and problem.robot.gravity == (0.0, 0.0, -9.81)
     assert problem.robot.arm.n_params == 7 * 14 and problem.robot.offsets
     assert [p.name for p in problem.data.training] == ["measurements_1.csv.gz", "measurements_3.csv.gz"]
     assert [p.name for p in problem.data.testing] == ["measurements_2.csv.gz"]
@@ -139,7 +139,7 @@ def test_optional_robot_keys(tmp_path):
     robot = load_problem(tmp_path / "b.toml").robot
     assert robot.gravity == (0.0, 0.5, -9.8) and robot.mass_range is None and robot.com_box == 0.05
     assert robot.arm.joint_terms == ("off",) and robot.arm.n_params == 7 * 11
-    assert robot.drives["lwr_0_joint"].gear_ratio == 100.0
+    assert robot.joints[0].gear_ratio == 100.0
     with pytest.raises(InputError, match="couplings"):
         load_problem(_problem(tmp_path, URDF, JOINTS, 'couplings = [["lwr_6_joint", "nope", 1.0]]\n'))
 

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident_opt.urdf_arm import REGRESSOR_CHUNK, UrdfArm
+from ident_opt.arm.chain import ChainArm
+from ident_opt.cbuild import REGRESSOR_CHUNK
 
 ROOT = Path(__file__).resolve().parents[1]
 ARMS = {
@@ -19,12 +20,12 @@ ARMS = {
 }
 
 
-def _arm(which: str) -> UrdfArm:
+def _arm(which: str) -> ChainArm:
     path, joints, couplings = ARMS[which]
-    return UrdfArm(str(ROOT / "data" / path), joints, offsets=True, couplings=couplings)
+    return ChainArm(str(ROOT / "data" / path), joints, offsets=True, couplings=couplings)
 
 
-def _states(arm: UrdfArm, n: int, seed: int = 0):
+def _states(arm: ChainArm, n: int, seed: int = 0):
     rng = np.random.default_rng(seed)
     size = (n, arm.n_joints)
     q, dq, ddq = rng.uniform(-np.pi, np.pi, size), rng.uniform(-2, 2, size), rng.uniform(-5, 5, size)

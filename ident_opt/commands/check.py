@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from ident_opt.arm.chain import ChainRobot
 from ident_opt.commands.common import add_problem_arguments, load, write_json
-from ident_opt.urdf_problem import UrdfRobot
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     loaded = load(args, fit=False)  # a constant torque is a warning here: nothing is fitted
     reports = [summary(trial) for trial in loaded.trials]
     extra = {}
-    if isinstance(loaded.problem.robot, UrdfRobot):  # an n-joint arm: its summary is ident_opt.studies.urdf's
+    if isinstance(loaded.problem.robot, ChainRobot):  # an n-joint arm: its summary is ident_opt.studies.urdf's
         from ident_opt.studies import urdf as study
 
         extra["robot"] = study.check_summary(loaded.problem)

@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from ident_opt.studies import ship
 
     problem = load_problem(args.problem)
-    if isinstance(problem.robot, urdf.UrdfRobot):  # an n-joint arm from a URDF: ident_opt.commands.urdf
+    if isinstance(problem.robot, urdf.ChainRobot):  # an n-joint arm from a URDF: ident_opt.commands.urdf
         return urdf.codegen(args, problem)
     if args.estimator == "consistent":
         raise InputError("codegen: --estimator consistent is the fit of arms from a URDF; use constrained or ols")
@@ -106,14 +106,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _model(extension: list[str] | None, saved: dict | None):
-    """The `ArmModel` to ship: the --extension ones, else the saved parameters' (with their parameters checked:
+    """The `PlanarArm` to ship: the --extension ones, else the saved parameters' (with their parameters checked:
     every one present and numeric, before --out is touched)."""
-    from ident_opt.robot import ArmModel
+    from ident_opt.arm.planar import PlanarArm
     from ident_opt.studies import ship
 
     extensions = extension if extension is not None else (saved or {}).get("extensions", [])
     try:
-        model = ArmModel(extensions=tuple(dict.fromkeys(extensions)))
+        model = PlanarArm(extensions=tuple(dict.fromkeys(extensions)))
     except ValueError as exc:
         raise InputError(f"codegen: {exc}") from None
     if saved is not None:

@@ -62,10 +62,10 @@ def run(args: argparse.Namespace) -> int:
     """Run the comparison (or the constraints study), write the files, print a summary."""
     # Deferred: the studies load NumPy, pandas, CasADi and cvxpy; `ident-opt --help` builds every subcommand's
     # parser and stays fast (0.1 s instead of over 2 s) only if that waits until a command runs.
+    from ident_opt.arm.planar import PlanarArm
     from ident_opt.problem import load_problem
     from ident_opt.report import compare as report
     from ident_opt.report import constraints as constraints_report
-    from ident_opt.robot import ArmModel
     from ident_opt.studies import compare, constraints
 
     urdf_problem = urdf.urdf_problem(args)
@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     if args.margin < 0:
         raise InputError(f"--margin must be ≥ 0 (got {args.margin})")
     try:
-        model = ArmModel(tuple(args.extension))
+        model = PlanarArm(tuple(args.extension))
     except ValueError as exc:
         raise InputError(f"--extension: {exc}") from None
     if not args.extension:

@@ -98,7 +98,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     two_joint_only("simulate", args.problem)  # its models are two-link: refuse a URDF arm up front
-    from ident_opt.problem import SimulateSpec, load_problem
+    from ident_opt.problem import load_problem
+    from ident_opt.problem.spec import SimulateSpec
     from ident_opt.simulate import simulate_trial, truth_path
 
     if args.trajectory and args.trajectory_file:

@@ -10,9 +10,9 @@ import sys
 from pathlib import Path
 
 from ident_opt import outputs
+from ident_opt.arm.chain import ChainRobot
 from ident_opt.commands.common import output_dir
 from ident_opt.errors import InputError
-from ident_opt.urdf_problem import UrdfRobot
 
 
 def urdf_problem(args: argparse.Namespace):
@@ -20,7 +20,7 @@ def urdf_problem(args: argparse.Namespace):
     from ident_opt.problem import load_problem  # deferred: it loads the effect catalogue; --help must stay fast
 
     problem = load_problem(args.problem)
-    return problem if isinstance(problem.robot, UrdfRobot) else None
+    return problem if isinstance(problem.robot, ChainRobot) else None
 
 
 def trial_paths(args: argparse.Namespace, problem) -> tuple[list[Path], list[Path]]:
@@ -107,7 +107,7 @@ def codegen(args: argparse.Namespace, problem) -> int:
     payload = {
         "problem": problem.name,
         "urdf": str(robot.urdf),
-        "joints": list(robot.joints),
+        "joints": list(robot.joint_names),
         "estimator": estimator,
         "parameters": arm.as_dict(pi),
         "functions": [f.name() for f in functions],

@@ -1,7 +1,7 @@
 """One candidate model family per catalogue cause, fitted on the training part.
 
 Each cause's module in `ident_opt.effects` declares its *family* of models τ̂ = o(θ) + X(θ) β (see
-`linear.py`), built from the `ArmModel` extensions where the effect is linear in its parameters, plus a few
+`linear.py`), built from the `PlanarArm` extensions where the effect is linear in its parameters, plus a few
 nonlinear parameters θ searched by variable projection (`Effect.families`, `docs/effects.md`). It is fitted
 against one or both nominal models:
 
@@ -24,11 +24,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ident_opt.arm.datasheet import PlanarRobot
+from ident_opt.arm.planar import PHYSICAL, PlanarArm
 from ident_opt.data import Dataset
 from ident_opt.diagnose import linear, signals
 from ident_opt.effects import CATALOGUE
-from ident_opt.problem import Robot
-from ident_opt.robot import PHYSICAL, ArmModel
 
 #: The nominal structure under the physical convention (the datasheet has the joint-2 armature ia2).
 NOMINAL = PHYSICAL
@@ -47,7 +47,7 @@ THETA_STEP = 1e-4
 class Context:
     """What every candidate needs: the robot, the training and held-out parts, joint weights 1/σ_j²."""
 
-    robot: Robot
+    robot: PlanarRobot
     train: Dataset
     test: Dataset
     weights: np.ndarray
@@ -77,7 +77,7 @@ class Candidate:
 
 @dataclass
 class Family:
-    """How to build one cause's model: the ArmModel for θ, which π are freed from the datasheet, extra
+    """How to build one cause's model: the PlanarArm for θ, which π are freed from the datasheet, extra
     columns, how the prediction is transformed, the θ axes, how to read the estimate and how to polish it.
 
     `angles(θ)`: a shift δ (2,) [rad] of the angles the model is evaluated at (q + δ), or None.
@@ -89,7 +89,7 @@ class Family:
     """
 
     cause: str
-    model: Callable[[dict], ArmModel]
+    model: Callable[[dict], PlanarArm]
     free: tuple[str, ...] | None  # names freed against the datasheet (None: the effect adds no π names)
     extra: Callable[[Dataset, dict, float, Context], tuple[np.ndarray, list[str]]] | None = None
     angles: Callable[[dict], np.ndarray] | None = None
@@ -115,7 +115,7 @@ class Family:
     coupled: Callable[[dict], dict] | None = None
 
 
-def nominal(theta: dict) -> ArmModel:
+def nominal(theta: dict) -> PlanarArm:
     """The nominal structure, whatever θ (for families that add no model extension)."""
     return NOMINAL
 
@@ -123,7 +123,7 @@ def nominal(theta: dict) -> ArmModel:
 _CACHE: dict = {}
 
 
-def _regressor(model: ArmModel, ds: Dataset, rows: slice) -> np.ndarray:
+def _regressor(model: PlanarArm, ds: Dataset, rows: slice) -> np.ndarray:
     """model.regressor on ds[rows], remembered for the last few (model, data) pairs: the searches over a
     delay or a mode re-use the same regressor hundreds of times."""
     key = (model, id(ds), ds.n, rows.start, rows.stop, rows.step)
@@ -363,8 +363,8 @@ def physical_units(
 
 
 # ---------------------------------------------------------------------------------------------- composition
-def merged_model(models: list[ArmModel]) -> ArmModel:
-    """One ArmModel with every extension of `models` (the Stribeck velocities of the one that sets them)."""
+def merged_model(models: list[PlanarArm]) -> PlanarArm:
+    """One PlanarArm with every extension of `models` (the Stribeck velocities of the one that sets them)."""
     extensions: list[str] = []
     velocity = NOMINAL.stribeck_velocity
     for m in models:
@@ -375,7 +375,7 @@ def merged_model(models: list[ArmModel]) -> ArmModel:
     extensions.sort(key=lambda e: order.index(e) if e in order else -1)
     if tuple(extensions) == NOMINAL.extensions:
         return NOMINAL
-    return ArmModel(tuple(extensions), stribeck_velocity=velocity)
+    return PlanarArm(tuple(extensions), stribeck_velocity=velocity)
 
 
 def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
@@ -392,7 +392,7 @@ def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
     transforms = [f.transform for f in sorted(fams, key=lambda f: list(CATALOGUE).index(f.cause)) if f.transform]
     frees = [f.free for f in fams if f.free is not None]
 
-    def model(theta: dict) -> ArmModel:
+    def model(theta: dict) -> PlanarArm:
         return merged_model([f.model(theta) for f in fams])
 
     def extra(ds, theta, dt, ctx):
@@ -438,6 +438,6 @@ def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
 
 
 # ---------------------------------------------------------------------------------------------- families
-def families(robot: Robot) -> list[Family]:
+def families(robot: PlanarRobot) -> list[Family]:
     """Every catalogue cause's families (`Effect.families`), in catalogue order."""
     return [family for effect in CATALOGUE.values() for family in effect.families(robot)]

@@ -16,13 +16,12 @@ import numpy as np
 from scipy import signal
 from tqdm import tqdm
 
+from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.data import Dataset, chronological_split
-from ident_opt.datasheet import datasheet_pi, rigid_body
 from ident_opt.diagnose import candidates as cands
 from ident_opt.diagnose import evidence, linear, scoring, signals
 from ident_opt.errors import InputError
 from ident_opt.metrics import nmse
-from ident_opt.problem import Robot
 
 #: A joint moving slower than this fraction of its speed scale (95th percentile of |dq|) is at rest.
 REST_FRACTION = 0.01
@@ -204,7 +203,7 @@ def _prune(named: list, chain: list, current: dict, ctx, version, var) -> tuple[
     return named, chain, current, gone
 
 
-def _rounds(robot: Robot, ctx, current: dict, version, row, var, progress: bool) -> tuple:
+def _rounds(robot: PlanarRobot, ctx, current: dict, version, row, var, progress: bool) -> tuple:
     """The loop of question 2: name the best cause, extend the model with it, ask again against the extended
     model, until nothing clears the margin (at most `MAX_CAUSES`). Every candidate of a round is scored
     against the same reference (the best model so far). Returns (chain, versions of the final model, the
@@ -274,7 +273,7 @@ def _promising(v: Fitted, without: Fitted) -> bool:
     return v.common > without.common and bool(np.any(without.mse - v.mse >= 0.5 * scoring.MARGIN * without.mse))
 
 
-def _fit_round(robot: Robot, ctx, named: list, ref: Fitted, version, bar, searched: dict | None) -> list[Fitted]:
+def _fit_round(robot: PlanarRobot, ctx, named: list, ref: Fitted, version, bar, searched: dict | None) -> list[Fitted]:
     """Every cause not yet named, composed with those named, fitted against every baseline it allows.
 
     After the first round (`searched` given) a cause whose first-round fit was `_promising` is searched
@@ -405,7 +404,7 @@ def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
 
 
 def diagnose(
-    robot: Robot,
+    robot: PlanarRobot,
     trial: Dataset,
     unseen: Dataset | None = None,
     train_fraction: float = 0.7,

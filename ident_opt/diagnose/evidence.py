@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.data import Dataset
 from ident_opt.diagnose import signals
-from ident_opt.robot import ArmModel
 
 #: Below this frequency [Hz] lies the motion band of point-to-point trials (the real trials' residual
 #: power sits mostly there).
@@ -101,7 +101,7 @@ def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float) -> dict:
 
 
 def forward_error(
-    model: ArmModel,
+    model: PlanarArm,
     pi: np.ndarray,
     ds: Dataset,
     dt: float,

@@ -10,18 +10,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from ident_opt.arm.datasheet import PlanarRobot
 from ident_opt.effects import CATALOGUE
-from ident_opt.problem import Robot
 
 
-def draw(cause: str, rng: np.random.Generator, robot: Robot) -> dict:
+def draw(cause: str, rng: np.random.Generator, robot: PlanarRobot) -> dict:
     """Keys for `simulate_trial(effects={cause: keys})`, drawn from a realistic range."""
     if cause not in CATALOGUE:
         raise ValueError(f"unknown cause {cause!r}")
     return CATALOGUE[cause].draw(rng, robot)
 
 
-def scaled(cause: str, keys: dict, factor: float, robot: Robot) -> dict:
+def scaled(cause: str, keys: dict, factor: float, robot: PlanarRobot) -> dict:
     """`keys` of a hidden `cause` with its magnitude multiplied by `factor` (`Effect.scaled`: e.g. a payload's
     mass, a mode's compliance 1/k, a torque scale's deviation from 1)."""
     from ident_opt.simulate.truth import coulomb_levels

@@ -2,7 +2,7 @@
 
 Each module of this package (besides `base`) defines ``EFFECT``, an `base.Effect`: its name, summary and keys
 (the ``NAME:key=value`` syntax of `--effect` and problem files), its model extension where it is linear in
-its parameters (`ArmModel(extensions=...)`), its plant term in the simulator, its candidate family in the
+its parameters (`PlanarArm(extensions=...)`), its plant term in the simulator, its candidate family in the
 diagnosis, its resolution rule and report sentence, and how a hidden instance is drawn and judged. The
 modules are found by listing the package, so a new cause is one new module. `background` holds the
 simulator's realism terms that no diagnosis names (stiction, drift, ripple) the same way; `docs/effects.md`

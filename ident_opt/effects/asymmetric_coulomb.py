@@ -91,7 +91,7 @@ class AsymmetricCoulomb(Effect):
         extended = (*cands.NOMINAL.extensions, self.name)
         return [
             self.family(
-                lambda th: robot_model.ArmModel(extended),
+                lambda th: robot_model.PlanarArm(extended),
                 tuple(p.name for p in self.parameters),
                 estimate=_estimate,
             )

@@ -12,7 +12,7 @@ no-ops by default; each effect overrides those it needs:
 | who calls                                 | hooks                                                          |
 |-------------------------------------------|----------------------------------------------------------------|
 | the syntax (`--effect`, problem files)    | `keys`, `default`, `scaled`, `is_active`                       |
-| the model (`ArmModel(extensions=...)`)    | `parameters`, `replaces`, `fallback`, `aliases`,               |
+| the model (`PlanarArm(extensions=...)`)    | `parameters`, `replaces`, `fallback`, `aliases`,               |
 |                                           | `check_model`, `columns`, `add_terms`                          |
 | the simulator's truth (`simulate/truth`)  | `true_robot`, `true_plant`, `mechanism`, `truth_entry`,        |
 |                                           | `true_physical`                                                |
@@ -59,13 +59,13 @@ DEFERRED = {
     "np": "numpy",
     "ca": "casadi",
     "cands": "ident_opt.diagnose.candidates",
-    "datasheet": "ident_opt.datasheet",
+    "datasheet": "ident_opt.arm.datasheet",
     "elastic_nlp": "ident_opt.diagnose.elastic_nlp",
     "flexible_link": "ident_opt.simulate.flexible_link",
     "linear": "ident_opt.diagnose.linear",
     "nlp": "ident_opt.identify.nlp",
     "report": "ident_opt.diagnose.report",
-    "robot_model": "ident_opt.robot",
+    "robot_model": "ident_opt.arm.planar",
     "signals": "ident_opt.diagnose.signals",
     "sim": "ident_opt.simulate.truth",
 }
@@ -243,14 +243,14 @@ class Effect:
             lines.append(f"      {key}={default}  ({spec.doc})")
         return lines
 
-    # ------------------------------------------------------------------ model (`ArmModel` extension)
+    # ------------------------------------------------------------------ model (`PlanarArm` extension)
     #: Parameters the extension adds to π, in column order (empty: the effect is no model extension).
     parameters: tuple[Parameter, ...] = ()
     #: Rigid parameters the extension replaces.
     replaces: tuple[str, ...] = ()
-    #: name -> the parameter whose value `ArmModel.vector` uses when `name` is not given.
+    #: name -> the parameter whose value `PlanarArm.vector` uses when `name` is not given.
     fallback: dict[str, str] = {}  # noqa: RUF012
-    #: Other names `ArmModel(extensions=...)` accepts for this extension.
+    #: Other names `PlanarArm(extensions=...)` accepts for this extension.
     aliases: tuple[str, ...] = ()
 
     def check_model(self, model) -> None:
@@ -266,7 +266,7 @@ class Effect:
 
     # ------------------------------------------------------------------ simulator truth
     def true_robot(self, robot, p: dict):
-        """The true robot (a `problem.Robot`) the datasheet π is computed from."""
+        """The true robot (a `problem.PlanarRobot`) the datasheet π is computed from."""
         return robot
 
     def true_plant(self, plant, p: dict) -> None:

@@ -109,7 +109,7 @@ def gravity_rotation(ctx, baseline: str) -> dict:
     asymmetric friction would otherwise leak into the gravity columns. The search then refines ±0.1 rad
     around the centre and IPOPT polishes within ±2π."""
     tr = ctx.train
-    model = robot_model.ArmModel((*cands.NOMINAL.extensions, "asymmetric_coulomb", "joint_offset"))
+    model = robot_model.PlanarArm((*cands.NOMINAL.extensions, "asymmetric_coulomb", "joint_offset"))
     tau = signals.demean_runs(tr.tau, ctx.rest)
     delta = np.zeros(2)
     for _ in range(CENTRE_ITERATIONS):

@@ -3,7 +3,7 @@
 The friction is fc sgn(dq) + (fs − fc) sgn(dq) exp(−(dq/vs)²). The effect's keys and estimate give the
 static level fs itself [N m]; the model extension's parameters fs1 fs2 are the excess fs − fc (linear).
 Model extension ``stribeck``: fs1 fs2 (excess), with the Stribeck velocities vs given
-(`ArmModel.stribeck_velocity`). Simulator: that friction, the excess over the true plant's mean Coulomb
+(`PlanarArm.stribeck_velocity`). Simulator: that friction, the excess over the true plant's mean Coulomb
 level. Diagnosis: the excess ≥ 0 linear, vs1 vs2 [rad/s] searched by variable projection, then polished by
 IPOPT (`polish`), against both nominal models; the estimate adds the fitted (or datasheet) Coulomb level.
 It shows only where the joints move slowly for a while, so its hidden trials follow the smooth `fourier`

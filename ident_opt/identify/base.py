@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from ident_opt.arm import Arm
+from ident_opt.arm.base import Arm
 from ident_opt.identify.fit import LinearFit, fit_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.parameters import Parameter

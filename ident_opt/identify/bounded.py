@@ -42,7 +42,7 @@ import numpy as np
 from scipy.linalg.lapack import dgesv as _dgesv
 from scipy.linalg.lapack import dposv as _dposv
 
-from ident_opt.arm import Arm
+from ident_opt.arm.base import Arm
 from ident_opt.consistency import MARGIN, MatrixInequality, mass_constraints, physical_bounds
 from ident_opt.identify.constrained import solve_constrained
 from ident_opt.identify.stats import Stats

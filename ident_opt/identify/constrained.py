@@ -8,7 +8,7 @@
                 lb ≤ π ≤ ub (optional)                       "lower_<p>", "upper_<p>"
 
 For the two-link arm the two 2×2 LMIs are M(q) at cos q2 = ±1, which is exactly "M(q) ⪰ margin·I for every
-q" (`ArmModel.mass_lmis`); which parameters are sign-constrained follows their declared kind.
+q" (`PlanarArm.mass_lmis`); which parameters are sign-constrained follows their declared kind.
 
 The prior term, written above as λ Σ_p D_p (π_p − π0_p)², is relative: D_p = S / π0_scale_p², with S the
 weighted torque energy Σ_j w_j s_j [N² m²] and π0_scale_p = |π0_p| (floored at 1e-3 max|π0|). So
@@ -48,7 +48,7 @@ import numpy as np
 from scipy import sparse
 
 from ident_opt import consistency
-from ident_opt.arm import Arm
+from ident_opt.arm.base import Arm
 from ident_opt.consistency import MARGIN, Consistency
 from ident_opt.identify.fit import LinearFit, check_stats, finish, joint_weights, normal_equations, solve_normal
 from ident_opt.identify.stats import Stats

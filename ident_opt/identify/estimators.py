@@ -14,10 +14,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import LinearFit, fit_ols
 from ident_opt.identify.stats import Stats
-from ident_opt.robot import ArmModel
 
 #: (statistics, arm, **options) -> LinearFit. Options: `weights` for both, `margin`, `bounds`… for `constrained`.
 FitFn = Callable[..., LinearFit]
@@ -28,7 +28,7 @@ ESTIMATORS: dict[str, FitFn] = {"ols": fit_ols, "constrained": fit_constrained}
 ONLINE = {"ols": "bounded", "constrained": "consistent"}
 
 
-def fit(name: str, stats: Stats, arm: ArmModel, **options) -> LinearFit:
+def fit(name: str, stats: Stats, arm: PlanarArm, **options) -> LinearFit:
     """π̂ of estimator `name` from the statistics of `arm`'s regressor; `options` go to the estimator."""
     return estimator(name)(stats, arm, **options)
 

@@ -28,7 +28,7 @@ import numpy as np
 import scipy.linalg
 
 from ident_opt import consistency
-from ident_opt.arm import Arm
+from ident_opt.arm.base import Arm
 from ident_opt.identify.stats import Stats
 from ident_opt.parameters import Parameter
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ident_opt.arm import Arm
+from ident_opt.arm.base import Arm
 from ident_opt.data import Dataset, choose_cutoff, estimate_derivatives
 from ident_opt.identify.fit import LinearFit, check_stats, finish
 from ident_opt.identify.stats import Stats

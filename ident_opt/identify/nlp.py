@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from ident_opt.arm.datasheet import grouped, rigid_body
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.consistency import sign_constraints
-from ident_opt.datasheet import grouped, rigid_body
 from ident_opt.identify.fit import LinearFit, check_stats, finish, joint_weights, normal_equations
 from ident_opt.identify.stats import Stats
-from ident_opt.robot import ArmModel
 
 IPOPT_QUIET = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes"}
 
@@ -144,7 +144,7 @@ def fit_expression(
 PHYSICAL_INERTIAL = ("m1", "m2", "lc1", "lc2", "Ic1", "Ic2", "ia1", "ia2")
 
 
-def physical_start(robot, model: ArmModel) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
+def physical_start(robot, model: PlanarArm) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
     """Datasheet start values (physical convention) and physical bounds for every parameter θ.
 
     Masses ≥ 1 g, centres of mass on their link (0 ≤ lc ≤ l), inertias and armatures ≥ 0; the other
@@ -174,7 +174,7 @@ def physical_start(robot, model: ArmModel) -> tuple[dict[str, float], dict[str, 
     return {k: v for k, (v, _) in theta.items()}, {k: b for k, (_, b) in theta.items()}
 
 
-def pi_of_physical(theta: dict, robot, model: ArmModel) -> list:
+def pi_of_physical(theta: dict, robot, model: PlanarArm) -> list:
     """π(θ) in the model's order, through `datasheet.grouped` (works on numbers and CasADi symbols)."""
     l1, g = robot.link1.length, robot.gravity
     a1, a2, a3, b1, b2 = grouped(
@@ -187,7 +187,7 @@ def pi_of_physical(theta: dict, robot, model: ArmModel) -> list:
 def fit_physical(
     source: Stats | object,
     robot,
-    model: ArmModel | None = None,
+    model: PlanarArm | None = None,
     *,
     prior_weight: float = 1e-6,
     weights: str | np.ndarray | None = None,
@@ -201,7 +201,7 @@ def fit_physical(
     equivalent solutions; at the default weight it changes π by far less than its standard errors.
     Returns a `LinearFit` (method "nlp_physical") whose `details["physical"]` holds θ by name.
     """
-    model = model or ArmModel()
+    model = model or PlanarArm()
     stats = source if isinstance(source, Stats) else Stats.from_data(model, source.q, source.dq, source.ddq, source.tau)
     check_stats(stats, model)
     w = joint_weights(stats, weights)

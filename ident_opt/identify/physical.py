@@ -34,12 +34,12 @@ import clarabel
 import numpy as np
 from scipy import sparse
 
+from ident_opt.arm.chain import ChainArm
+from ident_opt.arm.rnea import N_LINK
 from ident_opt.consistency import MARGIN, Bound, Consistency, svec
 from ident_opt.identify.constrained import ACTIVE_TOL, solve_cvxpy
 from ident_opt.identify.fit import LinearFit, check_stats, finish, joint_weights, normal_equations
 from ident_opt.identify.stats import Stats
-from ident_opt.rnea import N_LINK
-from ident_opt.urdf_arm import UrdfArm
 
 #: The default weight λ of the log-det prior (dimensionless, module doc).
 PRIOR_WEIGHT = 1e-7
@@ -66,7 +66,7 @@ def _square_root(H: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @functools.lru_cache(maxsize=8)
-def _program(arm: UrdfArm, margin: float, mass: bool, com: bool):
+def _program(arm: ChainArm, margin: float, mass: bool, com: bool):
     """The cvxpy problem of the module doc for this arm (data, prior, bounds as Parameters), compiled once."""
     import cvxpy as cp  # deferred: cvxpy takes about a second to import and only this fit needs it
 
@@ -114,7 +114,7 @@ class _Data(NamedTuple):
 
 def fit_physical(
     stats: Stats,
-    arm: UrdfArm,
+    arm: ChainArm,
     *,
     prior: np.ndarray | None = None,
     prior_weight: float = PRIOR_WEIGHT,
@@ -126,7 +126,7 @@ def fit_physical(
 ) -> LinearFit:
     """The plausible consistent fit of the module doc from the statistics of `arm`'s regressor.
 
-    prior (P,) = the URDF's inertials (`UrdfArm.cad_parameters`); prior_weight λ > 0 [dimensionless];
+    prior (P,) = the URDF's inertials (`ChainArm.cad_parameters`); prior_weight λ > 0 [dimensionless];
     mass_range r (± fraction of each CAD mass) and com_box δ [m] (None: unbounded); margin: J_i ⪰ margin·I.
     backend "clarabel" (the conic program stated directly, cached per arm: tens of ms) or "cvxpy" (the same
     program through cvxpy: the tests' oracle). `details` holds the prior's weight, each link's divergence
@@ -178,7 +178,7 @@ def fit_physical(
     return fit
 
 
-def _solve_cvxpy(arm: UrdfArm, margin: float, mass: bool, com: bool, data: _Data) -> tuple[np.ndarray | None, str]:
+def _solve_cvxpy(arm: ChainArm, margin: float, mass: bool, com: bool, data: _Data) -> tuple[np.ndarray | None, str]:
     """The program through cvxpy (compiled once per arm and options): (π or None, status)."""
 
     problem, pi, par = _program(arm, margin, mass, com)
@@ -198,7 +198,7 @@ _TRIL = tuple((r, c) for c in range(4) for r in range(c, 4))  # Z's lower-triang
 
 
 @functools.lru_cache(maxsize=8)
-def _conic(arm: UrdfArm, margin: float, mass: bool, com: bool) -> tuple:
+def _conic(arm: ChainArm, margin: float, mass: bool, com: bool) -> tuple:
     """What Clarabel needs that depends on the arm and options only: the fixed constraint rows (A, b), their
     cones, and per link the column of each variable (module doc: log det J = max Σ_j u_j over
     [[J, Z], [Zᵀ, diag Z]] ⪰ 0 with Z lower triangular and (u_j, 1, Z_jj) in the exponential cone)."""
@@ -237,7 +237,7 @@ def _conic(arm: UrdfArm, margin: float, mass: bool, com: bool) -> tuple:
     return A, b, tuple(cones), tuple(settings)
 
 
-def _bound_rows(arm: UrdfArm, mass: bool, com: bool, data: _Data, nx: int) -> tuple[np.ndarray, np.ndarray]:
+def _bound_rows(arm: ChainArm, mass: bool, com: bool, data: _Data, nx: int) -> tuple[np.ndarray, np.ndarray]:
     """The mass and centre-of-mass rows (s = b − A x ≥ 0): m_lo ≤ m ≤ m_hi, m c_lo ≤ h ≤ m c_hi."""
     rows, rhs = [], []
     for i in range(arm.n_joints):
@@ -257,7 +257,7 @@ def _bound_rows(arm: UrdfArm, mass: bool, com: bool, data: _Data, nx: int) -> tu
     return np.array(rows).reshape(-1, nx), np.array(rhs)
 
 
-def _solve_clarabel(arm: UrdfArm, margin: float, mass: bool, com: bool, data: _Data) -> tuple[np.ndarray | None, str]:
+def _solve_clarabel(arm: ChainArm, margin: float, mass: bool, com: bool, data: _Data) -> tuple[np.ndarray | None, str]:
     """min ½ xᵀ Q x + qᵀ x over x = [π; Z, u per link] with Clarabel directly: (π or None, status).
 
     Q = 2 H/n on π; q = −2 h/n + w·Ē tr(J0⁻¹ A_p) on the link parameters and −w·Ē on every u (module doc)."""

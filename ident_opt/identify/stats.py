@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ident_opt.arm import Arm
+from ident_opt.arm.base import Arm
 
 
 @dataclass

@@ -15,8 +15,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ident_opt.arm.datasheet import PlanarRobot
 from ident_opt.effects import BACKGROUND
-from ident_opt.problem import Robot
 
 
 def _terms(background: dict) -> list:
@@ -54,7 +54,7 @@ def with_background(base: ca.Function, nx: int, background: dict) -> ca.Function
     return ca.Function("plant_bg", [x, tau, d], [xdot, y], ["x", "tau", "d"], ["xdot", "y"])
 
 
-def current(background: dict, robot: Robot, q_enc: ca.SX, dq_enc: ca.SX) -> ca.SX | None:
+def current(background: dict, robot: PlanarRobot, q_enc: ca.SX, dq_enc: ca.SX) -> ca.SX | None:
     """The torque [N m] the background adds to the commanded one at encoder angles q_enc [rad] and rates
     dq_enc [rad/s] (e.g. a current ripple); None when none does."""
     out = None

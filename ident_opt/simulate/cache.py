@@ -10,27 +10,14 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from dataclasses import asdict
 from pathlib import Path
 
+from ident_opt.cache import cache_root
 from ident_opt.errors import InputError
 from ident_opt.simulate.trial import simulate_trial
 
 SIMULATOR_VERSION = 5  # bump when the simulator's output changes for the same settings
-
-
-def cache_root(path: Path) -> Path:
-    """The cache folder for a file (a problem, a URDF): $IDENT_OPT_CACHE if set, else `.cache` of the project
-    holding it (the nearest folder above with a pyproject.toml), else `.cache` next to it."""
-    env = os.environ.get("IDENT_OPT_CACHE")
-    if env:
-        return Path(env)
-    here = Path(path).resolve().parent
-    for folder in (here, *here.parents):
-        if (folder / "pyproject.toml").is_file():
-            return folder / ".cache"
-    return here / ".cache"
 
 
 def cache_dir(problem_path: Path) -> Path:

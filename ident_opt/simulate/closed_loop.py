@@ -29,8 +29,7 @@ import casadi as ca
 import numpy as np
 from tqdm import tqdm
 
-from ident_opt.datasheet import datasheet_pi
-from ident_opt.problem import Robot
+from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi
 from ident_opt.simulate import background
 from ident_opt.simulate.trajectories import Reference
 from ident_opt.simulate.truth import TRUTH_MODEL, Truth, initial_state, plant, state_size
@@ -52,7 +51,7 @@ class Gains:
     kd: tuple[float, float]
 
 
-def gains(robot: Robot, bandwidth_hz: float = BANDWIDTH_HZ) -> Gains:
+def gains(robot: PlanarRobot, bandwidth_hz: float = BANDWIDTH_HZ) -> Gains:
     """Critically damped PD gains on the nominal (datasheet) diagonal inertia at q2 = 0 [kg m²]."""
     p = datasheet_pi(robot, "physical")
     J = np.array([p["a1"] + 2 * p["a2"], p["a3"] + p["ia2"]])
@@ -60,7 +59,7 @@ def gains(robot: Robot, bandwidth_hz: float = BANDWIDTH_HZ) -> Gains:
     return Gains(tuple(J * w**2), tuple(2 * J * w))
 
 
-def controller(robot: Robot, g: Gains) -> ca.Function:
+def controller(robot: PlanarRobot, g: Gains) -> ca.Function:
     """(ref = [q_r, dq_r, ddq_r], q_enc, dq_enc) -> τ [N m], the nominal feedforward plus PD."""
     ref, q, dq = ca.SX.sym("ref", 6), ca.SX.sym("q", 2), ca.SX.sym("dq", 2)
     pi_nominal = ca.DM(TRUTH_MODEL.vector(datasheet_pi(robot, "physical")))
@@ -74,7 +73,7 @@ def control_hz(rate_hz: float) -> float:
     return max(CONTROL_HZ, float(rate_hz))
 
 
-def substeps(truth: Truth, g: Gains, robot: Robot, control: float = CONTROL_HZ) -> int:
+def substeps(truth: Truth, g: Gains, robot: PlanarRobot, control: float = CONTROL_HZ) -> int:
     """RK4 sub-steps per tick of a `control` [Hz] loop so that the fastest closed-loop rate |λ| satisfies
     |λ| h ≤ 0.25."""
     p = datasheet_pi(robot, "physical")
@@ -87,7 +86,7 @@ def substeps(truth: Truth, g: Gains, robot: Robot, control: float = CONTROL_HZ) 
     return max(2, math.ceil(max(rates) / control / 0.25))
 
 
-def tick(truth: Truth, robot: Robot, g: Gains, control: float = CONTROL_HZ) -> ca.Function:
+def tick(truth: Truth, robot: PlanarRobot, g: Gains, control: float = CONTROL_HZ) -> ca.Function:
     """One tick of a `control` [Hz] loop: (x, ref) -> (x_next, out) with out = [τ (2), y (7)] at its start.
 
     ref = [q_r, dq_r, ddq_r, d]: the reference and the background's external torque d [N m] over the tick."""
@@ -117,7 +116,7 @@ def tick(truth: Truth, robot: Robot, g: Gains, control: float = CONTROL_HZ) -> c
 
 def run(
     truth: Truth,
-    robot: Robot,
+    robot: PlanarRobot,
     ref: Reference,
     progress: bool = True,
     seed: int = 0,

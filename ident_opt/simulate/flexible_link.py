@@ -21,8 +21,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ident_opt.datasheet import bar_inertia, cylinder_inertia, rigid_body
-from ident_opt.problem import Link, Robot
+from ident_opt.arm.datasheet import Link, PlanarRobot, bar_inertia, cylinder_inertia, rigid_body
 
 
 @dataclass(frozen=True)
@@ -50,7 +49,7 @@ def _half(link: Link) -> tuple[float, float]:
     return half.mass, bar_inertia(half)
 
 
-def segments(robot: Robot, flexible: int) -> list[Segment]:
+def segments(robot: PlanarRobot, flexible: int) -> list[Segment]:
     """The chain for a flexible link `flexible` (0 or 1): link 1 carries joint 2's actuator at its far end
     (the physical convention); a payload sits at the tip of link 2. z = [q1, q2, φ]."""
     l1, l2 = robot.link1.length, robot.link2.length
@@ -80,7 +79,7 @@ def segments(robot: Robot, flexible: int) -> list[Segment]:
     ]
 
 
-def lagrangian_terms(robot: Robot, flexible: int, armature: tuple[float, float]):
+def lagrangian_terms(robot: PlanarRobot, flexible: int, armature: tuple[float, float]):
     """CasADi (z, dz) and the expressions M(z) (3×3) and h(z, dz) (3×1) with M ddz + h = Q."""
     z, dz = ca.SX.sym("z", 3), ca.SX.sym("dz", 3)
     g = robot.gravity
@@ -103,19 +102,19 @@ def lagrangian_terms(robot: Robot, flexible: int, armature: tuple[float, float])
     return z, dz, M, h
 
 
-def mode_inertia(robot: Robot, flexible: int, armature: tuple[float, float], q2: float) -> float:
+def mode_inertia(robot: PlanarRobot, flexible: int, armature: tuple[float, float], q2: float) -> float:
     """M_φφ at joint-2 angle q2 [kg m²]: everything beyond the cut, about the cut, joints held."""
     z, _, M, _ = lagrangian_terms(robot, flexible, armature)
     return float(ca.Function("M", [z], [M])([0.0, q2, 0.0])[2, 2])
 
 
-def free_rate(robot: Robot, flexible: int, armature: tuple[float, float], k: float) -> float:
+def free_rate(robot: PlanarRobot, flexible: int, armature: tuple[float, float], k: float) -> float:
     """An upper bound of the mode's angular frequency with free joints [rad/s]: √(k (M⁻¹)_φφ), max over q2."""
     z, _, M, _ = lagrangian_terms(robot, flexible, armature)
     f = ca.Function("M", [z], [M])
     return max(math.sqrt(k * np.linalg.inv(np.array(f([0.0, q2, 0.0])))[2, 2]) for q2 in (0.0, 0.7, 1.4))
 
 
-def datasheet_armature(robot: Robot) -> tuple[float, float]:
+def datasheet_armature(robot: PlanarRobot) -> tuple[float, float]:
     """Reflected rotor inertia per joint, N² J [kg m²] (physical convention)."""
     return tuple(rigid_body(robot, "physical").armature)

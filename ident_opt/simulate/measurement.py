@@ -17,9 +17,10 @@ from collections.abc import Callable
 import numpy as np
 import pandas as pd
 
+from ident_opt.arm.datasheet import PlanarRobot
 from ident_opt.data import estimate_derivatives
 from ident_opt.errors import InputError
-from ident_opt.problem import DataSpec, Robot
+from ident_opt.problem.spec import DataSpec
 from ident_opt.simulate.closed_loop import CONTROL_HZ, MAX_CONTROL_HZ, control_hz
 
 ENCODER_COUNTS = 4096  # counts per motor revolution (a 1024-line encoder, quadrature)
@@ -46,7 +47,7 @@ def decimation(rate_hz: float) -> int:
 def log(
     out: np.ndarray,
     q_ref: np.ndarray,
-    robot: Robot,
+    robot: PlanarRobot,
     *,
     rate_hz: float,
     channel: Callable[[np.ndarray, np.ndarray], np.ndarray],

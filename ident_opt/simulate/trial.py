@@ -11,11 +11,10 @@ import numpy as np
 import pandas as pd
 
 from ident_opt import outputs
+from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.data import Dataset
-from ident_opt.datasheet import datasheet_pi, rigid_body
 from ident_opt.effects import CATALOGUE, is_active, normalise
 from ident_opt.errors import InputError
-from ident_opt.problem import Robot
 from ident_opt.simulate import closed_loop, measurement
 from ident_opt.simulate.trajectories import reference
 from ident_opt.simulate.truth import TRUTH_MODEL, Truth, build_truth, coulomb_levels
@@ -34,7 +33,7 @@ class SimTrial:
 
     frame: pd.DataFrame
     truth: dict
-    robot: Robot
+    robot: PlanarRobot
 
     def dataset(self) -> Dataset:
         """The trial as the data loader would return it (currents converted to joint torques)."""
@@ -93,7 +92,7 @@ def _atomic(path: Path, write) -> None:
 
 
 def simulate_trial(
-    robot: Robot,
+    robot: PlanarRobot,
     *,
     trajectory: str = "tud01",
     duration: float = 80.0,
@@ -185,7 +184,7 @@ def _plain(value):
     return value
 
 
-def _truth_dict(robot: Robot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, settings: dict) -> dict:
+def _truth_dict(robot: PlanarRobot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, settings: dict) -> dict:
     """The ground truth, with effects in the diagnosis's estimate keys (`docs/effects.md`)."""
     effects = {name: CATALOGUE[name].truth_entry(truth, p) for name, p in truth.effects.items()}
     physical = asdict(rigid_body(truth.robot, "physical"))  # the true plant's, not the datasheet's

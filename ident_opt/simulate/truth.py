@@ -1,6 +1,6 @@
 """The truth plant: the physical-convention datasheet arm plus the hidden effects, as CasADi expressions.
 
-Without effects the plant is exactly `ArmModel(("armature",))` with `datasheet_pi(robot, "physical")`:
+Without effects the plant is exactly `PlanarArm(("armature",))` with `datasheet_pi(robot, "physical")`:
 M(q) ddq + C(q, dq) dq + G(q) + F(dq) = τ, and the encoders log q. Each hidden effect of
 `ident_opt.effects.CATALOGUE` shapes it through its own hooks, applied in catalogue order:
 
@@ -22,10 +22,9 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ident_opt.datasheet import datasheet_pi, rigid_body
+from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
+from ident_opt.arm.planar import PHYSICAL, PlanarArm
 from ident_opt.effects import BACKGROUND, CATALOGUE, EXTENSIONS
-from ident_opt.problem import Robot
-from ident_opt.robot import PHYSICAL, ArmModel
 
 #: The structure of `SimTrial.truth["pi"]`: the nominal physical-convention arm.
 TRUTH_MODEL = PHYSICAL
@@ -35,10 +34,10 @@ TRUTH_MODEL = PHYSICAL
 class PlantSpec:
     """The true plant while the hidden effects shape it (`Effect.true_plant` changes it in place)."""
 
-    robot: Robot  # the datasheet robot with any hidden payload
+    robot: PlanarRobot  # the datasheet robot with any hidden payload
     pi: dict[str, float]  # π by name
-    extensions: list[str]  # the ArmModel extensions π needs
-    options: dict  # other ArmModel fields (e.g. stribeck_velocity)
+    extensions: list[str]  # the PlanarArm extensions π needs
+    options: dict  # other PlanarArm fields (e.g. stribeck_velocity)
     armature: list[float]  # reflected rotor inertia per joint [kg m²] (a1 holds joint 1's, ia2 is joint 2's)
     offset: list[float]  # encoder zero offsets δ [rad]: the true angle is the logged (encoder) angle + δ
     channel: list[Callable]  # the logged torque: (t_tick [s], τ (N, 2) [N m]) -> τ as logged, in order
@@ -49,8 +48,8 @@ class PlantSpec:
 class Truth:
     """The true plant: its model structure, π (vector in `model.names` order), and effects."""
 
-    robot: Robot  # the datasheet robot with any hidden payload
-    model: ArmModel
+    robot: PlanarRobot  # the datasheet robot with any hidden payload
+    model: PlanarArm
     pi: np.ndarray
     elastic: object | None  # the mechanism replacing the rigid arm (`effects.elasticity.Elastic`), if any
     offset: tuple[float, float]
@@ -80,13 +79,13 @@ class Truth:
         return tau
 
 
-def coulomb_levels(robot: Robot) -> tuple[tuple, tuple]:
+def coulomb_levels(robot: PlanarRobot) -> tuple[tuple, tuple]:
     """The datasheet's per-direction Coulomb levels reflected to the joint [N m]: (positive, negative)."""
     body = rigid_body(robot, "physical")
     return tuple(body.fc_positive), tuple(body.fc_negative)
 
 
-def build_truth(robot: Robot, effects: dict[str, dict]) -> Truth:
+def build_truth(robot: PlanarRobot, effects: dict[str, dict]) -> Truth:
     """The true plant for the (normalised, active) `effects`; background terms go to `Truth.background`."""
     background = {name: p for name, p in effects.items() if name in BACKGROUND}
     effects = {name: p for name, p in effects.items() if name not in BACKGROUND}
@@ -105,7 +104,7 @@ def build_truth(robot: Robot, effects: dict[str, dict]) -> Truth:
     )
     for effect, p in hidden:
         effect.true_plant(spec, p)
-    model = ArmModel(tuple(spec.extensions), **spec.options)
+    model = PlanarArm(tuple(spec.extensions), **spec.options)
     mechanisms = [m for effect, p in hidden if (m := effect.mechanism(spec, p)) is not None]
     return Truth(
         true_robot,
@@ -122,7 +121,7 @@ def build_truth(robot: Robot, effects: dict[str, dict]) -> Truth:
 
 
 # ---------------------------------------------------------------------------------------------- dynamics
-def solve_forward(model: ArmModel, pi, q, dq, tau) -> ca.SX:
+def solve_forward(model: PlanarArm, pi, q, dq, tau) -> ca.SX:
     """ddq = M(q)⁻¹ (τ − h(q, dq)) from the model's inverse dynamics τ = M ddq + h (one source of truth)."""
     a = ca.SX.sym("a", 2)
     expr = model.tau_expression(q, dq, a, pi)
@@ -131,7 +130,7 @@ def solve_forward(model: ArmModel, pi, q, dq, tau) -> ca.SX:
     return ca.solve(M, tau - h)
 
 
-def link_pi(model: ArmModel, pi: np.ndarray, armature) -> np.ndarray:
+def link_pi(model: PlanarArm, pi: np.ndarray, armature) -> np.ndarray:
     """π of the link side: friction zeroed and the rotors' reflected inertia (`armature` [kg m²]) removed, so
     that τ = Y π is the link-side rigid-body torque (inertial, Coriolis/centrifugal, gravity)."""
     out = np.where([p.kind == "friction" for p in model.parameters], 0.0, np.asarray(pi, dtype=float))
@@ -175,7 +174,7 @@ def _forward(truth: Truth, q, dq, tau) -> ca.SX:
     )
 
 
-def friction_only(model: ArmModel, pi: np.ndarray, joint: int) -> np.ndarray:
+def friction_only(model: PlanarArm, pi: np.ndarray, joint: int) -> np.ndarray:
     """π with everything zeroed except the friction parameters (`Parameter.kind`) of `joint` (0-based): those
     on which τ_joint depends (a structural non-zero of the symbolic Y's row)."""
     acts = model.symbols["Y"].sparsity()

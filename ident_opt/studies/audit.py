@@ -15,14 +15,14 @@ import numpy as np
 import pandas as pd
 
 from ident_opt import paper
+from ident_opt.arm.datasheet import PI_NAMES, PlanarRobot, datasheet_pi, rigid_body
+from ident_opt.arm.planar import RIGID, PlanarArm
 from ident_opt.data import Dataset, shuffled_split
-from ident_opt.datasheet import PI_NAMES, datasheet_pi, rigid_body
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.metrics import all_metrics
 from ident_opt.models import datasheet_model
-from ident_opt.problem import Robot, SplitSpec
-from ident_opt.robot import RIGID, ArmModel
+from ident_opt.problem.spec import SplitSpec
 
 #: The metrics of the audit's tables, in their column order.
 METRICS = ("nmse", "nmse_range", "rmse")
@@ -30,7 +30,7 @@ METRICS = ("nmse", "nmse_range", "rmse")
 SHUFFLED, CROSS_TRIAL = "paper (shuffled 70/30, mean of seeds)", "cross-trial (unseen trial)"
 
 
-def parameter_table(robot: Robot) -> pd.DataFrame:
+def parameter_table(robot: PlanarRobot) -> pd.DataFrame:
     """Published π̂ beside the datasheet π under both conventions, with relative differences to π̂."""
     fit = paper.pi_hat_physical()
     sheet = datasheet_pi(robot, "paper")
@@ -60,7 +60,7 @@ class DataAudit:
     predictions: dict[str, np.ndarray]  # model -> (N, 2) on the whole identification trial
 
 
-def datasheet_models(robot: Robot) -> dict[str, tuple[ArmModel, np.ndarray]]:
+def datasheet_models(robot: PlanarRobot) -> dict[str, tuple[PlanarArm, np.ndarray]]:
     """The datasheet models the audit compares: name -> (model, π). Besides the two datasheet models of
     `models.datasheet_model`, the paper's π with the correct gravity vector."""
     sheet, physical = datasheet_model(robot, "paper"), datasheet_model(robot, "physical")
@@ -71,7 +71,7 @@ def datasheet_models(robot: Robot) -> dict[str, tuple[ArmModel, np.ndarray]]:
     }
 
 
-def audit_data(robot: Robot, train: Dataset, unseen: Dataset | None, split: SplitSpec) -> DataAudit:
+def audit_data(robot: PlanarRobot, train: Dataset, unseen: Dataset | None, split: SplitSpec) -> DataAudit:
     """The paper's protocol (shuffled 70/30 over its seeds) for every model, plus the unseen trial; the
     OLS fit of the rigid model on the same training samples beside them."""
     models = datasheet_models(robot)
@@ -93,12 +93,12 @@ def audit_data(robot: Robot, train: Dataset, unseen: Dataset | None, split: Spli
     return DataAudit(table, predictions)
 
 
-def _ols(data: Dataset) -> tuple[ArmModel, np.ndarray]:
+def _ols(data: Dataset) -> tuple[PlanarArm, np.ndarray]:
     """The rigid model fitted by OLS on `data` (π only)."""
     return RIGID, solve_ols(Stats.from_data(RIGID, data.q, data.dq, data.ddq, data.tau))
 
 
-def _scores(models: dict[str, tuple[ArmModel, np.ndarray]], test: Dataset) -> dict[str, dict[str, list[float]]]:
+def _scores(models: dict[str, tuple[PlanarArm, np.ndarray]], test: Dataset) -> dict[str, dict[str, list[float]]]:
     """Every model's metrics (per joint) on `test`."""
     return {
         name: all_metrics(test.tau, model.predict(pi, test.q, test.dq, test.ddq))
@@ -111,14 +111,14 @@ def _row(values) -> dict[str, float]:
     return {f"{m}_j{j + 1}": float(values[i][j]) for i, m in enumerate(METRICS) for j in range(2)}
 
 
-def physical_is_closer(robot: Robot, table: pd.DataFrame | None = None) -> dict[str, bool]:
+def physical_is_closer(robot: PlanarRobot, table: pd.DataFrame | None = None) -> dict[str, bool]:
     """For each parameter: is the physical datasheet closer to the paper's π̂ (read physically) than the paper's?
     (`table`: the robot's `parameter_table`, if already computed.)"""
     table = parameter_table(robot) if table is None else table
     return {name: abs(r.rel_diff_physical) < abs(r.rel_diff_paper) for name, r in table.iterrows()}
 
 
-def rigid_body_table(robot: Robot) -> pd.DataFrame:
+def rigid_body_table(robot: PlanarRobot) -> pd.DataFrame:
     """Masses, centres of mass and inertias under both conventions (the paper's 'Dynamic Parameters' table)."""
     rows = {}
     for convention in ("paper", "physical"):

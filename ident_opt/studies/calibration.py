@@ -13,13 +13,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.planar import RIGID
 from ident_opt.data import Dataset, load_dataset
-from ident_opt.datasheet import datasheet_pi
 from ident_opt.effects import BACKGROUND, parse_effect
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
-from ident_opt.problem import Problem
-from ident_opt.robot import RIGID
+from ident_opt.problem.spec import Problem
 from ident_opt.simulate.cache import spec_trial
 
 #: The simulator's spring-deflection columns (one per elastic joint or link it simulates).

@@ -13,6 +13,7 @@ from functools import partial
 
 import numpy as np
 
+from ident_opt.arm.planar import RIGID, PlanarArm
 from ident_opt.consistency import sign_violations
 from ident_opt.data import Dataset, chronological_split, concat, shuffled_split
 from ident_opt.errors import InputError
@@ -21,7 +22,6 @@ from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.nlp import fit_physical
 from ident_opt.metrics import all_metrics
 from ident_opt.models import DATASHEETS, datasheet_model
-from ident_opt.robot import RIGID, ArmModel
 from ident_opt.studies import METRICS
 from ident_opt.studies.seeds import FitFn, SplitResults, seed_study, split_fits
 from ident_opt.studies.trust import Trust, checks, iv_fit, stats_of
@@ -36,7 +36,7 @@ def fitted_estimators(robot, margin: float = 1e-6, weights: str | None = None) -
     }
 
 
-def datasheet_models(robot) -> dict[str, tuple[ArmModel, np.ndarray]]:
+def datasheet_models(robot) -> dict[str, tuple[PlanarArm, np.ndarray]]:
     """The datasheet under both conventions (`models.DATASHEETS`), each with the arm it is evaluated with:
     "datasheet_<convention>" -> (arm, π)."""
     out = {}
@@ -46,7 +46,7 @@ def datasheet_models(robot) -> dict[str, tuple[ArmModel, np.ndarray]]:
     return out
 
 
-def default_model(robot) -> tuple[ArmModel, str | None]:
+def default_model(robot) -> tuple[PlanarArm, str | None]:
     """(The model `compare` fits when no --extension is given, why, or None for the plain rigid model).
 
     A robot described by its inertials with a reflected rotor inertia on a joint (a geared drive) carries
@@ -54,14 +54,14 @@ def default_model(robot) -> tuple[ArmModel, str | None]:
     folding a wrong fixed value into the other parameters. Bars-and-cylinder datasheets (the paper's form)
     keep the paper's rigid model."""
     if robot.description == "inertials" and any(j.rotor_inertia > 0 for j in robot.joints):
-        return ArmModel(("armature",)), "armature, as the robot states a rotor inertia behind a gear"
+        return PlanarArm(("armature",)), "armature, as the robot states a rotor inertia behind a gear"
     return RIGID, None
 
 
-def reference_model(reference) -> tuple[ArmModel, np.ndarray]:
+def reference_model(reference) -> tuple[PlanarArm, np.ndarray]:
     """A problem's `[reference]` (a published identification) as (arm, π): the armature extension when it
     names ia2; an unknown parameter name is an InputError naming it."""
-    model = ArmModel(("armature",)) if "ia2" in reference.parameters else RIGID
+    model = PlanarArm(("armature",)) if "ia2" in reference.parameters else RIGID
     unknown = [k for k in reference.parameters if k not in model.names]
     if unknown:
         raise InputError(f"[reference.parameters]: unknown parameter '{unknown[0]}'; known: {', '.join(model.names)}")
@@ -80,9 +80,9 @@ class Comparison:
     """Everything `ident-opt compare` reports. `fits` are on the whole identification trial; `metrics` is
     {protocol: {metric: {estimator: [joint 1, joint 2]}}}; `seeds` is the paper's seed study."""
 
-    model: ArmModel
+    model: PlanarArm
     fits: dict[str, LinearFit]
-    datasheets: dict[str, tuple[ArmModel, np.ndarray]]
+    datasheets: dict[str, tuple[PlanarArm, np.ndarray]]
     metrics: dict[str, dict[str, dict[str, list[float]]]]
     seeds: SplitResults
     convention: str
@@ -125,13 +125,13 @@ class Comparison:
         return out
 
 
-def _scores(datasets: list[tuple[Dataset, np.ndarray]], model: ArmModel, pi: np.ndarray) -> dict[str, list]:
+def _scores(datasets: list[tuple[Dataset, np.ndarray]], model: PlanarArm, pi: np.ndarray) -> dict[str, list]:
     """Metrics of a fixed π on (dataset, test index) pairs, averaged over the pairs."""
     per = [all_metrics(d.tau[idx], model.predict(pi, d.q[idx], d.dq[idx], d.ddq[idx])) for d, idx in datasets]
     return {m: [float(np.mean([p[m][j] for p in per])) for j in range(2)] for m in METRICS}
 
 
-def _held_out(d: Dataset, scored: dict[str, tuple[ArmModel, np.ndarray]]) -> dict[str, dict[str, list[float]]]:
+def _held_out(d: Dataset, scored: dict[str, tuple[PlanarArm, np.ndarray]]) -> dict[str, dict[str, list[float]]]:
     """{metric: {key: [joint 1, joint 2]}} of each fixed (arm, π) on every sample of `d` (measured τ)."""
     out: dict[str, dict[str, list[float]]] = {m: {} for m in METRICS}
     for key, (arm, pi) in scored.items():
@@ -152,7 +152,7 @@ def compare_estimators(
     split,
     unseen: Dataset | list[Dataset] | None = None,
     *,
-    model: ArmModel | None = None,
+    model: PlanarArm | None = None,
     margin: float = 1e-6,
     weights: str | None = None,
     progress: bool = True,

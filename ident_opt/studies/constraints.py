@@ -14,15 +14,15 @@ import pandas as pd
 from tqdm import tqdm
 
 from ident_opt import simulate
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.planar import PHYSICAL, PlanarArm
 from ident_opt.data import Dataset
-from ident_opt.datasheet import datasheet_pi
 from ident_opt.identify import estimators
 from ident_opt.identify.stats import Stats
-from ident_opt.robot import PHYSICAL, ArmModel
 
 
 def multisine_trial(
-    model: ArmModel,
+    model: PlanarArm,
     pi_true: np.ndarray,
     *,
     duration: float,
@@ -103,7 +103,7 @@ STUDY_SOURCES = {
 def _study_trial(
     source: str,
     robot,
-    model: ArmModel,
+    model: PlanarArm,
     pi_sheet: np.ndarray,
     i: int,
     duration: float,
@@ -174,7 +174,7 @@ def constraints_study(
     return StudyResult(pd.DataFrame(rows), settings)
 
 
-def _both_fits(trial: Dataset, model: ArmModel, pi_true: np.ndarray, margin: float) -> dict:
+def _both_fits(trial: Dataset, model: PlanarArm, pi_true: np.ndarray, margin: float) -> dict:
     """OLS and the constrained fit on one trial: rank, consistency, active constraints, parameter errors."""
     st = Stats.from_data(model, trial.q, trial.dq, trial.ddq, trial.tau)
     ols = estimators.fit("ols", st, model)

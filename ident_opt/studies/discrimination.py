@@ -31,15 +31,14 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.data import Dataset
-from ident_opt.datasheet import datasheet_pi, rigid_body
 from ident_opt.diagnose import candidates as cands
 from ident_opt.diagnose import linear, signals
 from ident_opt.diagnose.diagnosis import prepare, rigid_fit
 from ident_opt.diagnose.signals import TORQUE_FILTER_HZ
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
-from ident_opt.problem import Robot
 from ident_opt.report import shown
 from ident_opt.studies import excitation
 from ident_opt.studies.excitation import Design, Setup
@@ -94,7 +93,7 @@ def parse_between(text: str) -> tuple[str, str]:
 
 
 def fit_rivals(
-    robot: Robot, trial: Dataset, causes: tuple[str, str], torque_filter_hz: float = TORQUE_FILTER_HZ
+    robot: PlanarRobot, trial: Dataset, causes: tuple[str, str], torque_filter_hz: float = TORQUE_FILTER_HZ
 ) -> Rivals:
     """Each cause's best family (least weighted training cost) fitted on the whole `trial` against the refitted
     nominal model, in the diagnosis's context (`diagnose.diagnosis.prepare`, `rigid_fit` weights)."""
@@ -271,7 +270,7 @@ def reference_gaps(rivals: Rivals, trial: Dataset, duration: float) -> dict:
 
 def design(
     setup: Setup,
-    robot: Robot,
+    robot: PlanarRobot,
     trial: Dataset | None,
     between: str,
     *,

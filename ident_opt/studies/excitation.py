@@ -35,13 +35,13 @@ import numpy as np
 import scipy.linalg
 from tqdm import tqdm
 
+from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi
+from ident_opt.arm.planar import PHYSICAL, PlanarArm
 from ident_opt.data import Dataset
-from ident_opt.datasheet import datasheet_pi
 from ident_opt.errors import InputError
 from ident_opt.identify.fit import base_combinations
-from ident_opt.problem import Limits, Robot
+from ident_opt.problem.spec import Limits
 from ident_opt.report import shown
-from ident_opt.robot import PHYSICAL, ArmModel
 from ident_opt.trajectory import Fourier, default_base_hz
 
 CRITERIA = ("d", "cond", "discriminate")
@@ -70,8 +70,8 @@ class Setup:
     """What every design of one problem shares: the model, the datasheet torque model, limits, the series,
     the noise model (σ [N m] per joint, where it came from) and the base columns of the model's regressor."""
 
-    arm: ArmModel
-    torque_model: ArmModel
+    arm: PlanarArm
+    torque_model: PlanarArm
     pi_datasheet: np.ndarray
     limits: Limits
     fourier: Fourier
@@ -111,7 +111,7 @@ class Design:
 
 
 # ---------------------------------------------------------------------------------------------- setup
-def noise_from_data(trial: Dataset | None, robot: Robot, arm: ArmModel = PHYSICAL) -> tuple[np.ndarray, str]:
+def noise_from_data(trial: Dataset | None, robot: PlanarRobot, arm: PlanarArm = PHYSICAL) -> tuple[np.ndarray, str]:
     """(σ (n,) [N m], source): the RMS residual per joint of the datasheet model on `trial`, or 1 N m without data."""
     if trial is None:
         return np.ones(arm.n_joints), "unit (no data: σ = 1 N m per joint)"
@@ -129,7 +129,7 @@ def random_states(limits: Limits, n: int, rng: np.random.Generator) -> tuple[np.
     return rng.uniform(lo, hi, (n, J)), rng.uniform(-v, v, (n, J)), rng.uniform(-a, a, (n, J))
 
 
-def base_columns(arm: ArmModel, limits: Limits, seed: int = 0) -> tuple[tuple[int, ...], np.ndarray]:
+def base_columns(arm: PlanarArm, limits: Limits, seed: int = 0) -> tuple[tuple[int, ...], np.ndarray]:
     """(indices of independent columns, 1/RMS of each at random states): pivoted QR of the column-equilibrated
     regressor at `BASE_STATES` random states within the limits."""
     Y = arm.regressor(*random_states(limits, BASE_STATES, np.random.default_rng([seed, 15])))
@@ -144,7 +144,7 @@ def base_columns(arm: ArmModel, limits: Limits, seed: int = 0) -> tuple[tuple[in
 
 
 def make_setup(
-    robot: Robot,
+    robot: PlanarRobot,
     limits: Limits,
     duration: float,
     *,
@@ -154,7 +154,7 @@ def make_setup(
     trial: Dataset | None = None,
 ) -> Setup:
     """The shared part of every design: model = the nominal structure (`robot.PHYSICAL`) with `extensions`."""
-    arm = ArmModel((*PHYSICAL.extensions, *extensions))
+    arm = PlanarArm((*PHYSICAL.extensions, *extensions))
     sigma, noise = noise_from_data(trial, robot)
     base, scale = base_columns(arm, limits)
     fourier = Fourier(arm.n_joints, harmonics, base_hz or default_base_hz(duration))

@@ -35,14 +35,14 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from ident_opt.arm.planar import PHYSICAL
 from ident_opt.data import Dataset
 from ident_opt.diagnose.diagnosis import at_rest, diagnose, prepare, rigid_fit
 from ident_opt.diagnose.signals import TORQUE_FILTER_HZ
 from ident_opt.effects import CATALOGUE
 from ident_opt.identify import estimators
 from ident_opt.identify.stats import Stats
-from ident_opt.problem import Problem
-from ident_opt.robot import PHYSICAL
+from ident_opt.problem.spec import Problem
 from ident_opt.simulate import simulate_trial
 from ident_opt.simulate.trial import MAX_NOISE_SCALE
 from ident_opt.studies import discrimination, excitation

@@ -10,12 +10,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ident_opt.arm.datasheet import datasheet_pi
+from ident_opt.arm.planar import RIGID
 from ident_opt.data import Dataset
-from ident_opt.datasheet import datasheet_pi
 from ident_opt.models import DATASHEETS, FITTED, RidgeModel, RigidModel
 from ident_opt.paper import PI_TRUE
-from ident_opt.problem import Problem
-from ident_opt.robot import RIGID
+from ident_opt.problem.spec import Problem
 from ident_opt.studies.protocols import ProtocolResult, chronological_protocol, cross_trial_protocol, paper_protocol
 from ident_opt.studies.seeds import SplitResults, seed_study
 

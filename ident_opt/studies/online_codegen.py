@@ -73,7 +73,7 @@ def verify(problem, trial: Dataset, out_dir: Path, compiler: list[str] | None = 
     start = offline_start("pbr", problem, train)
     ident = start_identifier(start, train)
     state = update_state(ident)
-    from ident_opt.robot import RIGID  # the online PBR's model
+    from ident_opt.arm.planar import RIGID  # the online PBR's model
 
     paths = codegen.generate_pi_update(RIGID, state, out_dir, KKT_TOL)
     library, example = codegen.compile_pi_update(out_dir, compiler)

@@ -19,7 +19,7 @@ from ident_opt.identify.stats import Stats
 from ident_opt.metrics import all_metrics, coverage
 from ident_opt.models import features, make_gmr
 from ident_opt.online import MODEL_KEYS, OnlineIdentifier, Start, batch_theta, offline_start, start_identifier
-from ident_opt.problem import Problem
+from ident_opt.problem.spec import Problem
 from ident_opt.studies import METRICS
 
 #: Adapted models whose parameters are checked against a batch re-solve (DM never moves).

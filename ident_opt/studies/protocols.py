@@ -29,7 +29,7 @@ from threadpoolctl import threadpool_limits
 from ident_opt.data import Dataset, chronological_split, shuffled_split
 from ident_opt.metrics import all_metrics, coverage
 from ident_opt.models import HybridModel, make_gmr, parametric_models
-from ident_opt.problem import Problem
+from ident_opt.problem.spec import Problem
 from ident_opt.studies import METRICS
 
 

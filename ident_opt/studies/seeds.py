@@ -15,16 +15,16 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.data import Dataset, shuffled_split
 from ident_opt.identify import estimators
 from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.stats import Stats
 from ident_opt.metrics import all_metrics
-from ident_opt.robot import ArmModel
 from ident_opt.studies import METRICS
 
 #: statistics + model -> fit.
-FitFn = Callable[[Stats, ArmModel], LinearFit]
+FitFn = Callable[[Stats, PlanarArm], LinearFit]
 
 
 @dataclass
@@ -51,7 +51,7 @@ class SplitResults:
 
 def split_fits(
     dataset: Dataset,
-    model: ArmModel,
+    model: PlanarArm,
     splits: Sequence[tuple[np.ndarray, np.ndarray]],
     fits: dict[str, FitFn],
     test: Dataset | None = None,
@@ -81,7 +81,7 @@ def split_fits(
 
 
 def seed_study(
-    dataset: Dataset, model: ArmModel, split, fits: dict[str, FitFn] | None = None, progress: bool = False
+    dataset: Dataset, model: PlanarArm, split, fits: dict[str, FitFn] | None = None, progress: bool = False
 ) -> SplitResults:
     """The paper's protocol: for each seed in `split.seeds`, a shuffled `split.train_fraction` split;
     `fits` default to OLS only. Returns parameters and held-out metrics per seed."""

@@ -13,14 +13,14 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt import codegen
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.data import Dataset
 from ident_opt.errors import InputError
 from ident_opt.gmr import GMR
 from ident_opt.identify import estimators
 from ident_opt.identify.stats import Stats
 from ident_opt.models import features, make_gmr
-from ident_opt.problem import ResidualSpec
-from ident_opt.robot import ArmModel
+from ident_opt.problem.spec import ResidualSpec
 
 #: The solver status written for estimators that have none to report.
 STATUS = {"ols": "least squares (no constraints)"}
@@ -36,7 +36,7 @@ N_RANDOM = 4000
 class Shipped:
     """The model baked into the C code: the arm, π in its order, how π was obtained, the GMR residual model."""
 
-    model: ArmModel
+    model: PlanarArm
     pi: np.ndarray
     estimator: str
     status: str
@@ -44,7 +44,7 @@ class Shipped:
 
 
 def prepare(
-    model: ArmModel,
+    model: PlanarArm,
     train: Dataset | None,
     residual: ResidualSpec,
     estimator: str,
@@ -65,7 +65,7 @@ def prepare(
     return Shipped(model, pi, label, status, gmr)
 
 
-def identify(model: ArmModel, train: Dataset, estimator: str) -> tuple[np.ndarray, str, str]:
+def identify(model: PlanarArm, train: Dataset, estimator: str) -> tuple[np.ndarray, str, str]:
     """(π, estimator name, solver status) from the training trial, by the chosen estimator."""
     stats = Stats.from_data(model, train.q, train.dq, train.ddq, train.tau)
     try:
@@ -75,7 +75,7 @@ def identify(model: ArmModel, train: Dataset, estimator: str) -> tuple[np.ndarra
     return fit.pi, fit.method, STATUS.get(fit.method, fit.status)
 
 
-def fit_residual(model: ArmModel, pi: np.ndarray, train: Dataset, spec: ResidualSpec, components: int | None) -> GMR:
+def fit_residual(model: PlanarArm, pi: np.ndarray, train: Dataset, spec: ResidualSpec, components: int | None) -> GMR:
     """The GMR residual model on x = [q dq ddq], r = τ − τ̂(π), with the problem's [residual] settings."""
     residual = train.tau - model.predict(pi, train.q, train.dq, train.ddq)
     return make_gmr(spec, components).fit(features(train), residual)
@@ -105,7 +105,7 @@ def read_parameters(path: str) -> dict:
     }
 
 
-def saved_vector(saved: dict, model: ArmModel) -> np.ndarray:
+def saved_vector(saved: dict, model: PlanarArm) -> np.ndarray:
     """π in the model's order; every model parameter must be in the file, as a finite number."""
     params = saved["parameters"]
     missing = [n for n in model.names if n not in params]
@@ -153,7 +153,7 @@ def check(library: Path, shipped: Shipped, train: Dataset | None, names: list[st
     return errors
 
 
-def _states(model: ArmModel, pi: np.ndarray, train: Dataset | None, rng) -> Dataset:
+def _states(model: PlanarArm, pi: np.ndarray, train: Dataset | None, rng) -> Dataset:
     """`N_RANDOM` random states spanning the training states (at least ±π, ±1, ±1) followed by the training
     states themselves (without a trial: ±π rad, ±3 rad/s, ±10 rad/s²), with the model's torques τ(π)."""
     if train is not None:

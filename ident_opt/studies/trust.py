@@ -27,12 +27,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.data import Dataset, choose_cutoff, refiltered
 from ident_opt.identify import estimators
 from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.iv import InstrumentStats, fit_iv
 from ident_opt.identify.stats import Stats
-from ident_opt.robot import ArmModel
 from ident_opt.warnings import ResultWarning
 
 #: OLS and IV disagree when a judged parameter differs by more than this fraction of its IV value (and 3 SE).
@@ -61,7 +61,7 @@ class Trust:
     warnings: list[ResultWarning] = field(default_factory=list)
 
 
-def stats_of(model: ArmModel, trials: list[Dataset]) -> Stats:
+def stats_of(model: PlanarArm, trials: list[Dataset]) -> Stats:
     """Σ of each trial's statistics, with the torque the fits use (`Dataset.tau_fit`)."""
     total = Stats.zeros(model.n_params, model.n_joints)
     for d in trials:
@@ -69,7 +69,7 @@ def stats_of(model: ArmModel, trials: list[Dataset]) -> Stats:
     return total
 
 
-def iv_fit(model: ArmModel, trials: list[Dataset]) -> LinearFit:
+def iv_fit(model: PlanarArm, trials: list[Dataset]) -> LinearFit:
     """IDIM-IV on all training trials (instrument statistics added up, each trial's derivatives its own)."""
     total = InstrumentStats.from_data(model, trials[0])
     for d in trials[1:]:
@@ -77,11 +77,11 @@ def iv_fit(model: ArmModel, trials: list[Dataset]) -> LinearFit:
     return fit_iv(total, model)
 
 
-def _judged(model: ArmModel) -> list[int]:
+def _judged(model: PlanarArm) -> list[int]:
     return [i for i, p in enumerate(model.parameters) if p.kind in JUDGED_KINDS]
 
 
-def _moved(model: ArmModel, a: LinearFit, b: LinearFit, tolerance: float) -> list[tuple[str, float, float]]:
+def _moved(model: PlanarArm, a: LinearFit, b: LinearFit, tolerance: float) -> list[tuple[str, float, float]]:
     """(name, a's value, b's value) of the judged parameters that differ by > 3 SE and > `tolerance` × |b|."""
     out = []
     for i in _judged(model):
@@ -96,7 +96,7 @@ def _listing(moved: list[tuple[str, float, float]]) -> str:
     return ", ".join(f"{n} {x:.4g} vs {y:.4g}" for n, x, y in moved)
 
 
-def check_ols_iv(model: ArmModel, ols: LinearFit, iv: LinearFit, cutoffs: list[float]) -> list[ResultWarning]:
+def check_ols_iv(model: PlanarArm, ols: LinearFit, iv: LinearFit, cutoffs: list[float]) -> list[ResultWarning]:
     """The OLS-against-IV rule (module doc)."""
     moved = _moved(model, ols, iv, OLS_IV_TOLERANCE)
     if not moved or not cutoffs:
@@ -118,7 +118,7 @@ def _hz(cutoffs: list[float]) -> str:
 
 
 def check_cutoff(
-    model: ArmModel, trials: list[Dataset], ols: LinearFit
+    model: PlanarArm, trials: list[Dataset], ols: LinearFit
 ) -> tuple[dict[float, LinearFit], list[ResultWarning]]:
     """OLS at ½× and 2× each trial's cut-off; a warning when 2× moves a judged parameter (module doc)."""
     if any(d.cutoff_hz is None for d in trials):
@@ -139,11 +139,11 @@ def check_cutoff(
 
 
 def check_convention(
-    model: ArmModel, trials: list[Dataset], conversions: dict[str, tuple[float, float]] | None = None
+    model: PlanarArm, trials: list[Dataset], conversions: dict[str, tuple[float, float]] | None = None
 ) -> tuple[dict[str, float], list[ResultWarning]]:
     """The direction of gravity per joint from OLS with the sine gravity columns; a warning with the
     `[data.columns]` offsets that fix it when it is off by more than `CONVENTION_TOLERANCE_RAD`."""
-    extended = model if "b1s" in model.names else ArmModel((*model.extensions, "joint_offset"))
+    extended = model if "b1s" in model.names else PlanarArm((*model.extensions, "joint_offset"))
     # Gravity is static: judge it at the motion's own cut-off, so that a noisy cut-off cannot hide the zero.
     trials = [d if d.cutoff_hz is None else refiltered(d, min(d.cutoff_hz, choose_cutoff(d.t, d.q))) for d in trials]
     p = estimators.fit("ols", stats_of(extended, trials), extended).as_dict()
@@ -178,7 +178,7 @@ def check_convention(
 
 
 def checks(
-    model: ArmModel,
+    model: PlanarArm,
     trials: list[Dataset],
     ols: LinearFit,
     iv: LinearFit,

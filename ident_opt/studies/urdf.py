@@ -5,7 +5,7 @@ Split: the test trials when given (`cross_trial`: another recording), else each 
 `train_fraction` in time trains and the rest tests (`chronological`). Everything is fitted from the
 training statistics (`identify.stats.Stats`). Returned as one JSON-ready dict (`docs/cli.md`):
 
-- `parameters.<estimator>`: standard parameters by name (`ident_opt.urdf_arm`); `base_parameters.ols`:
+- `parameters.<estimator>`: standard parameters by name (`ident_opt.arm.chain`); `base_parameters.ols`:
   each base parameter's value, SE and definition (`identify.base`);
 - `metrics.<protocol>.<estimator>`: held-out `rmse` [N m] and `nmse` per joint (by URDF joint name);
 - `consistency.<estimator>`: each link's pseudo-inertia λ_min [kg m²], the active constraints;
@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt import metrics
+from ident_opt.arm.chain import ChainArm
+from ident_opt.arm.rnea import N_LINK
 from ident_opt.data import Dataset, chronological_split, load_dataset
 from ident_opt.errors import InputError
 from ident_opt.identify.base import BaseFit, base_parameters, fit_base_ols
@@ -29,8 +31,6 @@ from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.physical import fit_physical
 from ident_opt.identify.stats import Stats
-from ident_opt.rnea import N_LINK
-from ident_opt.urdf_arm import UrdfArm
 
 #: The estimators of the comparison, in report order.
 ESTIMATORS = ("ols", "constrained", "consistent", "cad")
@@ -56,7 +56,7 @@ def load_trials(paths: list[Path], problem, **options) -> list[Dataset]:
         if extra and max(extra) > n:
             raise InputError(
                 f"{path}: the data have joint columns up to joint {max(extra)}, the URDF arm {problem.robot.urdf} "
-                f"has {n} joints ({', '.join(problem.robot.joints)})"
+                f"has {n} joints ({', '.join(problem.robot.joint_names)})"
             )
         trials.append(trial)
     return trials
@@ -74,7 +74,7 @@ def split(trials: list[Dataset], test: list[Dataset], train_fraction: float) -> 
     return "chronological", train, held
 
 
-def stats_of(arm: UrdfArm, trials: list[Dataset]) -> Stats:
+def stats_of(arm: ChainArm, trials: list[Dataset]) -> Stats:
     """The sufficient statistics of the arm's regressor over the trials."""
     total = Stats.zeros(arm.n_params, arm.n_joints)
     for trial in trials:
@@ -82,7 +82,7 @@ def stats_of(arm: UrdfArm, trials: list[Dataset]) -> Stats:
     return total
 
 
-def _consistency(arm: UrdfArm, pi: np.ndarray, fit: LinearFit | None) -> dict:
+def _consistency(arm: ChainArm, pi: np.ndarray, fit: LinearFit | None) -> dict:
     """Each link's pseudo-inertia λ_min [kg m²], whether all are ≥ 0 and the signs hold, which are active
     (0 ≤ λ_min < `ACTIVE_EIGENVALUE`) and which violated (λ_min < 0), the fit's active constraints."""
     lam = np.linalg.eigvalsh(arm.pseudo_inertias(pi))[:, 0]
@@ -97,7 +97,7 @@ def _consistency(arm: UrdfArm, pi: np.ndarray, fit: LinearFit | None) -> dict:
 
 def fit_all(robot, stats: Stats, weights: str | None = None) -> tuple[dict, dict, BaseFit, dict]:
     """(fits, π, the base OLS fit, seconds) of every estimator (`ESTIMATORS`) from the statistics."""
-    arm: UrdfArm = robot.arm
+    arm: ChainArm = robot.arm
     fits: dict[str, LinearFit | None] = {}
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -127,13 +127,13 @@ def summary(problem, fits: dict, pis: dict, base_fit: BaseFit) -> dict:
     """What both the comparison and the identification report: the robot, base parameters, each estimator's
     standard parameters (and SEs), consistency and masses against the URDF's."""
     robot = problem.robot
-    arm: UrdfArm = robot.arm
+    arm: ChainArm = robot.arm
     urdf_masses = arm.link_masses(pis["cad"])
     return {
         "problem": problem.name,
         "robot": {
             "urdf": str(robot.urdf),
-            "joints": list(robot.joints),
+            "joints": list(robot.joint_names),
             "links": list(arm.links),
             "n_params": arm.n_params,
             "gravity": list(robot.gravity),
@@ -163,7 +163,7 @@ def summary(problem, fits: dict, pis: dict, base_fit: BaseFit) -> dict:
     }
 
 
-def _scores(arm: UrdfArm, joints: tuple[str, ...], pis: dict, sets: list[Dataset]) -> dict:
+def _scores(arm: ChainArm, joints: tuple[str, ...], pis: dict, sets: list[Dataset]) -> dict:
     """rmse [N m] and nmse per joint of every π on the data sets."""
     tau = np.concatenate([t.tau for t in sets])
     q, dq, ddq = (np.concatenate([getattr(t, a) for t in sets]) for a in ("q", "dq", "ddq"))
@@ -181,13 +181,13 @@ def _scores(arm: UrdfArm, joints: tuple[str, ...], pis: dict, sets: list[Dataset
 def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None = None) -> dict:
     """The comparison of the module doc for a URDF problem; returns the JSON-ready result."""
     robot = problem.robot
-    arm: UrdfArm = robot.arm
+    arm: ChainArm = robot.arm
     protocol, train, held = split(trials, test, problem.split.train_fraction)
     t0 = time.perf_counter()
     stats = stats_of(arm, train)
     stats_seconds = time.perf_counter() - t0
     fits, pis, base_fit, seconds = fit_all(robot, stats, weights)
-    scores = _scores(arm, robot.joints, pis, held)
+    scores = _scores(arm, robot.joint_names, pis, held)
     return {
         **summary(problem, fits, pis, base_fit),
         "split": {
@@ -198,7 +198,7 @@ def run(problem, trials: list[Dataset], test: list[Dataset], weights: str | None
             "test_samples": sum(t.n for t in held),
         },
         "metrics": {protocol: scores},
-        "within_10_percent_of_ols": _within(scores, robot.joints),
+        "within_10_percent_of_ols": _within(scores, robot.joint_names),
         "seconds": {"statistics": stats_seconds, **seconds},
     }
 
@@ -207,14 +207,14 @@ def identify(problem, trials: list[Dataset], weights: str | None = None) -> dict
     """Every estimator on all the trials (no held-out data): parameters, SEs, base parameters, consistency,
     masses, and the in-sample rmse/nmse per joint (`metrics.fit`)."""
     robot = problem.robot
-    arm: UrdfArm = robot.arm
+    arm: ChainArm = robot.arm
     stats = stats_of(arm, trials)
     fits, pis, base_fit, seconds = fit_all(robot, stats, weights)
     return {
         **summary(problem, fits, pis, base_fit),
         "trials": [t.source for t in trials],
         "samples": int(stats.n),
-        "metrics": {"fit": _scores(arm, robot.joints, pis, trials)},
+        "metrics": {"fit": _scores(arm, robot.joint_names, pis, trials)},
         "seconds": seconds,
     }
 
@@ -224,11 +224,11 @@ def check_summary(problem) -> dict:
     links, gravity [m/s²], the joint terms and couplings, the number of standard and base parameters, and the
     URDF's total mass [kg] (None when a link has no <inertial>, which `missing_inertials` names)."""
     robot = problem.robot
-    arm: UrdfArm = robot.arm  # builds Pinocchio's model: a URDF fault shows here, naming the element
+    arm: ChainArm = robot.arm  # builds Pinocchio's model: a URDF fault shows here, naming the element
     mass = None if arm.missing_inertials else sum(arm.link_masses(arm.cad_parameters()).values())
     return {
         "urdf": str(robot.urdf),
-        "joints": list(robot.joints),
+        "joints": list(robot.joint_names),
         "links": list(arm.links),
         "gravity": list(robot.gravity),
         "joint_terms": list(arm.joint_terms),
@@ -261,7 +261,7 @@ def check_lines(problem, robot: dict) -> list[str]:
     return lines
 
 
-def necessarily_nonnegative(arm: UrdfArm, K: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+def necessarily_nonnegative(arm: ChainArm, K: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     """For each row k of K (B, P): is K_k · π ≥ 0 for every consistent π (pseudo-inertias ⪰ 0, friction and
     armature ≥ 0)? The consistent set is a cone, so that holds exactly when K_k is in its dual: on each link,
     the symmetric S_i with K_k,i · π_i = tr(S_i J_i(π_i)) is ⪰ 0 (the 10 pseudo-inertia maps span the 4×4
@@ -285,7 +285,7 @@ def necessarily_nonnegative(arm: UrdfArm, K: np.ndarray, tol: float = 1e-9) -> n
     return np.array(out)
 
 
-def impossible_base_values(arm: UrdfArm, base_fit) -> dict[str, dict]:
+def impossible_base_values(arm: ChainArm, base_fit) -> dict[str, dict]:
     """The OLS base parameters that no consistent arm can have negative, yet are negative: name → value, SE,
     and how many SE below 0. What a consistent fit cannot follow (module doc of `identify.physical`)."""
     base = base_fit.base

@@ -29,7 +29,7 @@ locked at 0 and fixed children merged into their parent (as Pinocchio does):
   link frame from axis 2 (the tip; lc2 when all its frames sit on the axis).
 
 Angles and torques: the tool's q1 is link 1's direction from the horizontal, q2 the direction of link 2's
-centre of mass relative to link 1 (`ident_opt.robot`), so
+centre of mass relative to link 1 (`ident_opt.arm.planar`), so
 
     q1 = q1_urdf + θ1,   θ1 = atan2(d⊥·ŷ, d⊥·x̂)
     q2 = s2 q2_urdf + φ2
@@ -41,23 +41,23 @@ N m s/rad and N m), unless [robot.jointN] gives it.
 
 With these, M(q), the gravity torque and τ = M ddq + C dq + G + F of the two-link closed form equal
 Pinocchio's RNEA on the URDF (`tests/test_urdf_planar.py`). A URDF that is not such an arm raises
-`NotPlanar` (the n-joint path `ident_opt.urdf_problem.UrdfRobot` is then taken, unless form = "planar").
+`NotPlanar` (the n-joint path `ident_opt.arm.chain.ChainRobot` is then taken, unless form = "planar").
 """
 
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
+from ident_opt.arm.datasheet import InertialLink, PlanarRobot
+from ident_opt.arm.joints import JointSide
+from ident_opt.arm.urdf import chain_model, check_chain, parse_urdf
 from ident_opt.errors import InputError
-from ident_opt.problem import LIMITS, InertialLink, JointSide, Robot, _friction
-from ident_opt.urdf_arm import chain_model, check_chain, parse_urdf
 
 if TYPE_CHECKING:  # only a type here: pandas is a heavy import that loading a problem does not need
     import pandas as pd
@@ -102,7 +102,7 @@ class PlanarGeometry:
 
 
 @dataclass(frozen=True)
-class UrdfPlanarRobot(Robot):
+class UrdfPlanarRobot(PlanarRobot):
     """The measured-inertials robot (`description` "inertials") built from a URDF, with the map from the URDF's
     angles to the tool's: q_tool = sign · q_urdf + offset [rad] per joint (module doc)."""
 
@@ -167,26 +167,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
 def _wrap(angle: float) -> float:
     """An angle in (−π, π] [rad]."""
     return float(math.pi - (math.pi - angle) % (2 * math.pi))
-
-
-def _dynamics(path: Path, text: str, name: str) -> tuple[float, float]:
-    """(damping [N m s/rad], friction [N m]) of <joint name=…>'s <dynamics>, 0 where absent; InputError naming
-    the joint for a value that is not a finite number ≥ 0."""
-    for joint in ET.fromstring(text).findall("joint"):
-        dyn = joint.find("dynamics")
-        if joint.get("name") != name or dyn is None:
-            continue
-        values = []
-        for key in ("damping", "friction"):
-            try:
-                value = float(dyn.get(key, 0.0))
-            except ValueError:
-                value = math.nan
-            if not 0.0 <= value <= LIMITS["friction"]:
-                raise InputError(f"{path}: <joint name={name!r}> <dynamics {key}={dyn.get(key)!r}>: not a friction ≥ 0")
-            values.append(value)
-        return values[0], values[1]
-    return 0.0, 0.0
 
 
 def _carried(model: pin.Model, joint: int) -> list[pin.Frame]:
@@ -277,7 +257,7 @@ def planar_geometry(
         ),
         signs=(1.0, s2),
         offsets=(_wrap(math.atan2(d @ y_hat, d @ x_hat)), _wrap(math.atan2(y2, x2)) if lc2 > COM_TOLERANCE else 0.0),
-        dynamics=(_dynamics(path, text, names[0]), _dynamics(path, text, names[1])),
+        dynamics=tuple((joints[name].damping, joints[name].friction) for name in names),
     )
 
 
@@ -287,44 +267,11 @@ def _reach(data: pin.Data, frame: pin.Frame, n: np.ndarray, axis_point: np.ndarr
     return float(np.linalg.norm(offset - (offset @ n) * n))
 
 
-def _joint_side(table: Any, dynamics: tuple[float, float]) -> tuple[JointSide, list[str]]:
-    """[robot.jointN] (all keys optional) over the URDF's <dynamics>: joint-side friction, reflected rotor
-    inertia, torque constant and gear ratio (the inertials form's keys; `side`, if given, must be "joint")."""
-    notes = []
-    if table.take("side", str, "joint") != "joint":
-        raise InputError(f"{table.path}: key 'side' in [{table.where}] must be \"joint\" for a URDF arm")
-    for key, value in (("viscous_friction", dynamics[0]), ("coulomb_friction", dynamics[1])):
-        if key in table.raw and value:
-            notes.append(f"[{table.where}] {key} replaces the URDF's <dynamics> value {value:g}")
-    optional = {
-        key: table.number(key, None, 0.0, LIMITS[key], open_low=True) if key in table.raw else None
-        for key in ("torque_constant", "gear_ratio")
-    }
-    joint = JointSide(
-        viscous_friction=_friction(table, "viscous_friction", dynamics[0]),
-        coulomb_friction=_friction(table, "coulomb_friction", dynamics[1]),
-        rotor_inertia=table.non_negative("rotor_inertia", 0.0, high=LIMITS["inertia"]),
-        **optional,
-    )
-    table.done()
-    return joint, notes
-
-
-def planar_robot(table: Any, urdf: Path, names: tuple[str, ...], geometry: PlanarGeometry) -> UrdfPlanarRobot:
-    """The robot of a planar URDF from the rest of problem.py's checked [robot] table ([robot.joint1],
-    [robot.joint2]); every other key left is an error of the problem file."""
-    for name in names:
-        if name in table.raw:
-            raise InputError(
-                f"{table.path}: [robot.{name}]: a planar two-link URDF arm takes its joints' extras in "
-                f"[robot.joint{names.index(name) + 1}] (joint side, as the inertials form)"
-            )
-    joints, notes = [], []
-    for j, dynamics in enumerate(geometry.dynamics):
-        joint, said = _joint_side(table.table(f"joint{j + 1}", required=False), dynamics)
-        joints.append(joint)
-        notes += said
-    table.done()
+def planar_robot(
+    urdf: Path, names: tuple[str, ...], geometry: PlanarGeometry, joints: tuple[JointSide, JointSide], notes=()
+) -> UrdfPlanarRobot:
+    """The measured-inertials robot of a planar URDF (`planar_geometry`) with its joints' joint-side values
+    (friction from the URDF's <dynamics> unless the problem overrides it) and the notes the parser made."""
     body1, body2 = geometry.bodies
     g_note = f"gravity {geometry.gravity:.6g} m/s² in the plane of motion"
     if abs(geometry.gravity_along_axis) > 1e-12:

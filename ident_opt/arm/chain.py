@@ -29,11 +29,7 @@ joint the file lacks or that is not revolute, joints that are not one serial cha
 
 from __future__ import annotations
 
-import hashlib
 import os
-import tempfile
-import threading
-import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -43,10 +39,14 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from ident_opt.arm import casadi_function, symbol_table
+from ident_opt.arm.base import casadi_function, symbol_table
+from ident_opt.arm.joints import JointSide
+from ident_opt.arm.rnea import N_LINK, ChainJoint, rnea
+from ident_opt.arm.urdf import chain_model, check_chain, parse_urdf
+from ident_opt.cache import cache_root
+from ident_opt.cbuild import CompiledRows
 from ident_opt.errors import InputError
 from ident_opt.parameters import Parameter
-from ident_opt.rnea import N_LINK, ChainJoint, rnea
 
 #: The 10 standard inertial parameters per link: (prefix, unit, kind, meaning), Pinocchio's order.
 LINK_PARAMETERS = (
@@ -68,204 +68,12 @@ JOINT_TERMS = {
     "ia": ("kg m^2", "armature", "rotor inertia (armature) reflected to the joint"),
     "off": ("N m", "other", "constant torque offset"),
 }
-#: Samples per call of the compiled regressor: its input and output buffers (~4 kB a sample) stay cache-sized.
-REGRESSOR_CHUNK = 512
-#: Revolute joint types of the URDF format.
-REVOLUTE = ("revolute", "continuous")
 #: Gravity along −z of the base [m/s²] unless the problem file says otherwise.
 STANDARD_GRAVITY = (0.0, 0.0, -9.81)
 
 
 @dataclass(frozen=True)
-class UrdfJoint:
-    """One URDF <joint>: type, parent and child link, origin (xyz [m], rpy [rad]) and axis."""
-
-    name: str
-    type: str
-    parent: str
-    child: str
-    xyz: tuple[float, float, float]
-    rpy: tuple[float, float, float]
-    axis: tuple[float, float, float]
-
-
-def _floats(element: ET.Element | None, key: str, default: str, where: str) -> tuple[float, float, float]:
-    """Three floats from attribute `key` of `element` (default when absent); InputError naming `where`."""
-    text = default if element is None else element.get(key, default)
-    try:
-        values = tuple(float(v) for v in text.split())
-    except ValueError:
-        values = ()
-    if len(values) != 3 or not all(np.isfinite(values)):
-        raise InputError(f"{where}: {key}={text!r} must be three finite numbers")
-    return values  # type: ignore[return-value]
-
-
-def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Element]]:
-    """(the file's text, joints by name, links by name) of a URDF; InputError if it does not parse."""
-    try:
-        text = path.read_text(encoding="utf-8")
-        root = ET.fromstring(text)
-    except FileNotFoundError:
-        raise InputError(f"{path}: URDF file not found") from None
-    except (ET.ParseError, UnicodeDecodeError, OSError) as exc:
-        raise InputError(f"{path}: not a valid URDF (XML error: {exc})") from None
-    if root.tag != "robot":
-        raise InputError(f"{path}: not a URDF: the root element is <{root.tag}>, not <robot>")
-    links = {}
-    for link in root.findall("link"):
-        if not link.get("name"):
-            raise InputError(f"{path}: a <link> without a name")
-        links[link.get("name")] = link
-    joints = {}
-    for j in root.findall("joint"):
-        name = j.get("name")
-        where = f"{path}: <joint name={name!r}>"
-        parent, child = j.find("parent"), j.find("child")
-        if not name or parent is None or child is None or j.get("type") is None:
-            raise InputError(f"{where}: needs a name, a type, <parent link=…> and <child link=…>")
-        for end in (parent.get("link"), child.get("link")):
-            if end not in links:
-                raise InputError(f"{where}: refers to link {end!r}, which the file does not define")
-        origin = j.find("origin")
-        joints[name] = UrdfJoint(
-            name,
-            j.get("type"),
-            parent.get("link"),
-            child.get("link"),
-            _floats(origin, "xyz", "0 0 0", where),
-            _floats(origin, "rpy", "0 0 0", where),
-            _floats(j.find("axis"), "xyz", "1 0 0", where),
-        )
-    return text, joints, links
-
-
-def check_chain(path: Path, joints: dict[str, UrdfJoint], names: tuple[str, ...], base: str | None) -> str:
-    """Check that `names` are revolute joints of the file forming one serial chain from `base` (default: the
-    root link) through fixed joints only; return the base link. InputError naming the element otherwise."""
-    if not names:
-        raise InputError(f"{path}: [robot] joints must name at least one joint")
-    for name in names:
-        if name not in joints:
-            close = ", ".join(sorted(joints)) or "none"
-            raise InputError(f"{path}: joint {name!r} is not in the URDF (its joints: {close})")
-        if joints[name].type not in REVOLUTE:
-            raise InputError(
-                f"{path}: <joint name={name!r}> is of type {joints[name].type!r}; only revolute joints are supported"
-            )
-    by_child = {j.child: j for j in joints.values()}
-    children = set(by_child)
-    roots = sorted({j.parent for j in joints.values()} - children)
-    if base is None:
-        if len(roots) != 1:
-            raise InputError(f"{path}: the URDF has {len(roots)} root links ({', '.join(roots)}), not one")
-        base = roots[0]
-
-    def ancestor_through_fixed(link: str) -> str:
-        """Walk up from `link` through fixed joints; the first link reached by a non-fixed joint's child."""
-        while link in by_child and by_child[link].type == "fixed" and link != base:
-            link = by_child[link].parent
-        return link
-
-    expected = base
-    for name in names:
-        parent = ancestor_through_fixed(joints[name].parent)
-        if parent != expected:
-            what = f"the base link {base!r}" if expected == base else f"the child of the previous joint ({expected!r})"
-            raise InputError(
-                f"{path}: <joint name={name!r}>: not a serial chain: its parent link {joints[name].parent!r} is not "
-                f"{what} or attached to it by fixed joints"
-            )
-        expected = joints[name].child
-    return base
-
-
-def _as_revolute(text: str) -> str:
-    """The URDF with every continuous joint made revolute with wide limits: Pinocchio would read a continuous
-    joint as a unit-circle joint (two configuration entries for one velocity); the dynamics are the same."""
-    root = ET.fromstring(text)
-    for joint in root.findall("joint"):
-        if joint.get("type") == "continuous":
-            joint.set("type", "revolute")
-            if joint.find("limit") is None:
-                ET.SubElement(joint, "limit", effort="1e6", lower="-1e6", upper="1e6", velocity="1e6")
-    return ET.tostring(root, encoding="unicode")
-
-
-def chain_model(path: str | Path, text: str, joints: tuple[str, ...]) -> pin.Model:
-    """Pinocchio's model of the URDF `text` (read from `path`) reduced to `joints`, base to tip: every other
-    movable joint of the file locked at 0; InputError naming the file when Pinocchio cannot read it or the
-    joints are not its chain in this order."""
-    try:
-        full = pin.buildModelFromXML(_as_revolute(text))
-    except (RuntimeError, ValueError) as exc:
-        raise InputError(f"{path}: Pinocchio cannot read this URDF ({exc})") from None
-    lock = [full.getJointId(n) for n in full.names[1:] if n not in joints]
-    model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
-    if tuple(model.names[1:]) != tuple(joints) or model.nv != len(joints):
-        raise InputError(
-            f"{path}: the joints {list(joints)} are not the file's chain in this order "
-            f"(Pinocchio reads {list(model.names[1:])})"
-        )
-    return model
-
-
-class CompiledRows:
-    """A CasADi Function of one sample's x (k×1) to one dense output (r×c), as generated C compiled into a shared
-    library and mapped over `chunk` samples: `rows(X)` for X (N, k) gives (N, c, r), i.e. each sample's output
-    transposed, read through CasADi's buffers (no copies into CasADi matrices, which cost more than the C).
-
-    The library is cached in `folder` under the hash of its source, so a machine compiles each model once;
-    it is written under a temporary name and renamed, so parallel processes never load a half-written file."""
-
-    def __init__(self, function: ca.Function, folder: Path, chunk: int = REGRESSOR_CHUNK):
-        from ident_opt import codegen  # the compiler helpers; imported only when a regressor is compiled
-
-        self.n_in = function.size1_in(0)
-        self.shape = (function.size2_out(0), function.size1_out(0))
-        self.chunk = chunk
-        name = function.name()
-        with tempfile.TemporaryDirectory() as tmp:
-            source, _ = codegen.generate_sources([function], Path(tmp), name)
-            key = hashlib.sha256(source.read_bytes() + " ".join(codegen.CFLAGS).encode()).hexdigest()[:16]
-            lib = Path(folder) / codegen.library_name(f"{name}_{key}")
-            if not lib.is_file():
-                built = codegen.compile_library(source, Path(tmp), name=name)
-                lib.parent.mkdir(parents=True, exist_ok=True)
-                partial = lib.with_name(f"{lib.name}.{os.getpid()}.part")
-                partial.write_bytes(built.read_bytes())
-                os.replace(partial, lib)
-        self.mapped = codegen.load_external(lib, name).map(chunk, "serial")
-        self._buffer, self._run = self.mapped.buffer()
-        self._x = np.zeros((chunk, self.n_in))  # the last, partial chunk goes through these
-        self._y = np.empty((chunk, *self.shape))
-        self._lock = threading.Lock()  # one CasADi buffer and one scratch pair: one caller at a time
-
-    def _call(self, x: np.ndarray, y: np.ndarray) -> None:
-        """Evaluate one full chunk: x (chunk, k) C-contiguous into y (chunk, c, r) C-contiguous."""
-        self._buffer.set_arg(0, memoryview(x))
-        self._buffer.set_res(0, memoryview(y))
-        self._run()
-        if self._buffer.ret() != 0:
-            raise RuntimeError(f"the compiled {self.mapped.name()} failed (status {self._buffer.ret()})")
-
-    def __call__(self, X: np.ndarray) -> np.ndarray:
-        """(N, c, r): each sample's output, transposed, for X (N, k)."""
-        X = np.ascontiguousarray(X, dtype=float)
-        out = np.empty((len(X), *self.shape))
-        full = len(X) - len(X) % self.chunk
-        with self._lock:
-            for s in range(0, full, self.chunk):
-                self._call(X[s : s + self.chunk], out[s : s + self.chunk])
-            if full < len(X):
-                self._x[: len(X) - full] = X[full:]
-                self._call(self._x, self._y)
-                out[full:] = self._y[: len(X) - full]
-        return out
-
-
-@dataclass(frozen=True)
-class UrdfArm:
+class ChainArm:
     """An `Arm` from a URDF: `joints` (the revolute joints, base to tip) of the file `urdf`, gravity (3,)
     [m/s²] in the base frame; per-joint friction (fv, fc), armature (ia) and offset (off) terms as chosen.
 
@@ -443,8 +251,6 @@ class UrdfArm:
         also asks for that): Y then comes from Pinocchio."""
         if os.environ.get("IDENT_OPT_REGRESSOR", "").strip().lower() == "pinocchio":
             return None
-        from ident_opt.simulate.cache import cache_root  # the project's cache folder (or $IDENT_OPT_CACHE)
-
         n = self.n_joints
         q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
         pi = ca.SX.sym("pi", self.n_params)
@@ -563,3 +369,63 @@ class UrdfArm:
     def function(self, what: str) -> ca.Function:
         """A CasADi Function of (q, dq, ddq, pi) for one of M, C, G, F, tau, Y."""
         return casadi_function(self.symbols, what)
+
+
+@dataclass(frozen=True)
+class ChainRobot:
+    """An n-joint arm from a URDF, as a problem's `[robot]` describes it (`ident_opt.problem.urdf`): the file,
+    its revolute joints base to tip (`joint_names`), gravity (3,) [m/s²] in the base frame, the model's joint
+    terms, each drive's nominal values (`joints`: joint-side friction, reflected rotor inertia, and the torque
+    constant and gear ratio that turn currents into torques), couplings, and the plausible fit's prior (its
+    weight, the links' mass range and centre-of-mass box)."""
+
+    urdf: Path
+    joint_names: tuple[str, ...]
+    gravity: tuple[float, float, float]
+    joints: tuple[JointSide, ...]
+    base: str | None = None
+    friction: bool = True
+    armature: bool = True
+    offsets: bool = False
+    prior_weight: float = 1e-7
+    mass_range: float | None = 0.5
+    com_box: float | None = 0.1
+    couplings: tuple[tuple[str, str, float], ...] = ()
+    notes: tuple[str, ...] = field(default=(), compare=False)
+    description: str = "urdf"
+
+    @property
+    def n_joints(self) -> int:
+        """n, the number of joints."""
+        return len(self.joint_names)
+
+    @cached_property
+    def arm(self) -> ChainArm:
+        """The `ChainArm` (built once; InputError naming the file and element on a bad URDF)."""
+        return ChainArm(
+            str(self.urdf),
+            self.joint_names,
+            self.gravity,
+            self.base,
+            self.friction,
+            self.armature,
+            self.offsets,
+            self.couplings,
+        )
+
+    def nominal_parameters(self) -> np.ndarray:
+        """π0 (P,): the URDF's inertials, each drive's nominal viscous and Coulomb friction (mean of the two
+        directions) and reflected rotor inertia, no offsets: the arm's "datasheet" model."""
+        arm = self.arm
+        pi = arm.cad_parameters()
+        values = {
+            "fv": [j.viscous_friction.mean for j in self.joints],
+            "fc": [j.coulomb_friction.mean for j in self.joints],
+            "ia": [j.rotor_inertia for j in self.joints],
+        }
+        n = self.n_joints
+        for t, term in enumerate(arm.joint_terms):
+            if term in values:
+                start = arm.n_link_params + t * n
+                pi[start : start + n] = values[term]
+        return pi

@@ -27,8 +27,8 @@ import casadi as ca
 import numpy as np
 
 from ident_opt import effects as catalogue
-from ident_opt.arm import casadi_function, symbol_table
-from ident_opt.datasheet import PI_NAMES
+from ident_opt.arm.base import casadi_function, symbol_table
+from ident_opt.arm.datasheet import PI_NAMES
 from ident_opt.parameters import Parameter
 
 #: The paper's grouped parameters π, declared once (names in `PI_NAMES` order).
@@ -52,7 +52,7 @@ EXTENSIONS = {name: tuple(p.name for p in e.parameters) for name, e in catalogue
 
 
 @dataclass(frozen=True)
-class ArmModel:
+class PlanarArm:
     """A rigid two-link arm model: which parameters it has and how τ depends on them (an `Arm`).
 
     `gravity="paper"` gives the paper's printed G1 = (β1 + β2) c1 + β2 c12, kept only to reproduce its
@@ -263,15 +263,11 @@ class ArmModel:
         return float(min(np.linalg.eigvalsh(M0 + M1)[0], np.linalg.eigvalsh(M0 - M1)[0]))
 
 
-#: The two-link closed form under the name of what it is (`ArmModel` is kept for existing callers).
-TwoLinkArm = ArmModel
-
-
 #: The paper's identification model (physically correct gravity vector).
-RIGID = ArmModel()
+RIGID = PlanarArm()
 #: The nominal physical-convention structure: the datasheet read physically has a joint-2 armature ia2
 #: (joint 1's is folded into a1). The simulator's truth, the physical datasheet model and the diagnosis'
 #: nominal model all use it.
-PHYSICAL = ArmModel(("armature",))
+PHYSICAL = PlanarArm(("armature",))
 #: The paper's printed gravity vector G1 = (β1 + β2) c1 + β2 c12, only to reproduce its Model 2.
-PAPER = ArmModel(gravity="paper")
+PAPER = PlanarArm(gravity="paper")

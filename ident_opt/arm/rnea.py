@@ -2,7 +2,7 @@
 standard inertial parameters of its links.
 
 The installable Pinocchio has no CasADi bindings, so NLPs and generated C need the same model written
-once in CasADi; `ident_opt.urdf_arm.UrdfArm` checks it against Pinocchio's RNEA and torque regressor.
+once in CasADi; `ident_opt.arm.chain.ChainArm` checks it against Pinocchio's RNEA and torque regressor.
 
 Conventions (Pinocchio's, so the two agree to rounding): spatial vectors (linear; angular), every
 quantity of link i expressed in its own frame (the frame of joint i), spatial (not classical)

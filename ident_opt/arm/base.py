@@ -4,7 +4,7 @@ An arm is a rigid-body torque model that is linear in its parameters π (P,):
 
     τ = M(q) ddq + C(q, dq) dq + G(q) + F(dq) = Y(q, dq, ddq) π          q, dq, ddq, τ ∈ Rⁿ (n joints)
 
-`Arm` is that contract. The two-link closed form (`ident_opt.robot.ArmModel`, alias `TwoLinkArm`) is one
+`Arm` is that contract. The two-link closed form (`ident_opt.arm.planar.PlanarArm`, alias `TwoLinkArm`) is one
 implementation; the rest of the package depends on this interface only, so another arm plugs in without
 touching the estimators (`ident_opt.identify`), GMR, online identification, code generation or reports.
 
@@ -135,3 +135,26 @@ def casadi_function(symbols: Mapping[str, ca.SX], what: str) -> ca.Function:
     """A CasADi Function of (q, dq, ddq, pi) for one of an arm's symbols (M, C, G, F, tau, Y)."""
     s = symbols
     return ca.Function(what, [s["q"], s["dq"], s["ddq"], s["pi"]], [s[what]], ["q", "dq", "ddq", "pi"], [what])
+
+
+@runtime_checkable
+class Robot(Protocol):
+    """An arm as a problem's `[robot]` describes it: its joints and their nominal drive values, from which the
+    identification model (`Arm`) is built. Implementations: `ident_opt.arm.datasheet.PlanarRobot` (the planar
+    two-link arm; `ident_opt.arm.planar_urdf.UrdfPlanarRobot` from a URDF) and `ident_opt.arm.chain.ChainRobot`
+    (an n-joint chain from a URDF)."""
+
+    @property
+    def n_joints(self) -> int:
+        """n, the number of joints."""
+        ...
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The joints' names, base to tip (the URDF's, or joint1, joint2)."""
+        ...
+
+    @property
+    def joints(self) -> tuple:
+        """Each joint's nominal drive values (friction, rotor inertia, `current_to_torque`), base to tip."""
+        ...

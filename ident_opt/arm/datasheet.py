@@ -17,7 +17,84 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ident_opt.problem import Link, Robot
+from ident_opt.arm.joints import Friction, JointSide
+
+
+@dataclass(frozen=True)
+class Link:
+    """A link modelled as a uniform rectangular bar [m, kg/m^3]."""
+
+    length: float
+    width: float
+    height: float
+    density: float
+
+    @property
+    def mass(self) -> float:
+        """Bar mass [kg]."""
+        return self.density * self.length * self.width * self.height
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One actuator's datasheet: motor-side friction and rotor inertia, gear ratio N, torque constant."""
+
+    torque_constant: float  # N m / A, motor side
+    gear_ratio: float
+    rotor_inertia: float  # kg m^2, motor side
+    viscous_friction: Friction  # N m s / rad, motor side
+    coulomb_friction: Friction  # N m, motor side
+    motor_diameter: float  # m
+    actuator_mass: float  # kg
+
+    @property
+    def current_to_torque(self) -> float:
+        """Joint-side torque per ampere of motor current [N m / A]: torque constant × gear ratio."""
+        return self.torque_constant * self.gear_ratio
+
+
+@dataclass(frozen=True)
+class InertialLink:
+    """A link given by its measured or CAD inertials: `length` [m] (joint axis to the next axis or the tip),
+    `mass` [kg] (everything it carries included), `com` [m] (along the link from its own joint axis) and
+    `inertia` [kg m²] (about the centre of mass, around the joint axis)."""
+
+    length: float
+    mass: float
+    com: float
+    inertia: float
+
+
+@dataclass(frozen=True)
+class PlanarRobot:
+    """The `[robot]` section: a two-link planar arm under gravity, as bars and cylinders (`description`
+    "bars": a datasheet, motor-side friction and rotor inertia) or as measured inertials ("inertials":
+    joint-side values)."""
+
+    gravity: float
+    convention: str  # "physical" or "paper"
+    link1: Link | InertialLink
+    link2: Link | InertialLink
+    joint1: Joint | JointSide
+    joint2: Joint | JointSide
+    payload_mass: float = 0.0
+    description: str = "bars"
+
+    @property
+    def joints(self) -> tuple[Joint | JointSide, ...]:
+        """The joints, in order."""
+        return (self.joint1, self.joint2)
+
+    @property
+    def n_joints(self) -> int:
+        """n = 2 joints."""
+        return 2
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The joints' names in reports: joint1, joint2."""
+        return ("joint1", "joint2")
+
 
 #: The paper's grouped parameters, in its order (β in N·m, friction joint-side).
 PI_NAMES = ("a1", "a2", "a3", "b1", "b2", "fv1", "fv2", "fc1", "fc2")
@@ -64,7 +141,7 @@ def combine(parts: list[tuple[float, float, float]]) -> tuple[float, float, floa
     return mass, com, inertia
 
 
-def rigid_body(robot: Robot, convention: str | None = None) -> RigidBody:
+def rigid_body(robot: PlanarRobot, convention: str | None = None) -> RigidBody:
     """Rigid-body parameters from the datasheet under `convention` (default: the robot's own); a robot
     given by measured inertials is read as it is (joint-side values; the conventions concern bars)."""
     convention = convention or robot.convention
@@ -101,7 +178,7 @@ def rigid_body(robot: Robot, convention: str | None = None) -> RigidBody:
     return RigidBody(m1, m2, l1, l2, lc1, lc2, Ic1, Ic2, robot.gravity, armature, fv, fc, fc_pos, fc_neg)
 
 
-def _from_inertials(robot: Robot) -> RigidBody:
+def _from_inertials(robot: PlanarRobot) -> RigidBody:
     """Rigid-body parameters of a robot given by measured inertials (`[robot.linkN]` mass, com, inertia about
     the centre of mass; `[robot.jointN]` joint-side friction and reflected rotor inertia); a payload is a point
     mass at the tip of link 2."""
@@ -144,7 +221,7 @@ def grouped(m1, m2, l1, lc1, lc2, Ic1, Ic2, g):
     return a1, a2, a3, b1, b2
 
 
-def datasheet_pi(robot: Robot, convention: str | None = None) -> dict[str, float]:
+def datasheet_pi(robot: PlanarRobot, convention: str | None = None) -> dict[str, float]:
     """The datasheet's π by name. Under ``physical`` the joint-1 armature is folded into ``a1``
     (it cannot be told apart from it) and the joint-2 armature is reported as ``ia2``."""
     convention = convention or robot.convention

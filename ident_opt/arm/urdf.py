@@ -1,0 +1,236 @@
+"""Reading a URDF: its joints, links and inertials, checked, and Pinocchio's model of a chain of its joints.
+
+Every fault is an `InputError` naming the file and the element: a file that does not parse, a joint that is
+not in it or not revolute, joints that are not one serial chain from the base, and (`chain_model`) anything
+Pinocchio cannot read. Both arm implementations read URDFs through this module: the n-joint chain
+(`ident_opt.arm.chain`) and the planar two-link arm (`ident_opt.arm.planar_urdf`).
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from ident_opt.errors import InputError
+
+#: Revolute joint types of the URDF format.
+REVOLUTE = ("revolute", "continuous")
+
+
+#: Largest magnitude of a URDF number the tool accepts, per kind: a mass [kg], a length [m], an inertia [kg m²],
+#: a friction [N m s/rad or N m]; beyond, the value is a unit mistake or a typo and overflows the arithmetic.
+SANE = {"mass": 1e4, "length": 100.0, "inertia": 1e3, "friction": 1e4}
+
+
+@dataclass(frozen=True)
+class UrdfJoint:
+    """One URDF <joint>: type, parent and child link, origin (xyz [m], rpy [rad]) and axis; its <dynamics>
+    damping [N m s/rad] and friction [N m] (0 where absent); its <limit> lower, upper [rad], velocity [rad/s]
+    and effort [N m] (None where absent)."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+    axis: tuple[float, float, float]
+    damping: float = 0.0
+    friction: float = 0.0
+    limit: dict[str, float] = field(default_factory=dict)
+
+
+def _number(element: ET.Element, key: str, where: str, low: float, high: float) -> float | None:
+    """Attribute `key` of `element` as a finite number in [low, high] (None when absent); InputError naming it."""
+    text = element.get(key)
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and low <= value <= high):
+        raise InputError(f"{where} <{element.tag} {key}={text!r}>: must be a finite number in [{low:g}, {high:g}]")
+    return value
+
+
+def _floats(element: ET.Element | None, key: str, default: str, where: str) -> tuple[float, float, float]:
+    """Three floats from attribute `key` of `element` (default when absent); InputError naming `where`."""
+    text = default if element is None else element.get(key, default)
+    try:
+        values = tuple(float(v) for v in text.split())
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(np.isfinite(values)) or max(map(abs, values), default=0) > 1e6:
+        raise InputError(f"{where}: {key}={text!r} must be three finite numbers")
+    return values  # type: ignore[return-value]
+
+
+def _check_inertial(path: Path, link: ET.Element) -> None:
+    """A link's <inertial>, when it has one: a mass that is a number in [0, 10⁴] kg, a finite origin, and an
+    inertia (about the centre of mass) that is finite and positive semi-definite; InputError naming the link."""
+    inertial = link.find("inertial")
+    if inertial is None:
+        return
+    where = f"{path}: <link name={link.get('name')!r}>"
+    mass = inertial.find("mass")
+    if mass is None or mass.get("value") is None:
+        raise InputError(f"{where} <inertial> has no <mass value=…>")
+    _number(mass, "value", where, 0.0, SANE["mass"])
+    _floats(inertial.find("origin"), "xyz", "0 0 0", f"{where} <inertial><origin>")
+    _floats(inertial.find("origin"), "rpy", "0 0 0", f"{where} <inertial><origin>")
+    element = inertial.find("inertia")
+    if element is None:
+        raise InputError(f"{where} <inertial> has no <inertia ixx=… iyy=… izz=…/>")
+    keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+    v = {k: _number(element, k, where, -SANE["inertia"], SANE["inertia"]) or 0.0 for k in keys}
+    inertia = np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]], [v["ixz"], v["iyz"], v["izz"]]])
+    lowest = float(np.linalg.eigvalsh(inertia)[0])
+    if lowest < -1e-9 * max(1.0, float(np.abs(inertia).max())):
+        raise InputError(
+            f"{where} <inertia>: not physically possible (its smallest principal moment is {lowest:.3g} kg m², below 0)"
+        )
+
+
+def _joint(path: Path, j: ET.Element, links: dict[str, ET.Element]) -> UrdfJoint:
+    """One <joint> element, checked (module doc)."""
+    name = j.get("name")
+    where = f"{path}: <joint name={name!r}>"
+    parent, child = j.find("parent"), j.find("child")
+    if not name or parent is None or child is None or j.get("type") is None:
+        raise InputError(f"{where}: needs a name, a type, <parent link=…> and <child link=…>")
+    for end in (parent.get("link"), child.get("link")):
+        if end not in links:
+            raise InputError(f"{where}: refers to link {end!r}, which the file does not define")
+    axis = _floats(j.find("axis"), "xyz", "1 0 0", where)
+    if j.get("type") in REVOLUTE and not np.linalg.norm(axis) > 0:
+        raise InputError(f"{where} <axis xyz={j.find('axis').get('xyz')!r}>: a revolute joint needs a non-zero axis")
+    dynamics = j.find("dynamics")
+    damping = friction = 0.0
+    if dynamics is not None:
+        damping = _number(dynamics, "damping", where, 0.0, SANE["friction"]) or 0.0
+        friction = _number(dynamics, "friction", where, 0.0, SANE["friction"]) or 0.0
+    limit = {}
+    element = j.find("limit")
+    if element is not None:
+        for key in ("lower", "upper", "velocity", "effort"):
+            value = _number(element, key, where, -1e6, 1e6)
+            if value is not None:
+                limit[key] = value
+    origin = j.find("origin")
+    return UrdfJoint(
+        name,
+        j.get("type"),
+        parent.get("link"),
+        child.get("link"),
+        _floats(origin, "xyz", "0 0 0", where),
+        _floats(origin, "rpy", "0 0 0", where),
+        axis,
+        damping,
+        friction,
+        limit,
+    )
+
+
+def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Element]]:
+    """(the file's text, joints by name, links by name) of a URDF, every <joint> and <inertial> checked;
+    InputError naming the file and the element on any fault (module doc)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+        root = ET.fromstring(text)
+    except FileNotFoundError:
+        raise InputError(f"{path}: URDF file not found") from None
+    except (ET.ParseError, UnicodeDecodeError, OSError) as exc:
+        raise InputError(f"{path}: not a valid URDF (XML error: {exc})") from None
+    if root.tag != "robot":
+        raise InputError(f"{path}: not a URDF: the root element is <{root.tag}>, not <robot>")
+    links = {}
+    for link in root.findall("link"):
+        if not link.get("name"):
+            raise InputError(f"{path}: a <link> without a name")
+        links[link.get("name")] = link
+        _check_inertial(path, link)
+    joints = {}
+    for element in root.findall("joint"):
+        joint = _joint(path, element, links)
+        joints[joint.name] = joint
+    return text, joints, links
+
+
+def check_chain(path: Path, joints: dict[str, UrdfJoint], names: tuple[str, ...], base: str | None) -> str:
+    """Check that `names` are revolute joints of the file forming one serial chain from `base` (default: the
+    root link) through fixed joints only; return the base link. InputError naming the element otherwise."""
+    if not names:
+        raise InputError(f"{path}: [robot] joints must name at least one joint")
+    for name in names:
+        if name not in joints:
+            close = ", ".join(sorted(joints)) or "none"
+            raise InputError(f"{path}: joint {name!r} is not in the URDF (its joints: {close})")
+        if joints[name].type not in REVOLUTE:
+            raise InputError(
+                f"{path}: <joint name={name!r}> is of type {joints[name].type!r}; only revolute joints are supported"
+            )
+    by_child = {j.child: j for j in joints.values()}
+    children = set(by_child)
+    roots = sorted({j.parent for j in joints.values()} - children)
+    if base is None:
+        if len(roots) != 1:
+            raise InputError(f"{path}: the URDF has {len(roots)} root links ({', '.join(roots)}), not one")
+        base = roots[0]
+
+    def ancestor_through_fixed(link: str) -> str:
+        """Walk up from `link` through fixed joints; the first link reached by a non-fixed joint's child."""
+        seen = {link}
+        while link in by_child and by_child[link].type == "fixed" and link != base:
+            link = by_child[link].parent
+            if link in seen:
+                raise InputError(f"{path}: the fixed joints above link {link!r} form a cycle; a URDF is a tree")
+            seen.add(link)
+        return link
+
+    expected = base
+    for name in names:
+        parent = ancestor_through_fixed(joints[name].parent)
+        if parent != expected:
+            what = f"the base link {base!r}" if expected == base else f"the child of the previous joint ({expected!r})"
+            raise InputError(
+                f"{path}: <joint name={name!r}>: not a serial chain: its parent link {joints[name].parent!r} is not "
+                f"{what} or attached to it by fixed joints"
+            )
+        expected = joints[name].child
+    return base
+
+
+def _as_revolute(text: str) -> str:
+    """The URDF with every continuous joint made revolute with wide limits: Pinocchio would read a continuous
+    joint as a unit-circle joint (two configuration entries for one velocity); the dynamics are the same."""
+    root = ET.fromstring(text)
+    for joint in root.findall("joint"):
+        if joint.get("type") == "continuous":
+            joint.set("type", "revolute")
+            if joint.find("limit") is None:
+                ET.SubElement(joint, "limit", effort="1e6", lower="-1e6", upper="1e6", velocity="1e6")
+    return ET.tostring(root, encoding="unicode")
+
+
+def chain_model(path: str | Path, text: str, joints: tuple[str, ...]) -> pin.Model:
+    """Pinocchio's model of the URDF `text` (read from `path`) reduced to `joints`, base to tip: every other
+    movable joint of the file locked at 0; InputError naming the file when Pinocchio cannot read it or the
+    joints are not its chain in this order."""
+    try:
+        full = pin.buildModelFromXML(_as_revolute(text))
+    except (RuntimeError, ValueError) as exc:
+        raise InputError(f"{path}: Pinocchio cannot read this URDF ({exc})") from None
+    lock = [full.getJointId(n) for n in full.names[1:] if n not in joints]
+    model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
+    if tuple(model.names[1:]) != tuple(joints) or model.nv != len(joints):
+        raise InputError(
+            f"{path}: the joints {list(joints)} are not the file's chain in this order "
+            f"(Pinocchio reads {list(model.names[1:])})"
+        )
+    return model

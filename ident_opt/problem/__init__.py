@@ -1,0 +1,68 @@
+"""Problem files (`problems/*.toml`): which robot, which data, and how to identify it.
+
+The `[robot]` section is a contract, documented in `docs/problem-files.md` (datasheet values as printed:
+motor-side friction and rotor inertia, everything else joint-side, SI units; or a URDF). The other sections
+are documented there too; every key has a default, and an unknown key is an error so that a typo never falls
+back silently to a default. Paths are relative to the problem file.
+
+`load_problem` reads and checks a file; the parsed sections are the dataclasses of `ident_opt.problem.spec`.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+from ident_opt.errors import InputError
+from ident_opt.problem.robot import parse_planar
+from ident_opt.problem.sections import OPTIONAL_SECTIONS, parse_data, parse_residual, parse_split, relative
+from ident_opt.problem.spec import DataSpec, Limits, Problem, Reference, ResidualSpec, SimulateSpec, SplitSpec
+from ident_opt.problem.table import Table
+from ident_opt.problem.urdf import parse_urdf_robot
+
+__all__ = [
+    "DataSpec",
+    "Limits",
+    "Problem",
+    "Reference",
+    "ResidualSpec",
+    "SimulateSpec",
+    "SplitSpec",
+    "load_problem",
+]
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read and validate a problem file; raise `InputError` naming the file and key on any fault."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: problem file not found")
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not a valid TOML file ({exc})") from None
+    top = Table(raw, "", path)
+    base = path.resolve().parent
+    name = top.take("name", str)
+    robot = _robot(top.table("robot"))
+    sections = {  # each section fills the `Problem` field of its name, read in this order
+        "data": parse_data(top.table("data", required=False), base, robot.n_joints),
+        "split": parse_split(top.table("split", required=False)),
+        "residual": parse_residual(top.table("residual", required=False)),
+    }
+    for key, parse in OPTIONAL_SECTIONS.items():
+        sections[key] = parse(top.table(key)) if key in top.raw else None
+    output = top.table("output", required=False)
+    out_dir = output.take("dir", str, None)
+    output.done()
+    top.done()
+    return Problem(
+        name=name, path=path, robot=robot, output_dir=relative(base, out_dir) if out_dir else None, **sections
+    )
+
+
+def _robot(table: Table):
+    """The arm the `[robot]` table describes: from a URDF when it names one, else the planar two-link arm."""
+    if "urdf" in table.raw:
+        return parse_urdf_robot(table, table.path.resolve().parent)
+    return parse_planar(table)

@@ -1,0 +1,121 @@
+"""What a problem file says, once parsed and checked: one frozen dataclass per section (`docs/problem-files.md`).
+
+The robot itself (`[robot]`) is an arm description of `ident_opt.arm`; the rest is here. Nothing in this
+module reads files: `ident_opt.problem.load_problem` builds these.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ident_opt.arm.base import Robot
+
+#: At most this many seeds (each is a full refit of every model) and mixture components.
+MAX_SEEDS = 100
+MAX_SEED = 2**32 - 1  # NumPy's and scikit-learn's range of random seeds
+MAX_COMPONENTS = 50
+
+
+@dataclass(frozen=True)
+class DataSpec:
+    """The `[data]` section: the trials and how to read them.
+
+    `columns` maps a data-format name (q1, tau2, ...) to the file's column (a name, or a 0-based index);
+    `conversions` holds (scale, offset) for the mapped columns that are converted on the way in:
+    value = scale × raw + offset (scale −1 flips a sign, 0.01745 reads degrees, offset −π/2 moves a zero).
+    With `standard_by_name`, a file whose header already has the standard names (t, q1, q2, ...) is read by
+    name, whatever `columns` says.
+    """
+
+    trials: tuple[Path, ...] = ()
+    header: bool = True
+    sheet: str | None = None
+    columns: dict[str, str | int] = field(default_factory=dict)
+    derivative_cutoff_hz: float | str = 15.0  # Hz, or "auto"
+    conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
+    standard_by_name: bool = True
+    train: tuple[Path, ...] = ()  # training trials (`train = [...]`): their statistics add up
+    test: tuple[Path, ...] = ()  # held-out trials (`test = [...]`), each scored and pooled
+    ros_topic: str = "/joint_states"  # a ROS 2 bag's topic of sensor_msgs/msg/JointState messages
+    ros_joints: tuple[str, ...] = ()  # a bag's joint names, base to tip: joint k is the k-th (`ident_opt.rosbag`)
+
+    @property
+    def training(self) -> tuple[Path, ...]:
+        """The training trials: `train`, else the first of `trials` (the legacy reading)."""
+        return self.train or self.trials[:1]
+
+    @property
+    def testing(self) -> tuple[Path, ...]:
+        """The held-out trials: `test`, else the second of `trials` (the legacy unseen trial)."""
+        return self.test if self.train or self.test else self.trials[1:2]
+
+
+@dataclass(frozen=True)
+class SplitSpec:
+    """The `[split]` section: the paper's shuffled protocol and the chronological one."""
+
+    train_fraction: float = 0.7
+    seeds: tuple[int, ...] = tuple(range(10))
+
+
+@dataclass(frozen=True)
+class ResidualSpec:
+    """The `[residual]` section: the Gaussian-mixture residual model."""
+
+    components: int | None = None  # None: chosen on validation data among `candidates`
+    candidates: tuple[int, ...] = (1, 2, 3, 4, 6, 8, 10)
+    covariance: str = "full"
+    reg_covar: float = 1e-4
+    max_train_samples: int = 20000
+
+
+@dataclass(frozen=True)
+class SimulateSpec:
+    """The `[simulate]` section: a trial from the built-in simulator instead of a data file."""
+
+    trajectory: str = "tud01"
+    duration: float = 80.0
+    rate_hz: float = 100.0
+    seed: int = 0
+    effects: tuple[str, ...] = ()
+    output: str = "torque"  # "torque" or "current"
+
+
+@dataclass(frozen=True)
+class Limits:
+    """The `[limits]` section: what an excitation design must respect, per joint (tuples of n values).
+
+    Joint angles in [position_min, position_max] [rad], |dq| ≤ velocity [rad/s], |ddq| ≤ acceleration
+    [rad/s²] and, when given, |τ| ≤ torque [N m] (τ from the datasheet model)."""
+
+    position_min: tuple[float, ...]
+    position_max: tuple[float, ...]
+    velocity: tuple[float, ...]
+    acceleration: tuple[float, ...]
+    torque: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A parsed, validated problem file."""
+
+    name: str
+    path: Path
+    robot: Robot
+    data: DataSpec = field(default_factory=DataSpec)
+    split: SplitSpec = field(default_factory=SplitSpec)
+    residual: ResidualSpec = field(default_factory=ResidualSpec)
+    simulate: SimulateSpec | None = None
+    output_dir: Path | None = None
+    limits: Limits | None = None
+    reference: Reference | None = None
+
+
+@dataclass(frozen=True)
+class Reference:
+    """`[reference]`: a published identification of the same arm to compare against (not ground truth):
+    `label` and the grouped parameters by name (SI units, `docs/conventions.md`)."""
+
+    label: str
+    parameters: dict[str, float]
