@@ -2,8 +2,8 @@
 
 Exit status: 0 success, 2 bad input or usage (a one-paragraph message, no traceback), 1 anything else.
 Each command module is thin: arguments, then `run()` = load, call a study (`ident_opt.studies`), call its
-report writer (`ident_opt.report`), return the exit status. Its heavy imports wait inside `run()`, so
-`ident-opt --help` (which builds every subcommand's parser) stays fast.
+report writer (`ident_opt.report`), return the exit status. Only the command being run is imported (its flags
+are added to the parser then): `ident-opt --help` lists the commands without importing any of them.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from collections.abc import Iterable
 
 from ident_opt import __version__, outputs
 from ident_opt.arguments import validate_numbers
@@ -21,6 +22,14 @@ INPUT_FLAGS = ("problem", "data", "test_data", "parameters", "real", "trajectory
 OUTPUT_FLAGS = ("json", "final")
 FILE_OUT = ("simulate", "excite")
 
+#: What `ident-opt --help` says first.
+DESCRIPTION = (
+    "Identify the dynamics of robot arms from measured data (any number of joints), find what the model still gets "
+    "wrong, and ship the result: generated C for the controller, a URDF or MJCF for other tools.\n\n"
+    "Start with `ident-opt check --problem P` on a new robot's logs, then `compare` (which fit to trust), "
+    "`identify` (every model, tables and figures) and `codegen` or `export`. `ident-opt COMMAND --help` documents "
+    "each command; docs/ has the problem file, data format and JSON contracts."
+)
 #: subcommand -> one-line help. Each lives in ident_opt.commands.<name> with add_arguments() and run().
 COMMANDS = {
     "identify": "identify every model on the problem's data; write tables and figures",
@@ -44,23 +53,21 @@ class _Parser(argparse.ArgumentParser):
         raise InputError(f"{self.prog}: {message}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser (subcommand modules add their own flags)."""
-    parser = _Parser(
-        prog="ident-opt", description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+def build_parser(commands: Iterable[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser: every subcommand by name and help; the flags of those in `commands` (None: all), whose
+    modules (`ident_opt.commands.<name>`) are imported to add them."""
+    parser = _Parser(prog="ident-opt", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, summary in COMMANDS.items():
-        module = _module(name)
         p = sub.add_parser(
-            name,
-            help=summary,
-            description=(module.__doc__ or summary).strip(),
-            formatter_class=argparse.RawDescriptionHelpFormatter,
+            name, help=summary, description=summary, formatter_class=argparse.RawDescriptionHelpFormatter
         )
-        module.add_arguments(p)
-        validate_numbers(name, p)
+        if commands is None or name in commands:
+            module = _module(name)
+            p.description = (module.__doc__ or summary).strip()
+            module.add_arguments(p)
+            validate_numbers(name, p)
     return parser
 
 
@@ -86,8 +93,9 @@ def _module(name: str):
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
     try:
-        parser = build_parser()
-        args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+        argv = sys.argv[1:] if argv is None else list(argv)
+        parser = build_parser(argv[:1])  # the command comes first: only its module is imported
+        args = parser.parse_args(argv)
         if args.command is None:
             parser.print_help()
             return 2

@@ -41,16 +41,15 @@ from ident_opt.cbuild import (  # noqa: F401  (the toolchain, re-exported for co
     load_external,
     run_compiler,
 )
+from ident_opt.columns import kinematic_columns
 from ident_opt.errors import InputError
 
 
 def gmr_inputs(n_joints: int) -> tuple[str, ...]:
     """The GMR inputs x = [q; dq; ddq] by name, in order: q1 … qn, dq1 … dqn, ddq1 … ddqn."""
-    return tuple(f"{v}{j + 1}" for v in ("q", "dq", "ddq") for j in range(n_joints))
+    return kinematic_columns(n_joints)[1:]
 
 
-#: The two-link arm's GMR inputs (kept for callers that name them without an arm at hand).
-GMR_INPUTS = gmr_inputs(2)
 #: Smallest accepted GMR input standard deviation, relative to max(1, |mean|) of that input (rad, rad/s,
 #: rad/s²). Below it the component is a near-delta in that input (a column that was constant up to rounding in
 #: the training data): its log-density then changes by ~|x|·eps/σ² per ulp of x, so no two implementations
@@ -207,11 +206,46 @@ def solve_ldl(M: ca.SX, b: ca.SX) -> ca.SX:
 # ---------------------------------------------------------------------------------------------- C files
 
 
-def write_readme(out_dir: Path, functions: list[ca.Function], name: str = NAME) -> Path:
-    """The embedding README (template in `codegen_files/README.md`) filled with this build's names."""
+#: What each generated function does, for the README.
+DESCRIPTIONS = {
+    "tau_hat": "τ = M(q) ddq + C(q, dq) dq + G(q) + F(dq), the identified rigid-body model with its joint terms "
+    "and extensions.",
+    "tau_hat_gmr": "`tau_hat` plus the conditional mean E[r | x] of the Gaussian-mixture residual model, "
+    "x = [q; dq; ddq] (a fixed sum of Gaussians, evaluated with a log-sum-exp, so it stays finite far from the "
+    "training data).",
+    "ddq_hat": "forward dynamics ddq = M(q)⁻¹ (τ − C dq − G − F), for on-board simulation (an LDLᵀ solve).",
+}
+#: The example's state (q [rad], dq [rad/s], ddq [rad/s²]) for joint j, cycled over the joints.
+EXAMPLE_STATE = {"q": (0.3, -0.5, 0.2, -0.1), "dq": (0.8, -0.2, 0.4, -0.6), "ddq": (1.5, 2.0, -1.0, 0.5)}
+#: The example's call of tau_hat_gmr, when the library has it.
+EXAMPLE_GMR = """  {
+    casadi_real tau_gmr[N_JOINTS] = {0.0};
+    EVALUATE(tau_hat_gmr, q, dq, ddq, tau_gmr, status);
+    if (status != 0) {
+      fprintf(stderr, "tau_hat_gmr failed (%d)\\n", status);
+      return 1;
+    }
+    finite = report("tau_hat_gmr", tau_gmr) && finite;
+  }"""
+
+
+def write_readme(out_dir: Path, functions: list[ca.Function], robot, name: str = NAME) -> Path:
+    """The embedding README (template in `codegen_files/README.md`) for this arm (`robot`: its joints and their
+    angle convention, `ident_opt.arm.base.Robot`) and this build's functions."""
     rows = "\n".join(f"| `{f.name()}` | {_signature(f)} |" for f in functions)
+    described = "\n".join(f"- `{f.name()}`: {DESCRIPTIONS[f.name()]}" for f in functions if f.name() in DESCRIPTIONS)
+    calls = [f"`{f.name()}`" for f in functions if f.name() in ("tau_hat", "tau_hat_gmr")]
     text = Template((FILES / "README.md").read_text(encoding="utf-8")).substitute(
-        name=name, library=library_name(name), cflags=" ".join(CFLAGS), functions=rows
+        name=name,
+        library=library_name(name),
+        cflags=" ".join(CFLAGS),
+        functions=rows,
+        descriptions=described,
+        robot=robot.headline,
+        n=robot.n_joints,
+        joints=", ".join(robot.joint_names),
+        convention=robot.angle_convention,
+        example=" and ".join(calls),
     )
     path = Path(out_dir) / "README.md"
     path.write_text(text, encoding="utf-8")
@@ -224,9 +258,18 @@ def _signature(f: ca.Function) -> str:
     return f"`({ins}) -> ({outs})`"
 
 
-def copy_example(out_dir: Path) -> Path:
-    """Copy the minimal example program `main.c` next to the generated code."""
-    return Path(shutil.copyfile(FILES / "main.c", Path(out_dir) / "main.c"))
+def copy_example(out_dir: Path, n_joints: int, gmr: bool = True) -> Path:
+    """The minimal example program `main.c` for an arm of `n_joints` joints (calling tau_hat_gmr too when the
+    library has it), next to the generated code."""
+    state = {
+        key: ", ".join(f"{values[j % len(values)]:g}" for j in range(n_joints)) for key, values in EXAMPLE_STATE.items()
+    }
+    text = Template((FILES / "main.c").read_text(encoding="utf-8")).substitute(
+        n=n_joints, gmr_call=EXAMPLE_GMR if gmr else "", **state
+    )
+    path = Path(out_dir) / "main.c"
+    path.write_text(text, encoding="utf-8")
+    return path
 
 
 # ---------------------------------------------------------------------------------------------- check

@@ -262,3 +262,55 @@ class Consistency:
                 return False
         # π_p − lb_p ≥ 0 ⇔ π_p ≥ lb_p exactly in IEEE arithmetic (and likewise for ub_p − π_p).
         return bool(np.all(pi[lower_index] >= lower) and np.all(pi[upper_index] <= upper))
+
+
+def lmi_eigenvalues(arm: Arm, pi: np.ndarray) -> dict[str, float]:
+    """λ_min [kg m²] of each of the arm's mass LMIs at π, by name (< 0: that statement of consistency fails)."""
+    pi = np.asarray(pi, dtype=float)
+    return {name: float(np.linalg.eigvalsh(np.tensordot(pi, A, 1))[0]) for name, A in arm.mass_lmis().items()}
+
+
+def _separable(arm: Arm) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """Per LMI (its parameters, the (m, m) basis with K·π = tr(S J(π)) ⇔ K_support = basis @ upper(S)), when
+    the LMIs act on disjoint sets of parameters whose maps span the symmetric matrices of their size (one
+    pseudo-inertia per link); None otherwise (e.g. the planar arm's two LMIs share every inertial parameter)."""
+    out, seen = [], set()
+    for A in arm.mass_lmis().values():
+        k = A.shape[1]
+        support = np.flatnonzero(np.abs(A).reshape(len(A), -1).max(axis=1) > 0)
+        rows, cols = np.triu_indices(k)
+        if seen & set(support.tolist()) or len(support) != len(rows):
+            return None
+        seen |= set(support.tolist())
+        basis = A[support][:, rows, cols] * np.where(rows == cols, 1.0, 2.0)  # tr(S A_p) = Σ_upper scale S_rc A_rc
+        if abs(np.linalg.det(basis)) < 1e-12:
+            return None
+        out.append((support, basis))
+    return out
+
+
+def necessarily_nonnegative(arm: Arm, K: np.ndarray, tol: float = 1e-9) -> np.ndarray | None:
+    """For each row k of K (B, P): is K_k · π ≥ 0 for every consistent π (mass LMIs ⪰ 0, friction and armature
+    ≥ 0)? The consistent set is a cone, so that holds exactly when K_k is in its dual: on each LMI's parameters
+    the symmetric S with K_k · π = tr(S J(π)) is ⪰ 0, on the sign-constrained parameters the coefficient is ≥ 0,
+    on the others 0. None when the arm's LMIs do not separate so (`_separable`): the test would need a program."""
+    blocks = _separable(arm)
+    if blocks is None:
+        return None
+    in_lmi = np.zeros(arm.n_params, dtype=bool)
+    for support, _ in blocks:
+        in_lmi[support] = True
+    signed = np.array([p.kind in SIGN_KINDS for p in arm.parameters])
+    out = []
+    for row in K:
+        rest = row[~in_lmi]
+        ok = bool(np.all(rest[signed[~in_lmi]] >= -tol) and np.all(np.abs(rest[~signed[~in_lmi]]) <= tol))
+        for support, basis in blocks:
+            k = round((np.sqrt(8 * len(support) + 1) - 1) / 2)
+            upper = np.linalg.solve(basis, row[support])
+            S = np.zeros((k, k))
+            S[np.triu_indices(k)] = upper
+            S = S + np.triu(S, 1).T
+            ok = ok and np.linalg.eigvalsh(S)[0] >= -tol * max(1.0, np.abs(S).max())
+        out.append(ok)
+    return np.array(out)

@@ -7,22 +7,25 @@ dq/ddq, and either joint torques tau1 … taun or motor currents i1 … in. Ever
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy import signal
-from scipy.interpolate import CubicSpline
 from sklearn.model_selection import train_test_split
 
 from ident_opt import rosbag
-from ident_opt.arm.datasheet import PI_NAMES, PlanarRobot
+from ident_opt.arm.base import Robot
+from ident_opt.arm.planar import PI_NAMES
+from ident_opt.columns import channel_names, data_columns
+from ident_opt.derivatives import estimate_derivatives, lowpass, resolve_cutoff
 from ident_opt.errors import InputError
-
-#: Limits beyond which a value is almost surely in the wrong unit (degrees, encoder counts, mA ...).
 from ident_opt.problem.spec import DataSpec
 
+#: A standard joint column's name: its signal and its joint number (1-based).
+JOINT_COLUMN = re.compile(r"(q|dq|ddq|tau|i)(\d+)")
+#: Limits beyond which a value is almost surely in the wrong unit (degrees, encoder counts, mA ...).
 PLAUSIBLE = {"q": 100.0, "dq": 1e3, "ddq": 1e5, "tau": 1e5, "i": 1e3}
 #: Sampling rates [Hz] a robot log can have: outside, t is almost surely not in seconds.
 PLAUSIBLE_RATE_HZ = (0.1, 1e5)
@@ -164,15 +167,10 @@ def _check_unique_header(frame: pd.DataFrame, path: Path, spec: DataSpec) -> Non
         seen[name] = index
 
 
-def channel_names(n_joints: int) -> dict[str, tuple[str, ...]]:
-    """The data format's column names per signal for an arm of `n_joints` joints (q → q1 … qn, ...)."""
-    return {kind: tuple(f"{kind}{j}" for j in range(1, n_joints + 1)) for kind in ("q", "dq", "ddq", "tau", "i")}
-
-
 def _locate(frame: pd.DataFrame, spec: DataSpec, path: Path, n_joints: int) -> dict[str, object]:
     """Map each data-format column present in the file to its column label in `frame`."""
     found: dict[str, object] = {}
-    names = ("t", *(name for group in channel_names(n_joints).values() for name in group))
+    names = data_columns(n_joints)
     for name in names:
         source = spec.columns.get(name, name if spec.header else None)
         if source is None:
@@ -224,10 +222,23 @@ def _numeric(
     return values
 
 
+def _beyond(name: str, n_joints: int) -> bool:
+    """Whether `name` is a standard joint column (q7, tau8, …) of a joint beyond the arm's `n_joints`."""
+    match = JOINT_COLUMN.fullmatch(name)
+    return match is not None and int(match.group(2)) > n_joints
+
+
 def _check_columns(cols: dict[str, object], frame: pd.DataFrame, path: Path, n_joints: int) -> str:
     """Required columns present, signals complete per joint, exactly one of torques/currents: its kind."""
     have = ", ".join(map(str, frame.columns[:30]))
     names = channel_names(n_joints)
+    used = {str(label) for label in cols.values()}
+    extra = [str(c) for c in frame.columns if str(c) not in used and _beyond(str(c), n_joints)]
+    if extra:
+        raise InputError(
+            f"{path}: the file has columns of joints the arm does not have ({', '.join(extra[:8])}): the problem's "
+            f"arm has {n_joints} joints; check the problem file's [robot] joints, or drop those columns"
+        )
     for required in ("t", *names["q"]):
         if required not in cols:
             raise InputError(
@@ -286,6 +297,16 @@ def _check_time(t: np.ndarray, path: Path, spec: DataSpec) -> None:
         )
 
 
+def in_source_convention(frame: pd.DataFrame, column_map: dict[str, tuple[float, float]]) -> pd.DataFrame:
+    """A trial in the tool's convention written back in the data's own (the inverse of a robot's `column_map`:
+    value = (value_tool − offset) / scale), so that reading it again maps it to what it was."""
+    out = frame.copy()
+    for name, (scale, offset) in column_map.items():
+        if name in out:
+            out[name] = (out[name] - offset) / scale
+    return out
+
+
 def convert(values: np.ndarray, scale: float, offset: float) -> np.ndarray:
     """A mapped column's conversion on the way in: scale × raw + offset (`[data.columns]`)."""
     return values if (scale, offset) == (1.0, 0.0) else scale * values + offset
@@ -321,14 +342,15 @@ def _check_plausible(
             )
 
 
-def _current_to_torque(robot: PlanarRobot, path: Path) -> np.ndarray:
-    """Joint-side torque per ampere per joint [N m/A]; an error when the problem lacks it for a joint."""
+def _current_to_torque(robot: Robot, path: Path) -> np.ndarray:
+    """Joint-side torque per ampere per joint [N m/A]; an error naming the joint's table when the problem lacks it."""
     k = [j.current_to_torque for j in robot.joints]
-    missing = [f"joint{i + 1}" for i, v in enumerate(k) if v is None]
+    missing = [table for table, v in zip(robot.joint_tables, k) if v is None]
     if missing:
+        torques = ", ".join(channel_names(robot.n_joints)["tau"])
         raise InputError(
             f"{path}: the file logs motor currents, but [robot.{missing[0]}] gives no torque_constant and "
-            "gear_ratio to turn them into torques; add both, or log joint torques (tau1, tau2)"
+            f"gear_ratio to turn them into torques; add both, or log joint torques ({torques})"
         )
     return np.array(k, dtype=float)
 
@@ -344,7 +366,7 @@ def _extra_columns(frame: pd.DataFrame, cols: dict[str, object], keep: np.ndarra
 def load_dataset(
     path: str | Path,
     spec: DataSpec,
-    robot: PlanarRobot,
+    robot: Robot,
     *,
     allow_implausible: bool = False,
     drop_invalid: bool = False,
@@ -371,7 +393,7 @@ def load_dataset(
     keep = ~bad
     values = {name: convert(v[keep], *spec.conversions.get(name, (1.0, 0.0))) for name, v in values.items()}
     # A URDF's angle zero and axis sign are the file's, not ident-opt's: the robot maps them (urdf_planar).
-    to_tool = getattr(robot, "column_map", {})
+    to_tool = robot.column_map
     values = {name: convert(v, *to_tool.get(name, (1.0, 0.0))) for name, v in values.items()}
     t = values["t"]
     if not drop_invalid:
@@ -440,94 +462,6 @@ def concat(trials: list[Dataset]) -> Dataset:
         cutoff_hz=cutoffs.pop() if len(cutoffs) == 1 else None,
         tau_filtered=np.concatenate(filtered),
     )
-
-
-def lowpass(t: np.ndarray, x: np.ndarray, cutoff_hz: float) -> np.ndarray:
-    """`x` (N, J) through the derivative estimate's zero-phase 4th-order Butterworth at `cutoff_hz` (at the
-    median step; unchanged at or above Nyquist or for 30 samples or fewer)."""
-    fs = 1.0 / float(np.median(np.diff(t)))
-    if cutoff_hz >= 0.5 * fs or len(t) <= 30:
-        return x
-    b, a = signal.butter(4, cutoff_hz / (0.5 * fs))
-    return signal.filtfilt(b, a, x, axis=0)
-
-
-# ---------------------------------------------------------------------------------------------- derivatives
-#: The motion band ends where the angle spectrum has fallen this far below its peak (40 dB).
-MOTION_DYNAMIC_RANGE = 1e-4
-#: Margin above that edge, and the range a chosen cut-off is clipped to [Hz, fraction of the sampling rate].
-CUTOFF_MARGIN, CUTOFF_MIN_HZ, CUTOFF_MAX_FRACTION = 1.2, 0.5, 0.25
-
-
-def choose_cutoff(t: np.ndarray, q: np.ndarray) -> float:
-    """The derivative cut-off [Hz] read from where the motion's spectrum ends.
-
-    Noise in estimated accelerations sits inside the regressor, and least squares with a noisy regressor is
-    biased toward zero (errors-in-variables); the noise power of ddq grows as f⁴ above the motion's band,
-    so the cut-off should sit just above that band, not at a fixed 15 Hz. Rule: Welch spectrum P_j(f) of
-    each joint's detrended angle (4 s segments); the band of joint j ends at the highest frequency where
-    P_j(f) ≥ 10⁻⁴ max P_j (40 dB below the peak); the cut-off is 1.2 × the widest joint's band edge,
-    clipped to [0.5 Hz, fs/4].
-    """
-    steps = np.diff(t)
-    fs = 1.0 / float(np.median(steps))
-    grid = np.arange(t[0], t[-1] + 0.5 / fs, 1.0 / fs)
-    qg = CubicSpline(t, q, axis=0)(grid) if np.ptp(steps) > 1e-6 / fs else q
-    f, P = signal.welch(signal.detrend(qg, axis=0), fs=fs, nperseg=min(len(grid), max(int(4 * fs), 8)), axis=0)
-    edges = [f[np.flatnonzero(P[:, j] >= MOTION_DYNAMIC_RANGE * P[:, j].max())[-1]] for j in range(P.shape[1])]
-    return float(np.clip(CUTOFF_MARGIN * max(edges), CUTOFF_MIN_HZ, CUTOFF_MAX_FRACTION * fs))
-
-
-def resolve_cutoff(setting: float | str, t: np.ndarray, q: np.ndarray) -> tuple[float, str]:
-    """(cut-off [Hz], how it was set): a number as given, or "auto" by `choose_cutoff`."""
-    if setting == "auto":
-        cutoff = choose_cutoff(t, q)
-        return cutoff, f" (cut-off {cutoff:.3g} Hz chosen from where the motion's spectrum ends)"
-    return float(setting), ""
-
-
-def estimate_derivatives(
-    t: np.ndarray, q: np.ndarray, cutoff_hz: float, dq: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray, str]:
-    """Zero-phase velocity and acceleration estimates from sampled angles (and velocities, if logged).
-
-    A 4th-order Butterworth low-pass run forward and backward (no phase lag) at `cutoff_hz`, then central
-    differences. Non-uniform sampling is resampled onto a uniform grid first (cubic spline) and mapped back.
-    Returns (dq, ddq, description).
-    """
-    steps = np.diff(t)
-    dt = float(np.median(steps))
-    uniform = np.max(np.abs(steps - dt)) <= 1e-6 * max(dt, 1e-12) + 1e-9 * abs(t[-1])
-    if uniform:
-        grid, qg, dqg = t, q, dq
-    else:
-        grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
-        qg = CubicSpline(t, q, axis=0)(grid)
-        dqg = CubicSpline(t, dq, axis=0)(grid) if dq is not None else None
-    fs = 1.0 / dt
-    if cutoff_hz < 0.5 * fs and len(grid) > 30:
-        b, a = signal.butter(4, cutoff_hz / (0.5 * fs))
-
-        def smooth(x):
-            return signal.filtfilt(b, a, x, axis=0)
-
-        how = f"estimated: 4th-order Butterworth at {cutoff_hz:g} Hz, forward-backward, central differences"
-    else:
-
-        def smooth(x):
-            return x
-
-        how = "estimated: central differences (cut-off at or above Nyquist, no smoothing)"
-    if dqg is None:
-        v = np.gradient(smooth(qg), grid, axis=0)
-    else:
-        v = dqg
-        how += " (velocities as logged)"
-    acc = np.gradient(smooth(v), grid, axis=0)
-    if not uniform:
-        v, acc = CubicSpline(grid, v, axis=0)(t), CubicSpline(grid, acc, axis=0)(t)
-        how += f"; non-uniform sampling resampled to {fs:.6g} Hz"
-    return (dq if dq is not None else v), acc, how
 
 
 # ---------------------------------------------------------------------------------------------- splits

@@ -312,3 +312,12 @@ def claim(paths: Iterable[str | Path]) -> None:
     if _current is not None:
         for path in paths:
             _current.before_write(Path(path))
+
+
+def shown(path: str | Path) -> str:
+    """A data path as people read it: relative to the working folder when inside it, else absolute."""
+    resolved = Path(path).resolve()
+    try:
+        return os.path.relpath(resolved) if resolved.is_relative_to(Path.cwd()) else str(resolved)
+    except ValueError:
+        return str(resolved)

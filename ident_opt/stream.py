@@ -20,15 +20,14 @@ from __future__ import annotations
 import json
 import math
 import signal
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TextIO
 
 import numpy as np
-from scipy import signal as dsp
 
 from ident_opt.data import PLAUSIBLE
+from ident_opt.derivatives import CausalDerivatives, NonIncreasingTime
 from ident_opt.errors import InputError
 from ident_opt.online import OnlineIdentifier, Prediction
 
@@ -41,10 +40,6 @@ STANDARD = ("t", *Q, *DQ, *DDQ, *TORQUES, *CURRENTS)
 INPUTS = (*Q, *DQ, *DDQ)
 #: Default robust outlier threshold: residuals beyond this many robust standard deviations update nothing.
 OUTLIER_K = 10.0
-#: Share of the zero-phase filter's impulse response left out by the causal FIR (`derivative_kernels`).
-TAIL = 0.02
-#: Estimated speeds below this [rad/s] are rest (0): a 10⁻⁴ rad encoder step over the filter's half second.
-REST = 1e-4
 #: Memory (samples) of the robust residual scale; an outlier moves it by 1/`OUTLIER_MEMORY` of its clipped square.
 OUTLIER_MEMORY = 500.0
 
@@ -76,7 +71,7 @@ class Mapping:
         URDF's angle convention, if it has one)."""
         cols = {k: v for k, v in spec.columns.items() if k in STANDARD}
         conv = {k: v for k, v in spec.conversions.items() if k in cols}
-        return cls(cols, conv, bool(spec.header), dict(getattr(robot, "column_map", {})))
+        return cls(cols, conv, bool(spec.header), dict(robot.column_map) if robot is not None else {})
 
     def resolve_header(self, header: list[str]) -> tuple[dict[str, int], dict[str, tuple[float, float]]]:
         """{standard name: position} for a CSV header, and the conversions that apply; `InputError` when
@@ -274,97 +269,6 @@ def _value(name: str, value, conversions: dict | None) -> float:
     return number
 
 
-# ---------------------------------------------------------------------------------------------- derivatives
-def derivative_kernels(dt: float, cutoff_hz: float, tail: float = TAIL) -> tuple[np.ndarray, np.ndarray, int]:
-    """FIR kernels (oldest sample first) giving dq [rad/s] and ddq [rad/s²] at the window's centre, and the
-    delay in samples.
-
-    The batch loader's recipe (`data.estimate_derivatives`: low-pass, central difference, low-pass, central
-    difference) with its zero-phase filter made causal: forward-backward filtering with the 4th-order
-    Butterworth b at `cutoff_hz` is convolution with b's autocorrelation h (symmetric, the same magnitude
-    response |B(f)|², no phase). h is truncated to ±m samples, m the smallest with less than `tail` of h's
-    absolute mass beyond, and renormalised to unit DC gain; then dq = (g∗h)∗q and ddq = (g∗h)∗(g∗h)∗q with g
-    the central difference. Symmetric kernels have no phase distortion: a pure delay of 2m + 2 samples
-    (0.26 s at 100 Hz and 15 Hz)."""
-    fc = cutoff_hz * dt * 2  # fraction of Nyquist
-    if fc >= 1.0:  # cut-off at or above Nyquist: no smoothing, as the batch loader
-        h = np.ones(1)
-    else:
-        b, a = dsp.butter(4, fc)
-        n = 20 * math.ceil(1.0 / fc) + 50
-        impulse = dsp.lfilter(b, a, np.r_[1.0, np.zeros(n - 1)])
-        ac = np.correlate(impulse, impulse, "full")
-        centre = n - 1
-        mass = np.abs(ac[centre:])[::-1].cumsum()[::-1] / np.abs(ac).sum()  # mass at lag ≥ k (one side)
-        m = max(1, int(np.argmax(mass < tail / 2)))
-        h = ac[centre - m : centre + m + 1]
-        h = h / h.sum()
-    m = h.size // 2
-    gh = np.convolve(h, [0.5, 0.0, -0.5]) / dt  # one smoothed central difference, 2m + 3 taps
-    k2 = np.convolve(gh, gh)  # 4m + 5 taps, centre 2m + 2
-    k1 = np.zeros_like(k2)
-    k1[m + 1 : m + 1 + gh.size] = gh  # the same centre
-    # np.convolve(x, k)[n] = Σ k[i] x[n − i] (newest last): reversed for a dot product with the buffer, oldest first.
-    return k1[::-1].copy(), k2[::-1].copy(), 2 * m + 2
-
-
-class CausalDerivatives:
-    """dq and ddq estimated online from q and t, `delay` samples late (`derivative_kernels`), with the rest of
-    the sample (torque, t) delayed to match. `push` returns the completed sample `delay` pushes later, or
-    None while the window fills. A time step off the nominal one by more than 25 % (a gap, jitter) restarts
-    the window: the samples in it are lost (counted in `lost`). The nominal step is the stream's first."""
-
-    def __init__(self, cutoff_hz: float):
-        self.cutoff_hz = cutoff_hz
-        self.dt: float | None = None
-        self.k1 = self.k2 = None
-        self.delay = 0
-        self.window: deque = deque()
-        self.pushed = 0
-        self.completed = 0
-        self.restarts = 0
-        self.last_t: float | None = None
-
-    @property
-    def lost(self) -> int:
-        """Samples pushed that no output completed (the last `delay` at the end, and those lost to restarts)."""
-        return self.pushed - self.completed
-
-    def delay_seconds(self) -> float | None:
-        """The stated delay [s] (None before the second sample sets the rate)."""
-        return None if self.dt is None else self.delay * self.dt
-
-    def push(self, sample: dict[str, float]) -> dict[str, float] | None:
-        """Add one sample (with t and q1 q2); raises BadLine when t does not increase."""
-        t = sample["t"]
-        if self.last_t is not None:
-            step = t - self.last_t
-            if step <= 0:
-                raise BadLine(f"t = {t!r} does not increase (last {self.last_t!r})", "time")
-            if self.dt is None:
-                self.dt = step
-                self.k1, self.k2, self.delay = derivative_kernels(step, self.cutoff_hz)
-            elif abs(step - self.dt) > 0.25 * self.dt:
-                self.window.clear()
-                self.restarts += 1
-        self.last_t = t
-        self.pushed += 1
-        self.window.append(sample)
-        if self.k2 is None or len(self.window) < self.k2.size:
-            return None
-        if len(self.window) > self.k2.size:
-            self.window.popleft()
-        centre = dict(self.window[self.delay])
-        # Relative to the centre sample (the kernels sum to 0): a joint at rest (q repeated) gives exactly 0, not
-        # rounding noise whose sign would decide the Coulomb friction column.
-        q = np.array([[s["q1"], s["q2"]] for s in self.window]) - [centre["q1"], centre["q2"]]
-        dq, ddq = self.k1 @ q, self.k2 @ q
-        dq[np.abs(dq) < REST] = 0.0  # unresolvable: at rest (the Coulomb column's sign is 0, not noise)
-        centre.update(dq1=float(dq[0]), dq2=float(dq[1]), ddq1=float(ddq[0]), ddq2=float(ddq[1]))
-        self.completed += 1
-        return centre
-
-
 # ---------------------------------------------------------------------------------------------- the service
 def prediction_record(n: int, sample: dict[str, float], p: Prediction) -> dict:
     """The output line for one sample (n = updates so far, t echoed when given)."""
@@ -439,7 +343,10 @@ class Service:
         if "dq1" not in sample or "ddq1" not in sample:
             if "t" not in sample:
                 raise BadLine("t is needed to estimate dq and ddq (the sample gives neither both)")
-            sample = self.derivatives.push(sample)
+            try:
+                sample = self.derivatives.push(sample)
+            except NonIncreasingTime as exc:
+                raise BadLine(str(exc), "time") from None
             if sample is None:
                 return []
             for name in (*DQ, *DDQ):

@@ -7,6 +7,7 @@ import ctypes
 import re
 import shutil
 import subprocess
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -18,6 +19,9 @@ from ident_opt import codegen
 from ident_opt.arm.planar import PlanarArm
 from ident_opt.errors import InputError
 from ident_opt.gmr import GMR
+from ident_opt.problem import load_problem
+
+ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 
@@ -67,8 +71,8 @@ def built(tmp_path_factory, gmr):
     functions = codegen.build_functions(MODEL, PI, gmr)
     source, _ = codegen.generate_sources(functions, out)
     lib = codegen.compile_library(source, out, [shutil.which("gcc")])
-    codegen.copy_example(out)
-    codegen.write_readme(out, functions)
+    codegen.copy_example(out, MODEL.n_joints)
+    codegen.write_readme(out, functions, load_problem(ROOT / "problems" / "tudor_2dof.toml").robot)
     return out, lib, ctypes.CDLL(str(lib))
 
 
@@ -213,7 +217,7 @@ def test_example_main_c_compiles_strictly_and_runs(built):
     }
     src = (out / "main.c").read_text()
     state = [
-        np.array([[float(v) for v in re.search(rf"{n}\[2\] = {{([^}}]+)}}", src)[1].split(",")]])
+        np.array([[float(v) for v in re.search(rf"{n}\[N_JOINTS\] = {{([^}}]+)}}", src)[1].split(",")]])
         for n in ("q", "dq", "ddq")
     ]
     assert codegen.relative_error(printed["tau_hat"], MODEL.predict(PI, *state)) <= 1e-12
@@ -314,5 +318,5 @@ def test_ldl_solve_of_any_size():
 
 
 def test_gmr_input_names_follow_the_number_of_joints():
-    assert codegen.GMR_INPUTS == ("q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
+    assert codegen.gmr_inputs(2) == ("q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
     assert codegen.gmr_inputs(3) == ("q1", "q2", "q3", "dq1", "dq2", "dq3", "ddq1", "ddq2", "ddq3")

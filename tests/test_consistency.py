@@ -104,6 +104,18 @@ class DragArm:
     def min_mass_eigenvalue(self, pi) -> float:
         return self.base.min_mass_eigenvalue(np.asarray(pi)[:-1])
 
+    consistency_measure = "min eig M(q) [kg m²]"
+
+    @property
+    def extensions(self) -> tuple[str, ...]:
+        return self.base.extensions
+
+    def link_masses(self, pi) -> dict[str, float]:
+        return {}
+
+    def settings(self) -> dict:
+        return {"drag": True}
+
 
 @dataclass(frozen=True)
 class BorderedArm(DragArm):

@@ -9,7 +9,8 @@ import pytest
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PHYSICAL
-from ident_opt.data import choose_cutoff, load_dataset
+from ident_opt.data import load_dataset
+from ident_opt.derivatives import choose_cutoff
 from ident_opt.identify.fit import fit_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import DataSpec, load_problem

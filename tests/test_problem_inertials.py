@@ -110,10 +110,10 @@ def test_currents_need_a_torque_constant_for_every_joint(tmp_path):
 
 
 def test_compare_frees_the_rotor_inertia_of_a_geared_inertials_robot_by_default():
-    from ident_opt.studies.compare import default_model
-
-    model, why = default_model(load_problem(PROBLEMS / "dfki_c0.toml").robot)
+    robot = load_problem(PROBLEMS / "dfki_c0.toml").robot
+    model, why = robot.model(), robot.model_note
     assert "ia2" in model.names and "rotor inertia" in why
     # The paper's bars-and-cylinders datasheet keeps the paper's rigid model.
-    model, why = default_model(load_problem(PROBLEMS / "tudor_2dof.toml").robot)
+    robot = load_problem(PROBLEMS / "tudor_2dof.toml").robot
+    model, why = robot.model(), robot.model_note
     assert "ia2" not in model.names and why is None

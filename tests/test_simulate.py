@@ -252,7 +252,8 @@ def test_common_load_reads_the_simulated_trials_of_a_sim_problem(tmp_path, monke
 
     monkeypatch.setenv("IDENT_OPT_CACHE", str(tmp_path / "cache"))
     problem = short_sim_problem(tmp_path)
-    loaded = load(Namespace(problem=str(problem.path), data=None, allow_implausible=False, drop_invalid=False))
+    args = Namespace(problem=str(problem.path), data=None, allow_implausible=False, drop_invalid=False)
+    loaded = load(args, "identify")
     assert len(loaded.trials) == 2 and loaded.train.n == 300
     assert not np.allclose(loaded.train.tau[:50], loaded.unseen.tau[:50])
 

@@ -111,6 +111,22 @@ class Arm(Protocol):
         """min over all q of λ_min(M(q)) [kg m²] (or the arm's best lower bound): > 0 means consistent."""
         ...
 
+    #: What `min_mass_eigenvalue` measures, as a table heading.
+    consistency_measure: str
+
+    @property
+    def extensions(self) -> tuple[str, ...]:
+        """The model extensions (`ident_opt.effects`) this model has, in catalogue order."""
+        ...
+
+    def link_masses(self, pi: np.ndarray) -> dict[str, float]:
+        """Each link's mass [kg] at π, by name, where π holds them ({} for grouped parameters, which do not)."""
+        ...
+
+    def settings(self) -> dict:
+        """What defines the model besides π and its extensions, JSON-ready (saved with generated code)."""
+        ...
+
 
 def symbol_table(q, dq, ddq, pi, M, C, G, F, tau=None) -> dict[str, ca.SX]:
     """An arm's `symbols`: the inputs q, dq, ddq (n×1) and pi (P×1), M, C, G, F, tau (default
@@ -137,12 +153,32 @@ def casadi_function(symbols: Mapping[str, ca.SX], what: str) -> ca.Function:
     return ca.Function(what, [s["q"], s["dq"], s["ddq"], s["pi"]], [s[what]], ["q", "dq", "ddq", "pi"], [what])
 
 
+#: The subcommands of `ident-opt`, each of which an arm serves or not (`Robot.serves`).
+ALL_COMMANDS = (
+    "identify",
+    "compare",
+    "diagnose",
+    "simulate",
+    "codegen",
+    "online",
+    "check",
+    "audit",
+    "excite",
+    "calibrate",
+    "export",
+)
+
+
 @runtime_checkable
 class Robot(Protocol):
-    """An arm as a problem's `[robot]` describes it: its joints and their nominal drive values, from which the
-    identification model (`Arm`) is built. Implementations: `ident_opt.arm.datasheet.PlanarRobot` (the planar
-    two-link arm; `ident_opt.arm.planar_urdf.UrdfPlanarRobot` from a URDF) and `ident_opt.arm.chain.ChainRobot`
-    (an n-joint chain from a URDF)."""
+    """An arm as a problem's `[robot]` describes it: its joints and their nominal drive values, the model it is
+    identified with (`model`, an `Arm`), its nominal parameters (`datasheets`), and what it serves.
+
+    Implementations: `ident_opt.arm.datasheet.PlanarRobot` (the planar two-link arm: a datasheet of bars and
+    motors or measured inertials; `ident_opt.arm.planar_urdf.UrdfPlanarRobot` from a URDF) and
+    `ident_opt.arm.chain.ChainRobot` (an n-joint chain from a URDF). Nothing outside `ident_opt.arm` asks which
+    one it has: it asks the robot.
+    """
 
     @property
     def n_joints(self) -> int:
@@ -157,4 +193,78 @@ class Robot(Protocol):
     @property
     def joints(self) -> tuple:
         """Each joint's nominal drive values (friction, rotor inertia, `current_to_torque`), base to tip."""
+        ...
+
+    @property
+    def joint_tables(self) -> tuple[str, ...]:
+        """The problem file's table of each joint's values: [robot.<this>] (joint1, …, or the URDF's names)."""
+        ...
+
+    #: The `ident-opt` commands that serve this arm (a subset of `ALL_COMMANDS`).
+    serves: frozenset[str]
+    #: The fits `compare` runs for it, in report order (names of `ident_opt.identify.estimators`).
+    estimators: tuple[str, ...]
+    #: The fit used downstream (`identify`'s consistent model, `codegen`, `export`) unless told otherwise.
+    default_estimator: str
+    #: What q, dq, ddq, τ mean for this arm (zero, sign, order), in a paragraph for READMEs and reports.
+    angle_convention: str
+    #: The arm in a few words, for sentences ("a 7-joint URDF arm").
+    described_as: str
+    #: Whether the paper's own views apply (its shuffled protocol, its tables): the planar two-link arm's.
+    paper_views: bool
+
+    @property
+    def column_map(self) -> Mapping[str, tuple[float, float]]:
+        """Data column → (scale, offset) from the data's convention to the tool's (empty when they agree)."""
+        ...
+
+    @property
+    def statement(self) -> tuple[str, ...]:
+        """Lines saying what the tool applied to read this robot (offsets, signs, defaults it took); may be ()."""
+        ...
+
+    @property
+    def datasheet(self) -> str:
+        """The key of `datasheets()` that is this problem's own nominal model."""
+        ...
+
+    @property
+    def model_note(self) -> str | None:
+        """Why the default model (`model()`) adds terms to the plain rigid one, or None."""
+        ...
+
+    #: The model extensions (`ident_opt.effects`) `model` can add for this arm.
+    extensions: tuple[str, ...]
+
+    def fit_options(self, estimator: str) -> dict:
+        """What estimator `estimator` takes from this description (a datasheet, a prior), as keyword options."""
+        ...
+
+    def model(self, extensions: tuple[str, ...] | None = None) -> Arm:
+        """The identification model, with `extensions` (`ident_opt.effects`) or by default the robot's own."""
+        ...
+
+    def datasheets(self) -> dict[str, tuple[Arm, np.ndarray]]:
+        """The nominal parameter sets (datasheet, URDF/CAD) by name, each with the arm it is evaluated with."""
+        ...
+
+    def reference(self, parameters: Mapping[str, float]) -> tuple[Arm, np.ndarray]:
+        """A published identification's parameters by name as (arm, π); an unknown name is an InputError."""
+        ...
+
+    def limits(self) -> dict[str, tuple[float | None, ...]]:
+        """Defaults for `[limits]` from the description (a URDF's <limit>): key → one value per joint."""
+        ...
+
+    def summary(self) -> dict:
+        """A JSON-ready description (`ident-opt check --json`, key "robot")."""
+        ...
+
+    @property
+    def headline(self) -> str:
+        """The arm in one line ("7-joint arm from the URDF …")."""
+        ...
+
+    def describe(self) -> list[str]:
+        """Lines for people: the joints, gravity, the model's parameters, what the tool applied (`statement`)."""
         ...

@@ -46,6 +46,7 @@ from ident_opt.arm.urdf import chain_model, check_chain, parse_urdf
 from ident_opt.cache import cache_root
 from ident_opt.cbuild import CompiledRows
 from ident_opt.errors import InputError
+from ident_opt.outputs import shown
 from ident_opt.parameters import Parameter
 
 #: The 10 standard inertial parameters per link: (prefix, unit, kind, meaning), Pinocchio's order.
@@ -107,6 +108,11 @@ class ChainArm:
         self._model  # noqa: B018  (build Pinocchio's model now, so a fault shows at construction)
 
     # ------------------------------------------------------------------ structure
+    @property
+    def urdf_joints(self) -> dict:
+        """The URDF's joints as read (`ident_opt.arm.urdf.UrdfJoint`: origin, axis, <dynamics>, <limit>), by name."""
+        return self._parsed[1]
+
     @cached_property
     def _model(self) -> pin.Model:
         """Pinocchio's model of the chain (`chain_model`) under this arm's gravity."""
@@ -138,6 +144,24 @@ class ChainArm:
     def n_joints(self) -> int:
         """n, the number of joints."""
         return len(self.joints)
+
+    @property
+    def extensions(self) -> tuple[str, ...]:
+        """Model extensions of `ident_opt.effects`: none (the joint terms are the arm's own)."""
+        return ()
+
+    #: What `min_mass_eigenvalue` measures, as a table heading.
+    consistency_measure = "min eig of the links' pseudo-inertias [kg m²]"
+
+    def settings(self) -> dict:
+        """The URDF, its joints, gravity [m/s²], the joint terms and couplings."""
+        return {
+            "urdf": str(self.urdf),
+            "joints": list(self.joints),
+            "gravity": list(self.gravity),
+            "joint_terms": list(self.joint_terms),
+            "couplings": [list(c) for c in self.couplings],
+        }
 
     @cached_property
     def joint_terms(self) -> tuple[str, ...]:
@@ -398,6 +422,154 @@ class ChainRobot:
     def n_joints(self) -> int:
         """n, the number of joints."""
         return len(self.joint_names)
+
+    @property
+    def joint_tables(self) -> tuple[str, ...]:
+        """Each joint's values are in [robot.<its URDF name>]."""
+        return self.joint_names
+
+    # ------------------------------------------------------------------ the `Robot` interface
+    #: The commands that serve an n-joint arm.
+    serves = frozenset(("identify", "compare", "codegen", "check", "export"))
+    #: The fits `compare` runs, in report order: OLS on the base parameters, consistent without and with the
+    #: URDF as a prior (`ident_opt.identify.estimators`).
+    estimators = ("ols", "constrained", "consistent")
+    #: The fit used downstream unless told otherwise: consistent and plausible.
+    default_estimator = "consistent"
+    model_note = None
+    paper_views = False
+    #: The nominal model's key in `datasheets()`.
+    datasheet = "urdf"
+
+    @property
+    def described_as(self) -> str:
+        """ "a 7-joint URDF arm"; a two-joint one says why it is not the planar arm."""
+        why = ' on the n-joint path (its axes are not parallel, or form = "n-joint")' if self.n_joints == 2 else ""
+        return f"a {self.n_joints}-joint URDF arm{why}"
+
+    @property
+    def angle_convention(self) -> str:
+        """q_j is the URDF joint's own position, in the `joint_names` order."""
+        return (
+            f"q1 … q{self.n_joints} are the positions of the URDF's joints {', '.join(self.joint_names)} (in that "
+            "order), as the URDF defines them: zero at each joint's <origin>, positive about its <axis>; tau_j is the "
+            "torque about that axis; gravity as the problem file gives it, in the base frame."
+        )
+
+    @property
+    def column_map(self) -> dict[str, tuple[float, float]]:
+        """Data column → (scale, offset) to the tool's convention: none (a URDF arm's data are in its own)."""
+        return {}
+
+    @property
+    def statement(self) -> tuple[str, ...]:
+        """What the tool read from the URDF and the problem file, and what the nominal model lacks."""
+        lines = [
+            f"robot from the URDF {shown(self.urdf)}: {self.n_joints} joints ({', '.join(self.joint_names)})",
+            *(f"  {note}" for note in self.notes),
+        ]
+        bare = [
+            name
+            for name, j in zip(self.joint_names, self.joints)
+            if not (j.viscous_friction.mean or j.coulomb_friction.mean)
+        ]
+        if bare:
+            lines.append(
+                f"  no nominal friction for {', '.join(bare)} (no <dynamics> and no [robot.<joint>] values): the "
+                "nominal model has none there"
+            )
+        return tuple(lines)
+
+    #: Model extensions: none yet on an n-joint arm (its joint terms are set in [robot]).
+    extensions = ()
+
+    def fit_options(self, estimator: str) -> dict:
+        """The plausible consistent fit's prior: its weight, the links' mass range and centre-of-mass box."""
+        if estimator != "consistent":
+            return {}
+        return {"prior_weight": self.prior_weight, "mass_range": self.mass_range, "com_box": self.com_box}
+
+    def model(self, extensions: tuple[str, ...] | None = None) -> ChainArm:
+        """The identification model: the chain with its joint terms. Model extensions are the planar arm's
+        only, for now: asking for one is an InputError naming it."""
+        if extensions:
+            raise InputError(
+                f"{shown(self.urdf)}: model extensions ({', '.join(extensions)}) are available for the planar "
+                "two-link arm only; an n-joint arm's model has its joint terms (friction, armature, offsets in [robot])"
+            )
+        return self.arm
+
+    def datasheets(self) -> dict[str, tuple[ChainArm, np.ndarray]]:
+        """The nominal model: the URDF's inertials with each joint's nominal friction and armature."""
+        return {"urdf": (self.arm, self.nominal_parameters())}
+
+    def reference(self, parameters: Mapping[str, float]) -> tuple[ChainArm, np.ndarray]:
+        """A published identification in the standard parameters by name (`m_<link>`, `fv_<joint>`, …) as
+        (arm, π); names it lacks are 0; an unknown name is an InputError naming it."""
+        unknown = [k for k in parameters if k not in self.arm.names]
+        if unknown:
+            raise InputError(
+                f"[reference.parameters]: unknown parameter '{unknown[0]}' for the arm of {shown(self.urdf)} "
+                f"(its names: {', '.join(self.arm.names[:3])}, …: m_, mx_, my_, mz_, ixx_ … izz_<link> and "
+                f"{', '.join(t + '_<joint>' for t in self.arm.joint_terms)})"
+            )
+        return self.arm, self.arm.vector(parameters)
+
+    def limits(self) -> dict[str, tuple[float | None, ...]]:
+        """`[limits]` defaults from each joint's URDF <limit>: position_min/max [rad] (lower, upper), velocity
+        [rad/s], torque [N m] (effort); None for a joint whose <limit> lacks the value, a key absent when no
+        joint has it."""
+        parsed = self.arm.urdf_joints
+        keys = {"position_min": "lower", "position_max": "upper", "velocity": "velocity", "torque": "effort"}
+        out = {}
+        for key, attribute in keys.items():
+            values = tuple(parsed[name].limit.get(attribute) for name in self.joint_names)
+            if any(v is not None for v in values):
+                out[key] = values
+        return out
+
+    @property
+    def headline(self) -> str:
+        """The arm in one line."""
+        return f"{self.n_joints}-joint arm from the URDF {shown(self.urdf)}"
+
+    def describe(self) -> list[str]:
+        """The joints, gravity, the model's parameters, the URDF's mass, couplings and the statement's notes."""
+        arm, info = self.arm, self.summary()
+        mass = (
+            f"{info['urdf_mass_kg']:.3f} kg"
+            if info["urdf_mass_kg"] is not None
+            else f"unknown: no <inertial> on {', '.join(info['missing_inertials'])}"
+        )
+        terms = ", ".join(arm.joint_terms) or "none"
+        lines = [
+            f"  joints: {', '.join(self.joint_names)}",
+            f"  gravity [m/s²]: ({', '.join(f'{g:g}' for g in self.gravity)})",
+            f"  parameters: {arm.n_params} standard ({N_LINK} per link, joint terms: {terms})",
+            f"  URDF mass of the moving links: {mass}",
+        ]
+        lines += [f"  coupling: drive {a} also acts on {b} (ratio {r:g})" for a, b, r in self.couplings]
+        return lines + list(self.statement[1:])
+
+    def summary(self) -> dict:
+        """What `ident-opt check --json` says of the robot (key "robot"): the URDF, its joints and moving links,
+        gravity [m/s²], the joint terms, couplings, the number of parameters, the URDF's total mass [kg] (None
+        when a link has no <inertial>, which `missing_inertials` names)."""
+        arm = self.arm
+        mass = None if arm.missing_inertials else sum(arm.link_masses(arm.cad_parameters()).values())
+        return {
+            "form": "n-joint chain from a URDF",
+            "urdf": str(self.urdf),
+            "joints": list(self.joint_names),
+            "links": list(arm.links),
+            "gravity": list(self.gravity),
+            "joint_terms": list(arm.joint_terms),
+            "couplings": [list(c) for c in self.couplings],
+            "parameters": arm.n_params,
+            "urdf_mass_kg": mass,
+            "missing_inertials": list(arm.missing_inertials),
+            "statement": list(self.statement),
+        }
 
     @cached_property
     def arm(self) -> ChainArm:

@@ -17,7 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ident_opt.arm.base import ALL_COMMANDS
 from ident_opt.arm.joints import Friction, JointSide
+from ident_opt.arm.planar import ANGLE_CONVENTION, EXTENSIONS, PAPER, PHYSICAL, RIGID, PlanarArm
+from ident_opt.errors import InputError
 
 
 @dataclass(frozen=True)
@@ -95,9 +98,97 @@ class PlanarRobot:
         """The joints' names in reports: joint1, joint2."""
         return ("joint1", "joint2")
 
+    #: Each joint's values are in [robot.joint1] and [robot.joint2] (also for an arm from a URDF).
+    joint_tables = ("joint1", "joint2")
 
-#: The paper's grouped parameters, in its order (β in N·m, friction joint-side).
-PI_NAMES = ("a1", "a2", "a3", "b1", "b2", "fv1", "fv2", "fc1", "fc2")
+    # ------------------------------------------------------------------ the `Robot` interface
+    #: Every command serves the planar two-link arm (the paper's own views included).
+    serves = frozenset(ALL_COMMANDS)
+    #: The fits `compare` runs, in report order (`ident_opt.identify.estimators`).
+    estimators = ("ols", "constrained", "nlp_physical")
+    #: The fit used downstream unless told otherwise.
+    default_estimator = "constrained"
+    angle_convention = ANGLE_CONVENTION
+    described_as = "a planar two-link arm"
+    paper_views = True
+
+    @property
+    def column_map(self) -> dict[str, tuple[float, float]]:
+        """Data column → (scale, offset) to the tool's convention: none (the data are in it already)."""
+        return {}
+
+    @property
+    def statement(self) -> tuple[str, ...]:
+        """What the tool applied to read this robot: nothing."""
+        return ()
+
+    @property
+    def datasheet(self) -> str:
+        """The key of `datasheets()` that is this problem's own reading (its `convention`)."""
+        return self.convention
+
+    #: The model extensions `model` can add: every one of the catalogue's.
+    extensions = tuple(EXTENSIONS)
+
+    def fit_options(self, estimator: str) -> dict:
+        """The NLP on physical parameters starts from, and is pulled toward, this datasheet."""
+        return {"robot": self} if estimator == "nlp_physical" else {}
+
+    def model(self, extensions: tuple[str, ...] | None = None) -> PlanarArm:
+        """The identification model: the grouped π with `extensions` (`ident_opt.effects`), by default the
+        rigid model, plus `armature` for a robot given by its inertials with a rotor inertia behind a gear
+        (`model_note` says why)."""
+        if extensions is not None:
+            return PlanarArm(tuple(extensions))
+        return PlanarArm(("armature",)) if self.model_note else RIGID
+
+    @property
+    def model_note(self) -> str | None:
+        """Why the default model is not the plain rigid one, or None: a robot described by its inertials with a
+        reflected rotor inertia on a joint carries it on the diagonal of M, so the model frees it (armature,
+        ia2 apart from α1) instead of folding a wrong fixed value into the other parameters."""
+        if self.description == "inertials" and any(j.rotor_inertia > 0 for j in self.joints):
+            return "armature, as the robot states a rotor inertia behind a gear"
+        return None
+
+    def datasheets(self) -> dict[str, tuple[PlanarArm, np.ndarray]]:
+        """The datasheet read both ways, each with the arm it is evaluated with: "paper" (its printed gravity
+        vector, the paper's Model 2) and "physical" (a joint-2 armature, reflected friction)."""
+        return {
+            convention: (arm, arm.vector(datasheet_pi(self, convention)))
+            for convention, arm in (("paper", PAPER), ("physical", PHYSICAL))
+        }
+
+    def reference(self, parameters: dict[str, float]) -> tuple[PlanarArm, np.ndarray]:
+        """A published identification in the grouped parameters as (arm, π): the armature extension when it
+        names ia2; an unknown name is an InputError naming it."""
+        arm = PlanarArm(("armature",)) if "ia2" in parameters else RIGID
+        unknown = [k for k in parameters if k not in arm.names]
+        if unknown:
+            raise InputError(f"[reference.parameters]: unknown parameter '{unknown[0]}'; known: {', '.join(arm.names)}")
+        return arm, arm.vector(parameters)
+
+    def limits(self) -> dict[str, tuple[float, ...]]:
+        """Defaults of `[limits]` the description gives: none."""
+        return {}
+
+    def summary(self) -> dict:
+        """What `ident-opt check --json` says of the robot (key "robot")."""
+        return {"form": "planar two-link", "description": self.description, "convention": self.convention}
+
+    @property
+    def headline(self) -> str:
+        """The arm in one line."""
+        how = {"bars": "bars and motors", "inertials": "measured inertials"}.get(self.description, self.description)
+        return f"planar two-link arm ({how}), datasheet convention {self.convention!r}"
+
+    def describe(self) -> list[str]:
+        """The model's parameters and what the tool applied to read the robot."""
+        arm = self.model()
+        lines = [f"  parameters: {arm.n_params} grouped ({', '.join(arm.names)})"]
+        if self.model_note:
+            lines.append(f"  model: rigid + {self.model_note}")
+        return lines + [f"  {line}" for line in self.statement]
 
 
 @dataclass(frozen=True)

@@ -28,8 +28,17 @@ import numpy as np
 
 from ident_opt import effects as catalogue
 from ident_opt.arm.base import casadi_function, symbol_table
-from ident_opt.arm.datasheet import PI_NAMES
 from ident_opt.parameters import Parameter
+
+#: What q means for this arm, for READMEs and reports (`docs/conventions.md`).
+ANGLE_CONVENTION = (
+    "q1 is link 1's angle from the horizontal, q2 is link 2's angle relative to link 1 (0 when the links are in "
+    "line), both counter-clockwise positive, gravity along −y. An arm whose zero hangs straight down must pass "
+    "q1 = its angle − π/2 (the same conversion as its problem file's `[data.columns]` offset); a joint that counts "
+    "clockwise flips the sign of its q, dq, ddq and tau."
+)
+#: The paper's grouped parameters, in its order (β in N·m, friction joint-side).
+PI_NAMES = ("a1", "a2", "a3", "b1", "b2", "fv1", "fv2", "fc1", "fc2")
 
 #: The paper's grouped parameters π, declared once (names in `PI_NAMES` order).
 RIGID_PARAMETERS = (
@@ -254,6 +263,17 @@ class PlanarArm:
         so its minimum over c ∈ [−1, 1] lies at an end."""
         A0, A1 = self.mass_matrix_maps
         return {"mass_pd_q2_0": A0 + A1, "mass_pd_q2_pi": A0 - A1}
+
+    #: What `min_mass_eigenvalue` measures, as a table heading.
+    consistency_measure = "min eig M(q) [kg m²]"
+
+    def settings(self) -> dict:
+        """The gravity vector's reading and the Stribeck velocities [rad/s]."""
+        return {"gravity": self.gravity, "stribeck_velocity": list(self.stribeck_velocity)}
+
+    def link_masses(self, pi: np.ndarray) -> dict[str, float]:
+        """{}: the grouped π do not hold the links' masses (only their combinations with lengths and inertias)."""
+        return {}
 
     def min_mass_eigenvalue(self, pi: np.ndarray) -> float:
         """min over all q of the smallest eigenvalue of M(q) [kg m²]: > 0 means physically consistent."""

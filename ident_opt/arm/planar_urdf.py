@@ -58,9 +58,10 @@ from ident_opt.arm.datasheet import InertialLink, PlanarRobot
 from ident_opt.arm.joints import JointSide
 from ident_opt.arm.urdf import chain_model, check_chain, parse_urdf
 from ident_opt.errors import InputError
+from ident_opt.outputs import shown
 
 if TYPE_CHECKING:  # only a type here: pandas is a heavy import that loading a problem does not need
-    import pandas as pd
+    pass
 
 #: Largest angle between the two joint axes [rad] still read as parallel (a URDF's rounded rpy, e.g.
 #: 1.5708 for π/2, is off by 4e-6 rad).
@@ -122,15 +123,6 @@ class UrdfPlanarRobot(PlanarRobot):
             out.update({f"{kind}{j + 1}": (s, 0.0) for kind in _SIGNED})
         return out
 
-    def to_urdf(self, frame: pd.DataFrame) -> pd.DataFrame:
-        """A data frame in the tool's convention written back in the URDF's (the inverse of `column_map`:
-        value_urdf = (value − offset) / scale), so that reading it again maps it to what it was."""
-        out = frame.copy()
-        for name, (scale, offset) in self.column_map.items():
-            if name in out:
-                out[name] = (out[name] - offset) / scale
-        return out
-
     def summary(self) -> dict:
         """The JSON-able description `ident-opt check --json` gives (key "robot"): the URDF, its joints, the
         signs and offsets [rad] applied to its data, and the statement's lines."""
@@ -146,8 +138,6 @@ class UrdfPlanarRobot(PlanarRobot):
     @property
     def statement(self) -> tuple[str, ...]:
         """The lines the tool prints about this robot: the angle offsets and signs it applied, and why."""
-        from ident_opt.report import shown  # deferred: the report package is not needed to load a problem
-
         joints = ", ".join(self.joint_names)
         lines = [f"robot from the URDF {shown(self.urdf)} as a planar two-link arm (joints {joints})"]
         for j, (name, s, off) in enumerate(zip(self.joint_names, self.angle_signs, self.angle_offsets)):

@@ -1,4 +1,4 @@
-/* Minimal example: predict the joint torques of the identified arm from C, without Python.
+/* Minimal example: predict the joint torques of the identified arm ($n joints) from C, without Python.
  *
  * Build (from the folder that `ident-opt codegen` wrote), against the shared library:
  *   cc -O2 -std=c99 -Wall -Wextra -Werror main.c -L. -lident_opt_model -Wl,-rpath,. -o example -lm
@@ -13,6 +13,8 @@
 #include <stdio.h>
 
 #include "ident_opt_model.h"
+
+#define N_JOINTS $n
 
 /* One evaluation of a (q, dq, ddq) -> tau entry point; the sizes come from the generated header. */
 #define EVALUATE(f, q, dq, ddq, tau, status)                                  \
@@ -33,26 +35,33 @@
     f##_decref();                                                             \
   } while (0)
 
+/* Print one torque vector and say whether every entry is finite. */
+static int report(const char *name, const casadi_real *tau) {
+  int finite = 1;
+  printf("%-11s = [", name);
+  for (int j = 0; j < N_JOINTS; ++j) {
+    printf(j ? ", %.17g" : "%.17g", tau[j]);
+    finite = finite && isfinite(tau[j]);
+  }
+  printf("] N m\n");
+  return finite;
+}
+
 int main(void) {
   /* A state: joint angles [rad], velocities [rad/s], accelerations [rad/s^2]. */
-  const casadi_real q[2] = {0.3, -0.5};
-  const casadi_real dq[2] = {0.8, -0.2};
-  const casadi_real ddq[2] = {1.5, 2.0};
-  casadi_real tau[2] = {0.0, 0.0};
-  casadi_real tau_gmr[2] = {0.0, 0.0};
+  const casadi_real q[N_JOINTS] = {$q};
+  const casadi_real dq[N_JOINTS] = {$dq};
+  const casadi_real ddq[N_JOINTS] = {$ddq};
+  casadi_real tau[N_JOINTS] = {0.0};
   int status = 0;
+  int finite = 1;
 
   EVALUATE(tau_hat, q, dq, ddq, tau, status);
   if (status != 0) {
     fprintf(stderr, "tau_hat failed (%d)\n", status);
     return 1;
   }
-  EVALUATE(tau_hat_gmr, q, dq, ddq, tau_gmr, status);
-  if (status != 0) {
-    fprintf(stderr, "tau_hat_gmr failed (%d)\n", status);
-    return 1;
-  }
-  printf("tau_hat     = [%.17g, %.17g] N m\n", tau[0], tau[1]);
-  printf("tau_hat_gmr = [%.17g, %.17g] N m\n", tau_gmr[0], tau_gmr[1]);
-  return (isfinite(tau[0]) && isfinite(tau[1]) && isfinite(tau_gmr[0]) && isfinite(tau_gmr[1])) ? 0 : 1;
+  finite = report("tau_hat", tau) && finite;
+$gmr_call
+  return finite ? 0 : 1;
 }

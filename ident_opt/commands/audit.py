@@ -12,7 +12,8 @@ import argparse
 from pathlib import Path
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
-from ident_opt.studies.scope import two_joint_only
+from ident_opt.report import audit as report
+from ident_opt.studies.audit import audit
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -22,13 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Load, audit, write the report, print the summary."""
-    two_joint_only("audit", args.problem)  # its models are two-link: refuse a URDF arm up front
-    # Deferred: the study loads NumPy, pandas and CasADi, the report matplotlib; `ident-opt --help` builds
-    # every subcommand's parser and stays fast only if that waits until a command runs.
-    from ident_opt.report import audit as report
-    from ident_opt.studies.audit import audit
-
-    loaded = load(args)
+    loaded = load(args, "audit")
     out = output_dir(args, loaded.problem, Path("results"))
     result = audit(loaded.problem, loaded.train, loaded.unseen)
     report.write(result, out, args.json)

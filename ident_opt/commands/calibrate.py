@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import argparse
 
-from ident_opt.commands.common import output_dir
+from ident_opt.commands.common import output_dir, require
 from ident_opt.errors import InputError
-from ident_opt.studies.scope import two_joint_only
+from ident_opt.problem import load_problem
+from ident_opt.report import calibration as report
+from ident_opt.studies.calibration import calibrate
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -33,14 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Load both problems, calibrate, write the report, print it."""
-    two_joint_only("calibrate", args.problem, args.real)  # its models are two-link: refuse a URDF arm up front
-    # Deferred: the study loads NumPy, SciPy and CasADi (the simulator), the report matplotlib; `ident-opt
-    # --help` builds every subcommand's parser and stays fast only if that waits until a command runs.
-    from ident_opt.problem import load_problem
-    from ident_opt.report import calibration as report
-    from ident_opt.studies.calibration import calibrate
-
     sim, real = load_problem(args.problem), load_problem(args.real)
+    require("calibrate", sim)
+    require("calibrate", real)
     if sim.simulate is None:
         raise InputError(f"{sim.path}: no [simulate] section: nothing to calibrate")
     if not real.data.trials:

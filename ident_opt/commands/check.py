@@ -1,4 +1,4 @@
-"""Validate a problem file and its data, and summarise each trial (samples, rate, ranges, derivatives).
+"""Validate a problem file and its data, and summarise the robot and each trial (samples, rate, ranges, derivatives).
 
 Nothing is fitted and nothing is written except the optional --json summary. Use it first on a new
 robot's logs: every fault is reported with the file, column and first offending row, exit status 2.
@@ -8,8 +8,11 @@ from __future__ import annotations
 
 import argparse
 
-from ident_opt.arm.chain import ChainRobot
 from ident_opt.commands.common import add_problem_arguments, load, write_json
+from ident_opt.identify.base import base_parameters
+
+#: Units of the ranges printed per signal.
+UNITS = {"q": "rad", "dq": "rad/s", "ddq": "rad/s²", "tau": "N·m"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -33,22 +36,21 @@ def summary(trial) -> dict:
     }
 
 
-def run(args: argparse.Namespace) -> int:
-    loaded = load(args, fit=False)  # a constant torque is a warning here: nothing is fitted
-    reports = [summary(trial) for trial in loaded.trials]
-    extra = {}
-    if isinstance(loaded.problem.robot, ChainRobot):  # an n-joint arm: its summary is ident_opt.studies.urdf's
-        from ident_opt.studies import urdf as study
+def robot_summary(problem) -> tuple[dict, list[str]]:
+    """The robot's JSON summary (`Robot.summary` with its identifiable base parameters) and the lines printed."""
+    robot = problem.robot
+    arm = robot.model()
+    info = {**robot.summary(), "base_parameters": base_parameters(arm).rank}
+    lines = [f"problem {problem.name!r} ({problem.path}): {robot.headline}", *robot.describe()]
+    lines.append(f"  identifiable: {info['base_parameters']} base parameters of the {arm.n_params} of its model")
+    return info, lines
 
-        extra["robot"] = study.check_summary(loaded.problem)
-        print("\n".join(study.check_lines(loaded.problem, extra["robot"])))
-    else:
-        problem = loaded.problem
-        print(f"problem {problem.name!r} ({problem.path}): robot convention {problem.robot.convention!r}")
-        if hasattr(problem.robot, "statement"):  # a two-joint URDF arm: the angle offsets applied to its data
-            extra["robot"] = problem.robot.summary()
-            print("\n".join(problem.robot.statement))
-    units = {"q": "rad", "dq": "rad/s", "ddq": "rad/s²", "tau": "N·m"}
+
+def run(args: argparse.Namespace) -> int:
+    loaded = load(args, "check", fit=False)  # a constant torque is a warning here: nothing is fitted
+    reports = [summary(trial) for trial in loaded.trials]
+    robot, lines = robot_summary(loaded.problem)
+    print("\n".join(lines))
     for rep in reports:
         print(
             f"{rep['source']}: {rep['samples']} samples, {rep['duration_s']:.2f} s at {rep['rate_hz']:.6g} Hz; "
@@ -56,6 +58,6 @@ def run(args: argparse.Namespace) -> int:
         )
         for name, ranges in rep["ranges"].items():
             joints = ", ".join(f"joint {j} [{lo:.4g}, {hi:.4g}]" for j, (lo, hi) in enumerate(ranges, 1))
-            print(f"  {name:>3} [{units[name]}]: {joints}")
-    write_json(args.json, {"problem": loaded.problem.name, **extra, "trials": reports})
+            print(f"  {name:>3} [{UNITS[name]}]: {joints}")
+    write_json(args.json, {"problem": loaded.problem.name, "robot": robot, "trials": reports})
     return 0

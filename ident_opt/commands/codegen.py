@@ -13,10 +13,16 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ident_opt import outputs
-from ident_opt.commands import urdf
-from ident_opt.commands.common import add_components, add_problem_arguments, add_switches, load, output_dir
+import numpy as np
+
+from ident_opt import codegen, outputs
+from ident_opt.commands.common import add_components, add_problem_arguments, add_switches, load, output_dir, require
+from ident_opt.data import concat
 from ident_opt.errors import InputError
+from ident_opt.identify.estimators import ESTIMATORS
+from ident_opt.problem import load_problem
+from ident_opt.report import codegen as report
+from ident_opt.studies import online_codegen, ship
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,9 +38,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--estimator",
-        choices=("constrained", "ols", "consistent"),  # ESTIMATORS; consistent: the URDF arms' plausible fit
+        choices=tuple(ESTIMATORS),
         default=None,
-        help="how π is identified (default: the physically consistent fit)",
+        help="how π is identified, among the arm's fits (default: its physically consistent one: constrained for "
+        "the planar arm, consistent for an n-joint arm)",
     )
     parser.add_argument(
         "--parameters",
@@ -56,38 +63,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Identify (or load), generate, compile, check; 0 when the library agrees with Python, 1 when not."""
-    # Deferred: CasADi, NumPy and scikit-learn; `ident-opt --help` builds every subcommand's parser and stays
-    # fast only if that waits until a command runs.
-    import numpy as np
-
-    from ident_opt import codegen
-    from ident_opt.problem import load_problem
-    from ident_opt.report import codegen as report
-    from ident_opt.studies import ship
-
     problem = load_problem(args.problem)
-    if isinstance(problem.robot, urdf.ChainRobot):  # an n-joint arm from a URDF: ident_opt.commands.urdf
-        return urdf.codegen(args, problem)
-    if args.estimator == "consistent":
-        raise InputError("codegen: --estimator consistent is the fit of arms from a URDF; use constrained or ols")
-    args.estimator = args.estimator or "constrained"
+    require("codegen", problem)
+    robot = problem.robot
+    args.estimator = args.estimator or robot.default_estimator
+    if args.estimator not in robot.estimators:
+        raise InputError(
+            f"codegen: --estimator {args.estimator} is not a fit of this arm ({robot.described_as}); "
+            f"its fits: {', '.join(robot.estimators)}"
+        )
     compiler = codegen.find_compiler()  # fail before any fitting when there is none
     saved = ship.read_parameters(args.parameters) if args.parameters else None
-    model = _model(args.extension, saved)
-    trials = load(args).trials if saved is None or saved.get("gmr") is None else []
-    train = trials[0] if trials else None
+    model = _model(robot, args.extension, saved)
+    trials = load(args, "codegen", problem=problem).training if saved is None or saved.get("gmr") is None else []
+    train = concat(trials) if trials else None
     if not (saved and saved.get("gmr")):
         _announce_gmr(problem.residual, args.components, train)
     out = output_dir(args, problem)  # only once every input is read and checked
-    written = _written(args, trials)
+    written = _written(args, robot, trials)
     outputs.guard_owned(out, written, force=args.force)
-    shipped = ship.prepare(model, train, problem.residual, args.estimator, args.components, saved)
+    shipped = ship.prepare(robot, model, train, problem.residual, args.estimator, args.components, saved)
     print(
-        f"ident-opt codegen: {len(model.names)} parameters ({shipped.estimator}), GMR with "
+        f"ident-opt codegen: {robot.headline}; {len(model.names)} parameters ({shipped.estimator}), GMR with "
         f"{len(shipped.gmr.weights_)} components; generating C in {out}",
         flush=True,
     )
-    built = report.build(shipped, out, compiler, forward=not args.no_forward)
+    built = report.build(shipped, robot, out, compiler, forward=not args.no_forward)
     errors = ship.check(built.library, shipped, train, built.names, np.random.default_rng(0))
     data = report.payload(shipped, built, errors, problem, [t.source for t in trials])
     update = _pi_update(args, problem, trials, out, compiler)
@@ -105,15 +106,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _model(extension: list[str] | None, saved: dict | None):
-    """The `PlanarArm` to ship: the --extension ones, else the saved parameters' (with their parameters checked:
-    every one present and numeric, before --out is touched)."""
-    from ident_opt.arm.planar import PlanarArm
-    from ident_opt.studies import ship
-
+def _model(robot, extension: list[str] | None, saved: dict | None):
+    """The model to ship: the arm with the --extension ones, else the saved parameters' (with their parameters
+    checked: every one present and numeric, before --out is touched)."""
     extensions = extension if extension is not None else (saved or {}).get("extensions", [])
     try:
-        model = PlanarArm(extensions=tuple(dict.fromkeys(extensions)))
+        model = robot.model(tuple(dict.fromkeys(extensions)))
     except ValueError as exc:
         raise InputError(f"codegen: {exc}") from None
     if saved is not None:
@@ -121,15 +119,20 @@ def _model(extension: list[str] | None, saved: dict | None):
     return model
 
 
-def _written(args: argparse.Namespace, trials: list) -> list[str]:
-    """The files this run writes to DIR (the online update's only with a trial to check it on)."""
-    from ident_opt import codegen
-
+def _written(args: argparse.Namespace, robot, trials: list) -> list[str]:
+    """The files this run writes to DIR (the online update's only with a trial to check it on, for an arm the
+    online identifier serves)."""
     written = [f"{codegen.NAME}.c", f"{codegen.NAME}.h", codegen.library_name(), "main.c", "README.md"]
     written.append("parameters.json")
-    if not args.no_update and trials:
+    if _with_update(args, robot, trials):
         written += UPDATE_FILES
     return written
+
+
+def _with_update(args: argparse.Namespace, robot, trials: list) -> bool:
+    """Whether pi_update (the online update in C) is generated: not --no-update, a trial to check it on, and an arm
+    the online identifier serves."""
+    return not args.no_update and bool(trials) and "online" in robot.serves
 
 
 #: What the online update adds to DIR (`ident_opt.codegen.generate_pi_update`, `compile_pi_update`, the check).
@@ -146,11 +149,9 @@ UPDATE_FILES = [
 
 
 def _pi_update(args: argparse.Namespace, problem, trials: list, out, compiler) -> dict | None:
-    """pi_update generated, compiled and checked on the first trial's online part (none without a trial)."""
-    if args.no_update or not trials:
+    """pi_update generated, compiled and checked on the first trial's online part (`_with_update`)."""
+    if not _with_update(args, problem.robot, trials):
         return None
-    from ident_opt.studies import online_codegen  # deferred with the rest of the heavy imports
-
     print("ident-opt codegen: generating pi_update (the online update) and checking it against Python", flush=True)
     return online_codegen.verify(problem, trials[0], out, compiler)
 

@@ -9,8 +9,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ident_opt import outputs
+from ident_opt import outputs, simulate
+from ident_opt.arm.base import ALL_COMMANDS
+from ident_opt.data import load_dataset
 from ident_opt.errors import InputError
+from ident_opt.problem import load_problem
 from ident_opt.report import write_json  # noqa: F401  (every command's --json goes through it)
 
 #: The largest |value| (SI units) of q, dq, ddq or τ that a fit can take: the regressor's products of four
@@ -85,15 +88,25 @@ class Loaded:
         return self.training[1] if len(self.training) > 1 else None
 
 
-def load(args: argparse.Namespace, min_samples: int | None = None, fit: bool = True) -> Loaded:
-    """The problem file and its data (from --data, the problem's [data] trials, or its [simulate] section).
-    `fit`: the trials will be fitted, so a joint whose torque never varies is an error (else a warning)."""
-    # Deferred: the data loader brings pandas and SciPy (1.5 s); every subcommand's parser imports this module.
-    from ident_opt import simulate  # its integrator loads on first use only
-    from ident_opt.data import load_dataset
-    from ident_opt.problem import load_problem
+def require(command: str, problem) -> None:
+    """InputError (exit 2) when `command` does not serve the problem's arm (`Robot.serves`), before any work."""
+    robot = problem.robot
+    if command not in robot.serves:
+        serving = ", ".join(c for c in ALL_COMMANDS if c in robot.serves)
+        raise InputError(
+            f"{command} supports two-joint problems only; {problem.path} describes {robot.described_as} "
+            f"(the commands for this arm: {serving})"
+        )
 
-    problem = load_problem(args.problem)
+
+def load(
+    args: argparse.Namespace, command: str, min_samples: int | None = None, fit: bool = True, problem=None
+) -> Loaded:
+    """The problem file (`problem` when the command read it already) and its data (from --data, the problem's
+    [data] trials, or its [simulate] section), once `command` is known to serve its arm. `fit`: the trials will be
+    fitted, so a joint whose torque never varies is an error (else a warning)."""
+    problem = problem or load_problem(args.problem)
+    require(command, problem)
     train, test = _trial_paths(args, problem)
     paths, n_train = train + test, len(train) or 1
     if not paths and problem.simulate is not None:

@@ -1,4 +1,10 @@
-"""`ident-opt compare`: datasheet (both conventions) vs OLS vs physically constrained vs NLP-physical.
+"""`ident-opt compare`: the nominal model (datasheet or URDF) against OLS and the physically consistent fits.
+
+For the planar two-link arm: the datasheet under both conventions, OLS, the constrained fit (M(q) ≻ 0 for every
+q, friction ≥ 0), the NLP on physical parameters and IV, on the paper's shuffled protocol, a chronological split
+and the held-out trials. For an n-joint arm from a URDF: the URDF with its joints' nominal friction and armature,
+OLS on the base parameters, the consistent fit (a pseudo-inertia ⪰ 0 per link), the plausible consistent fit
+(the default: a log-det prior toward the URDF) and IV, on the chronological split and the held-out trials.
 
 Writes to the output folder: compare.md (the report), compare_parameters.csv (values and standard
 errors), compare_consistency.csv, compare_metrics.csv (held-out rmse / nmse / nmse_range per joint and
@@ -12,9 +18,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ident_opt.commands import urdf
-from ident_opt.commands.common import add_problem_arguments, load, output_dir
+from ident_opt.commands.common import add_problem_arguments, load, output_dir, require
 from ident_opt.errors import InputError
+from ident_opt.problem import load_problem
+from ident_opt.report import compare as report
+from ident_opt.report import constraints as constraints_report
+from ident_opt.studies import compare, constraints
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,44 +69,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the comparison (or the constraints study), write the files, print a summary."""
-    # Deferred: the studies load NumPy, pandas, CasADi and cvxpy; `ident-opt --help` builds every subcommand's
-    # parser and stays fast (0.1 s instead of over 2 s) only if that waits until a command runs.
-    from ident_opt.arm.planar import PlanarArm
-    from ident_opt.problem import load_problem
-    from ident_opt.report import compare as report
-    from ident_opt.report import constraints as constraints_report
-    from ident_opt.studies import compare, constraints
-
-    urdf_problem = urdf.urdf_problem(args)
-    if urdf_problem is not None:  # an n-joint arm from a URDF: ident_opt.commands.urdf
-        return urdf.compare(args, urdf_problem)
     if args.margin < 0:
         raise InputError(f"--margin must be ≥ 0 (got {args.margin})")
+    problem = load_problem(args.problem)
+    require("compare", problem)
+    robot = problem.robot
     try:
-        model = PlanarArm(tuple(args.extension))
+        model = robot.model(tuple(args.extension) if args.extension else None)
     except ValueError as exc:
         raise InputError(f"--extension: {exc}") from None
-    if not args.extension:
-        model, why = compare.default_model(load_problem(args.problem).robot)
-        if why is not None:
-            print(f"model: rigid + {why} (--extension chooses another)", file=sys.stderr)
+    if not args.extension and robot.model_note is not None:
+        print(f"model: rigid + {robot.model_note} (--extension chooses another)", file=sys.stderr)
     if args.constraints_study is not None:
-        if args.constraints_study < 1:
-            raise InputError("--constraints-study needs a positive number of trials")
-        problem = load_problem(args.problem)
-        out = output_dir(args, problem)
-        sources = tuple(constraints.STUDY_SOURCES) if args.study_source == "both" else (args.study_source,)
-        results, rich = constraints.study(
-            problem.robot, args.constraints_study, sources, margin=args.margin, progress=not args.no_progress
-        )
-        constraints_report.write(results, rich, out, args.json)
-        print(constraints_report.terminal(results, rich, out))
-        return 0
-    loaded = load(args, min_samples=2 * model.n_params)
+        return _constraints_study(args, problem)
+    loaded = load(args, "compare", min_samples=2 * model.n_params, problem=problem)
     out = output_dir(args, loaded.problem)
     result = compare.compare_estimators(
         loaded.training,
-        loaded.problem.robot,
+        robot,
         loaded.problem.split,
         loaded.testing or None,
         model=model,
@@ -112,4 +101,19 @@ def run(args: argparse.Namespace) -> int:
     for warning in result.trust.warnings:
         print(warning, file=sys.stderr)
     print(f"wrote {', '.join(files)} to {out.resolve()}")
+    return 0
+
+
+def _constraints_study(args: argparse.Namespace, problem) -> int:
+    """The study of where the constraints matter, on N short simulated trials of the problem's robot."""
+    if args.constraints_study < 1:
+        raise InputError("--constraints-study needs a positive number of trials")
+    require("simulate", problem)  # its trials come from the simulator
+    out = output_dir(args, problem)
+    sources = tuple(constraints.STUDY_SOURCES) if args.study_source == "both" else (args.study_source,)
+    results, rich = constraints.study(
+        problem.robot, args.constraints_study, sources, margin=args.margin, progress=not args.no_progress
+    )
+    constraints_report.write(results, rich, out, args.json)
+    print(constraints_report.terminal(results, rich, out))
     return 0

@@ -9,9 +9,10 @@ train_fraction, in time) trains and the rest is held out. Writes diagnosis.md an
 from __future__ import annotations
 
 import argparse
+import sys
 
-from ident_opt.commands.common import add_problem_arguments
-from ident_opt.studies.scope import two_joint_only
+from ident_opt.commands.common import add_problem_arguments, load, output_dir, write_json
+from ident_opt.diagnose import diagnose, report
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -21,13 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    two_joint_only("diagnose", args.problem)  # its models are two-link: refuse a URDF arm up front
-    import sys
-
-    from ident_opt.commands.common import load, output_dir, write_json
-    from ident_opt.diagnose import diagnose, report
-
-    loaded = load(args)
+    loaded = load(args, "diagnose")
     result = diagnose(
         loaded.problem.robot,
         loaded.train,

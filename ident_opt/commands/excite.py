@@ -21,9 +21,13 @@ import argparse
 import math
 from pathlib import Path
 
-from ident_opt.commands.common import add_problem_arguments
+from ident_opt.commands.common import add_problem_arguments, require
+from ident_opt.data import load_dataset
 from ident_opt.errors import InputError
-from ident_opt.studies.scope import two_joint_only
+from ident_opt.problem import load_problem
+from ident_opt.report import excitation as report
+from ident_opt.studies import discrimination, excitation, excitation_proof
+from ident_opt.trajectory import default_base_hz
 
 #: Accepted ranges of the numeric flags.
 DURATION = (2.0, 3600.0)  # s
@@ -99,20 +103,13 @@ def _check(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Design, write the CSV, figure and JSON, print a summary."""
-    two_joint_only("excite", args.problem)  # its models are two-link: refuse a URDF arm up front
-    # Deferred: the study loads NumPy, CasADi and pandas; `ident-opt --help` stays fast.
-    from ident_opt.data import load_dataset
-    from ident_opt.problem import load_problem
-    from ident_opt.report import excitation as report
-    from ident_opt.studies import discrimination, excitation
-    from ident_opt.trajectory import default_base_hz
-
+    problem = load_problem(args.problem)
+    require("excite", problem)
     if args.criterion == "discriminate":
         args.harmonics = args.harmonics or discrimination.HARMONICS
         args.base_hz = args.base_hz or default_base_hz(args.duration, discrimination.BASE_HZ)
     args.harmonics = args.harmonics or 5
     _check(args)
-    problem = load_problem(args.problem)
     if problem.limits is None:
         raise InputError(
             f"{problem.path}: section [limits] is required to design an excitation (docs/problem-files.md)"
@@ -160,10 +157,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _proof(args: argparse.Namespace, problem, trial) -> int:
     """The simulator proof (`studies.excitation_proof`): the report --out (*.md) and its files beside it."""
-    # Deferred like run()'s: the simulator and the diagnosis load CasADi, SciPy and pandas.
-    from ident_opt.report import excitation as report
-    from ident_opt.studies import excitation_proof
-
     if trial is None:
         raise InputError(
             f"{problem.path}: --proof needs data (the problem's [data] trials or --data): the noise "

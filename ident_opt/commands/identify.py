@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     from ident_opt.data import concat
 
-    loaded = load(args, min_samples=50)
+    loaded = load(args, "identify", min_samples=50)
     # Several training (held-out) trials are pooled: derivatives were estimated per file, so nothing straddles.
     problem, trial = loaded.problem, concat(loaded.training)
     unseen = concat(loaded.testing) if loaded.testing else None

@@ -24,8 +24,13 @@ from ident_opt.commands.common import (
     output_dir,
     write_json,
 )
+from ident_opt.data import chronological_split
+from ident_opt.derivatives import resolve_cutoff
 from ident_opt.errors import InputError
-from ident_opt.studies.scope import two_joint_only
+from ident_opt.online import serving_identifier
+from ident_opt.report import online as report
+from ident_opt.stream import Mapping, StreamOptions, serve
+from ident_opt.studies.online_replay import replay
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -74,7 +79,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Check the flags, load, split in time; serve the stream or replay and write the report."""
-    two_joint_only("online", args.problem)  # its models are two-link: refuse a URDF arm up front
     if args.snapshot_every < 0:
         raise InputError("--snapshot-every must be ≥ 0")
     if args.checks < 0:
@@ -83,11 +87,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--outlier-k must be ≥ 0")
     if args.components is not None and args.components < 1:
         raise InputError("--components must be ≥ 1")
-    # Deferred: the models load NumPy, scikit-learn and CasADi, the report matplotlib; `ident-opt --help` builds
-    # every subcommand's parser and stays fast only if that waits until a command runs.
-    from ident_opt.data import chronological_split
-
-    loaded = load(args)
+    loaded = load(args, "online")
     problem, trial = loaded.problem, loaded.train
     train_idx, test_idx = chronological_split(trial.n, problem.split.train_fraction)
     train, test = trial.subset(train_idx), trial.subset(test_idx)
@@ -95,9 +95,6 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"{trial.source}: too few samples for an offline part and an online part ({trial.n})")
     if args.stream:
         return _stream(args, problem, train)
-    from ident_opt.report import online as report
-    from ident_opt.studies.online_replay import replay
-
     out = output_dir(args, problem)
     result = replay(
         problem,
@@ -116,10 +113,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _stream(args: argparse.Namespace, problem, train) -> int:
     """The offline fit of --model, then samples from standard input until its end or a signal."""
-    from ident_opt.data import resolve_cutoff
-    from ident_opt.online import serving_identifier
-    from ident_opt.stream import Mapping, StreamOptions, serve
-
     start, ident = serving_identifier(
         args.model, problem, train, args.components, args.cross_covariance, guard=not args.no_guard
     )

@@ -24,10 +24,13 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from ident_opt.commands.common import add_problem_arguments, add_switches, write_json
+from ident_opt.commands.common import add_problem_arguments, add_switches, require, write_json
+from ident_opt.effects import describe
 from ident_opt.errors import InputError
+from ident_opt.problem import load_problem
+from ident_opt.problem.spec import SimulateSpec
+from ident_opt.simulate import simulate_trial, truth_path
 from ident_opt.simulate.trajectories import TRAJECTORIES
-from ident_opt.studies.scope import two_joint_only
 
 #: The flags that override a key of the problem's [simulate] section: flag -> (key, type, metavar, help).
 OVERRIDES = {
@@ -44,8 +47,6 @@ OVERRIDES = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from ident_opt.effects import describe  # light: no NumPy, no CasADi
-
     parser.description = (parser.description or "") + "\n" + describe()
     add_problem_arguments(parser, data=False)
     parser.add_argument(
@@ -97,14 +98,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    two_joint_only("simulate", args.problem)  # its models are two-link: refuse a URDF arm up front
-    from ident_opt.problem import load_problem
-    from ident_opt.problem.spec import SimulateSpec
-    from ident_opt.simulate import simulate_trial, truth_path
-
+    problem = load_problem(args.problem)
+    require("simulate", problem)
     if args.trajectory and args.trajectory_file:
         raise InputError("give --trajectory or --trajectory-file, not both")
-    problem = load_problem(args.problem)
     spec = problem.simulate or SimulateSpec()
     given = {key: getattr(args, flag[2:]) for flag, (key, *_) in OVERRIDES.items()}
     spec = replace(spec, **{key: value for key, value in given.items() if value is not None})

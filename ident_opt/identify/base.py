@@ -19,6 +19,7 @@ parameters sets the dependent ones to 0 (any π with the same π_b predicts the 
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +27,7 @@ import scipy.linalg
 
 from ident_opt.arm.base import Arm
 from ident_opt.identify.fit import LinearFit, fit_ols
+from ident_opt.identify.iv import InstrumentStats
 from ident_opt.identify.stats import Stats
 from ident_opt.parameters import Parameter
 
@@ -95,6 +97,11 @@ class BaseParameters:
         """The statistics of the base regressor Y_ind (J, B, B)."""
         idx = self.independent
         return Stats(stats.G[:, idx][:, :, idx], stats.b[:, idx], stats.s.copy(), stats.n)
+
+    def instruments(self, iv: InstrumentStats) -> InstrumentStats:
+        """The instrument statistics of the base regressor and its instruments (Z_ind, Y_ind)."""
+        idx = self.independent
+        return InstrumentStats(iv.A[:, idx][:, :, idx], iv.c[:, idx], iv.K[:, idx][:, :, idx], self.stats(iv.stats))
 
 
 def random_regressor(arm: Arm, n_states: int = N_STATES, seed: int = SEED) -> np.ndarray:
@@ -173,3 +180,52 @@ def fit_base_ols(stats: Stats, arm: Arm, weights: str | np.ndarray | None = None
     fit = fit_ols(base.stats(stats), view, weights=weights)  # type: ignore[arg-type]
     fit.warnings = [w for w in fit.warnings if not w.startswith("physically inconsistent")]
     return BaseFit(base, fit, base.standard(fit.pi))
+
+
+def lifted_fit(arm: Arm, fit_on_base: Callable[[_BaseView], LinearFit]) -> LinearFit:
+    """A fit on the arm's base parameters (`fit_on_base`, given the base parameters as a parameter list) as a fit
+    of the arm's own parameters: π = the standard map (dependent parameters 0, `BaseParameters.standard`), each
+    independent parameter with its base parameter's standard error and each dependent one with none (NaN: the
+    data do not determine it alone). `details` holds the base parameters (value, SE, definition) and the names
+    not determined."""
+    base = base_parameters(arm)
+    fit = fit_on_base(_BaseView(base.names, arm.n_joints))
+    se = np.full(arm.n_params, np.nan)
+    se[base.independent] = fit.se
+    pi = base.standard(fit.pi)
+    definitions = base.definitions()
+    return LinearFit(
+        pi=pi,
+        names=arm.names,
+        se=se,
+        sigma2=fit.sigma2,
+        method=fit.method,
+        status=fit.status,
+        weights=fit.weights,
+        n=fit.n,
+        rss=fit.rss,
+        cond=fit.cond,
+        rank=fit.rank,
+        unexcited=list(fit.unexcited),
+        poorly_determined=list(fit.poorly_determined),
+        warnings=[w for w in fit.warnings if not w.startswith("physically inconsistent")],
+        min_mass_eigenvalue=arm.min_mass_eigenvalue(pi),
+        solve_seconds=fit.solve_seconds,
+        details={
+            "base_parameters": {
+                name: {"value": float(v), "se": float(e), "definition": definitions[name]}
+                for name, v, e in zip(base.names, fit.pi, fit.se)
+            },
+            "not_determined": [arm.names[i] for i in base.dependent],
+        },
+        parameters=arm.parameters,
+    )
+
+
+def fit_least_squares(stats: Stats, arm: Arm, weights: str | np.ndarray | None = None) -> LinearFit:
+    """(Weighted) OLS of the arm's parameters: on the parameters themselves when the regressor determines every
+    one of them (`fit.fit_ols`), else on the base parameters, lifted to the arm's (`lifted_fit`)."""
+    base = base_parameters(arm)
+    if base.rank == arm.n_params:
+        return fit_ols(stats, arm, weights=weights)
+    return lifted_fit(arm, lambda view: fit_ols(base.stats(stats), view, weights=weights))  # type: ignore[arg-type]

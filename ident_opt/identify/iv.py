@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ident_opt.arm.base import Arm
-from ident_opt.data import Dataset, choose_cutoff, estimate_derivatives
+from ident_opt.data import Dataset
+from ident_opt.derivatives import choose_cutoff, estimate_derivatives
 from ident_opt.identify.fit import LinearFit, check_stats, finish
 from ident_opt.identify.stats import Stats
 
@@ -55,7 +56,7 @@ class InstrumentStats:
     @classmethod
     def from_data(cls, arm: Arm, data: Dataset, ratio: float = INSTRUMENT_RATIO) -> InstrumentStats:
         """Y from the trial's q, dq, ddq; Z from the same angles differentiated at `ratio` × its cut-off
-        (the trial's own, or for logged derivatives the one `data.choose_cutoff` reads from its spectrum);
+        (the trial's own, or for logged derivatives the one `derivatives.choose_cutoff` reads from its spectrum);
         τ filtered like the regressor's inputs (`Dataset.tau_fit`)."""
         cutoff = data.cutoff_hz if data.cutoff_hz is not None else choose_cutoff(data.t, data.q)
         dq_z, ddq_z, _ = estimate_derivatives(data.t, data.q, ratio * cutoff)

@@ -51,7 +51,7 @@ def _column(table: Table, key: str) -> tuple[str | int, tuple[float, float] | No
 
 
 def _cutoff(table: Table) -> float | str:
-    """`derivative_cutoff_hz`: a number [Hz] or "auto" (chosen from each trial's spectrum, `data.choose_cutoff`)."""
+    """`derivative_cutoff_hz`: a number [Hz] or "auto" (read from each trial's spectrum: `choose_cutoff`)."""
     if table.raw.get("derivative_cutoff_hz") == "auto":
         table.raw.pop("derivative_cutoff_hz")
         return "auto"

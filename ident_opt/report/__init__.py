@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from ident_opt import outputs
+from ident_opt.outputs import shown  # noqa: F401  (re-exported: every writer names its inputs so)
 
 #: Where the manifests live inside an output folder.
 MANIFESTS = ".manifest"
@@ -118,15 +118,6 @@ def _relative(path: Path, out_dir: Path) -> str:
         except ValueError:
             raise ValueError(f"{path} is not inside the output folder {out_dir}") from None
     return path.as_posix()
-
-
-def shown(path: str | Path) -> str:
-    """A data path as people read it: relative to the working folder when inside it, else absolute."""
-    resolved = Path(path).resolve()
-    try:
-        return os.path.relpath(resolved) if resolved.is_relative_to(Path.cwd()) else str(resolved)
-    except ValueError:
-        return str(resolved)
 
 
 def write_json(path: str | Path | None, payload: dict) -> None:

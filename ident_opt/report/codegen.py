@@ -11,9 +11,6 @@ from ident_opt import codegen, outputs
 from ident_opt.report import write_json
 from ident_opt.studies.ship import MEASURE, TOLERANCE, Shipped
 
-#: Units of the parameters by prefix (parameters.json).
-UNITS = {"a": "kg m^2", "ia": "kg m^2", "b": "N m", "fv": "N m s/rad", "fc": "N m", "fs": "N m"}
-
 
 @dataclass
 class Built:
@@ -28,32 +25,32 @@ class Built:
         return [f.name() for f in self.functions]
 
 
-def build(shipped: Shipped, out: Path, compiler: str, forward: bool = True) -> Built:
-    """Generate the C code of `shipped` into `out` and compile it (`forward`: also ddq_hat)."""
+def build(shipped: Shipped, robot, out: Path, compiler: str, forward: bool = True) -> Built:
+    """Generate the C code of `shipped` into `out` and compile it (`forward`: also ddq_hat), with the example and
+    the README written for `robot` (its joints and angle convention)."""
     functions = codegen.build_functions(shipped.model, shipped.pi, shipped.gmr, forward=forward)
     source, header = codegen.generate_sources(functions, out)
     library = codegen.compile_library(source, out, compiler)
-    example = codegen.copy_example(out)
-    readme = codegen.write_readme(out, functions)
+    example = codegen.copy_example(out, shipped.model.n_joints, gmr=shipped.gmr is not None)
+    readme = codegen.write_readme(out, functions, robot)
     return Built(functions, [source, header, library, example, readme], library)
 
 
 def payload(shipped: Shipped, built: Built, errors: dict[str, float], problem, sources: list[str]) -> dict:
-    """parameters.json (and the --json payload)."""
-    model, gmr = shipped.model, shipped.gmr
-    return {
+    """parameters.json (and the --json payload): the parameters baked in, the model, the GMR, the checks."""
+    model, gmr, robot = shipped.model, shipped.gmr, problem.robot
+    n = model.n_joints
+    out = {
         "estimator": shipped.estimator,
         "estimator_status": shipped.status,
-        "model": {
-            "extensions": list(model.extensions),
-            "gravity": model.gravity,
-            "stribeck_velocity": list(model.stribeck_velocity),
-        },
+        "model": {"extensions": list(model.extensions), **model.settings()},
+        "arm": robot.summary(),
+        "joints": list(robot.joint_names),
         "parameters": model.as_dict(shipped.pi),
-        "units": UNITS,
+        "units": {p.name: p.unit for p in model.parameters},
         "gmr": {
-            "inputs": list(codegen.GMR_INPUTS),
-            "outputs": ["r1", "r2"],
+            "inputs": list(codegen.gmr_inputs(n)),
+            "outputs": [f"r{j + 1}" for j in range(n)],
             "n_components": len(gmr.weights_),
             "weights": gmr.weights_,
             "means": gmr.means_,
@@ -64,9 +61,10 @@ def payload(shipped: Shipped, built: Built, errors: dict[str, float], problem, s
         "functions": built.names,
         "library": built.library.name,
         "check": {name: {MEASURE[name]: err, "limit": TOLERANCE[name]} for name, err in errors.items()},
-        # a two-joint URDF arm: the offsets and signs from its angles to the ones the C code takes
-        **({"robot": list(problem.robot.statement)} if hasattr(problem.robot, "statement") else {}),
     }
+    if robot.statement:  # e.g. a two-joint URDF arm: the offsets and signs from its angles to the C code's
+        out["robot"] = list(robot.statement)
+    return out
 
 
 def _urdf_angles(statement: list[str]) -> str:

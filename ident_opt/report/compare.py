@@ -29,25 +29,30 @@ FILES = (
 
 
 def write(c: Comparison, out: Path, json_path: str | Path | None = None) -> list[str]:
-    """Every file of the comparison into `out` (and the JSON payload to `json_path`); returns their names."""
-    figure = seed_heatmap(c.seeds, out / "compare_seeds.png", "ols")
+    """Every file of the comparison into `out` (and the JSON payload to `json_path`); returns their names (the
+    seed study's only when the paper's protocol ran)."""
+    files = [f for f in FILES if c.seeds is not None or "seeds" not in f]
+    figure = seed_heatmap(c.seeds, out / "compare_seeds.png", "ols") if c.seeds is not None else None
     write_table(parameter_table(c), out / "compare_parameters.csv")
     write_table(consistency_table(c), out / "compare_consistency.csv")
     metrics = pd.concat({m: metrics_table(c, m) for m in METRICS}, names=["metric"])
     write_table(metrics, out / "compare_metrics.csv")
-    write_table(rmse_table(c.seeds), out / "compare_seeds.csv")
-    outputs.write_text(out / "compare.md", to_markdown(c, figure.name))
-    record(out, "compare", "constrained vs OLS vs datasheet parameters", FILES)
-    write_json(json_path, {**to_json(c), "files": list(FILES)})  # "files": in the output folder
-    return list(FILES)
+    if c.seeds is not None:
+        write_table(rmse_table(c.seeds), out / "compare_seeds.csv")
+    outputs.write_text(out / "compare.md", to_markdown(c, figure.name if figure else None))
+    record(out, "compare", "the nominal model against OLS and the consistent fits", files)
+    write_json(json_path, {**to_json(c), "files": files})  # "files": in the output folder
+    return files
 
 
 LABELS = {
     "datasheet_paper": "datasheet (paper)",
     "datasheet_physical": "datasheet (physical)",
+    "datasheet_urdf": "URDF",
     "ols": "OLS",
     "constrained": "constrained",
     "nlp_physical": "NLP-physical",
+    "consistent": "consistent (URDF prior)",
     "iv": "IV",
 }
 
@@ -66,14 +71,22 @@ def parameter_table(c: Comparison) -> pd.DataFrame:
     return pd.DataFrame(cols, index=pd.Index(names, name="parameter"))
 
 
-def consistency_table(c: Comparison) -> pd.DataFrame:
-    """Per estimator: min over q of λ_min(M(q)) [kg m²], friction ≥ 0, consistent, active constraints."""
+def consistency_table(c: Comparison, brief: bool = False) -> pd.DataFrame:
+    """Per estimator: the arm's consistency margin (`Arm.consistency_measure`: min over q of λ_min(M(q)), or over
+    the links' pseudo-inertias) [kg m²], friction ≥ 0, consistent, the active constraints (`brief`: the first
+    three and their count)."""
+
+    def active(names: list[str]) -> str:
+        if brief and len(names) > 3:
+            return " ".join(names[:3]) + f" … ({len(names)} in all)"
+        return " ".join(names) or "–"
+
     rows = {
         key: {
-            "min eig M(q) [kg m²]": v["min_mass_eigenvalue"],
+            c.model.consistency_measure: v["min_mass_eigenvalue"],
             "friction ≥ 0": v["friction_nonnegative"],
             "consistent": v["consistent"],
-            "active constraints": " ".join(v["active_constraints"]) or "–",
+            "active constraints": active(v["active_constraints"]),
         }
         for key, v in c.consistency().items()
     }
@@ -85,8 +98,8 @@ def metrics_table(c: Comparison, metric: str = "nmse") -> pd.DataFrame:
     rows: dict[str, dict[str, float]] = {}
     for protocol, per_metric in c.metrics.items():
         for key, values in per_metric[metric].items():
-            for j in range(2):
-                rows.setdefault(key, {})[f"{protocol} j{j + 1}"] = values[j]
+            for j, value in enumerate(values):
+                rows.setdefault(key, {})[f"{protocol} j{j + 1}"] = value
     return pd.DataFrame(rows).T.rename_axis("estimator")
 
 
@@ -109,7 +122,7 @@ def _with_se(c: Comparison) -> pd.DataFrame:
     # The consistency column of the issue, as rows under the parameters: one verdict per estimator.
     consistency = c.consistency()
     extra = {
-        "min eig M(q) [kg m²]": {label(c, k): fmt(v["min_mass_eigenvalue"]) for k, v in consistency.items()},
+        c.model.consistency_measure: {label(c, k): fmt(v["min_mass_eigenvalue"]) for k, v in consistency.items()},
         "friction ≥ 0": {label(c, k): "yes" if v["friction_nonnegative"] else "NO" for k, v in consistency.items()},
         "physically consistent": {label(c, k): "yes" if v["consistent"] else "NO" for k, v in consistency.items()},
     }
@@ -120,7 +133,20 @@ def findings(c: Comparison) -> list[str]:
     """Plain sentences: consistency of OLS, what the constraints did, their held-out cost or gain."""
     ols, con = c.fits["ols"], c.fits["constrained"]
     lines = []
-    if ols.consistent:
+    base = ols.details.get("base_parameters")
+    if base:
+        impossible = c.impossible_base_values()
+        lines.append(
+            f"OLS fits the {len(base)} base parameters (the combinations of the {len(c.model.names)} the data "
+            "determine); its standard parameters set the others to 0, so its links are not a physical arm"
+            + (
+                f", and {len(impossible)} of its base parameters are values no physical arm can have"
+                if impossible
+                else ""
+            )
+            + "."
+        )
+    elif ols.consistent:
         lines.append("OLS is physically consistent on this trial; the constrained fit equals it.")
     else:
         lines.append("OLS is " + "; ".join(w for w in ols.warnings if w.startswith("physically")) + ".")
@@ -137,13 +163,13 @@ def findings(c: Comparison) -> list[str]:
             for j, d in enumerate(change)
         )
         lines.append(
-            f"{protocol}: held-out nmse OLS {n_ols[0]:.4g} / {n_ols[1]:.4g}, constrained {n_con[0]:.4g} / "
-            f"{n_con[1]:.4g} ({change[0]:+.1f} % / {change[1]:+.1f} %; consistency {verdict})."
+            f"{protocol}: held-out nmse OLS {_joined(n_ols)}, constrained {_joined(n_con)} "
+            f"({' / '.join(f'{d:+.1f} %' for d in change)}; consistency {verdict})."
         )
     costs = [
-        c.metrics[p]["nmse"]["constrained"][j] > c.metrics[p]["nmse"]["ols"][j] * 1.0005
+        con > ols * 1.0005
         for p in c.metrics
-        for j in range(2)
+        for ols, con in zip(c.metrics[p]["nmse"]["ols"], c.metrics[p]["nmse"]["constrained"])
     ]
     if not ols.consistent and any(costs):
         lines.append(
@@ -156,6 +182,11 @@ def findings(c: Comparison) -> list[str]:
         if not w.startswith("physically"):
             lines.append("OLS: " + w + ".")
     return lines
+
+
+def _joined(values: list[float]) -> str:
+    """Per-joint values as "v1 / v2 / …" (4 significant digits)."""
+    return " / ".join(f"{v:.4g}" for v in values)
 
 
 def label(c: Comparison, key: str) -> str:
@@ -212,15 +243,107 @@ def _trust_section(c: Comparison) -> list[str]:
     return parts
 
 
+def _title(c: Comparison) -> str:
+    """ "datasheet vs OLS vs constrained vs …": the problem's nominal model, then the fits."""
+    keys = [f"datasheet_{c.datasheet}", *[k for k in c.fits if k != "iv"]]
+    names = ["datasheet" if k.startswith("datasheet") else label(c, k) for k in keys]
+    return "Identification: " + " vs ".join(names)
+
+
+def _physical_section(c: Comparison) -> list[str]:
+    """The NLP-physical fit's physical parameters (the planar arm's), where it ran."""
+    physical = c.fits.get("nlp_physical")
+    if physical is None or "physical" not in physical.details:
+        return []
+    theta = pd.DataFrame({"value": physical.details["physical"]}).rename_axis("physical parameter")
+    theta["at a physical bound"] = ["yes" if k in physical.details.get("at_bound", []) else "" for k in theta.index]
+    return [
+        "## NLP-physical: the physical parameters behind its π",
+        "",
+        "Masses [kg], centres of mass [m], inertias and armature [kg m²], friction [N m s/rad, N m]. "
+        "The grouped π do not determine all of them: a weak pull toward the datasheet picks one of "
+        "the equivalent sets, so read the individual values with care; π is what the data fix.",
+        "",
+        markdown_table(theta),
+        "",
+    ]
+
+
+def _links_section(c: Comparison) -> list[str]:
+    """Link masses against the nominal ones, and the OLS base parameters no consistent arm can have negative
+    (arms whose π holds link masses: an n-joint arm)."""
+    masses = c.masses()
+    if not masses:
+        return []
+    links = list(next(iter(masses.values()))["links"])
+    frame = pd.DataFrame({label(c, k): {**v["links"], "total": v["total"]} for k, v in masses.items()})
+    parts = [
+        "## Link masses [kg]",
+        "",
+        markdown_table(frame.reindex([*links, "total"]).rename_axis("link")),
+        "",
+        "OLS identifies base parameters only: its standard parameters set the dependent ones to 0, so its masses "
+        "are not estimates.",
+        "",
+    ]
+    impossible = c.impossible_base_values()
+    if impossible:
+        parts += [
+            "OLS uses values no physical arm can have (what a consistent fit cannot follow): these base parameters "
+            "are non-negative for every consistent arm (their coefficients lie in the dual of the pseudo-inertia "
+            "and sign cone), yet OLS makes them negative:",
+            "",
+            markdown_table(pd.DataFrame(impossible).T.rename_axis("base parameter")),
+            "",
+        ]
+    return parts
+
+
+def _base_section(c: Comparison) -> list[str]:
+    """The OLS base parameters with their definitions and standard errors (an arm whose regressor does not
+    determine every parameter)."""
+    summary = c.fits["ols"].details.get("base_parameters")
+    if not summary:
+        return []
+    frame = pd.DataFrame(summary).T.rename_axis("base parameter")
+    frame["definition"] = [f"`{d}`" for d in frame["definition"]]
+    return [
+        f"## Base parameters (OLS, with standard errors): {len(summary)} of the {len(c.model.names)} parameters",
+        "",
+        markdown_table(frame),
+        "",
+    ]
+
+
+def _within_section(c: Comparison) -> list[str]:
+    """Per joint: does OLS beat the nominal model, and is the default fit within 10 % of OLS's RMSE?"""
+    rows = {
+        joint: {
+            "OLS beats the datasheet": "yes" if v["ols_better_than_datasheet"] else "no",
+            f"RMSE {label(c, c.default)} / OLS": v["ratio_to_ols"],
+            "within 10 %": "yes" if v["within"] else "NO",
+        }
+        for joint, v in c.within_ols().items()
+    }
+    return [
+        f"## {label(c, c.default)} (the default fit) against OLS, {list(c.metrics)[-1]} protocol",
+        "",
+        markdown_table(pd.DataFrame(rows).T.rename_axis("joint")),
+        "",
+    ]
+
+
 def to_markdown(c: Comparison, figure: str | None = None) -> str:
     """The comparison as a Markdown report (parameters ± SE, consistency, held-out metrics, seed study)."""
     parts = [
-        "# Identification: datasheet vs OLS vs constrained vs NLP-physical",
+        f"# {_title(c)}",
         "",
         f"Identification trial: `{shown(c.sources['train'])}`"
         + (f"; unseen trial: `{shown(c.sources['unseen'])}`" if "unseen" in c.sources else "")
-        + f". Fitted model: {', '.join(c.model.names)} (β in N·m). Standard errors use a per-joint residual "
-        "variance and assume independent residuals (optimistic on densely sampled real data).",
+        + f". Joints: {', '.join(c.joints)}. Fitted model: {len(c.model.names)} parameters"
+        + (f" ({', '.join(c.model.names)}; β in N·m)" if len(c.model.names) <= 20 else "")
+        + ". Standard errors use a per-joint residual variance and assume independent residuals (optimistic on "
+        "densely sampled real data).",
         "",
         "## Findings",
         "",
@@ -245,33 +368,33 @@ def to_markdown(c: Comparison, figure: str | None = None) -> str:
             markdown_table(metrics_table(c, metric)),
             "",
         ]
-    physical = c.fits.get("nlp_physical")
-    if physical is not None and "physical" in physical.details:
-        theta = pd.DataFrame({"value": physical.details["physical"]}).rename_axis("physical parameter")
-        theta["at a physical bound"] = ["yes" if k in physical.details.get("at_bound", []) else "" for k in theta.index]
-        parts += [
-            "## NLP-physical: the physical parameters behind its π",
-            "",
-            "Masses [kg], centres of mass [m], inertias and armature [kg m²], friction [N m s/rad, N m]. "
-            "The grouped π do not determine all of them: a weak pull toward the datasheet picks one of "
-            "the equivalent sets, so read the individual values with care; π is what the data fix.",
-            "",
-            markdown_table(theta),
-            "",
-        ]
-    parts += ["## The paper's seed study (shuffled 70/30)", "", markdown_table(rmse_table(c.seeds)), ""]
+    parts += _within_section(c) + _physical_section(c) + _links_section(c) + _base_section(c)
+    if c.seeds is not None:
+        parts += ["## The paper's seed study (shuffled 70/30)", "", markdown_table(rmse_table(c.seeds)), ""]
     if figure:
         parts += [f"![grouped parameters across seeds]({figure})", ""]
     return "\n".join(parts)
 
 
+#: Above this many parameters the terminal shows the masses, not the parameter table (compare.md has it).
+TERMINAL_PARAMETERS = 20
+
+
 def to_terminal(c: Comparison) -> str:
-    """A compact text summary for the terminal."""
+    """A compact text summary for the terminal: the parameters ± SE (or, for a large arm, its link masses), the
+    consistency, the held-out nmse per joint and the findings."""
     with pd.option_context("display.width", 160, "display.max_columns", 20):
+        if len(c.model.names) <= TERMINAL_PARAMETERS:
+            parameters = "Parameters (± SE):\n" + _with_se(c).to_string()
+        else:
+            masses = pd.DataFrame({label(c, k): {"total": v["total"], **v["links"]} for k, v in c.masses().items()})
+            parameters = f"Link masses [kg] ({len(c.model.names)} parameters: compare.md):\n" + masses.to_string(
+                float_format=lambda v: f"{v:.4g}"
+            )
         return "\n\n".join(
             [
-                "Parameters (± SE):\n" + _with_se(c).to_string(),
-                "Consistency:\n" + consistency_table(c).to_string(),
+                parameters,
+                "Consistency:\n" + consistency_table(c, brief=True).to_string(),
                 "Held-out nmse per joint:\n" + metrics_table(c, "nmse").to_string(float_format=lambda v: f"{v:.4g}"),
                 "\n".join(f"- {line}" for line in findings(c)),
             ]
@@ -279,7 +402,9 @@ def to_terminal(c: Comparison) -> str:
 
 
 def to_json(c: Comparison) -> dict:
-    """The `compare --json` payload (`docs/cli.md`): parameters, standard errors, consistency, metrics."""
+    """The `compare --json` payload (`docs/cli.md`): parameters, standard errors, consistency, metrics, warnings,
+    the same keys for every arm (the seed study where the paper's protocol ran, masses where π holds them)."""
+    ols = c.fits["ols"]
     out = {
         "parameters": c.parameters(),
         "standard_errors": {key: fit.se_dict() for key, fit in c.fits.items()},
@@ -288,16 +413,9 @@ def to_json(c: Comparison) -> dict:
         "protocols": {p: PROTOCOLS[p] for p in c.metrics},
         "fits": {key: fit.summary() for key, fit in c.fits.items()},
         "physical_parameters": c.fits["nlp_physical"].details.get("physical", {}) if "nlp_physical" in c.fits else {},
-        "seed_study": {
-            "seeds": c.seeds.labels,
-            "parameters": {key: v.tolist() for key, v in c.seeds.pi.items()},
-            "deviation_from_mean_percent": {
-                key: deviation_from_mean(c.seeds, key).to_numpy().tolist() for key in c.seeds.pi
-            },
-            "rmse_mean": c.seeds.mean("rmse"),
-            "rmse_std": c.seeds.std("rmse"),
-        },
         "model": list(c.model.names),
+        "joints": list(c.joints),
+        "default_estimator": c.default,
         "sources": {key: shown(path) for key, path in c.sources.items()},
         "trials": {key: [shown(p) for p in paths] for key, paths in c.trials.items()},
         "metrics_by_test_trial": {shown(k): v for k, v in c.by_test_trial.items()},
@@ -306,7 +424,22 @@ def to_json(c: Comparison) -> dict:
         "sensitivity": {f"ols_{f:g}x_cutoff": fit.as_dict() for f, fit in c.trust.sensitivity.items()},
         "gravity_direction": c.trust.gravity_direction,
         "reference": c.reference_label,
+        "within_10_percent_of_ols": c.within_ols(),
+        "masses": c.masses(),
+        "base_parameters": {"ols": ols.details["base_parameters"]} if "base_parameters" in ols.details else {},
+        "not_determined": {"ols": ols.details.get("not_determined", [])},
+        "ols_impossible_base_values": c.impossible_base_values(),
     }
-    if c.robot_statement:  # only a URDF arm has one: other problems' JSON is unchanged
+    if c.seeds is not None:
+        out["seed_study"] = {
+            "seeds": c.seeds.labels,
+            "parameters": {key: v.tolist() for key, v in c.seeds.pi.items()},
+            "deviation_from_mean_percent": {
+                key: deviation_from_mean(c.seeds, key).to_numpy().tolist() for key in c.seeds.pi
+            },
+            "rmse_mean": c.seeds.mean("rmse"),
+            "rmse_std": c.seeds.std("rmse"),
+        }
+    if c.robot_statement:  # what the tool applied to read the robot (a URDF's angle offsets, notes)
         out["robot"] = list(c.robot_statement)
     return out

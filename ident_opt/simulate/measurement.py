@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from ident_opt.arm.datasheet import PlanarRobot
-from ident_opt.data import estimate_derivatives
+from ident_opt.derivatives import estimate_derivatives
 from ident_opt.errors import InputError
 from ident_opt.problem.spec import DataSpec
 from ident_opt.simulate.closed_loop import CONTROL_HZ, MAX_CONTROL_HZ, control_hz

@@ -12,7 +12,7 @@ import pandas as pd
 
 from ident_opt import outputs
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
-from ident_opt.data import Dataset
+from ident_opt.data import Dataset, in_source_convention
 from ident_opt.effects import CATALOGUE, is_active, normalise
 from ident_opt.errors import InputError
 from ident_opt.simulate import closed_loop, measurement
@@ -69,8 +69,8 @@ class SimTrial:
         gz = path.name.lower().endswith(".gz")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            # A URDF arm's data are logged in the URDF's angle convention (the loader maps them back).
-            frame = self.robot.to_urdf(self.frame) if hasattr(self.robot, "to_urdf") else self.frame
+            # A robot whose data have their own angle convention (a URDF arm's) logs in it; the loader maps it back.
+            frame = in_source_convention(self.frame, self.robot.column_map)
             _atomic(path, lambda tmp: frame.to_csv(tmp, index=False, compression="gzip" if gz else None))
             _atomic(truth_path(path), lambda tmp: tmp.write_text(json.dumps(self.truth, indent=2) + "\n"))
         except OSError as exc:

@@ -6,7 +6,7 @@ or prints (`ident_opt.report` does that, one writer per study).
 | `protocols`     | every model fitted on a training part, scored on a held-out part (paper, chrono, cross-trial) |
 | `identify`      | every model under every protocol on the problem's trials, GMR variants, the parameters    |
 | `seeds`         | the paper's seed study: estimators fitted on shuffled splits                             |
-| `compare`       | datasheet vs OLS vs constrained vs NLP-physical: parameters, consistency, held-out errors |
+| `compare`       | the nominal model vs OLS and the arm's consistent fits: parameters, consistency, held-out errors |
 | `constraints`   | where the physical-consistency constraints matter: short trials with a known truth       |
 | `audit`         | the paper's datasheet model under both conventions, against its own fit                  |
 | `online_replay` | offline fit, then the rest of the trial replayed sample by sample; the batch check       |
@@ -18,7 +18,6 @@ or prints (`ident_opt.report` does that, one writer per study).
 | `excitation_proof` | the designs proved in the simulator against MERIt-like and random trajectories        |
 | `trust`         | warnings: cut-off sensitivity, OLS vs IV, the angle convention                           |
 | `urdf`          | an n-joint URDF arm: OLS, constrained, consistent and CAD fits; `check`'s summary        |
-| `scope`         | which commands take which arms (n-joint URDF problems: one sentence, exit 2)             |
 | `ship`          | the model `codegen` ships and its check against Python                                  |
 """
 

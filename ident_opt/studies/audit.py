@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 
 from ident_opt import paper
-from ident_opt.arm.datasheet import PI_NAMES, PlanarRobot, datasheet_pi, rigid_body
-from ident_opt.arm.planar import RIGID, PlanarArm
+from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
+from ident_opt.arm.planar import PI_NAMES, RIGID, PlanarArm
 from ident_opt.data import Dataset, shuffled_split
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats

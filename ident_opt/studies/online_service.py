@@ -23,11 +23,12 @@ import numpy as np
 
 from ident_opt.arm.planar import RIGID
 from ident_opt.data import chronological_split, load_dataset
+from ident_opt.derivatives import REST
 from ident_opt.identify.fit import finish
 from ident_opt.identify.stats import Stats
 from ident_opt.online import batch_theta, serving_identifier
 from ident_opt.problem import load_problem
-from ident_opt.stream import REST, Mapping, StreamOptions, serve
+from ident_opt.stream import Mapping, StreamOptions, serve
 
 ROOT = Path(__file__).resolve().parents[2]
 Z95 = 1.959963984540054

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from ident_opt.arm.planar import PlanarArm
+from ident_opt.arm.base import Arm
 from ident_opt.data import Dataset, shuffled_split
 from ident_opt.identify import estimators
 from ident_opt.identify.fit import LinearFit
@@ -24,12 +24,12 @@ from ident_opt.metrics import all_metrics
 from ident_opt.studies import METRICS
 
 #: statistics + model -> fit.
-FitFn = Callable[[Stats, PlanarArm], LinearFit]
+FitFn = Callable[[Stats, Arm], LinearFit]
 
 
 @dataclass
 class SplitResults:
-    """Per split s and estimator e: π (S, P) and held-out metrics {metric: (S, 2)}."""
+    """Per split s and estimator e: π (S, P) and held-out metrics {metric: (S, n)}, one column per joint."""
 
     names: tuple[str, ...]
     pi: dict[str, np.ndarray]
@@ -51,7 +51,7 @@ class SplitResults:
 
 def split_fits(
     dataset: Dataset,
-    model: PlanarArm,
+    model: Arm,
     splits: Sequence[tuple[np.ndarray, np.ndarray]],
     fits: dict[str, FitFn],
     test: Dataset | None = None,
@@ -65,7 +65,7 @@ def split_fits(
     S, P = len(splits), model.n_params
     pi = {e: np.zeros((S, P)) for e in fits}
     ok = {e: np.zeros(S, dtype=bool) for e in fits}
-    metrics = {e: {m: np.zeros((S, 2)) for m in METRICS} for e in fits}
+    metrics = {e: {m: np.zeros((S, model.n_joints)) for m in METRICS} for e in fits}
     for s, (train, held) in enumerate(tqdm(splits, desc="splits", disable=not progress)):
         stats = Stats.from_regressor(Y[train], dataset.tau[train])
         if test is None:
@@ -81,7 +81,7 @@ def split_fits(
 
 
 def seed_study(
-    dataset: Dataset, model: PlanarArm, split, fits: dict[str, FitFn] | None = None, progress: bool = False
+    dataset: Dataset, model: Arm, split, fits: dict[str, FitFn] | None = None, progress: bool = False
 ) -> SplitResults:
     """The paper's protocol: for each seed in `split.seeds`, a shuffled `split.train_fraction` split;
     `fits` default to OLS only. Returns parameters and held-out metrics per seed."""
@@ -95,15 +95,10 @@ def rmse_table(study: SplitResults) -> pd.DataFrame:
     rows = []
     for e in study.metrics:
         mean, std = study.mean("rmse")[e], study.std("rmse")[e]
-        rows.append(
-            {
-                "estimator": e,
-                "rmse_j1_mean": mean[0],
-                "rmse_j1_std": std[0],
-                "rmse_j2_mean": mean[1],
-                "rmse_j2_std": std[1],
-            }
-        )
+        row = {"estimator": e}
+        for j, (m, s) in enumerate(zip(mean, std), 1):
+            row.update({f"rmse_j{j}_mean": m, f"rmse_j{j}_std": s})
+        rows.append(row)
     return pd.DataFrame(rows).set_index("estimator")
 
 

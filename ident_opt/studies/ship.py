@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt import codegen
-from ident_opt.arm.planar import PlanarArm
+from ident_opt.arm.base import Arm
 from ident_opt.data import Dataset
 from ident_opt.errors import InputError
 from ident_opt.gmr import GMR
@@ -36,7 +36,7 @@ N_RANDOM = 4000
 class Shipped:
     """The model baked into the C code: the arm, π in its order, how π was obtained, the GMR residual model."""
 
-    model: PlanarArm
+    model: Arm
     pi: np.ndarray
     estimator: str
     status: str
@@ -44,38 +44,40 @@ class Shipped:
 
 
 def prepare(
-    model: PlanarArm,
+    robot,
+    model: Arm,
     train: Dataset | None,
     residual: ResidualSpec,
     estimator: str,
     components: int | None = None,
     saved: dict | None = None,
 ) -> Shipped:
-    """π and the GMR: taken from `saved` (`read_parameters`) where it has them, else identified by `estimator` /
-    fitted with the problem's `residual` settings (`components`: a fixed K) on `train`."""
+    """π and the GMR: taken from `saved` (`read_parameters`) where it has them, else identified by `estimator`
+    (with the options `robot`'s description gives it) / fitted with the problem's `residual` settings
+    (`components`: a fixed K) on `train`."""
     if saved is not None:
         pi, label = saved_vector(saved, model), f"{saved['estimator']} (loaded from {saved['path']})"
         status = saved.get("estimator_status", "")
     else:
-        pi, label, status = identify(model, train, estimator)
+        pi, label, status = identify(robot, model, train, estimator)
     if saved and saved.get("gmr"):
-        gmr = gmr_from_saved(saved["gmr"])
+        gmr = gmr_from_saved(saved["gmr"], model.n_joints)
     else:
         gmr = fit_residual(model, pi, train, residual, components)
     return Shipped(model, pi, label, status, gmr)
 
 
-def identify(model: PlanarArm, train: Dataset, estimator: str) -> tuple[np.ndarray, str, str]:
-    """(π, estimator name, solver status) from the training trial, by the chosen estimator."""
+def identify(robot, model: Arm, train: Dataset, estimator: str) -> tuple[np.ndarray, str, str]:
+    """(π, estimator name, solver status) from the training samples, by the chosen estimator."""
     stats = Stats.from_data(model, train.q, train.dq, train.ddq, train.tau)
     try:
-        fit = estimators.fit(estimator, stats, model)
+        fit = estimators.fit_for(robot, estimator, stats, model)
     except RuntimeError as exc:  # the solver failed: nothing consistent to generate
         raise InputError(f"codegen: the physically consistent fit failed ({exc}); try --estimator ols") from None
-    return fit.pi, fit.method, STATUS.get(fit.method, fit.status)
+    return fit.pi, estimator, STATUS.get(fit.method, fit.status)
 
 
-def fit_residual(model: PlanarArm, pi: np.ndarray, train: Dataset, spec: ResidualSpec, components: int | None) -> GMR:
+def fit_residual(model: Arm, pi: np.ndarray, train: Dataset, spec: ResidualSpec, components: int | None) -> GMR:
     """The GMR residual model on x = [q dq ddq], r = τ − τ̂(π), with the problem's [residual] settings."""
     residual = train.tau - model.predict(pi, train.q, train.dq, train.ddq)
     return make_gmr(spec, components).fit(features(train), residual)
@@ -105,7 +107,7 @@ def read_parameters(path: str) -> dict:
     }
 
 
-def saved_vector(saved: dict, model: PlanarArm) -> np.ndarray:
+def saved_vector(saved: dict, model: Arm) -> np.ndarray:
     """π in the model's order; every model parameter must be in the file, as a finite number."""
     params = saved["parameters"]
     missing = [n for n in model.names if n not in params]
@@ -118,19 +120,20 @@ def saved_vector(saved: dict, model: PlanarArm) -> np.ndarray:
     return pi
 
 
-def gmr_from_saved(raw: dict) -> GMR:
-    """The 'gmr' object of a parameters.json (6 inputs, 2 outputs) back as a fitted `GMR`."""
+def gmr_from_saved(raw: dict, n_joints: int) -> GMR:
+    """The 'gmr' object of a parameters.json (3n inputs, n outputs for an arm of n joints) back as a fitted `GMR`."""
     try:
         w, m, c = (np.asarray(raw[key], dtype=float) for key in ("weights", "means", "covariances"))
     except (KeyError, TypeError, ValueError):
         raise InputError("parameters file: 'gmr' needs numeric weights, means and covariances") from None
-    K = w.shape[0] if w.ndim == 1 else 0
-    if K == 0 or w.ndim != 1 or m.shape != (K, 8) or c.shape != (K, 8, 8):
+    K, d = (w.shape[0] if w.ndim == 1 else 0), 4 * n_joints
+    if K == 0 or w.ndim != 1 or m.shape != (K, d) or c.shape != (K, d, d):
         raise InputError(
-            f"parameters file: GMR shapes {w.shape}, {m.shape}, {c.shape}; expected (K,), (K, 8), (K, 8, 8)"
+            f"parameters file: GMR shapes {w.shape}, {m.shape}, {c.shape}; expected (K,), (K, {d}), (K, {d}, {d}) "
+            f"for {n_joints} joints"
         )
     gmr = GMR(n_components=K)
-    gmr.weights_, gmr.means_, gmr.covariances_, gmr.n_inputs = w, m, c, 6
+    gmr.weights_, gmr.means_, gmr.covariances_, gmr.n_inputs = w, m, c, 3 * n_joints
     return gmr
 
 
@@ -153,16 +156,17 @@ def check(library: Path, shipped: Shipped, train: Dataset | None, names: list[st
     return errors
 
 
-def _states(model: PlanarArm, pi: np.ndarray, train: Dataset | None, rng) -> Dataset:
+def _states(model: Arm, pi: np.ndarray, train: Dataset | None, rng) -> Dataset:
     """`N_RANDOM` random states spanning the training states (at least ±π, ±1, ±1) followed by the training
     states themselves (without a trial: ±π rad, ±3 rad/s, ±10 rad/s²), with the model's torques τ(π)."""
+    n = model.n_joints
     if train is not None:
         lo = np.minimum(train.q.min(0), -np.pi), np.minimum(train.dq.min(0), -1), np.minimum(train.ddq.min(0), -1)
         hi = np.maximum(train.q.max(0), np.pi), np.maximum(train.dq.max(0), 1), np.maximum(train.ddq.max(0), 1)
     else:
-        lo = (-np.pi * np.ones(2), -3 * np.ones(2), -10 * np.ones(2))
-        hi = (np.pi * np.ones(2), 3 * np.ones(2), 10 * np.ones(2))
-    q, dq, ddq = (rng.uniform(a, b, (N_RANDOM, 2)) for a, b in zip(lo, hi))
+        lo = (-np.pi * np.ones(n), -3 * np.ones(n), -10 * np.ones(n))
+        hi = (np.pi * np.ones(n), 3 * np.ones(n), 10 * np.ones(n))
+    q, dq, ddq = (rng.uniform(a, b, (N_RANDOM, n)) for a, b in zip(lo, hi))
     if train is not None:
         q, dq, ddq = np.vstack([q, train.q]), np.vstack([dq, train.dq]), np.vstack([ddq, train.ddq])
     tau = model.predict(pi, q, dq, ddq)

@@ -9,12 +9,12 @@
 - **Cut-off sensitivity.** OLS again with every training trial's derivatives at ½× and 2× its cut-off. At 2×
   more noise enters the regressor: a move beyond 3 SE and `SENSITIVITY_TOLERANCE` of its value means the
   result depends on the cut-off. The ½× fit is reported, not judged: a cut-off chosen at 1.2× the motion's band
-  edge (`data.choose_cutoff`) halved removes part of the motion itself, and the parameters move for that reason.
+  edge (`derivatives.choose_cutoff`) halved removes part of the motion itself, and the parameters move for that reason.
 - **Angle convention.** OLS with the `joint_offset` extension's sine gravity columns: the direction of gravity
   per joint, δ1 = atan2(−b1s, b1), δ1 + δ2 = atan2(−b2s, b2) (`docs/conventions.md`), with derivatives at the
-  motion's own cut-off (`data.choose_cutoff`, if lower than the trial's) so a noisy cut-off cannot hide it. Beyond
-  `CONVENTION_TOLERANCE_RAD`, near a quarter, half or three-quarter turn, the data's zero is not ident-opt's,
-  and the warning gives the `[data.columns]` offset that fixes it (that multiple of π/2). A large direction
+  motion's own cut-off (`derivatives.choose_cutoff`, if lower than the trial's) so a noisy cut-off cannot hide
+  it. Beyond `CONVENTION_TOLERANCE_RAD`, near a quarter, half or three-quarter turn, the data's zero is not
+  ident-opt's, and the warning gives the `[data.columns]` offset that fixes it (that multiple of π/2). A large direction
   elsewhere is reported, not warned about: the sine columns then absorb some other effect (on MERIt's joint 2,
   δ2 ≈ 0.9 rad with a 24 % smaller residual, where the logged zero is right).
 
@@ -27,9 +27,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from ident_opt.arm.planar import PlanarArm
-from ident_opt.data import Dataset, choose_cutoff, refiltered
+from ident_opt.arm.base import Arm
+from ident_opt.data import Dataset, refiltered
+from ident_opt.derivatives import choose_cutoff
 from ident_opt.identify import estimators
+from ident_opt.identify.base import base_parameters, lifted_fit
 from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.iv import InstrumentStats, fit_iv
 from ident_opt.identify.stats import Stats
@@ -61,7 +63,7 @@ class Trust:
     warnings: list[ResultWarning] = field(default_factory=list)
 
 
-def stats_of(model: PlanarArm, trials: list[Dataset]) -> Stats:
+def stats_of(model: Arm, trials: list[Dataset]) -> Stats:
     """Σ of each trial's statistics, with the torque the fits use (`Dataset.tau_fit`)."""
     total = Stats.zeros(model.n_params, model.n_joints)
     for d in trials:
@@ -69,19 +71,23 @@ def stats_of(model: PlanarArm, trials: list[Dataset]) -> Stats:
     return total
 
 
-def iv_fit(model: PlanarArm, trials: list[Dataset]) -> LinearFit:
-    """IDIM-IV on all training trials (instrument statistics added up, each trial's derivatives its own)."""
+def iv_fit(model: Arm, trials: list[Dataset]) -> LinearFit:
+    """IDIM-IV on all training trials (instrument statistics added up, each trial's derivatives its own), on the
+    base parameters when the regressor does not determine every parameter (`identify.base.lifted_fit`)."""
     total = InstrumentStats.from_data(model, trials[0])
     for d in trials[1:]:
         total = total + InstrumentStats.from_data(model, d)
-    return fit_iv(total, model)
+    base = base_parameters(model)
+    if base.rank == model.n_params:
+        return fit_iv(total, model)
+    return lifted_fit(model, lambda view: fit_iv(base.instruments(total), view))
 
 
-def _judged(model: PlanarArm) -> list[int]:
+def _judged(model: Arm) -> list[int]:
     return [i for i, p in enumerate(model.parameters) if p.kind in JUDGED_KINDS]
 
 
-def _moved(model: PlanarArm, a: LinearFit, b: LinearFit, tolerance: float) -> list[tuple[str, float, float]]:
+def _moved(model: Arm, a: LinearFit, b: LinearFit, tolerance: float) -> list[tuple[str, float, float]]:
     """(name, a's value, b's value) of the judged parameters that differ by > 3 SE and > `tolerance` × |b|."""
     out = []
     for i in _judged(model):
@@ -96,7 +102,7 @@ def _listing(moved: list[tuple[str, float, float]]) -> str:
     return ", ".join(f"{n} {x:.4g} vs {y:.4g}" for n, x, y in moved)
 
 
-def check_ols_iv(model: PlanarArm, ols: LinearFit, iv: LinearFit, cutoffs: list[float]) -> list[ResultWarning]:
+def check_ols_iv(model: Arm, ols: LinearFit, iv: LinearFit, cutoffs: list[float]) -> list[ResultWarning]:
     """The OLS-against-IV rule (module doc)."""
     moved = _moved(model, ols, iv, OLS_IV_TOLERANCE)
     if not moved or not cutoffs:
@@ -118,7 +124,7 @@ def _hz(cutoffs: list[float]) -> str:
 
 
 def check_cutoff(
-    model: PlanarArm, trials: list[Dataset], ols: LinearFit
+    model: Arm, trials: list[Dataset], ols: LinearFit
 ) -> tuple[dict[float, LinearFit], list[ResultWarning]]:
     """OLS at ½× and 2× each trial's cut-off; a warning when 2× moves a judged parameter (module doc)."""
     if any(d.cutoff_hz is None for d in trials):
@@ -139,11 +145,12 @@ def check_cutoff(
 
 
 def check_convention(
-    model: PlanarArm, trials: list[Dataset], conversions: dict[str, tuple[float, float]] | None = None
+    robot, model: Arm, trials: list[Dataset], conversions: dict[str, tuple[float, float]] | None = None
 ) -> tuple[dict[str, float], list[ResultWarning]]:
-    """The direction of gravity per joint from OLS with the sine gravity columns; a warning with the
-    `[data.columns]` offsets that fix it when it is off by more than `CONVENTION_TOLERANCE_RAD`."""
-    extended = model if "b1s" in model.names else PlanarArm((*model.extensions, "joint_offset"))
+    """The direction of gravity per joint from OLS with the sine gravity columns of `robot`'s joint-offset model;
+    a warning with the `[data.columns]` offsets that fix it when it is off by more than
+    `CONVENTION_TOLERANCE_RAD`."""
+    extended = model if "b1s" in model.names else robot.model((*model.extensions, "joint_offset"))
     # Gravity is static: judge it at the motion's own cut-off, so that a noisy cut-off cannot hide the zero.
     trials = [d if d.cutoff_hz is None else refiltered(d, min(d.cutoff_hz, choose_cutoff(d.t, d.q))) for d in trials]
     p = estimators.fit("ols", stats_of(extended, trials), extended).as_dict()
@@ -178,14 +185,18 @@ def check_convention(
 
 
 def checks(
-    model: PlanarArm,
+    model: Arm,
     trials: list[Dataset],
     ols: LinearFit,
     iv: LinearFit,
-    conversions: dict[str, tuple[float, float]] | None = None,
+    conversions: dict[str, tuple[float, float]] | None,
+    robot,
 ) -> Trust:
-    """Every check on the training trials: the convention first (a wrong zero spoils the others)."""
-    direction, warnings = check_convention(model, trials, conversions)
+    """Every check on the training trials: the convention first (a wrong zero spoils the others), where the arm
+    offers the joint-offset model that reads it (`Robot.extensions`: the planar arm's)."""
+    direction, warnings = {}, []
+    if "joint_offset" in robot.extensions:
+        direction, warnings = check_convention(robot, model, trials, conversions)
     logged = any(d.cutoff_hz is None for d in trials)
     cutoffs = [] if logged else [d.cutoff_hz for d in trials]
     sensitivity, cut_warnings = check_cutoff(model, trials, ols)

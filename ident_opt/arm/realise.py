@@ -1,0 +1,495 @@
+"""From an identified π to rigid bodies (`ident_opt.arm.bodies.RobotDescription`), what `ident-opt export` writes.
+
+**n-joint chain** (`chain_bodies`): π holds each moving link's standard parameters (m, h = m c, Ī about the link
+frame's origin), realised one to one: c = h/m and the inertia about c, Ī − m (|c|² 1 − c cᵀ) (parallel axes).
+The kinematic chain is emitted fresh from Pinocchio's model of it (`ChainArm._model`): the URDF's joint names,
+origins and axes (so q means the same), each link's frame its joint's frame; the links Pinocchio merged into a
+moving link (fixed children) are massless frames, their inertials already in that link's, so nothing counts
+twice. Joint terms: fv → damping, fc → friction, ia → armature, off → offset; a coupled drive (a row of
+`ChainArm.drive_matrix` other than the joint's own) becomes a `Drive`.
+
+**Planar two-link arm** (`planar_bodies`): the grouped π (a1 a2 a3 b1 b2 …) is realised exactly by one set of
+standard parameters. The arm moves in the base's x–z plane with gravity (0, 0, −g); both joint axes are
+(0, −1, 0) (× the joint's sign), so that counter-clockwise seen from −y (x right, z up) is positive; link 1 runs
+along its frame's x axis to joint 2 at x = L, link 2's centre of mass lies on its frame's x axis. The data fix
+
+    h2 = m2 lc2 = b2/g,   L = g a2/b2   (a rigid arm has L = l1; a fit need not: joint 2 is put where it says),
+    a3 = I2 + m2 lc2²,    J1 = I1 + m1 lc1² = a1 − a3 − m2 L²,    h1 = m1 lc1 = b1/g − m2 L,
+
+and nothing else: m1 and m2 are free within I2 = a3 − h2²/m2 > 0 and I1 = J1 − h1²/m1 > 0, i.e.
+m2 ∈ (h2²/a3, (a1 − a3)/L²), nonempty exactly when a3 (a1 − a3) > a2² (the planar consistency condition), and
+m1 > h1²/J1. Each is the datasheet's (`rigid_body`) when it lies 1 % of its interval's width inside both ends
+(1 % above the lower end when there is no upper one), else the nearest such mass: every link keeps a positive
+moment of inertia, which MuJoCo needs. Also not determined, and said so: the moments about axes other than the
+joint axis (set equal to it) and the centres of mass along the axis (0). With the joint_offset extension, b1s
+(× sin q1) is link 1's centre of mass off its line; Coulomb levels per direction are their mean plus a constant
+offset; a Stribeck term is left out (each said in the notes). Joint 1's armature cannot be told from link 1's
+inertia (both only add to M11): it is in link 1's. A robot read from a URDF
+(`UrdfPlanarRobot`) is written in that URDF's angles: joint j's origin turns by θ_j and its axis by s_j, so the
+file's q_j is the URDF's, q_tool = s_j q_j + θ_j and τ_file = s_j τ_tool.
+
+**Bad input.** A π of the wrong length or with a value that is not a finite number, a link of mass 0, and what
+no robot description can say exactly (b2 = 0 with a2 ≠ 0; joint_offset's b2s ≠ 0, an offset of link 2's centre
+of mass off its line that the grouped model gives no inertial terms for) are `InputError`s. A realisation that
+is not physically possible (`RobotDescription.violations`; for the planar arm also a3 (a1 − a3) ≤ a2²), which an
+OLS fit can be, is an `InputError` naming the link and the value with `strict` (the default); with
+`strict=False` it is returned exact, the violations as notes headed "NOT PHYSICALLY POSSIBLE" (a URDF can say
+it; MuJoCo refuses such a body). The chain's consistent fit (every pseudo-inertia ⪰ a margin) always is
+possible, and so is the planar rigid model's (M(q) ≻ 0 for all q is exactly a3 > 0, a3 (a1 − a3) > a2²); with a
+joint-2 armature, M22 = a3 + ia2 and M(q) ≻ 0 no longer implies a3 (a1 − a3) > a2², so such a fit can be refused.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pinocchio as pin
+
+from ident_opt.arm.bodies import Body, Drive, Frame, Joint, Origin, RobotDescription, matrix3, vector3
+from ident_opt.arm.chain import ChainArm, ChainRobot
+from ident_opt.arm.datasheet import PlanarRobot, rigid_body
+from ident_opt.arm.planar import PlanarArm
+from ident_opt.arm.planar_urdf import UrdfPlanarRobot
+from ident_opt.arm.rnea import N_LINK
+from ident_opt.arm.urdf import SANE, UrdfJoint, parse_urdf
+from ident_opt.errors import InputError
+
+#: The planar export's joint axis (before each joint's sign): counter-clockwise in the x–z plane, seen from −y.
+PLANAR_AXIS = (0.0, -1.0, 0.0)
+#: Share of a free mass's interval kept off each end (module doc): a link at an end has a zero moment of inertia.
+MASS_MARGIN = 0.01
+#: Relative difference of L = g a2/b2 from the robot's l1 beyond which the file says joint 2 moved.
+LENGTH_TOLERANCE = 1e-9
+#: Heading of the notes that list what no physical body has (strict=False).
+IMPOSSIBLE = "NOT PHYSICALLY POSSIBLE"
+
+
+def robot_description(
+    robot: ChainRobot | PlanarRobot,
+    arm: ChainArm | PlanarArm,
+    pi: np.ndarray,
+    *,
+    name: str | None = None,
+    undetermined: Sequence[str] = (),
+    strict: bool = True,
+) -> RobotDescription:
+    """The description of `robot` with the parameters π of its model `arm` (`chain_bodies` or `planar_bodies`)."""
+    if isinstance(robot, ChainRobot):
+        if arm != robot.arm:
+            raise ValueError("an n-joint arm is exported with its own model, robot.arm")
+        return chain_bodies(robot, pi, name=name, undetermined=undetermined, strict=strict)
+    return planar_bodies(robot, arm, pi, name=name, undetermined=undetermined, strict=strict)
+
+
+# ---------------------------------------------------------------------------------------------- shared
+def _checked(pi: np.ndarray, names: Sequence[str], what: str) -> np.ndarray:
+    """π as floats (P,), or an InputError naming what is wrong: its length, a value that is not a number."""
+    values = np.asarray(pi, dtype=float)
+    if values.shape != (len(names),):
+        raise InputError(f"{what}: π has {values.size} values, its model has {len(names)} ({', '.join(names[:4])}, …)")
+    for n, v in zip(names, values):
+        if not math.isfinite(v):
+            raise InputError(f"{what}: parameter {n} = {v} is not a finite number")
+    return values
+
+
+def _root_link(joints: dict[str, UrdfJoint], link: str) -> str:
+    """The URDF tree's root above `link` (Pinocchio's universe: the frame gravity and the first origin refer to)."""
+    by_child = {j.child: j.parent for j in joints.values()}
+    while link in by_child:
+        link = by_child[link]
+    return link
+
+
+def _undetermined_note(names: Sequence[str]) -> list[str]:
+    if not names:
+        return []
+    return [
+        f"not determined by the data (the fit chose them, e.g. from its prior; the sidecar gives no standard error): "
+        f"{', '.join(names)}"
+    ]
+
+
+def _finish(description: RobotDescription, strict: bool, problems: Sequence[str] = ()) -> RobotDescription:
+    """The description, or (strict) an InputError listing why no physical robot has it; not strict: those reasons
+    as notes (module doc)."""
+    reasons = [*problems, *description.violations()]
+    if not reasons:
+        return description
+    if strict:
+        raise InputError(
+            f"{description.name}: the parameters are not those of any physical robot ({'; '.join(reasons)}); export "
+            "a physically consistent fit (the default), or allow an impossible one explicitly"
+        )
+    return replace(description, notes=(*description.notes, *(f"{IMPOSSIBLE}: {r}" for r in reasons)))
+
+
+# ---------------------------------------------------------------------------------------------- n-joint chain
+def chain_bodies(
+    robot: ChainRobot,
+    pi: np.ndarray,
+    *,
+    name: str | None = None,
+    undetermined: Sequence[str] = (),
+    strict: bool = True,
+) -> RobotDescription:
+    """The n-joint arm `robot` with the standard parameters and joint terms π (`robot.arm.names`) as rigid bodies
+    (module doc). `name`: the robot's (default: the URDF's); `undetermined`: parameter names the data did not
+    determine, said in the notes; `strict`: refuse a π no physical robot has (module doc)."""
+    arm = robot.arm
+    pi = _checked(pi, arm.names, str(robot.urdf))
+    model, n = arm._model, arm.n_joints
+    links = [link_body(link, pi[N_LINK * i : N_LINK * (i + 1)], str(robot.urdf)) for i, link in enumerate(arm.links)]
+    terms = {t: pi[arm.n_link_params + k * n : arm.n_link_params + (k + 1) * n] for k, t in enumerate(arm.joint_terms)}
+    zero = np.zeros(n)
+    fv, fc, ia, off = (terms.get(t, zero) for t in ("fv", "fc", "ia", "off"))
+    C = arm.drive_matrix
+    own = [bool(np.array_equal(C[j], np.eye(n)[j])) for j in range(n)]  # the drive turns its own joint only
+    base = _root_link(arm.urdf_joints, arm.urdf_joints[arm.joints[0]].parent)
+    joints = []
+    for i, joint in enumerate(arm.joints):
+        limit = arm.urdf_joints[joint].limit
+        joints.append(
+            Joint(
+                joint,
+                base if i == 0 else arm.links[model.parents[i + 1] - 1],
+                arm.links[i],
+                Origin.of(model.jointPlacements[i + 1]),
+                vector3(arm.chain[i].axis),
+                lower=limit.get("lower"),
+                upper=limit.get("upper"),
+                velocity=limit.get("velocity"),
+                effort=limit.get("effort"),
+                damping=float(fv[i]) if own[i] else 0.0,
+                friction=float(fc[i]) if own[i] else 0.0,
+                armature=float(ia[i]) if own[i] else 0.0,
+                offset=float(off[i]),
+            )
+        )
+    drives = tuple(
+        Drive(
+            f"{arm.joints[m]}_drive",
+            tuple(arm.joints[k] for k in np.flatnonzero(C[m])),
+            tuple(float(C[m, k]) for k in np.flatnonzero(C[m])),
+            float(fv[m]),
+            float(fc[m]),
+            float(ia[m]),
+        )
+        for m in range(n)
+        if not own[m]
+    )
+    notes = [
+        robot.angle_convention,
+        "the links' frames are the URDF joints' frames (Pinocchio's model of the chain); links the chain merged into "
+        "a moving link (fixed children) are massless frames here, their inertials counted once, in that link's",
+        "joint torques determine only combinations of the standard parameters (the base parameters): these link "
+        "values are one set with the fit's combinations, and the fit's own choice (e.g. its prior's) where the data "
+        "are silent",
+        *_undetermined_note(undetermined),
+    ]
+    description = RobotDescription(
+        name or ET.parse(arm.urdf).getroot().get("name") or "robot",
+        base,
+        tuple(links),
+        tuple(joints),
+        vector3(robot.gravity),
+        _fixed_frames(model),
+        drives,
+        tuple(notes),
+    )
+    return _finish(description, strict)
+
+
+def link_body(name: str, p: np.ndarray, where: str = "") -> Body:
+    """One link from its 10 standard parameters [m, mx, my, mz, ixx, ixy, iyy, ixz, iyz, izz] (Pinocchio's
+    `Inertia.toDynamicParameters` order; inertia about the link frame's origin): mass [kg], centre of mass [m]
+    and inertia about it [kg m²]. InputError for a mass of 0, which has no centre of mass."""
+    m, h = float(p[0]), np.asarray(p[1:4], dtype=float)
+    if m == 0:
+        raise InputError(
+            f"{where}: link {name!r}: mass 0 kg with first moment m c = {h.tolist()} kg m: a link without mass has no "
+            "centre of mass, which no robot description can say"
+        )
+    inertia = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]], dtype=float)
+    c = h / m
+    about_com = inertia - m * ((c @ c) * np.eye(3) - np.outer(c, c))  # parallel-axis theorem, back to c
+    return Body(name, m, vector3(c), matrix3(about_com))
+
+
+def _fixed_frames(model: pin.Model) -> tuple[Frame, ...]:
+    """The massless frames of Pinocchio's model: each fixed joint's child link, placed in its parent link."""
+    frames = model.frames
+    out = []
+    for index, joint in enumerate(frames):
+        if index == 0 or joint.type != pin.FrameType.FIXED_JOINT:  # 0 is Pinocchio's "universe"
+            continue
+        child = next((f for f in frames if f.type == pin.FrameType.BODY and f.parentFrame == index), None)
+        if child is None:
+            continue
+        parent = frames[joint.parentFrame]
+        out.append(Frame(child.name, joint.name, parent.name, Origin.of(parent.placement.inverse() * child.placement)))
+    return tuple(out)
+
+
+# ---------------------------------------------------------------------------------------------- planar arm
+@dataclass(frozen=True)
+class _PlanarShape:
+    """The planar arm's realised rigid part: joint 2 at L [m]; masses m [kg], centres of mass (x, z) [m] in the
+    link frames, moments about the axis through them I [kg m²], per link; the free masses' intervals [kg]."""
+
+    L: float
+    masses: tuple[float, float]
+    coms: tuple[tuple[float, float], tuple[float, float]]
+    moments: tuple[float, float]
+    intervals: tuple[tuple[float, float], tuple[float, float]]
+    feasible: bool
+    nominal: tuple[float, float]
+
+
+def _inside(preferred: float, low: float, high: float) -> float:
+    """`preferred` when in the inner part of (low, high) (`MASS_MARGIN` off each end; high may be inf), else the
+    nearest end of that part."""
+    if math.isinf(high):
+        return max(preferred, low * (1 + MASS_MARGIN))
+    pad = MASS_MARGIN * (high - low)
+    return min(max(preferred, low + pad), high - pad)
+
+
+def _joint2_distance(a2: float, b2: float, g: float, l1: float) -> float:
+    """L = g a2/b2 [m] (module doc); l1 when a2 = b2 = 0; InputError when no finite distance says a2 and b2."""
+    if b2 == 0 and a2 == 0:
+        return l1
+    L = g * a2 / b2 if b2 != 0 else math.inf
+    if not abs(L) <= SANE["length"]:
+        raise InputError(
+            f"planar arm: a2 = {a2:.6g} kg m² and b2 = {b2:.6g} N m put joint 2 at g a2/b2 = {L:.6g} m from joint 1: "
+            f"no robot description says them (a rigid arm has a2 g = l1 b2, with l1 = {l1:.6g} m)"
+        )
+    return L
+
+
+def _planar_shape(robot: PlanarRobot, p: dict[str, float], b1: float) -> _PlanarShape:
+    """The rigid part of the planar realisation (module doc) from the grouped parameters `p`; `b1` is the physical
+    g (m1 lc1 + m2 l1) [N m] (the paper's gravity vector has another)."""
+    g, a1, a2, a3, b2 = robot.gravity, p["a1"], p["a2"], p["a3"], p["b2"]
+    L = _joint2_distance(a2, b2, g, robot.link1.length)
+    h2 = b2 / g
+    nominal = rigid_body(robot)
+    low2 = h2**2 / a3 if a3 > 0 else math.inf
+    high2 = (a1 - a3) / L**2 if L != 0 else (math.inf if a1 > a3 else -math.inf)
+    feasible = low2 < high2
+    m2 = _inside(nominal.m2, low2, high2) if feasible else nominal.m2
+    J1 = a1 - a3 - m2 * L**2
+    h1 = np.array([b1 / g - m2 * L, -p.get("b1s", 0.0) / g])  # b1s sin q1: the centre of mass off link 1's line
+    low1 = float(h1 @ h1) / J1 if J1 > 0 else math.inf
+    m1 = _inside(nominal.m1, low1, math.inf) if feasible else nominal.m1
+    return _PlanarShape(
+        L=L,
+        masses=(m1, m2),
+        coms=(tuple(h1 / m1), (h2 / m2, 0.0)),
+        moments=(J1 - float(h1 @ h1) / m1, a3 - h2**2 / m2),
+        intervals=((low1, math.inf), (low2, high2)),
+        feasible=feasible,
+        nominal=(nominal.m1, nominal.m2),
+    )
+
+
+def _about_axis(angle: float) -> np.ndarray:
+    """Rotation by `angle` [rad] about `PLANAR_AXIS`: x̂ turns toward +z."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+
+
+def _planar_friction(arm: PlanarArm, p: dict[str, float], j: int) -> tuple[float, float, list[str]]:
+    """Joint j's (0 or 1) Coulomb friction [N m], constant offset [N m] and notes on what the file cannot say:
+    asymmetric Coulomb levels are their mean plus a constant offset (p − n)/2 (exact at dq ≠ 0); a Stribeck term
+    is left out."""
+    k = str(j + 1)
+    if f"fc{k}" in p:
+        return p[f"fc{k}"], 0.0, _stribeck_note(arm, p, j)
+    up, down = p[f"fc{k}p"], p[f"fc{k}n"]
+    fc, offset = 0.5 * (up + down), 0.5 * (up - down)
+    notes = []
+    if offset:
+        notes.append(
+            f"joint {k}: direction-dependent Coulomb friction (fc{k}p = {up:.6g}, fc{k}n = {down:.6g} N m) is said as "
+            f"their mean {fc:.6g} N m × sign(dq) plus a constant offset {offset:.6g} N m (equal at dq ≠ 0; neither "
+            "format has direction-dependent friction)"
+        )
+    return fc, offset, notes + _stribeck_note(arm, p, j)
+
+
+def _stribeck_note(arm: PlanarArm, p: dict[str, float], j: int) -> list[str]:
+    """The note that joint j's Stribeck term, if the model has a non-zero one, is left out."""
+    k = str(j + 1)
+    if not p.get(f"fs{k}", 0.0):
+        return []
+    vs = arm.stribeck_velocity[j]
+    quiet = vs * math.sqrt(math.log(1e9))  # |dq| beyond which exp(−(dq/vs)²) < 1e-9
+    return [
+        f"joint {k}: the Stribeck term fs{k} sign(dq) exp(−(dq/{vs:g})²), fs{k} = {p[f'fs{k}']:.6g} N m, is "
+        f"left out (neither format has it; below 1e-9 of fs{k} for |dq| > {quiet:.3g} rad/s)"
+    ]
+
+
+def _planar_names(robot: PlanarRobot) -> tuple[str, str, tuple[str, str], tuple[str, str]]:
+    """(robot, base link, link and joint names): a URDF robot's own, else planar_two_link_arm, base_link, link1,
+    link2, joint1, joint2."""
+    if isinstance(robot, UrdfPlanarRobot):
+        text, joints, _ = parse_urdf(robot.urdf)
+        first, second = robot.joint_names
+        base = _root_link(joints, joints[first].parent)
+        name = ET.fromstring(text).get("name") or "planar_two_link_arm"
+        return name, base, (joints[first].child, joints[second].child), (first, second)
+    return "planar_two_link_arm", "base_link", ("link1", "link2"), tuple(robot.joint_names)
+
+
+def planar_bodies(
+    robot: PlanarRobot,
+    arm: PlanarArm,
+    pi: np.ndarray,
+    *,
+    name: str | None = None,
+    undetermined: Sequence[str] = (),
+    strict: bool = True,
+) -> RobotDescription:
+    """The planar two-link `robot` with the grouped parameters π of `arm` (`arm.names`) as rigid bodies (module
+    doc: the exact realisation, its free choices and what it says it could not determine). `name`: the robot's
+    (default: its URDF's, else "planar_two_link_arm"); `undetermined`: parameter names the data did not
+    determine, said in the notes; `strict`: refuse a π no physical arm has."""
+    p = arm.as_dict(_checked(pi, arm.names, "planar arm"))
+    if p.get("b2s", 0.0) != 0:
+        raise InputError(
+            f"planar arm: the joint_offset term b2s = {p['b2s']:.6g} N m (link 2's gravity × sin(q1 + q2)) has no "
+            "rigid-body equivalent in the grouped model (link 2's centre of mass off its line would add inertial terms "
+            "the model lacks); export a fit without it"
+        )
+    # The paper's printed gravity vector has G1 = (b1 + b2) c1 + b2 c12: its b1 + b2 is the physical one.
+    b1 = p["b1"] + (p["b2"] if arm.gravity == "paper" else 0.0)
+    shape = _planar_shape(robot, p, b1)
+    own_name, base, links, joint_names = _planar_names(robot)
+    signs = tuple(getattr(robot, "angle_signs", (1.0, 1.0)))
+    offsets = tuple(getattr(robot, "angle_offsets", (0.0, 0.0)))
+    bodies = tuple(
+        Body(link, float(m), vector3((x, 0.0, z)), matrix3(moment * np.eye(3)))
+        for link, m, (x, z), moment in zip(links, shape.masses, shape.coms, shape.moments)
+    )
+    joints, friction_notes = [], []
+    for j in range(2):
+        fc, offset, lines = _planar_friction(arm, p, j)
+        friction_notes += lines
+        joints.append(
+            Joint(
+                joint_names[j],
+                (base, links[0])[j],
+                links[j],
+                Origin((shape.L if j else 0.0, 0.0, 0.0), matrix3(_about_axis(offsets[j]))),
+                vector3(signs[j] * np.array(PLANAR_AXIS)),
+                damping=p[f"fv{j + 1}"],
+                friction=fc,
+                armature=p.get("ia2", 0.0) if j else 0.0,
+                offset=signs[j] * offset,  # τ_file = s τ_tool
+            )
+        )
+    notes = [
+        *_planar_convention(robot, joint_names, signs, offsets),
+        *_planar_choices(robot, arm, p, shape),
+        *friction_notes,
+        *_undetermined_note(undetermined),
+    ]
+    description = RobotDescription(
+        name or own_name,
+        base,
+        bodies,
+        tuple(joints),
+        (0.0, 0.0, -robot.gravity),
+        notes=tuple(notes),
+    )
+    problems = [] if shape.feasible else [_infeasible(p)]
+    return _finish(description, strict, problems)
+
+
+def _infeasible(p: dict[str, float]) -> str:
+    a1, a2, a3 = p["a1"], p["a2"], p["a3"]
+    return (
+        f"a1 = {a1:.6g}, a2 = {a2:.6g}, a3 = {a3:.6g} kg m² are not those of any two-link arm of rigid bodies: "
+        f"that needs a3 > 0 and a3 (a1 − a3) = {a3 * (a1 - a3):.6g} > a2² = {a2**2:.6g} (kg m²)²"
+    )
+
+
+def _planar_convention(
+    robot: PlanarRobot, joints: tuple[str, str], signs: tuple[float, ...], offsets: tuple[float, ...]
+) -> list[str]:
+    """The notes on the file's geometry and angles."""
+    lines = [
+        f"a planar two-link arm: it moves in the base's x–z plane, gravity (0, 0, −{robot.gravity:g}) m/s² along −z; "
+        "each joint turns about (0, −1, 0) × its sign, counter-clockwise seen from −y (x right, z up) positive; link 1 "
+        "runs along its frame's x axis to joint 2, link 2's centre of mass lies on its frame's x axis"
+    ]
+    if isinstance(robot, UrdfPlanarRobot):
+        maps = "; ".join(
+            f"q{j + 1} = {s:+g} q({name}) {'+' if off >= 0 else '−'} {abs(off)!r} rad, τ{j + 1} = {s:+g} τ({name})"
+            for j, (name, s, off) in enumerate(zip(joints, signs, offsets))
+        )
+        lines.append(
+            f"angles and torques are those of {robot.urdf.name} (as its data are logged), not ident-opt's: {maps} "
+            "(ident-opt's q1 from the horizontal, q2 relative to link 1); the geometry is the planar model's, not that "
+            "file's 3-D layout"
+        )
+    else:
+        lines.append(
+            "q1 is link 1's angle from the horizontal (+x), q2 link 2's relative to link 1, as ident-opt's (0 with the "
+            "links in line); τ about each joint's axis"
+        )
+    return lines
+
+
+def _mass_choice(label: str, mass: float, nominal: float, interval: tuple[float, float], feasible: bool) -> str:
+    """ "m2 = … kg (why; which masses give the same torques)" for the notes."""
+    low, high = interval
+    if not feasible:
+        return f"{label} = {mass:.6g} kg (the datasheet's: no mass makes these parameters a physical arm)"
+    same = f"any {label} > {low:.6g} kg" if math.isinf(high) else f"any {label} in ({low:.6g}, {high:.6g}) kg"
+    why = (
+        "the datasheet's"
+        if mass == nominal
+        else f"the datasheet's {nominal:.6g} kg is outside that range or within {MASS_MARGIN:.0%} of its end: the "
+        f"nearest mass {MASS_MARGIN:.0%} inside"
+    )
+    return f"{label} = {mass:.6g} kg ({why}; the same torques for {same})"
+
+
+def _planar_choices(robot: PlanarRobot, arm: PlanarArm, p: dict[str, float], shape: _PlanarShape) -> list[str]:
+    """The notes on what the data did not determine and what the realisation chose for it."""
+    l1, L = robot.link1.length, shape.L
+    choices = "; ".join(
+        _mass_choice(f"m{j + 1}", shape.masses[j], shape.nominal[j], shape.intervals[j], shape.feasible) for j in (1, 0)
+    )
+    lines = [
+        "not determined by the data: the masses m1 and m2 (the torques fix only m2 lc2, I2 + m2 lc2², m1 lc1 + m2 l1 "
+        f"and I1 + m1 lc1² + m2 l1²): {choices}; each link's centre of mass and moment of inertia follow from its mass",
+        "not determined by the data: joint 1's armature apart from link 1's inertia (both add to M11 only): it is in "
+        "link 1's inertia, joint 1's armature is 0; the moments of inertia about axes other than the joint axis (set "
+        "equal to it) and the centres of mass along the joint axis (0): a planar motion does not feel them",
+    ]
+    if abs(L - l1) > LENGTH_TOLERANCE * abs(l1):
+        lines.append(
+            f"joint 2 sits L = g a2/b2 = {L:.9g} m from joint 1, not at the robot's l1 = {l1:.9g} m: the fit's "
+            f"a2 = {p['a2']:.6g} kg m² and b2 = {p['b2']:.6g} N m both fix link 2's m2 lc2 (a2 = l1 m2 lc2, "
+            f"b2 = g m2 lc2) and disagree by {100 * (L / l1 - 1):.3g} %; this L keeps both exact"
+            + ("; L < 0: joint 2 lies behind joint 1 along link 1's x axis" if L < 0 else "")
+        )
+    if arm.gravity == "paper":
+        lines.append(
+            "the fit used the paper's printed gravity vector G1 = (b1 + b2) c1 + b2 c12: here b1 + b2 is link 1's"
+        )
+    if p.get("b1s", 0.0):
+        lines.append(
+            f"the joint_offset term b1s = {p['b1s']:.6g} N m (× sin q1) is link 1's centre of mass off its line "
+            "(z in its frame)"
+        )
+    return lines
