@@ -20,7 +20,7 @@ from ident_opt.errors import InputError
 #: Flags (by dest) that name input files, and output files; `--out` is a file for these subcommands, else a folder.
 INPUT_FLAGS = ("problem", "data", "test_data", "parameters", "real", "trajectory_file")
 OUTPUT_FLAGS = ("json", "final")
-FILE_OUT = ("simulate", "excite")
+FILE_OUT = ("simulate", "excite", "export")
 
 #: What `ident-opt --help` says first.
 DESCRIPTION = (
@@ -42,6 +42,7 @@ COMMANDS = {
     "audit": "the paper audit: its datasheet model under both conventions against its own fit",
     "excite": "design the trajectory to run next: a Fourier excitation optimised by IPOPT within [limits]",
     "calibrate": "how close the simulator's default trial is to a real one (residual size, spectrum, strain)",
+    "export": "write the identified arm as a robot description: URDF (with a JSON sidecar) or MuJoCo MJCF",
 }
 
 

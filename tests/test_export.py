@@ -19,7 +19,7 @@ from ident_opt.arm.bodies import RobotDescription
 from ident_opt.arm.chain import ChainRobot
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PAPER, RIGID, PlanarArm
-from ident_opt.arm.realise import IMPOSSIBLE, chain_bodies, planar_bodies, robot_description
+from ident_opt.arm.realise import IMPOSSIBLE, chain_bodies, planar_bodies
 from ident_opt.arm.rnea import N_LINK
 from ident_opt.errors import InputError
 from ident_opt.export import identified, write_mjcf, write_urdf
@@ -204,7 +204,7 @@ def test_chain_round_trip(name, perturbed, tmp_path):
     arm = robot.arm
     pi = _chain_pi(robot, perturbed)
     description = chain_bodies(robot, pi)
-    assert description == robot_description(robot, arm, pi)
+    assert description == robot.bodies(arm, pi)
     assert description.violations() == []
     assert [j.name for j in description.joints] == list(arm.joints)
     sidecar = identified(arm.names, pi, np.full(len(pi), 0.01), "test")
@@ -238,7 +238,7 @@ def test_planar_round_trip(case, tmp_path):
     robot = _robot(case.split("-")[0])
     arm, pi = PLANAR_CASES[case]()
     description = planar_bodies(robot, arm, pi)
-    assert description == robot_description(robot, arm, pi)
+    assert description == robot.bodies(arm, pi)
     assert description.violations() == []
     # A URDF robot's file keeps that URDF's angles: q_tool = s q + θ, τ_file = s τ_tool.
     s = np.array(getattr(robot, "angle_signs", (1.0, 1.0)))

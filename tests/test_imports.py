@@ -1,5 +1,6 @@
 """The package's import graph has no cycle, counting imports inside functions: each module's imports, wherever
-they stand, point one way (a cycle makes the import order, not the code, decide what works)."""
+they stand, point one way (a cycle makes the import order, not the code, decide what works). Imports under
+`if TYPE_CHECKING:` never run and are not counted."""
 
 from __future__ import annotations
 
@@ -22,12 +23,22 @@ def _modules() -> dict[str, Path]:
     return out
 
 
+def _runtime_nodes(tree: ast.AST):
+    """Every node of `tree` except those under `if TYPE_CHECKING:` (imports for the type checker never run)."""
+    for node in ast.iter_child_nodes(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            yield from (n for child in node.orelse for n in [child, *_runtime_nodes(child)])
+            continue
+        yield node
+        yield from _runtime_nodes(node)
+
+
 def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
     """The package's modules that `name` imports anywhere in its file (a `from P import x` counts as P.x when
     that is a module, else as P)."""
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     out = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in _runtime_nodes(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.Import):
             out |= {a.name for a in node.names if a.name in modules}
         elif isinstance(node, ast.ImportFrom):

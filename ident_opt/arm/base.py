@@ -248,6 +248,11 @@ class Robot(Protocol):
         """The nominal parameter sets (datasheet, URDF/CAD) by name, each with the arm it is evaluated with."""
         ...
 
+    def bodies(self, arm: Arm, pi: np.ndarray, **options):
+        """π of `arm` realised as rigid bodies (`ident_opt.arm.bodies.RobotDescription`, `ident_opt.arm.realise`):
+        what `ident-opt export` writes."""
+        ...
+
     def reference(self, parameters: Mapping[str, float]) -> tuple[Arm, np.ndarray]:
         """A published identification's parameters by name as (arm, π); an unknown name is an InputError."""
         ...

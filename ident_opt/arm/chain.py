@@ -40,7 +40,9 @@ import numpy as np
 import pinocchio as pin
 
 from ident_opt.arm.base import casadi_function, symbol_table
+from ident_opt.arm.bodies import RobotDescription
 from ident_opt.arm.joints import JointSide
+from ident_opt.arm.realise import chain_bodies
 from ident_opt.arm.rnea import N_LINK, ChainJoint, rnea
 from ident_opt.arm.urdf import chain_model, check_chain, parse_urdf
 from ident_opt.cache import cache_root
@@ -498,6 +500,12 @@ class ChainRobot:
                 "two-link arm only; an n-joint arm's model has its joint terms (friction, armature, offsets in [robot])"
             )
         return self.arm
+
+    def bodies(self, arm: ChainArm, pi: np.ndarray, **options) -> RobotDescription:
+        """π of the arm realised as rigid bodies, one per link (`ident_opt.arm.realise.chain_bodies`)."""
+        if arm != self.arm:
+            raise ValueError("an n-joint arm is realised with its own model, robot.arm")
+        return chain_bodies(self, pi, **options)
 
     def datasheets(self) -> dict[str, tuple[ChainArm, np.ndarray]]:
         """The nominal model: the URDF's inertials with each joint's nominal friction and armature."""

@@ -18,8 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ident_opt.arm.base import ALL_COMMANDS
+from ident_opt.arm.bodies import RobotDescription
 from ident_opt.arm.joints import Friction, JointSide
 from ident_opt.arm.planar import ANGLE_CONVENTION, EXTENSIONS, PAPER, PHYSICAL, RIGID, PlanarArm
+from ident_opt.arm.realise import planar_bodies
 from ident_opt.errors import InputError
 
 
@@ -100,6 +102,21 @@ class PlanarRobot:
 
     #: Each joint's values are in [robot.joint1] and [robot.joint2] (also for an arm from a URDF).
     joint_tables = ("joint1", "joint2")
+    #: The URDF the robot was read from (`ident_opt.arm.planar_urdf.UrdfPlanarRobot`), or None for a datasheet.
+    urdf = None
+    #: The map from the data's angles to the tool's, q_tool = sign · q + offset [rad] per joint: none here.
+    angle_signs = (1.0, 1.0)
+    angle_offsets = (0.0, 0.0)
+
+    @property
+    def nominal_masses(self) -> tuple[float, float]:
+        """(m1, m2) [kg]: the links' masses the datasheet gives (`rigid_body`), which the grouped π do not."""
+        body = rigid_body(self)
+        return body.m1, body.m2
+
+    def bodies(self, arm: PlanarArm, pi: np.ndarray, **options) -> RobotDescription:
+        """The grouped π of `arm` realised exactly as rigid bodies (`ident_opt.arm.realise.planar_bodies`)."""
+        return planar_bodies(self, arm, pi, **options)
 
     # ------------------------------------------------------------------ the `Robot` interface
     #: Every command serves the planar two-link arm (the paper's own views included).

@@ -16,17 +16,16 @@ along its frame's x axis to joint 2 at x = L, link 2's centre of mass lies on it
     h2 = m2 lc2 = b2/g,   L = g a2/b2   (a rigid arm has L = l1; a fit need not: joint 2 is put where it says),
     a3 = I2 + m2 lc2²,    J1 = I1 + m1 lc1² = a1 − a3 − m2 L²,    h1 = m1 lc1 = b1/g − m2 L,
 
-and nothing else: m1 and m2 are free within I2 = a3 − h2²/m2 > 0 and I1 = J1 − h1²/m1 > 0, i.e.
-m2 ∈ (h2²/a3, (a1 − a3)/L²), nonempty exactly when a3 (a1 − a3) > a2² (the planar consistency condition), and
-m1 > h1²/J1. Each is the datasheet's (`rigid_body`) when it lies 1 % of its interval's width inside both ends
-(1 % above the lower end when there is no upper one), else the nearest such mass: every link keeps a positive
-moment of inertia, which MuJoCo needs. Also not determined, and said so: the moments about axes other than the
-joint axis (set equal to it) and the centres of mass along the axis (0). With the joint_offset extension, b1s
-(× sin q1) is link 1's centre of mass off its line; Coulomb levels per direction are their mean plus a constant
-offset; a Stribeck term is left out (each said in the notes). Joint 1's armature cannot be told from link 1's
-inertia (both only add to M11): it is in link 1's. A robot read from a URDF
-(`UrdfPlanarRobot`) is written in that URDF's angles: joint j's origin turns by θ_j and its axis by s_j, so the
-file's q_j is the URDF's, q_tool = s_j q_j + θ_j and τ_file = s_j τ_tool.
+and nothing else: m1 and m2 are free within I2 = a3 − h2²/m2 > 0 and I1 = J1 − h1²/m1 > 0, i.e. m2 ∈ (h2²/a3, (a1 −
+a3)/L²), nonempty exactly when a3 (a1 − a3) > a2² (the planar consistency condition), and m1 > h1²/J1. Each is the
+datasheet's (`PlanarRobot.nominal_masses`) when it lies 1 % of its interval's width inside both ends (1 % above the
+lower end when there is no upper one), else the nearest such mass: every link keeps a positive moment of inertia,
+which MuJoCo needs. Also not determined, and said so: the moments about axes other than the joint axis (set equal to
+it) and the centres of mass along the axis (0). With the joint_offset extension, b1s (× sin q1) is link 1's centre
+of mass off its line; Coulomb levels per direction are their mean plus a constant offset; a Stribeck term is left
+out (each said in the notes). Joint 1's armature cannot be told from link 1's inertia (both only add to M11): it is
+in link 1's. A robot read from a URDF (`UrdfPlanarRobot`) is written in that URDF's angles: joint j's origin turns
+by θ_j and its axis by s_j, so the file's q_j is the URDF's, q_tool = s_j q_j + θ_j and τ_file = s_j τ_tool.
 
 **Bad input.** A π of the wrong length or with a value that is not a finite number, a link of mass 0, and what
 no robot description can say exactly (b2 = 0 with a2 ≠ 0; joint_offset's b2s ≠ 0, an offset of link 2's centre
@@ -45,18 +44,20 @@ import math
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from ident_opt.arm.bodies import Body, Drive, Frame, Joint, Origin, RobotDescription, matrix3, vector3
-from ident_opt.arm.chain import ChainArm, ChainRobot
-from ident_opt.arm.datasheet import PlanarRobot, rigid_body
 from ident_opt.arm.planar import PlanarArm
-from ident_opt.arm.planar_urdf import UrdfPlanarRobot
 from ident_opt.arm.rnea import N_LINK
 from ident_opt.arm.urdf import SANE, UrdfJoint, parse_urdf
 from ident_opt.errors import InputError
+
+if TYPE_CHECKING:  # the arm descriptions call these functions (`Robot.bodies`): named for the type checker only
+    from ident_opt.arm.chain import ChainRobot
+    from ident_opt.arm.datasheet import PlanarRobot
 
 #: The planar export's joint axis (before each joint's sign): counter-clockwise in the x–z plane, seen from −y.
 PLANAR_AXIS = (0.0, -1.0, 0.0)
@@ -66,23 +67,6 @@ MASS_MARGIN = 0.01
 LENGTH_TOLERANCE = 1e-9
 #: Heading of the notes that list what no physical body has (strict=False).
 IMPOSSIBLE = "NOT PHYSICALLY POSSIBLE"
-
-
-def robot_description(
-    robot: ChainRobot | PlanarRobot,
-    arm: ChainArm | PlanarArm,
-    pi: np.ndarray,
-    *,
-    name: str | None = None,
-    undetermined: Sequence[str] = (),
-    strict: bool = True,
-) -> RobotDescription:
-    """The description of `robot` with the parameters π of its model `arm` (`chain_bodies` or `planar_bodies`)."""
-    if isinstance(robot, ChainRobot):
-        if arm != robot.arm:
-            raise ValueError("an n-joint arm is exported with its own model, robot.arm")
-        return chain_bodies(robot, pi, name=name, undetermined=undetermined, strict=strict)
-    return planar_bodies(robot, arm, pi, name=name, undetermined=undetermined, strict=strict)
 
 
 # ---------------------------------------------------------------------------------------------- shared
@@ -278,15 +262,15 @@ def _planar_shape(robot: PlanarRobot, p: dict[str, float], b1: float) -> _Planar
     g, a1, a2, a3, b2 = robot.gravity, p["a1"], p["a2"], p["a3"], p["b2"]
     L = _joint2_distance(a2, b2, g, robot.link1.length)
     h2 = b2 / g
-    nominal = rigid_body(robot)
+    nominal = robot.nominal_masses
     low2 = h2**2 / a3 if a3 > 0 else math.inf
     high2 = (a1 - a3) / L**2 if L != 0 else (math.inf if a1 > a3 else -math.inf)
     feasible = low2 < high2
-    m2 = _inside(nominal.m2, low2, high2) if feasible else nominal.m2
+    m2 = _inside(nominal[1], low2, high2) if feasible else nominal[1]
     J1 = a1 - a3 - m2 * L**2
     h1 = np.array([b1 / g - m2 * L, -p.get("b1s", 0.0) / g])  # b1s sin q1: the centre of mass off link 1's line
     low1 = float(h1 @ h1) / J1 if J1 > 0 else math.inf
-    m1 = _inside(nominal.m1, low1, math.inf) if feasible else nominal.m1
+    m1 = _inside(nominal[0], low1, math.inf) if feasible else nominal[0]
     return _PlanarShape(
         L=L,
         masses=(m1, m2),
@@ -294,7 +278,7 @@ def _planar_shape(robot: PlanarRobot, p: dict[str, float], b1: float) -> _Planar
         moments=(J1 - float(h1 @ h1) / m1, a3 - h2**2 / m2),
         intervals=((low1, math.inf), (low2, high2)),
         feasible=feasible,
-        nominal=(nominal.m1, nominal.m2),
+        nominal=nominal,
     )
 
 
@@ -339,7 +323,7 @@ def _stribeck_note(arm: PlanarArm, p: dict[str, float], j: int) -> list[str]:
 def _planar_names(robot: PlanarRobot) -> tuple[str, str, tuple[str, str], tuple[str, str]]:
     """(robot, base link, link and joint names): a URDF robot's own, else planar_two_link_arm, base_link, link1,
     link2, joint1, joint2."""
-    if isinstance(robot, UrdfPlanarRobot):
+    if robot.urdf is not None:  # read from a URDF: its own names
         text, joints, _ = parse_urdf(robot.urdf)
         first, second = robot.joint_names
         base = _root_link(joints, joints[first].parent)
@@ -372,8 +356,8 @@ def planar_bodies(
     b1 = p["b1"] + (p["b2"] if arm.gravity == "paper" else 0.0)
     shape = _planar_shape(robot, p, b1)
     own_name, base, links, joint_names = _planar_names(robot)
-    signs = tuple(getattr(robot, "angle_signs", (1.0, 1.0)))
-    offsets = tuple(getattr(robot, "angle_offsets", (0.0, 0.0)))
+    signs = tuple(robot.angle_signs)
+    offsets = tuple(robot.angle_offsets)
     bodies = tuple(
         Body(link, float(m), vector3((x, 0.0, z)), matrix3(moment * np.eye(3)))
         for link, m, (x, z), moment in zip(links, shape.masses, shape.coms, shape.moments)
@@ -430,7 +414,7 @@ def _planar_convention(
         "each joint turns about (0, −1, 0) × its sign, counter-clockwise seen from −y (x right, z up) positive; link 1 "
         "runs along its frame's x axis to joint 2, link 2's centre of mass lies on its frame's x axis"
     ]
-    if isinstance(robot, UrdfPlanarRobot):
+    if robot.urdf is not None:  # read from a URDF: written in its angles
         maps = "; ".join(
             f"q{j + 1} = {s:+g} q({name}) {'+' if off >= 0 else '−'} {abs(off)!r} rad, τ{j + 1} = {s:+g} τ({name})"
             for j, (name, s, off) in enumerate(zip(joints, signs, offsets))

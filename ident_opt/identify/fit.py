@@ -211,6 +211,10 @@ def finish(
     meat = sum(w_j**2 * s2_j * G_j for w_j, s2_j, G_j in zip(w, sigma2, stats.G))
     cov = Hp @ meat @ Hp
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    # A parameter the data do not determine (its direction leaves the regressor's row space) has no standard
+    # error: what sets it is the estimator (a prior, a bound, the least-norm choice), not the data. Not "± 0".
+    undetermined = not_determined(H)
+    se[undetermined] = np.nan
     fit = LinearFit(
         pi=np.asarray(pi, dtype=float),
         names=names,
@@ -227,9 +231,21 @@ def finish(
         parameters=model.parameters,
         **_diagnostics(H, names, pi, se),
     )
+    if undetermined.any():
+        fit.details["not_determined"] = [n for n, u in zip(names, undetermined) if u]
     if not fit.consistent:
         fit.warnings.append(_inconsistency(fit))
     return fit
+
+
+def not_determined(H: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """(P,) bool: the parameters whose unit direction is not in the row space of the regressor behind H = YᵀY
+    (judged on the equilibrated H, `RANK_TOL`): the data alone do not fix them, whatever the others are."""
+    D = _equilibration(H)
+    Hs = D[:, None] * H * D[None, :]
+    lam, V = np.linalg.eigh(Hs)
+    null = V[:, lam <= RANK_TOL**2 * max(lam.max(), 0.0)] if lam.max() > 0 else V
+    return np.linalg.norm(null, axis=1) > tol
 
 
 def _diagnostics(H: np.ndarray, names: tuple[str, ...], pi: np.ndarray, se: np.ndarray) -> dict:

@@ -165,6 +165,7 @@ def fit_physical(
     value = _onto_bounds(pi, Consistency.of(arm, margin))
     slacks = Consistency.of(arm, margin).slacks(value)
     active = [name for name, v in slacks.items() if v < ACTIVE_TOL]
+    active += _bounds_at(arm, value, data, mass_range is not None, com_box is not None)
     fit = finish(stats, arm, value, w, "consistent", status, active, seconds)
     fit.details.update(
         prior_weight=prior_weight,
@@ -176,6 +177,29 @@ def fit_physical(
         link_masses=arm.link_masses(value),
     )
     return fit
+
+
+#: A link's mass or first moment within this relative distance of its bound counts as at the bound (active).
+BOUND_TOL = 1e-6
+
+
+def _bounds_at(arm: ChainArm, pi: np.ndarray, data: _Data, mass: bool, com: bool) -> list[str]:
+    """The mass range and centre-of-mass box bounds π sits on, named like constraints: `mass_min_<link>`,
+    `mass_max_<link>`, `com_<x|y|z>_min_<link>`, `com_<x|y|z>_max_<link>` (h within m·(c0 ± δ))."""
+    links = np.asarray(pi[: arm.n_link_params], dtype=float).reshape(-1, N_LINK)
+    out = []
+    for i, link in enumerate(arm.links):
+        m, h = links[i, 0], links[i, 1:4]
+        if mass:
+            for side, bound in (("min", data.m_lo[i]), ("max", data.m_hi[i])):
+                if abs(m - bound) <= BOUND_TOL * max(1.0, abs(bound)):
+                    out.append(f"mass_{side}_{link}")
+        if com:
+            for axis, name in enumerate("xyz"):
+                for side, bound in (("min", data.c_lo[i, axis]), ("max", data.c_hi[i, axis])):
+                    if abs(h[axis] - m * bound) <= BOUND_TOL * max(1.0, abs(m * bound)):
+                        out.append(f"com_{name}_{side}_{link}")
+    return out
 
 
 def _solve_cvxpy(arm: ChainArm, margin: float, mass: bool, com: bool, data: _Data) -> tuple[np.ndarray | None, str]:

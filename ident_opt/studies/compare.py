@@ -25,7 +25,7 @@ from ident_opt.identify.fit import LinearFit
 from ident_opt.metrics import all_metrics
 from ident_opt.studies import METRICS
 from ident_opt.studies.seeds import FitFn, SplitResults, seed_study, split_fits
-from ident_opt.studies.trust import Trust, checks, iv_fit, stats_of
+from ident_opt.studies.trust import Trust, check_masses, checks, iv_fit, stats_of
 
 PROTOCOLS = {
     "paper": "shuffled 70/30, mean over the paper's seeds (flattering: test samples have near-copies in training)",
@@ -229,6 +229,8 @@ def compare_estimators(
                 metrics[protocol][m][key] = v
     sources = {"train": pool.source, **({"unseen": test_pool.source} if test_pool is not None else {})}
     trust = checks(model, trains, fits["ols"], fits["iv"], conversions, robot)
+    nominal_arm, nominal_pi = sheets[f"datasheet_{robot.datasheet}"]
+    trust.warnings += check_masses(model, fits, nominal_arm.link_masses(nominal_pi))
     return Comparison(
         model,
         fits,

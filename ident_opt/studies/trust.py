@@ -203,3 +203,42 @@ def checks(
     if not warnings:  # with the zero off, every parameter is off: fix the convention first
         warnings += check_ols_iv(model, ols, iv, cutoffs) + cut_warnings
     return Trust(sensitivity, cutoffs, direction, warnings)
+
+
+#: A link's mass beyond this factor of its nominal one (either way), or a total beyond `TOTAL_MASS_RANGE` of the
+#: nominal total, is not a plausible identification of that arm.
+LINK_MASS_FACTOR = 3.0
+TOTAL_MASS_RANGE = 0.5
+
+
+def check_masses(model: Arm, fits: dict[str, LinearFit], nominal: dict[str, float]) -> list[ResultWarning]:
+    """A warning per fit whose links' masses (`Arm.link_masses`) are far from the nominal ones (`nominal`, by
+    link [kg]): a link beyond `LINK_MASS_FACTOR` × its nominal mass or below 1/`LINK_MASS_FACTOR` of it, or a total
+    beyond ± `TOTAL_MASS_RANGE` of the nominal total. Fits that determine only base parameters are not judged
+    (their standard parameters are a representative, not an estimate)."""
+    if not nominal:
+        return []
+    total0 = sum(nominal.values())
+    out = []
+    for key, fit in fits.items():
+        if "base_parameters" in fit.details:
+            continue
+        masses = model.link_masses(fit.pi)
+        odd = [
+            f"{link} {m:.3g} kg (nominal {nominal[link]:.3g})"
+            for link, m in masses.items()
+            if nominal[link] > 0 and not 1 / LINK_MASS_FACTOR <= m / nominal[link] <= LINK_MASS_FACTOR
+        ]
+        total = sum(masses.values())
+        if odd or abs(total / total0 - 1) > TOTAL_MASS_RANGE:
+            out.append(
+                ResultWarning(
+                    "implausible_masses",
+                    f"the {key} fit's links weigh {total:.3g} kg in all (nominal {total0:.3g} kg)"
+                    + (f"; {', '.join(odd)}" if odd else "")
+                    + ": the data do not pin these masses and the fit put them where no real arm has them. Prefer a "
+                    "fit with the nominal model as a prior (its mass range, `[robot] mass_range`), or record motion "
+                    "that excites these links (`ident-opt excite`).",
+                )
+            )
+    return out

@@ -1,0 +1,76 @@
+"""`ident-opt export`: the identified arm as a robot description other tools load.
+
+    ident-opt export --problem P [--data D] [--estimator NAME] --format urdf|mjcf --out FILE
+
+Fits the arm on the problem's training trials (or every --data) with the fit the tool stands behind (its
+physically consistent one unless --estimator says otherwise) and writes it as a URDF (with a JSON sidecar
+FILE.json: every identified value with its standard error, the notes) or a MuJoCo MJCF: per moving link the
+identified mass, centre of mass and inertia; per joint viscous and Coulomb friction (URDF <dynamics damping
+friction>, MJCF damping and frictionloss) and armature (MJCF armature; URDF: in its comment and the sidecar).
+A planar two-link arm's grouped parameters are realised by one physically consistent set of rigid bodies, and the
+file says which values the data did not determine. Pinocchio (URDF) and MuJoCo (MJCF) reproduce the fit's torques
+from the file (`tests/test_export.py`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ident_opt import outputs
+from ident_opt.commands.common import add_problem_arguments, load, require, write_json
+from ident_opt.errors import InputError
+from ident_opt.export import identified, write_mjcf, write_urdf
+from ident_opt.problem import load_problem
+from ident_opt.studies.export import identified_arm
+
+#: The formats of --format, and the file ending each expects.
+FORMATS = {"urdf": ".urdf", "mjcf": ".xml"}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """--problem/--data/--json, --estimator, --format and --out."""
+    add_problem_arguments(parser)
+    parser.add_argument("--format", required=True, choices=tuple(FORMATS), help="urdf (with FILE.json) or mjcf")
+    parser.add_argument("--out", required=True, metavar="FILE", help="the robot description to write")
+    parser.add_argument(
+        "--estimator",
+        metavar="NAME",
+        help="the fit to export, among the arm's (default: its physically consistent one: constrained for the "
+        "planar arm, consistent for an n-joint arm)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Fit, realise, write, print what was written and the notes."""
+    problem = load_problem(args.problem)
+    require("export", problem)
+    robot = problem.robot
+    estimator = args.estimator or robot.default_estimator
+    if estimator not in robot.estimators:
+        raise InputError(
+            f"export: --estimator {estimator} is not a fit of this arm ({robot.described_as}); its fits: "
+            f"{', '.join(robot.estimators)}"
+        )
+    sidecar = Path(f"{args.out}.json")
+    if args.format == "urdf":
+        outputs.check_file_output(sidecar, "--out's sidecar")
+    loaded = load(args, "export", min_samples=2 * robot.model().n_params, problem=problem)
+    exported = identified_arm(robot, loaded.training, estimator)
+    record = {
+        **identified(exported.model.names, exported.fit.pi, exported.fit.se, estimator),
+        "problem": problem.name,
+        "trials": exported.trials,
+        "model": {"extensions": list(exported.model.extensions), **exported.model.settings()},
+        "not_determined": exported.fit.details.get("not_determined", []),
+    }
+    if args.format == "urdf":
+        written = list(write_urdf(exported.description, args.out, record))
+    else:
+        written = [write_mjcf(exported.description, args.out)]
+    notes = list(exported.description.notes)
+    print(f"ident-opt export: {robot.headline}; the {estimator} fit on {len(exported.trials)} trial(s)")
+    print("\n".join(f"  note: {line}" for line in notes))
+    print("wrote " + ", ".join(str(p) for p in written))
+    write_json(args.json, {**record, "format": args.format, "files": [str(p) for p in written], "notes": notes})
+    return 0
