@@ -18,7 +18,7 @@ from pathlib import Path
 
 from confusion_matrix import chain
 
-from ident_opt.diagnose import diagnose
+from ident_opt.diagnosis import diagnose
 from ident_opt.problem import load_problem
 from ident_opt.simulate import simulate_trial
 

@@ -34,11 +34,12 @@ from timing import best_time  # noqa: E402
 
 from ident_opt import codegen  # noqa: E402
 from ident_opt.commands.common import write_json  # noqa: E402
+from ident_opt.data import load_dataset  # noqa: E402
 from ident_opt.identify.base import fit_base_ols  # noqa: E402
 from ident_opt.identify.constrained import fit_constrained  # noqa: E402
 from ident_opt.identify.physical import fit_physical  # noqa: E402
 from ident_opt.problem import load_problem  # noqa: E402
-from ident_opt.studies import urdf as study  # noqa: E402
+from ident_opt.studies.trust import stats_of  # noqa: E402
 
 TIMING_LOOP = ROOT / "benchmarks" / "c" / "bench_urdf.c"
 TARGETS = {"regressor_samples_per_s": 1e5, "consistent_fit_s": 1.0, "tau_hat_ns": 2000.0}
@@ -104,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     q, dq, ddq = rng.uniform(-3, 3, size), rng.uniform(-2, 2, size), rng.uniform(-5, 5, size)
     arm.regressor(q[:1], dq[:1], ddq[:1])  # compiles the regressor if this machine has not yet
     compiled_rate, pinocchio_rate, setup_s = regressor_rates(arm, q, dq, ddq)
-    stats = study.stats_of(arm, study.load_trials(list(problem.data.training), problem))
+    stats = stats_of(arm, [load_dataset(p, problem.data, problem.robot) for p in problem.data.training])
     robot = problem.robot
     options = {"prior_weight": robot.prior_weight, "mass_range": robot.mass_range, "com_box": robot.com_box}
     consistent = fit_physical(stats, arm, **options)  # first call: cvxpy compiles the program

@@ -8,7 +8,7 @@ Compound trials hide two catalogue effects at once (every pair, `--pair-seeds` s
 use one drawn mode); the diagnosis must name exactly that set (`causes` of the JSON), each within tolerance.
 
 For every catalogue cause and seed, a simulated trial (the built-in simulator, the default problem's robot)
-hides that one effect at a random realistic magnitude (`ident_opt.diagnose.hidden.draw`); `none` trials are
+hides that one effect at a random realistic magnitude (`ident_opt.diagnosis.hidden.draw`); `none` trials are
 clean. The reference is the point-to-point `tud01` (like the real trials), except for causes that need slow
 motion (Stribeck friction), which get the reference their module names (`Effect.reference`, here `fourier`;
 `--trajectory auto`); a pair of causes that need different references gets `mixed` (both in turn). `diagnose`
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ident_opt.diagnose import CAUSES
+from ident_opt.diagnosis import CAUSES
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
 
@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def pair(job: tuple[tuple[str, str], int, float, str]) -> dict:
     """Simulate one trial hiding two effects and diagnose it: was exactly that set named, within tolerance?"""
-    from ident_opt.diagnose import diagnose, hidden
+    from ident_opt.diagnosis import diagnose, hidden
     from ident_opt.problem import load_problem
     from ident_opt.simulate import simulate_trial
 
@@ -76,7 +76,7 @@ def one(job: tuple) -> dict:
     """Simulate one hidden-effect trial and diagnose it. `job`: (cause, seed, duration, trajectory), and
     optionally a condition: {"simulate": extra `simulate_trial` keywords (rate, controller bandwidth, noise
     scale), "magnitude": a factor on the drawn magnitude, "background": background terms to switch on}."""
-    from ident_opt.diagnose import diagnose, hidden
+    from ident_opt.diagnosis import diagnose, hidden
     from ident_opt.problem import load_problem
     from ident_opt.simulate import simulate_trial
 
@@ -193,7 +193,7 @@ def table(results: list[dict], command: str, pairs: list[dict] | None = None) ->
         f"Regenerate: `{command}`",
         "",
         "Rows: the hidden (true) cause; columns: the cause `diagnose` named. Each trial hides one effect "
-        "at a random realistic magnitude (`ident_opt/diagnose/hidden.py`) in a simulated trial that follows "
+        "at a random realistic magnitude (`ident_opt/diagnosis/hidden.py`) in a simulated trial that follows "
         "the point-to-point `tud01` reference (like the real trials), except Stribeck friction, which is "
         "invisible there (joints cross low speeds in a few ms at 100 Hz) and gets the smooth `fourier` "
         "reference; a paired trial whose causes need different motion (Stribeck friction with any other) "

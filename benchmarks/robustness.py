@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from confusion_matrix import ROOT, chain, one
 
-from ident_opt.diagnose import CAUSES
+from ident_opt.diagnosis import CAUSES
 from ident_opt.effects import BACKGROUND
 from ident_opt.report import record
 

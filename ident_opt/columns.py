@@ -8,6 +8,8 @@ design) takes its names from here.
 
 from __future__ import annotations
 
+import numpy as np
+
 #: The per-joint signals of a trial, in the order the loader reports them.
 SIGNALS = ("q", "dq", "ddq", "tau", "i")
 #: The signals that give the load: joint torques or motor currents (one of the two per trial).
@@ -32,3 +34,12 @@ def data_columns(n_joints: int) -> tuple[str, ...]:
 def kinematic_columns(n_joints: int) -> tuple[str, ...]:
     """t, q1…qn, dq1…dqn, ddq1…ddqn: the columns of a motion without its load (a trajectory file)."""
     return ("t", *(name for signal in ("q", "dq", "ddq") for name in joint_columns(signal, n_joints)))
+
+
+def columns_of(signals: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Each signal's array (N, n) as one column per joint: {"q": (N, 2)} → {"q1": (N,), "q2": (N,)}."""
+    return {
+        name: array[:, j]
+        for signal, array in signals.items()
+        for j, name in enumerate(joint_columns(signal, array.shape[1]))
+    }

@@ -168,12 +168,13 @@ def _check_unique_header(frame: pd.DataFrame, path: Path, spec: DataSpec) -> Non
 
 
 def _locate(frame: pd.DataFrame, spec: DataSpec, path: Path, n_joints: int) -> dict[str, object]:
-    """Map each data-format column present in the file to its column label in `frame`."""
+    """Map each data-format column present in the file to its column label in `frame` (none for a name the
+    problem leaves unread, `[data.columns]` name = false, even when the file has a column of that name)."""
     found: dict[str, object] = {}
     names = data_columns(n_joints)
     for name in names:
         source = spec.columns.get(name, name if spec.header else None)
-        if source is None:
+        if source is None or name in spec.ignored:
             continue
         if isinstance(source, int) and spec.header:
             if source >= frame.shape[1]:
@@ -228,7 +229,12 @@ def _beyond(name: str, n_joints: int) -> bool:
     return match is not None and int(match.group(2)) > n_joints
 
 
-def _check_columns(cols: dict[str, object], frame: pd.DataFrame, path: Path, n_joints: int) -> str:
+def _unread(name: str, spec: DataSpec) -> str:
+    """Why column `name` is missing when the problem leaves it unread on purpose ("" otherwise), for messages."""
+    return f" (the problem leaves it unread: [data.columns] {name} = false)" if name in spec.ignored else ""
+
+
+def _check_columns(cols: dict[str, object], frame: pd.DataFrame, path: Path, n_joints: int, spec: DataSpec) -> str:
     """Required columns present, signals complete per joint, exactly one of torques/currents: its kind."""
     have = ", ".join(map(str, frame.columns[:30]))
     names = channel_names(n_joints)
@@ -239,24 +245,27 @@ def _check_columns(cols: dict[str, object], frame: pd.DataFrame, path: Path, n_j
             f"{path}: the file has columns of joints the arm does not have ({', '.join(extra[:8])}): the problem's "
             f"arm has {n_joints} joints; check the problem file's [robot] joints, or drop those columns"
         )
-    for required in ("t", *names["q"]):
-        if required not in cols:
-            raise InputError(
-                f"{path}: required column '{required}' is missing; the file has: {have}. "
-                "Map foreign names with [data.columns] in the problem file."
-            )
+    missing = [c for c in ("t", *names["q"]) if c not in cols]
+    if missing:
+        which = f"column '{missing[0]}' is" if len(missing) == 1 else f"columns {', '.join(map(repr, missing))} are"
+        raise InputError(
+            f"{path}: required {which} missing; the file has: {have}. "
+            "Map foreign names with [data.columns] in the problem file."
+        )
+    together = "come in pairs" if n_joints == 2 else f"come for all {n_joints} joints or none"
     present = {kind: [c for c in names[kind] if c in cols] for kind in ("tau", "i")}
     for kind, group in present.items():
         if 0 < len(group) < n_joints:
             missing = next(c for c in names[kind] if c not in group)
             raise InputError(
-                f"{path}: column '{missing}' is missing; torques ({', '.join(names['tau'])}) or currents "
-                f"({', '.join(names['i'])}) come in pairs; the file has: {have}"
+                f"{path}: column '{missing}' is missing{_unread(missing, spec)}; torques ({', '.join(names['tau'])}) "
+                f"or currents ({', '.join(names['i'])}) {together}; the file has: {have}"
             )
     if present["tau"] and present["i"]:
         raise InputError(
             f"{path}: the file has both torques ({', '.join(names['tau'])}) and currents ({', '.join(names['i'])}); "
-            "keep one pair or map only one of them with [data.columns]"
+            "keep one set, or leave the other unread in [data.columns] (e.g. "
+            f"{', '.join(f'{c} = false' for c in names['i'])} to read the torques)"
         )
     if not present["tau"] and not present["i"]:
         raise InputError(
@@ -267,7 +276,9 @@ def _check_columns(cols: dict[str, object], frame: pd.DataFrame, path: Path, n_j
         group = [c for c in names[kind] if c in cols]
         if 0 < len(group) < n_joints:
             missing = next(c for c in names[kind] if c not in group)
-            raise InputError(f"{path}: column '{missing}' is missing; {' and '.join(names[kind])} come in pairs")
+            raise InputError(
+                f"{path}: column '{missing}' is missing{_unread(missing, spec)}; {' and '.join(names[kind])} {together}"
+            )
     return "tau" if present["tau"] else "i"
 
 
@@ -343,14 +354,21 @@ def _check_plausible(
 
 
 def _current_to_torque(robot: Robot, path: Path) -> np.ndarray:
-    """Joint-side torque per ampere per joint [N m/A]; an error naming the joint's table when the problem lacks it."""
+    """Joint-side torque per ampere per joint [N m/A] (torque constant × gear ratio); an error naming every
+    joint's table that lacks one of the two."""
     k = [j.current_to_torque for j in robot.joints]
-    missing = [table for table, v in zip(robot.joint_tables, k) if v is None]
-    if missing:
+    lacking = [
+        f"[robot.{table}] gives no "
+        + " and no ".join(key for key in ("torque_constant", "gear_ratio") if getattr(joint, key, None) is None)
+        for table, joint, v in zip(robot.joint_tables, robot.joints, k)
+        if v is None
+    ]
+    if lacking:
         torques = ", ".join(channel_names(robot.n_joints)["tau"])
         raise InputError(
-            f"{path}: the file logs motor currents, but [robot.{missing[0]}] gives no torque_constant and "
-            f"gear_ratio to turn them into torques; add both, or log joint torques ({torques})"
+            f"{path}: the file logs motor currents, but {'; '.join(lacking)}: a current becomes a joint torque as "
+            f"current × torque_constant × gear_ratio, so every joint needs both; add them, or log joint torques "
+            f"({torques})"
         )
     return np.array(k, dtype=float)
 
@@ -384,7 +402,7 @@ def load_dataset(
     frame, spec = _standard_layout(frame, spec)
     _check_unique_header(frame, path, spec)
     cols = _locate(frame, spec, path, n_joints)
-    load_kind = _check_columns(cols, frame, path, n_joints)
+    load_kind = _check_columns(cols, frame, path, n_joints, spec)
 
     bad = np.zeros(len(frame), dtype=bool)
     values = {name: _numeric(frame, label, name, path, spec, drop_invalid, bad) for name, label in cols.items()}

@@ -1,17 +1,19 @@
 """The paper's three torque models and ours, each alone or with a GMR residual, behind one interface.
 
-Every model has `fit(train: Dataset) -> self` and `predict(data: Dataset) -> τ̂ (N, 2)` [N m]; hybrids
-(`+gmr`) also have `predict_interval(data) -> (τ̂, σ)` with σ (N, 2) the predictive standard deviation of
-each joint [N m] (from the GMR's mixture covariance).
+Every model has `fit(train: Dataset) -> self` and `predict(data: Dataset) -> τ̂ (N, n)` [N m]; hybrids
+(`+gmr`) also have `predict_interval(data) -> (τ̂, σ)` with σ (N, n) the predictive standard deviation of
+each joint [N m] (from the GMR's mixture covariance). n is the arm's number of joints.
 
 | key           | model                                                                                  |
 |---------------|----------------------------------------------------------------------------------------|
 | `rr`          | ridge regression on [q, dq, ddq] with an intercept (the paper's Model 1, black box)    |
-| `dm`          | datasheet rigid-body model, the paper's convention and printed G (its Model 2)         |
-| `dm_physical` | datasheet rigid-body model read physically (joint-2 armature, reflected friction)      |
+| `dm`          | the arm's nominal model (`Robot.datasheets`, its first): the planar arm's datasheet in |
+|               | the paper's convention with its printed G (its Model 2); an n-joint arm's URDF         |
+| `dm_<name>`   | the arm's other nominal models: `dm_physical`, the planar datasheet read physically    |
 | `pbr`         | OLS-identified rigid-body model (the paper's Model 3, gray box)                        |
-| `cpbr`        | physically consistent constrained fit (M(q) ≻ 0 for all q, friction ≥ 0)               |
-| `<key>+gmr`   | the same plus a GMR on x = [q, dq, ddq] → r = τ − τ̂ (both joints in one mixture)       |
+| `cpbr`        | the arm's physically consistent fit (`Robot.default_estimator`: the planar arm's       |
+|               | constrained fit, M(q) ≻ 0 for all q; an n-joint arm's plausible consistent fit)        |
+| `<key>+gmr`   | the same plus a GMR on x = [q, dq, ddq] → r = τ − τ̂ (every joint in one mixture)       |
 """
 
 from __future__ import annotations
@@ -22,8 +24,8 @@ from typing import Protocol
 import numpy as np
 from sklearn.linear_model import RidgeCV
 
-from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi
-from ident_opt.arm.planar import PAPER, PHYSICAL, RIGID, PlanarArm
+from ident_opt.arm.base import Arm
+from ident_opt.arm.planar import RIGID
 from ident_opt.data import Dataset
 from ident_opt.gmr import GMR
 from ident_opt.identify import estimators
@@ -32,12 +34,19 @@ from ident_opt.problem.spec import ResidualSpec
 
 #: Ridge penalties searched by (efficient leave-one-out) cross-validation.
 RIDGE_ALPHAS = tuple(np.logspace(-4, 4, 17))
-#: The identified rigid-body models: key -> estimator (`ident_opt.identify.estimators`).
-FITTED = {"pbr": "ols", "cpbr": "constrained"}
-#: The datasheet models: convention -> (key, the arm it is evaluated with). The paper's is evaluated with
-#: its printed gravity vector, as its Model 2 was (that is what reproduces its DM row); the physical
-#: reading carries the joint-2 armature.
-DATASHEETS = {"paper": ("dm", PAPER), "physical": ("dm_physical", PHYSICAL)}
+
+
+def fitted(robot) -> dict[str, str]:
+    """The identified rigid-body models: key -> estimator (`ident_opt.identify.estimators`): pbr by OLS, cpbr by
+    the arm's physically consistent fit."""
+    return {"pbr": "ols", "cpbr": robot.default_estimator}
+
+
+def datasheet_keys(robot) -> dict[str, str]:
+    """Model key -> the name of the robot's nominal model (`Robot.datasheets`): its first is "dm" (the planar arm's
+    paper-convention datasheet, the paper's Model 2), the others "dm_<name>" (the planar arm's "dm_physical")."""
+    names = list(robot.datasheets())
+    return {("dm" if i == 0 else f"dm_{name}"): name for i, name in enumerate(names)}
 
 
 class TorqueModel(Protocol):
@@ -51,8 +60,8 @@ class TorqueModel(Protocol):
 
 
 def features(data: Dataset) -> np.ndarray:
-    """The kinematic input x = [q1 q2 dq1 dq2 ddq1 ddq2] (N, 6) [rad, rad/s, rad/s²] of a trial (anything
-    with q, dq, ddq (N, 2)): the input of the ridge model and of every GMR residual."""
+    """The kinematic input x = [q1 … qn, dq1 … dqn, ddq1 … ddqn] (N, 3n) [rad, rad/s, rad/s²] of a trial (anything
+    with q, dq, ddq (N, n)): the input of the ridge model and of every GMR residual."""
     return np.hstack([data.q, data.dq, data.ddq])
 
 
@@ -75,7 +84,7 @@ class RidgeModel:
         return self
 
     def predict(self, data: Dataset) -> np.ndarray:
-        """τ̂ (N, 2) [N m]."""
+        """τ̂ (N, n) [N m]."""
         return self._reg.predict(features(data))
 
 
@@ -89,9 +98,10 @@ class RigidModel:
     """
 
     key: str
-    arm: PlanarArm = RIGID
+    arm: Arm = RIGID
     pi: np.ndarray | None = None
     estimator: str | None = None
+    options: dict = field(default_factory=dict)  # what the estimator takes from the arm's description
     fit_: object = field(init=False, default=None)
 
     def fit(self, train: Dataset) -> RigidModel:
@@ -99,12 +109,12 @@ class RigidModel:
         if self.estimator is None:
             return self
         stats = Stats.from_data(self.arm, train.q, train.dq, train.ddq, train.tau)
-        self.fit_ = estimators.fit(self.estimator, stats, self.arm)
+        self.fit_ = estimators.fit(self.estimator, stats, self.arm, **self.options)
         self.pi = np.asarray(self.fit_.pi, dtype=float)
         return self
 
     def predict(self, data: Dataset) -> np.ndarray:
-        """τ̂ (N, 2) [N m]."""
+        """τ̂ (N, n) [N m]."""
         return self.arm.predict(self.pi, data.q, data.dq, data.ddq)
 
     def params(self) -> dict[str, float]:
@@ -112,10 +122,12 @@ class RigidModel:
         return self.arm.as_dict(self.pi)
 
 
-def datasheet_model(robot: PlanarRobot, convention: str) -> RigidModel:
-    """The datasheet model: the paper's (its printed G, key `dm`) or the physical reading (`dm_physical`)."""
-    key, arm = DATASHEETS[convention]
-    return RigidModel(key, arm, arm.vector(datasheet_pi(robot, convention)))
+def datasheet_model(robot, name: str) -> RigidModel:
+    """The robot's nominal model `name` (`Robot.datasheets`: "paper", "physical", "urdf"), keyed as in
+    `datasheet_keys`, with its arm and π."""
+    arm, pi = robot.datasheets()[name]
+    key = next(k for k, n in datasheet_keys(robot).items() if n == name)
+    return RigidModel(key, arm, pi)
 
 
 # ---------------------------------------------------------------------------------------------- hybrid
@@ -143,11 +155,11 @@ class HybridModel:
         return self
 
     def predict(self, data: Dataset) -> np.ndarray:
-        """τ̂ (N, 2) [N m]."""
+        """τ̂ (N, n) [N m]."""
         return self.base.predict(data) + self.gmr.predict_mean(features(data))
 
     def predict_interval(self, data: Dataset) -> tuple[np.ndarray, np.ndarray]:
-        """τ̂ and the predictive standard deviation per joint, both (N, 2) [N m]."""
+        """τ̂ and the predictive standard deviation per joint, both (N, n) [N m]."""
         mean, std = self.gmr.predict_std(features(data))
         return self.base.predict(data) + mean, std
 
@@ -172,11 +184,13 @@ def make_gmr(
     )
 
 
-def parametric_models(robot: PlanarRobot, constrained: bool = True) -> list:
-    """Fresh, unfitted parametric models in report order: rr, dm, dm_physical, pbr (, cpbr)."""
-    fitted = {key: name for key, name in FITTED.items() if constrained or name != "constrained"}
+def parametric_models(robot, constrained: bool = True) -> list:
+    """Fresh, unfitted parametric models in report order: rr, the nominal models (dm, dm_…), pbr (, cpbr), the
+    fitted ones on the arm's rigid model (`Robot.model(())`) with the options its description gives them."""
+    arm = robot.model(())
+    models = {key: name for key, name in fitted(robot).items() if constrained or key != "cpbr"}
     return [
         RidgeModel(),
-        *(datasheet_model(robot, convention) for convention in DATASHEETS),
-        *(RigidModel(key, RIGID, estimator=name) for key, name in fitted.items()),
+        *(datasheet_model(robot, name) for name in datasheet_keys(robot).values()),
+        *(RigidModel(key, arm, estimator=name, options=robot.fit_options(name)) for key, name in models.items()),
     ]

@@ -42,12 +42,13 @@ import casadi as ca
 import numpy as np
 
 from ident_opt.arm.planar import RIGID
+from ident_opt.columns import kinematic_columns
 from ident_opt.errors import InputError
 from ident_opt.gmr import Support, conditioning, input_log_density
 from ident_opt.identify import estimators
 from ident_opt.identify.bounded import Bounds, WarmBoundedLS, WarmConsistentLS, default_bounds
 from ident_opt.identify.stats import Stats
-from ident_opt.models import DATASHEETS, FITTED, RidgeModel, datasheet_model, features, make_gmr
+from ident_opt.models import RidgeModel, datasheet_keys, datasheet_model, features, fitted, make_gmr
 
 #: z-value of the central 95 % interval of a Gaussian.
 Z95 = 1.959963984540054
@@ -402,18 +403,19 @@ class Start:
 def offline_start(key: str, problem, train, bounds: Bounds | None = None, margin: float = 1e-6) -> Start:
     """The offline fit of one model on the training trial (`ident_opt.models` for RR's penalty and the
     datasheet π): rr — ridge with the per-joint penalty RidgeCV picks; dm, dm_physical — the datasheet
-    (fixed); pbr, cpbr — their estimator (`models.FITTED`) followed online as `estimators.ONLINE` says: box-
+    (fixed); pbr, cpbr — their estimator (`models.fitted`) followed online as `estimators.ONLINE` says: box-
     bounded LS (`identify.bounded.default_bounds` unless `bounds`), or M(q) ⪰ margin·I for all q [kg m²]
     with the same box."""
     if key == "rr":
         return _ridge_start(train)
-    datasheets = {k: convention for convention, (k, _) in DATASHEETS.items()}
+    datasheets = datasheet_keys(problem.robot)
     if key in datasheets:
         dm = datasheet_model(problem.robot, datasheets[key])
         return Start(key, dm.arm.regressor, Estimator("fixed"), dm.pi, dm.arm.names, arm_design_jacobian(dm.arm))
-    if key not in FITTED:
+    estimators_of = fitted(problem.robot)
+    if key not in estimators_of:
         raise ValueError(f"unknown online model {key!r}; known: {', '.join(MODEL_KEYS)}")
-    estimator = online_estimator(FITTED[key], bounds or default_bounds(RIGID), margin)
+    estimator = online_estimator(estimators_of[key], bounds or default_bounds(RIGID), margin)
     stats = Stats.from_data(RIGID, train.q, train.dq, train.ddq, train.tau)
     theta0 = batch_theta(estimator, stats)
     return Start(key, RIGID.regressor, estimator, theta0, RIGID.names, arm_design_jacobian(RIGID))
@@ -431,10 +433,12 @@ def online_estimator(name: str, bounds: Bounds, margin: float = 1e-6) -> Estimat
 def _ridge_start(train) -> Start:
     """RR: the ridge RidgeCV fits offline, as θ = [c1, w1, c2, w2] of `kinematic_design`."""
     ridge = RidgeModel().fit(train)
-    alpha = np.broadcast_to(ridge.alpha_, (2,))
-    penalty = np.concatenate([np.r_[0.0, np.full(6, a)] for a in alpha])  # intercepts unpenalised
-    theta0 = np.concatenate([np.r_[ridge.intercept_[j], ridge.coef_[j]] for j in range(2)])
-    names = tuple(f"{w}_{j}" for j in (1, 2) for w in ("c", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2"))
+    n = train.q.shape[1]
+    features = kinematic_columns(n)[1:]
+    alpha = np.broadcast_to(ridge.alpha_, (n,))
+    penalty = np.concatenate([np.r_[0.0, np.full(len(features), a)] for a in alpha])  # intercepts unpenalised
+    theta0 = np.concatenate([np.r_[ridge.intercept_[j], ridge.coef_[j]] for j in range(n)])
+    names = tuple(f"{w}_{j + 1}" for j in range(n) for w in ("c", *features))
     return Start("rr", kinematic_design, Estimator("ridge", penalty=penalty), theta0, names, _kinematic_jacobian)
 
 

@@ -56,7 +56,8 @@ class BadLine(ValueError):
 class Mapping:
     """How stream columns become standard names: `columns` {standard name: column name or 0-based index},
     `conversions` {standard name: (scale, offset)} (value = scale × raw + offset), `header`: whether a CSV
-    stream is expected to start with a header line (the problem's `[data] header`)."""
+    stream is expected to start with a header line (the problem's `[data] header`), `ignored`: standard names
+    never read from a CSV header (`[data.columns]` name = false)."""
 
     columns: dict[str, str | int] = field(default_factory=dict)
     conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
@@ -64,14 +65,16 @@ class Mapping:
     #: after the conversions, name -> (scale, offset) to ident-opt's angle convention: a two-joint URDF arm's
     #: samples come in the URDF's (`UrdfPlanarRobot.column_map`, as `data.load_dataset` applies it)
     to_tool: dict[str, tuple[float, float]] = field(default_factory=dict)
+    ignored: frozenset[str] = frozenset()
 
     @classmethod
     def from_spec(cls, spec, robot=None) -> Mapping:
         """From a problem's `DataSpec`, restricted to the names the stream reads (and its robot's map from a
-        URDF's angle convention, if it has one)."""
+        URDF's angle convention, if it has one), with the names it leaves unread."""
         cols = {k: v for k, v in spec.columns.items() if k in STANDARD}
         conv = {k: v for k, v in spec.conversions.items() if k in cols}
-        return cls(cols, conv, bool(spec.header), dict(robot.column_map) if robot is not None else {})
+        to_tool = dict(robot.column_map) if robot is not None else {}
+        return cls(cols, conv, bool(spec.header), to_tool, frozenset(spec.ignored))
 
     def resolve_header(self, header: list[str]) -> tuple[dict[str, int], dict[str, tuple[float, float]]]:
         """{standard name: position} for a CSV header, and the conversions that apply; `InputError` when
@@ -82,12 +85,13 @@ class Mapping:
             twice = next(n for n in names if names.count(n) > 1)
             raise InputError(f"stream: column '{twice}' appears twice in the CSV header")
         fits = bool(self.columns) and all(isinstance(v, str) and v in names for v in self.columns.values())
+        by_name = [n for n in STANDARD if n in names and n not in self.ignored]  # a name left unread is not read
         if fits:
             found = {k: names.index(v) for k, v in self.columns.items()}
-            found.update({n: names.index(n) for n in STANDARD if n in names and n not in found})
+            found.update({n: names.index(n) for n in by_name if n not in found})
             return found, dict(self.conversions)
         if set(Q) <= set(names):
-            return {n: names.index(n) for n in STANDARD if n in names}, {}
+            return {n: names.index(n) for n in by_name}, {}
         found = {}
         for k, v in self.columns.items():
             if isinstance(v, int):

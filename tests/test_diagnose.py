@@ -14,7 +14,7 @@ import json
 import numpy as np
 import pytest
 
-from ident_opt.diagnose import CAUSES, diagnose, hidden
+from ident_opt.diagnosis import CAUSES, diagnose, hidden
 
 DURATION = 60.0
 FAST_DURATION = 30.0  # fast-sampled trials: 5-20x the samples per second, so half the length keeps the signal

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from ident_opt.diagnose import diagnose, hidden, report
+from ident_opt.diagnosis import diagnose, hidden, report
 
 
 def _run(robot, effects: list[str], **kwargs):

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident_opt.diagnose import diagnose, hidden
-from ident_opt.diagnose.candidates import hac_lag
+from ident_opt.diagnosis import diagnose, hidden
+from ident_opt.diagnosis.candidates import hac_lag
 
 
 def test_hac_lag_grows_with_the_residuals_correlation():

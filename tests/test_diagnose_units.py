@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from ident_opt.data import Dataset
-from ident_opt.diagnose import linear, scoring, signals
-from ident_opt.diagnose.diagnosis import at_rest
+from ident_opt.diagnosis import linear, scoring, signals
+from ident_opt.diagnosis.loop import at_rest
 from ident_opt.effects.elasticity import ELASTIC_BAND_HZ
 
 
@@ -158,7 +158,7 @@ def test_at_rest_zeroes_filter_ringing_but_not_a_smooth_reversal():
 
 def test_residual_evidence_reads_direction_and_pose(physical_problem):
     """A residual made of a direction-dependent step plus a gravity-like term shows in the right features."""
-    from ident_opt.diagnose.evidence import residual_evidence
+    from ident_opt.diagnosis.evidence import residual_evidence
 
     dt = 0.01
     t = np.arange(6000) * dt
@@ -180,8 +180,8 @@ def test_residual_evidence_reads_direction_and_pose(physical_problem):
 def test_forward_simulation_error_separates_right_from_wrong_parameters(physical_problem):
     """Driven by the measured torque, the true model tracks short windows; a 50 % inertia error does not."""
     from ident_opt.arm.datasheet import datasheet_pi
-    from ident_opt.diagnose.candidates import NOMINAL
-    from ident_opt.diagnose.evidence import forward_error
+    from ident_opt.diagnosis.candidates import NOMINAL
+    from ident_opt.diagnosis.evidence import forward_error
     from ident_opt.simulate import simulate_trial
 
     robot = physical_problem.robot
@@ -209,7 +209,7 @@ def test_trapezoid_step_is_the_deflection_filter_exactly():
     for sample, from the filter's zero-history initial state."""
     import math
 
-    from ident_opt.diagnose.elastic_nlp import trapezoid_step
+    from ident_opt.diagnosis.elastic_nlp import trapezoid_step
 
     dt, f, zeta = 0.01, 4.3, 0.03
     u = np.random.default_rng(1).normal(size=600)
@@ -241,7 +241,7 @@ def _elastic_problem(n=3000, dt=0.01, f=5.0, zeta=0.04, seed=2):
 
 
 def test_elastic_polish_recovers_the_mode_from_a_wrong_start():
-    from ident_opt.diagnose.elastic_nlp import polish
+    from ident_opt.diagnosis.elastic_nlp import polish
 
     u, P, target, X_rigid, labels, beta, dt = _elastic_problem()
     start = {"frequency_hz": 5.3, "damping": 0.07}  # 6 % and 75 % off: where a coarse grid could leave it
@@ -255,7 +255,7 @@ def test_elastic_polish_recovers_the_mode_from_a_wrong_start():
 
 def test_offset_polish_recovers_both_offsets_jointly_with_pi(physical_problem):
     from ident_opt.arm.datasheet import datasheet_pi
-    from ident_opt.diagnose.candidates import NOMINAL
+    from ident_opt.diagnosis.candidates import NOMINAL
     from ident_opt.effects.joint_offset import offsets
 
     rng = np.random.default_rng(3)
@@ -277,7 +277,7 @@ def test_an_auto_cutoff_filters_the_torque_at_the_cutoff_the_trial_was_read_with
     cut-off is used, as if it had been given as a number (this raised a TypeError before)."""
     from dataclasses import replace
 
-    from ident_opt.diagnose.diagnosis import prepare
+    from ident_opt.diagnosis.loop import prepare
 
     rng = np.random.default_rng(0)
     t = np.arange(2000) * 0.002
@@ -293,7 +293,7 @@ def test_an_auto_cutoff_filters_the_torque_at_the_cutoff_the_trial_was_read_with
 def test_physical_units_undo_a_torque_scale_exactly_on_one_row_columns():
     """τ_logged = τ / s: a coefficient on joint j's row alone is fitted as β / s_j and read back as β; a
     column on both rows gets s averaged by its energy on each row."""
-    from ident_opt.diagnose.candidates import physical_units
+    from ident_opt.diagnosis.candidates import physical_units
 
     rng = np.random.default_rng(0)
     n, s = 500, np.array([0.8, 1.25])

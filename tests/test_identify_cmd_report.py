@@ -6,7 +6,7 @@ import pytest
 
 from ident_opt.paper import NMSE_RANGE as PAPER_NMSE_RANGE
 from ident_opt.paper import RMSE as PAPER_RMSE
-from ident_opt.report.identify import reproduction_frame
+from ident_opt.report.identify_tables import reproduction_frame
 from ident_opt.studies.identify import IdentifyResult
 from ident_opt.studies.protocols import ProtocolResult
 

@@ -74,8 +74,7 @@ def test_unknown_estimator_is_named():
 def test_codegen_offers_exactly_the_registered_estimators():
     codegen = build_parser()._subparsers._group_actions[0].choices["codegen"]
     choices = next(a.choices for a in codegen._actions if a.dest == "estimator")
-    # The registry's estimators, plus "consistent": the plausible fit of URDF arms (commands/urdf.py).
-    assert set(choices) == set(estimators.ESTIMATORS) | {"consistent"}
+    assert set(choices) == set(estimators.ESTIMATORS)
 
 
 def test_calibrate_needs_a_simulate_section(capsys):

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from ident_opt.arm.chain import ChainArm
+from ident_opt.consistency import necessarily_nonnegative
 from ident_opt.identify.base import base_parameters, fit_base_ols, random_regressor
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.studies.urdf import necessarily_nonnegative
 
 KUKA = Path(__file__).resolve().parents[1] / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"
 

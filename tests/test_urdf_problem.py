@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
@@ -12,7 +11,6 @@ import pytest
 
 from ident_opt.arm.chain import ChainRobot
 from ident_opt.cli import main
-from ident_opt.commands import urdf as commands
 from ident_opt.data import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
@@ -122,14 +120,15 @@ def test_comparison_on_a_time_split_keeps_the_json_contract(tmp_path):
 
 def test_identify_writes_its_report(tmp_path):
     problem = load_problem(KUKA_PROBLEM)
-    args = argparse.Namespace(
-        data=[str(problem.data.training[0])], allow_implausible=False, drop_invalid=False, weights="ols",
-        out=str(tmp_path), json=None,
-    )  # fmt: skip
-    assert commands.identify(args, problem) == 0
-    result = json.loads((tmp_path / "identify.json").read_text())
-    assert set(result["metrics"]["fit"]) == {"ols", "constrained", "consistent", "cad"}
-    assert "m_lwr_1_link" in result["se"]["consistent"] and (tmp_path / "identify.md").is_file()
+    out, result_path = tmp_path / "out", tmp_path / "identify.json"
+    argv = ["identify", "--problem", str(KUKA_PROBLEM), "--data", str(problem.data.training[0])]
+    assert main([*argv, "--out", str(out), "--json", str(result_path)]) == 0
+    result = json.loads(result_path.read_text())
+    assert set(result["metrics"]) == {"chronological"} and result["joints"] == JOINTS
+    assert {"pbr", "cpbr", "dm", "rr", "pbr+gmr"} <= set(result["metrics"]["chronological"]["rmse"])
+    assert all(len(v) == 7 for v in result["metrics"]["chronological"]["nmse"].values())
+    assert "m_lwr_1_link" in result["standard_errors"]["consistent"] and (out / "README.md").is_file()
+    assert isinstance(result["warnings"], list)
 
 
 def test_optional_robot_keys(tmp_path):

@@ -257,6 +257,11 @@ class Robot(Protocol):
         """A published identification's parameters by name as (arm, π); an unknown name is an InputError."""
         ...
 
+    def reference_urdf(self, urdf) -> dict[str, float]:
+        """A published identification given as a URDF of the same arm, as this arm's parameters by name
+        (InputError when the arm's parameters cannot be read from one)."""
+        ...
+
     def limits(self) -> dict[str, tuple[float | None, ...]]:
         """Defaults for `[limits]` from the description (a URDF's <limit>): key → one value per joint."""
         ...

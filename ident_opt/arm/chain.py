@@ -523,6 +523,31 @@ class ChainRobot:
             )
         return self.arm, self.arm.vector(parameters)
 
+    def reference_urdf(self, urdf: Path) -> dict[str, float]:
+        """A published identification given as a URDF of the same arm, as this arm's standard parameters by name.
+        Link k's inertials (as Pinocchio merges them into its frame: m [kg], m c [kg m], the inertia about the
+        frame's origin [kg m²]) are this arm's link k's, whatever the reference calls it; each joint's <dynamics>
+        damping and friction are fv_<joint> [N m s/rad] and fc_<joint> [N m] (0 left out). The file must have
+        this arm's joints, by name, as one serial chain (an InputError naming the file otherwise)."""
+        model = self.arm
+        _, _, links = parse_urdf(Path(urdf))
+        base = self.base if self.base in links else None  # the same arm may call its base otherwise
+        arm = ChainArm(str(urdf), self.joint_names, self.gravity, base)
+        count = model.n_link_params  # link parameters come first, link by link, in both arms
+        parameters = dict(zip(model.names[:count], map(float, arm.cad_parameters()[:count])))
+        for name in self.joint_names:
+            for prefix, attribute in (("fv", "damping"), ("fc", "friction")):
+                value = getattr(arm.urdf_joints[name], attribute)
+                if not value:
+                    continue
+                if f"{prefix}_{name}" not in model.names:
+                    raise InputError(
+                        f"<joint name={name!r}> has <dynamics {attribute}={value:g}>, but the problem's model has no "
+                        "friction terms ([robot] friction = false); set friction = true to compare with it"
+                    )
+                parameters[f"{prefix}_{name}"] = float(value)
+        return parameters
+
     def limits(self) -> dict[str, tuple[float | None, ...]]:
         """`[limits]` defaults from each joint's URDF <limit>: position_min/max [rad] (lower, upper), velocity
         [rad/s], torque [N m] (effort); None for a joint whose <limit> lacks the value, a key absent when no

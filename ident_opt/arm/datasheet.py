@@ -185,6 +185,14 @@ class PlanarRobot:
             raise InputError(f"[reference.parameters]: unknown parameter '{unknown[0]}'; known: {', '.join(arm.names)}")
         return arm, arm.vector(parameters)
 
+    def reference_urdf(self, urdf) -> dict[str, float]:
+        """A URDF reference: refused, the planar arm's parameters are grouped (a1, a2, …), not per link."""
+        raise InputError(
+            "a URDF reference needs an arm with n joints from a URDF, and this problem's robot is "
+            f"{self.described_as}, whose parameters are grouped (a1, a2, …); give them by name in "
+            "[reference.parameters]"
+        )
+
     def limits(self) -> dict[str, tuple[float, ...]]:
         """Defaults of `[limits]` the description gives: none."""
         return {}

@@ -56,7 +56,7 @@ from ident_opt.arm.urdf import SANE, UrdfJoint, parse_urdf
 from ident_opt.errors import InputError
 
 if TYPE_CHECKING:  # the arm descriptions call these functions (`Robot.bodies`): named for the type checker only
-    from ident_opt.arm.chain import ChainRobot
+    from ident_opt.arm.chain import ChainArm, ChainRobot
     from ident_opt.arm.datasheet import PlanarRobot
 
 #: The planar export's joint axis (before each joint's sign): counter-clockwise in the x–z plane, seen from −y.
@@ -98,9 +98,21 @@ def _undetermined_note(names: Sequence[str]) -> list[str]:
     ]
 
 
-def _finish(description: RobotDescription, strict: bool, problems: Sequence[str] = ()) -> RobotDescription:
-    """The description, or (strict) an InputError listing why no physical robot has it; not strict: those reasons
-    as notes (module doc)."""
+def _finish(
+    description: RobotDescription,
+    problems: Sequence[str] = (),
+    *,
+    name: str | None = None,
+    undetermined: Sequence[str] = (),
+    strict: bool = True,
+) -> RobotDescription:
+    """What both realisations end with: the description under `name` (default: its own), the parameters the data
+    did not determine (`undetermined`, names) said in its notes; then the description, or (`strict`) an InputError
+    listing why no physical robot has it (`problems` and its `violations`); not strict: those reasons as notes
+    (module doc)."""
+    description = replace(
+        description, name=name or description.name, notes=(*description.notes, *_undetermined_note(undetermined))
+    )
     reasons = [*problems, *description.violations()]
     if not reasons:
         return description
@@ -113,17 +125,10 @@ def _finish(description: RobotDescription, strict: bool, problems: Sequence[str]
 
 
 # ---------------------------------------------------------------------------------------------- n-joint chain
-def chain_bodies(
-    robot: ChainRobot,
-    pi: np.ndarray,
-    *,
-    name: str | None = None,
-    undetermined: Sequence[str] = (),
-    strict: bool = True,
-) -> RobotDescription:
+def chain_bodies(robot: ChainRobot, pi: np.ndarray, **options) -> RobotDescription:
     """The n-joint arm `robot` with the standard parameters and joint terms π (`robot.arm.names`) as rigid bodies
-    (module doc). `name`: the robot's (default: the URDF's); `undetermined`: parameter names the data did not
-    determine, said in the notes; `strict`: refuse a π no physical robot has (module doc)."""
+    (module doc). `options` (`_finish`): `name` (default: the URDF's); `undetermined`, parameter names the data did
+    not determine, said in the notes; `strict`, refuse a π no physical robot has (module doc)."""
     arm = robot.arm
     pi = _checked(pi, arm.names, str(robot.urdf))
     model, n = arm._model, arm.n_joints
@@ -134,26 +139,9 @@ def chain_bodies(
     C = arm.drive_matrix
     own = [bool(np.array_equal(C[j], np.eye(n)[j])) for j in range(n)]  # the drive turns its own joint only
     base = _root_link(arm.urdf_joints, arm.urdf_joints[arm.joints[0]].parent)
-    joints = []
-    for i, joint in enumerate(arm.joints):
-        limit = arm.urdf_joints[joint].limit
-        joints.append(
-            Joint(
-                joint,
-                base if i == 0 else arm.links[model.parents[i + 1] - 1],
-                arm.links[i],
-                Origin.of(model.jointPlacements[i + 1]),
-                vector3(arm.chain[i].axis),
-                lower=limit.get("lower"),
-                upper=limit.get("upper"),
-                velocity=limit.get("velocity"),
-                effort=limit.get("effort"),
-                damping=float(fv[i]) if own[i] else 0.0,
-                friction=float(fc[i]) if own[i] else 0.0,
-                armature=float(ia[i]) if own[i] else 0.0,
-                offset=float(off[i]),
-            )
-        )
+    joints = [
+        _chain_joint(arm, i, base, (fv[i], fc[i], ia[i]) if own[i] else (0.0, 0.0, 0.0), off[i]) for i in range(n)
+    ]
     drives = tuple(
         Drive(
             f"{arm.joints[m]}_drive",
@@ -173,10 +161,9 @@ def chain_bodies(
         "joint torques determine only combinations of the standard parameters (the base parameters): these link "
         "values are one set with the fit's combinations, and the fit's own choice (e.g. its prior's) where the data "
         "are silent",
-        *_undetermined_note(undetermined),
     ]
     description = RobotDescription(
-        name or ET.parse(arm.urdf).getroot().get("name") or "robot",
+        ET.parse(arm.urdf).getroot().get("name") or "robot",
         base,
         tuple(links),
         tuple(joints),
@@ -185,7 +172,29 @@ def chain_bodies(
         drives,
         tuple(notes),
     )
-    return _finish(description, strict)
+    return _finish(description, **options)
+
+
+def _chain_joint(arm: ChainArm, i: int, base: str, drive: tuple[float, float, float], offset: float) -> Joint:
+    """Joint i of the chain: its links, origin and axis (Pinocchio's model of the URDF), its URDF <limit>, the
+    (damping, friction, armature) of its own drive and its constant offset [N m]."""
+    joint, model = arm.joints[i], arm._model
+    limit = arm.urdf_joints[joint].limit
+    return Joint(
+        joint,
+        base if i == 0 else arm.links[model.parents[i + 1] - 1],
+        arm.links[i],
+        Origin.of(model.jointPlacements[i + 1]),
+        vector3(arm.chain[i].axis),
+        lower=limit.get("lower"),
+        upper=limit.get("upper"),
+        velocity=limit.get("velocity"),
+        effort=limit.get("effort"),
+        damping=float(drive[0]),
+        friction=float(drive[1]),
+        armature=float(drive[2]),
+        offset=float(offset),
+    )
 
 
 def link_body(name: str, p: np.ndarray, where: str = "") -> Body:
@@ -332,19 +341,11 @@ def _planar_names(robot: PlanarRobot) -> tuple[str, str, tuple[str, str], tuple[
     return "planar_two_link_arm", "base_link", ("link1", "link2"), tuple(robot.joint_names)
 
 
-def planar_bodies(
-    robot: PlanarRobot,
-    arm: PlanarArm,
-    pi: np.ndarray,
-    *,
-    name: str | None = None,
-    undetermined: Sequence[str] = (),
-    strict: bool = True,
-) -> RobotDescription:
+def planar_bodies(robot: PlanarRobot, arm: PlanarArm, pi: np.ndarray, **options) -> RobotDescription:
     """The planar two-link `robot` with the grouped parameters π of `arm` (`arm.names`) as rigid bodies (module
-    doc: the exact realisation, its free choices and what it says it could not determine). `name`: the robot's
-    (default: its URDF's, else "planar_two_link_arm"); `undetermined`: parameter names the data did not
-    determine, said in the notes; `strict`: refuse a π no physical arm has."""
+    doc: the exact realisation, its free choices and what it says it could not determine). `options` (`_finish`):
+    `name` (default: its URDF's, else "planar_two_link_arm"); `undetermined`, parameter names the data did not
+    determine, said in the notes; `strict`, refuse a π no physical arm has."""
     p = arm.as_dict(_checked(pi, arm.names, "planar arm"))
     if p.get("b2s", 0.0) != 0:
         raise InputError(
@@ -383,10 +384,9 @@ def planar_bodies(
         *_planar_convention(robot, joint_names, signs, offsets),
         *_planar_choices(robot, arm, p, shape),
         *friction_notes,
-        *_undetermined_note(undetermined),
     ]
     description = RobotDescription(
-        name or own_name,
+        own_name,
         base,
         bodies,
         tuple(joints),
@@ -394,7 +394,7 @@ def planar_bodies(
         notes=tuple(notes),
     )
     problems = [] if shape.feasible else [_infeasible(p)]
-    return _finish(description, strict, problems)
+    return _finish(description, problems, **options)
 
 
 def _infeasible(p: dict[str, float]) -> str:

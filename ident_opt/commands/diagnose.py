@@ -12,7 +12,7 @@ import argparse
 import sys
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir, write_json
-from ident_opt.diagnose import diagnose, report
+from ident_opt.diagnosis import diagnose, report
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

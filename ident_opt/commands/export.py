@@ -19,8 +19,8 @@ from pathlib import Path
 
 from ident_opt import outputs
 from ident_opt.commands.common import add_problem_arguments, load, require, write_json
+from ident_opt.descriptions import identified, write_mjcf, write_urdf
 from ident_opt.errors import InputError
-from ident_opt.export import identified, write_mjcf, write_urdf
 from ident_opt.problem import load_problem
 from ident_opt.studies.export import identified_arm
 

@@ -1,6 +1,7 @@
-"""`ident-opt identify`: every model (RR, DM in both conventions, PBR, CPBR, each ± GMR) on the problem's
-trials under three protocols — the paper's shuffled 70/30 over its seeds, a chronological split, and
-cross-trial (identify on the first trial, test on the second) — with the paper's tables and figures.
+"""`ident-opt identify`: every model (RR, the nominal models DM, PBR, CPBR, each ± GMR) on the problem's trials
+under every protocol — a chronological split and cross-trial (identify on the training trials, test on the
+held-out ones, pooled and each), and for the planar two-link arm also the paper's shuffled 70/30 over its seeds,
+with the paper's tables and figures — plus the trust checks' warnings.
 
 Writes to --out (default: the problem's [output] dir, else results/): identify_*.md/.csv tables,
 figures/identify_*.png, README.md; with --json the result of `docs/cli.md`.
@@ -12,8 +13,11 @@ import argparse
 import sys
 import time
 
-from ident_opt.commands import urdf
+from tqdm import tqdm
+
 from ident_opt.commands.common import add_problem_arguments, add_switches, load, output_dir
+from ident_opt.report import identify as report
+from ident_opt.studies.identify import identify, steps
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,31 +30,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Identify, evaluate, write tables/figures/README/JSON, print a summary."""
-    # Deferred: the study loads NumPy, pandas, scikit-learn and CasADi, the report matplotlib; `ident-opt
-    # --help` builds every subcommand's parser and stays fast only if that waits until a command runs.
-    from tqdm import tqdm
-
-    from ident_opt.report import identify as report
-    from ident_opt.studies.identify import identify, steps
-
-    urdf_problem = urdf.urdf_problem(args)
-    if urdf_problem is not None:  # an n-joint arm from a URDF: ident_opt.commands.urdf
-        return urdf.identify(args, urdf_problem)
+    """Identify, evaluate, write tables/figures/README/JSON, print a summary and the warnings."""
     start = time.perf_counter()
-    from ident_opt.data import concat
-
     loaded = load(args, "identify", min_samples=50)
-    # Several training (held-out) trials are pooled: derivatives were estimated per file, so nothing straddles.
-    problem, trial = loaded.problem, concat(loaded.training)
-    unseen = concat(loaded.testing) if loaded.testing else None
+    problem = loaded.problem
     out = output_dir(args, problem)
-    total = steps(problem, unseen, not args.no_variants) + report.figure_count(unseen is not None)
+    n, paper, unseen = problem.robot.n_joints, problem.robot.paper_views, bool(loaded.testing)
+    total = steps(problem, unseen, not args.no_variants) + report.figure_count(n, paper, unseen)
     with tqdm(total=total, desc="identify", unit="step", file=sys.stderr, leave=False) as bar:
-        result = identify(problem, trial, unseen, variants=not args.no_variants, progress=bar)
+        result = identify(problem, loaded.training, loaded.testing, variants=not args.no_variants, progress=bar)
         bar.set_postfix_str("figures")
         seconds = report.write(result, out, args.json, _command(args), start, bar.update)
     print(report.terminal(result, out, args.json, seconds))
+    for warning in result.warnings:
+        print(warning, file=sys.stderr)
     return 0
 
 

@@ -17,7 +17,7 @@ no-ops by default; each effect overrides those it needs:
 | the simulator's truth (`simulate/truth`)  | `true_robot`, `true_plant`, `mechanism`, `truth_entry`,        |
 |                                           | `true_physical`                                                |
 | the simulator's loop (background terms)   | see `Background`                                               |
-| the diagnosis (`diagnose/`)               | `families`, `resolved`, `resolution`, `sentence`,              |
+| the diagnosis (`diagnosis/`)               | `families`, `resolved`, `resolution`, `sentence`,              |
 |                                           | `spectrum_marker`, `channel_lines`                             |
 | hidden-effect trials (tests, benchmarks)  | `reference`, `draw`, `judged`, `judge`                         |
 
@@ -58,15 +58,15 @@ class deferred:  # lower case: used like the module it stands for
 DEFERRED = {
     "np": "numpy",
     "ca": "casadi",
-    "cands": "ident_opt.diagnose.candidates",
+    "cands": "ident_opt.diagnosis.candidates",
     "datasheet": "ident_opt.arm.datasheet",
-    "elastic_nlp": "ident_opt.diagnose.elastic_nlp",
+    "elastic_nlp": "ident_opt.diagnosis.elastic_nlp",
     "flexible_link": "ident_opt.simulate.flexible_link",
-    "linear": "ident_opt.diagnose.linear",
+    "linear": "ident_opt.diagnosis.linear",
     "nlp": "ident_opt.identify.nlp",
-    "report": "ident_opt.diagnose.report",
+    "report": "ident_opt.diagnosis.report",
     "robot_model": "ident_opt.arm.planar",
-    "signals": "ident_opt.diagnose.signals",
+    "signals": "ident_opt.diagnosis.signals",
     "sim": "ident_opt.simulate.truth",
 }
 
@@ -288,7 +288,7 @@ class Effect:
     resolution: tuple[str, str] | None = None
 
     def families(self, robot) -> list:
-        """The candidate model families (`diagnose.candidates.Family`) that explain this cause."""
+        """The candidate model families (`diagnosis.candidates.Family`) that explain this cause."""
         return []
 
     def family(self, model=None, free: tuple[str, ...] = (), **options):

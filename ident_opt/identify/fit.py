@@ -70,9 +70,9 @@ class LinearFit:
         """π by name."""
         return {name: float(v) for name, v in zip(self.names, self.pi)}
 
-    def se_dict(self) -> dict[str, float]:
-        """Standard errors by name."""
-        return {name: float(v) for name, v in zip(self.names, self.se)}
+    def se_dict(self) -> dict[str, float | None]:
+        """Standard errors by name; None where there is none (the data do not determine the parameter)."""
+        return {name: float(v) if np.isfinite(v) else None for name, v in zip(self.names, self.se)}
 
     @property
     def sign_violations(self) -> dict[str, list[str]]:

@@ -139,23 +139,7 @@ def fit_physical(
         raise ValueError(f"backend must be 'clarabel' or 'cvxpy', not {backend!r}")
     prior = arm.cad_parameters() if prior is None else np.asarray(prior, dtype=float)
     w = joint_weights(stats, weights)
-    H, h = normal_equations(stats, w)
-    n = max(stats.n, 1)
-    J0 = np.array([_regularised(J) for J in arm.pseudo_inertias(prior)])
-    masses = prior[: arm.n_link_params : N_LINK]
-    com0 = prior[: arm.n_link_params].reshape(-1, N_LINK)[:, 1:4] / np.maximum(masses, 1e-12)[:, None]
-    r = 0.0 if mass_range is None else float(mass_range)
-    delta = 0.0 if com_box is None else float(com_box)
-    data = _Data(
-        H / n,
-        h / n,
-        prior_weight * float(w @ stats.s) / n,
-        np.linalg.inv(J0),
-        (1 - r) * masses,
-        (1 + r) * masses,
-        com0 - delta,
-        com0 + delta,
-    )
+    data, J0 = _program_data(arm, stats, w, prior, prior_weight, mass_range, com_box)
     t0 = time.perf_counter()
     solve = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
     pi, status = solve(arm, float(margin), mass_range is not None, com_box is not None, data)
@@ -200,6 +184,38 @@ def _bounds_at(arm: ChainArm, pi: np.ndarray, data: _Data, mass: bool, com: bool
                     if abs(h[axis] - m * bound) <= BOUND_TOL * max(1.0, abs(m * bound)):
                         out.append(f"com_{name}_{side}_{link}")
     return out
+
+
+def _program_data(
+    arm: ChainArm,
+    stats: Stats,
+    w: np.ndarray,
+    prior: np.ndarray,
+    prior_weight: float,
+    mass_range: float | None,
+    com_box: float | None,
+) -> tuple[_Data, np.ndarray]:
+    """The numbers of the program (module doc) for these statistics, joint weights `w` and prior π0: its data term
+    per sample, the prior's weight λ Ē, each link's J0⁻¹, mass bounds [kg] and centre-of-mass box [m]; and the
+    regularised CAD pseudo-inertias J0 (L, 4, 4)."""
+    H, h = normal_equations(stats, w)
+    n = max(stats.n, 1)
+    J0 = np.array([_regularised(J) for J in arm.pseudo_inertias(prior)])
+    masses = prior[: arm.n_link_params : N_LINK]
+    com0 = prior[: arm.n_link_params].reshape(-1, N_LINK)[:, 1:4] / np.maximum(masses, 1e-12)[:, None]
+    r = 0.0 if mass_range is None else float(mass_range)
+    delta = 0.0 if com_box is None else float(com_box)
+    data = _Data(
+        H / n,
+        h / n,
+        prior_weight * float(w @ stats.s) / n,
+        np.linalg.inv(J0),
+        (1 - r) * masses,
+        (1 + r) * masses,
+        com0 - delta,
+        com0 + delta,
+    )
+    return data, J0
 
 
 def _solve_cvxpy(arm: ChainArm, margin: float, mass: bool, com: bool, data: _Data) -> tuple[np.ndarray | None, str]:

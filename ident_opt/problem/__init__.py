@@ -15,7 +15,15 @@ from pathlib import Path
 
 from ident_opt.errors import InputError
 from ident_opt.problem.robot import parse_planar
-from ident_opt.problem.sections import OPTIONAL_SECTIONS, parse_data, parse_residual, parse_split, relative
+from ident_opt.problem.sections import (
+    parse_data,
+    parse_limits,
+    parse_reference,
+    parse_residual,
+    parse_simulate,
+    parse_split,
+    relative,
+)
 from ident_opt.problem.spec import DataSpec, Limits, Problem, Reference, ResidualSpec, SimulateSpec, SplitSpec
 from ident_opt.problem.table import Table
 from ident_opt.problem.urdf import parse_urdf_robot
@@ -44,13 +52,18 @@ def load_problem(path: str | Path) -> Problem:
     top = Table(raw, "", path)
     base = path.resolve().parent
     name = top.take("name", str)
-    robot = _robot(top.table("robot"))
+    robot = _robot(top.table("robot"))  # first: the sections below depend on the arm (its joints, its model)
     sections = {  # each section fills the `Problem` field of its name, read in this order
         "data": parse_data(top.table("data", required=False), base, robot.n_joints),
         "split": parse_split(top.table("split", required=False)),
         "residual": parse_residual(top.table("residual", required=False)),
     }
-    for key, parse in OPTIONAL_SECTIONS.items():
+    optional = {  # the sections a file may leave out (their field is then None)
+        "simulate": parse_simulate,
+        "limits": lambda table: parse_limits(table, robot),
+        "reference": lambda table: parse_reference(table, robot, base),
+    }
+    for key, parse in optional.items():
         sections[key] = parse(top.table(key)) if key in top.raw else None
     output = top.table("output", required=False)
     out_dir = output.take("dir", str, None)

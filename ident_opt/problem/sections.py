@@ -1,6 +1,7 @@
 """The sections of a problem file other than `[robot]`: `[data]`, `[split]`, `[residual]`, `[simulate]`,
-`[limits]` and `[reference]` (`docs/problem-files.md`). Each parser takes its checked `Table` and returns the
-section's spec (`ident_opt.problem.spec`).
+`[limits]` and `[reference]` (`docs/problem-files.md`). Each parser takes its checked `Table` (and, where the
+section depends on the arm, the robot `[robot]` describes) and returns the section's spec
+(`ident_opt.problem.spec`).
 """
 
 from __future__ import annotations
@@ -8,7 +9,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ident_opt.columns import data_columns
+from ident_opt.arm.base import Robot
+from ident_opt.columns import channel_names, data_columns
 from ident_opt.effects import parse_effect
 from ident_opt.errors import InputError
 from ident_opt.problem.spec import (
@@ -27,6 +29,7 @@ from ident_opt.simulate.trajectories import TRAJECTORIES
 
 
 def relative(base: Path, value: str) -> Path:
+    """A path of the problem file: absolute as written, else relative to `base` (the problem file's folder)."""
     path = Path(value)
     return path if path.is_absolute() else (base / path)
 
@@ -48,6 +51,28 @@ def _column(table: Table, key: str) -> tuple[str | int, tuple[float, float] | No
     if isinstance(source, int) and source < 0:
         raise InputError(f"{table.path}: key '{key}' in [data.columns] must be a 0-based index >= 0")
     return source, conversion
+
+
+def _unmapped(table: Table, key: str, n_joints: int) -> bool:
+    """Whether `[data.columns]` entry `key` is `false`: do not read that standard column, even from a file with a
+    column of its name (a file with both torques and currents is read by one of them). `true` means nothing, and
+    t and q1 … qn cannot be left unread."""
+    value = table.raw.get(key)
+    if not isinstance(value, bool):
+        return False
+    if value:
+        raise InputError(
+            f"{table.path}: key '{key}' in [data.columns] must be a column name, a 0-based index, a table "
+            "{column, scale, offset}, or false (leave the column unread); got true"
+        )
+    required = ("t", *channel_names(n_joints)["q"])
+    if key in required:
+        raise InputError(
+            f"{table.path}: key '{key}' in [data.columns] cannot be false: {', '.join(required)} are always read "
+            "(map it to the file's column instead)"
+        )
+    table.raw.pop(key)
+    return True
 
 
 def _cutoff(table: Table) -> float | str:
@@ -81,6 +106,8 @@ def _names(table: Table, key: str, n_joints: int) -> list[str]:
 
 
 def parse_data(table: Table, base: Path, n_joints: int = 2) -> DataSpec:
+    """`[data]` and `[data.columns]` of an arm of `n_joints` joints: the trials (relative to `base`), how to read
+    them, and where each standard column is (a name, an index, a conversion, or false: not read)."""
     known = data_columns(n_joints)
     trials, train, test = _paths(table, "trials"), _paths(table, "train"), _paths(table, "test")
     if trials and (train or test):
@@ -93,9 +120,13 @@ def parse_data(table: Table, base: Path, n_joints: int = 2) -> DataSpec:
     columns_table = table.table("columns", required=False)
     columns: dict[str, str | int] = {}
     conversions: dict[str, tuple[float, float]] = {}
+    ignored: list[str] = []
     for key in list(columns_table.raw):
         if key not in known:
             raise InputError(f"{table.path}: unknown column '{key}' in [data.columns]; known: {', '.join(known)}")
+        if _unmapped(columns_table, key, n_joints):
+            ignored.append(key)
+            continue
         columns[key], conversion = _column(columns_table, key)
         if conversion is not None:
             conversions[key] = conversion
@@ -111,6 +142,7 @@ def parse_data(table: Table, base: Path, n_joints: int = 2) -> DataSpec:
         standard_by_name=table.take("standard_by_name", bool, True),
         ros_topic=table.take("ros_topic", str, DataSpec.ros_topic),
         ros_joints=tuple(_names(table, "ros_joints", n_joints)),
+        ignored=tuple(ignored),
     )
     if not spec.header and any(isinstance(v, str) for v in columns.values()):
         raise InputError(f"{table.path}: [data] header = false needs 0-based column indices in [data.columns]")
@@ -131,6 +163,7 @@ def _int_list(table: Table, key: str, default: list[int], low: int, high: int, l
 
 
 def parse_split(table: Table) -> SplitSpec:
+    """`[split]`: the training fraction of the chronological and shuffled splits, and the paper's seeds."""
     # Both parts of a split must hold enough samples to fit and to score: 5 % .. 95 %.
     fraction = table.number("train_fraction", SplitSpec.train_fraction, 0.05, 0.95)
     seeds = _int_list(table, "seeds", list(SplitSpec.seeds), 0, MAX_SEED, MAX_SEEDS)
@@ -139,6 +172,7 @@ def parse_split(table: Table) -> SplitSpec:
 
 
 def parse_residual(table: Table) -> ResidualSpec:
+    """`[residual]`: the GMR residual model's components, candidates, covariance and regulariser."""
     components = table.take("components", (int, str), "auto")
     if components == "auto":
         components = None
@@ -162,7 +196,8 @@ def parse_residual(table: Table) -> ResidualSpec:
     return spec
 
 
-def _simulate(table: Table) -> SimulateSpec:
+def parse_simulate(table: Table) -> SimulateSpec:
+    """`[simulate]`: the built-in simulator's trajectory, duration [s], rate [Hz], seed, effects and output."""
     effects = table.take("effects", list, [])
     if not all(isinstance(e, str) for e in effects):
         raise InputError(f"{table.path}: key 'effects' in [simulate] must be a list of strings")
@@ -190,55 +225,155 @@ def _simulate(table: Table) -> SimulateSpec:
     return spec
 
 
-#: Sane magnitudes of the `[limits]` keys: angle [rad], speed [rad/s], acceleration [rad/s²], torque [N m].
-_LIMIT_RANGES = {"position": 100.0, "velocity": 1e3, "acceleration": 1e5, "torque": 1e5}
+#: The `[limits]` keys and the range of each value: (low, high, whether low itself is excluded); an angle [rad],
+#: a speed [rad/s], an acceleration [rad/s²], a torque [N m]. A value beyond is a typo or a unit mistake.
+_LIMIT_RANGES = {
+    "position_min": (-100.0, 100.0, False),
+    "position_max": (-100.0, 100.0, False),
+    "velocity": (0.0, 1e3, True),
+    "acceleration": (0.0, 1e5, True),
+    "torque": (0.0, 1e5, True),
+}
+#: The attribute of a URDF's <limit> that is each key's default (`Robot.limits`), for messages.
+_URDF_LIMIT = {"position_min": "lower", "position_max": "upper", "velocity": "velocity", "torque": "effort"}
 
 
-def _per_joint(table: Table, key: str, low: float, high: float, *, open_low: bool) -> tuple[float, ...]:
-    """A list of one finite number per joint (2) in [low, high] (or (low, high] with `open_low`)."""
-    value = table.take(key, list)
-    ok = len(value) == 2 and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
-    ok = ok and all(math.isfinite(v) and (v > low if open_low else v >= low) and v <= high for v in value)
-    if not ok:
-        what = f"{'(' if open_low else '['}{low:g}, {high:g}]"
-        raise InputError(f"{table._name(key)} must be a list of 2 finite numbers in {what}, got {excerpt(value)}")
-    return tuple(float(v) for v in value)
+def _joint_label(robot: Robot, j: int) -> str:
+    """ "joint 3 (elbow)": joint j (0-based) by its number and, where it has one of its own, its name."""
+    name = robot.joint_names[j]
+    return f"joint {j + 1}" if name == f"joint{j + 1}" else f"joint {j + 1} ({name})"
 
 
-def _limits(table: Table) -> Limits:
-    angle = _LIMIT_RANGES["position"]
-    low = _per_joint(table, "position_min", -angle, angle, open_low=False)
-    high = _per_joint(table, "position_max", -angle, angle, open_low=False)
-    for j, (a, b) in enumerate(zip(low, high)):
-        if not a < b:
+def _in_range(value: object, key: str) -> bool:
+    """Whether `value` is a finite number (not a boolean) within the range of `[limits]` key `key`."""
+    low, high, open_low = _LIMIT_RANGES[key]
+    if not isinstance(value, int | float) or isinstance(value, bool) or not math.isfinite(value):
+        return False
+    return (value > low if open_low else value >= low) and value <= high
+
+
+def _range_text(key: str) -> str:
+    low, high, open_low = _LIMIT_RANGES[key]
+    return f"{'(' if open_low else '['}{low:g}, {high:g}]"
+
+
+def _per_joint(table: Table, key: str, robot: Robot) -> tuple[float, ...]:
+    """`key` of [limits] as one value per joint, in the key's unit: a list of n finite numbers in its range
+    (n = the robot's joints, in its `joints` order), or one such number for every joint."""
+    n, what = robot.n_joints, _range_text(key)
+    value = table.take(key, (float, list))
+    if not isinstance(value, list):
+        if not _in_range(value, key):
             raise InputError(
-                f"{table.path}: keys 'position_min' and 'position_max' in [limits]: joint {j + 1} has "
-                f"min {a:g} ≥ max {b:g} rad"
+                f"{table._name(key)} must be a finite number in {what} (for every joint) or a list of {n}, one per "
+                f"joint, got {excerpt(value)}"
             )
-    limits = Limits(
-        position_min=low,
-        position_max=high,
-        velocity=_per_joint(table, "velocity", 0.0, _LIMIT_RANGES["velocity"], open_low=True),
-        acceleration=_per_joint(table, "acceleration", 0.0, _LIMIT_RANGES["acceleration"], open_low=True),
-        torque=_per_joint(table, "torque", 0.0, _LIMIT_RANGES["torque"], open_low=True)
-        if "torque" in table.raw
-        else None,
+        return (float(value),) * n
+    if len(value) != n:
+        names = ", ".join(robot.joint_names[:8]) + (", …" if n > 8 else "")
+        why = (
+            f"{_joint_label(robot, len(value))} has none"
+            if len(value) < n
+            else f"{len(value) - n} more than the arm's joints"
+        )
+        raise InputError(
+            f"{table._name(key)} must list {n} numbers, one per joint ({names}), or be one number for every "
+            f"joint; it lists {len(value)} ({excerpt(value)}): {why}"
+        )
+    return _in_ranges(
+        table,
+        key,
+        value,
+        lambda j: f"{_joint_label(robot, j)} has {excerpt(value[j])}; each value must be a finite number in {what}",
     )
+
+
+def _in_ranges(table: Table, key: str, values, why) -> tuple[float, ...]:
+    """`values` (one per joint) as floats when each is a finite number in the range of `[limits]` key `key`
+    (`_in_range`); else an InputError naming the key, `why(j)` saying what is wrong with the first joint j."""
+    bad = next((j for j, v in enumerate(values) if not _in_range(v, key)), None)
+    if bad is not None:
+        raise InputError(f"{table._name(key)}: {why(bad)}")
+    return tuple(float(v) for v in values)
+
+
+def _default(table: Table, key: str, robot: Robot) -> tuple[float, ...] | None:
+    """The value of a `[limits]` key the file leaves out: the URDF's <limit> when it gives it for every joint
+    (within the key's range). A key it gives for some joints only is an error naming the others, `torque`
+    included: a design must not drop silently the efforts the URDF states. Without any URDF value, `torque` is
+    None (no torque limit) and the other keys are required."""
+    given = robot.limits().get(key)
+    if given is None or all(v is None for v in given):
+        if key != "torque":
+            table.take(key, float)  # absent: raises "required but missing" (naming a near spelling, if any)
+        return None
+    attribute = _URDF_LIMIT[key]
+    lacking = [_joint_label(robot, j) for j, v in enumerate(given) if v is None]
+    if lacking:
+        hint = " (a continuous joint has no lower or upper)" if key.startswith("position") else ""
+        raise InputError(
+            f"{table._name(key)} is required: the URDF's <limit {attribute}=…> is missing for {', '.join(lacking)}"
+            f"{hint}; give {key} in [limits], a list of {robot.n_joints} or one number for every joint"
+        )
+    return _in_ranges(
+        table,
+        key,
+        given,
+        lambda j: (
+            f"the URDF's <limit {attribute}={given[j]:g}> of {_joint_label(robot, j)} is not in "
+            f"{_range_text(key)}; give {key} in [limits]"
+        ),
+    )
+
+
+def parse_limits(table: Table, robot: Robot) -> Limits:
+    """`[limits]` of an arm of n joints (`docs/problem-files.md`): each key a list of n values or one for every
+    joint; a key left out is the URDF's <limit> (`_default`); position_min < position_max for every joint."""
+    defaulted = {key for key in _LIMIT_RANGES if key not in table.raw}
+    values = {
+        key: _default(table, key, robot) if key in defaulted else _per_joint(table, key, robot) for key in _LIMIT_RANGES
+    }
+    for j, (a, b) in enumerate(zip(values["position_min"], values["position_max"])):
+        if not a < b:
+            source = " (from the URDF's <limit>)" if defaulted & {"position_min", "position_max"} else ""
+            raise InputError(
+                f"{table.path}: keys 'position_min' and 'position_max' in [limits]: {_joint_label(robot, j)} has "
+                f"min {a:g} ≥ max {b:g} rad{source}"
+            )
     table.done()
-    return limits
+    return Limits(**values)
 
 
-def _reference(table: Table) -> Reference:
-    """`[reference]`: label = "…" and [reference.parameters] name = value (finite numbers, |v| ≤ 10⁶)."""
+def parse_reference(table: Table, robot: Robot, base: Path) -> Reference:
+    """`[reference]` (`docs/problem-files.md`): `label` and either [reference.parameters] (names of the robot's
+    model → values, finite, |v| ≤ 10⁶) or `urdf` (relative to the problem file: a URDF of the same arm, read by
+    `Robot.reference_urdf`). The names are checked against the robot's model
+    (`Robot.reference`) here, so a bad reference stops every command, `check` included."""
     label = table.take("label", str)
-    values = table.table("parameters")
-    params = {str(k): values.number(str(k), None, -1e6, 1e6) for k in list(values.raw)}
-    values.done()
+    if ("urdf" in table.raw) == ("parameters" in table.raw):
+        given = "both" if "urdf" in table.raw else "neither"
+        raise InputError(
+            f"{table.path}: [reference] needs either 'urdf' (a URDF of the same arm: its inertials and <dynamics>) "
+            f"or [reference.parameters] (the parameters by name), got {given}"
+        )
+    urdf, where = None, f"{table.path}: [reference.parameters]"
+    if "urdf" in table.raw:
+        urdf = relative(base, table.take("urdf", str))
+        where = f"{table.path}: key 'urdf' in [reference] ({urdf})"
+        try:
+            params = robot.reference_urdf(urdf)
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}") from None
+    else:
+        values = table.table("parameters")
+        params = {str(k): values.number(str(k), None, -1e6, 1e6) for k in list(values.raw)}
+        values.done()
+        if not params:
+            raise InputError(f"{where} is empty; give the parameters by name (a1 = …, or m_<link> = …)")
     table.done()
-    if not params:
-        raise InputError(f"{table.path}: [reference.parameters] is empty; give the parameters by name (a1 = …)")
-    return Reference(label, params)
-
-
-#: The sections a problem file may leave out (its `Problem` field is then None): name -> parser.
-OPTIONAL_SECTIONS = {"simulate": _simulate, "limits": _limits, "reference": _reference}
+    try:
+        robot.reference(params)
+    except InputError as exc:
+        message = str(exc).removeprefix("[reference.parameters]: ")
+        raise InputError(f"{where}: {message}") from None
+    return Reference(label, params, urdf)

@@ -25,7 +25,9 @@ class DataSpec:
     `conversions` holds (scale, offset) for the mapped columns that are converted on the way in:
     value = scale × raw + offset (scale −1 flips a sign, 0.01745 reads degrees, offset −π/2 moves a zero).
     With `standard_by_name`, a file whose header already has the standard names (t, q1, q2, ...) is read by
-    name, whatever `columns` says.
+    name, whatever `columns` says. `ignored` are the standard names un-mapped with `name = false`: never read,
+    even from a file that has a column of that name (so a file with both torques and currents can be read by
+    one of the two).
     """
 
     trials: tuple[Path, ...] = ()
@@ -39,6 +41,7 @@ class DataSpec:
     test: tuple[Path, ...] = ()  # held-out trials (`test = [...]`), each scored and pooled
     ros_topic: str = "/joint_states"  # a ROS 2 bag's topic of sensor_msgs/msg/JointState messages
     ros_joints: tuple[str, ...] = ()  # a bag's joint names, base to tip: joint k is the k-th (`ident_opt.rosbag`)
+    ignored: tuple[str, ...] = ()  # standard names not to read (`[data.columns]` name = false)
 
     @property
     def training(self) -> tuple[Path, ...]:
@@ -84,10 +87,11 @@ class SimulateSpec:
 
 @dataclass(frozen=True)
 class Limits:
-    """The `[limits]` section: what an excitation design must respect, per joint (tuples of n values).
+    """The `[limits]` section: what an excitation design must respect, per joint (tuples of n values, n the
+    robot's joints, in its `joint_names` order; a key the file leaves out is the URDF's <limit> value).
 
     Joint angles in [position_min, position_max] [rad], |dq| ≤ velocity [rad/s], |ddq| ≤ acceleration
-    [rad/s²] and, when given, |τ| ≤ torque [N m] (τ from the datasheet model)."""
+    [rad/s²] and, when given, |τ| ≤ torque [N m] (τ from the nominal model; None: no torque limit)."""
 
     position_min: tuple[float, ...]
     position_max: tuple[float, ...]
@@ -115,7 +119,10 @@ class Problem:
 @dataclass(frozen=True)
 class Reference:
     """`[reference]`: a published identification of the same arm to compare against (not ground truth):
-    `label` and the grouped parameters by name (SI units, `docs/conventions.md`)."""
+    `label` and its parameters by the names of the robot's model (the planar arm's grouped π, an n-joint arm's
+    standard parameters; SI units, `docs/conventions.md`), so that `robot.reference(parameters)` gives its
+    (arm, π). `urdf` is the URDF they were read from (`[reference] urdf = "…"`), None when given by name."""
 
     label: str
     parameters: dict[str, float]
+    urdf: Path | None = None

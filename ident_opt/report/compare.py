@@ -103,16 +103,27 @@ def metrics_table(c: Comparison, metric: str = "nmse") -> pd.DataFrame:
     return pd.DataFrame(rows).T.rename_axis("estimator")
 
 
+#: The mark of a value the data do not determine (no standard error), and what it means.
+NOT_DETERMINED = "†"
+NOT_DETERMINED_NOTE = (
+    f"{NOT_DETERMINED} not determined by the data: the fit's own choice (its prior toward the nominal model, a bound, "
+    "or 0 for OLS's dependent parameters), so no standard error."
+)
+
+
 def _with_se(c: Comparison) -> pd.DataFrame:
     """The parameter table with "value ± se" strings, for people."""
     table = parameter_table(c)
     out = {}
     for key in [k for k in table.columns if not k.endswith(" se")]:
         se = table.get(f"{key} se")
+        silent = set(c.fits[key].details.get("not_determined", [])) if key in c.fits else set()
         cells = []
-        for i, v in enumerate(table[key]):
+        for i, (name, v) in enumerate(zip(table.index, table[key])):
             if np.isnan(v):
                 cells.append("–")
+            elif name in silent:
+                cells.append(f"{fmt(v)} {NOT_DETERMINED}")
             elif se is None or np.isnan(se.iloc[i]):
                 cells.append(fmt(v))
             else:
@@ -354,6 +365,7 @@ def to_markdown(c: Comparison, figure: str | None = None) -> str:
         "",
         markdown_table(_with_se(c)),
         "",
+        *([NOT_DETERMINED_NOTE, ""] if any(f.details.get("not_determined") for f in c.fits.values()) else []),
         "## Physical consistency",
         "",
         markdown_table(consistency_table(c)),

@@ -16,14 +16,12 @@ matplotlib.use("Agg")  # files only, never a window
 import matplotlib.pyplot as plt
 
 from ident_opt import outputs
+from ident_opt.columns import joint_columns, kinematic_columns
 from ident_opt.errors import InputError
 from ident_opt.report import record, write_json
 from ident_opt.report.tables import markdown_table
 from ident_opt.studies.excitation import Design, Setup
 from ident_opt.studies.excitation_proof import Proof
-
-#: Column names of the trajectory file (the data format's names; the torque is a feed-forward, not a measurement).
-COLUMNS = ("t", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2", "tau_ff1", "tau_ff2")
 
 
 def paths(out: str | Path) -> tuple[Path, Path, Path]:
@@ -35,8 +33,11 @@ def paths(out: str | Path) -> tuple[Path, Path, Path]:
 
 
 def frame(d: Design) -> pd.DataFrame:
-    """The trajectory as a table in `COLUMNS` (SI units)."""
-    return pd.DataFrame(np.column_stack([d.t, d.q, d.dq, d.ddq, d.tau]), columns=list(COLUMNS))
+    """The trajectory as a table (SI units): the data format's t, q, dq, ddq (`columns.kinematic_columns`) and the
+    feed-forward torque tau_ff1 … tau_ffn (a command, not a measurement: not named tau)."""
+    n = d.q.shape[1]
+    names = [*kinematic_columns(n), *joint_columns("tau_ff", n)]
+    return pd.DataFrame(np.column_stack([d.t, d.q, d.dq, d.ddq, d.tau]), columns=names)
 
 
 def to_json(d: Design, setup: Setup) -> dict:
@@ -196,12 +197,12 @@ def proof_markdown(p: Proof, designs: str = "excitation") -> str:
         markdown_table(p.identification_summary(), digits=4),
         "",
     ]
-    for label, ratio in p.improvement().items():
-        lines.append(
-            f"- {label}: median parameter error {ratio['ols']:.3g}× smaller than the MERIt-like trajectory's (OLS), "
-            f"{ratio['constrained']:.3g}× (constrained); with resting velocities read as 0: "
-            f"{ratio['ols (rests 0)']:.3g}× (OLS), {ratio['constrained (rests 0)']:.3g}× (constrained)."
-        )
+    lines += [
+        f"- {label}: median parameter error {ratio['ols']:.3g}× smaller than the MERIt-like trajectory's (OLS), "
+        f"{ratio['constrained']:.3g}× (constrained); with resting velocities read as 0: "
+        f"{ratio['ols (rests 0)']:.3g}× (OLS), {ratio['constrained (rests 0)']:.3g}× (constrained)."
+        for label, ratio in p.improvement().items()
+    ]
     lines += [
         "",
         "The MERIt-like trajectory rests a large part of the time; at rest the sign of an estimated velocity is noise "

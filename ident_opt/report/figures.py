@@ -42,7 +42,7 @@ def _save(fig, path: Path, dpi: int = 110) -> Path:
 
 
 def torque_figure(split: SplitResult, joint: int, path: Path, models=PAPER_MODELS, title: str = "") -> Path:
-    """Measured vs predicted torque of one joint (0 or 1) over time, one panel per model."""
+    """Measured vs predicted torque of one joint (0-based) over time, one panel per model."""
 
     def draw(ax, t, tau, parametric, corrected, key):
         ax.plot(t, tau, color=MEASURED, lw=0.8, label="measured")
@@ -85,9 +85,11 @@ def _model_panels(split: SplitResult, joint: int, path: Path, models, draw, layo
 
 
 def parity_figure(split: SplitResult, path: Path, models=PAPER_MODELS, title: str = "") -> Path:
-    """Predicted vs measured torque: joints in rows, models in columns (the paper's 2×3 parity plots)."""
-    fig, axes = plt.subplots(2, len(models), figsize=(4.2 * len(models), 8), squeeze=False)
-    for j in range(2):
+    """Predicted vs measured torque: joints in rows, models in columns (for two joints, the paper's 2×3 parity
+    plots)."""
+    n = split.test.tau.shape[1]
+    fig, axes = plt.subplots(n, len(models), figsize=(4.2 * len(models), 4 * n), squeeze=False)
+    for j in range(n):
         tau = split.test.tau[:, j]
         lo, hi = float(tau.min()), float(tau.max())
         pad = 0.1 * (hi - lo)
@@ -127,7 +129,9 @@ def interval_figure(
     sel = np.ones(len(t), bool) if window is None else (t >= window[0]) & (t <= window[1])
     mean, std = split.predictions[key + "+gmr"], split.std[key + "+gmr"]
     cover = split.coverage[key + "+gmr"]
-    fig, axes = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True)
+    n = split.test.tau.shape[1]
+    fig, axes = plt.subplots(n, 1, figsize=(11, 3.25 * n), sharex=True, squeeze=False)
+    axes = axes[:, 0]
     for j, ax in enumerate(axes):
         ax.fill_between(
             t[sel],

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from ident_opt.arm.datasheet import PlanarRobot
+from ident_opt.columns import columns_of, joint_columns
 from ident_opt.derivatives import estimate_derivatives
 from ident_opt.errors import InputError
 from ident_opt.problem.spec import DataSpec
@@ -84,16 +85,11 @@ def log(
         dq, ddq = dq_enc[idx], ddq_enc[idx]
     else:
         dq, ddq, _ = estimate_derivatives(t, q, DERIVATIVE_CUTOFF_HZ)
-    cols = {"t": t}
-    for name, arr in (("q", q), ("dq", dq), ("ddq", ddq)):
-        cols[name + "1"], cols[name + "2"] = arr[:, 0], arr[:, 1]
-    if output == "current":
-        k = np.array([j.current_to_torque for j in robot.joints])
-        cols["i1"], cols["i2"] = tau[:, 0] / k[0], tau[:, 1] / k[1]
-    else:
-        cols["tau1"], cols["tau2"] = tau[:, 0], tau[:, 1]
+    load = tau / np.array([j.current_to_torque for j in robot.joints]) if output == "current" else tau
+    signals = {"q": q, "dq": dq, "ddq": ddq, "i" if output == "current" else "tau": load}
+    cols = {"t": t, **columns_of(signals)}
     # Extra columns a real logger has: the commanded angles, and a strain-like deflection of a spring.
-    cols["q1_ref"], cols["q2_ref"] = q_ref[idx, 0], q_ref[idx, 1]
+    cols.update({f"{name}_ref": q_ref[idx, j] for j, name in enumerate(joint_columns("q", q.shape[1]))})
     if deflection_column is not None:
         cols[deflection_column] = deflection[idx]
     return pd.DataFrame(cols)

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ident_opt.columns import kinematic_columns
 from ident_opt.errors import InputError
 
 Q_MIN = np.array([0.25, -1.40])  # rad
@@ -61,20 +62,18 @@ def reference(name: str, duration: float, seed: int, dt: float) -> Reference:
     return {"tud01": tud01, "fourier": fourier, "mixed": mixed}[name](t, rng)
 
 
-#: The columns a trajectory file must have.
-FILE_COLUMNS = ("t", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
-
-
-def from_file(path: Path, t: np.ndarray) -> Reference:
-    """The trajectory in the CSV file `path` (columns `FILE_COLUMNS`, t from 0, increasing) at times t [s]."""
+def from_file(path: Path, t: np.ndarray, n_joints: int = 2) -> Reference:
+    """The trajectory in the CSV file `path` (t, q, dq, ddq of `n_joints` joints: `columns.kinematic_columns`; t from
+    0, increasing) at times t [s]."""
     try:
         frame = pd.read_csv(path)
     except (OSError, ValueError) as exc:
         raise InputError(f"{path}: cannot read the trajectory file ({exc})") from None
-    missing = [c for c in FILE_COLUMNS if c not in frame.columns]
+    columns = kinematic_columns(n_joints)
+    missing = [c for c in columns if c not in frame.columns]
     if missing:
         raise InputError(f"{path}: the trajectory file lacks column(s) {', '.join(missing)}")
-    values = frame[list(FILE_COLUMNS)].to_numpy(dtype=float)
+    values = frame[list(columns)].to_numpy(dtype=float)
     if len(values) < 2 or not np.all(np.isfinite(values)) or np.any(np.diff(values[:, 0]) <= 0):
         raise InputError(f"{path}: the trajectory file needs finite values and increasing times t")
     tf = values[:, 0]
@@ -82,7 +81,9 @@ def from_file(path: Path, t: np.ndarray) -> Reference:
         raise InputError(
             f"{path}: the trajectory covers [{tf[0]:g}, {tf[-1]:g}] s, not the {t[-1] + (t[1] - t[0]):g} s asked for"
         )
-    q, dq, ddq = (np.column_stack([np.interp(t, tf, values[:, k + j]) for j in range(2)]) for k in (1, 3, 5))
+    q, dq, ddq = (
+        np.column_stack([np.interp(t, tf, values[:, 1 + k * n_joints + j]) for j in range(n_joints)]) for k in range(3)
+    )
     return Reference(t, q, dq, ddq)
 
 

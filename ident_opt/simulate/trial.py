@@ -12,6 +12,7 @@ import pandas as pd
 
 from ident_opt import outputs
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
+from ident_opt.columns import channel_names, data_columns
 from ident_opt.data import Dataset, in_source_convention
 from ident_opt.effects import CATALOGUE, is_active, normalise
 from ident_opt.errors import InputError
@@ -38,19 +39,23 @@ class SimTrial:
     def dataset(self) -> Dataset:
         """The trial as the data loader would return it (currents converted to joint torques)."""
         f = self.frame
-        pair = lambda p: f[[p + "1", p + "2"]].to_numpy(dtype=float)  # noqa: E731
-        if "tau1" in f:
-            tau = pair("tau")
+        names = channel_names(self.robot.n_joints)
+
+        def signal(kind: str) -> np.ndarray:
+            return f[list(names[kind])].to_numpy(dtype=float)
+
+        if names["tau"][0] in f:
+            tau = signal("tau")
         else:
-            tau = pair("i") * np.array([j.current_to_torque for j in self.robot.joints])
-        used = {"t", "q1", "q2", "dq1", "dq2", "ddq1", "ddq2", "tau1", "tau2", "i1", "i2"}
+            tau = signal("i") * np.array([j.current_to_torque for j in self.robot.joints])
+        used = set(data_columns(self.robot.n_joints))
         extra = f[[c for c in f.columns if c not in used]].reset_index(drop=True)
         return Dataset(
             "simulated",
             f["t"].to_numpy(dtype=float),
-            pair("q"),
-            pair("dq"),
-            pair("ddq"),
+            signal("q"),
+            signal("dq"),
+            signal("ddq"),
             tau,
             extra,
             "given",

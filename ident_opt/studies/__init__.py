@@ -17,7 +17,6 @@ or prints (`ident_opt.report` does that, one writer per study).
 | `discrimination`| T-optimal designs that separate two candidate causes                                     |
 | `excitation_proof` | the designs proved in the simulator against MERIt-like and random trajectories        |
 | `trust`         | warnings: cut-off sensitivity, OLS vs IV, the angle convention                           |
-| `urdf`          | an n-joint URDF arm: OLS, constrained, consistent and CAD fits; `check`'s summary        |
 | `ship`          | the model `codegen` ships and its check against Python                                  |
 """
 

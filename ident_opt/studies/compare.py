@@ -230,7 +230,8 @@ def compare_estimators(
     sources = {"train": pool.source, **({"unseen": test_pool.source} if test_pool is not None else {})}
     trust = checks(model, trains, fits["ols"], fits["iv"], conversions, robot)
     nominal_arm, nominal_pi = sheets[f"datasheet_{robot.datasheet}"]
-    trust.warnings += check_masses(model, fits, nominal_arm.link_masses(nominal_pi))
+    estimates = {k: f.pi for k, f in fits.items() if "base_parameters" not in f.details}  # not a lifted base fit
+    trust.warnings += check_masses(model, estimates, nominal_arm.link_masses(nominal_pi))
     return Comparison(
         model,
         fits,

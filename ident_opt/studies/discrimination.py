@@ -1,6 +1,6 @@
 """Discrimination design: the excitation that best tells two suspected causes apart (T-optimal design).
 
-The two causes' candidate models are the diagnosis's own (`diagnose.candidates`: each cause's families,
+The two causes' candidate models are the diagnosis's own (`diagnosis.candidates`: each cause's families,
 refitted with every π of the nominal structure, baseline ``rigid_fit``), fitted on the problem's first trial
 (the data the diagnosis could not separate well), each cause's best family kept. On a trajectory, with A
 true: τ_A is A's prediction, and B fitted to it (weighted least squares on B's columns, its nonlinear
@@ -10,7 +10,7 @@ weights), the diagnosis's expected score gap between the true cause and the othe
 
     gap(A true) = (n/2) Σ_j ln(1 + LOF_j(A→B) / (n σ_j²)) − ((k_B − k_A)/2) ln n
 
-(`diagnose.scoring`: held-out log-likelihood gain with a BIC penalty; n samples at the data's rate over the
+(`diagnosis.scoring`: held-out log-likelihood gain with a BIC penalty; n samples at the data's rate over the
 design's duration). The design maximises the geometric mean of gap(A true) and gap(B true), in the same limits
 as every design; its value, the smaller of the two, is reported against the first `duration` seconds of the
 trial the data came from, and the whole of it.
@@ -33,10 +33,10 @@ import numpy as np
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.data import Dataset
-from ident_opt.diagnose import candidates as cands
-from ident_opt.diagnose import linear, signals
-from ident_opt.diagnose.diagnosis import prepare, rigid_fit
-from ident_opt.diagnose.signals import TORQUE_FILTER_HZ
+from ident_opt.diagnosis import candidates as cands
+from ident_opt.diagnosis import linear, signals
+from ident_opt.diagnosis.loop import prepare, rigid_fit
+from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
 from ident_opt.report import shown
@@ -96,7 +96,7 @@ def fit_rivals(
     robot: PlanarRobot, trial: Dataset, causes: tuple[str, str], torque_filter_hz: float = TORQUE_FILTER_HZ
 ) -> Rivals:
     """Each cause's best family (least weighted training cost) fitted on the whole `trial` against the refitted
-    nominal model, in the diagnosis's context (`diagnose.diagnosis.prepare`, `rigid_fit` weights)."""
+    nominal model, in the diagnosis's context (`diagnosis.loop.prepare`, `rigid_fit` weights)."""
     data = prepare(trial, torque_filter_hz)
     dt = float(np.median(np.diff(data.t)))
     _, weights = rigid_fit(data)

@@ -486,21 +486,17 @@ def design(
             "try more starts"
         )
     x, kept = best
-    t, q, dq, ddq, tau = output_samples(setup, x, rate)
+    samples = output_samples(setup, x, rate)  # t, q, dq, ddq, tau at the output rate
     warnings = []
     if not kept["converged"]:
         warnings.append(
             f"IPOPT did not converge on the kept start ({kept['status']}); kept the best feasible design found"
         )
     return Design(
-        criterion=criterion,
-        x=x,
-        t=t,
-        q=q,
-        dq=dq,
-        ddq=ddq,
-        tau=tau,
-        criteria=evaluate(q, dq, ddq) if evaluate is not None else {},
+        criterion,
+        x,
+        *samples,
+        criteria=evaluate(*samples[1:4]) if evaluate is not None else {},
         start_criteria=kept["start_criteria"],
         margins=margins(setup, x),
         starts=records,

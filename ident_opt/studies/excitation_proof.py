@@ -37,8 +37,8 @@ from tqdm import tqdm
 
 from ident_opt.arm.planar import PHYSICAL
 from ident_opt.data import Dataset
-from ident_opt.diagnose.diagnosis import at_rest, diagnose, prepare, rigid_fit
-from ident_opt.diagnose.signals import TORQUE_FILTER_HZ
+from ident_opt.diagnosis.loop import at_rest, diagnose, prepare, rigid_fit
+from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
 from ident_opt.effects import CATALOGUE
 from ident_opt.identify import estimators
 from ident_opt.identify.stats import Stats
@@ -128,7 +128,7 @@ def median_relative_error(pi_hat: np.ndarray, pi_true: np.ndarray) -> float:
 
 def identification_row(setup: Setup, ds: Dataset, pi_true: np.ndarray) -> dict:
     """cond, log det and both estimators' median relative error on one simulated trial, as logged and with the
-    velocities of resting joints read as 0 (`diagnose.diagnosis.at_rest`: at rest the sign of an estimated
+    velocities of resting joints read as 0 (`diagnosis.loop.at_rest`: at rest the sign of an estimated
     velocity is noise, and the Coulomb columns would carry it)."""
     row = {k: v for k, v in excitation.criteria(setup, ds.q, ds.dq, ds.ddq).items() if k != "rank"}
     for suffix, d in (("", ds), (" (rests 0)", at_rest(ds))):

@@ -1,6 +1,6 @@
 """What `ident-opt export` writes, computed: the arm identified on the problem's training trials by the fit the
 tool stands behind (its consistent fit, or `--estimator`), realised exactly as rigid bodies
-(`ident_opt.arm.realise`), with what the data did not determine named. `ident_opt.export` writes it."""
+(`ident_opt.arm.realise`), with what the data did not determine named. `ident_opt.descriptions` writes it."""
 
 from __future__ import annotations
 

@@ -10,19 +10,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident_opt.arm.datasheet import datasheet_pi
-from ident_opt.arm.planar import RIGID
-from ident_opt.data import Dataset
-from ident_opt.models import DATASHEETS, FITTED, RidgeModel, RigidModel
+from ident_opt.columns import kinematic_columns
+from ident_opt.data import Dataset, concat
+from ident_opt.identify import estimators
+from ident_opt.metrics import all_metrics
+from ident_opt.models import RidgeModel, RigidModel, fitted
 from ident_opt.paper import PI_TRUE
 from ident_opt.problem.spec import Problem
+from ident_opt.studies import METRICS
 from ident_opt.studies.protocols import ProtocolResult, chronological_protocol, cross_trial_protocol, paper_protocol
 from ident_opt.studies.seeds import SplitResults, seed_study
+from ident_opt.studies.trust import Trust, check_masses, checks, iv_fit, stats_of
 
 #: The paper's protocol with other GMR settings: name -> label (`IdentifyResult.variants`).
 VARIANTS = {"diagonal_covariance": "diag GMM", "one_component": "K = 1"}
-#: The names of Model 1's features, in its column order.
-RIDGE_FEATURES = ("q1", "q2", "dq1", "dq2", "ddq1", "ddq2")
 
 
 @dataclass
@@ -44,8 +45,15 @@ class IdentifyResult:
     seeds: SplitResults | None = None  # OLS over the paper's seeds (the seed figure)
     #: the problem describes the paper's robot: its reproduction table, π columns and sentences belong in the report
     paper_robot: bool = True
-    #: what the tool applied to read the robot (a URDF arm's angle offsets and signs, `UrdfPlanarRobot.statement`)
+    #: what the tool applied to read the robot (`Robot.statement`: a URDF arm's angle offsets and signs, notes)
     robot_statement: tuple[str, ...] = ()
+    joints: tuple[str, ...] = ("joint1", "joint2")  # the joints' names, base to tip
+    paper_views: bool = True  # the paper's protocol, its seed study and tables apply (`Robot.paper_views`)
+    #: what `consistency` measures, for the report (`Arm.consistency_measure` without its unit)
+    consistency_note: str = "min eig M(q)"
+    warnings: list = field(default_factory=list)  # `ident_opt.warnings.ResultWarning`s of the trust checks
+    #: per held-out trial (when there are several): {file: {metric: {model: [one value per joint]}}}
+    by_test_trial: dict = field(default_factory=dict)
 
 
 #: A problem describes the paper's robot when its datasheet, read in the paper's convention, gives the paper's
@@ -54,26 +62,44 @@ PAPER_ROBOT_TOLERANCE = 0.02
 
 
 def is_paper_robot(problem: Problem) -> bool:
-    """Whether `problem` is the paper's arm (TUDOR): bars and motors whose paper-convention π is the paper's."""
-    if getattr(problem.robot, "description", "bars") != "bars":
+    """Whether `problem` is the paper's arm (TUDOR): a planar arm of bars and motors whose paper-convention π is the
+    paper's (`PAPER_ROBOT_TOLERANCE`)."""
+    robot = problem.robot
+    if not robot.paper_views or "paper" not in robot.datasheets():
         return False
-    pi = datasheet_pi(problem.robot, "paper")
-    return all(abs(pi[k] / PI_TRUE[k] - 1) <= PAPER_ROBOT_TOLERANCE for k in ("a1", "a2", "a3", "b1", "b2"))
+    arm, pi = robot.datasheets()["paper"]
+    values = arm.as_dict(pi)
+    return all(abs(values[k] / PI_TRUE[k] - 1) <= PAPER_ROBOT_TOLERANCE for k in ("a1", "a2", "a3", "b1", "b2"))
 
 
-def steps(problem: Problem, unseen: Dataset | None, variants: bool = True) -> int:
-    """How many times `identify` ticks its progress bar."""
-    return len(problem.split.seeds) * (3 if variants else 1) + 2 + (unseen is not None)
+def steps(problem: Problem, unseen: bool, variants: bool = True) -> int:
+    """How many times `identify` ticks its progress bar (`unseen`: with held-out trials)."""
+    paper = len(problem.split.seeds) * (3 if variants else 1) if problem.robot.paper_views else 0
+    return paper + 2 + unseen
 
 
 def identify(
-    problem: Problem, trial: Dataset, unseen: Dataset | None = None, *, variants: bool = True, progress=None
+    problem: Problem,
+    training: list[Dataset],
+    testing: list[Dataset] | None = None,
+    *,
+    variants: bool = True,
+    progress=None,
 ) -> IdentifyResult:
-    """The study. `progress`: a tqdm-like bar (`update()`, `set_postfix_str(text)`) or None."""
+    """The study on the `training` trials (pooled: derivatives were estimated per file, so nothing straddles two)
+    and the held-out `testing` ones (pooled, and each scored on its own). `progress`: a tqdm-like bar (`update()`,
+    `set_postfix_str(text)`) or None. The paper's protocol (and its GMR variants, its seed study) runs where the
+    paper's views apply (`Robot.paper_views`). The trust checks of `studies.trust` run on the training trials."""
     bar = progress or _Silent()
-    bar.set_postfix_str("paper's protocol")
-    protocols = {"paper": paper_protocol(trial, problem, progress=bar.update)}
-    others = _variants(trial, problem, protocols["paper"], bar) if variants else {}
+    robot = problem.robot
+    trial = concat(training)
+    unseen = concat(testing) if testing else None
+    protocols, others, seeds = {}, {}, None
+    if robot.paper_views:
+        bar.set_postfix_str("paper's protocol")
+        protocols["paper"] = paper_protocol(trial, problem, progress=bar.update)
+        others = _variants(trial, problem, protocols["paper"], bar) if variants else {}
+        seeds = seed_study(trial, robot.model(()), problem.split)
     bar.set_postfix_str("chronological")
     protocols["chronological"] = chronological_protocol(trial, problem, progress=bar.update)
     if unseen is not None:
@@ -81,6 +107,7 @@ def identify(
         protocols["cross_trial"] = cross_trial_protocol(trial, unseen, problem, progress=bar.update)
     bar.set_postfix_str("parameters")
     params, ses, eig = whole_trial_parameters(problem, trial)
+    trust = _trust(problem, training, params)
     result = IdentifyResult(
         problem.name,
         trial.source,
@@ -93,9 +120,14 @@ def identify(
         gmr_candidates=tuple(problem.residual.candidates),
         ridge=ridge_weights(trial),
         reg_covar=problem.residual.reg_covar,
-        seeds=seed_study(trial, RIGID, problem.split),
+        seeds=seeds,
         paper_robot=is_paper_robot(problem),
-        robot_statement=tuple(getattr(problem.robot, "statement", ())),
+        robot_statement=tuple(robot.statement),
+        joints=tuple(robot.joint_names),
+        paper_views=robot.paper_views,
+        consistency_note=robot.model(()).consistency_measure.removesuffix(" [kg m²]"),
+        warnings=list(trust.warnings),
+        by_test_trial=_by_test_trial(protocols.get("cross_trial"), testing or []),
     )
     bar.update()
     return result
@@ -116,20 +148,54 @@ def _variants(trial: Dataset, problem: Problem, paper: ProtocolResult, bar) -> d
     }
 
 
+def _trust(problem: Problem, training: list[Dataset], params: dict) -> Trust:
+    """The trust checks (`studies.trust`: the angle convention, the cut-off, OLS against IV) on the training trials,
+    and the fits' masses against the nominal ones: what the JSON's `warnings` say."""
+    robot, model = problem.robot, problem.robot.model(())
+    ols = estimators.fit_for(robot, "ols", stats_of(model, training), model)
+    trust = checks(model, training, ols, iv_fit(model, training), problem.data.conversions, robot)
+    nominal_arm, nominal_pi = robot.datasheets()[robot.datasheet]
+    estimates = {name: model.vector(params[name]) for name in fitted(robot).values() if name != "ols"}
+    trust.warnings += check_masses(model, estimates, nominal_arm.link_masses(nominal_pi))
+    return trust
+
+
+def _by_test_trial(cross: ProtocolResult | None, testing: list[Dataset]) -> dict[str, dict]:
+    """{file: {metric: {model: [one value per joint]}}} of the cross-trial protocol on each held-out trial, from its
+    predictions on their pool (the trials follow one another in it); {} for fewer than two held-out trials."""
+    if cross is None or len(testing) < 2:
+        return {}
+    out, start = {}, 0
+    split = cross.example
+    for d in testing:
+        rows = slice(start, start + d.n)
+        start += d.n
+        per: dict[str, dict] = {m: {} for m in METRICS}
+        for key, prediction in split.predictions.items():
+            for m, v in all_metrics(d.tau, prediction[rows]).items():
+                per[m][key] = v
+        out[d.source] = per
+    return out
+
+
 def whole_trial_parameters(problem: Problem, trial: Dataset):
-    """π on the whole first trial: datasheet (both conventions), every fitted estimator (`models.FITTED`)
-    with SEs; and each one's smallest eigenvalue of M(q) over q [kg m²] (rounded to 1e-12)."""
-    conv = problem.robot.convention
-    other = next(c for c in DATASHEETS if c != conv)
-    params = {"datasheet": datasheet_pi(problem.robot, conv), f"datasheet_{other}": datasheet_pi(problem.robot, other)}
+    """π on the whole first trial: the robot's nominal models ("datasheet" its own, "datasheet_<name>" the others),
+    every fitted estimator (`models.fitted`) with SEs; and each one's consistency margin (`Arm.min_mass_eigenvalue`,
+    for the planar arm the smallest eigenvalue of M(q) over q) [kg m²] (rounded to 1e-12)."""
+    robot = problem.robot
+    sheets = robot.datasheets()
+    own_arm, own_pi = sheets[robot.datasheet]
+    params = {"datasheet": own_arm.as_dict(own_pi)}
+    others = {name: model for name, model in sheets.items() if name != robot.datasheet}
+    params.update({f"datasheet_{name}": arm.as_dict(pi) for name, (arm, pi) in others.items()})
     ses, eig = {}, {}
-    for name in FITTED.values():
-        fitted = RigidModel(name, RIGID, estimator=name).fit(trial)
-        params[name] = fitted.params()
-        ses[name] = fitted.fit_.se_dict()
-        eig[name] = RIGID.min_mass_eigenvalue(fitted.pi)
-    arm = DATASHEETS[conv][1]  # M(q) does not depend on the gravity vector: RIGID's and PAPER's are the same
-    eig["datasheet"] = arm.min_mass_eigenvalue(arm.vector(params["datasheet"]))
+    arm = robot.model(())
+    for name in fitted(robot).values():
+        model = RigidModel(name, arm, estimator=name, options=robot.fit_options(name)).fit(trial)
+        params[name] = model.params()
+        ses[name] = model.fit_.se_dict()
+        eig[name] = arm.min_mass_eigenvalue(model.pi)
+    eig["datasheet"] = own_arm.min_mass_eigenvalue(own_pi)
     return params, ses, {k: float(np.round(v, 12)) for k, v in eig.items()}
 
 
@@ -139,7 +205,7 @@ def ridge_weights(trial: Dataset) -> dict:
     return {
         "alpha": rr.alpha_.tolist(),
         "intercept": rr.intercept_.tolist(),
-        "coef": {f: rr.coef_[:, i].tolist() for i, f in enumerate(RIDGE_FEATURES)},
+        "coef": {f: rr.coef_[:, i].tolist() for i, f in enumerate(kinematic_columns(trial.q.shape[1])[1:])},
     }
 
 

@@ -39,10 +39,10 @@ class SplitResult:
 
     test: Dataset
     models: dict[str, object]  # key -> fitted model (parametric and hybrid)
-    predictions: dict[str, np.ndarray]  # key -> τ̂ on the test part (N, 2) [N m]
-    std: dict[str, np.ndarray]  # `+gmr` key -> predictive standard deviation (N, 2) [N m]
-    metrics: dict[str, dict[str, list[float]]]  # metric -> key -> [joint 1, joint 2]
-    coverage: dict[str, list[float]]  # `+gmr` key -> [joint 1, joint 2]
+    predictions: dict[str, np.ndarray]  # key -> τ̂ on the test part (N, n) [N m]
+    std: dict[str, np.ndarray]  # `+gmr` key -> predictive standard deviation (N, n) [N m]
+    metrics: dict[str, dict[str, list[float]]]  # metric -> key -> [one value per joint]
+    coverage: dict[str, list[float]]  # `+gmr` key -> [one value per joint]
     components: dict[str, int]  # `+gmr` key -> chosen number of mixture components
     train_fit: dict[str, list[float]]  # key -> training-data RMSE [N m] (hybrid never worse: checked in tests)
 
@@ -61,7 +61,7 @@ class ProtocolResult:
     example: SplitResult | None = None  # the first split, for figures
 
     def as_json(self) -> dict:
-        """The spec's shape: metric -> key -> [j1, j2], plus coverage and the chosen components."""
+        """The spec's shape: metric -> key -> [one value per joint], plus coverage and the chosen components."""
         out: dict = {m: self.metrics[m] for m in METRICS}
         out["coverage"] = self.coverage
         out["gmr_components"] = self.components

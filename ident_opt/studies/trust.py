@@ -27,6 +27,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ident_opt.arm.base import Arm
 from ident_opt.data import Dataset, refiltered
 from ident_opt.derivatives import choose_cutoff
@@ -211,19 +213,17 @@ LINK_MASS_FACTOR = 3.0
 TOTAL_MASS_RANGE = 0.5
 
 
-def check_masses(model: Arm, fits: dict[str, LinearFit], nominal: dict[str, float]) -> list[ResultWarning]:
-    """A warning per fit whose links' masses (`Arm.link_masses`) are far from the nominal ones (`nominal`, by
-    link [kg]): a link beyond `LINK_MASS_FACTOR` × its nominal mass or below 1/`LINK_MASS_FACTOR` of it, or a total
-    beyond ± `TOTAL_MASS_RANGE` of the nominal total. Fits that determine only base parameters are not judged
-    (their standard parameters are a representative, not an estimate)."""
+def check_masses(model: Arm, pis: dict[str, np.ndarray], nominal: dict[str, float]) -> list[ResultWarning]:
+    """A warning per parameter set π of `model` (by the fit's name) whose links' masses (`Arm.link_masses`) are far
+    from the nominal ones (`nominal`, by link [kg]): a link beyond `LINK_MASS_FACTOR` × its nominal mass or below
+    1/`LINK_MASS_FACTOR` of it, or a total beyond ± `TOTAL_MASS_RANGE` of the nominal total. Pass only estimates:
+    a fit of base parameters lifted to standard ones (`identify.base.lifted_fit`) holds a representative."""
     if not nominal:
         return []
     total0 = sum(nominal.values())
     out = []
-    for key, fit in fits.items():
-        if "base_parameters" in fit.details:
-            continue
-        masses = model.link_masses(fit.pi)
+    for key, pi in pis.items():
+        masses = model.link_masses(pi)
         odd = [
             f"{link} {m:.3g} kg (nominal {nominal[link]:.3g})"
             for link, m in masses.items()

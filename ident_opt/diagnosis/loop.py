@@ -18,8 +18,8 @@ from tqdm import tqdm
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.data import Dataset, chronological_split
-from ident_opt.diagnose import candidates as cands
-from ident_opt.diagnose import evidence, linear, scoring, signals
+from ident_opt.diagnosis import candidates as cands
+from ident_opt.diagnosis import evidence, linear, scoring, signals
 from ident_opt.errors import InputError
 from ident_opt.metrics import nmse
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt import outputs
-from ident_opt.diagnose import scoring, signals
-from ident_opt.diagnose.diagnosis import Diagnosis
+from ident_opt.diagnosis import scoring, signals
+from ident_opt.diagnosis.loop import Diagnosis
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
 

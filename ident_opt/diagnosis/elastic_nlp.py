@@ -42,7 +42,7 @@ import time
 import casadi as ca
 import numpy as np
 
-from ident_opt.diagnose import signals
+from ident_opt.diagnosis import signals
 from ident_opt.identify.nlp import IPOPT_QUIET
 
 #: Length of one shooting segment [s].

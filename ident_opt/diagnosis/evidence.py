@@ -11,7 +11,7 @@ import numpy as np
 
 from ident_opt.arm.planar import PlanarArm
 from ident_opt.data import Dataset
-from ident_opt.diagnose import signals
+from ident_opt.diagnosis import signals
 
 #: Below this frequency [Hz] lies the motion band of point-to-point trials (the real trials' residual
 #: power sits mostly there).

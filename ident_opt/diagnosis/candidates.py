@@ -27,7 +27,7 @@ import numpy as np
 from ident_opt.arm.datasheet import PlanarRobot
 from ident_opt.arm.planar import PHYSICAL, PlanarArm
 from ident_opt.data import Dataset
-from ident_opt.diagnose import linear, signals
+from ident_opt.diagnosis import linear, signals
 from ident_opt.effects import CATALOGUE
 
 #: The nominal structure under the physical convention (the datasheet has the joint-2 armature ia2).

@@ -23,8 +23,8 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from ident_opt.arm.bodies import ABSOLUTE_TOLERANCE, RELATIVE_TOLERANCE, Body, Origin, RobotDescription
+from ident_opt.descriptions.urdf import comment, number, numbers, xml_text
 from ident_opt.errors import InputError
-from ident_opt.export.urdf import comment, number, numbers, xml_text
 from ident_opt.outputs import write_text
 
 #: The lower bound MuJoCo's compiler puts on principal moments when a link has a zero one [kg m²] (its mjMINVAL).

@@ -5,7 +5,7 @@ naming rule), `diagnosis` (the four questions in order), `report` (Markdown, fig
 `hidden` (hidden-effect trials for tests and benchmarks); `linear`, `signals` and `elastic_nlp` (the IPOPT
 polish of a lightly damped mode) are shared tools."""
 
-from ident_opt.diagnose.diagnosis import Diagnosis, diagnose
+from ident_opt.diagnosis.loop import Diagnosis, diagnose
 from ident_opt.effects import CATALOGUE
 
 #: The catalogue's cause names, `none` first.

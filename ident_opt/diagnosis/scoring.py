@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident_opt.diagnose import signals
+from ident_opt.diagnosis import signals
 from ident_opt.effects import CATALOGUE
 
 #: Least fraction of the baseline's held-out MSE (on some joint) the named extension must remove.

@@ -1,7 +1,0 @@
-"""`ident-opt export`'s writers: an identified arm (`ident_opt.arm.bodies.RobotDescription`, realised from π by
-`ident_opt.arm.realise`) as a URDF with a JSON sidecar (`write_urdf`) or as a MuJoCo MJCF (`write_mjcf`)."""
-
-from ident_opt.export.mjcf import mjcf_text, write_mjcf
-from ident_opt.export.urdf import identified, urdf_text, write_urdf
-
-__all__ = ["identified", "mjcf_text", "urdf_text", "write_mjcf", "write_urdf"]
