@@ -18,7 +18,7 @@ from sklearn.model_selection import train_test_split
 from ident_opt import rosbag
 from ident_opt.arm.base import Robot
 from ident_opt.arm.planar import PI_NAMES
-from ident_opt.columns import channel_names, data_columns
+from ident_opt.columns import channel_names, locate
 from ident_opt.derivatives import estimate_derivatives, lowpass, resolve_cutoff
 from ident_opt.errors import InputError
 from ident_opt.problem.spec import DataSpec
@@ -128,25 +128,17 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
     return frame
 
 
-def _standard_layout(frame: pd.DataFrame, spec: DataSpec) -> tuple[pd.DataFrame, DataSpec]:
-    """A file whose header row has the standard names (t, q1, q2) is read by name when the problem's mapping
-    is for another layout (it names columns this file lacks, or indices of a header-less export), unless
-    `[data] standard_by_name = false`. A mapping whose names all exist in the file is applied as written."""
-    if not spec.standard_by_name:
-        return frame, spec
-    if spec.header:
-        names = {str(c).strip() for c in frame.columns}
-        # The mapping fits this file (every mapped name is in it): keep it, conversions included.
-        fits = all(isinstance(v, str) and v in names for v in spec.columns.values())
-        if spec.columns and not fits and {"t", "q1", "q2"} <= names:
-            return frame, replace(spec, columns={}, conversions={})
+def _header_row(frame: pd.DataFrame, spec: DataSpec) -> tuple[pd.DataFrame, DataSpec]:
+    """A file read without a header row (`[data] header = false`) whose first row has the standard names (t, q1) is
+    a file with a header after all (unless `[data] standard_by_name = false`): that row becomes the header."""
+    if spec.header or not spec.standard_by_name:
         return frame, spec
     first = [str(v).strip() for v in frame.iloc[0]]
-    if not {"t", "q1", "q2"} <= set(first):
+    if not {"t", "q1"} <= set(first):
         return frame, spec
     body = frame.iloc[1:].reset_index(drop=True)
     body.columns = first
-    return body, replace(spec, header=True, columns={}, conversions={})
+    return body, replace(spec, header=True)
 
 
 def _check_unique_header(frame: pd.DataFrame, path: Path, spec: DataSpec) -> None:
@@ -167,29 +159,14 @@ def _check_unique_header(frame: pd.DataFrame, path: Path, spec: DataSpec) -> Non
         seen[name] = index
 
 
-def _locate(frame: pd.DataFrame, spec: DataSpec, path: Path, n_joints: int) -> dict[str, object]:
-    """Map each data-format column present in the file to its column label in `frame` (none for a name the
-    problem leaves unread, `[data.columns]` name = false, even when the file has a column of that name)."""
-    found: dict[str, object] = {}
-    names = data_columns(n_joints)
-    for name in names:
-        source = spec.columns.get(name, name if spec.header else None)
-        if source is None or name in spec.ignored:
-            continue
-        if isinstance(source, int) and spec.header:
-            if source >= frame.shape[1]:
-                raise InputError(
-                    f"{path}: column index {source} for '{name}' is beyond the file's {frame.shape[1]} columns"
-                )
-            found[name] = frame.columns[source]
-        elif source in frame.columns:
-            found[name] = source
-        elif name in spec.columns:
-            have = ", ".join(map(str, frame.columns[:30]))
-            raise InputError(
-                f"{path}: column '{source}' (mapped to '{name}' by [data.columns]) not found; the file has: {have}"
-            )
-    return found
+def _locate(
+    frame: pd.DataFrame, spec: DataSpec, path: Path, n_joints: int
+) -> tuple[dict[str, object], dict[str, tuple[float, float]]]:
+    """({data-format name: its column label in `frame`}, the conversions that apply) by the rules every reader of
+    the problem's data shares (`columns.locate`)."""
+    header = [str(c) for c in frame.columns] if spec.header else None
+    found, conversions = locate(header, frame.shape[1], spec, n_joints, str(path))
+    return {name: frame.columns[i] for name, i in found.items()}, conversions
 
 
 def _row_label(path: Path, row: int, spec: DataSpec) -> str:
@@ -399,9 +376,9 @@ def load_dataset(
     n_joints = len(robot.joints)
     names = channel_names(n_joints)
     frame = _read(path, spec)
-    frame, spec = _standard_layout(frame, spec)
+    frame, spec = _header_row(frame, spec)
     _check_unique_header(frame, path, spec)
-    cols = _locate(frame, spec, path, n_joints)
+    cols, conversions = _locate(frame, spec, path, n_joints)
     load_kind = _check_columns(cols, frame, path, n_joints, spec)
 
     bad = np.zeros(len(frame), dtype=bool)
@@ -409,7 +386,7 @@ def load_dataset(
     if drop_invalid:  # rows that break strict increase of t are dropped too (the first of a run is kept)
         bad |= _non_increasing(values["t"], bad)
     keep = ~bad
-    values = {name: convert(v[keep], *spec.conversions.get(name, (1.0, 0.0))) for name, v in values.items()}
+    values = {name: convert(v[keep], *conversions.get(name, (1.0, 0.0))) for name, v in values.items()}
     # A URDF's angle zero and axis sign are the file's, not ident-opt's: the robot maps them (urdf_planar).
     to_tool = robot.column_map
     values = {name: convert(v, *to_tool.get(name, (1.0, 0.0))) for name, v in values.items()}

@@ -3,9 +3,10 @@
 Input on standard input, one sample per line: CSV with a header line (any order, extra columns ignored), CSV
 without a header when the problem's `[data] header = false` maps column indices, or JSON lines. The first
 non-empty line decides. The problem's `[data.columns]` mapping and its `{column, scale, offset}` conversions
-apply as in the batch loader. Each sample needs q1 q2 [rad]; dq1 dq2 ddq1 ddq2 [rad/s, rad/s²] when given,
-else estimated causally from q and t (`CausalDerivatives`: a linear-phase FIR whose delay is stated, the
-torque delayed to match); tau1 tau2 [N m] or motor currents i1 i2 [A] make the sample an update.
+apply by the batch loader's rules (`columns.locate`). Each sample needs q1 … qn [rad] (n the arm's joints);
+dq1 … dqn, ddq1 … ddqn [rad/s, rad/s²] when given, else estimated causally from q and t
+(`derivatives.CausalDerivatives`: a linear-phase FIR whose delay is stated, the torque delayed to match);
+tau1 … taun [N m] or motor currents i1 … in [A] make the sample an update.
 
 Guards (nothing on the input kills the stream): lines that are not UTF-8, not parseable, with numbers that
 overflow, missing fields or values outside the batch loader's plausibility limits (`data.PLAUSIBLE`) are
@@ -26,18 +27,12 @@ from typing import TextIO
 
 import numpy as np
 
+from ident_opt.columns import channel_names, data_columns, locate
 from ident_opt.data import PLAUSIBLE
 from ident_opt.derivatives import CausalDerivatives, NonIncreasingTime
 from ident_opt.errors import InputError
 from ident_opt.online import OnlineIdentifier, Prediction
 
-Q, DQ, DDQ = ("q1", "q2"), ("dq1", "dq2"), ("ddq1", "ddq2")
-TORQUES = ("tau1", "tau2")
-CURRENTS = ("i1", "i2")
-#: Every standard name the stream reads.
-STANDARD = ("t", *Q, *DQ, *DDQ, *TORQUES, *CURRENTS)
-#: Columns every sample with logged derivatives needs (kept for callers).
-INPUTS = (*Q, *DQ, *DDQ)
 #: Default robust outlier threshold: residuals beyond this many robust standard deviations update nothing.
 OUTLIER_K = 10.0
 #: Memory (samples) of the robust residual scale; an outlier moves it by 1/`OUTLIER_MEMORY` of its clipped square.
@@ -54,78 +49,72 @@ class BadLine(ValueError):
 
 @dataclass
 class Mapping:
-    """How stream columns become standard names: `columns` {standard name: column name or 0-based index},
-    `conversions` {standard name: (scale, offset)} (value = scale × raw + offset), `header`: whether a CSV
-    stream is expected to start with a header line (the problem's `[data] header`), `ignored`: standard names
-    never read from a CSV header (`[data.columns]` name = false)."""
+    """How stream columns become standard names, by the batch loader's rules (`columns.locate`): `columns`
+    {standard name: column name or 0-based index}, `conversions` {standard name: (scale, offset)} (value = scale ×
+    raw + offset), `header`: whether a CSV stream is expected to start with a header line (the problem's `[data]
+    header`), `to_tool`: after the conversions, name → (scale, offset) to ident-opt's angle convention (a URDF
+    arm's samples come in the URDF's: `Robot.column_map`), `ignored`: standard names never read (`[data.columns]`
+    name = false), `standard_by_name`: a header with the standard names is read by name, `n_joints`: the arm's."""
 
     columns: dict[str, str | int] = field(default_factory=dict)
     conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
     header: bool = True
-    #: after the conversions, name -> (scale, offset) to ident-opt's angle convention: a two-joint URDF arm's
-    #: samples come in the URDF's (`UrdfPlanarRobot.column_map`, as `data.load_dataset` applies it)
     to_tool: dict[str, tuple[float, float]] = field(default_factory=dict)
     ignored: frozenset[str] = frozenset()
+    standard_by_name: bool = True
+    n_joints: int = 2
 
     @classmethod
     def from_spec(cls, spec, robot=None) -> Mapping:
-        """From a problem's `DataSpec`, restricted to the names the stream reads (and its robot's map from a
-        URDF's angle convention, if it has one), with the names it leaves unread."""
-        cols = {k: v for k, v in spec.columns.items() if k in STANDARD}
-        conv = {k: v for k, v in spec.conversions.items() if k in cols}
+        """From a problem's `DataSpec` and its robot (its number of joints, its map from the data's angle
+        convention to the tool's)."""
+        n = robot.n_joints if robot is not None else 2
         to_tool = dict(robot.column_map) if robot is not None else {}
-        return cls(cols, conv, bool(spec.header), to_tool, frozenset(spec.ignored))
+        return cls(
+            dict(spec.columns),
+            dict(spec.conversions),
+            bool(spec.header),
+            to_tool,
+            frozenset(spec.ignored),
+            bool(spec.standard_by_name),
+            n,
+        )
+
+    @property
+    def names(self) -> dict[str, tuple[str, ...]]:
+        """The standard names per signal for this arm (`columns.channel_names`)."""
+        return channel_names(self.n_joints)
 
     def resolve_header(self, header: list[str]) -> tuple[dict[str, int], dict[str, tuple[float, float]]]:
-        """{standard name: position} for a CSV header, and the conversions that apply; `InputError` when
-        the header lacks q1 q2 (or a mapped column). Rules of the batch loader: a mapping whose names are all
-        in the header is applied as written; else a header with the standard names is read by name."""
+        """{standard name: position} for a CSV header, and the conversions that apply (`columns.locate`);
+        `InputError` when a name repeats or the header lacks an angle."""
         names = [c.strip() for c in header]
         if len(set(names)) != len(names):
             twice = next(n for n in names if names.count(n) > 1)
             raise InputError(f"stream: column '{twice}' appears twice in the CSV header")
-        fits = bool(self.columns) and all(isinstance(v, str) and v in names for v in self.columns.values())
-        by_name = [n for n in STANDARD if n in names and n not in self.ignored]  # a name left unread is not read
-        if fits:
-            found = {k: names.index(v) for k, v in self.columns.items()}
-            found.update({n: names.index(n) for n in by_name if n not in found})
-            return found, dict(self.conversions)
-        if set(Q) <= set(names):
-            return {n: names.index(n) for n in by_name}, {}
-        found = {}
-        for k, v in self.columns.items():
-            if isinstance(v, int):
-                if v >= len(names):
-                    raise InputError(
-                        f"stream: [data.columns] maps '{k}' to column {v}, beyond the header's {len(names)} columns"
-                    )
-                found[k] = v
-            elif v in names:
-                found[k] = names.index(v)
-        missing = [n for n in Q if n not in found]
+        found, conversions = locate(names, len(names), self, self.n_joints, "stream")
+        missing = self._missing_angles(found)
         if missing:
             raise InputError(
-                f"stream: the CSV header ({', '.join(names[:20])}) lacks {', '.join(missing)}; "
-                "name them so, or map them with [data.columns] in the problem file"
+                f"stream: the CSV header ({', '.join(names[:20])}) lacks {missing}; name them so, or map them with "
+                "[data.columns] in the problem file"
             )
-        return found, {k: v for k, v in self.conversions.items() if k in found}
+        return found, conversions
 
     def by_index(self, width: int) -> tuple[dict[str, int], dict[str, tuple[float, float]]]:
         """{standard name: position} for a header-less CSV stream from the mapping's column indices."""
-        found = {k: v for k, v in self.columns.items() if isinstance(v, int)}
-        missing = [n for n in Q if n not in found]
+        found, conversions = locate(None, width, self, self.n_joints, "stream")
+        missing = self._missing_angles(found)
         if missing:
             raise InputError(
                 "stream: the first line is data, not a header, and [data.columns] maps no column index for "
-                f"{', '.join(missing)}; start the stream with a header line"
+                f"{missing}; start the stream with a header line"
             )
-        beyond = [k for k, v in found.items() if v >= width]
-        if beyond:
-            raise InputError(
-                f"stream: [data.columns] maps '{beyond[0]}' to column {found[beyond[0]]}, beyond the line's "
-                f"{width} fields"
-            )
-        return found, {k: v for k, v in self.conversions.items() if k in found}
+        return found, conversions
+
+    def _missing_angles(self, found: dict[str, int]) -> str:
+        """The joint angles `found` lacks, comma-separated ("" when none)."""
+        return ", ".join(n for n in self.names["q"] if n not in found)
 
 
 def _number(text: str) -> float:
@@ -147,7 +136,7 @@ class LineParser:
 
     format: str | None = None  # "csv" or "json", decided by the first non-empty line
     header: list[str] = field(default_factory=list)
-    current_to_torque: tuple[float, float] | None = None  # N m / A per joint, for i1 i2 samples
+    current_to_torque: tuple[float, ...] | None = None  # N m / A per joint, for samples of currents
     mapping: Mapping = field(default_factory=Mapping)
     positions: dict[str, int] = field(default_factory=dict)
     conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
@@ -180,7 +169,7 @@ class LineParser:
             if len(cells) != self.width:
                 raise BadLine(f"{len(cells)} fields, the {'header' if self.header else 'first line'} has {self.width}")
             raw = {name: cells[i] for name, i in self.positions.items()}
-        sample = _sample(raw, self.current_to_torque, self.conversions)
+        sample = _sample(raw, self.mapping.names, self.current_to_torque, self.conversions)
         for name, (scale, offset) in self.mapping.to_tool.items():  # currents are torques by now: tau's sign
             if name in sample:
                 sample[name] = scale * sample[name] + offset
@@ -188,11 +177,12 @@ class LineParser:
 
     def _check_time_column(self) -> None:
         """Without dq and ddq columns the derivatives are estimated, which needs t: else an `InputError`."""
-        derivatives = all(n in self.positions for n in (*DQ, *DDQ))
+        names = self.mapping.names
+        derivatives = all(n in self.positions for n in (*names["dq"], *names["ddq"]))
         if not derivatives and "t" not in self.positions:
             raise InputError(
-                "stream: the CSV columns give neither dq1 dq2 ddq1 ddq2 nor t; the derivatives are estimated from "
-                "q and t, so t [s] is needed"
+                f"stream: the CSV columns give neither {' '.join((*names['dq'], *names['ddq']))} nor t; the "
+                "derivatives are estimated from q and t, so t [s] is needed"
             )
 
     def _json(self, text: str) -> dict:
@@ -205,7 +195,9 @@ class LineParser:
         if not isinstance(raw, dict):
             raise BadLine("a JSON line must be an object")
         out = {}
-        for name in STANDARD:  # a mapped key first (with its conversion), else the standard name
+        for name in data_columns(self.mapping.n_joints):  # a mapped key first (with its conversion), else the name
+            if name in self.mapping.ignored:
+                continue
             source = self.mapping.columns.get(name)
             if isinstance(source, str) and source in raw:
                 out[name] = raw[source]
@@ -226,30 +218,32 @@ def _is_number(cell: str) -> bool:
 
 
 def _sample(
-    raw: dict, current_to_torque: tuple[float, float] | None = None, conversions: dict | None = None
+    raw: dict,
+    names: dict[str, tuple[str, ...]],
+    current_to_torque: tuple[float, ...] | None = None,
+    conversions: dict | None = None,
 ) -> dict[str, float]:
-    """The numeric fields of a sample, checked: q present, dq and ddq both or neither, every used value a finite
-    number within `data.PLAUSIBLE`; conversions applied; currents i1 i2 become torques tau1 tau2 [N m]."""
+    """The numeric fields of a sample, checked: every angle present, each other signal for every joint or none,
+    torques or currents, every used value a finite number within `data.PLAUSIBLE`; conversions applied; currents
+    become torques [N m]. `names`: the standard names per signal (`columns.channel_names`)."""
 
     def present(name):
         return name in raw and raw[name] not in ("", None)
 
-    missing = [c for c in Q if not present(c)]
+    missing = [c for c in names["q"] if not present(c)]
     if missing:
         raise BadLine(f"missing field(s) {', '.join(missing)}")
-    groups = {g: [c for c in names if present(c)] for g, names in (("dq", DQ), ("ddq", DDQ), ("tau", TORQUES))}
-    groups["i"] = [c for c in CURRENTS if present(c)]
-    if any(len(v) == 1 for v in groups.values()):
-        raise BadLine("joint signals come in pairs: give both joints (tau1 and tau2, dq1 and dq2, ...) or neither")
+    groups = {g: [c for c in names[g] if present(c)] for g in ("dq", "ddq", "tau", "i")}
+    if any(0 < len(v) < len(names["q"]) for v in groups.values()):
+        raise BadLine("a joint signal comes for every joint or none (tau1 … taun, dq1 … dqn, …)")
     if groups["tau"] and groups["i"]:
-        raise BadLine("give torques tau1 tau2 or currents i1 i2, not both")
+        raise BadLine(f"give torques {' '.join(names['tau'])} or currents {' '.join(names['i'])}, not both")
     if groups["i"] and current_to_torque is None:
-        raise BadLine("currents i1 i2 need the problem's torque constants and gear ratios")
-    used = [*Q, *groups["dq"], *groups["ddq"], *groups["tau"], *groups["i"], *(["t"] if present("t") else [])]
+        raise BadLine(f"currents {' '.join(names['i'])} need the problem's torque constants and gear ratios")
+    used = [*names["q"], *(c for g in ("dq", "ddq", "tau", "i") for c in groups[g]), *(["t"] if present("t") else [])]
     out = {name: _value(name, raw[name], conversions) for name in used}
-    if groups["i"]:
-        out["tau1"] = out.pop("i1") * current_to_torque[0]
-        out["tau2"] = out.pop("i2") * current_to_torque[1]
+    for current, torque, k in zip(groups["i"], names["tau"], current_to_torque or ()):
+        out[torque] = out.pop(current) * k
     return out
 
 
@@ -344,7 +338,8 @@ class Service:
         if sample is None:
             return []
         self.counts.samples += 1
-        if "dq1" not in sample or "ddq1" not in sample:
+        names = self.parser.mapping.names
+        if names["dq"][0] not in sample or names["ddq"][0] not in sample:
             if "t" not in sample:
                 raise BadLine("t is needed to estimate dq and ddq (the sample gives neither both)")
             try:
@@ -353,24 +348,23 @@ class Service:
                 raise BadLine(str(exc), "time") from None
             if sample is None:
                 return []
-            for name in (*DQ, *DDQ):
-                kind = name.rstrip("12")
+            for name in (*names["dq"], *names["ddq"]):
+                kind = name.rstrip("0123456789")
                 if not abs(sample[name]) <= PLAUSIBLE[kind]:
                     raise BadLine(f"estimated {name} = {sample[name]:.6g} is implausible", "implausible")
         return self.step(sample)
 
     def step(self, sample: dict[str, float]) -> list[dict]:
         """Predict one complete sample and, when it has a torque that passes the residual test, fold it in."""
-        q = np.array([sample["q1"], sample["q2"]])
-        dq = np.array([sample["dq1"], sample["dq2"]])
-        ddq = np.array([sample["ddq1"], sample["ddq2"]])
+        names = self.parser.mapping.names
+        q, dq, ddq = (np.array([sample[n] for n in names[s]]) for s in ("q", "dq", "ddq"))
         p, D = self.ident.step(q, dq, ddq)
         if not (np.isfinite(p.tau).all() and np.isfinite(p.std).all()):
             raise BadLine("the prediction is not finite for this sample", "numeric")
         self.counts.extrapolating += bool(p.extrapolating)
         out = []
-        if "tau1" in sample:
-            tau = np.array([sample["tau1"], sample["tau2"]])
+        if names["tau"][0] in sample:
+            tau = np.array([sample[n] for n in names["tau"]])
             if self._outlier(tau - p.parametric):
                 self.counts.outliers += 1
                 record = prediction_record(self.ident.n_updates, sample, p)

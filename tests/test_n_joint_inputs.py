@@ -424,7 +424,7 @@ def _run(args: list[str], capsys) -> tuple[int, str]:
     return status, text
 
 
-def test_check_compare_identify_on_the_three_joint_arm(workspace, capsys, tmp_path):
+def test_check_compare_identify_export_on_the_three_joint_arm(workspace, capsys, tmp_path):
     problem = str(workspace / "full.toml")
     assert _run(["check", "--problem", problem], capsys)[0] == 0
     out, result = tmp_path / "compare", tmp_path / "compare.json"
@@ -440,6 +440,9 @@ def test_check_compare_identify_on_the_three_joint_arm(workspace, capsys, tmp_pa
     )
     status, text = _run(["identify", "--problem", problem, "--out", str(tmp_path / "identify")], capsys)
     assert status == 0, text
+    for fmt, name in (("urdf", "arm.urdf"), ("mjcf", "arm.xml")):
+        status, text = _run(["export", "--problem", problem, "--format", fmt, "--out", str(tmp_path / name)], capsys)
+        assert status == 0 and (tmp_path / name).is_file(), text
 
 
 @pytest.mark.skipif(shutil.which("gcc") is None and shutil.which("cc") is None, reason="no C compiler")
@@ -460,7 +463,7 @@ BAD = {
 }
 
 
-@pytest.mark.parametrize("command", ["check", "compare", "identify", "codegen"])
+@pytest.mark.parametrize("command", ["check", "compare", "identify", "codegen", "export"])
 @pytest.mark.parametrize("case", sorted(BAD))
 def test_bad_input_on_each_new_path_exits_2_writing_nothing(workspace, capsys, tmp_path, command, case):
     (workspace / "missing_joint.urdf").write_text(TWISTED.replace('joint name="c"', 'joint name="c2"'))
@@ -471,6 +474,10 @@ def test_bad_input_on_each_new_path_exits_2_writing_nothing(workspace, capsys, t
     path.write_text(text.replace(old, new, 1))
     out = tmp_path / "out"
     args = [command, "--problem", str(path)] + ([] if command == "check" else ["--out", str(out)])
+    if command == "export":  # --out is the file to write; nothing may appear in its folder
+        out.mkdir()
+        args[-1] = str(out / "arm.urdf")
+        args += ["--format", "urdf"]
     if command == "compare":
         args.append("--no-progress")
     status, message = _run(args, capsys)
