@@ -166,6 +166,7 @@ ALL_COMMANDS = (
     "excite",
     "calibrate",
     "export",
+    "fleet",
 )
 
 
