@@ -78,6 +78,15 @@ class Elastic:
         """The fastest closed-loop rate [1/s] the mode adds under PD damping gains kd [N m s/rad]."""
         return [self.fastest_rate + kd[self.index] / self.B]
 
+    def spring(self, e, de):
+        """The joint's spring and damper torque [N m] at deflection e = θ − q_j [rad] and its rate [rad/s] (linear
+        here; `simulate.unseen.NonlinearJoint` shapes it)."""
+        return self.k * e + self.d * de
+
+    def static_deflection(self, torque: float) -> float:
+        """The deflection [rad] at which the spring holds `torque` [N m] at rest."""
+        return torque / self.k
+
     def plant(self, truth) -> ca.Function:
         """(x, τ) -> (ẋ, y) as `simulate.truth.plant`, y's deflection θ − q_j (joint) or φ (link)."""
         x, tau = ca.SX.sym("x", self.state_size), ca.SX.sym("tau", 2)
@@ -88,7 +97,7 @@ class Elastic:
         q, theta, dq, dtheta = x[:2], x[2], x[3:5], x[5]
         link = pi - sim.friction_only(model, pi, j)  # the link side: no friction and no motor inertia at j
         link[model.names.index("a1" if j == 0 else "ia2")] -= self.B
-        spring = self.k * (theta - q[j]) + self.d * (dtheta - dq[j])
+        spring = self.spring(theta - q[j], dtheta - dq[j])
         v = ca.vertcat(dtheta, 0) if j == 0 else ca.vertcat(0, dtheta)
         motor_friction = model.tau_expression(q, v, ca.DM.zeros(2), ca.DM(sim.friction_only(model, pi, j)))[j]
         other = 1 - j
@@ -148,7 +157,7 @@ class Elastic:
         gravity = sim.TRUTH_MODEL.function("G")
         link_pi = sim.TRUTH_MODEL.vector(truth.pi_rigid)
         for _ in range(20):  # fixed point of k (θ − q_j) = G_j(q): the spring holds the link against gravity
-            q[self.index] = theta - float(gravity(q, [0, 0], [0, 0], link_pi)[self.index]) / self.k
+            q[self.index] = theta - self.static_deflection(float(gravity(q, [0, 0], [0, 0], link_pi)[self.index]))
         return np.concatenate([q, [theta], [0.0, 0.0, 0.0]])
 
 

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -110,6 +110,7 @@ def simulate_trial(
     progress: bool = True,
     bandwidth_hz: float = closed_loop.BANDWIDTH_HZ,
     noise_scale: float | Sequence[float] = 1.0,
+    mechanism: Callable[[Truth], object] | None = None,
 ) -> SimTrial:
     """Simulate one trial of `robot` (datasheet read physically) with hidden `effects`; deterministic.
 
@@ -120,7 +121,8 @@ def simulate_trial(
     `exact_derivatives=True` logs the true dq and the ddq the dynamics produce instead of estimating them
     from the logged angles. `bandwidth_hz` [Hz]: the controller's closed-loop bandwidth (its PD gains);
     `noise_scale`: the torque noise's σ as a multiple of the one measured on the real robot (with `noise`), one
-    factor for both joints or one per joint.
+    factor for both joints or one per joint. `mechanism`: truth -> a mechanism that replaces the one the hidden
+    effects built (`truth.elastic`), e.g. a plant the diagnosis was not tuned on (`simulate.unseen`).
     """
     if output not in ("torque", "current"):
         raise InputError(f'output {output!r}: must be "torque" or "current"')
@@ -144,6 +146,8 @@ def simulate_trial(
     wanted = normalise(effects, coulomb)
     active = {name: p for name, p in wanted.items() if is_active(name, p, coulomb)}
     truth = build_truth(robot, active)
+    if mechanism is not None:
+        truth = replace(truth, elastic=mechanism(truth))
     control = closed_loop.control_hz(rate_hz)  # 1 kHz unless the log is faster
     ref = reference(trajectory, duration, seed, 1.0 / control)
     out = closed_loop.run(
