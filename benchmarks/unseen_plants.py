@@ -27,7 +27,7 @@ import argparse
 import json
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from functools import partial
 from pathlib import Path
 
@@ -210,21 +210,29 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--set", choices=tuple(SEEDS), required=True, help="tuning or unseen seeds")
     parser.add_argument("--cases", nargs="*", help="labels of the cases to run (default: all)")
+    parser.add_argument("--seeds", type=int, nargs="*", help="a subset of the set's seeds (default: all of them)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out-dir", default=str(ROOT / "results" / "diagnosis"))
     args = parser.parse_args(argv)
     wanted = [i for i, c in enumerate(CASES) if not args.cases or c[0] in args.cases]
-    jobs = [(i, s) for s in SEEDS[args.set] for i in wanted]
-    with ProcessPoolExecutor(args.jobs) as pool:
-        results = list(tqdm(pool.map(trial, jobs), total=len(jobs), desc=f"{args.set} trials", file=sys.stderr))
-    for r in results:
-        print(f"{r['case']:28s} seed {r['seed']:4d} {r['pipeline']:15s} named {r['named']} exact={r['exact']} "
-              f"within={r['within']} errors={_rounded(r['errors'])}")
+    seeds = [s for s in SEEDS[args.set] if not args.seeds or s in args.seeds]
+    jobs = [(i, s) for s in seeds for i in wanted]
     out = Path(args.out_dir)
-    stem = f"unseen_plants_{args.set}" + ("" if not args.cases else "_partial")
+    stem = f"unseen_plants_{args.set}" + ("" if not args.cases and not args.seeds else "_partial")
+    results = []
+    with ProcessPoolExecutor(args.jobs) as pool, open(out / f"{stem}.jsonl", "w") as log:
+        futures = [pool.submit(trial, job) for job in jobs]
+        for future in tqdm(as_completed(futures), total=len(jobs), desc=f"{args.set} trials", file=sys.stderr):
+            r = future.result()
+            results.append(r)
+            log.write(json.dumps(r, default=float) + "\n")
+            log.flush()
+            print(f"{r['case']:28s} seed {r['seed']:4d} {r['pipeline']:15s} named {r['named']} exact={r['exact']} "
+                  f"within={r['within']} errors={_rounded(r['errors'])}", flush=True)
+    order = {job: k for k, job in enumerate(jobs)}
+    results.sort(key=lambda r: order[(next(i for i, c in enumerate(CASES) if c[0] == r["case"]), r["seed"])])
     command = "python benchmarks/unseen_plants.py " + " ".join(argv if argv is not None else sys.argv[1:])
     (out / f"{stem}.md").write_text(tables(results, command))
-    (out / f"{stem}.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
     print(tables(results, command).split("\n\n| hidden")[0])
     return 0
 

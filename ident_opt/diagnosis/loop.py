@@ -383,7 +383,8 @@ def rigid_fit(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
 def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
     """`at_rest`, then the torque low-passed by the zero-phase filter the derivatives are estimated with
     (4th-order Butterworth at `torque_filter_hz`, forward-backward; "auto": the cut-off the trial's derivatives
-    were estimated with, `Dataset.cutoff_hz`; None: no filter).
+    were estimated with, `Dataset.cutoff_hz`, or for derivatives as logged the bandwidth of the logger's own
+    filter, `signals.matched_cutoff`; None: no filter).
 
     Estimated accelerations are a smoothed version of the true ones (a step in acceleration becomes a ramp
     over tens of ms); the measured torque steps. Filtering τ the same way puts both sides of τ = Y π in the
@@ -394,6 +395,8 @@ def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
     trial = at_rest(trial)
     if torque_filter_hz == "auto":  # the problem's `derivative_cutoff_hz = "auto"`: the one this trial was read with
         torque_filter_hz = trial.cutoff_hz
+        if torque_filter_hz is None:  # derivatives as logged: the bandwidth of the logger's own filter
+            torque_filter_hz = signals.matched_cutoff(trial.t, trial.q, trial.ddq)
     if torque_filter_hz is None:
         return trial
     dt = float(np.median(np.diff(trial.t)))

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, signal
 
+from ident_opt.derivatives import lowpass
+
 #: The diagnosis's default torque filter cut-off [Hz] (`diagnosis.prepare`): the data loader's and the
 #: simulator's derivative cut-off, so both sides of τ = Y π share one bandwidth.
 TORQUE_FILTER_HZ = 15.0
@@ -172,3 +174,32 @@ def demean_runs(x: np.ndarray, labels: np.ndarray) -> np.ndarray:
             flat[:, c] -= (np.bincount(lab, weights=flat[:, c]) / counts)[lab]
         out[rest, j] = flat.reshape(block.shape)
     return out
+
+
+#: Cut-offs [Hz] `matched_cutoff` tries, from this lowest one up to `MATCH_TOP` of the sampling rate.
+MATCH_LOWEST_HZ, MATCH_TOP, MATCH_GRID = 1.0, 0.45, 48
+#: A logged acceleration that the best Butterworth of the grid imitates worse than this (relative squared error)
+#: has a bandwidth of its own that no low-pass describes (exact derivatives: the angles' quantisation noise
+#: dominates the numerical one): the torque is then left unfiltered.
+MATCH_MISFIT = 0.1
+
+
+def matched_cutoff(t: np.ndarray, q: np.ndarray, ddq: np.ndarray) -> float | None:
+    """The cut-off [Hz] of the zero-phase Butterworth (`derivatives.lowpass`) that, applied to the angles' second
+    difference, best reproduces the logged accelerations `ddq`: the bandwidth of a logger's own derivative filter
+    (a Savitzky–Golay filter, say), which the torque must share for τ = Y π to compare like with like. None when
+    none imitates them (`MATCH_MISFIT`) or the best is the grid's top (the accelerations are not low-passed).
+
+    The second difference (q[k+1] − 2 q[k] + q[k−1]) / dt² passes (sin(ω dt/2) / (ω dt/2))² of the amplitude,
+    0.93 at 15 Hz in a 100 Hz log: close enough to 1 within the band that matters."""
+    dt = float(np.median(np.diff(t)))
+    second = np.zeros_like(q)
+    second[1:-1] = (q[2:] - 2 * q[1:-1] + q[:-2]) / dt**2
+    second[0], second[-1] = second[1], second[-2]
+    inner = slice(50, len(t) - 50)  # the filters' edges disagree whatever the bandwidth
+    grid = np.geomspace(MATCH_LOWEST_HZ, MATCH_TOP / dt, MATCH_GRID)
+    errors = [float(np.sum((lowpass(t, second, f) - ddq)[inner] ** 2)) for f in grid]
+    best = int(np.argmin(errors))
+    if best == len(grid) - 1 or errors[best] > MATCH_MISFIT * float(np.sum(ddq[inner] ** 2)):
+        return None
+    return float(grid[best])
