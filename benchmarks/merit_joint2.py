@@ -83,7 +83,7 @@ def strain_tests(train, test, robot) -> list[str]:
     """The rival stories of the q1 torque against the gauges and joint 1's row (module docstring), as lines."""
     rows = lambda d, j: RIGID.regressor(d.q, d.dq, d.ddq)[:, j, :]  # noqa: E731
     tau = lambda j: lambda d: d.tau[:, j]  # noqa: E731
-    link_side = lambda d: np.column_stack([rows(d, 1)[:, [1, 2, 4]], np.ones(d.n)])  # a2, a3, b2 and the zero
+    link_side = lambda d: np.column_stack([rows(d, 1)[:, [1, 2, 4]], np.ones(d.n)])  # noqa: E731 (a2, a3, b2, zero)
     beta_t, *_ = ols(lambda d: np.column_stack([rows(d, 1), q1_harmonic(d)]), tau(1), train, test)
     c_tau = beta_t[-2:]
     eps31 = strain("col12")
@@ -105,21 +105,47 @@ def strain_tests(train, test, robot) -> list[str]:
     beta_1, *_ = ols(lambda d: rows(d, 0), forced1, train, test)
     p1_te = nmse(rows(test, 0) @ beta_1 + 2 * half(test) @ beta_2[-2:] - test.tau[:, 0], test.tau[:, 0])
     amplitude = float(np.hypot(*c_tau))
+    # Where the term lives: joint 2 rests (|dq2| < 0.02 rad/s) or moves (> 0.1 rad/s); one q1 pair per regime.
+    regimes = []
+    for d in (train, test):
+        v = np.abs(d.dq[:, 1])
+        masks = (v < 0.02, v > 0.1, (v >= 0.02) & (v <= 0.1))
+        X = np.column_stack([rows(d, 1), *(q1_harmonic(d) * m[:, None] for m in masks)])
+        beta_r, *_ = np.linalg.lstsq(X, d.tau[:, 1], rcond=None)
+        pairs = [np.hypot(*beta_r[9 + 2 * k : 11 + 2 * k]) for k in range(3)]
+        regimes.append(
+            f"{Path(d.source).name}: rests {masks[0].mean():.0%} of samples, q1 term {pairs[0]:.3f} N m "
+            f"at rest, {pairs[1]:.3f} moving, {pairs[2]:.3f} between"
+        )
+    moving = [np.abs(d.dq[:, 1]) > 0.1 for d in (train, test)]
+    on_moving = []
+    for d, m in zip((train, test), moving):
+        X = np.column_stack([link_side(d), q1_harmonic(d)])[m]
+        beta_m, *_ = np.linalg.lstsq(X, eps31(d)[m], rcond=None)
+        beta_q, *_ = np.linalg.lstsq(np.column_stack([rows(d, 1), q1_harmonic(d)])[m], d.tau[m, 1], rcond=None)
+        on_moving.append(
+            f"{Path(d.source).name}: torque {np.hypot(*beta_q[-2:]):.3f} N m, strain "
+            f"{np.hypot(*beta_m[-2:]) / kappa:.3f} N m"
+        )
     return [
         "",
-        "Rival stories of the q1 torque (amplitude {:.3f} N m on joint 2) against link 2's gauge eps31 "
-        "(low-passed at {:g} Hz):".format(amplitude, STRAIN_CUTOFF_HZ),
+        f"Rival stories of the q1 torque (amplitude {amplitude:.3f} N m on joint 2) against link 2's gauge eps31 "
+        f"(low-passed at {STRAIN_CUTOFF_HZ:g} Hz):",
         f"  eps31 ~ link 2's rigid link-side columns (a2, a3, b2, zero): nMSE {s_tr:.4f} train, {s_te:.4f} held out; "
         f"gain {kappa:.1f} µm/m per N m of link 2's gravity moment",
         f"  + sin/cos q1, free: nMSE {f_tr:.4f} / {f_te:.4f}; its q1 term {np.hypot(*beta_f[-2:]):.2f} µm/m "
         f"= {np.hypot(*beta_f[-2:]) / kappa:.4f} N m",
-        f"  + the q1 torque forced in (a torque on link 2: cable, mass, link 1's bending): nMSE {x_tr:.3f} / {x_te:.3f}",
-        f"  -> eps31 carries {np.hypot(*beta_f[-2:]) / kappa / amplitude:.1%} of the q1 torque: it does not reach link 2",
+        "  + the q1 torque forced in (a torque on link 2: cable, mass, link 1's bending): "
+        f"nMSE {x_tr:.3f} / {x_te:.3f}",
+        f"  -> eps31 carries {np.hypot(*beta_f[-2:]) / kappa / amplitude:.1%} of the q1 torque: "
+        "it does not reach link 2",
         "Joint 2's torque with link 2's gauge as its link-side torque (eps31, friction, ddq, zero): "
         f"nMSE {g_tr:.3f} / {g_te:.3f}; + sin/cos q1: {h_tr:.3f} / {h_te:.3f} "
         f"(q1 term {np.hypot(*beta_h[-2:]):.3f} N m beyond what link 2 carries)",
         f"A potential at the joint (cable loop, sin/cos(q1 + q2/2)): joint 1's held-out nMSE {r1_te:.4f} (rigid) -> "
         f"{p1_te:.4f} with the 2 x term it implies there ({r1_tr:.4f} train)",
+        "Joint 2's q1 term by regime (one pair each, fitted on each trial alone): " + "; ".join(regimes),
+        "Moving samples only (|dq2| > 0.1 rad/s), q1 term of each fit alone: " + "; ".join(on_moving),
     ]
 
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from ident_opt.arm.datasheet import datasheet_pi
-from ident_opt.simulate import unseen
-from ident_opt.simulate.truth import TRUTH_MODEL, build_truth, coulomb_levels
 from ident_opt.effects import normalise
 from ident_opt.problem import load_problem
+from ident_opt.simulate import unseen
+from ident_opt.simulate.truth import TRUTH_MODEL, build_truth, coulomb_levels
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -79,3 +79,40 @@ def test_savitzky_golay_derivatives_are_exact_on_a_cubic():
     np.testing.assert_allclose(dq, np.column_stack([3 * t**2, -2 * t]), atol=1e-8)
     np.testing.assert_allclose(ddq, np.column_stack([6 * t, -2 + 0 * t]), atol=1e-6)
     assert math.isfinite(float(ddq.sum()))
+
+
+# ------------------------------------------------------------------------------------- diagnosis (lean subset)
+def _diagnosed(robot, effects, mechanism, pipeline, duration=40.0, seed=3):
+    from ident_opt.diagnosis import diagnose
+    from ident_opt.simulate import simulate_trial
+
+    sim = simulate_trial(robot, duration=duration, seed=seed, effects=effects, progress=False, mechanism=mechanism)
+    return sim, diagnose(robot, unseen.derived(sim, pipeline, robot), progress=False, torque_filter_hz="auto")
+
+
+def test_a_hardening_joints_mode_is_named_at_its_effective_frequency(robot):
+    """An elastic joint 2 whose spring stiffens (tangent 2 × k at the largest gravity deflection), logged with
+    Savitzky–Golay derivatives (15 samples): `elasticity` on joint 2 alone, within 20 % of the frequency of the
+    spring's mean tangent stiffness."""
+    effects = {"elasticity": {"joint": 2, "frequency_hz": 4.0, "damping": 0.02, "kind": "joint"}}
+    sim, d = _diagnosed(robot, effects, lambda truth: unseen.nonlinear_joint(truth, "hardening", 1.0), "savgol15")
+    truth = unseen.nonlinear_joint(_truth(robot, **effects["elasticity"]), "hardening", 1.0)
+    f = unseen.effective_frequency_hz(truth, sim.frame["deflection2"].to_numpy())
+    assert [c["cause"] for c in d.causes] == ["elasticity"]
+    assert d.estimate["joint"] == 2 and d.estimate["frequency_hz"] == pytest.approx(f, rel=0.2)
+
+
+def test_a_distributed_links_first_mode_is_named(robot):
+    """Link 1 as a beam (two modes, first at 3.5 Hz, 1 % damping on each), logged without derivatives: the first
+    mode is `elasticity` on joint 1 within 20 %, and nothing else is named."""
+    effects = {"elasticity": {"joint": 1, "frequency_hz": 3.5, "damping": 0.01, "kind": "link"}}
+    _, d = _diagnosed(robot, effects, lambda truth: unseen.beam(truth, 0, 3.5, 0.01, 2, points=6), "no_derivatives")
+    assert [c["cause"] for c in d.causes] == ["elasticity"]
+    assert d.estimate["joint"] == 1 and d.estimate["frequency_hz"] == pytest.approx(3.5, rel=0.2)
+
+
+def test_a_clean_trial_logged_with_savitzky_golay_derivatives_names_nothing(robot):
+    """The torque is filtered to the logged accelerations' bandwidth (`signals.matched_cutoff`), so the filters'
+    mismatch poses as no cause."""
+    _, d = _diagnosed(robot, {}, None, "savgol21")
+    assert d.causes == [] and d.cause == "none"

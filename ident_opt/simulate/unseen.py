@@ -48,11 +48,15 @@ def _shape(i: int, length: float):
     s = (math.cosh(BETA_L[i]) + math.cos(BETA_L[i])) / (math.sinh(BETA_L[i]) + math.sin(BETA_L[i]))
 
     def raw(x, d):
-        cosh, cos, sinh, sin = (np.cosh, np.cos, np.sinh, np.sin) if isinstance(x, np.ndarray) else (
-            math.cosh,
-            math.cos,
-            math.sinh,
-            math.sin,
+        cosh, cos, sinh, sin = (
+            (np.cosh, np.cos, np.sinh, np.sin)
+            if isinstance(x, np.ndarray)
+            else (
+                math.cosh,
+                math.cos,
+                math.sinh,
+                math.sin,
+            )
         )
         bx = b * x
         if d == 0:
@@ -65,11 +69,12 @@ def _shape(i: int, length: float):
     return tuple(lambda x, d=d: raw(x, d) / tip for d in (0, 1, 2))
 
 
-def beam_lagrangian(robot, j: int, modes: int, armature):
+def beam_lagrangian(robot, j: int, modes: int, armature, points: int = POINTS):
     """CasADi (z, dz, M(z), h(z, dz), K̂, tip slope) of the arm with link j (0-based) an assumed-modes beam.
 
     z = [q1, q2, δ_1 … δ_m]; M ddz + h = Q (h: Coriolis, centrifugal and gravity; no spring); the elastic
-    energy is ½ EI δᵀ K̂ δ (K̂ = diag ∫ φ_i''² dx, EI set by the caller); `tip slope` w'(L) [rad]."""
+    energy is ½ EI δᵀ K̂ δ (K̂ = diag ∫ φ_i''² dx, EI set by the caller); `tip slope` w'(L) [rad]. The beam's mass
+    is `points` equal pieces, each a point mass at its middle with its own inertia (the rigid bar's exactly)."""
     n = 2 + modes
     z, dz = ca.SX.sym("z", n), ca.SX.sym("dz", n)
     g = robot.gravity
@@ -79,7 +84,7 @@ def beam_lagrangian(robot, j: int, modes: int, armature):
         [(rider.actuator_mass, cylinder_inertia(rider.actuator_mass, rider.motor_diameter))],
         [(robot.payload_mass, 0.0)] if robot.payload_mass > 0 else [],
     )
-    points = []  # (mass, inertia, position (2), angle) of every body
+    bodies = []  # (mass, inertia, position (2), angle) of every body
     origin, angle, slope_tip = ca.DM.zeros(2), 0, 0
     K = np.zeros(modes)
     for i, link in enumerate(links):
@@ -88,22 +93,25 @@ def beam_lagrangian(robot, j: int, modes: int, armature):
         R = ca.vertcat(ca.horzcat(ca.cos(angle), -ca.sin(angle)), ca.horzcat(ca.sin(angle), ca.cos(angle)))
         if i == j:
             shapes = [_shape(k, L) for k in range(modes)]
-            w = lambda x, d=0: sum(shapes[k][d](x) * z[2 + k] for k in range(modes))  # noqa: E731
-            piece = link.mass / POINTS
-            for x in (np.arange(POINTS) + 0.5) * L / POINTS:
-                points.append((piece, piece * (L / POINTS) ** 2 / 12, origin + R @ ca.vertcat(x, w(x)), angle))
+
+            def w(x, d=0, shapes=shapes):
+                return sum(shapes[k][d](x) * z[2 + k] for k in range(modes))
+
+            piece = link.mass / points
+            for x in (np.arange(points) + 0.5) * L / points:
+                bodies.append((piece, piece * (L / points) ** 2 / 12, origin + R @ ca.vertcat(x, w(x)), angle))
             grid = np.linspace(0.0, L, 801)
             K = np.array([np.trapezoid(shapes[k][2](grid) ** 2, grid) for k in range(modes)])
             end, tilt = origin + R @ ca.vertcat(L, w(L)), w(L, 1)
             slope_tip = tilt
         else:
-            points.append((link.mass, bar_inertia(link), origin + R @ ca.vertcat(L / 2, 0), angle))
+            bodies.append((link.mass, bar_inertia(link), origin + R @ ca.vertcat(L / 2, 0), angle))
             end, tilt = origin + R @ ca.vertcat(L, 0), 0
-        points += [(m, inertia, end, angle + tilt) for m, inertia in tips[i]]
+        bodies += [(m, inertia, end, angle + tilt) for m, inertia in tips[i]]
         origin, angle = end, angle + tilt
     T = 0.5 * armature[0] * dz[0] ** 2 + 0.5 * armature[1] * dz[1] ** 2
     V = 0
-    for m, inertia, p, a in points:
+    for m, inertia, p, a in bodies:
         v = ca.jtimes(p, z, dz)
         omega = ca.jtimes(a, z, dz) if isinstance(a, ca.SX) else 0
         T += 0.5 * m * ca.dot(v, v) + 0.5 * inertia * omega**2
@@ -134,6 +142,7 @@ class Beam:
     J_link: float
     fastest_rate: float
     kind: str = "beam"
+    points: int = POINTS
 
     @property
     def state_size(self) -> int:
@@ -150,7 +159,7 @@ class Beam:
         return [self.fastest_rate + kd[self.index] / self.B]
 
     def _terms(self, truth):
-        z, dz, M, h, K, slope = beam_lagrangian(truth.robot, self.index, self.modes, truth.armature)
+        z, dz, M, h, K, slope = beam_lagrangian(truth.robot, self.index, self.modes, truth.armature, self.points)
         return z, dz, M, h, ca.DM(np.diag(self.EI * K)), slope
 
     def plant(self, truth) -> ca.Function:
@@ -187,10 +196,10 @@ class Beam:
         return np.concatenate([q, delta, np.zeros(2 + self.modes)])
 
 
-def beam(truth, j: int, f: float, zeta: float, modes: int = 3) -> Beam:
+def beam(truth, j: int, f: float, zeta: float, modes: int = 3, points: int = POINTS) -> Beam:
     """Link j (0-based) as an assumed-modes beam whose first mode (joints held, q2 = 0) is at f [Hz], every
-    mode damped at ratio ζ, on the true plant `truth` (its robot and rotor inertias)."""
-    z, _, M, _, K, _ = beam_lagrangian(truth.robot, j, modes, truth.armature)
+    mode damped at ratio ζ, on the true plant `truth` (its robot and rotor inertias); `points`: pieces of its mass."""
+    z, _, M, _, K, _ = beam_lagrangian(truth.robot, j, modes, truth.armature, points)
     Mf = ca.Function("M", [z], [M])
 
     def held(q2: float, EI: float = 1.0):  # modes with the joints held: K v = ω² M_δδ v
@@ -226,6 +235,7 @@ def beam(truth, j: int, f: float, zeta: float, modes: int = 3) -> Beam:
         float(truth.armature[j]),
         m1,
         fastest,
+        points=points,
     )
 
 
@@ -269,7 +279,9 @@ def gravity_deflection(truth, j: int, k: float) -> float:
     """e_g [rad]: the largest static deflection of joint j (0-based) under gravity over the workspace."""
     G = sim.TRUTH_MODEL.function("G")
     pi = sim.TRUTH_MODEL.vector(truth.pi_rigid)
-    torques = [abs(float(G([q1, q2], [0, 0], [0, 0], pi)[j])) for q1 in np.linspace(0, math.pi, 13) for q2 in (-1.4, 0, 1.4)]
+    torques = [
+        abs(float(G([q1, q2], [0, 0], [0, 0], pi)[j])) for q1 in np.linspace(0, math.pi, 13) for q2 in (-1.4, 0, 1.4)
+    ]
     return max(torques) / k
 
 
