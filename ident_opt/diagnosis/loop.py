@@ -17,7 +17,8 @@ from scipy import signal
 from tqdm import tqdm
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
-from ident_opt.data import Dataset, chronological_split
+from ident_opt.data import Dataset, chronological_split, refiltered
+from ident_opt.derivatives import choose_cutoff
 from ident_opt.diagnosis import candidates as cands
 from ident_opt.diagnosis import evidence, linear, scoring, signals
 from ident_opt.errors import InputError
@@ -380,11 +381,31 @@ def rigid_fit(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
     return linear.solve(zero, Y, tau, weights).beta, weights
 
 
+def logged_bandwidth(trial: Dataset) -> tuple[Dataset, float | None]:
+    """(The trial, the torque's cut-off [Hz]) for derivatives as logged, under "auto".
+
+    The logger's filter is unknown; its bandwidth is read from the logged accelerations
+    (`signals.matched_cutoff`). Where it is narrower than what the angles support (`derivatives.choose_cutoff`,
+    the rule the loader uses for a file without derivatives), the derivatives are estimated again from the
+    angles at that cut-off (`data.refiltered`): a narrow logger filter (a Savitzky–Golay filter of 21 samples at
+    100 Hz passes 4.7 Hz) smears Coulomb steps and modes that the data hold. Assumption: the angles are logged
+    at the full rate and resolution, so they carry the motion's whole band. The trial keeps every sample (the
+    held-out part is aligned with the raw torque's)."""
+    matched = signals.matched_cutoff(trial.t, trial.q, trial.ddq)
+    if matched is None:
+        return trial, None
+    supported = choose_cutoff(trial.t, trial.q)
+    if matched >= supported:
+        return trial, matched
+    return refiltered(trial, supported), supported
+
+
 def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
     """`at_rest`, then the torque low-passed by the zero-phase filter the derivatives are estimated with
     (4th-order Butterworth at `torque_filter_hz`, forward-backward; "auto": the cut-off the trial's derivatives
     were estimated with, `Dataset.cutoff_hz`, or for derivatives as logged the bandwidth of the logger's own
-    filter, `signals.matched_cutoff`; None: no filter).
+    filter, with the derivatives estimated again where that filter is narrower than the data, `logged_bandwidth`;
+    None: no filter).
 
     Estimated accelerations are a smoothed version of the true ones (a step in acceleration becomes a ramp
     over tens of ms); the measured torque steps. Filtering τ the same way puts both sides of τ = Y π in the
@@ -392,11 +413,9 @@ def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
     and noise above the cut-off goes too. Modes and delays inside the band are untouched (the filter is
     zero-phase and linear).
     """
-    trial = at_rest(trial)
     if torque_filter_hz == "auto":  # the problem's `derivative_cutoff_hz = "auto"`: the one this trial was read with
-        torque_filter_hz = trial.cutoff_hz
-        if torque_filter_hz is None:  # derivatives as logged: the bandwidth of the logger's own filter
-            torque_filter_hz = signals.matched_cutoff(trial.t, trial.q, trial.ddq)
+        trial, torque_filter_hz = (trial, trial.cutoff_hz) if trial.cutoff_hz is not None else logged_bandwidth(trial)
+    trial = at_rest(trial)
     if torque_filter_hz is None:
         return trial
     dt = float(np.median(np.diff(trial.t)))
