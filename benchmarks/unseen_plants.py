@@ -176,6 +176,7 @@ def tables(results: list[dict], command: str) -> str:
         f"| all | {len(real)} | {n_exact} ({n_exact / max(len(real), 1):.0%}) | "
         f"{n_within} ({n_within / max(len(real), 1):.0%}) | |",
         "",
+        *confusion(results),
         "| hidden | seed | logger | reference | named (in order) | exact | within | worst rel. error | estimates "
         "| truth |",
         "|---|---|---|---|---|---|---|---|---|---|",
@@ -192,6 +193,21 @@ def tables(results: list[dict], command: str) -> str:
     return "\n".join(lines)
 
 
+def confusion(results: list[dict]) -> list[str]:
+    """Hidden case × cause named (anywhere in the chain; `none` for an empty chain): trial counts."""
+    from ident_opt.diagnosis import CAUSES
+
+    lines = [
+        "| hidden \\ named | " + " | ".join(CAUSES) + " | trials |",
+        "|---|" + "---|" * (len(CAUSES) + 1),
+    ]
+    for label in dict.fromkeys(r["case"] for r in results):
+        rows = [r for r in results if r["case"] == label]
+        counts = [sum((c in r["named"]) or (c == "none" and not r["named"]) for r in rows) for c in CAUSES]
+        lines.append(f"| {label} | " + " | ".join(str(n) for n in counts) + f" | {len(rows)} |")
+    return [*lines, ""]
+
+
 def _judged(cause: str, truth: dict) -> dict:
     from ident_opt.effects import CATALOGUE
 
@@ -206,6 +222,22 @@ def _rounded(value):
     return round(value, 4) if isinstance(value, float) else value
 
 
+def _tables_only(args, command: str) -> int:
+    """Write `unseen_plants_<set>.md` from trial logs (`--tables`): each case and seed once, in matrix order."""
+    latest = {}
+    for path in args.tables:
+        for line in Path(path).read_text().splitlines():
+            r = json.loads(line)
+            if r["seed"] in SEEDS[args.set]:
+                latest[(r["case"], r["seed"])] = r
+    labels = [c[0] for c in CASES]
+    results = sorted(latest.values(), key=lambda r: (r["seed"], labels.index(r["case"])))
+    text = tables(results, command)
+    (Path(args.out_dir) / f"unseen_plants_{args.set}.md").write_text(text)
+    print(text.split("\n\n| hidden")[0])
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
@@ -215,7 +247,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="*", help="a subset of the set's seeds (default: all of them)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out-dir", default=str(ROOT / "results" / "diagnosis"))
+    parser.add_argument(
+        "--tables",
+        nargs="*",
+        metavar="JSONL",
+        help="only write the tables of the set from these trial logs (the last record of a case and seed wins)",
+    )
     args = parser.parse_args(argv)
+    command = "python benchmarks/unseen_plants.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    if args.tables:
+        return _tables_only(args, command)
     wanted = [i for i, c in enumerate(CASES) if not args.cases or c[0] in args.cases]
     seeds = [s for s in SEEDS[args.set] if not args.seeds or s in args.seeds]
     # The unseen plants first (the slowest to simulate, and the ones the matrix is about); order does not change
@@ -238,7 +279,6 @@ def main(argv: list[str] | None = None) -> int:
             )
     order = {job: k for k, job in enumerate(jobs)}
     results.sort(key=lambda r: order[(next(i for i, c in enumerate(CASES) if c[0] == r["case"]), r["seed"])])
-    command = "python benchmarks/unseen_plants.py " + " ".join(argv if argv is not None else sys.argv[1:])
     (out / f"{stem}.md").write_text(tables(results, command))
     print(tables(results, command).split("\n\n| hidden")[0])
     return 0

@@ -116,3 +116,19 @@ def test_a_clean_trial_logged_with_savitzky_golay_derivatives_names_nothing(robo
     mismatch poses as no cause."""
     _, d = _diagnosed(robot, {}, None, "savgol21")
     assert d.causes == [] and d.cause == "none"
+
+
+def test_a_loggers_bandwidth_is_read_from_its_accelerations():
+    """`matched_cutoff`: a Savitzky–Golay logger's accelerations are imitated by a Butterworth of about its
+    bandwidth (narrower for a longer window); exact accelerations by none, or by one far above the motion."""
+    from ident_opt.diagnosis.signals import matched_cutoff
+
+    t = np.arange(0, 60, 0.01)
+    w = 2 * np.pi * np.array([0.3, 1.1, 2.3, 4.1, 6.7])
+    q = np.column_stack([np.sin(np.outer(t, w) + k).sum(1) / len(w) for k in (0, 1)])
+    ddq = np.column_stack([-(w**2 * np.sin(np.outer(t, w) + k)).sum(1) / len(w) for k in (0, 1)])
+    cutoffs = [matched_cutoff(t, q, unseen.savgol(t, q, window)[1]) for window in (11, 15, 21)]
+    assert cutoffs[0] > cutoffs[1] > cutoffs[2] > 3.0 and cutoffs[0] < 12.0
+    exact = matched_cutoff(t, q, ddq)
+    assert exact is None or exact > 25.0
+    assert matched_cutoff(t, q, np.zeros_like(q)) is None  # no low-passed second derivative at all

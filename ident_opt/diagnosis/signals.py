@@ -179,9 +179,10 @@ def demean_runs(x: np.ndarray, labels: np.ndarray) -> np.ndarray:
 #: Cut-offs [Hz] `matched_cutoff` tries, from this lowest one up to `MATCH_TOP` of the sampling rate.
 MATCH_LOWEST_HZ, MATCH_TOP, MATCH_GRID = 1.0, 0.45, 48
 #: A logged acceleration that the best Butterworth of the grid imitates worse than this (relative squared error)
-#: has a bandwidth of its own that no low-pass describes (exact derivatives: the angles' quantisation noise
-#: dominates the numerical one): the torque is then left unfiltered.
-MATCH_MISFIT = 0.1
+#: is not a low-passed second derivative of the angles at all (zeros, another signal): the torque is then left
+#: unfiltered. A Savitzky–Golay filter's side lobes leave up to 0.18 on a motion with lines in them (21 samples
+#: at 100 Hz, a line at 6.7 Hz); exact accelerations are imitated best by the grid's top (no filter either).
+MATCH_MISFIT = 0.5
 
 
 def matched_cutoff(t: np.ndarray, q: np.ndarray, ddq: np.ndarray) -> float | None:
