@@ -11,17 +11,23 @@ typical one (a motion that excites it less) scatters more: its inflation f_d = m
 median standard error of the fleet's baseline days.
 
 **Test.** z_d = (x_d − μ) / (σ √(f_d² + 1/K)), μ the robot's baseline mean (the 1/K: μ is itself uncertain). A
-parameter has moved when `RUN_DAYS` consecutive days after the baseline all lie beyond `BAND_Z` on the same side
-(the band drawn in the figures is μ ± `BAND_Z` σ f_d). One day far out is scatter until the next days agree.
+parameter has moved when, after the baseline, a window of L ≥ `RUN_DAYS` consecutive days all lie beyond `DAY_Z` on
+one side and their mean deviation lies beyond `WINDOW_Z` times its standard error σ √(mean f_d² / L + 1/K): a
+persistent shift adds up over days, while one day far out (a motion that excites the parameter badly) is scatter
+until the next days agree. The first day of the first such window is the day the test raises it. The figures draw
+the band μ ± `BAND_Z` σ f_d.
 
 **Start and pattern.** The z-series of the moved parameters together are fitted by a change from day τ on, either a
-step (z = a from τ) or a drift (z = a (day − τ + 1)), over τ after the baseline and not after the first alarm; the
-pair with the smallest residual gives `first_day` (the first day of the significant change) and `pattern`.
+step (z = a from τ) or a drift (z = a (day − τ + 1)), over τ after the baseline and not after the first alarm. The
+cause is judged on the days from the later of the two τ (so that no unchanged day dilutes its evidence); the change's
+pattern is its cause's (a drift for wear, a step for a payload or a drive; for other, the one that fits best), and
+`first_day` is that pattern's τ: the first day of the significant change.
 
-**Cause.** From τ on, the robot's statistics pooled (`tasks.evidence`, against the baseline model π0): how much of
-what a refit of every parameter gains (`full`) each named cause gains with its few directions — `wear` of joint j
-(its friction terms; named only if they grew), `payload` (a body on the last link), `drive` of joint j (one factor
-on that joint's torque). The best cause is named when it explains at least `EXPLAINED` of it; else `other`.
+**Cause.** From there on, the robot's statistics pooled (`tasks.evidence`, against the baseline model π0): how much
+of what a refit of every parameter gains (`full`) each cause gains with its few columns — `wear` of joint j (its
+friction terms; named only if they grew), `payload` (a body on the last link), `drive` of joint j (one factor on that
+joint's torque), and where the model has them a joint's torque offset (named `other`, with its joint). The best cause
+is named when it explains at least `EXPLAINED` of it; else `other`.
 """
 
 from __future__ import annotations
@@ -31,14 +37,16 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats as st
 
-#: A day lies outside the baseline's band when |z| exceeds this ...
+#: The band drawn around a parameter's baseline mean, in scatter units (figures, series).
 BAND_Z = 3.0
-#: ... and a parameter has moved when this many consecutive days do, on the same side.
-RUN_DAYS = 3
+#: A parameter has moved when at least `RUN_DAYS` consecutive days lie beyond `DAY_Z` on one side and their mean
+#: beyond `WINDOW_Z` standard errors of a mean of that many days (module doc).
+RUN_DAYS, DAY_Z, WINDOW_Z = 3, 1.5, 5.0
 #: A named cause must explain at least this share of what a refit of every parameter explains.
 EXPLAINED = 0.8
-#: The causes, in the order of the contract (`docs/cli.md`), and their patterns.
+#: The causes, in the order of the contract (`docs/cli.md`), and the patterns of those that have one.
 CAUSES = ("wear", "payload", "drive", "other")
+PATTERNS = {"wear": "drift", "payload": "step", "drive": "step"}
 
 
 @dataclass
@@ -77,8 +85,8 @@ class Test:
 class Change:
     """A change of one robot (the contract's `changes[]`): cause, joint (1-based, None for a payload or other),
     the parameters it concerns, the first day it is significant, its pattern, baseline and latest values, z of
-    the lead parameter on the latest day; plus the day the test first raised it, the share of the misfit the cause
-    explains, the drive's torque factor and the lead parameter's relative change."""
+    the lead parameter (the one furthest out on the latest day) then; plus the day the test first raised it, the
+    share of the misfit the cause explains, the drive's torque factor and the lead parameter's relative change."""
 
     robot: str
     cause: str
@@ -93,6 +101,7 @@ class Change:
     explained: float
     scale: float | None
     size: float
+    lead: str
 
     def as_dict(self) -> dict:
         """The JSON object (`docs/cli.md`, fleet)."""
@@ -110,6 +119,7 @@ class Change:
             "explained": self.explained,
             "scale": self.scale,
             "size": self.size,
+            "lead": self.lead,
         }
 
 
@@ -132,9 +142,10 @@ def scatter(robots: list[Tested], baseline_days: int) -> Scatter:
         if len(x) < 2:
             continue
         dof = len(x) - 1
-        deviation = (x - x.mean(axis=0)) / _inflation(r.se[:baseline_days], se_ref)
-        variances.append(deviation.var(axis=0, ddof=1) * dof / st.chi2.median(dof))
-    pooled = np.median(variances, axis=0) if variances else np.zeros(Q)
+        deviation = (x - np.nanmean(x, axis=0)) / _inflation(r.se[:baseline_days], se_ref)
+        variances.append(np.nanvar(deviation, axis=0, ddof=1) * dof / st.chi2.median(dof))
+    pooled = np.nanmedian(variances, axis=0) if variances else np.zeros(Q)
+    pooled = np.where(np.isfinite(pooled), pooled, 0.0)
     return Scatter(np.sqrt(np.maximum(pooled, se_ref**2)), se_ref)
 
 
@@ -142,8 +153,8 @@ def test(robot: Tested, fleet: Scatter, baseline_days: int) -> Test:
     """z of every fitted day of `robot` against its baseline, and the parameters that moved (module doc)."""
     K = baseline_days
     base = robot.values[:K]
-    mean = base.mean(axis=0)
-    own = base.std(axis=0, ddof=1) if len(base) > 1 else np.zeros_like(mean)
+    mean = np.nanmean(base, axis=0)
+    own = np.nan_to_num(np.nanstd(base, axis=0, ddof=1)) if len(base) > 1 else np.zeros_like(mean)
     sigma = np.maximum(fleet.sigma, own)
     f = _inflation(robot.se, fleet.se_ref)
     spread = sigma * np.sqrt(f**2 + 1.0 / K)
@@ -151,54 +162,85 @@ def test(robot: Tested, fleet: Scatter, baseline_days: int) -> Test:
         z = np.where(spread > 0, (robot.values - mean) / spread, 0.0)
     out = Test(mean, sigma, z, BAND_Z * sigma * f)
     for q in range(z.shape[1]):
-        alarm = _first_run(z[K:, q])
+        deviation = robot.values[K:, q] - mean[q]
+        alarm = first_alarm(z[K:, q], deviation, f[K:, q] ** 2, sigma[q], K)
         if alarm is not None:
             out.moved[q] = (K + alarm[0], alarm[1])
     return out
 
 
-def _first_run(z: np.ndarray) -> tuple[int, int] | None:
-    """(index, sign) of the first day that starts `RUN_DAYS` consecutive days beyond ±`BAND_Z` on one side."""
+def first_alarm(z: np.ndarray, deviation: np.ndarray, f2: np.ndarray, sigma: float, K: int) -> tuple[int, int] | None:
+    """(index, sign) of the first day that starts a window of at least `RUN_DAYS` consecutive days, each beyond
+    ±`DAY_Z` on one side, whose mean deviation lies beyond `WINDOW_Z` of its own standard error, σ √(mean f² / L +
+    1/K) for L days (module doc); None when there is none."""
     first = None
     for sign in (1, -1):
-        count = 0
-        for d, beyond in enumerate(sign * z > BAND_Z):
-            count = count + 1 if beyond else 0
-            if count == RUN_DAYS:
-                if first is None or d - RUN_DAYS + 1 < first[0]:
-                    first = (d - RUN_DAYS + 1, sign)
+        beyond = np.nan_to_num(sign * z) > DAY_Z
+        d = 0
+        while d < len(z) and (first is None or d < first[0]):
+            if not beyond[d]:
+                d += 1
+                continue
+            end = d
+            while end < len(z) and beyond[end]:
+                end += 1
+            hit = _window(sign * deviation[d:end], f2[d:end], sigma, K)
+            if hit is not None:
+                if first is None or d + hit < first[0]:
+                    first = (d + hit, sign)
                 break
+            d = end
     return first
 
 
-def onset(test: Test, day_numbers: np.ndarray, baseline_days: int, moved: list[int]) -> tuple[int, str]:
-    """(τ, pattern): the day index from which the moved parameters' z-series are best fitted by one step or one
-    drift (module doc), between the first day after the baseline and the first alarm."""
+def _window(dev: np.ndarray, f2: np.ndarray, sigma: float, K: int) -> int | None:
+    """The first start, within a run of days beyond `DAY_Z`, of a window of `RUN_DAYS` or more days whose mean
+    deviation `dev` exceeds `WINDOW_Z` standard errors (None when no window does)."""
+    for start in range(len(dev) - RUN_DAYS + 1):
+        length = np.arange(RUN_DAYS, len(dev) - start + 1)
+        mean = np.cumsum(dev[start:])[length - 1] / length
+        se = sigma * np.sqrt(np.cumsum(f2[start:])[length - 1] / length**2 + 1.0 / K)
+        if np.any(mean > WINDOW_Z * se):
+            return start
+    return None
+
+
+def onsets(test: Test, day_numbers: np.ndarray, baseline_days: int, moved: list[int]) -> dict[str, tuple[int, float]]:
+    """Per pattern ("step", "drift") the day index τ from which the moved parameters' z-series are best fitted by one
+    change of that shape (module doc), between the first day after the baseline and the first alarm, with the
+    share of Σ z² it fits."""
     K = baseline_days
-    z = test.z[:, moved]
+    z = np.nan_to_num(test.z[:, moved])
     last = min(test.moved[q][0] for q in moved)
-    best = (-np.inf, K, "step")
+    total = max(float(np.sum(z[K:] ** 2)), 1e-300)
+    best = {"step": (K, -np.inf), "drift": (K, -np.inf)}
     for tau in range(K, last + 1):
-        for pattern in ("step", "drift"):
-            g = (day_numbers >= day_numbers[tau]).astype(float)
-            if pattern == "drift":
-                g = g * (day_numbers - day_numbers[tau] + 1)
-            gain = float(np.sum((g @ z) ** 2) / (g @ g))
-            if gain > best[0] + 1e-12:
-                best = (gain, tau, pattern)
-    return best[1], best[2]
+        after = (day_numbers >= day_numbers[tau]).astype(float)
+        for pattern, g in (("step", after), ("drift", after * (day_numbers - day_numbers[tau] + 1))):
+            gain = float(np.sum((g @ z) ** 2) / (g @ g)) / total
+            if gain > best[pattern][1] + 1e-12:
+                best[pattern] = (tau, gain)
+    return best
 
 
-def name_cause(reductions: dict[str, float], growth: dict[str, float]) -> tuple[str, int | None, float]:
-    """(cause, joint, explained share) from pooled evidence (`tasks.Evidence`): the named cause that explains most
-    of what a refit of every parameter gains, if at least `EXPLAINED` of it (wear only if the friction grew)."""
-    full = reductions.get("full", 0.0)
-    if full <= 0:
+def pattern_of(cause: str, fits: dict[str, tuple[int, float]]) -> str:
+    """A change's pattern: the one its cause has (`PATTERNS`), for `other` the one that fits best."""
+    return PATTERNS.get(cause) or max(fits, key=lambda p: fits[p][1])
+
+
+def name_cause(gains: dict[str, float], growth: dict[str, float]) -> tuple[str, int | None, float]:
+    """(cause, joint, explained share) from pooled evidence (`tasks.Evidence`): the share of what a refit of every
+    parameter gains that each cause gains; the best is named when it explains at least `EXPLAINED` (wear only if the
+    joint's friction grew; a joint's torque offset is `other`, of that joint), else `other`."""
+    full = gains.get("full", 0.0)
+    shares = {k: v / full for k, v in gains.items() if k != "full"} if full > 0 else {}
+    if not shares:
         return "other", None, 0.0
-    shares = {key: value / full for key, value in reductions.items() if key != "full"}
     key = max(shares, key=shares.get)
-    share = float(min(shares[key], 1.0))
+    share = float(min(max(shares[key], 0.0), 1.0))
     cause, _, joint = key.partition(":")
     if share < EXPLAINED or (cause == "wear" and growth.get(key, 0.0) <= 0):
         return "other", None, share
+    if cause == "offset":
+        return "other", int(joint), share
     return cause, int(joint) if joint else None, share

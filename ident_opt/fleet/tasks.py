@@ -5,7 +5,9 @@
 - `day_stats`: files' `FileStats` → `DayStats`, their sum with the files read and skipped (a robot-day, or the days
   of a baseline or of a change pooled);
 - `fit_day`: a robot-day's `DayStats` → `DayFit`, its fit (π with standard errors) and the tested parameters;
-- `baseline`: a robot's first days pooled → `Baseline`, π0 (OLS) and each joint's weight 1/σ²;
+- `baseline`: a robot's first days → `Baseline`, π0 (OLS on the first K with statistics, pooled) and each joint's
+  weight 1/σ²;
+- `scales`: a robot-day and its `Baseline` → `Scales`, the factor on each joint's torque against π0;
 - `evidence`: the days of a change pooled and the `Baseline` → `Evidence`, how much of the misfit to π0 each named
   cause explains.
 
@@ -15,11 +17,12 @@ the skip reason. The problem is loaded once per worker process (`setup`, by its 
 needs the same path, as it needs the logs).
 
 Evidence, from the statistics alone (`Stats`: per joint G_j = Σ Y_jᵀY_j, b_j = Σ Y_jᵀτ_j, s_j = Σ τ_j²), with the
-baseline π0 and joint weights w_j: the misfit RSS0 = Σ_j w_j (s_j − 2 b_j·π0 + π0ᵀG_jπ0). A cause that moves π
-along directions A (P, m) — `wear` of joint j: its friction terms; `payload`: the last link's (`Robot.tool_directions`);
-`full`: every parameter — explains δᵀh of it, with H = Σ_j w_j AᵀG_jA, h = Σ_j w_j Aᵀ(b_j − G_jπ0), δ = H⁺h. A
-`drive` of joint j scales that joint's torque, τ_j = k Y_jπ0: k = u/v with u = b_j·π0, v = π0ᵀG_jπ0, explaining
-w_j (u − v)²/v.
+baseline π0 and joint weights w_j: the misfit RSS0 = Σ_j w_j (s_j − 2 b_j·π0 + π0ᵀG_jπ0). A cause is a few columns,
+each a direction a in π acting on some joints (Y_j a on joint j): `wear` of joint j, its friction terms on every
+joint; `payload`, the directions a body on the last link moves π along (`Robot.tool_directions`); `drive` of joint j,
+π0 itself on joint j only (τ_j = k Y_jπ0); `offset` of joint j, its constant torque offset where the model has one
+(a cause the contract calls `other`); `full`, every parameter. A cause explains δᵀh of RSS0, with
+H_cd = Σ_j w_j a_cᵀG_ja_d (over the joints both columns act on), h_c = Σ_j w_j a_cᵀ(b_j − G_jπ0), δ = H⁺h.
 """
 
 from __future__ import annotations
@@ -63,17 +66,23 @@ class Job:
     drop_invalid: bool = False
 
 
+#: A block of a cause's columns: directions in π (P, m), or "pi0" (the baseline π0 itself), and the joints (rows of
+#: Y, a bool mask) they act on.
+Block = tuple[np.ndarray | str, np.ndarray]
+
+
 @dataclass(frozen=True, eq=False)
 class Setup:
     """A worker's view of the problem, built once per process: the robot, its model, the fit, the base parameters
-    (the quantities tested for changes) and the causes' directions."""
+    (the quantities tested for changes) and the causes as blocks of columns (`causes`: "wear:j", "drive:j",
+    "payload"; "offset:j" where the model has a joint's torque offset; "full": every parameter)."""
 
     problem: object
     robot: Robot
     model: Arm
     estimator: str
     base: BaseParameters
-    causes: dict[str, np.ndarray]  # "wear:j" / "payload" / "full" -> A (P, m)
+    causes: dict[str, list[Block]]
 
     @property
     def tested(self) -> tuple[str, ...]:
@@ -88,14 +97,17 @@ def setup(problem_path: str) -> Setup:
     problem = load_problem(problem_path)
     robot = problem.robot
     model = robot.model()
-    P = model.n_params
-    causes = {}
-    for j in range(1, model.n_joints + 1):
-        friction = [i for i, p in enumerate(model.parameters) if p.kind == "friction" and p.joint == j]
-        if friction:
-            causes[f"wear:{j}"] = np.eye(P)[:, friction]
-    causes["payload"] = robot.tool_directions(model)
-    causes["full"] = np.eye(P)
+    P, n = model.n_params, model.n_joints
+    every = np.ones(n, dtype=bool)
+    causes: dict[str, list[Block]] = {}
+    for j in range(1, n + 1):
+        for cause, kind in (("wear", "friction"), ("offset", "other")):
+            own = [i for i, p in enumerate(model.parameters) if p.kind == kind and p.joint == j]
+            if own:
+                causes[f"{cause}:{j}"] = [(np.eye(P)[:, own], every)]
+        causes[f"drive:{j}"] = [("pi0", np.arange(n) == j - 1)]
+    causes["payload"] = [(robot.tool_directions(model), every)]
+    causes["full"] = [(np.eye(P), every)]
     return Setup(problem, robot, model, fleet_estimator(robot), base_parameters(model), causes)
 
 
@@ -200,7 +212,8 @@ class DayFit:
 
 def fit_day(job: Job, day: DayStats) -> DayFit:
     """The robot-day's fit by `fleet_estimator` with standard errors (OLS's where the fit gives none at all), and
-    its base parameters: the fit's π projected on them (K π), with the OLS fit's standard errors on them."""
+    the tested parameters: the base parameters by least squares (`identify.base.fit_base_ols`), what the data
+    determine with no prior or bound in them, with their standard errors."""
     s = setup(job.problem)
     out = DayFit(day.robot, day.day, day.files, day.skipped, day.samples)
     stats = day.stats
@@ -220,7 +233,7 @@ def fit_day(job: Job, day: DayStats) -> DayFit:
         se = fit_least_squares(stats, s.model).se
     ols = fit_base_ols(stats, s.model)
     out.pi, out.se = fit.pi, se
-    out.tested, out.tested_se = s.base.project(fit.pi), ols.fit.se
+    out.tested, out.tested_se = ols.fit.pi, ols.fit.se
     out.notes += fit.warnings
     return out
 
@@ -237,10 +250,11 @@ class Baseline:
     days: list[str]
 
 
-def baseline(job: Job, *days: DayStats) -> Baseline | None:
-    """The baseline model of a robot from its first days (None when none of them was readable)."""
+def baseline(job: Job, *days: DayStats, count: int | None = None) -> Baseline | None:
+    """The baseline model of a robot from the first `count` (default: all) of `days` that have statistics (None when
+    none has)."""
     s = setup(job.problem)
-    read = [d for d in days if d.stats is not None]
+    read = [d for d in days if d.stats is not None][:count]
     if not read:
         return None
     total = read[0].stats.copy()
@@ -252,40 +266,70 @@ def baseline(job: Job, *days: DayStats) -> Baseline | None:
 
 
 @dataclass
+class Scales:
+    """A robot-day's torque scale per joint against the baseline, k_j (n,) with its standard error: the factor on
+    joint j's torque that best fits the day with π0 (1 for an unchanged robot; a drive's gain moves it)."""
+
+    robot: str
+    day: str
+    scale: np.ndarray
+    se: np.ndarray
+
+
+def scales(job: Job, day: DayStats, base: Baseline | None) -> Scales | None:
+    """The day's `Scales` against the robot's baseline: per joint k = u/v with u = b_j·π0, v = π0ᵀG_jπ0, and its
+    standard error √(RSS_j(k)/(n−1)/v); None without statistics or baseline."""
+    if day.stats is None or base is None:
+        return None
+    S, pi0 = day.stats, base.pi
+    u = S.b @ pi0
+    v = np.maximum(np.einsum("p,jpr,r->j", pi0, S.G, pi0), 1e-300)
+    rss = np.maximum(S.s - u**2 / v, 0.0)
+    return Scales(day.robot, day.day, u / v, np.sqrt(rss / max(S.n - 1, 1) / v))
+
+
+@dataclass
 class Evidence:
-    """A robot-day against its baseline: the weighted misfit RSS0 of π0, how much of it each cause explains
-    (`reductions`: "drive:j", "wear:j", "payload", "full"), each joint's torque scale k_j with its standard error,
-    and each joint's friction growth (δ·π0_f / π0_f·π0_f, the relative change along its baseline friction)."""
+    """Pooled days against the baseline: the weighted misfit RSS0 of π0, how much of it each cause explains
+    (`gains`: the keys of `Setup.causes`), each drive's torque factor k_j (1 + its coefficient on Y_jπ0) and each
+    joint's friction growth (δ·f_j / f_j·f_j, f_j its baseline friction terms)."""
 
     robot: str
     day: str
     rss0: float
-    reductions: dict[str, float]
+    gains: dict[str, float]
     scale: np.ndarray
-    scale_se: np.ndarray
     growth: dict[str, float]
 
 
+def _columns(blocks: list[Block], pi0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A cause's columns: directions A (P, m), π0 for "pi0", and the joints each acts on, (m, n) bool."""
+    directions, rows = [], []
+    for A, joints in blocks:
+        A = pi0[:, None] if isinstance(A, str) else A
+        directions.append(A)
+        rows += [joints] * A.shape[1]
+    return np.hstack(directions), np.array(rows, dtype=float)
+
+
 def evidence(job: Job, day: DayStats, base: Baseline | None) -> Evidence | None:
-    """The day's `Evidence` against the robot's baseline (module doc); None without statistics or baseline."""
+    """The pooled days' `Evidence` against the robot's baseline (module doc); None without statistics or baseline."""
     if day.stats is None or base is None:
         return None
     s = setup(job.problem)
     S, pi0, w = day.stats, base.pi, base.weights
-    r0 = S.rss(pi0)
-    u = S.b @ pi0
-    v = np.maximum(np.einsum("p,jpr,r->j", pi0, S.G, pi0), 1e-300)
-    scale = u / v
-    rss_scaled = np.maximum(S.s - u**2 / v, 0.0)
-    scale_se = np.sqrt(rss_scaled / max(S.n - 1, 1) / v)
-    reductions = {f"drive:{j + 1}": float(w[j] * (u[j] - v[j]) ** 2 / v[j]) for j in range(S.n_joints)}
-    growth = {}
-    for key, A in s.causes.items():
-        H = np.einsum("j,pa,jpr,rb->ab", w, A, S.G, A)
-        h = np.einsum("j,pa,jp->a", w, A, S.b - np.einsum("jpr,r->jp", S.G, pi0))
+    residual = S.b - np.einsum("jpr,r->jp", S.G, pi0)  # b_j − G_j π0
+    gains, growth, scale = {}, {}, np.ones(S.n_joints)
+    for key, blocks in s.causes.items():
+        A, rows = _columns(blocks, pi0)
+        H = np.einsum("j,cj,dj,pc,jpr,rd->cd", w, rows, rows, A, S.G, A)
+        h = np.einsum("j,cj,pc,jp->c", w, rows, A, residual)
         delta = solve_normal(H, h)
-        reductions[key] = float(delta @ h)
-        if key.startswith("wear:"):
-            f0 = A.T @ pi0
-            growth[key] = float(delta @ f0 / max(f0 @ f0, 1e-300))
-    return Evidence(day.robot, day.day, float(w @ r0), reductions, scale, scale_se, growth)
+        gains[key] = float(delta @ h)
+        cause, _, joint = key.partition(":")
+        if cause == "drive":
+            scale[int(joint) - 1] = 1.0 + delta[0]
+        elif cause == "wear":
+            f = A.T @ pi0
+            growth[key] = float(delta @ f / max(f @ f, 1e-300))
+    return Evidence(day.robot, day.day, float(w @ S.rss(pi0)), gains, scale, growth)

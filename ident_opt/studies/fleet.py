@@ -1,12 +1,13 @@
 """What `ident-opt fleet` computes: every robot of a fleet identified every day on Dask, and what changed, named.
 
 1. The layout under `--logs` is found and checked (`fleet.layout`), before any work.
-2. Phase 1, on the cluster (`fleet.engine`): per file its statistics, per robot-day their sum and the fit
-   (`fleet.tasks`); the client gathers the fits only.
+2. Phase 1, on the cluster (`fleet.engine`): per file its statistics, per robot-day their sum and the fit, per
+   robot a baseline model from its first days and against it each day's torque scale per joint (`fleet.tasks`);
+   the client gathers the fits, baselines and scales only.
 3. On the client (`fleet.changes`): the fleet's scatter of each tested parameter, each robot's test against its
    first `baseline_days` fitted days, and for a robot with a moved parameter the day its change began.
-4. Phase 2, on the cluster, for the robots with a change only: the baseline days' and the change's files read again
-   and pooled, and the evidence that names the cause (`tasks.evidence`, `changes.name_cause`).
+4. Phase 2, on the cluster, for the robots with a change only: the change's files read again and pooled, and the
+   evidence against the robot's baseline model that names the cause (`tasks.evidence`, `changes.name_cause`).
 
 A robot with fewer fitted days than the baseline plus `changes.RUN_DAYS` gets its series but no test (a warning).
 """
@@ -27,6 +28,8 @@ from ident_opt.warnings import ResultWarning
 
 #: The engine every run names in its JSON.
 ENGINE = "dask.distributed"
+#: The baseline model may look this many days past the baseline for days with statistics (unreadable days).
+SPARE_DAYS = 3
 
 
 @dataclass
@@ -89,12 +92,16 @@ def run_fleet(
     with Engine(scheduler, workers, processes) as engine:
         engine.check(tasks.ready, problem_path)
         phase1 = time.perf_counter()
-        fits = engine.run(found.robots, _phase1(job, found), _count1(found), progress, "fleet: statistics and fits")
+        submit = _phase1(job, found, baseline_days)
+        gathered = engine.run(found.robots, submit, _count1(found), progress, "fleet: statistics and fits")
         engine_seconds = time.perf_counter() - phase1
-        robots, skipped, warnings = _series(fits, setup, found)
-        tests, onsets = _test(robots, baseline_days, warnings)
-        units = [_change_files(found, robots[r], onsets[r][0], baseline_days) for r in onsets]
-        total = sum(len(b) + len(c) + 4 for _, b, c in units)
+        baselines = {b.robot: b for b in gathered if isinstance(b, tasks.Baseline)}
+        robots, skipped, warnings = _series(gathered, setup, found)
+        onsets = _test(robots, baseline_days, warnings)
+        units = [
+            (r, _change_files(found, robots[r], max(t for t, _ in onsets[r].values())), baselines[r]) for r in onsets
+        ]
+        total = sum(len(files) + 2 for _, files, _ in units)
         evidence = engine.run(units, _phase2(job), total, progress, "fleet: naming the changes")
         n_workers, address = engine.workers, engine.address
     found_changes = [
@@ -114,7 +121,7 @@ def run_fleet(
         "scheduler": address,
         "engine_seconds": engine_seconds,
         "samples_per_second": samples / engine_seconds if engine_seconds > 0 else None,
-        "files_read_again": sum(len(b) + len(c) for _, b, c in units),
+        "files_read_again": sum(len(files) for _, files, _ in units),
         "baseline_days": baseline_days,
         "estimator": setup.estimator,
     }
@@ -127,7 +134,7 @@ def run_fleet(
         estimator=setup.estimator,
         baseline_days=baseline_days,
         names=setup.model.names,
-        tested_names=setup.tested,
+        tested_names=tested_names(setup),
         definitions=definitions,
         robots=robots,
         changes=found_changes,
@@ -139,21 +146,25 @@ def run_fleet(
 
 # ---------------------------------------------------------------------------------------------- phase 1
 def _count1(found: layout.Layout) -> int:
-    """Phase 1's tasks: one per file, and a sum and a fit per robot-day."""
-    return len(found.files) + 2 * sum(len(found.days(r)) for r in found.robots)
+    """Phase 1's tasks: one per file, a sum, a fit and the scales per robot-day, a baseline per robot."""
+    return len(found.files) + sum(3 * len(found.days(r)) + 1 for r in found.robots)
 
 
-def _phase1(job: tasks.Job, found: layout.Layout):
-    """A robot's phase-1 tasks: each file's statistics, each day's sum and fit (the fits are gathered)."""
+def _phase1(job: tasks.Job, found: layout.Layout, baseline_days: int):
+    """A robot's phase-1 tasks: each file's statistics; each day's sum, fit and torque scales against the baseline
+    model, fitted on the first `baseline_days` days with statistics (of the first `baseline_days` + `SPARE_DAYS`).
+    The fits, the baseline and the scales are gathered."""
 
     def submit(client, robot: str) -> tuple[list, list]:
-        fits, others = [], []
+        gathered, others, days = [], [], []
         for day in found.days(robot):
             files = [client.submit(tasks.file_stats, job, f) for f in found.files_of(robot, day)]
-            total = client.submit(tasks.day_stats, *files)
-            fits.append(client.submit(tasks.fit_day, job, total))
-            others += [*files, total]
-        return fits, others
+            days.append(client.submit(tasks.day_stats, *files))
+            gathered.append(client.submit(tasks.fit_day, job, days[-1]))
+            others += files
+        base = client.submit(tasks.baseline, job, *days[: baseline_days + SPARE_DAYS], count=baseline_days)
+        gathered += [base, *(client.submit(tasks.scales, job, day, base) for day in days)]
+        return gathered, others + days
 
     return submit
 
@@ -163,30 +174,38 @@ def _day_number(day: str) -> int:
 
 
 def _series(
-    fits: list[tasks.DayFit], setup: tasks.Setup, found: layout.Layout
+    gathered: list, setup: tasks.Setup, found: layout.Layout
 ) -> tuple[dict[str, RobotResult], list[dict], list[ResultWarning]]:
-    """The fits gathered into each robot's series (fitted days only), the files skipped, and a warning per robot
-    with days that have no fit."""
-    by_robot: dict[str, list[tasks.DayFit]] = {}
-    for fit in fits:
-        by_robot.setdefault(fit.robot, []).append(fit)
+    """Phase 1's results gathered into each robot's series (fitted days only): the fit, and the tested parameters
+    (the base parameters, then each joint's torque scale); the files skipped; a warning per robot with days that
+    have no fit."""
+    fits: dict[str, list[tasks.DayFit]] = {}
+    scales: dict[tuple[str, str], tasks.Scales] = {}
+    for item in gathered:
+        if isinstance(item, tasks.DayFit):
+            fits.setdefault(item.robot, []).append(item)
+        elif isinstance(item, tasks.Scales):
+            scales[item.robot, item.day] = item
     robots, skipped, warnings = {}, [], []
-    P, Q = setup.model.n_params, len(setup.tested)
+    P, n = setup.model.n_params, setup.model.n_joints
+    missing = (np.full(n, np.nan), np.full(n, np.nan))
     for robot in found.robots:
-        days = sorted(by_robot.get(robot, []), key=lambda f: f.day)
+        days = sorted(fits.get(robot, []), key=lambda f: f.day)
         for fit in days:
             skipped += fit.skipped
         good = [f for f in days if f.pi is not None]
         bad = [f for f in days if f.pi is None]
         if bad:
             listed = "; ".join(f"{f.day}: {', '.join(f.notes)}" for f in bad[:5]) + (" …" if len(bad) > 5 else "")
-            warnings.append(ResultWarning("unfitted_days", f"robot {robot}: {len(bad)} day(s) without a fit ({listed})"))
+            sentence = f"robot {robot}: {len(bad)} day(s) without a fit ({listed})"
+            warnings.append(ResultWarning("unfitted_days", sentence))
+        k = [(s.scale, s.se) if (s := scales.get((robot, f.day))) else missing for f in good]
         tested = changes.Tested(
             robot,
             [f.day for f in good],
             np.array([_day_number(f.day) for f in good], dtype=float),
-            np.array([f.tested for f in good]).reshape(len(good), Q),
-            np.array([f.tested_se for f in good]).reshape(len(good), Q),
+            np.hstack([np.array([f.tested for f in good]), np.array([a for a, _ in k])]).reshape(len(good), -1),
+            np.hstack([np.array([f.tested_se for f in good]), np.array([b for _, b in k])]).reshape(len(good), -1),
         )
         robots[robot] = RobotResult(
             robot,
@@ -200,11 +219,18 @@ def _series(
     return robots, skipped, warnings
 
 
+def tested_names(setup: tasks.Setup) -> tuple[str, ...]:
+    """The tested parameters' names: the base parameters, then `scale_<joint>` per joint (its torque's factor
+    against the baseline model)."""
+    return (*setup.tested, *(f"scale_{name}" for name in setup.robot.joint_names))
+
+
 # ---------------------------------------------------------------------------------------------- the test
 def _test(
     robots: dict[str, RobotResult], baseline_days: int, warnings: list[ResultWarning]
-) -> tuple[dict[str, changes.Test], dict[str, tuple[int, str]]]:
-    """Each testable robot's test (stored on it), and the onset (day index, pattern) of those with a change."""
+) -> dict[str, dict[str, tuple[int, float]]]:
+    """Test each robot with enough days (stored on it); for those with a change, the onset of each pattern
+    (`changes.onsets`)."""
     K = baseline_days
     testable = [r for r in robots.values() if len(r.days) >= K + changes.RUN_DAYS]
     short = [r.robot for r in robots.values() if len(r.days) < K + changes.RUN_DAYS]
@@ -217,69 +243,72 @@ def _test(
                 + (" …" if len(short) > 10 else ""),
             )
         )
-    tests, onsets = {}, {}
+    onsets = {}
     if not testable:
-        return tests, onsets
+        return onsets
     fleet = changes.scatter([r.tested for r in testable], K)
     for r in testable:
-        r.test = tests[r.robot] = changes.test(r.tested, fleet, K)
+        r.test = changes.test(r.tested, fleet, K)
         if r.test.moved:
-            onsets[r.robot] = changes.onset(r.test, r.tested.day_numbers, K, sorted(r.test.moved))
-    return tests, onsets
+            onsets[r.robot] = changes.onsets(r.test, r.tested.day_numbers, K, sorted(r.test.moved))
+    return onsets
 
 
 # ---------------------------------------------------------------------------------------------- phase 2
-def _change_files(found: layout.Layout, robot: RobotResult, tau: int, K: int) -> tuple[str, list, list]:
-    """(robot, the files of its baseline days, the files of its days from the change on)."""
-    files = [found.files_of(robot.robot, day) for day in robot.days]
-    return robot.robot, [f for day in files[:K] for f in day], [f for day in files[tau:] for f in day]
+def _change_files(found: layout.Layout, robot: RobotResult, tau: int) -> list:
+    """The files of a robot's fitted days from its change (day index `tau`) on."""
+    return [f for day in robot.days[tau:] for f in found.files_of(robot.robot, day)]
 
 
 def _phase2(job: tasks.Job):
-    """A changed robot's phase-2 tasks: its baseline's and its change's files pooled, π0, the evidence (gathered)."""
+    """A changed robot's phase-2 tasks: its change's files read again and pooled, the evidence against its baseline
+    model (gathered)."""
 
     def submit(client, unit) -> tuple[list, list]:
-        _, base_files, change_files = unit
-        base_stats = [client.submit(tasks.file_stats, job, f) for f in base_files]
-        change_stats = [client.submit(tasks.file_stats, job, f) for f in change_files]
-        base = client.submit(tasks.day_stats, *base_stats, day="baseline")
-        after = client.submit(tasks.day_stats, *change_stats, day="change")
-        model = client.submit(tasks.baseline, job, base)
-        found = client.submit(tasks.evidence, job, after, model)
-        return [found], [*base_stats, *change_stats, base, after, model]
+        _, files, base = unit
+        stats = [client.submit(tasks.file_stats, job, f) for f in files]
+        after = client.submit(tasks.day_stats, *stats, day="change")
+        return [client.submit(tasks.evidence, job, after, base)], [*stats, after]
 
     return submit
 
 
-def _roles(setup: tasks.Setup) -> tuple[dict[int, list[int]], list[int]]:
-    """Which tested parameters each joint's friction is ({joint: indices}), and which a body on the last link moves."""
-    tested = setup.tested
+def _roles(setup: tasks.Setup) -> tuple[dict[int, list[int]], list[int], dict[int, int]]:
+    """Which tested parameters are each joint's friction ({joint: indices}), which a body on the last link moves,
+    and each joint's torque scale ({joint: index})."""
+    names = tested_names(setup)
     friction: dict[int, list[int]] = {}
     for p in setup.model.parameters:
-        if p.kind == "friction" and p.joint and p.name in tested:
-            friction.setdefault(p.joint, []).append(tested.index(p.name))
-    moved_by_tool = np.abs(setup.base.K @ setup.causes["payload"]).max(axis=1) > 0
-    return friction, [int(i) for i in np.flatnonzero(moved_by_tool)]
+        if p.kind == "friction" and p.joint and p.name in setup.tested:
+            friction.setdefault(p.joint, []).append(names.index(p.name))
+    moved_by_tool = np.abs(setup.base.K @ setup.robot.tool_directions(setup.model)).max(axis=1) > 0
+    B = len(setup.tested)
+    return friction, [int(i) for i in np.flatnonzero(moved_by_tool)], {j + 1: B + j for j in range(len(names) - B)}
 
 
 def _change(
-    robot: RobotResult, onset: tuple[int, str], found: tasks.Evidence, setup: tasks.Setup, K: int
+    robot: RobotResult, onsets: dict[str, tuple[int, float]], found: tasks.Evidence, setup: tasks.Setup, K: int
 ) -> changes.Change:
-    """The contract's change entry of a robot from its test, its onset and the pooled evidence."""
+    """The contract's change entry of a robot from its test, its onset and the pooled evidence: the parameters it
+    concerns are the moved ones of its cause (a joint's friction for wear, what a body on the last link moves for a
+    payload, the joint's torque scale and the rest for a drive, every moved one for other)."""
     test, tested = robot.test, robot.tested
-    cause, joint, explained = changes.name_cause(found.reductions, found.growth)
+    cause, joint, explained = changes.name_cause(found.gains, found.growth)
     moved = sorted(test.moved)
-    friction, tool = _roles(setup)
-    own = {"wear": friction.get(joint, []), "payload": tool}.get(cause, moved)
+    friction, tool, scale_of = _roles(setup)
+    own = {"wear": friction.get(joint, []), "payload": tool, "drive": moved}.get(cause, moved)
     concerned = [q for q in moved if q in own] or moved
+    if cause == "drive":
+        concerned = [scale_of[joint]] + [q for q in concerned if q != scale_of[joint]]
     last = len(robot.days) - 1
-    lead = max(concerned, key=lambda q: abs(test.z[last, q]))
-    names = setup.tested
+    lead = scale_of[joint] if cause == "drive" else max(concerned, key=lambda q: abs(test.z[last, q]))
+    names = tested_names(setup)
     baseline = {names[q]: float(test.mean[q]) for q in concerned}
     latest = {names[q]: float(tested.values[last, q]) for q in concerned}
     scale = float(found.scale[joint - 1]) if cause == "drive" else None
     size = scale - 1.0 if scale is not None else latest[names[lead]] / baseline[names[lead]] - 1.0
-    tau, pattern = onset
+    pattern = changes.pattern_of(cause, onsets)
+    tau = onsets[pattern][0]
     return changes.Change(
         robot=robot.robot,
         cause=cause,
@@ -294,4 +323,5 @@ def _change(
         explained=explained,
         scale=scale,
         size=float(size),
+        lead=names[lead],
     )
