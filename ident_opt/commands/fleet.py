@@ -1,7 +1,7 @@
 """`ident-opt fleet`: every robot of a fleet identified every day on Dask, and what changed, named.
 
     ident-opt fleet --problem P --logs ROOT [--out DIR] [--json F] [--scheduler ADDRESS] [--workers N]
-                    [--baseline-days K] [--no-progress]
+                    [--baseline-days K] [--connect-timeout S] [--no-progress]
 
 ROOT holds the logs in the fleet layout, ROOT/robot=<id>/day=<YYYY-MM-DD>/*.parquet|csv|csv.gz (a local folder or a
 URL the installed filesystem libraries read); every file is a trial of the problem's arm, read with its column
@@ -14,7 +14,7 @@ reason, and the run goes on.
 
 Without --scheduler: a local cluster of --workers processes (default: the cores). With --scheduler tcp://host:8786:
 an existing cluster (`dask scheduler`, `dask worker`), whose workers need ident-opt and the problem file and logs
-at the same paths; a scheduler that does not answer within 10 s is an error (exit 2).
+at the same paths; a scheduler that does not answer within --connect-timeout (10 s) is an error (exit 2).
 
 Writes to --out (default: the problem's [output] dir, else results/): fleet.md, fleet_changes.csv,
 fleet_series.csv and .parquet, figures/fleet_<robot>.png; with --json the result of `docs/cli.md` (fleet).
@@ -30,6 +30,7 @@ from tqdm import tqdm
 
 from ident_opt.commands.common import add_problem_arguments, output_dir, require
 from ident_opt.errors import InputError
+from ident_opt.fleet.engine import CONNECT_TIMEOUT_S
 from ident_opt.problem import load_problem
 from ident_opt.report import fleet as report
 from ident_opt.studies.fleet import run_fleet
@@ -43,6 +44,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="DIR", help="output folder (default: the problem's [output] dir)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (default: a local cluster)")
     parser.add_argument("--workers", type=int, metavar="N", help="local cluster's worker processes (default: cores)")
+    parser.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=CONNECT_TIMEOUT_S,
+        metavar="S",
+        help=f"seconds to wait for --scheduler to answer and have a worker ({CONNECT_TIMEOUT_S:g})",
+    )
     parser.add_argument(
         "--baseline-days", type=int, default=5, metavar="K", help="each robot's first K days are its baseline (5)"
     )
@@ -66,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
         allow_implausible=args.allow_implausible,
         drop_invalid=args.drop_invalid,
         progress=not args.no_progress,
+        connect_timeout=args.connect_timeout,
     )
     with tqdm(
         total=len(result.robots), desc="fleet: figures", unit="robot", file=sys.stderr, disable=args.no_progress

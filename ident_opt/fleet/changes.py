@@ -23,11 +23,13 @@ cause is judged on the days from the later of the two τ (so that no unchanged d
 pattern is its cause's (a drift for wear, a step for a payload or a drive; for other, the one that fits best), and
 `first_day` is that pattern's τ: the first day of the significant change.
 
-**Cause.** From there on, the robot's statistics pooled (`tasks.evidence`, against the baseline model π0): how much
-of what a refit of every parameter gains (`full`) each cause gains with its few columns — `wear` of joint j (its
-friction terms; named only if they grew), `payload` (a body on the last link), `drive` of joint j (one factor on that
-joint's torque), and where the model has them a joint's torque offset (named `other`, with its joint). The best cause
-is named when it explains at least `EXPLAINED` of it; else `other`.
+**Cause.** From there on, the robot's statistics pooled (`tasks.evidence`, against the baseline model π0, each joint
+weighted by its out-of-sample misfit): what a refit of every parameter (`full`) gains beyond what it gains on as many
+unchanged days (the baseline's days, each predicted by the others: day-to-day scatter), and the share of it each
+cause gains beyond its own such null — `wear` of joint j (its friction terms; named only if they grew), `payload` (a
+body on the last link), `drive` of joint j (one factor on that joint's torque), and where the model has them a
+joint's torque offset (named `other`, with its joint). The best cause is named when it explains at least `EXPLAINED`
+of it; else `other`.
 """
 
 from __future__ import annotations
@@ -42,8 +44,12 @@ BAND_Z = 3.0
 #: A parameter has moved when at least `RUN_DAYS` consecutive days lie beyond `DAY_Z` on one side and their mean
 #: beyond `WINDOW_Z` standard errors of a mean of that many days (module doc).
 RUN_DAYS, DAY_Z, WINDOW_Z = 3, 1.5, 5.0
-#: A named cause must explain at least this share of what a refit of every parameter explains.
+#: A named cause must explain at least this share of what a refit of every parameter explains beyond scatter.
 EXPLAINED = 0.8
+#: Causes whose shares are within `TIE` of the best explain the change alike (a joint whose torque is mostly friction:
+#: a higher gain on it looks like more friction); the first of them in `PREFERENCE` is named: a friction that rose
+#: is the likelier event, then a payload, then a drive, then an offset.
+TIE, PREFERENCE = 0.05, ("wear", "payload", "drive", "offset")
 #: The causes, in the order of the contract (`docs/cli.md`), and the patterns of those that have one.
 CAUSES = ("wear", "payload", "drive", "other")
 PATTERNS = {"wear": "drift", "payload": "step", "drive": "step"}
@@ -228,18 +234,23 @@ def pattern_of(cause: str, fits: dict[str, tuple[int, float]]) -> str:
     return PATTERNS.get(cause) or max(fits, key=lambda p: fits[p][1])
 
 
-def name_cause(gains: dict[str, float], growth: dict[str, float]) -> tuple[str, int | None, float]:
-    """(cause, joint, explained share) from pooled evidence (`tasks.Evidence`): the share of what a refit of every
-    parameter gains that each cause gains; the best is named when it explains at least `EXPLAINED` (wear only if the
-    joint's friction grew; a joint's torque offset is `other`, of that joint), else `other`."""
-    full = gains.get("full", 0.0)
-    shares = {k: v / full for k, v in gains.items() if k != "full"} if full > 0 else {}
-    if not shares:
+def name_cause(
+    gains: dict[str, float], null: dict[str, float], growth: dict[str, float]
+) -> tuple[str, int | None, float]:
+    """(cause, joint, explained share) from pooled evidence (`tasks.Evidence`): of what a refit of every parameter
+    gains beyond what it gains on unchanged days (`null`: scatter), the share each cause gains beyond its own null;
+    the best is named when it explains at least `EXPLAINED` (wear only if the joint's friction grew; of causes within
+    `TIE` of the best, the first in `PREFERENCE`; a joint's torque offset is `other`, of that joint), else `other`."""
+    full = gains.get("full", 0.0) - null.get("full", 0.0)
+    if full <= 0:
         return "other", None, 0.0
-    key = max(shares, key=shares.get)
+    shares = {k: (v - null.get(k, 0.0)) / full for k, v in gains.items() if k != "full"}
+    shares = {k: v for k, v in shares.items() if not (k.startswith("wear:") and growth.get(k, 0.0) <= 0)}
+    best = max(shares.values(), default=0.0)
+    key = min((k for k, v in shares.items() if v >= best - TIE), key=lambda k: PREFERENCE.index(k.partition(":")[0]))
     share = float(min(max(shares[key], 0.0), 1.0))
     cause, _, joint = key.partition(":")
-    if share < EXPLAINED or (cause == "wear" and growth.get(key, 0.0) <= 0):
+    if share < EXPLAINED:
         return "other", None, share
     if cause == "offset":
         return "other", int(joint), share

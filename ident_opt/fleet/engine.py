@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from distributed import Client, LocalCluster, as_completed
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from ident_opt.errors import InputError
@@ -51,10 +52,13 @@ class Engine:
         self.timeout = timeout
         self.client = None
         self.cluster = None
+        self.blas = None
 
     def __enter__(self) -> Engine:
         if self.scheduler is None:
             workers = self.requested or os.cpu_count() or 1
+            if not self.processes:  # as Dask's worker processes run: one BLAS thread each (many threads thrash)
+                self.blas = threadpool_limits(limits=1)
             self.cluster = LocalCluster(
                 n_workers=workers,
                 threads_per_worker=1,
@@ -94,6 +98,9 @@ class Engine:
         if self.cluster is not None:
             self.cluster.close()
             self.cluster = None
+        if self.blas is not None:
+            self.blas.restore_original_limits()
+            self.blas = None
 
     @property
     def workers(self) -> int:

@@ -241,28 +241,48 @@ def fit_day(job: Job, day: DayStats) -> DayFit:
 # ---------------------------------------------------------------------------------------------- changes
 @dataclass
 class Baseline:
-    """A robot's baseline model: π0 (P,) fitted by OLS on its first days' statistics together, the joint weights
-    w_j = 1/σ_j² [1/(N² m²)] from that fit's residual, and the days it used."""
+    """A robot's baseline model: π0 (P,) fitted by OLS on its first days' statistics together; each joint's weight
+    w_j = 1/v_j, v_j its out-of-sample residual variance [N² m²] (each baseline day predicted by the fit on the
+    others: noise and day-to-day scatter); per sample, what each cause gains on a baseline day so predicted
+    (`null`: the scatter's share of any gain); the days it used."""
 
     robot: str
     pi: np.ndarray
     weights: np.ndarray
+    null: dict[str, float]
     days: list[str]
 
 
+def _without(total: Stats, part: Stats) -> Stats:
+    """The statistics of `total` without those of `part` (a subset of its samples)."""
+    return Stats(total.G - part.G, total.b - part.b, total.s - part.s, total.n - part.n)
+
+
 def baseline(job: Job, *days: DayStats, count: int | None = None) -> Baseline | None:
-    """The baseline model of a robot from the first `count` (default: all) of `days` that have statistics (None when
-    none has)."""
+    """The baseline model of a robot from the first `count` (default: all) of `days` that have statistics, with its
+    out-of-sample weights and null gains from leaving each day out in turn (one day alone: its in-sample residual,
+    no null); None when no day has statistics."""
     s = setup(job.problem)
-    read = [d for d in days if d.stats is not None][:count]
+    read = [d.stats for d in days if d.stats is not None][:count]
     if not read:
         return None
-    total = read[0].stats.copy()
-    for d in read[1:]:
-        total += d.stats
+    total = read[0].copy()
+    for stats in read[1:]:
+        total += stats
     fit = fit_least_squares(total, s.model)
-    weights = 1.0 / np.maximum(fit.sigma2, 1e-12 * max(float(fit.sigma2.max()), 1e-300))
-    return Baseline(read[0].robot, fit.pi, weights, [d.day for d in read])
+    floor = 1e-12 * max(float(fit.sigma2.max()), 1e-300)
+    if len(read) < 2:
+        return Baseline(days[0].robot, fit.pi, 1.0 / np.maximum(fit.sigma2, floor), {}, [days[0].day])
+    others = [fit_least_squares(_without(total, stats), s.model).pi for stats in read]
+    n = sum(stats.n for stats in read)
+    variance = sum(stats.rss(pi) for stats, pi in zip(read, others)) / n
+    weights = 1.0 / np.maximum(variance, floor)
+    null: dict[str, float] = {}
+    for stats, pi in zip(read, others):
+        for key, gain in _gains(s, stats, pi, weights)[0].items():
+            null[key] = null.get(key, 0.0) + gain / n
+    used = [d.day for d in days if d.stats is not None][: len(read)]
+    return Baseline(days[0].robot, fit.pi, weights, null, used)
 
 
 @dataclass
@@ -291,13 +311,15 @@ def scales(job: Job, day: DayStats, base: Baseline | None) -> Scales | None:
 @dataclass
 class Evidence:
     """Pooled days against the baseline: the weighted misfit RSS0 of π0, how much of it each cause explains
-    (`gains`: the keys of `Setup.causes`), each drive's torque factor k_j (1 + its coefficient on Y_jπ0) and each
-    joint's friction growth (δ·f_j / f_j·f_j, f_j its baseline friction terms)."""
+    (`gains`: the keys of `Setup.causes`) and how much it would on as many unchanged days (`null`: the baseline's
+    rates × the samples), each drive's torque factor k_j (1 + its coefficient on Y_jπ0) and each joint's friction
+    growth (δ·f_j / f_j·f_j, f_j its baseline friction terms)."""
 
     robot: str
     day: str
     rss0: float
     gains: dict[str, float]
+    null: dict[str, float]
     scale: np.ndarray
     growth: dict[str, float]
 
@@ -312,18 +334,17 @@ def _columns(blocks: list[Block], pi0: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return np.hstack(directions), np.array(rows, dtype=float)
 
 
-def evidence(job: Job, day: DayStats, base: Baseline | None) -> Evidence | None:
-    """The pooled days' `Evidence` against the robot's baseline (module doc); None without statistics or baseline."""
-    if day.stats is None or base is None:
-        return None
-    s = setup(job.problem)
-    S, pi0, w = day.stats, base.pi, base.weights
+def _gains(s: Setup, S: Stats, pi0: np.ndarray, w: np.ndarray) -> tuple[dict[str, float], np.ndarray, dict]:
+    """(gains, drive factors k_j, friction growths) of every cause on statistics S against π0 with weights w."""
     residual = S.b - np.einsum("jpr,r->jp", S.G, pi0)  # b_j − G_j π0
     gains, growth, scale = {}, {}, np.ones(S.n_joints)
     for key, blocks in s.causes.items():
         A, rows = _columns(blocks, pi0)
-        H = np.einsum("j,cj,dj,pc,jpr,rd->cd", w, rows, rows, A, S.G, A)
-        h = np.einsum("j,cj,pc,jp->c", w, rows, A, residual)
+        H, h = np.zeros((A.shape[1], A.shape[1])), np.zeros(A.shape[1])
+        for j in range(S.n_joints):
+            Aj = A * rows[:, j]  # the columns acting on joint j
+            H += w[j] * (Aj.T @ S.G[j] @ Aj)
+            h += w[j] * (Aj.T @ residual[j])
         delta = solve_normal(H, h)
         gains[key] = float(delta @ h)
         cause, _, joint = key.partition(":")
@@ -332,4 +353,15 @@ def evidence(job: Job, day: DayStats, base: Baseline | None) -> Evidence | None:
         elif cause == "wear":
             f = A.T @ pi0
             growth[key] = float(delta @ f / max(f @ f, 1e-300))
-    return Evidence(day.robot, day.day, float(w @ S.rss(pi0)), gains, scale, growth)
+    return gains, scale, growth
+
+
+def evidence(job: Job, day: DayStats, base: Baseline | None) -> Evidence | None:
+    """The pooled days' `Evidence` against the robot's baseline (module doc); None without statistics or baseline."""
+    if day.stats is None or base is None:
+        return None
+    s = setup(job.problem)
+    S = day.stats
+    gains, scale, growth = _gains(s, S, base.pi, base.weights)
+    null = {key: rate * S.n for key, rate in base.null.items()}
+    return Evidence(day.robot, day.day, float(base.weights @ S.rss(base.pi)), gains, null, scale, growth)

@@ -284,6 +284,8 @@ def daily_figure(
     for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
     axes.flat[0].legend(fontsize=7)
-    fig.suptitle(title, fontsize=11)
-    fig.tight_layout()
+    height = 2.5 * rows  # inches
+    fig.suptitle(title, fontsize=11, y=1 - 0.1 / height, va="top")
+    # fixed margins: tight_layout would cost a third of the figure's time, once per robot of a fleet
+    fig.subplots_adjust(left=0.06, right=0.99, bottom=0.25 / height, top=1 - 0.65 / height, wspace=0.28, hspace=0.5)
     return _save(fig, path, dpi=90)

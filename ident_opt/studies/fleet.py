@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt.fleet import changes, layout, tasks
-from ident_opt.fleet.engine import Engine
+from ident_opt.fleet.engine import CONNECT_TIMEOUT_S, Engine
 from ident_opt.problem import load_problem
 from ident_opt.warnings import ResultWarning
 
@@ -79,17 +79,19 @@ def run_fleet(
     drop_invalid: bool = False,
     progress: bool = True,
     processes: bool = True,
+    connect_timeout: float = CONNECT_TIMEOUT_S,
 ) -> FleetResult:
     """Identify every robot-day under `logs` for the problem at `problem_path`, test each robot against its first
     `baseline_days` days and name what changed (module doc). `scheduler`: an existing Dask scheduler's address
-    (None: a local cluster of `workers` processes, or threads with `processes` False)."""
+    (None: a local cluster of `workers` processes, or threads with `processes` False), which must answer within
+    `connect_timeout` [s]."""
     start = time.perf_counter()
     problem_path = str(Path(problem_path).resolve())
     problem = load_problem(problem_path)
     found = layout.discover(logs)
     job = tasks.Job(problem_path, allow_implausible, drop_invalid)
     setup = tasks.setup(problem_path)
-    with Engine(scheduler, workers, processes) as engine:
+    with Engine(scheduler, workers, processes, connect_timeout) as engine:
         engine.check(tasks.ready, problem_path)
         phase1 = time.perf_counter()
         submit = _phase1(job, found, baseline_days)
@@ -293,7 +295,7 @@ def _change(
     concerns are the moved ones of its cause (a joint's friction for wear, what a body on the last link moves for a
     payload, the joint's torque scale and the rest for a drive, every moved one for other)."""
     test, tested = robot.test, robot.tested
-    cause, joint, explained = changes.name_cause(found.gains, found.growth)
+    cause, joint, explained = changes.name_cause(found.gains, found.null, found.growth)
     moved = sorted(test.moved)
     friction, tool, scale_of = _roles(setup)
     own = {"wear": friction.get(joint, []), "payload": tool, "drive": moved}.get(cause, moved)
