@@ -112,12 +112,12 @@ class Engine:
         """ "local" for the local cluster, else the scheduler's address."""
         return "local" if self.scheduler is None else self.scheduler
 
-    def check(self, task: Callable, *args) -> Any:
-        """Run `task(*args)` on one worker first: an `InputError` there (the problem not found on the worker) or a
-        worker that cannot run ident-opt at all is an InputError naming the scheduler, before any work."""
-        future = self.client.submit(task, *args, pure=False)
+    def check(self, task: Callable, *args) -> dict:
+        """Run `task(*args)` on every worker first (`Client.run`, outside the task graph: it also warms each worker
+        up before the timed work): an `InputError` there (the problem not found on a worker) or a worker that cannot
+        run ident-opt at all is an InputError naming the scheduler, before any work. {worker: result}."""
         try:
-            return future.result(timeout=max(self.timeout, 60.0))
+            return self.client.run(task, *args)
         except InputError as exc:
             raise InputError(f"a worker of {self.address} cannot load the problem: {exc}") from None
         except Exception as exc:  # whatever stops a worker, said with the address
