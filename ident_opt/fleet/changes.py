@@ -14,11 +14,12 @@ median standard error of the fleet's baseline days.
 parameter has moved when, after the baseline, a window of L ≥ `RUN_DAYS` consecutive days all lie beyond `DAY_Z` on
 one side and their mean deviation lies beyond `WINDOW_Z` times its standard error σ √(mean f_d² / L + 1/K): a
 persistent shift adds up over days, while one day far out (a motion that excites the parameter badly) is scatter
-until the next days agree. The first day of the first such window is the day the test raises it. The figures draw
-the band μ ± `BAND_Z` σ f_d.
+until the next days agree. The last day of the first such window is the day the test raises it (with the days up to
+then, as a daily run would). The figures draw the band μ ± `BAND_Z` σ f_d.
 
 **Start and pattern.** The z-series of the moved parameters together are fitted by a change from day τ on, either a
-step (z = a from τ) or a drift (z = a (day − τ + 1)), over τ after the baseline and not after the first alarm. The
+step (z = a from τ) or a drift (z = a (day − τ + 1)), over τ after the baseline and not after the day the test
+raised it. The
 cause is judged on the days from the later of the two τ (so that no unchanged day dilutes its evidence); the change's
 pattern is its cause's (a drift for wear, a step for a payload or a drive; for other, the one that fits best), and
 `first_day` is that pattern's τ: the first day of the significant change.
@@ -176,14 +177,14 @@ def test(robot: Tested, fleet: Scatter, baseline_days: int) -> Test:
 
 
 def first_alarm(z: np.ndarray, deviation: np.ndarray, f2: np.ndarray, sigma: float, K: int) -> tuple[int, int] | None:
-    """(index, sign) of the first day that starts a window of at least `RUN_DAYS` consecutive days, each beyond
-    ±`DAY_Z` on one side, whose mean deviation lies beyond `WINDOW_Z` of its own standard error, σ √(mean f² / L +
-    1/K) for L days (module doc); None when there is none."""
+    """(index, sign) of the first day on which the days so far end a window of at least `RUN_DAYS` consecutive
+    days, each beyond ±`DAY_Z` on one side, whose mean deviation lies beyond `WINDOW_Z` of its own standard error,
+    σ √(mean f² / L + 1/K) for L days (module doc): the day the test raises it; None when it never does."""
     first = None
     for sign in (1, -1):
         beyond = np.nan_to_num(sign * z) > DAY_Z
         d = 0
-        while d < len(z) and (first is None or d < first[0]):
+        while d < len(z) and (first is None or d + RUN_DAYS - 1 < first[0]):
             if not beyond[d]:
                 d += 1
                 continue
@@ -200,21 +201,23 @@ def first_alarm(z: np.ndarray, deviation: np.ndarray, f2: np.ndarray, sigma: flo
 
 
 def _window(dev: np.ndarray, f2: np.ndarray, sigma: float, K: int) -> int | None:
-    """The first start, within a run of days beyond `DAY_Z`, of a window of `RUN_DAYS` or more days whose mean
+    """Within a run of days beyond `DAY_Z`, the first day that ends a window of `RUN_DAYS` or more days whose mean
     deviation `dev` exceeds `WINDOW_Z` standard errors (None when no window does)."""
-    for start in range(len(dev) - RUN_DAYS + 1):
-        length = np.arange(RUN_DAYS, len(dev) - start + 1)
-        mean = np.cumsum(dev[start:])[length - 1] / length
-        se = sigma * np.sqrt(np.cumsum(f2[start:])[length - 1] / length**2 + 1.0 / K)
+    total, spread = np.concatenate([[0.0], np.cumsum(dev)]), np.concatenate([[0.0], np.cumsum(f2)])
+    for last in range(RUN_DAYS - 1, len(dev)):
+        starts = np.arange(0, last - RUN_DAYS + 2)
+        length = last + 1 - starts
+        mean = (total[last + 1] - total[starts]) / length
+        se = sigma * np.sqrt((spread[last + 1] - spread[starts]) / length**2 + 1.0 / K)
         if np.any(mean > WINDOW_Z * se):
-            return start
+            return last
     return None
 
 
 def onsets(test: Test, day_numbers: np.ndarray, baseline_days: int, moved: list[int]) -> dict[str, tuple[int, float]]:
     """Per pattern ("step", "drift") the day index τ from which the moved parameters' z-series are best fitted by one
-    change of that shape (module doc), between the first day after the baseline and the first alarm, with the
-    share of Σ z² it fits."""
+    change of that shape (module doc), between the first day after the baseline and the day the test raised the
+    change, with the share of Σ z² it fits."""
     K = baseline_days
     z = np.nan_to_num(test.z[:, moved])
     last = min(test.moved[q][0] for q in moved)

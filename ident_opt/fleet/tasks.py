@@ -30,6 +30,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import tempfile
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
@@ -119,12 +120,14 @@ def ready(problem_path: str) -> int:
 
 @dataclass
 class FileStats:
-    """One file's statistics (None when skipped, with the `reason`) and its number of samples."""
+    """One file's statistics (None when skipped, with the `reason`), its number of samples and the task's CPU
+    time [s] (`time.thread_time`: what it costs, whatever else the machine runs)."""
 
     file: FleetFile
     stats: Stats | None
     samples: int = 0
     reason: str = ""
+    cpu: float = 0.0
 
 
 @contextlib.contextmanager
@@ -147,6 +150,7 @@ def local_copy(url: str) -> Iterator[Path]:
 def file_stats(job: Job, file: FleetFile) -> FileStats:
     """Read, check, differentiate and reduce one trial to its statistics with the torque the fits use
     (`Dataset.tau_fit`); a file the loader refuses is returned as skipped, with the loader's reason."""
+    start = time.thread_time()
     s = setup(job.problem)
     local = file.url
     try:
@@ -161,16 +165,16 @@ def file_stats(job: Job, file: FleetFile) -> FileStats:
             fittable(trial)
     except InputError as exc:
         reason = str(exc).replace(f"{local}: ", "", 1).replace(str(local), file.name)
-        return FileStats(file, None, 0, reason)
+        return FileStats(file, None, 0, reason, time.thread_time() - start)
     stats = Stats.from_data(s.model, trial.q, trial.dq, trial.ddq, trial.tau_fit)
-    return FileStats(file, stats, trial.n)
+    return FileStats(file, stats, trial.n, cpu=time.thread_time() - start)
 
 
 # ---------------------------------------------------------------------------------------------- days
 @dataclass
 class DayStats:
     """A robot-day's statistics (the sum over its readable files; None if none was), the files read and the ones
-    skipped (`{"file", "reason"}`), and the samples."""
+    skipped (`{"file", "reason"}`), the samples, and the CPU time [s] of its files' tasks and its own."""
 
     robot: str
     day: str
@@ -178,10 +182,12 @@ class DayStats:
     files: list[str]
     skipped: list[dict]
     samples: int
+    cpu: float = 0.0
 
 
 def day_stats(*files: FileStats, day: str | None = None) -> DayStats:
     """The sum of the files' statistics, labelled with the first file's robot and day (or `day`)."""
+    start = time.thread_time()
     read = [f for f in files if f.stats is not None]
     total = None
     for f in read:
@@ -189,14 +195,15 @@ def day_stats(*files: FileStats, day: str | None = None) -> DayStats:
     first = files[0].file
     skipped = [{"file": f.file.name, "reason": f.reason} for f in files if f.stats is None]
     samples = sum(f.samples for f in read)
-    return DayStats(first.robot, day or first.day, total, [f.file.name for f in read], skipped, samples)
+    cpu = sum(f.cpu for f in files) + time.thread_time() - start
+    return DayStats(first.robot, day or first.day, total, [f.file.name for f in read], skipped, samples, cpu)
 
 
 @dataclass
 class DayFit:
     """A robot-day's fit: π and its standard errors (NaN where the data do not determine a parameter) by the
-    model's names, the tested quantities (`Setup.tested`) with their OLS standard errors, and notes. `pi` is None
-    when the day could not be fitted (`notes` say why)."""
+    model's names, the tested quantities (`Setup.tested`) with their OLS standard errors, notes, and the CPU time
+    [s] of the day's tasks (files, sum, fit). `pi` is None when the day could not be fitted (`notes` say why)."""
 
     robot: str
     day: str
@@ -208,12 +215,21 @@ class DayFit:
     tested: np.ndarray | None = None
     tested_se: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    cpu: float = 0.0
 
 
 def fit_day(job: Job, day: DayStats) -> DayFit:
     """The robot-day's fit by `fleet_estimator` with standard errors (OLS's where the fit gives none at all), and
     the tested parameters: the base parameters by least squares (`identify.base.fit_base_ols`), what the data
     determine with no prior or bound in them, with their standard errors."""
+    start = time.thread_time()
+    out = _fit_day(job, day)
+    out.cpu = day.cpu + time.thread_time() - start
+    return out
+
+
+def _fit_day(job: Job, day: DayStats) -> DayFit:
+    """`fit_day` without its clock."""
     s = setup(job.problem)
     out = DayFit(day.robot, day.day, day.files, day.skipped, day.samples)
     stats = day.stats
@@ -322,6 +338,7 @@ class Evidence:
     null: dict[str, float]
     scale: np.ndarray
     growth: dict[str, float]
+    cpu: float = 0.0  # the pooled files' tasks and its own [s]
 
 
 def _columns(blocks: list[Block], pi0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -360,8 +377,10 @@ def evidence(job: Job, day: DayStats, base: Baseline | None) -> Evidence | None:
     """The pooled days' `Evidence` against the robot's baseline (module doc); None without statistics or baseline."""
     if day.stats is None or base is None:
         return None
+    start = time.thread_time()
     s = setup(job.problem)
     S = day.stats
     gains, scale, growth = _gains(s, S, base.pi, base.weights)
     null = {key: rate * S.n for key, rate in base.null.items()}
-    return Evidence(day.robot, day.day, float(base.weights @ S.rss(base.pi)), gains, null, scale, growth)
+    cpu = day.cpu + time.thread_time() - start
+    return Evidence(day.robot, day.day, float(base.weights @ S.rss(base.pi)), gains, null, scale, growth, cpu)

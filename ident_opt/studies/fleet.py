@@ -112,6 +112,7 @@ def run_fleet(
     ]
     samples = sum(sum(r.samples) for r in robots.values())
     seconds = time.perf_counter() - start
+    cpu = sum(item.cpu for item in [*gathered, *evidence] if isinstance(item, tasks.DayFit | tasks.Evidence))
     fleet = {
         "robots": len(robots),
         "robot_days": sum(len(r.days) for r in robots.values()),
@@ -124,6 +125,8 @@ def run_fleet(
         "engine_seconds": engine_seconds,
         "samples_per_second": samples / engine_seconds if engine_seconds > 0 else None,
         "files_read_again": sum(len(files) for _, files, _ in units),
+        "cpu_seconds": cpu,
+        "cpu_seconds_per_file": cpu / max(len(found.files), 1),
         "baseline_days": baseline_days,
         "estimator": setup.estimator,
     }
