@@ -255,6 +255,7 @@ def test_a_planar_fleet_end_to_end(planar_fleet, planar_run):
     _judge(data["changes"], hidden)
     assert data["skipped"] == [{"file": victim, "reason": data["skipped"][0]["reason"]}]
     assert "cannot read the file" in data["skipped"][0]["reason"]
+    assert [w["code"] for w in data["warnings"]] == ["unfitted_days"] and "R02" in data["warnings"][0]["sentence"]
     fleet = data["fleet"]
     assert fleet["robots"] == 6 and fleet["files"] == 72 and fleet["robot_days"] == 71
     assert fleet["engine"] == "dask.distributed" and fleet["scheduler"] == "local" and fleet["workers"] == 2

@@ -7,9 +7,10 @@ ROOT holds the logs in the fleet layout, ROOT/robot=<id>/day=<YYYY-MM-DD>/*.parq
 URL the installed filesystem libraries read); every file is a trial of the problem's arm, read with its column
 mapping. One Dask task per file reads it, estimates the derivatives and reduces it to sufficient statistics (the
 samples never leave the worker); each robot-day gets the fit the tool stands behind, with standard errors. Each
-robot's first K days (default 5) are its baseline; a parameter that leaves the fleet's day-to-day scatter around it
-on 3 consecutive days has changed, and the change is named: wear (a joint's friction), payload (a body on the last
-link), drive (one factor on a joint's torque) or other. A file that fails validation is listed as skipped, with the
+robot's first K days (default 5) are its baseline; a parameter the data determine that leaves its baseline on 3 or
+more consecutive days, by more on average than the fleet's day-to-day scatter allows, has changed, and the change is
+named: wear (a joint's friction), payload (a body on the last link), drive (one factor on a joint's torque) or other
+(docs/fleet.md). A file that fails validation is listed as skipped, with the
 reason, and the run goes on.
 
 Without --scheduler: a local cluster of --workers processes (default: the cores). With --scheduler tcp://host:8786:

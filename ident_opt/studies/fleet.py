@@ -23,7 +23,6 @@ import numpy as np
 
 from ident_opt.fleet import changes, layout, tasks
 from ident_opt.fleet.engine import CONNECT_TIMEOUT_S, Engine
-from ident_opt.problem import load_problem
 from ident_opt.warnings import ResultWarning
 
 #: The engine every run names in its JSON.
@@ -87,10 +86,10 @@ def run_fleet(
     `connect_timeout` [s]."""
     start = time.perf_counter()
     problem_path = str(Path(problem_path).resolve())
-    problem = load_problem(problem_path)
+    setup = tasks.setup(problem_path)
+    problem = setup.problem
     found = layout.discover(logs)
     job = tasks.Job(problem_path, allow_implausible, drop_invalid)
-    setup = tasks.setup(problem_path)
     with Engine(scheduler, workers, processes, connect_timeout) as engine:
         engine.check(tasks.ready, problem_path)
         phase1 = time.perf_counter()
@@ -101,15 +100,16 @@ def run_fleet(
         robots, skipped, warnings = _series(gathered, setup, found)
         onsets = _test(robots, baseline_days, warnings)
         units = [
-            (r, _change_files(found, robots[r], max(t for t, _ in onsets[r].values())), baselines[r]) for r in onsets
+            (r, _change_files(found, robots[r], max(t for t, _ in onsets[r].values())), baselines[r])
+            for r in onsets
+            if r in baselines
         ]
         total = sum(len(files) + 2 for _, files, _ in units)
         evidence = engine.run(units, _phase2(job), total, progress, "fleet: naming the changes")
         n_workers, address = engine.workers, engine.address
-    found_changes = [
-        _change(robots[e.robot], onsets[e.robot], e, setup, baseline_days)
-        for e in sorted((e for e in evidence if e is not None), key=lambda e: e.robot)
-    ]
+    named = {e.robot: e for e in evidence if e is not None}
+    unnamed = tasks.Evidence("", "change", 0.0, {}, {}, np.ones(setup.model.n_joints), {})  # no evidence: other
+    found_changes = [_change(robots[r], onsets[r], named.get(r, unnamed), setup, baseline_days) for r in sorted(onsets)]
     samples = sum(sum(r.samples) for r in robots.values())
     seconds = time.perf_counter() - start
     cpu = sum(item.cpu for item in [*gathered, *evidence] if isinstance(item, tasks.DayFit | tasks.Evidence))
