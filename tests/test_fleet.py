@@ -126,7 +126,7 @@ def test_the_layout_is_found_and_its_oddities_reported(tmp_path):
         {"file": "robot=A/day=2026-01-01/notes.txt", "reason": "not a trial file (.parquet, .csv, .csv.gz)"}
     ]
     assert [w.code for w in found.warnings] == ["no_logs", "no_logs"]
-    assert "robot=B/day=2026-01-01" in found.warnings[0].sentence and "robot=C" in found.warnings[1].sentence
+    assert "robot=B/day=2026-01-01" in found.warnings[0].message and "robot=C" in found.warnings[1].message
 
 
 @pytest.mark.parametrize(
@@ -255,7 +255,7 @@ def test_a_planar_fleet_end_to_end(planar_fleet, planar_run):
     _judge(data["changes"], hidden)
     assert data["skipped"] == [{"file": victim, "reason": data["skipped"][0]["reason"]}]
     assert "cannot read the file" in data["skipped"][0]["reason"]
-    assert [w["code"] for w in data["warnings"]] == ["unfitted_days"] and "R02" in data["warnings"][0]["sentence"]
+    assert [w["code"] for w in data["warnings"]] == ["unfitted_days"] and "R02" in data["warnings"][0]["message"]
     fleet = data["fleet"]
     assert fleet["robots"] == 6 and fleet["files"] == 72 and fleet["robot_days"] == 71
     assert fleet["engine"] == "dask.distributed" and fleet["scheduler"] == "local" and fleet["workers"] == 2

@@ -192,7 +192,7 @@ def markdown(result: FleetResult, table: pd.DataFrame, command: str, figures: li
         skipped = pd.DataFrame(result.skipped, columns=["file", "reason"])
         lines += ["", f"## Skipped files ({len(skipped)})", "", markdown_table(skipped, index=False)]
     if result.warnings:
-        lines += ["", "## Warnings", "", *(f"- `{w.code}`: {w.sentence}" for w in result.warnings)]
+        lines += ["", "## Warnings", "", *(f"- `{w.code}`: {w.message}" for w in result.warnings)]
     lines += [
         "",
         "## Files",
