@@ -25,12 +25,15 @@ import pytest
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.cli import main
+from ident_opt.data import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.fleet import changes, layout, tasks
 from ident_opt.fleet.simulated import FleetSpec, simulate_fleet
+from ident_opt.identify import estimators
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
 from ident_opt.report import fleet as report
+from ident_opt.studies import recommend
 from ident_opt.studies.fleet import run_fleet
 from tests.conftest import PROBLEMS, ROOT
 
@@ -255,7 +258,8 @@ def test_a_planar_fleet_end_to_end(planar_fleet, planar_run):
     _judge(data["changes"], hidden)
     assert data["skipped"] == [{"file": victim, "reason": data["skipped"][0]["reason"]}]
     assert "cannot read the file" in data["skipped"][0]["reason"]
-    assert [w["code"] for w in data["warnings"]] == ["unfitted_days"] and "R02" in data["warnings"][0]["message"]
+    unfitted = [w["message"] for w in data["warnings"] if w["code"] == "unfitted_days"]
+    assert len(unfitted) == 1 and "R02" in unfitted[0]
     fleet = data["fleet"]
     assert fleet["robots"] == 6 and fleet["files"] == 72 and fleet["robot_days"] == 71
     assert fleet["engine"] == "dask.distributed" and fleet["scheduler"] == "local" and fleet["workers"] == 2
@@ -272,6 +276,35 @@ def test_a_planar_fleet_end_to_end(planar_fleet, planar_run):
     assert sorted(p.name for p in (report / "figures").iterdir()) == [f"fleet_R0{i}.png" for i in range(1, 7)]
     table = (report / "fleet.md").read_text()
     assert all(f"| {c['robot']} | {c['cause']} |" in table for c in data["changes"]) and victim in table
+
+
+def test_each_robot_day_gets_the_recommended_fit(planar_fleet, planar_run):
+    """The fit of a robot's days is the recommended one (issue 29), judged on its first day's trials as `identify`
+    judges its own, and a day's series is that fit of the day's trial, as one computes it here from the file."""
+    root = planar_fleet[0]
+    data = planar_run[2]
+    problem = load_problem(PLANAR)
+    robot, arm = problem.robot, problem.robot.model()
+    for name in ("R01", "R04"):
+        entry = data["robots"][name]
+        first = load_dataset(root / f"robot={name}" / f"day={entry['days'][0]}" / "log0.parquet", problem.data, robot)
+        expected = recommend.evidence(
+            robot, arm, [first], problem.data.conversions, problem.data.derivative_cutoff_hz
+        ).recommendation
+        assert (entry["estimator"], entry["recommended_why"], entry["cutoff_factor"]) == (
+            expected.estimator,
+            expected.why,
+            expected.factor,
+        )
+        day = entry["days"][6]
+        trial = load_dataset(root / f"robot={name}" / f"day={day}" / "log0.parquet", problem.data, robot)
+        (trial,) = recommend.raised([trial], expected.factor) if expected.factor != 1 else (trial,)
+        stats = estimators.statistics(arm, [trial], expected.estimator)
+        fit = estimators.fit_for(robot, expected.estimator, stats, arm)
+        got = np.array([entry["parameters"][p][6] for p in arm.names], dtype=float)
+        assert np.allclose(got, fit.pi, rtol=1e-6, atol=1e-9), (got, fit.pi)
+    named = {e["estimator"] for e in data["robots"].values()}
+    assert data["estimator"] == (named.pop() if len(named) == 1 else "per robot") and data["recommended_why"]
 
 
 def test_an_n_joint_fleet_through_the_api(tmp_path_factory):

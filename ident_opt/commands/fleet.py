@@ -1,12 +1,13 @@
 """`ident-opt fleet`: every robot of a fleet identified every day on Dask, and what changed, named.
 
     ident-opt fleet --problem P --logs ROOT [--out DIR] [--json F] [--scheduler ADDRESS] [--workers N]
-                    [--baseline-days K] [--connect-timeout S] [--no-progress]
+                    [--baseline-days K] [--estimator NAME] [--connect-timeout S] [--no-progress]
 
 ROOT holds the logs in the fleet layout, ROOT/robot=<id>/day=<YYYY-MM-DD>/*.parquet|csv|csv.gz (a local folder or a
 URL the installed filesystem libraries read); every file is a trial of the problem's arm, read with its column
 mapping. One Dask task per file reads it, estimates the derivatives and reduces it to sufficient statistics (the
-samples never leave the worker); each robot-day gets the fit the tool stands behind, with standard errors. Each
+samples never leave the worker); each robot-day gets the recommended fit (judged once per robot on its first
+readable day, as identify judges its trials; --estimator NAME: that fit instead), with standard errors. Each
 robot's first K days (default 5) are its baseline; a parameter the data determine that leaves its baseline on 3 or
 more consecutive days, by more on average than the fleet's day-to-day scatter allows, has changed, and the change is
 named: wear (a joint's friction), payload (a body on the last link), drive (one factor on a joint's torque) or other
@@ -38,8 +39,8 @@ from ident_opt.studies.fleet import run_fleet
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """--problem, --logs, --out, --json, --scheduler, --workers, --baseline-days, --no-progress and the loader's
-    switches."""
+    """--problem, --logs, --out, --json, --scheduler, --workers, --baseline-days, --estimator, --no-progress and the
+    loader's switches."""
     add_problem_arguments(parser, data=False)
     parser.add_argument("--logs", required=True, metavar="ROOT", help="the fleet's logs: ROOT/robot=<id>/day=<date>/")
     parser.add_argument("--out", metavar="DIR", help="output folder (default: the problem's [output] dir)")
@@ -54,6 +55,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--baseline-days", type=int, default=5, metavar="K", help="each robot's first K days are its baseline (5)"
+    )
+    parser.add_argument(
+        "--estimator",
+        metavar="NAME",
+        help="the fit of every robot-day, among the arm's (default: each robot's recommended fit, judged on its first "
+        "readable day)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -76,7 +83,9 @@ def run(args: argparse.Namespace) -> int:
         drop_invalid=args.drop_invalid,
         progress=not args.no_progress,
         connect_timeout=args.connect_timeout,
+        estimator=args.estimator,
     )
+    print(report.recommended_line(result), file=sys.stderr)
     with tqdm(
         total=len(result.robots), desc="fleet: figures", unit="robot", file=sys.stderr, disable=args.no_progress
     ) as bar:
@@ -101,4 +110,5 @@ def _command(args: argparse.Namespace) -> str:
     parts += [f"--scheduler {args.scheduler}"] if args.scheduler else []
     parts += [f"--workers {args.workers}"] if args.workers else []
     parts += [f"--baseline-days {args.baseline_days}"] if args.baseline_days != 5 else []
+    parts += [f"--estimator {args.estimator}"] if args.estimator else []
     return " ".join(parts)

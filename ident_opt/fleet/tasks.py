@@ -1,10 +1,15 @@
 """What runs on a Dask worker: each function takes and returns small picklable objects; samples never leave it.
 
-- `file_stats`: a `FleetFile` → `FileStats`, the trial's `Stats` (a few kB whatever its length) or why it was
-  skipped;
+- `choose`: a robot's first days' files → `Choice`, the fit its days get: the recommended fit
+  (`studies.recommend.evidence` on the first day that has a readable trial, its trials read together on the worker),
+  or the one `--estimator` names;
+- `file_stats`: a `FleetFile` and its robot's `Choice` → `FileStats`, the trial's `Stats` (a few kB whatever its
+  length; with its `InstrumentStats` when the chosen fit is the robust one; derivatives at the choice's cut-off
+  factor) or why it was skipped;
 - `day_stats`: files' `FileStats` → `DayStats`, their sum with the files read and skipped (a robot-day, or the days
   of a baseline or of a change pooled);
-- `fit_day`: a robot-day's `DayStats` → `DayFit`, its fit (π with standard errors) and the tested parameters;
+- `fit_day`: a robot-day's `DayStats` and `Choice` → `DayFit`, its fit (π with standard errors) and the tested
+  parameters;
 - `baseline`: a robot's first days → `Baseline`, π0 (OLS on the first K with statistics, pooled) and each joint's
   weight 1/σ²;
 - `scales`: a robot-day and its `Baseline` → `Scales`, the factor on each joint's torque against π0;
@@ -40,31 +45,32 @@ import numpy as np
 from fsspec.implementations.local import LocalFileSystem
 
 from ident_opt.arm.base import Arm, Robot
-from ident_opt.data import fittable, load_dataset
+from ident_opt.data import Dataset, fittable, load_dataset
 from ident_opt.errors import InputError
 from ident_opt.fleet.layout import FleetFile
 from ident_opt.identify import estimators
 from ident_opt.identify.base import BaseParameters, base_parameters, fit_base_ols, fit_least_squares
 from ident_opt.identify.fit import solve_normal
+from ident_opt.identify.iv import InstrumentStats
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
+from ident_opt.studies import recommend
+from ident_opt.studies.recommend import Recommendation
+from ident_opt.warnings import ResultWarning
 
 #: A robot-day is fitted when its samples × joints reach this many times the base parameters.
 MIN_ROWS_PER_PARAMETER = 5
 
 
-def fleet_estimator(robot: Robot) -> str:
-    """The fit each robot-day gets: the one the tool stands behind for this arm (the one place to choose it)."""
-    return robot.default_estimator
-
-
 @dataclass(frozen=True)
 class Job:
-    """What every task of a run shares: the problem file (absolute path) and the loader's switches."""
+    """What every task of a run shares: the problem file (absolute path), the loader's switches and the fit asked
+    for with `--estimator` (None: each robot's recommended fit, `choose`)."""
 
     problem: str
     allow_implausible: bool = False
     drop_invalid: bool = False
+    estimator: str | None = None
 
 
 #: A block of a cause's columns: directions in π (P, m), or "pi0" (the baseline π0 itself), and the joints (rows of
@@ -81,7 +87,6 @@ class Setup:
     problem: object
     robot: Robot
     model: Arm
-    estimator: str
     base: BaseParameters
     causes: dict[str, list[Block]]
 
@@ -109,7 +114,7 @@ def setup(problem_path: str) -> Setup:
         causes[f"drive:{j}"] = [("pi0", np.arange(n) == j - 1)]
     causes["payload"] = [(robot.tool_directions(model), every)]
     causes["full"] = [(np.eye(P), every)]
-    return Setup(problem, robot, model, fleet_estimator(robot), base_parameters(model), causes)
+    return Setup(problem, robot, model, base_parameters(model), causes)
 
 
 # ---------------------------------------------------------------------------------------------- files
@@ -119,15 +124,68 @@ def ready(problem_path: str) -> int:
 
 
 @dataclass
+class Choice:
+    """The fit a robot's days get (`Recommendation`: estimator, why, the cut-off factor its files' derivatives take),
+    the warnings of the evidence behind it (`studies.trust`), the day it was judged on (None: `--estimator`, or no
+    readable day: the arm's consistent fit) and the task's CPU time [s]."""
+
+    robot: str
+    recommendation: Recommendation
+    warnings: list[ResultWarning] = field(default_factory=list)
+    day: str | None = None
+    cpu: float = 0.0
+
+
+def _read(job: Job, s: Setup, file: FleetFile) -> Dataset:
+    """One trial read, checked and differentiated by the loader every command uses; refused, an InputError whose
+    message names the file as the layout does (not the path of a temporary copy)."""
+    with local_copy(file.url) as local:
+        try:
+            trial = load_dataset(
+                local, s.problem.data, s.robot, allow_implausible=job.allow_implausible, drop_invalid=job.drop_invalid
+            )
+            fittable(trial)
+        except InputError as exc:
+            raise InputError(str(exc).replace(f"{local}: ", "", 1).replace(str(local), file.name)) from None
+    return trial
+
+
+def choose(job: Job, robot: str, *days: list[FleetFile]) -> Choice:
+    """The fit of `robot`'s days: `job.estimator` if asked (checked as every command checks it), else the
+    recommended fit (`studies.recommend.evidence`) from the first of `days` (each a day's files) with a readable
+    trial, its trials read together; the arm's consistent fit, said so, when no day has one. One choice for all the
+    robot's days, so that its series compare like with like."""
+    start = time.thread_time()
+    s = setup(job.problem)
+    if job.estimator is not None:
+        asked = recommend.chosen("fleet", s.robot, s.model, [], s.problem, job.estimator)
+        return Choice(robot, asked, cpu=time.thread_time() - start)
+    for files in days:
+        trials = []
+        for file in files:
+            with contextlib.suppress(InputError):  # the file's own task says why it is skipped
+                trials.append(_read(job, s, file))
+        if trials:
+            data = s.problem.data
+            found = recommend.evidence(s.robot, s.model, trials, data.conversions, data.derivative_cutoff_hz)
+            return Choice(robot, found.recommendation, found.trust.warnings, files[0].day, time.thread_time() - start)
+    consistent = s.robot.default_estimator
+    why = f"no readable trial in its first days to judge the data by: the physically consistent fit ({consistent})"
+    return Choice(robot, Recommendation(consistent, why), cpu=time.thread_time() - start)
+
+
+@dataclass
 class FileStats:
-    """One file's statistics (None when skipped, with the `reason`), its number of samples and the task's CPU
-    time [s] (`time.thread_time`: what it costs, whatever else the machine runs)."""
+    """One file's statistics (None when skipped, with the `reason`; `instruments` too when the robot's fit takes
+    them), its number of samples and the task's CPU time [s] (`time.thread_time`: what it costs, whatever else the
+    machine runs)."""
 
     file: FleetFile
     stats: Stats | None
     samples: int = 0
     reason: str = ""
     cpu: float = 0.0
+    instruments: InstrumentStats | None = None
 
 
 @contextlib.contextmanager
@@ -147,34 +205,31 @@ def local_copy(url: str) -> Iterator[Path]:
         yield local
 
 
-def file_stats(job: Job, file: FleetFile) -> FileStats:
-    """Read, check, differentiate and reduce one trial to its statistics with the torque the fits use
-    (`Dataset.tau_fit`); a file the loader refuses is returned as skipped, with the loader's reason."""
+def file_stats(job: Job, file: FleetFile, choice: Choice) -> FileStats:
+    """Read, check, differentiate (at the robot's `choice` of cut-off factor) and reduce one trial to the statistics
+    its robot's fit takes, with the torque the fits use (`Dataset.tau_fit`, `estimators.statistics`); a file the
+    loader refuses is returned as skipped, with the loader's reason (the file named as in the layout)."""
     start = time.thread_time()
     s = setup(job.problem)
-    local = file.url
     try:
-        with local_copy(file.url) as local:
-            trial = load_dataset(
-                local,
-                s.problem.data,
-                s.robot,
-                allow_implausible=job.allow_implausible,
-                drop_invalid=job.drop_invalid,
-            )
-            fittable(trial)
+        trial = _read(job, s, file)
     except InputError as exc:
-        reason = str(exc).replace(f"{local}: ", "", 1).replace(str(local), file.name)
-        return FileStats(file, None, 0, reason, time.thread_time() - start)
-    stats = Stats.from_data(s.model, trial.q, trial.dq, trial.ddq, trial.tau_fit)
+        return FileStats(file, None, 0, str(exc), time.thread_time() - start)
+    rec = choice.recommendation
+    if rec.factor != 1.0:
+        (trial,) = recommend.raised([trial], rec.factor)
+    stats = estimators.statistics(s.model, [trial], rec.estimator)
+    if isinstance(stats, InstrumentStats):
+        return FileStats(file, stats.stats, trial.n, cpu=time.thread_time() - start, instruments=stats)
     return FileStats(file, stats, trial.n, cpu=time.thread_time() - start)
 
 
 # ---------------------------------------------------------------------------------------------- days
 @dataclass
 class DayStats:
-    """A robot-day's statistics (the sum over its readable files; None if none was), the files read and the ones
-    skipped (`{"file", "reason"}`), the samples, and the CPU time [s] of its files' tasks and its own."""
+    """A robot-day's statistics (the sum over its readable files; None if none was; `instruments` their instrument
+    statistics when the robot's fit takes them), the files read and the ones skipped (`{"file", "reason"}`), the
+    samples, and the CPU time [s] of its files' tasks and its own."""
 
     robot: str
     day: str
@@ -183,33 +238,39 @@ class DayStats:
     skipped: list[dict]
     samples: int
     cpu: float = 0.0
+    instruments: InstrumentStats | None = None
 
 
 def day_stats(*files: FileStats, day: str | None = None) -> DayStats:
     """The sum of the files' statistics, labelled with the first file's robot and day (or `day`)."""
     start = time.thread_time()
     read = [f for f in files if f.stats is not None]
-    total = None
+    total = instruments = None
     for f in read:
         total = f.stats.copy() if total is None else total + f.stats
+        if f.instruments is not None:
+            instruments = f.instruments if instruments is None else instruments + f.instruments
     first = files[0].file
     skipped = [{"file": f.file.name, "reason": f.reason} for f in files if f.stats is None]
     samples = sum(f.samples for f in read)
     cpu = sum(f.cpu for f in files) + time.thread_time() - start
-    return DayStats(first.robot, day or first.day, total, [f.file.name for f in read], skipped, samples, cpu)
+    names = [f.file.name for f in read]
+    return DayStats(first.robot, day or first.day, total, names, skipped, samples, cpu, instruments)
 
 
 @dataclass
 class DayFit:
-    """A robot-day's fit: π and its standard errors (NaN where the data do not determine a parameter) by the
-    model's names, the tested quantities (`Setup.tested`) with their OLS standard errors, notes, and the CPU time
-    [s] of the day's tasks (files, sum, fit). `pi` is None when the day could not be fitted (`notes` say why)."""
+    """A robot-day's fit by `estimator`: π and its standard errors (NaN where the data do not determine a
+    parameter) by the model's names, the tested quantities (`Setup.tested`) with their OLS standard errors, notes,
+    and the CPU time [s] of the day's tasks (files, sum, fit). `pi` is None when the day could not be fitted (`notes`
+    say why)."""
 
     robot: str
     day: str
     files: list[str]
     skipped: list[dict]
     samples: int
+    estimator: str = ""
     pi: np.ndarray | None = None
     se: np.ndarray | None = None
     tested: np.ndarray | None = None
@@ -218,20 +279,21 @@ class DayFit:
     cpu: float = 0.0
 
 
-def fit_day(job: Job, day: DayStats) -> DayFit:
-    """The robot-day's fit by `fleet_estimator` with standard errors (OLS's where the fit gives none at all), and
-    the tested parameters: the base parameters by least squares (`identify.base.fit_base_ols`), what the data
-    determine with no prior or bound in them, with their standard errors."""
+def fit_day(job: Job, day: DayStats, choice: Choice) -> DayFit:
+    """The robot-day's fit by its robot's `choice` (the recommended fit) with standard errors (OLS's where the fit
+    gives none at all), and the tested parameters: the base parameters by least squares
+    (`identify.base.fit_base_ols`), what the data determine with no prior or bound in them, with their standard
+    errors (a change test compares like with like: the same estimator, free of any prior, on every day)."""
     start = time.thread_time()
-    out = _fit_day(job, day)
+    out = _fit_day(job, day, choice.recommendation.estimator)
     out.cpu = day.cpu + time.thread_time() - start
     return out
 
 
-def _fit_day(job: Job, day: DayStats) -> DayFit:
-    """`fit_day` without its clock."""
+def _fit_day(job: Job, day: DayStats, name: str) -> DayFit:
+    """`fit_day` by estimator `name`, without its clock."""
     s = setup(job.problem)
-    out = DayFit(day.robot, day.day, day.files, day.skipped, day.samples)
+    out = DayFit(day.robot, day.day, day.files, day.skipped, day.samples, name)
     stats = day.stats
     if stats is None:
         out.notes.append("no readable trial")
@@ -239,10 +301,11 @@ def _fit_day(job: Job, day: DayStats) -> DayFit:
     if stats.n * s.model.n_joints < MIN_ROWS_PER_PARAMETER * s.base.rank:
         out.notes.append(f"{stats.n} samples: too few for the {s.base.rank} identifiable parameters")
         return out
+    taken = day.instruments if name in estimators.INSTRUMENTED else stats
     try:
-        fit = estimators.fit_for(s.robot, s.estimator, stats, s.model)
+        fit = estimators.fit_for(s.robot, name, taken, s.model)
     except RuntimeError as exc:  # a solver failure: the day has no fit
-        out.notes.append(f"the {s.estimator} fit failed ({exc})")
+        out.notes.append(f"the {name} fit failed ({exc})")
         return out
     se = fit.se
     if not np.isfinite(se).any():

@@ -26,12 +26,13 @@ MAX_PANELS = 12
 
 
 def payload(result: FleetResult) -> dict:
-    """The `fleet --json` payload (`docs/cli.md`): robots (days, parameters, se, and the tested parameters with
-    their test), changes, skipped, fleet, warnings."""
+    """The `fleet --json` payload (`docs/cli.md`): the fit the robot-days got and why, robots (days, parameters, se,
+    their fit, and the tested parameters with their test), changes, skipped, fleet, warnings."""
     return {
         "problem": result.problem,
         "logs": result.logs,
         "estimator": result.estimator,
+        "recommended_why": result.why,
         "baseline_days": result.baseline_days,
         "robots": {name: _robot(result, r) for name, r in result.robots.items()},
         "changes": [c.as_dict() for c in result.changes],
@@ -54,6 +55,9 @@ def _robot(result: FleetResult, r: RobotResult) -> dict:
         "parameters": {name: _series(r.pi[:, i]) for i, name in enumerate(result.names)},
         "se": {name: _series(r.se[:, i]) for i, name in enumerate(result.names)},
     }
+    if r.choice is not None:
+        rec = r.choice.recommendation
+        out.update(estimator=rec.estimator, recommended_why=rec.why, cutoff_factor=rec.factor, judged_on=r.choice.day)
     tested = {}
     for q, name in enumerate(result.tested_names):
         entry = {"values": _series(r.tested.values[:, q]), "se": _series(r.tested.se[:, q])}
@@ -169,8 +173,12 @@ def markdown(result: FleetResult, table: pd.DataFrame, command: str, figures: li
         f"`{command}`",
         "",
         f"{result.arm}; {f['robots']} robots, {f['robot_days']} robot-days, {f['files']} files, {f['samples']:,} "
-        f"samples; each robot-day fitted by `{result.estimator}`; {f['workers']} worker(s) on {f['engine']} "
-        f"(scheduler: {f['scheduler']}), {f['seconds']:.1f} s in all, {_rate(f)} samples/s through the cluster.",
+        f"samples; {f['workers']} worker(s) on {f['engine']} (scheduler: {f['scheduler']}), {f['seconds']:.1f} s in "
+        f"all, {_rate(f)} samples/s through the cluster.",
+        "",
+        f"Each robot-day's fit (the series of `fleet_series`, kind `fit`): **{result.estimator}**: {result.why}. "
+        "The recommended fit is judged once per robot, on its first readable day, and kept for all its days so that "
+        "its series compare like with like.",
         "",
         f"A parameter has changed when {RUN_DAYS} or more consecutive days after a robot's first "
         f"{result.baseline_days} (its baseline) lie more than {DAY_Z:g} scatter units from its baseline mean on one "
@@ -244,6 +252,11 @@ def _headline(change) -> str:
     """ "wear of joint 2 since 2026-03-14" and the like."""
     where = f" of joint {change.joint}" if change.joint else ""
     return f"{change.cause}{where} since {change.first_day}"
+
+
+def recommended_line(result: FleetResult) -> str:
+    """The terminal's line on the fit the robot-days got (stderr, as `codegen` says its fit)."""
+    return f"ident-opt fleet: each robot-day's fit: {result.estimator} ({result.why})"
 
 
 def terminal(result: FleetResult, out: Path, json_path) -> str:

@@ -1,9 +1,11 @@
 """What `ident-opt fleet` computes: every robot of a fleet identified every day on Dask, and what changed, named.
 
 1. The layout under `--logs` is found and checked (`fleet.layout`), before any work.
-2. Phase 1, on the cluster (`fleet.engine`): per file its statistics, per robot-day their sum and the fit, per
-   robot a baseline model from its first days and against it each day's torque scale per joint (`fleet.tasks`);
-   the client gathers the fits, baselines and scales only.
+2. Phase 1, on the cluster (`fleet.engine`): per robot the fit its days get (`tasks.choose`: the recommended fit,
+   judged on its first readable day as `identify` judges its training trials; or `--estimator`), per file its
+   statistics, per robot-day their sum and that fit, per robot a baseline model from its first days and against it
+   each day's torque scale per joint (`fleet.tasks`); the client gathers the choices, fits, baselines and scales
+   only.
 3. On the client (`fleet.changes`): the fleet's scatter of each tested parameter, each robot's test against its
    first `baseline_days` fitted days, and for a robot with a moved parameter the day its change began.
 4. Phase 2, on the cluster, for the robots with a change only: the change's files read again and pooled, and the
@@ -23,6 +25,7 @@ import numpy as np
 
 from ident_opt.fleet import changes, layout, tasks
 from ident_opt.fleet.engine import CONNECT_TIMEOUT_S, Engine
+from ident_opt.studies.recommend import chosen
 from ident_opt.warnings import ResultWarning
 
 #: The engine every run names in its JSON.
@@ -34,7 +37,8 @@ SPARE_DAYS = 3
 @dataclass
 class RobotResult:
     """One robot's series: its fitted days, their files and samples, the fit's π and standard errors (D, P), the
-    tested parameters (`changes.Tested`) and their test (None with too few days)."""
+    tested parameters (`changes.Tested`) and their test (None with too few days), and the fit its days got with why
+    (`tasks.Choice`)."""
 
     robot: str
     days: list[str]
@@ -44,11 +48,13 @@ class RobotResult:
     se: np.ndarray
     tested: changes.Tested
     test: changes.Test | None = None
+    choice: tasks.Choice | None = None
 
 
 @dataclass
 class FleetResult:
-    """A fleet run: the problem and logs, the arm in a line, the fit each robot-day got, the model's parameter names
+    """A fleet run: the problem and logs, the arm in a line, the fit the robot-days got (`estimator`, `why`: the
+    robots' one choice; "per robot" when they differ, each robot's in its `choice`), the model's parameter names
     and the tested ones (with their definitions where they are base parameters), the robots' series, the changes,
     the skipped files, the run's numbers (`fleet`, the contract's keys and more) and the warnings."""
 
@@ -56,6 +62,7 @@ class FleetResult:
     logs: str
     arm: str
     estimator: str
+    why: str
     baseline_days: int
     names: tuple[str, ...]
     tested_names: tuple[str, ...]
@@ -79,17 +86,20 @@ def run_fleet(
     progress: bool = True,
     processes: bool = True,
     connect_timeout: float = CONNECT_TIMEOUT_S,
+    estimator: str | None = None,
 ) -> FleetResult:
     """Identify every robot-day under `logs` for the problem at `problem_path`, test each robot against its first
     `baseline_days` days and name what changed (module doc). `scheduler`: an existing Dask scheduler's address
     (None: a local cluster of `workers` processes, or threads with `processes` False), which must answer within
-    `connect_timeout` [s]."""
+    `connect_timeout` [s]. `estimator`: the fit every robot-day gets (None: each robot's recommended fit)."""
     start = time.perf_counter()
     problem_path = str(Path(problem_path).resolve())
     setup = tasks.setup(problem_path)
     problem = setup.problem
+    if estimator is not None:  # an unknown fit is refused here, before any work
+        chosen("fleet", setup.robot, setup.model, [], problem, estimator)
     found = layout.discover(logs)
-    job = tasks.Job(problem_path, allow_implausible, drop_invalid)
+    job = tasks.Job(problem_path, allow_implausible, drop_invalid, estimator)
     with Engine(scheduler, workers, processes, connect_timeout) as engine:
         engine.check(tasks.ready, problem_path)
         phase1 = time.perf_counter()
@@ -97,14 +107,16 @@ def run_fleet(
         gathered = engine.run(found.robots, submit, _count1(found), progress, "fleet: statistics and fits")
         engine_seconds = time.perf_counter() - phase1
         baselines = {b.robot: b for b in gathered if isinstance(b, tasks.Baseline)}
+        choices = {c.robot: c for c in gathered if isinstance(c, tasks.Choice)}
         robots, skipped, warnings = _series(gathered, setup, found)
+        warnings += _choice_warnings(choices)
         onsets = _test(robots, baseline_days, warnings)
         units = [
-            (r, _change_files(found, robots[r], max(t for t, _ in onsets[r].values())), baselines[r])
+            (r, _change_files(found, robots[r], max(t for t, _ in onsets[r].values())), baselines[r], choices[r])
             for r in onsets
             if r in baselines
         ]
-        total = sum(len(files) + 2 for _, files, _ in units)
+        total = sum(len(unit[1]) + 2 for unit in units)
         evidence = engine.run(units, _phase2(job), total, progress, "fleet: naming the changes")
         n_workers, address = engine.workers, engine.address
     named = {e.robot: e for e in evidence if e is not None}
@@ -112,7 +124,12 @@ def run_fleet(
     found_changes = [_change(robots[r], onsets[r], named.get(r, unnamed), setup, baseline_days) for r in sorted(onsets)]
     samples = sum(sum(r.samples) for r in robots.values())
     seconds = time.perf_counter() - start
-    cpu = sum(item.cpu for item in [*gathered, *evidence] if isinstance(item, tasks.DayFit | tasks.Evidence))
+    cpu = sum(
+        item.cpu for item in [*gathered, *evidence] if isinstance(item, tasks.DayFit | tasks.Evidence | tasks.Choice)
+    )
+    for name, r in robots.items():
+        r.choice = choices.get(name)
+    fit_name, why = _one_choice(choices)
     fleet = {
         "robots": len(robots),
         "robot_days": sum(len(r.days) for r in robots.values()),
@@ -124,11 +141,11 @@ def run_fleet(
         "scheduler": address,
         "engine_seconds": engine_seconds,
         "samples_per_second": samples / engine_seconds if engine_seconds > 0 else None,
-        "files_read_again": sum(len(files) for _, files, _ in units),
+        "files_read_again": sum(len(unit[1]) for unit in units),
         "cpu_seconds": cpu,
         "cpu_seconds_per_file": cpu / max(len(found.files), 1),
         "baseline_days": baseline_days,
-        "estimator": setup.estimator,
+        "estimator": fit_name,
     }
     base = setup.base
     definitions = base.definitions() if base.rank < setup.model.n_params else {}
@@ -136,7 +153,8 @@ def run_fleet(
         problem=str(problem.path),
         logs=str(logs),
         arm=problem.robot.headline,
-        estimator=setup.estimator,
+        estimator=fit_name,
+        why=why,
         baseline_days=baseline_days,
         names=setup.model.names,
         tested_names=tested_names(setup),
@@ -151,21 +169,25 @@ def run_fleet(
 
 # ---------------------------------------------------------------------------------------------- phase 1
 def _count1(found: layout.Layout) -> int:
-    """Phase 1's tasks: one per file, a sum, a fit and the scales per robot-day, a baseline per robot."""
-    return len(found.files) + sum(3 * len(found.days(r)) + 1 for r in found.robots)
+    """Phase 1's tasks: a choice of fit per robot, one per file, a sum, a fit and the scales per robot-day, a
+    baseline per robot."""
+    return len(found.files) + sum(3 * len(found.days(r)) + 2 for r in found.robots)
 
 
 def _phase1(job: tasks.Job, found: layout.Layout, baseline_days: int):
-    """A robot's phase-1 tasks: each file's statistics; each day's sum, fit and torque scales against the baseline
-    model, fitted on the first `baseline_days` days with statistics (of the first `baseline_days` + `SPARE_DAYS`).
-    The fits, the baseline and the scales are gathered."""
+    """A robot's phase-1 tasks: the fit its days get (`tasks.choose`, from its first days); each file's statistics
+    for it; each day's sum, fit and torque scales against the baseline model, fitted on the first `baseline_days`
+    days with statistics (of the first `baseline_days` + `SPARE_DAYS`). The choice, the fits, the baseline and the
+    scales are gathered."""
 
     def submit(client, robot: str) -> tuple[list, list]:
-        gathered, others, days = [], [], []
+        first = [found.files_of(robot, day) for day in found.days(robot)[: baseline_days + SPARE_DAYS]]
+        choice = client.submit(tasks.choose, job, robot, *first)
+        gathered, others, days = [choice], [], []
         for day in found.days(robot):
-            files = [client.submit(tasks.file_stats, job, f) for f in found.files_of(robot, day)]
+            files = [client.submit(tasks.file_stats, job, f, choice) for f in found.files_of(robot, day)]
             days.append(client.submit(tasks.day_stats, *files))
-            gathered.append(client.submit(tasks.fit_day, job, days[-1]))
+            gathered.append(client.submit(tasks.fit_day, job, days[-1], choice))
             others += files
         base = client.submit(tasks.baseline, job, *days[: baseline_days + SPARE_DAYS], count=baseline_days)
         gathered += [base, *(client.submit(tasks.scales, job, day, base) for day in days)]
@@ -224,6 +246,43 @@ def _series(
     return robots, skipped, warnings
 
 
+def _choice_warnings(choices: dict[str, tasks.Choice]) -> list[ResultWarning]:
+    """The warnings of the evidence behind the robots' fits (`studies.trust`), one per code with the robots it
+    concerns (the first robot's message as the example)."""
+    by_code: dict[str, list[tuple[str, ResultWarning]]] = {}
+    for name in sorted(choices):
+        for w in choices[name].warnings:
+            by_code.setdefault(w.code, []).append((name, w))
+    out = []
+    for code, found in by_code.items():
+        names = ", ".join(n for n, _ in found[:10]) + (" …" if len(found) > 10 else "")
+        first_robot, first = found[0]
+        day = choices[first_robot].day
+        out.append(
+            ResultWarning(
+                code,
+                f"{len(found)} robot(s) ({names}), judged on their first readable day; "
+                f"{first_robot} on {day}: {first.message}",
+            )
+        )
+    return out
+
+
+def _one_choice(choices: dict[str, tasks.Choice]) -> tuple[str, str]:
+    """(estimator, why) of the robots' fits: the name when every robot got the same fit ("per robot" otherwise), the
+    reason when they share one, else how many robots got each fit (each robot's reason is in its entry)."""
+    recs = [c.recommendation for c in choices.values()]
+    if not recs:
+        return "none", "no robot to fit"
+    names = sorted({r.estimator for r in recs})
+    whys = {r.why for r in recs}
+    name = names[0] if len(names) == 1 else "per robot"
+    if len(whys) == 1:
+        return name, whys.pop()
+    counts = ", ".join(f"{n} on {sum(r.estimator == n for r in recs)} robot(s)" for n in names)
+    return name, f"each robot's recommended fit, judged on its own first readable day ({counts}; why: per robot)"
+
+
 def tested_names(setup: tasks.Setup) -> tuple[str, ...]:
     """The tested parameters' names: the base parameters, then `scale_<joint>` per joint (its torque's factor
     against the baseline model)."""
@@ -266,12 +325,12 @@ def _change_files(found: layout.Layout, robot: RobotResult, tau: int) -> list:
 
 
 def _phase2(job: tasks.Job):
-    """A changed robot's phase-2 tasks: its change's files read again and pooled, the evidence against its baseline
-    model (gathered)."""
+    """A changed robot's phase-2 tasks: its change's files read again (as in phase 1: its choice's derivatives) and
+    pooled, the evidence against its baseline model (gathered)."""
 
     def submit(client, unit) -> tuple[list, list]:
-        _, files, base = unit
-        stats = [client.submit(tasks.file_stats, job, f) for f in files]
+        _, files, base, choice = unit
+        stats = [client.submit(tasks.file_stats, job, f, choice) for f in files]
         after = client.submit(tasks.day_stats, *stats, day="change")
         return [client.submit(tasks.evidence, job, after, base)], [*stats, after]
 
