@@ -143,19 +143,21 @@ def memory_section(args, folder: Path) -> None:
     print("\n## 3. Memory\n")
     job = tasks.Job(str(PLANAR.resolve()))
     tasks.setup(job.problem)
-    print("one file's task (tasks.file_stats):")
+    print("one file's task (tasks.file_stats, with the robot's recommended fit's statistics):")
     for factor in (1, 4, 16):
         root = folder / f"length_{factor}"
         spec = FleetSpec(robots=1, days=1, seconds=args.seconds * factor, rate_hz=200.0, changed=0.0, seed=3)
         simulate_fleet(PLANAR, root, spec)
         file = layout.discover(str(root)).files[0]
-        tasks.file_stats(job, file)  # warm: imports, caches
+        choice = tasks.choose(job, file.robot, [file])  # the fit the file's statistics are for; warms the caches
+        tasks.file_stats(job, file, choice)
         tracemalloc.start()
-        result = tasks.file_stats(job, file)
+        result = tasks.file_stats(job, file, choice)
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
         print(
-            f"  {result.samples:>9,} samples: returns {len(pickle.dumps(result)):>6,} bytes; "
+            f"  {result.samples:>9,} samples ({choice.recommendation.estimator}): returns "
+            f"{len(pickle.dumps(result)):>6,} bytes; "
             f"peak {peak / 1e6:7.1f} MB ({peak / result.samples:5.0f} bytes/sample)"
         )
     print("the client's peak over a whole run (tracemalloc; 8 robots × 12 days, 2 workers):")
