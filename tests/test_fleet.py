@@ -358,9 +358,9 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_the_same_run_through_a_scheduler_in_another_process(small_fleet, tmp_path):
+def test_the_same_run_through_a_scheduler_in_another_process(small_fleet, tmp_path, capsys):
     """`dask scheduler` and `dask worker` started as their own processes (as on a cluster): the command runs on them
-    and its JSON equals the local cluster's."""
+    and its JSON equals the local cluster's; the progress bars and the fit's line go to stderr."""
     root, local = small_fleet
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
@@ -372,8 +372,11 @@ def test_the_same_run_through_a_scheduler_in_another_process(small_fleet, tmp_pa
     try:
         argv = ["fleet", "--problem", str(PLANAR), "--logs", str(root), "--out", str(tmp_path / "report")]
         argv += ["--json", str(tmp_path / "fleet.json"), "--scheduler", address, "--connect-timeout", "60"]
-        assert main([*argv, "--no-progress"]) == 0
+        assert main(argv) == 0
         data = _strict((tmp_path / "fleet.json").read_text())
+        err = capsys.readouterr().err
+        assert "fleet: statistics and fits" in err and "task/s" in err, err
+        assert f"each robot-day's fit: {data['estimator']} ({data['recommended_why']})" in err
     finally:
         for process in reversed(started):
             process.terminate()
@@ -400,6 +403,7 @@ def test_a_scheduler_that_does_not_answer_is_an_error_in_bounded_time(small_flee
         (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers"),
         (["--workers", "0"], "--workers"),
         (["--baseline-days", "1"], "--baseline-days"),
+        (["--estimator", "nonsense"], "--estimator nonsense"),
         (["--out", "{root}/robot=R01/report"], "inside --logs"),
     ],
 )
