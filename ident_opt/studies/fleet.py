@@ -280,7 +280,11 @@ def _one_choice(choices: dict[str, tasks.Choice]) -> tuple[str, str]:
     if len(whys) == 1:
         return name, whys.pop()
     counts = ", ".join(f"{n} on {sum(r.estimator == n for r in recs)} robot(s)" for n in names)
-    return name, f"each robot's recommended fit, judged on its own first readable day ({counts}; why: per robot)"
+    return (
+        name,
+        f"each robot's recommended fit, judged on its own first readable day ({counts}; each robot's reason in its "
+        "entry)",
+    )
 
 
 def tested_names(setup: tasks.Setup) -> tuple[str, ...]:
