@@ -66,7 +66,10 @@ def judge(result, root: Path) -> tuple[int, int, int, list[str]]:
 
 def changes_section(args, folder: Path) -> None:
     print("\n## 1. Changes found (hidden: wear, payload, drive)\n")
-    print(f"{'arm':<14}{'robots×days':>12}{'hidden':>8}{'right':>7}{'false':>7}{'seconds':>9}  problems")
+    print(
+        f"{'arm':<14}{'robots×days':>12}{'hidden':>8}{'right':>7}{'false':>7}{'seconds':>9}{'CPU-ms/file':>12}"
+        "  fit  problems"
+    )
     for name, problem, seconds in (("planar 2-joint", PLANAR, args.seconds), ("TX40 6-joint", CHAIN, 20.0)):
         if args.quick and problem == CHAIN:
             continue
@@ -76,7 +79,11 @@ def changes_section(args, folder: Path) -> None:
         result = run_fleet(problem, str(root), workers=2, progress=False)
         hidden, right, false, problems = judge(result, root)
         size, seconds = f"{args.robots}×{args.days}", result.fleet["seconds"]
-        print(f"{name:<14}{size:>12}{hidden:>8}{right:>7}{false:>7}{seconds:>9.1f}  {problems or 'none'}")
+        cpu = 1000 * result.fleet["cpu_seconds_per_file"]
+        print(
+            f"{name:<14}{size:>12}{hidden:>8}{right:>7}{false:>7}{seconds:>9.1f}{cpu:>12.0f}  {result.estimator}  "
+            f"{problems or 'none'}"
+        )
 
 
 def _free_port() -> int:
