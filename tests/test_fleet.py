@@ -260,6 +260,11 @@ def test_a_planar_fleet_end_to_end(planar_fleet, planar_run):
     assert "cannot read the file" in data["skipped"][0]["reason"]
     unfitted = [w["message"] for w in data["warnings"] if w["code"] == "unfitted_days"]
     assert len(unfitted) == 1 and "R02" in unfitted[0]
+    contract = {"robots", "changes", "skipped", "fleet", "warnings"}  # the contract's keys (docs/fleet.md), at least
+    assert contract <= set(data) and {"days", "parameters", "se"} <= set(data["robots"]["R01"])
+    assert {"robots", "robot_days", "files", "samples", "seconds", "workers", "engine", "scheduler"} <= set(
+        data["fleet"]
+    )
     fleet = data["fleet"]
     assert fleet["robots"] == 6 and fleet["files"] == 72 and fleet["robot_days"] == 71
     assert fleet["engine"] == "dask.distributed" and fleet["scheduler"] == "local" and fleet["workers"] == 2
