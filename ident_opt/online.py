@@ -380,9 +380,10 @@ class OnlineIdentifier:
         return Prediction(f.tau.copy(), f.par.copy(), f.std.copy(), bool(extrapolating)), f.Yt
 
     def use_kernel(self, kernel) -> None:
-        """Let `add` run in generated C (`online_kernel.attach`): H, h become views of the C state."""
+        """Let `add` run in generated C (`online_kernel.attach`): the statistics' factor lives in the C state from now
+        on (the NumPy normal equations are dropped), θ is read back after each call."""
         self._kernel = kernel
-        self._H, self._h = kernel.H, kernel.h
+        self._H = self._h = None
         self.parametric_var = np.ascontiguousarray(self.parametric_var, dtype=float)
         self._pv_address = self.parametric_var.ctypes.data
 
