@@ -314,10 +314,10 @@ class OnlineIdentifier:
             self.theta = k.theta.copy()
             self._fold(k.D.copy(), k.tau.copy())  # the buffers are reused: the pending statistics keep copies
             return
-        if not (np.isfinite(D).all() and np.isfinite(tau).all()):
-            raise FloatingPointError("a non-finite regressor row or torque; the sample was not folded in")
         r = tau - D @ self.theta  # the parametric model's one-step residual
         if self.estimator.kind == "cadence":
+            if not np.isfinite(r).all():  # the statistics must stay finite for the next re-solve
+                raise FloatingPointError("a non-finite regressor row or torque; the sample was not folded in")
             self.parametric_var += (r * r - self.parametric_var) * ALPHA
             self._fold(D, tau, moved=False)
             if self.n_updates % self.estimator.solver.every == 0:

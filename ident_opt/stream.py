@@ -30,14 +30,20 @@ import numpy as np
 from ident_opt.columns import channel_names, data_columns, locate
 from ident_opt.data import PLAUSIBLE
 from ident_opt.data import _current_to_torque as current_to_torque  # the batch loader's rule and message
-from ident_opt.derivatives import CausalDerivatives, NonIncreasingTime
+from ident_opt.derivatives import CausalDerivatives, NonIncreasingTime, RateError
 from ident_opt.errors import InputError
 from ident_opt.online import OnlineIdentifier, Prediction
 
+#: The UTF-8 byte-order mark some writers put before a file's first line.
+BOM = "\ufeff"
 #: Default robust outlier threshold: residuals beyond this many robust standard deviations update nothing.
 OUTLIER_K = 10.0
 #: Memory (samples) of the robust residual scale; an outlier moves it by 1/`OUTLIER_MEMORY` of its clipped square.
 OUTLIER_MEMORY = 500.0
+
+
+#: Where a sample keeps its input line number (for errors found later, in the causal derivatives' window).
+LINE = "_line"
 
 
 class BadLine(ValueError):
@@ -148,6 +154,8 @@ class LineParser:
         """The sample on `line`, or None for a blank line or the CSV header; raises BadLine (a bad sample) or
         InputError (a header or mapping the stream cannot be read with)."""
         text = line.strip()
+        if self.format is None:
+            text = text.removeprefix(BOM).strip()  # a byte-order mark before the first line, as the batch loader reads
         if not text:
             return None
         if self.format is None:
@@ -345,6 +353,7 @@ class Service:
         self.derivatives = CausalDerivatives(options.cutoff_hz)
         self.counts = Counts()
         self.scale2: np.ndarray | None = None  # robust residual variance per joint [N² m²]
+        self.errors: list[dict] = []  # error records about earlier lines (times found stray later), to report
 
     def line(self, raw: str | bytes, lineno: int) -> list[dict]:
         """The output records for one input line; raises BadLine or InputError."""
@@ -361,10 +370,15 @@ class Service:
         if names["dq"][0] not in sample or names["ddq"][0] not in sample:
             if "t" not in sample:
                 raise BadLine("t is needed to estimate dq and ddq (the sample gives neither both)")
+            sample[LINE] = lineno
             try:
                 sample = self.derivatives.push(sample)
             except NonIncreasingTime as exc:
                 raise BadLine(str(exc), "time") from None
+            except RateError as exc:
+                raise InputError(f"stream: {exc}") from None
+            finally:
+                self._stray_times()
             if sample is None:
                 return []
             for name in (*names["dq"], *names["ddq"]):
@@ -372,6 +386,13 @@ class Service:
                 if not abs(sample[name]) <= PLAUSIBLE[kind]:
                     raise BadLine(f"estimated {name} = {sample[name]:.6g} is implausible", "implausible")
         return self.step(sample)
+
+    def _stray_times(self) -> None:
+        """Samples the causal derivatives left out after seeing later ones (a time that jumps ahead): their errors."""
+        for sample, why in self.derivatives.rejected:
+            self.counts.skip("time")
+            self.errors.append({"error": why, "kind": "time", "line": sample.get(LINE)})
+        self.derivatives.rejected.clear()
 
     def step(self, sample: dict[str, float]) -> list[dict]:
         """Predict one complete sample and, when it has a torque that passes the residual test, fold it in."""
@@ -515,12 +536,15 @@ def _loop(service: Service, instream, outstream: TextIO, errstream: TextIO, stat
             raise
         except BadLine as exc:
             service.counts.skip(exc.kind)
-            _emit(errstream, {"error": str(exc), "kind": exc.kind, "line": lineno})
-            continue
+            records, errors = [], [{"error": str(exc), "kind": exc.kind, "line": lineno}]
         except Exception as exc:  # the stream never dies on input: report, skip, go on
             service.counts.skip("internal")
-            _emit(errstream, {"error": f"{type(exc).__name__}: {exc}", "kind": "internal", "line": lineno})
-            continue
+            records, errors = [], [{"error": f"{type(exc).__name__}: {exc}", "kind": "internal", "line": lineno}]
+        else:
+            errors = []
+        for error in [*service.errors, *errors]:
+            _emit(errstream, error)
+        service.errors.clear()
         for record in records:
             _emit(outstream, record)
 
