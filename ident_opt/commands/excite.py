@@ -21,6 +21,7 @@ import argparse
 import math
 from pathlib import Path
 
+from ident_opt import outputs
 from ident_opt.commands.common import add_problem_arguments, require
 from ident_opt.data import load_dataset
 from ident_opt.errors import InputError
@@ -115,6 +116,10 @@ def run(args: argparse.Namespace) -> int:
             f"{problem.path}: section [limits] is required to design an excitation (docs/problem-files.md)"
         )
     data = args.data or [str(p) for p in problem.data.trials]
+    outputs.declare_inputs(data)  # the problem's own trials too: --out (declared by the CLI) is refused if one
+    written = report.proof_paths(args.out)[:3] if args.proof is not None else report.paths(args.out)
+    for path in written:
+        outputs.check_file_output(path, "--out")  # the figure and JSON beside it, the proof's tables
     kwargs = {"allow_implausible": args.allow_implausible, "drop_invalid": args.drop_invalid}
     trial = load_dataset(data[0], problem.data, problem.robot, **kwargs) if data else None
     if args.proof is not None:
