@@ -318,15 +318,38 @@ UPDATE_CFLAGS = ("-O3", "-std=c99", "-fPIC")
 @dataclass(frozen=True)
 class UpdateState:
     """What the generated update starts from: the combined normal equations H (P, P), h (P,) of the offline data,
-    θ (P,), its active set (P,) (−1 lower, +1 upper, 0 free), the sample count, and the box bounds (P,) each."""
+    θ (P,), its active set (P,) (−1 lower, +1 upper, 0 free), the sample count, and the box bounds (P,) each; or,
+    instead of H, their square-root factor R (P, P, upper: H = RᵀR), z (P,) = R⁻ᵀh and diag H (`hdiag`), as
+    `identify.bounded.FactorBoundedLS` keeps them (more accurate than a Cholesky factor of H)."""
 
-    H: np.ndarray
+    H: np.ndarray | None
     h: np.ndarray
     theta: np.ndarray
     state: np.ndarray
     n: int
     lower: np.ndarray
     upper: np.ndarray
+    R: np.ndarray | None = None
+    z: np.ndarray | None = None
+    hdiag: np.ndarray | None = None
+
+    def factor(self, order: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(R, z, diag H) in the column order `order`: R upper with a positive diagonal, RᵀR = H[order, order]."""
+        if self.R is None:
+            H = np.asarray(self.H, dtype=float)[np.ix_(order, order)]
+            try:
+                R = np.linalg.cholesky(H).T  # upper: H = RᵀR
+            except np.linalg.LinAlgError:
+                raise InputError(
+                    "pi_update: the offline statistics do not determine every parameter (H is not positive "
+                    "definite); train on data that excite every parameter"
+                ) from None
+            return R, np.linalg.solve(R.T, np.asarray(self.h, dtype=float)[order]), np.diag(H).copy()
+        Q, R = np.linalg.qr(np.asarray(self.R, dtype=float)[:, order])  # columns permuted: triangular again
+        sign = np.where(np.diag(R) < 0, -1.0, 1.0)
+        if not np.all(np.abs(np.diag(R)) > 0):
+            raise InputError("pi_update: the offline data do not determine every parameter; excite them all")
+        return np.triu(R * sign[:, None]), sign * (Q.T @ np.asarray(self.z, dtype=float)), self.hdiag[order]
 
 
 def _c_numbers(values) -> str:
@@ -398,16 +421,8 @@ def generate_pi_update(
     casadi_c, casadi_h = generate_sources([f], out_dir, name=f"{UPDATE}_casadi")
     held = np.asarray(start.state) != 0
     order = [k for k in solver_order(Y) if not held[k]] + [k for k in solver_order(Y) if held[k]]
-    H = np.asarray(start.H, dtype=float)[np.ix_(order, order)]
+    R, z, hdiag = start.factor(order)
     h = np.asarray(start.h, dtype=float)[order]
-    try:
-        R = np.linalg.cholesky(H).T  # upper: H = RᵀR
-    except np.linalg.LinAlgError:
-        raise InputError(
-            "pi_update: the offline statistics do not determine every parameter (H is not positive definite); "
-            "train on data that excite every parameter"
-        ) from None
-    z = np.linalg.solve(R.T, h)
     values = {
         "n_params": len(names),
         "n_joints": model.n_joints,
@@ -417,7 +432,7 @@ def generate_pi_update(
         "R0": _c_numbers(np.triu(R)),
         "z0": _c_numbers(z),
         "h0": _c_numbers(h),
-        "hdiag0": _c_numbers(np.diag(H)),
+        "hdiag0": _c_numbers(hdiag),
         "order": ", ".join(str(int(k)) for k in order),
         "m0": str(int(held.sum())),
         "theta0": _c_numbers(start.theta),

@@ -64,7 +64,7 @@ from ident_opt.errors import InputError
 from ident_opt.gmr import Support, conditioning, input_log_density
 from ident_opt.identify import estimators
 from ident_opt.identify.base import BaseParameters, base_parameters
-from ident_opt.identify.bounded import Bounds, WarmBoundedLS, WarmConsistentLS, default_bounds
+from ident_opt.identify.bounded import Bounds, FactorBoundedLS, WarmBoundedLS, WarmConsistentLS, default_bounds
 from ident_opt.identify.fit import LinearFit
 from ident_opt.identify.stats import Stats
 from ident_opt.models import RidgeModel, datasheet_keys, datasheet_model, features, fitted, make_gmr
@@ -153,9 +153,10 @@ class Prediction:
 @dataclass
 class Estimator:
     """How θ follows from the statistics: ``fixed``, ``ridge`` (with `penalty` (P,) = λ per column, 0 for
-    an unpenalised intercept), ``bounded`` (with `bounds`), ``consistent`` (with `solver`, an object
-    with `.solve(H, h) -> θ`, e.g. `WarmConsistentLS`) or ``cadence`` (with `solver` a `Cadence`: a from-scratch
-    fit every `Cadence.every` samples, θ held in between)."""
+    an unpenalised intercept), ``bounded`` (with `bounds`), ``factor`` (the same with the statistics kept as a
+    square-root factor of the rows, `identify.bounded.FactorBoundedLS`: base parameters of an n-joint arm),
+    ``consistent`` (with `solver`, an object with `.solve(H, h) -> θ`, e.g. `WarmConsistentLS`) or ``cadence`` (with
+    `solver` a `Cadence`: a from-scratch fit every `Cadence.every` samples, θ held in between)."""
 
     kind: str
     penalty: np.ndarray | None = None
@@ -164,7 +165,7 @@ class Estimator:
 
     def make_solver(self) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
         """A callable (H, h) -> θ keeping whatever warm-start state the estimator needs."""
-        if self.kind in ("fixed", "cadence"):  # no per-sample solve (`OnlineIdentifier.add` asks a cadence itself)
+        if self.kind in ("fixed", "cadence", "factor"):  # none on (H, h): `OnlineIdentifier.add` asks these itself
             return None
         if self.kind == "ridge":
             D = np.diag(self.penalty)
@@ -182,7 +183,9 @@ class OnlineIdentifier:
     design: D(q, dq, ddq) (N, n, P); theta0: the offline parameters; stats0: the offline statistics
     of the design (the data θ0 was fitted on); gmr: a fitted `ident_opt.gmr.GMR` on x = [q dq ddq],
     r = τ − Dθ0, or None; cross_covariance: also apply the first-order covariance update (module doc);
-    design_jacobian: x (3n,) -> ∂D/∂x (n, 3n, P), needed only for `cross_covariance`.
+    design_jacobian: x (3n,) -> ∂D/∂x (n, 3n, P), needed only for `cross_covariance`; rows: the offline design
+    rows and torques (D (N, n, P), τ (N, n)) a ``factor`` estimator starts from (the statistics alone would lose the
+    accuracy it keeps).
     """
 
     def __init__(
@@ -195,6 +198,7 @@ class OnlineIdentifier:
         cross_covariance: bool = False,
         design_jacobian: Callable[[np.ndarray], np.ndarray] | None = None,
         support: Support | None = None,
+        rows: tuple[np.ndarray, np.ndarray] | None = None,
     ):
         self.design = design
         self.estimator = estimator
@@ -218,6 +222,13 @@ class OnlineIdentifier:
                 if design_jacobian is None:
                     raise ValueError("cross_covariance needs design_jacobian")
                 self._jac_at_means = np.stack([design_jacobian(m) for m in mu_x])  # (K, 2, 6, P)
+        self._factor = None
+        if estimator.kind == "factor":
+            if rows is None:
+                raise ValueError("a factor estimator starts from the offline rows")
+            self._factor = FactorBoundedLS(estimator.bounds, *rows)
+            self._factor.last = self._factor.solve()
+            self.theta = self._factor.last.pi.copy()
         if self._solve is not None:
             self.theta = self._solve(self._H, self._h)  # the offline solution, by this estimator
         self.support = support
@@ -315,6 +326,11 @@ class OnlineIdentifier:
             self._fold(k.D.copy(), k.tau.copy())  # the buffers are reused: the pending statistics keep copies
             return
         r = tau - D @ self.theta  # the parametric model's one-step residual
+        if self._factor is not None:
+            self.theta = self._factor.add(D, tau)  # raises, changing nothing, when the re-solve fails
+            self.parametric_var += (r * r - self.parametric_var) * ALPHA
+            self._fold(D, tau)
+            return
         if self.estimator.kind == "cadence":
             if not np.isfinite(r).all():  # the statistics must stay finite for the next re-solve
                 raise FloatingPointError("a non-finite regressor row or torque; the sample was not folded in")
@@ -434,11 +450,19 @@ class _FastGMR:
         return mean, var, float(top + np.log(total))
 
 
-def batch_theta(estimator: Estimator, stats: Stats, theta_fixed: np.ndarray | None = None) -> np.ndarray:
-    """The from-scratch (cold-started) solution on `stats`: what the online θ must equal (a cadence estimator's:
-    at the samples where it re-solves)."""
+def batch_theta(
+    estimator: Estimator,
+    stats: Stats,
+    theta_fixed: np.ndarray | None = None,
+    rows: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """The from-scratch (cold-started) solution on `stats` (a ``factor`` estimator's on `rows`, the design rows and
+    torques those statistics sum): what the online θ must equal (a cadence estimator's: at the samples where it
+    re-solves)."""
     if estimator.kind == "fixed":
         return np.asarray(theta_fixed, dtype=float)
+    if estimator.kind == "factor":
+        return FactorBoundedLS(estimator.bounds, *rows).solve().pi
     if estimator.kind == "cadence":
         return estimator.solver.cold().refresh(stats)
     H, h, _ = stats.combined()
@@ -582,11 +606,14 @@ def offline_start(
     if name not in estimators.ONLINE:
         estimator = Estimator("cadence", solver=Cadence(robot, name, arm, base, every))
         theta0 = estimator.solver.refresh(stats)
-    else:
-        estimator = online_estimator(
-            name, arm, bounds or (default_bounds(arm) if full else base_bounds(arm, base)), margin
-        )
+    elif full:
+        estimator = online_estimator(name, arm, bounds or default_bounds(arm), margin)
         theta0 = batch_theta(estimator, stats)
+    else:  # the base parameters' information is ill-conditioned: their bounded LS on a square-root factor
+        if estimators.ONLINE[name] != "bounded":
+            raise ValueError(f"no online form of {name!r} on base parameters")
+        estimator = Estimator("factor", bounds=bounds or base_bounds(arm, base))
+        theta0 = batch_theta(estimator, stats, rows=(design(train.q, train.dq, train.ddq), train.tau))
     return Start(key, design, estimator, theta0, design.names, design.jacobian, None if full else base)
 
 
@@ -634,6 +661,7 @@ def start_identifier(
         cross_covariance=cross_covariance,
         design_jacobian=start.jacobian() if cross_covariance else None,
         support=support,
+        rows=(D, train.tau),
     )
     if start.estimator.kind == "ridge":
         # The recursive ridge reproduces the offline ridge on the same data (a check, not a fit), judged on the

@@ -150,27 +150,47 @@ class Predictor:
         return self.fn(*self.args)
 
 
+def update_state(ident) -> codegen.UpdateState:
+    """The state of a bounded online identifier (NumPy path), for `codegen.generate_pi_update`: its normal
+    equations, or its square-root factor (a ``factor`` estimator)."""
+    bounds = ident.estimator.bounds
+    factor = ident._factor
+    if factor is not None:
+        return codegen.UpdateState(
+            None,
+            factor.h.copy(),
+            ident.theta.copy(),
+            factor.last.state.copy(),
+            ident.stats.n,
+            bounds.lower,
+            bounds.upper,
+            factor.R.copy(),
+            factor.z.copy(),
+            factor.hdiag.copy(),
+        )
+    solver = ident._solve.__self__  # WarmBoundedLS: its last active set
+    return codegen.UpdateState(
+        ident._H.copy(),
+        ident._h.copy(),
+        ident.theta.copy(),
+        solver.last.state.copy(),
+        ident.stats.n,
+        bounds.lower,
+        bounds.upper,
+    )
+
+
 def attach(identifier, design, compiler: list[str] | None = None) -> bool:
     """Give a bounded `OnlineIdentifier` (on `design`, an `online.ArmDesign`: columns of an arm's regressor) the
     generated C update; False (and nothing changed) when the estimator is not bounded or no C compiler is
     available."""
-    if identifier.estimator.kind != "bounded" or identifier._solve is None:
+    if identifier.estimator.kind not in ("bounded", "factor"):
         return False
     try:
         compiler = list(compiler or codegen.find_compiler())
     except InputError:
         return False
-    solver = identifier._solve.__self__
-    bounds = identifier.estimator.bounds
-    start = codegen.UpdateState(
-        identifier._H.copy(),
-        identifier._h.copy(),
-        identifier.theta.copy(),
-        solver.last.state.copy() if solver.last is not None else np.zeros(len(design.names), dtype=np.int8),
-        identifier.n_updates,
-        bounds.lower,
-        bounds.upper,
-    )
+    start = update_state(identifier)
     folder = Path(tempfile.mkdtemp(prefix="ident_opt_update_"))
     try:
         codegen.generate_pi_update(design.arm, start, folder, KKT_TOL, design.columns)

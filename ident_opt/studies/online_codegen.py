@@ -22,8 +22,8 @@ import numpy as np
 from ident_opt import codegen
 from ident_opt.data import Dataset, chronological_split
 from ident_opt.identify.bounded import KKT_TOL
-from ident_opt.online import OnlineIdentifier, offline_start, start_identifier
-from ident_opt.online_kernel import load_pi_update
+from ident_opt.online import offline_start, start_identifier
+from ident_opt.online_kernel import load_pi_update, update_state
 from ident_opt.studies.online_replay import _relative, _standard_errors
 
 
@@ -31,21 +31,6 @@ def _torque_relative(D: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     """‖D (a − b)‖∞ / ‖D b‖∞: how differently two parameter vectors predict one sample's torques (D (n, P))."""
     scale = np.abs(D @ b).max()
     return float(np.abs(D @ (a - b)).max() / scale) if scale > 0 else 0.0
-
-
-def update_state(ident: OnlineIdentifier) -> codegen.UpdateState:
-    """The state of a bounded online identifier (NumPy path), for `codegen.generate_pi_update`."""
-    solver = ident._solve.__self__  # WarmBoundedLS: its last active set
-    bounds = ident.estimator.bounds
-    return codegen.UpdateState(
-        ident._H.copy(),
-        ident._h.copy(),
-        ident.theta.copy(),
-        solver.last.state.copy(),
-        ident.stats.n,
-        bounds.lower,
-        bounds.upper,
-    )
 
 
 class CUpdate:

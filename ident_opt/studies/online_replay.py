@@ -183,7 +183,7 @@ def batch_check(starts: dict[str, Start], theta: dict, train: Dataset, test: Dat
         for i in at:
             D = np.concatenate([D_train, D_test[: i + 1]])
             tau = np.concatenate([train.tau, test.tau[: i + 1]])
-            ref = batch_theta(start.estimator, Stats.from_regressor(D, tau))
+            ref = batch_theta(start.estimator, Stats.from_regressor(D, tau), rows=(D, tau))
             worst = max(worst, _relative(theta[key][i], ref))
             if key == "pbr":
                 b = start.estimator.bounds
