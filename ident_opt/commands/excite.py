@@ -111,6 +111,13 @@ def run(args: argparse.Namespace) -> int:
         args.base_hz = args.base_hz or default_base_hz(args.duration, discrimination.BASE_HZ)
     args.harmonics = args.harmonics or 5
     _check(args)
+    if (args.criterion == "discriminate" or args.proof is not None) and not problem.robot.extensions:
+        what = "--proof (its discriminating design)" if args.proof is not None else "--criterion discriminate"
+        raise InputError(
+            f"{what} tells two causes of the diagnosis apart, which only an arm with model extensions has; "
+            f"{problem.robot.described_as} has none: design with --criterion d or cond (and see "
+            "`python -m ident_opt.studies.excitation_benefit` for the proof against random motions)"
+        )
     if problem.limits is None:
         raise InputError(
             f"{problem.path}: section [limits] is required to design an excitation (docs/problem-files.md)"

@@ -50,9 +50,10 @@ from ident_opt.trajectory import Fourier, default_base_hz
 
 CRITERIA = ("d", "cond", "discriminate")
 #: Grid of the NLP's limits over one period [Hz] (the highest harmonic is far slower: at 0.5 Hz the worst
-#: overshoot between grid points is (2π·0.5/20)²/8 ≈ 0.3 % of its amplitude, inside `SAFETY`; a finer grid
-#: costs IPOPT time superlinearly, and the 1 kHz check has the final word).
-CONSTRAINT_HZ = 20.0
+#: overshoot between grid points is (2π·0.5/12)²/8 ≈ 0.9 % of its amplitude, inside `SAFETY`; IPOPT's time per
+#: iteration grows with the number of limits (a 7-joint design: 0.2 s at 20 Hz, 0.1 s at 12 Hz on a loaded
+#: machine), and the 1 kHz check has the final word).
+CONSTRAINT_HZ = 12.0
 #: Grid of the information matrix in the NLP over one period [Hz].
 OBJECTIVE_HZ = 25.0
 #: Fraction of each limit the NLP keeps free (the 1 kHz check has the final word).

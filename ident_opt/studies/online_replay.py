@@ -167,7 +167,8 @@ def batch_check(starts: dict[str, Start], theta: dict, train: Dataset, test: Dat
     solver on freshly accumulated statistics); for PBR also against the paper's re-solve,
     `scipy.optimize.lsq_linear` (BVLS) on all stacked rows. A model re-solved at a cadence (`online.Cadence`) is
     checked at its re-solves (its θ is held in between), apart: `cadence_by_model` (the conic solver's tolerance,
-    not the update's exactness, sets that difference)."""
+    not the update's exactness, sets that difference; also as the RMS difference of the two fits' torques over the
+    prefix ÷ their RMS)."""
     n = test.n
     rng = np.random.default_rng(seed)
     steps = sorted(set(rng.choice(n, min(checks, n), replace=False).tolist()) | {n - 1})
@@ -180,11 +181,13 @@ def batch_check(starts: dict[str, Start], theta: dict, train: Dataset, test: Dat
         D_test = start.design(test.q, test.dq, test.ddq)
         every = getattr(start.estimator.solver, "every", None) if start.estimator.kind == "cadence" else None
         at = _refreshes(n, every)[-checks:] if every else steps
+        torque = 0.0
         for i in at:
             D = np.concatenate([D_train, D_test[: i + 1]])
             tau = np.concatenate([train.tau, test.tau[: i + 1]])
             ref = batch_theta(start.estimator, Stats.from_regressor(D, tau), rows=(D, tau))
             worst = max(worst, _relative(theta[key][i], ref))
+            torque = max(torque, _torque_gap(D, theta[key][i], ref))
             if key == "pbr":
                 b = start.estimator.bounds
                 bv = lsq_linear(
@@ -192,7 +195,11 @@ def batch_check(starts: dict[str, Start], theta: dict, train: Dataset, test: Dat
                 ).x
                 paper = max(paper or 0.0, _relative(theta[key][i], bv))
         if every:
-            cadence[key] = {"max_relative_difference": worst, "steps": [int(train.n + i + 1) for i in at]}
+            cadence[key] = {
+                "max_relative_difference": worst,
+                "max_torque_rms_difference": torque,
+                "steps": [int(train.n + i + 1) for i in at],
+            }
         else:
             by_model[key] = worst
     return {
@@ -254,6 +261,11 @@ def consistency_check(
         "sign_bound_least_slack": slack,
         "least_lmi_eigenvalue": min(cadence.least_eigenvalues) if cadence.least_eigenvalues else None,
     }
+
+
+def _torque_gap(D: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """RMS of D (a − b) ÷ RMS of D b over the rows D (N, n, P): how differently two parameter vectors predict."""
+    return float(np.sqrt(np.mean((D @ (a - b)) ** 2) / max(np.mean((D @ b) ** 2), 1e-300)))
 
 
 def _standard_errors(D: np.ndarray, tau: np.ndarray, theta: np.ndarray) -> np.ndarray:

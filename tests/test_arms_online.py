@@ -1,0 +1,113 @@
+"""`online`, its stream and the generated update on an arm of n joints (the 3-joint URDF arm logged with currents,
+`tests.test_n_joint_inputs`): the --json contract per joint, PBR's base parameters against a from-scratch re-solve
+after every checked step, the sign bounds exact at every sample and the consistent fit re-solved at its cadence, the
+compiled update equal to the Python one, the stream on t, q, i only."""
+
+from __future__ import annotations
+
+import io
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ident_opt.cli import main
+from ident_opt.consistency import necessarily_nonnegative
+from ident_opt.data import chronological_split, load_dataset
+from ident_opt.online import offline_start, start_identifier
+from ident_opt.online_kernel import attach
+from ident_opt.problem import load_problem
+from ident_opt.stream import Mapping, StreamOptions, currents_to_torques, serve
+from ident_opt.studies.online_replay import _standard_errors
+from tests.test_n_joint_inputs import arm3, workspace  # noqa: F401  (the fixtures)
+
+
+@pytest.fixture(scope="module")
+def replayed(workspace, tmp_path_factory):  # noqa: F811
+    out = tmp_path_factory.mktemp("online3")
+    args = ["online", "--problem", str(workspace / "full.toml"), "--out", str(out / "out")]
+    args += ["--json", str(out / "o.json"), "--components", "2", "--checks", "3", "--consistent-every", "60"]
+    code = main([*args, "--no-progress"])
+    return code, json.loads((out / "o.json").read_text()), out / "out"
+
+
+def test_online_json_on_three_joints(replayed, workspace):  # noqa: F811
+    code, js, out = replayed
+    assert code == 0
+    arm = load_problem(workspace / "full.toml").robot.arm
+    assert js["joints"] == ["a", "b", "c"]
+    assert list(js["parameters"]["initial"]) == list(arm.names) and list(js["parameters"]["final"]) == list(arm.names)
+    base = js["base_parameters"]
+    assert set(base["final"]) == set(base["definitions"]) and len(base["final"]) < arm.n_params
+    for which in ("online", "frozen"):
+        for block in js["metrics"][which].values():
+            assert set(block) >= {"rr", "dm", "pbr", "cpbr", "pbr+gmr"}
+            assert all(len(v) == 3 and all(np.isfinite(v)) for v in block.values())
+    assert all(len(v) == 3 for v in js["coverage"]["online"].values())
+    assert js["updates_per_second"] > 0 and js["warnings"] == []
+    assert js["batch_check"] <= 1e-9 and js["batch_check_detail"]["pbr_vs_lsq_linear"] <= 1e-8
+    assert (out / "online.md").read_text().count("Consistency online") == 1
+
+
+def test_sign_bounds_exact_and_the_lmis_at_the_cadence(replayed):
+    _, js, _ = replayed
+    c = js["consistency"]
+    assert c["every"] == 60 and c["re_solves"] >= 3 and c["failed_re_solves"] == 0
+    assert c["sign_bound_least_slack"] >= 0.0 and c["sign_bounds"]
+    assert c["least_lmi_eigenvalue"] >= 0.0  # every re-solve consistent
+    assert len(c["at_re_solves"]) == c["re_solves"] - 1  # the offline start is the first re-solve
+    assert all(len(r["torque_rms_difference"]) == 3 for r in c["at_re_solves"])
+    cadence = js["batch_check_detail"]["cadence_by_model"]["cpbr"]
+    assert cadence["max_torque_rms_difference"] < 1e-6  # the conic solver's tolerance, at its own re-solves
+
+
+@pytest.fixture(scope="module")
+def split(workspace):  # noqa: F811
+    problem = load_problem(workspace / "full.toml")
+    trial = load_dataset(workspace / "train.csv", problem.data, problem.robot)
+    tr, te = chronological_split(trial.n, 0.7)
+    return problem, trial.subset(tr), trial.subset(te)
+
+
+def test_sign_bounds_are_those_no_consistent_arm_breaks(split):
+    problem, train, _ = split
+    start = offline_start("pbr", problem, train)
+    lower = start.estimator.bounds.lower
+    definite = necessarily_nonnegative(problem.robot.arm, start.base.K)
+    assert np.array_equal(lower == 0.0, definite) and np.all(np.isinf(lower[~definite]))
+    assert any(name.startswith("fv_") for name, b in zip(start.names, lower) if b == 0.0)
+
+
+def test_compiled_update_equals_python_on_three_joints(split):
+    problem, train, test = split
+    start = offline_start("pbr", problem, train)
+    python, compiled = start_identifier(start, train), start_identifier(start, train)
+    assert attach(compiled, start.design)
+    D = start.design(test.q, test.dq, test.ddq)
+    for i in range(test.n):
+        python.add(D[i], test.tau[i])
+        compiled.add(D[i], test.tau[i])
+        prefix = np.concatenate([start.design(train.q, train.dq, train.ddq), D[: i + 1]])
+        tau = np.concatenate([train.tau, test.tau[: i + 1]])
+        scale = np.maximum(np.abs(python.theta), _standard_errors(prefix, tau, python.theta))
+        assert np.all(np.abs(compiled.theta - python.theta) <= 1e-9 * scale), i
+
+
+def test_stream_on_t_q_i_only_updates_every_completed_sample(split, workspace):  # noqa: F811
+    problem, train, _ = split
+    raw = pd.read_csv(workspace / "test.csv")
+    lines = [",".join(["t", "q1", "q2", "q3", "i1", "i2", "i3"])]
+    lines += [",".join(repr(float(v)) for v in row) for row in raw[["t", "q1", "q2", "q3", "i1", "i2", "i3"]].values]
+    start = offline_start("pbr", problem, train)
+    ident = start_identifier(start, train)
+    scale, refused = currents_to_torques(problem.robot)
+    options = StreamOptions(Mapping.from_spec(problem.data, problem.robot), scale, refused, cutoff_hz=5.0)
+    out, err = io.StringIO(), io.StringIO()
+    final = serve(ident, start.names, io.StringIO("\n".join(lines) + "\n"), out, err, 0, options=options)
+    final = final["final"]
+    assert err.getvalue() == "" and final["derivatives"]["estimated"] and final["updates"] > 300
+    assert final["updates"] + final["outliers"] + final["derivatives"]["lost"] == len(raw)
+    records = [json.loads(x) for x in out.getvalue().splitlines() if '"n"' in x and "final" not in x]
+    assert all(len(r["tau"]) == 3 and len(r["std"]) == 3 for r in records)
+    assert list(final["parameters"]) == list(start.names)
