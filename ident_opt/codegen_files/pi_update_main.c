@@ -6,8 +6,9 @@
  * samples.csv: a header line, then rows $columns [rad, rad/s, rad/s^2, N m] (the
  * columns in this order; any further columns ignored). Starts from the offline fit baked into pi_update.c,
  * folds every row in, and prints one JSON line: samples, updates, failures, the time per update measured
- * over the loop alone (ns: regressor + update), the regressor's own time per sample (ns, a separate loop) and the
- * final parameters. thetas.csv (optional): the parameters after each row. Every buffer is static: no dynamic
+ * over the loop alone (ns: regressor + update; wall clock, and the process's CPU time, which other programs on a
+ * busy machine do not inflate), the regressor's own time per sample (ns, a separate loop) and the final
+ * parameters. thetas.csv (optional): the parameters after each row. Every buffer is static: no dynamic
  * allocation. */
 #include <stdio.h>
 #include <stdlib.h>
@@ -23,9 +24,9 @@ static double rows[MAX_ROWS][COLS];
 static double thetas[MAX_ROWS][PI_UPDATE_P];
 static volatile double sink_out;
 
-static double seconds_since(const struct timespec *t0) {
+static double seconds_since(const struct timespec *t0, clockid_t clock) {
   struct timespec t1;
-  clock_gettime(CLOCK_MONOTONIC, &t1);
+  clock_gettime(clock, &t1);
   return (t1.tv_sec - t0->tv_sec) + 1e-9 * (t1.tv_nsec - t0->tv_nsec);
 }
 
@@ -47,7 +48,7 @@ static double regressor_ns(long n) {
     sink += Y[k % (PI_UPDATE_J * PI_UPDATE_P)];
   }
   sink_out = sink; /* keeps the loop from being optimised away */
-  return seconds_since(&t0) * 1e9 / (n > 0 ? n : 1);
+  return seconds_since(&t0, CLOCK_MONOTONIC) * 1e9 / (n > 0 ? n : 1);
 }
 
 int main(int argc, char **argv) {
@@ -78,14 +79,16 @@ int main(int argc, char **argv) {
   static pi_update_state s;
   pi_update_initial(&s);
   long failed = 0;
-  struct timespec t0;
+  struct timespec t0, c0;
   clock_gettime(CLOCK_MONOTONIC, &t0);
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
   for (long k = 0; k < n; ++k) {
     const double *r = rows[k];
     if (pi_update(&s, r, r + PI_UPDATE_J, r + 2 * PI_UPDATE_J, r + 3 * PI_UPDATE_J) != 0) ++failed;
     for (int p = 0; p < PI_UPDATE_P; ++p) thetas[k][p] = s.theta[p];
   }
-  double ns = seconds_since(&t0) * 1e9 / (n > 0 ? n : 1);
+  double cpu_ns = seconds_since(&c0, CLOCK_PROCESS_CPUTIME_ID) * 1e9 / (n > 0 ? n : 1);
+  double ns = seconds_since(&t0, CLOCK_MONOTONIC) * 1e9 / (n > 0 ? n : 1);
   double ns_regressor = regressor_ns(n);
 
   if (argc > 2) {
@@ -99,9 +102,9 @@ int main(int argc, char **argv) {
       for (int p = 0; p < PI_UPDATE_P; ++p) fprintf(out, "%.17g%s", thetas[k][p], p + 1 < PI_UPDATE_P ? "," : "\n");
     fclose(out);
   }
-  printf("{\"samples\": %ld, \"updates\": %ld, \"failed\": %ld, \"ns_per_update\": %.1f, \"ns_regressor\": %.1f, "
-         "\"parameters\": {",
-         n, n - failed, failed, ns, ns_regressor);
+  printf("{\"samples\": %ld, \"updates\": %ld, \"failed\": %ld, \"ns_per_update\": %.1f, \"cpu_ns_per_update\": "
+         "%.1f, \"ns_regressor\": %.1f, \"parameters\": {",
+         n, n - failed, failed, ns, cpu_ns, ns_regressor);
   for (int p = 0; p < PI_UPDATE_P; ++p)
     printf("\"%s\": %.17g%s", PI_UPDATE_NAMES[p], s.theta[p], p + 1 < PI_UPDATE_P ? ", " : "}}\n");
   return failed ? 1 : 0;

@@ -215,10 +215,19 @@ class FactorBoundedLS:
         start, state = (None, None) if last is None else (last.pi, last.state)
         return _active_set(self.bounds, R.shape[0], target, lambda x: R.T @ (R @ x - z), scale, start, state, None)
 
+    def _folded(self, D: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(R, z, h, diag H) with the rows D (…, P) and torques τ (…) folded in (nothing committed)."""
+        A, b = D.reshape(-1, D.shape[-1]), tau.reshape(-1)
+        R, z = self._factor(self.R, self.z, A, b)
+        return R, z, self.h + A.T @ b, self.hdiag + np.einsum("kp,kp->p", A, A)
+
+    def fold(self, D: np.ndarray, tau: np.ndarray) -> None:
+        """Fold rows in without re-solving (many samples at once: D (N, n, P), τ (N, n))."""
+        self.R, self.z, self.h, self.hdiag = self._folded(D, tau)
+
     def add(self, D: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """Fold one sample (D (n, P), τ (n,)) in and re-solve; the new π. Nothing changes when it raises."""
-        R, z = self._factor(self.R, self.z, D, tau)
-        h, hdiag = self.h + D.T @ tau, self.hdiag + np.einsum("jp,jp->p", D, D)
+        R, z, h, hdiag = self._folded(D, tau)
         sol = self.solve(R, z, h, hdiag)
         if not np.isfinite(sol.pi).all():
             raise FloatingPointError("the re-solve gave a non-finite θ; the sample was not folded in")

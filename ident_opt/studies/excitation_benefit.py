@@ -213,6 +213,7 @@ def payload(b: Benefit) -> dict:
         },
         "unseen": b.summary(True),
         "development": b.summary(False),
+        "design_coefficients": [float(v) for v in d.x],
         "rows": b.trials.to_dict(orient="records"),
         "seconds": b.seconds,
     }
@@ -238,9 +239,13 @@ def markdown(data: dict) -> str:
         )
     lines += [
         "",
-        f"Unseen seeds ({len(u['seeds'])}): median error {u['median_error_design']:.4g} (design) vs "
-        f"{u['median_error_random']:.4g} (random): **{u['ratio']:.2f}×** lower with the design; the design is better "
-        f"on {u['design_better_on']} of {len(u['seeds'])} seeds. Development seeds: {d['ratio']:.2f}×.",
+        *(
+            f"{label} seeds ({len(v['seeds'])}): median error {v['median_error_design']:.4g} (design) vs "
+            f"{v['median_error_random']:.4g} (random): **{v['ratio']:.2f}×** lower with the design; the design is "
+            f"better on {v['design_better_on']} of {len(v['seeds'])} seeds."
+            for label, v in (("Unseen", u), ("Development", d))
+            if v["seeds"]
+        ),
         "",
         "Margins per limit (least fraction of the limit left, per joint): "
         + "; ".join(f"{k} {', '.join(f'{v:.1%}' for v in m['fraction'])}" for k, m in des["margins"].items())

@@ -104,6 +104,7 @@ def verify(problem, trial: Dataset, out_dir: Path, compiler: list[str] | None = 
         "failures": int(failures),
         "c_ns_per_update": min(r["ns_per_update"] for r in runs),
         "c_ns_per_update_runs": [r["ns_per_update"] for r in runs],
+        "c_cpu_ns_per_update": min(r["cpu_ns_per_update"] for r in runs),
         "c_ns_regressor": min(r["ns_regressor"] for r in runs),
         "python_us_per_update": python_seconds / test.n * 1e6,
         "final_python": dict(zip(start.names, map(float, py[-1]))),
