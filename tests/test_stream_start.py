@@ -9,18 +9,24 @@ from __future__ import annotations
 import copy
 import io
 import json
+import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ident_opt.data import chronological_split
 from ident_opt.derivatives import CausalDerivatives, RateError
 from ident_opt.online import offline_start, start_identifier
 from ident_opt.problem import load_problem
 from ident_opt.stream import BadLine, LineParser, Mapping, currents_to_torques, serve
+from tests.test_fuzz import EXAMPLES, FUZZ, LOG
+from tests.test_fuzz import _strict_text as _strict
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "tudor_2dof.toml"
@@ -138,3 +144,51 @@ def test_cli_a_microsecond_stream_exits_2_at_once(tmp_path):
     )
     assert done.returncode == 2, done.stderr[-2000:]
     assert "Traceback" not in done.stderr and "taps" in done.stderr and done.stdout == ""
+
+
+# ---------------------------------------------------------------------------------------------- fuzz
+HOSTILE_TIMES = ["1e-300", "1e300", "1000", "-1", "same", "+10", "+1e-6", "+0.5", "nan", "1e309", "drop", "twice"]
+
+
+def _mutated_start(rows: list[str], choices: list[tuple[int, str]]) -> list[str]:
+    """The clean rows with the times of some of the first ten replaced (or the row dropped, or sent twice)."""
+    rows = list(rows)
+    for index, how in sorted(choices, reverse=True):
+        cells = rows[index].split(",")
+        t = float(cells[0])
+        if how == "drop":
+            del rows[index]
+            continue
+        if how == "twice":
+            rows.insert(index, rows[index])
+            continue
+        value = {"same": repr(float(rows[index - 1].split(",")[0])) if index else "0.0"}.get(how, how)
+        if how.startswith("+"):
+            value = repr(t + float(how[1:]))
+        rows[index] = ",".join([value, *cells[1:]])
+    return rows
+
+
+@settings(FUZZ, max_examples=EXAMPLES if os.environ.get("IDENT_OPT_FUZZ_EXAMPLES") else 30)
+@given(choices=st.lists(st.tuples(st.integers(0, 9), st.sampled_from(HOSTILE_TIMES)), min_size=1, max_size=4))
+def test_fuzz_stream_start(setup, clean, choices):
+    """Hostile times among the first ten samples: every line answered or reported (never `internal`), strict JSON,
+    the stream bounded in time (well under a minute) and in loss (the clean updates less at most a dozen)."""
+    lines = [HEADER, *_mutated_start(_rows(setup[2]), choices)]
+    start, ident, _ = setup
+    out, err = io.StringIO(), io.StringIO()
+    began = time.monotonic()
+    final = serve(copy.deepcopy(ident), start.names, io.StringIO("\n".join(lines) + "\n"), out, err, 0)["final"]
+    elapsed = time.monotonic() - began
+    problems = [f"internal error: {e}" for e in map(json.loads, err.getvalue().splitlines()) if e["kind"] == "internal"]
+    problems += [f"NaN or invalid JSON line on stdout: {x[:80]}" for x in out.getvalue().splitlines() if not _strict(x)]
+    if elapsed > 60:
+        problems.append(f"hang: {elapsed:.0f} s")
+    if final["updates"] < clean[0]["updates"] - 12:
+        problems.append(f"lost updates: {final['updates']} of {clean[0]['updates']}")
+    outcome = {"kind": "stream-start", "argv": [str(c) for c in choices], "status": 0, "message": ""}
+    outcome["problems"] = problems
+    if LOG:
+        with open(LOG, "a", encoding="utf-8") as fh:
+            fh.write(json.dumps(outcome) + "\n")
+    assert not problems, outcome
