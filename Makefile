@@ -33,7 +33,8 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
 
 ## The long hostile-input fuzz (tests/test_fuzz.py; the suite runs 80 cases per property): FUZZ_EXAMPLES cases per
-## property (6 properties: 5 there and the stream's first samples, tests/test_stream_start.py; >= 3,000 cases in all), each logged to build/fuzz.log, then summed up.
+## property (6 properties: 5 there and the stream's first samples, tests/test_stream_start.py; >= 3,000 cases in all),
+## each logged to build/fuzz.log, then summed up.
 FUZZ_EXAMPLES ?= 800
 fuzz: $(STAMP)
 	mkdir -p build && rm -f build/fuzz.log
