@@ -174,15 +174,17 @@ def run(
     seeds: int = 20,
     duration: float = 20.0,
     harmonics: int = 5,
+    base_hz: float | None = None,
     starts: int = 6,
     design: excitation.Design | None = None,
     progress: bool = True,
 ) -> Benefit:
-    """The design (unless given) and the trials of `DEV_SEEDS` and of `seeds` unseen seeds (module doc)."""
+    """The design (unless given) and the trials of `DEV_SEEDS` and of `seeds` unseen seeds (module doc); `base_hz`:
+    the series' base frequency (`excite --base-hz`; default excite's), the random motions' too."""
     if problem.limits is None:
         raise InputError(f"{problem.path}: section [limits] is required to design an excitation")
     t0 = time.perf_counter()
-    setup = excitation.make_setup(problem.robot, problem.limits, duration, harmonics=harmonics)
+    setup = excitation.make_setup(problem.robot, problem.limits, duration, harmonics=harmonics, base_hz=base_hz)
     design = design or excitation.design(setup, "d", starts=starts, progress=progress)
     t_design = time.perf_counter()
     closed_loop = "simulate" in problem.robot.serves and problem.robot.paper_views
@@ -220,6 +222,7 @@ def payload(b: Benefit) -> dict:
         "joints": int(b.setup.arm.n_joints),
         "duration_s": b.setup.duration,
         "harmonics": b.setup.fourier.harmonics,
+        "base_hz": b.setup.fourier.base_hz,
         "base_parameters": len(b.setup.base),
         "trials": b.how,
         "design": {
@@ -242,7 +245,8 @@ def markdown(data: dict) -> str:
     """The report of one arm."""
     u, d, des = data["unseen"], data["development"], data["design"]
     lines = [
-        f"## {data['problem']}: {data['joints']} joints, {data['harmonics']} harmonics, {data['duration_s']:g} s",
+        f"## {data['problem']}: {data['joints']} joints, {data['harmonics']} harmonics of {data['base_hz']:g} Hz, "
+        f"{data['duration_s']:g} s",
         "",
         f"D-optimal design in {des['seconds']:.1f} s ({des['starts']} starts, converged: {des['converged']}); "
         f"tightest limit margin {des['tightest_margin']:.1%} of its limit (1 kHz grid); {data['base_parameters']} "
@@ -280,14 +284,20 @@ def markdown(data: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--problem", action="append", required=True, help="a problem with [limits]; repeatable")
+    ap.add_argument(
+        "--base-hz", action="append", type=float, help="the series' base frequency per --problem, in their order"
+    )
     ap.add_argument("--seeds", type=int, default=20, help="unseen noise seeds (default 20)")
     ap.add_argument("--starts", type=int, default=6)
     ap.add_argument("--out", default=str(ROOT / "results"))
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
+    hz = args.base_hz or [None] * len(args.problem)
+    if len(hz) != len(args.problem):
+        raise SystemExit("give --base-hz once per --problem, or not at all")
     runs = [
-        payload(run(load_problem(p), seeds=args.seeds, starts=args.starts, progress=not args.no_progress))
-        for p in args.problem
+        payload(run(load_problem(p), seeds=args.seeds, starts=args.starts, base_hz=f, progress=not args.no_progress))
+        for p, f in zip(args.problem, hz)
     ]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
