@@ -43,6 +43,7 @@ from ident_opt.identify.base import base_parameters
 from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
 from ident_opt.problem.spec import Problem
+from ident_opt.report import record
 from ident_opt.simulate import simulate_trial
 from ident_opt.studies import excitation
 from ident_opt.studies.excitation import Setup
@@ -312,6 +313,12 @@ def main(argv: list[str] | None = None) -> int:
         ]
     )
     (out / "excitation_arms.md").write_text(text, encoding="utf-8")
+    record(
+        out,
+        "excitation_arms",
+        "the designed excitation against random Fourier motions, 7 joints and 2, on unseen noise seeds",
+        ("excitation_arms.md", "excitation_arms.json"),
+    )
     print(text)
     return 0
 

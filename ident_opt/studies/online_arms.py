@@ -34,6 +34,7 @@ from ident_opt.derivatives import REST, resolve_cutoff
 from ident_opt.identify.bounded import FactorBoundedLS
 from ident_opt.online import serving_identifier
 from ident_opt.problem import load_problem
+from ident_opt.report import record
 from ident_opt.stream import Mapping, StreamOptions, currents_to_torques, serve
 from ident_opt.studies.online_codegen import verify
 from ident_opt.studies.online_replay import _standard_errors, replay
@@ -250,6 +251,12 @@ def main(argv: list[str] | None = None) -> int:
     (out / "online_arms.json").write_text(json.dumps(rows, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     text = markdown(rows)
     (out / "online_arms.md").write_text(text, encoding="utf-8")
+    record(
+        out,
+        "online_arms",
+        "online identification on the n-joint arms: batch re-solves, the generated update, the t/q/i stream",
+        ("online_arms.md", "online_arms.json"),
+    )
     print(text)
     return 0
 
