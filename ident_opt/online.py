@@ -17,7 +17,10 @@ arm) it is bounded least squares on π with the bounds of the parameters' kinds;
 base parameters (an n-joint URDF arm) it is bounded least squares on the base parameters, with a lower bound 0 on
 exactly those base parameters that are non-negative for every consistent arm (`consistency.necessarily_nonnegative`:
 friction, armature, and each combination of link parameters whose coefficients lie in the dual of the
-pseudo-inertia cone). Those sign bounds hold exactly after every sample.
+pseudo-inertia cone). Those sign bounds hold exactly after every sample. The base parameters' information is
+ill-conditioned (κ(Y)² of 1e7 to 1e12 on real trials), so their statistics are kept as a square-root factor of the
+rows (`identify.bounded.FactorBoundedLS`: a QR of (P + n) × P per sample, never YᵀY), as the generated update keeps
+them too.
 
 CPBR follows the arm's default estimator (`Robot.default_estimator`, through `models.fitted`: the one place that
 names it). Where that estimator has an exact online counterpart (`estimators.ONLINE`: the planar arm's constrained
@@ -130,8 +133,8 @@ class ArmDesign:
 
 @dataclass
 class Prediction:
-    """One sample's predicted torque [N m] (2,), its parametric part, and the predictive standard
-    deviation [N m] (2,) (GMR's Cov[r | x], or the residual RMS of the fit when there is no GMR);
+    """One sample's predicted torque [N m] (n,), its parametric part, and the predictive standard
+    deviation [N m] (n,) (GMR's Cov[r | x], or the residual RMS of the fit when there is no GMR);
     `extrapolating`: x lies outside the GMR's training support (`gmr.Support`; only with a guard)."""
 
     tau: np.ndarray
