@@ -45,6 +45,13 @@ def test_discriminating_design_is_refused_on_n_joints(workspace, tmp_path, capsy
     assert "discriminat" in err and "Traceback" not in err and not (tmp_path / "t.csv").exists()
 
 
+def test_model_extensions_are_refused_on_n_joints(workspace, tmp_path, capsys):  # noqa: F811
+    args = ["excite", "--problem", str(workspace / "full.toml"), "--out", str(tmp_path / "t.csv")]
+    assert main([*args, "--extension", "armature"]) == 2
+    err = capsys.readouterr().err
+    assert "armature" in err and "Traceback" not in err and not (tmp_path / "t.csv").exists()
+
+
 def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 

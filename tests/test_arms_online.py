@@ -15,10 +15,11 @@ import pytest
 from ident_opt.cli import main
 from ident_opt.consistency import necessarily_nonnegative
 from ident_opt.data import chronological_split, load_dataset
+from ident_opt.errors import InputError
 from ident_opt.online import offline_start, start_identifier
 from ident_opt.online_kernel import attach
 from ident_opt.problem import load_problem
-from ident_opt.stream import Mapping, StreamOptions, currents_to_torques, serve
+from ident_opt.stream import BadLine, LineParser, Mapping, StreamOptions, currents_to_torques, serve
 from ident_opt.studies.online_replay import _standard_errors
 from tests.test_n_joint_inputs import arm3, workspace  # noqa: F401  (the fixtures)
 
@@ -111,3 +112,14 @@ def test_stream_on_t_q_i_only_updates_every_completed_sample(split, workspace): 
     records = [json.loads(x) for x in out.getvalue().splitlines() if '"n"' in x and "final" not in x]
     assert all(len(r["tau"]) == 3 and len(r["std"]) == 3 for r in records)
     assert list(final["parameters"]) == list(start.names)
+
+
+def test_stream_header_without_an_angle_of_the_arm_exits_2(split):
+    problem, _, _ = split
+    parser = LineParser(mapping=Mapping.from_spec(problem.data, problem.robot))
+    with pytest.raises(InputError, match="q3"):
+        parser.parse("t,q1,q2,tau1,tau2,tau3")
+    with pytest.raises(BadLine, match="every joint"):  # torques of two joints of three
+        good = LineParser(mapping=Mapping.from_spec(problem.data, problem.robot))
+        good.parse("t,q1,q2,q3,tau1,tau2")
+        good.parse("0.1,0.1,0.2,0.3,1.0,2.0")
