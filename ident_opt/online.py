@@ -69,6 +69,7 @@ from ident_opt.identify import estimators
 from ident_opt.identify.base import BaseParameters, base_parameters
 from ident_opt.identify.bounded import Bounds, FactorBoundedLS, WarmBoundedLS, WarmConsistentLS, default_bounds
 from ident_opt.identify.fit import LinearFit
+from ident_opt.identify.iv import InstrumentStats
 from ident_opt.identify.stats import Stats
 from ident_opt.models import RidgeModel, datasheet_keys, datasheet_model, features, fitted, make_gmr
 
@@ -483,6 +484,33 @@ def arm_design_jacobian(model: Arm) -> Callable[[np.ndarray], np.ndarray]:
     return ArmDesign(model).jacobian()
 
 
+def lift(base: BaseParameters, stats: Stats) -> Stats:
+    """The arm's statistics from those of its base parameters' design (exact: Y = Y_b K, so G = Kᵀ G_b K and
+    b = Kᵀ b_b)."""
+    K = base.K
+    G = np.einsum("bp,jbc,cq->jpq", K, stats.G, K)
+    return Stats(G, np.einsum("bp,jb->jp", K, stats.b), stats.s.copy(), stats.n)
+
+
+@dataclass(frozen=True)
+class Instruments:
+    """An instrumented estimator's (`estimators.INSTRUMENTED`: the robust fit) statistics for the cadence: the
+    training part's instrument statistics `offline` and its least-squares statistics `trained` (both on the arm's
+    π; the instruments from the trial, `identify.iv.InstrumentStats.from_data`). Samples arriving online carry no
+    instruments (a stream has one derivative estimate): each enters as its own instrument (Z = Y), i.e. as least
+    squares, so the re-solves keep the training part's correction of the noise bias and add the online samples as
+    they are."""
+
+    offline: InstrumentStats
+    trained: Stats
+
+    def with_online(self, seen: Stats) -> InstrumentStats:
+        """The instrument statistics of every sample seen, from the arm's least-squares statistics of them all."""
+        t = self.trained
+        G, b = seen.G - t.G, seen.b - t.b
+        return self.offline + InstrumentStats(G, b, G, Stats(G, b, seen.s - t.s, seen.n - t.n))
+
+
 class Cadence:
     """An estimator without an exact online counterpart, followed by from-scratch re-solves: every `every` samples,
     `estimators.fit_for(robot, name, …)` on the exact statistics of every sample seen. The online statistics are
@@ -490,10 +518,21 @@ class Cadence:
     G = Kᵀ G_b K and b = Kᵀ b_b (`lift`). θ is the base parameters of the fit, K π; `fit` its `LinearFit` (π in
     the arm's own parameters, which the estimator keeps consistent)."""
 
-    def __init__(self, robot, name: str, arm: Arm, base: BaseParameters, every: int = CONSISTENT_EVERY):
+    def __init__(
+        self,
+        robot,
+        name: str,
+        arm: Arm,
+        base: BaseParameters,
+        every: int = CONSISTENT_EVERY,
+        instruments: Instruments | None = None,
+    ):
         if every < 1:
             raise ValueError("a cadence needs every ≥ 1 samples")
+        if (name in estimators.INSTRUMENTED) != (instruments is not None):
+            raise ValueError(f"the {name} fit needs instruments exactly when it is instrumented")
         self.robot, self.name, self.arm, self.base, self.every = robot, name, arm, base, int(every)
+        self.instruments = instruments
         self.fit: LinearFit | None = None
         self.refreshed = 0  # re-solves done
         self.seconds = 0.0  # spent in them
@@ -501,18 +540,19 @@ class Cadence:
 
     def cold(self) -> Cadence:
         """The same estimator with no history (a from-scratch solve)."""
-        return Cadence(self.robot, self.name, self.arm, self.base, self.every)
+        return Cadence(self.robot, self.name, self.arm, self.base, self.every, self.instruments)
 
     def lift(self, stats: Stats) -> Stats:
-        """The arm's statistics from those of its base parameters' design (exact: Y = Y_b K)."""
-        K = self.base.K
-        G = np.einsum("bp,jbc,cq->jpq", K, stats.G, K)
-        return Stats(G, np.einsum("bp,jb->jp", K, stats.b), stats.s.copy(), stats.n)
+        """The arm's statistics from those of its base parameters' design (`lift`)."""
+        return lift(self.base, stats)
 
     def refresh(self, stats: Stats) -> np.ndarray:
         """θ = K π of the estimator's fit on `stats` (of the base design); raises what the fit raises."""
         t0 = time.perf_counter()
-        fit = estimators.fit_for(self.robot, self.name, self.lift(stats), self.arm)
+        lifted = self.lift(stats)
+        if self.instruments is not None:
+            lifted = self.instruments.with_online(lifted)
+        fit = estimators.fit_for(self.robot, self.name, lifted, self.arm)
         if not np.isfinite(fit.pi).all():
             raise FloatingPointError(f"the {self.name} fit gave non-finite parameters")
         self.fit, self.refreshed = fit, self.refreshed + 1
@@ -595,7 +635,7 @@ def offline_start(
         dm = datasheet_model(robot, datasheets[key])
         design = ArmDesign(dm.arm)
         return Start(key, design, Estimator("fixed"), dm.pi, design.names, design.jacobian)
-    estimators_of = fitted(robot)
+    estimators_of = fitted(robot, problem.estimator)
     if key not in estimators_of:
         raise ValueError(f"unknown online model {key!r}; known: {', '.join(model_keys(robot))}")
     arm = robot.model(())
@@ -607,7 +647,10 @@ def offline_start(
         stats = base.stats(stats)
     name = estimators_of[key]
     if name not in estimators.ONLINE:
-        estimator = Estimator("cadence", solver=Cadence(robot, name, arm, base, every))
+        instruments = None
+        if name in estimators.INSTRUMENTED:
+            instruments = Instruments(estimators.statistics(arm, [train], name), lift(base, stats))
+        estimator = Estimator("cadence", solver=Cadence(robot, name, arm, base, every, instruments))
         theta0 = estimator.solver.refresh(stats)
     elif full:
         estimator = online_estimator(name, arm, bounds or default_bounds(arm), margin)

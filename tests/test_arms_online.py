@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import json
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -16,11 +17,14 @@ from ident_opt.cli import main
 from ident_opt.consistency import necessarily_nonnegative
 from ident_opt.data import chronological_split, load_dataset
 from ident_opt.errors import InputError
+from ident_opt.identify import estimators
+from ident_opt.identify.iv import InstrumentStats
 from ident_opt.online import offline_start, start_identifier
 from ident_opt.online_kernel import attach
 from ident_opt.problem import load_problem
 from ident_opt.stream import BadLine, LineParser, Mapping, StreamOptions, currents_to_torques, serve
 from ident_opt.studies.online_replay import _standard_errors
+from ident_opt.studies.recommend import chosen
 from tests.test_n_joint_inputs import arm3, workspace  # noqa: F401  (the fixtures)
 
 
@@ -69,6 +73,50 @@ def split(workspace):  # noqa: F811
     trial = load_dataset(workspace / "train.csv", problem.data, problem.robot)
     tr, te = chronological_split(trial.n, 0.7)
     return problem, trial.subset(tr), trial.subset(te)
+
+
+def test_the_start_is_the_recommended_fit_named_with_its_reason(replayed, split):
+    _, js, out = replayed
+    problem, train, _ = split
+    choice = chosen("online", problem.robot, problem.robot.model(()), [train], problem, None)
+    assert (js["estimator"], js["estimator_why"]) == (choice.estimator, choice.why)
+    assert f"**{choice.estimator}**" in (out / "online.md").read_text()
+    cpbr = js["parameters_by_model"]["cpbr"]
+    start = offline_start("cpbr", replace(problem, estimator=choice.estimator), train)
+    assert np.allclose(cpbr["initial"], start.theta0, rtol=1e-9, atol=1e-12)
+
+
+def test_a_robust_start_keeps_its_instruments_at_the_cadence(split):
+    problem, train, test = split
+    robust = replace(problem, estimator="robust")
+    start = offline_start("cpbr", robust, train, every=40)
+    fit = estimators.fit_for(
+        problem.robot, "robust", estimators.statistics(problem.robot.arm, [train], "robust"), problem.robot.arm
+    )
+    assert np.allclose(start.theta0, start.base.project(fit.pi), rtol=1e-9, atol=1e-12)  # the start: the robust fit
+    ident = start_identifier(start, train)
+    D = start.design(test.q[:80], test.dq[:80], test.ddq[:80])
+    for k in range(80):
+        ident.add(D[k], test.tau[k])
+    assert ident.estimator.solver.refreshed == 3 and ident.refresh_failures == 0
+    # at its re-solve (80 samples in), the robust fit on the training instruments plus the online rows as their own
+    online = estimators.statistics(problem.robot.arm, [train], "robust") + InstrumentStats.from_regressors(
+        *(problem.robot.arm.regressor(test.q[:80], test.dq[:80], test.ddq[:80]),) * 2, test.tau[:80]
+    )
+    again = start.base.project(estimators.fit_for(problem.robot, "robust", online, problem.robot.arm).pi)
+    gap = np.sqrt(np.mean((D @ (ident.theta - again)) ** 2)) / np.sqrt(np.mean(test.tau[:80] ** 2))
+    assert gap < 1e-6  # the conic solver's tolerance (as at the consistent fit's own re-solves)
+    plain = start.base.project(
+        estimators.fit_for(problem.robot, problem.robot.default_estimator, online.stats, problem.robot.arm).pi
+    )
+    apart = np.sqrt(np.mean((D @ (plain - again)) ** 2)) / np.sqrt(np.mean(test.tau[:80] ** 2))
+    assert apart > 100 * gap  # the instruments matter: without them the re-solve lands elsewhere
+
+
+def test_an_unknown_estimator_exits_2_writing_nothing(workspace, tmp_path, capsys):  # noqa: F811
+    args = ["online", "--problem", str(workspace / "full.toml"), "--out", str(tmp_path / "o"), "--estimator", "nope"]
+    assert main([*args, "--no-progress"]) == 2
+    assert "--estimator nope" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 
 def test_sign_bounds_are_those_no_consistent_arm_breaks(split):

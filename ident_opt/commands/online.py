@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 from ident_opt.commands.common import (
     add_components,
@@ -33,6 +34,7 @@ from ident_opt.online import CONSISTENT_EVERY, serving_identifier
 from ident_opt.report import online as report
 from ident_opt.stream import Mapping, StreamOptions, currents_to_torques, serve
 from ident_opt.studies.online_replay import replay
+from ident_opt.studies.recommend import chosen
 
 #: Largest accepted --consistent-every.
 MAX_EVERY = 10**7
@@ -88,6 +90,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="random steps at which the online parameters are checked against a batch "
         "re-solve (plus the last step; default 10)",
     )
+    parser.add_argument(
+        "--estimator",
+        metavar="NAME",
+        help="the fit cpbr starts from and follows, among the arm's (default: the recommended fit, chosen from the "
+        "training part's own evidence: the arm's physically consistent fit, or the robust one when noise biases it)",
+    )
     add_components(parser)
 
 
@@ -105,10 +113,15 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--consistent-every must be an integer in [1, {MAX_EVERY}], got {args.consistent_every}")
     loaded = load(args, "online")
     problem, trial = loaded.problem, loaded.train
+    if args.estimator is not None:  # an unknown one fails before any work
+        chosen("online", problem.robot, problem.robot.model(()), [], problem, args.estimator)
     train_idx, test_idx = chronological_split(trial.n, problem.split.train_fraction)
     train, test = trial.subset(train_idx), trial.subset(test_idx)
     if train.n < 20 or test.n < 1:
         raise InputError(f"{trial.source}: too few samples for an offline part and an online part ({trial.n})")
+    choice = chosen("online", problem.robot, problem.robot.model(()), [train], problem, args.estimator)
+    problem = replace(problem, estimator=choice.estimator)
+    print(f"ident-opt online: cpbr starts from the {choice.estimator} fit ({choice.why})", file=sys.stderr)
     if args.stream:
         return _stream(args, problem, train)
     out = output_dir(args, problem)
@@ -124,6 +137,7 @@ def run(args: argparse.Namespace) -> int:
         every=args.consistent_every,
     )
     data = report.payload(result, problem, trial.source, args.cross_covariance)
+    data["estimator"], data["estimator_why"] = choice.estimator, choice.why
     report.write(result, data, out, args.json)
     print(report.terminal(data, out))
     return 0

@@ -177,6 +177,11 @@ def markdown(data: dict, nmse: pd.DataFrame) -> str:
             "",
             data["protocol"] + ".",
             "",
+            *(
+                [f"cpbr starts from the **{data['estimator']}** fit: {data['estimator_why']}.", ""]
+                if "estimator" in data
+                else []
+            ),
             "nMSE (÷ variance of the measured torque) per joint, online (exact re-solves after every sample, "
             "GMR kept consistent by the mean-only transform) vs frozen (offline model, never updated):",
             "",
