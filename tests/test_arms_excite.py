@@ -23,8 +23,13 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_excite_three_joints(workspace, tmp_path, capsys):  # noqa: F811
     out = tmp_path / "traj.csv"
     args = ["excite", "--problem", str(workspace / "full.toml"), "--out", str(out), "--duration", "4"]
-    assert main([*args, "--harmonics", "2", "--starts", "2", "--rate", "200", "--no-progress"]) == 0
+    small = ["--harmonics", "2", "--starts", "2", "--rate", "200", "--no-progress"]
+    assert main([*args, *small, "--workers", "2"]) == 0
     frame = pd.read_csv(out)
+    # the starts in one process give the same design as in two (drawn beforehand; IPOPT is deterministic)
+    one = ["excite", "--problem", str(workspace / "full.toml"), "--out", str(tmp_path / "one.csv"), "--duration", "4"]
+    assert main([*one, *small, "--workers", "1"]) == 0
+    assert pd.read_csv(tmp_path / "one.csv").equals(frame)
     joints = [f"{k}{j}" for k in ("q", "dq", "ddq") for j in (1, 2, 3)]
     assert list(frame.columns) == ["t", *joints, "tau_ff1", "tau_ff2", "tau_ff3"] and len(frame) == 800
     limits = load_problem(workspace / "full.toml").limits
@@ -43,6 +48,13 @@ def test_discriminating_design_is_refused_on_n_joints(workspace, tmp_path, capsy
     assert main([*args, "--criterion", "discriminate", "--between", "asymmetric_coulomb,elasticity"]) == 2
     err = capsys.readouterr().err
     assert "discriminat" in err and "Traceback" not in err and not (tmp_path / "t.csv").exists()
+
+
+def test_workers_out_of_range_exit_2(workspace, tmp_path, capsys):  # noqa: F811
+    args = ["excite", "--problem", str(workspace / "full.toml"), "--out", str(tmp_path / "t.csv")]
+    assert main([*args, "--workers", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "--workers" in err and "Traceback" not in err and not (tmp_path / "t.csv").exists()
 
 
 def test_model_extensions_are_refused_on_n_joints(workspace, tmp_path, capsys):  # noqa: F811

@@ -52,6 +52,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--between", metavar="A,B", help="the two causes a discriminating design tells apart")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the starts (default 0)")
     parser.add_argument("--starts", type=int, default=6, metavar="K", help="random starts (default 6)")
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=excitation.cores(),
+        metavar="K",
+        help=f"processes running the starts at once (default: the cores available, {excitation.cores()} here; the "
+        "design does not depend on it)",
+    )
     parser.add_argument("--harmonics", type=int, metavar="H", help="harmonics per joint (default 5; discriminate: 16)")
     parser.add_argument(
         "--base-hz",
@@ -86,6 +94,8 @@ def _check(args: argparse.Namespace) -> None:
         raise InputError(f"--harmonics must be an integer in [1, {MAX_HARMONICS}], got {args.harmonics}")
     if not 1 <= args.starts <= MAX_STARTS:
         raise InputError(f"--starts must be an integer in [1, {MAX_STARTS}], got {args.starts}")
+    if not 1 <= args.workers <= MAX_STARTS:
+        raise InputError(f"--workers must be an integer in [1, {MAX_STARTS}], got {args.workers}")
     if args.seed < 0:
         raise InputError(f"--seed must be ≥ 0, got {args.seed}")
     if not (math.isfinite(args.rate) and 10.0 <= args.rate <= 10000.0):
@@ -156,10 +166,17 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             rate=args.rate,
             progress=not args.no_progress,
+            workers=args.workers,
         )
     else:
         design = excitation.design(
-            setup, args.criterion, starts=args.starts, seed=args.seed, rate=args.rate, progress=not args.no_progress
+            setup,
+            args.criterion,
+            starts=args.starts,
+            seed=args.seed,
+            rate=args.rate,
+            progress=not args.no_progress,
+            workers=args.workers,
         )
     files = report.write(design, setup, args.out, args.json)
     print(report.terminal(design))

@@ -26,6 +26,8 @@ kept. An infeasible torque limit (below what gravity needs at rest everywhere in
 
 from __future__ import annotations
 
+import multiprocessing
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -651,6 +653,55 @@ def _score(criterion: str, values: dict) -> float:
     return values["discrimination"]
 
 
+def cores() -> int:
+    """The cores this process may run on (the default number of workers of `design`)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+#: The solver and its bounds while `_run_starts` forks its workers (they inherit it: a CasADi solver with Python
+#: callbacks cannot be pickled).
+_FORKED: tuple | None = None
+
+
+def _solve_start(x0: np.ndarray, nlp: tuple | None = None) -> tuple[np.ndarray, dict]:
+    """One IPOPT run of the NLP (`nlp` = (solver, lbg, ubg), else the forked `_FORKED`) from `x0`: its answer
+    and a record (status, convergence, iterations, wall and CPU seconds)."""
+    solver, lbg, ubg = nlp or _FORKED
+    s0, c0 = time.perf_counter(), time.process_time()
+    sol = solver(x0=x0, lbg=lbg, ubg=ubg)
+    stats = solver.stats()
+    return np.array(sol["x"]).ravel(), {
+        "status": stats["return_status"],
+        "converged": bool(stats["success"]),
+        "iterations": int(stats["iter_count"]),
+        "seconds": time.perf_counter() - s0,
+        "cpu_seconds": time.process_time() - c0,
+    }
+
+
+def _run_starts(nlp: tuple, x0s: list[np.ndarray], workers: int, done: Callable[[], object]) -> list:
+    """`_solve_start` from every start in `x0s`, in order; `workers` > 1: that many forked processes at once (each
+    start's answer is the same as in one process: IPOPT is deterministic and the starts are drawn beforehand)."""
+    global _FORKED
+    workers = min(workers, len(x0s))
+    if workers <= 1 or "fork" not in multiprocessing.get_all_start_methods():
+        out = []
+        for x0 in x0s:
+            out.append(_solve_start(x0, nlp))
+            done()
+        return out
+    _FORKED = nlp
+    try:
+        with multiprocessing.get_context("fork").Pool(workers) as pool:
+            out = []
+            for answer in pool.imap(_solve_start, x0s):
+                out.append(answer)
+                done()
+            return out
+    finally:
+        _FORKED = None
+
+
 def design(
     setup: Setup,
     criterion: str = "d",
@@ -663,8 +714,10 @@ def design(
     progress: bool = True,
     max_iter: int = MAX_ITER,
     expand: bool = False,
+    workers: int = 1,
 ) -> Design:
-    """The best of `starts` IPOPT runs from random feasible starts (seeded by `seed`), sampled at `rate` [Hz].
+    """The best of `starts` IPOPT runs from random feasible starts (seeded by `seed`), sampled at `rate` [Hz];
+    `workers`: processes running the starts at once (`_run_starts`; the result does not depend on it).
 
     `objective` (x -> MX to minimise) and `evaluate` ((q, dq, ddq) -> criteria dict) default to the information
     criteria; the discrimination design passes its own. A start that does not converge still counts if its
@@ -682,22 +735,14 @@ def design(
     # One BLAS thread: the callbacks' matrices are small (r × r, r ≈ 70), and on a shared machine a threaded BLAS
     # mostly waits for cores (measured 30× slower per objective evaluation under load).
     blas = threadpool_limits(limits=1)
-    for k in tqdm(range(starts), desc=f"excite ({criterion})", disable=not progress, leave=False):
-        x0 = into_limits(setup, setup.fourier.random(rng, centre))
+    x0s = [into_limits(setup, setup.fourier.random(rng, centre)) for _ in range(starts)]
+    bar = tqdm(total=starts, desc=f"excite ({criterion})", disable=not progress, leave=False)
+    runs = _run_starts((solver, lbg, ubg), x0s, workers, bar.update)
+    bar.close()
+    for k, (x0, (answer, run)) in enumerate(zip(x0s, runs)):
         start_values = evaluate(*setup.fourier.evaluate(x0, grid))
-        s0 = time.perf_counter()
-        sol = solver(x0=x0, lbg=lbg, ubg=ubg)
-        stats = solver.stats()
-        x = repaired(setup, np.array(sol["x"]).ravel())
-        record = {
-            "start": k,
-            "status": stats["return_status"],
-            "converged": bool(stats["success"]),
-            "iterations": int(stats["iter_count"]),
-            "seconds": time.perf_counter() - s0,
-            "feasible": x is not None,
-            "start_criteria": start_values,
-        }
+        x = repaired(setup, answer)
+        record = {"start": k, **run, "feasible": x is not None, "start_criteria": start_values}
         if x is not None:
             record["criteria"] = evaluate(*setup.fourier.evaluate(x, grid))
             if _score(criterion, start_values) > _score(criterion, record["criteria"]) and feasible(setup, x0):

@@ -26,6 +26,7 @@ import argparse
 import dataclasses
 import hashlib
 import json
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -70,6 +71,8 @@ class Benefit:
     trials: pd.DataFrame
     how: str
     seconds: dict
+    workers: int = 1
+    load: float = 0.0  # the 1-minute load average before the design (the machine is shared)
 
     def summary(self, unseen: bool = True) -> dict:
         """Over the unseen (or the development) seeds: the median error of the design and of the random motions
@@ -179,14 +182,19 @@ def run(
     starts: int = 6,
     design: excitation.Design | None = None,
     progress: bool = True,
+    unseen_from: int = UNSEEN_FROM,
+    workers: int = 1,
 ) -> Benefit:
-    """The design (unless given) and the trials of `DEV_SEEDS` and of `seeds` unseen seeds (module doc); `base_hz`:
-    the series' base frequency (`excite --base-hz`; default excite's), the random motions' too."""
+    """The design (unless given) and the trials of `DEV_SEEDS` and of `seeds` unseen seeds from `unseen_from` on
+    (module doc); `base_hz`: the series' base frequency (`excite --base-hz`; default excite's), the random motions'
+    too; `workers`: processes running the design's starts."""
+    if unseen_from <= max(DEV_SEEDS):
+        raise InputError(f"unseen seeds start above the development seeds {DEV_SEEDS}, got {unseen_from}")
     if problem.limits is None:
         raise InputError(f"{problem.path}: section [limits] is required to design an excitation")
-    t0 = time.perf_counter()
+    t0, load = time.perf_counter(), os.getloadavg()[0]
     setup = excitation.make_setup(problem.robot, problem.limits, duration, harmonics=harmonics, base_hz=base_hz)
-    design = design or excitation.design(setup, "d", starts=starts, progress=progress)
+    design = design or excitation.design(setup, "d", starts=starts, progress=progress, workers=workers)
     t_design = time.perf_counter()
     closed_loop = "simulate" in problem.robot.serves and problem.robot.paper_views
     make = simulated_trial if closed_loop else rigid_trial
@@ -197,11 +205,11 @@ def run(
         f"σ_τ = {NOISE_TAU:g} N m, derivatives estimated by the loader"
     )
     rows = []
-    all_seeds = [*DEV_SEEDS, *range(UNSEEN_FROM, UNSEEN_FROM + seeds)]
+    all_seeds = [*DEV_SEEDS, *range(unseen_from, unseen_from + seeds)]
     with tempfile.TemporaryDirectory(prefix="ident_opt_benefit_") as tmp:
         for seed in tqdm(all_seeds, desc="excitation benefit", disable=not progress):
             x_random = random_motion(setup, seed)
-            row = {"seed": seed, "unseen": seed >= UNSEEN_FROM}
+            row = {"seed": seed, "unseen": seed >= unseen_from}
             for label, x in (("design", design.x), ("random", x_random)):
                 data, pi_true = make(problem, setup, x, seed, Path(tmp))
                 row[f"error_{label}"] = trial_error(setup, data, pi_true)
@@ -212,7 +220,7 @@ def run(
             row["ratio"] = row["error_random"] / row["error_design"]
             rows.append(row)
     seconds = {"design": t_design - t0, "trials": time.perf_counter() - t_design}
-    return Benefit(problem.name, setup, design, pd.DataFrame(rows), how, seconds)
+    return Benefit(problem.name, setup, design, pd.DataFrame(rows), how, seconds, workers, load)
 
 
 def payload(b: Benefit) -> dict:
@@ -230,6 +238,10 @@ def payload(b: Benefit) -> dict:
             "criteria": d.criteria,
             "seconds": d.seconds,
             "starts": len(d.starts),
+            "start_cpu_seconds": [r.get("cpu_seconds") for r in d.starts],
+            "start_iterations": [r["iterations"] for r in d.starts],
+            "workers": b.workers,
+            "load_average_before": b.load,
             "converged": d.converged,
             "margins": d.margins,
             "tightest_margin": min(min(m["fraction"]) for m in d.margins.values()),
@@ -249,7 +261,9 @@ def markdown(data: dict) -> str:
         f"## {data['problem']}: {data['joints']} joints, {data['harmonics']} harmonics of {data['base_hz']:g} Hz, "
         f"{data['duration_s']:g} s",
         "",
-        f"D-optimal design in {des['seconds']:.1f} s ({des['starts']} starts, converged: {des['converged']}); "
+        f"D-optimal design in {des['seconds']:.1f} s ({des['starts']} starts on {des['workers']} processes, "
+        f"{sum(des['start_cpu_seconds']):.0f} s of CPU in IPOPT, load average {des['load_average_before']:.1f} "
+        f"before; converged: {des['converged']}); "
         f"tightest limit margin {des['tightest_margin']:.1%} of its limit (1 kHz grid); {data['base_parameters']} "
         f"base parameters. Trials: {data['trials']}.",
         "",
@@ -290,6 +304,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--seeds", type=int, default=20, help="unseen noise seeds (default 20)")
     ap.add_argument("--starts", type=int, default=6)
+    ap.add_argument("--unseen-from", type=int, default=UNSEEN_FROM, help=f"first unseen seed (default {UNSEEN_FROM})")
+    ap.add_argument("--workers", type=int, default=excitation.cores(), help="processes running the design's starts")
     ap.add_argument("--out", default=str(ROOT / "results"))
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
@@ -297,7 +313,17 @@ def main(argv: list[str] | None = None) -> int:
     if len(hz) != len(args.problem):
         raise SystemExit("give --base-hz once per --problem, or not at all")
     runs = [
-        payload(run(load_problem(p), seeds=args.seeds, starts=args.starts, base_hz=f, progress=not args.no_progress))
+        payload(
+            run(
+                load_problem(p),
+                seeds=args.seeds,
+                starts=args.starts,
+                base_hz=f,
+                progress=not args.no_progress,
+                unseen_from=args.unseen_from,
+                workers=args.workers,
+            )
+        )
         for p, f in zip(args.problem, hz)
     ]
     out = Path(args.out)

@@ -38,6 +38,7 @@ from ident_opt.report import record
 from ident_opt.stream import Mapping, StreamOptions, currents_to_torques, serve
 from ident_opt.studies.online_codegen import verify
 from ident_opt.studies.online_replay import _standard_errors, replay
+from ident_opt.studies.recommend import chosen
 
 ROOT = Path(__file__).resolve().parents[2]
 PROBLEMS = ("kuka_lwr4", "franka_panda", "staubli_tx40")
@@ -131,6 +132,8 @@ def arm_figures(name: str, folder: Path) -> dict:
     problem = load_problem(path)
     trial = load_dataset(problem.data.trials[0], problem.data, problem.robot)
     tr, te = chronological_split(trial.n, problem.split.train_fraction)
+    choice = chosen("online", problem.robot, problem.robot.model(()), [trial.subset(tr)], problem, None)
+    problem = dataclasses.replace(problem, estimator=choice.estimator)  # as `ident-opt online` starts cpbr
     r = replay(
         problem,
         trial.subset(tr),
@@ -151,6 +154,8 @@ def arm_figures(name: str, folder: Path) -> dict:
         "problem": problem.name,
         "joints": problem.robot.n_joints,
         "base_parameters": len(r.starts["pbr"].names),
+        "cpbr_estimator": choice.estimator,
+        "cpbr_estimator_why": choice.why,
         "offline_samples": int(r.train.n),
         "online_samples": int(r.n),
         "batch_check": r.batch_check,
@@ -210,7 +215,8 @@ def markdown(rows: list[dict]) -> str:
             continue
         last = c["at_re_solves"][-1] if c["at_re_solves"] else None
         lines.append(
-            f"- {r['problem']}: {len(c['sign_bounds'])} sign bounds held exactly (least slack "
+            f"- {r['problem']} (cpbr: the {r['cpbr_estimator']} fit, recommended because {r['cpbr_estimator_why']}): "
+            f"{len(c['sign_bounds'])} sign bounds held exactly (least slack "
             f"{c['sign_bound_least_slack']:.3g}); {c['re_solves']} re-solves in {c['re_solve_seconds']:.1f} s, least "
             f"pseudo-inertia eigenvalue {c['least_lmi_eigenvalue']:.3g} kg·m²"
             + (
