@@ -63,6 +63,7 @@ def test_sign_bounds_exact_and_the_lmis_at_the_cadence(replayed):
     assert c["least_lmi_eigenvalue"] >= 0.0  # every re-solve consistent
     assert len(c["at_re_solves"]) == c["re_solves"] - 1  # the offline start is the first re-solve
     assert all(len(r["torque_rms_difference"]) == 3 for r in c["at_re_solves"])
+    assert all(min(r["held_torque_rms_difference"]) > 0 for r in c["at_re_solves"])  # the re-solves move cpbr
     cadence = js["batch_check_detail"]["cadence_by_model"]["cpbr"]
     assert cadence["max_torque_rms_difference"] < 1e-6  # the conic solver's tolerance, at its own re-solves
 

@@ -217,16 +217,19 @@ def _consistency_lines(data: dict) -> list[str]:
     if c["at_re_solves"]:
         lines += [
             "Distance of pbr's online parameters to the consistent re-solve at each re-solve: RMS of the difference "
-            "of their torques over every sample seen, per joint [N m] (÷ the consistent fit's residual RMS):",
+            "of their torques over every sample seen, per joint [N m] (÷ the consistent fit's residual RMS); and "
+            "cpbr as held until then (the previous re-solve) against the new one:",
             "",
-            "| samples seen | torque RMS difference [N m] | ÷ residual RMS | parameters: median, largest \\|Δ\\|/SE |",
-            "|---|---|---|---|",
+            "| samples seen | torque RMS difference [N m] | ÷ residual RMS | parameters: median, largest \\|Δ\\|/SE | "
+            "cpbr held: torque RMS difference [N m] | ÷ residual RMS |",
+            "|---|---|---|---|---|---|",
         ]
         for row in c["at_re_solves"]:
             se = row["parameter_difference_in_se"]
             lines.append(
                 f"| {row['samples_seen']} | {_list(row['torque_rms_difference'])} | "
-                f"{_list(row['relative_to_residual'])} | {se['median']:.3g}, {se['max']:.3g} |"
+                f"{_list(row['relative_to_residual'])} | {se['median']:.3g}, {se['max']:.3g} | "
+                f"{_list(row['held_torque_rms_difference'])} | {_list(row['held_relative_to_residual'])} |"
             )
         lines.append("")
     return lines

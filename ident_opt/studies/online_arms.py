@@ -223,7 +223,9 @@ def markdown(rows: list[dict]) -> str:
                 f"; at the last re-solve ({last['samples_seen']} samples) pbr's torques differ from the consistent "
                 f"fit's by {' / '.join(f'{v:.3g}' for v in last['torque_rms_difference'])} N·m RMS "
                 f"({' / '.join(f'{v:.2f}' for v in last['relative_to_residual'])} of its residual RMS), parameters "
-                f"median {last['parameter_difference_in_se']['median']:.2g} SE"
+                f"median {last['parameter_difference_in_se']['median']:.2g} SE; cpbr as held until then differs "
+                f"from the re-solve by {' / '.join(f'{v:.3g}' for v in last['held_torque_rms_difference'])} N·m RMS "
+                f"({' / '.join(f'{v:.2f}' for v in last['held_relative_to_residual'])} of the residual RMS)"
                 if last
                 else ""
             )

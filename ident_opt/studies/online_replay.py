@@ -222,7 +222,8 @@ def consistency_check(
 ) -> dict | None:
     """How far PBR's exact, sign-bounded online parameters are from the from-scratch consistent fit (CPBR re-solved
     at a cadence) at each of its re-solves: per joint, the RMS difference of their torques over every sample seen
-    [N m] and that ÷ the consistent fit's own residual RMS; the parameters' difference in PBR's standard errors
+    [N m] and that ÷ the consistent fit's own residual RMS, and the same for CPBR as held until then (the previous
+    re-solve's parameters: how stale the cadence lets it get); the parameters' difference in PBR's standard errors
     (`_standard_errors`: median, largest); the sign bounds' least slack over every replayed sample (≥ 0: they held
     exactly); the LMIs' least eigenvalue at the re-solves [kg m²] (`Arm.min_mass_eigenvalue`). None unless CPBR is
     re-solved at a cadence and PBR is on the same base parameters."""
@@ -239,12 +240,16 @@ def consistency_check(
         delta = np.sqrt(np.mean((D @ gap) ** 2, axis=0))
         residual = np.sqrt(np.mean((tau - D @ theta["cpbr"][i]) ** 2, axis=0))
         in_se = np.abs(gap) / _standard_errors(D, tau, theta["pbr"][i])
+        # CPBR as held until this re-solve (the previous one's parameters) against the re-solve: its staleness.
+        held = np.sqrt(np.mean((D @ (theta["cpbr"][i - 1] - theta["cpbr"][i])) ** 2, axis=0)) if i > 0 else delta * 0
         rows.append(
             {
                 "samples_seen": int(train.n + i + 1),
                 "torque_rms_difference": delta.tolist(),
                 "relative_to_residual": (delta / np.maximum(residual, 1e-300)).tolist(),
                 "parameter_difference_in_se": {"median": float(np.median(in_se)), "max": float(in_se.max())},
+                "held_torque_rms_difference": held.tolist(),
+                "held_relative_to_residual": (held / np.maximum(residual, 1e-300)).tolist(),
             }
         )
     lower = pbr.estimator.bounds.lower
