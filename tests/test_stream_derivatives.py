@@ -88,6 +88,7 @@ def test_exp2_stream_with_t_q_i_only_matches_the_batch_fit(physical_problem, exp
             timeout=600,
         )
     assert done.returncode == 0, done.stderr[-2000:]
+    assert "ident-opt online: cpbr starts from the constrained fit (" in done.stderr  # the recommended fit, why
     final = json.loads(final_path.read_text())["final"]
     assert final["derivatives"]["estimated"] and final["derivatives"]["delay_samples"] > 0
     assert final["updates"] + final["outliers"] + final["derivatives"]["lost"] == len(raw)
