@@ -8,7 +8,8 @@ check), with the criteria it reached next to those of its best random start, and
 (this process's and its workers', summed: on a shared machine the wall clock also counts other people's work; on an
 idle machine with K cores the design's wall clock is about that sum ÷ K when the starts dominate). Targets: the
 planar arm's D-optimal design (2 joints × 5 harmonics × 20 s) in ≤ 30 s on 2 cores (issue 15); the 7-joint one
-(7 joints × 5 harmonics × 20 s) in ≤ 120 s on 2 cores (issue 28). The planar arm's noise σ: the datasheet residual on exp1; the KUKA's: 1 N m.
+(7 joints × 5 harmonics × 20 s) in ≤ 120 s on 2 cores (issue 28). The planar arm's noise σ: the datasheet
+residual on exp1; the KUKA's: 1 N m.
 """
 
 from __future__ import annotations
