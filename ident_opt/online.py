@@ -22,13 +22,17 @@ ill-conditioned (κ(Y)² of 1e7 to 1e12 on real trials), so their statistics are
 rows (`identify.bounded.FactorBoundedLS`: a QR of (P + n) × P per sample, never YᵀY), as the generated update keeps
 them too.
 
-CPBR follows the arm's default estimator (`Robot.default_estimator`, through `models.fitted`: the one place that
-names it). Where that estimator has an exact online counterpart (`estimators.ONLINE`: the planar arm's constrained
-fit → M(q) ≻ 0 ∀q + friction ≥ 0, `identify.bounded.WarmConsistentLS`) it is re-solved after every sample. An
+CPBR follows the fit the problem names (`Problem.estimator`: `ident-opt online` sets the recommended one,
+`studies.recommend`, or --estimator's; else the arm's default estimator, `Robot.default_estimator`; through
+`models.fitted`, the one place that names it). Where that estimator has an exact online counterpart
+(`estimators.ONLINE`: the planar arm's constrained fit → M(q) ≻ 0 ∀q + friction ≥ 0,
+`identify.bounded.WarmConsistentLS`) it is re-solved after every sample. An
 n-joint arm's consistent fit (per-link pseudo-inertia LMIs, with its log-det prior) is a conic program of tens to
 hundreds of milliseconds: it is re-solved from scratch on the exact statistics every `CONSISTENT_EVERY` samples
 (`Cadence`; the LMIs then hold exactly, and its parameters stay as they are in between), while PBR gives the exact
 sign-bounded parameters after every sample; the replay measures how far those are from the consistent re-solve.
+The robust fit (instrumental variables) is re-solved at the cadence too, with the training part's instruments and the
+online samples as their own (`Instruments`).
 
 The GMR residual model r = τ − Dθ was trained offline with θ0. When θ moves by Δθ = θ − θ0 the residual
 it should model moves by −D(x)Δθ; the paper's mean-only consistency transform shifts each component's
