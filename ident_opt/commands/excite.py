@@ -200,6 +200,7 @@ def _proof(args: argparse.Namespace, problem, trial) -> int:
         between=args.between or "asymmetric_coulomb,elasticity",
         starts=args.starts,
         progress=not args.no_progress,
+        workers=args.workers,
     )
     report.write_proof(proof, args.out)
     print(report.proof_terminal(proof, Path(args.out)))
