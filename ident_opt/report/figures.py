@@ -198,9 +198,11 @@ def audit_torque_figure(trial, predictions: dict[str, np.ndarray], path: Path) -
     return _save(fig, path, dpi=120)
 
 
-def online_trajectories_figure(names: tuple[str, ...], theta: dict, theta0: dict, path: Path) -> Path:
+def online_trajectories_figure(
+    names: tuple[str, ...], theta: dict, theta0: dict, path: Path, title: str | None = None
+) -> Path:
     """Parameters over an online replay, one panel per parameter: `theta` model key -> (N, P) trajectory,
-    `theta0` model key -> the offline values (P,) drawn dotted."""
+    `theta0` model key -> the offline values (P,) drawn dotted; `title` (default: the planar arm's units)."""
     cols = 3
     rows = int(np.ceil(len(names) / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(11, 2.4 * rows), sharex=True)
@@ -214,7 +216,7 @@ def online_trajectories_figure(names: tuple[str, ...], theta: dict, theta0: dict
         ax.set_visible(False)
     axes.flat[0].legend(fontsize=7)
     fig.supxlabel("online samples")
-    fig.suptitle("Online parameter trajectories (dotted: offline fit); a kg·m², b N·m, fv N·m·s/rad, fc N·m")
+    fig.suptitle(title or "Online parameter trajectories (dotted: offline fit); a kg·m², b N·m, fv N·m·s/rad, fc N·m")
     fig.tight_layout()
     return _save(fig, path, dpi=120)
 
