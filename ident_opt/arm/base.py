@@ -213,6 +213,10 @@ class Robot(Protocol):
     described_as: str
     #: Whether the paper's own views apply (its shuffled protocol, its tables): the planar two-link arm's.
     paper_views: bool
+    #: Which simulator and diagnosis serve it: "planar" (the two-link closed form's own, tuned on the MERIt trials:
+    #: grouped π, flexible links, the paper's trajectories) or "arm" (any n joints, through `Arm` and `Robot` alone:
+    #: `simulate.arm_plant`, `diagnosis.arm_fit`).
+    engine: str
 
     @property
     def column_map(self) -> Mapping[str, tuple[float, float]]:
@@ -247,6 +251,11 @@ class Robot(Protocol):
 
     def datasheets(self) -> dict[str, tuple[Arm, np.ndarray]]:
         """The nominal parameter sets (datasheet, URDF/CAD) by name, each with the arm it is evaluated with."""
+        ...
+
+    def payload(self, mass: float, com) -> np.ndarray:
+        """Δπ of the model for a point mass `mass` [kg] rigidly attached to the last link, at `com` (3,) [m] in its
+        frame (the planar arm's sits at the tip of link 2: its `com` is None)."""
         ...
 
     def bodies(self, arm: Arm, pi: np.ndarray, **options):

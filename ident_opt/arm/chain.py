@@ -234,6 +234,15 @@ class ChainArm:
             pi[N_LINK * i : N_LINK * (i + 1)] = self._model.inertias[i + 1].toDynamicParameters()
         return pi
 
+    def point_mass(self, mass: float, com) -> np.ndarray:
+        """Δπ (P,) of a point mass `mass` [kg] at `com` (3,) [m] in the last link's frame, rigidly attached to it:
+        its 10 standard parameters (m, m c, m (|c|² 1 − c cᵀ) about the frame's origin) on the last link, 0
+        elsewhere."""
+        out = np.zeros(self.n_params)
+        point = pin.Inertia(float(mass), np.asarray(com, dtype=float), np.zeros((3, 3)))
+        out[N_LINK * (self.n_joints - 1) : N_LINK * self.n_joints] = point.toDynamicParameters()
+        return out
+
     def link_masses(self, pi: np.ndarray) -> dict[str, float]:
         """Each moving link's mass [kg] at π."""
         return {link: float(pi[N_LINK * i]) for i, link in enumerate(self.links)}
@@ -432,12 +441,14 @@ class ChainRobot:
 
     # ------------------------------------------------------------------ the `Robot` interface
     #: The commands that serve an n-joint arm.
-    serves = frozenset(("identify", "compare", "codegen", "check", "export", "fleet"))
+    serves = frozenset(("identify", "compare", "codegen", "check", "export", "fleet", "simulate"))
     #: The fits `compare` runs, in report order: OLS on the base parameters, consistent without and with the
     #: URDF as a prior (`ident_opt.identify.estimators`).
     estimators = ("ols", "constrained", "consistent")
     #: The fit used downstream unless told otherwise: consistent and plausible.
     default_estimator = "consistent"
+    #: The simulator and the diagnosis that serve it: those of any arm, through the `Arm` interface alone.
+    engine = "arm"
     model_note = None
     paper_views = False
     #: The nominal model's key in `datasheets()`.
@@ -506,6 +517,11 @@ class ChainRobot:
         if arm != self.arm:
             raise ValueError("an n-joint arm is realised with its own model, robot.arm")
         return chain_bodies(self, pi, **options)
+
+    def payload(self, mass: float, com) -> np.ndarray:
+        """Δπ (P,) of the model (`arm`) for a point mass `mass` [kg] at `com` (3,) [m] on the last link
+        (`ChainArm.point_mass`)."""
+        return self.arm.point_mass(mass, com)
 
     def datasheets(self) -> dict[str, tuple[ChainArm, np.ndarray]]:
         """The nominal model: the URDF's inertials with each joint's nominal friction and armature."""

@@ -13,7 +13,7 @@ conventions"):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -125,6 +125,9 @@ class PlanarRobot:
     estimators = ("ols", "constrained", "nlp_physical")
     #: The fit used downstream unless told otherwise.
     default_estimator = "constrained"
+    #: The simulator and the diagnosis that serve it: the planar two-link arm's own, tuned on the MERIt trials
+    #: (its datasheet conventions, flexible links, trajectories and candidate models in grouped parameters).
+    engine = "planar"
     angle_convention = ANGLE_CONVENTION
     described_as = "a planar two-link arm"
     paper_views = True
@@ -167,6 +170,14 @@ class PlanarRobot:
         if self.description == "inertials" and any(j.rotor_inertia > 0 for j in self.joints):
             return "armature, as the robot states a rotor inertia behind a gear"
         return None
+
+    def payload(self, mass: float, com=None) -> np.ndarray:
+        """Δπ of the physical-convention model (`planar.PHYSICAL`) for a point mass `mass` [kg] at the tip of
+        link 2 (π is affine in it); the planar arm's payload sits there, so `com` must be None."""
+        if com is not None:
+            raise InputError("the planar two-link arm's payload is a point mass at the tip of link 2: it takes no com")
+        heavier = replace(self, payload_mass=self.payload_mass + float(mass))
+        return PHYSICAL.vector(datasheet_pi(heavier, "physical")) - PHYSICAL.vector(datasheet_pi(self, "physical"))
 
     def datasheets(self) -> dict[str, tuple[PlanarArm, np.ndarray]]:
         """The datasheet read both ways, each with the arm it is evaluated with: "paper" (its printed gravity

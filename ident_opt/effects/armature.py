@@ -10,12 +10,15 @@ from __future__ import annotations
 from ident_opt.effects.base import Effect, Key, np, report
 from ident_opt.parameters import Parameter
 
+#: An n-joint arm's default extra inertia, as a share of each joint's nominal diagonal inertia.
+ARM_SHARE = 0.3
+
 
 class Armature(Effect):
     summary = "extra reflected rotor inertia on the diagonal of M, beyond the datasheet's"
     order = 1
     keys = {  # noqa: RUF012
-        "inertia": Key("pair", (0.25, 0.025), "kg m^2, joint side, per joint", magnitude=True),
+        "inertia": Key("pair", (0.25, 0.025), "kg m^2, joint side, per joint", magnitude=True, maximum=1e3),
     }
 
     # ------------------------------------------------------------------ model: ia2 on M22
@@ -36,6 +39,14 @@ class Armature(Effect):
 
     def true_physical(self, physical: dict, p: dict) -> None:
         physical["armature"] = [a + J for a, J in zip(physical["armature"], p["inertia"])]
+
+    # ------------------------------------------------------------------ any arm: J on the diagonal of M
+    def arm_default(self, key: str, joints) -> object:
+        """An n-joint arm: a third of each joint's nominal diagonal inertia (`ArmScale.inertia`)."""
+        return tuple(ARM_SHARE * J for J in joints.scale.inertia)
+
+    def arm_plant(self, plant, p: dict) -> None:
+        plant.inertia = plant.inertia + np.asarray(p["inertia"])
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("inertia",)

@@ -13,6 +13,9 @@ from ident_opt.parameters import Parameter
 
 #: Least direction difference |fc+ − fc−|, relative to the joint's mean level, that makes friction asymmetric.
 ASYMMETRY = 0.1
+#: An n-joint arm's default: levels ±40 % about the mean, which is 2 % of the joint's reference torque where the
+#: datasheet gives no Coulomb friction.
+ARM_SPLIT, ARM_LEVEL = 0.4, 0.02
 
 
 def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
@@ -24,8 +27,8 @@ class AsymmetricCoulomb(Effect):
     summary = "Coulomb friction that differs by direction (replaces the datasheet mean)"
     order = 2
     keys = {  # noqa: RUF012
-        "positive": Key("pair", None, "N m, level for dq > 0 (default: the datasheet's, x gear ratio)"),
-        "negative": Key("pair", None, "N m, level for dq < 0 (default: the datasheet's, x gear ratio)"),
+        "positive": Key("pair", None, "N m, level for dq > 0 (default: the datasheet's, x gear ratio)", maximum=1e4),
+        "negative": Key("pair", None, "N m, level for dq < 0 (default: the datasheet's, x gear ratio)", maximum=1e4),
     }
 
     def default(self, key: str, coulomb: tuple[tuple, tuple]) -> object:
@@ -36,6 +39,16 @@ class AsymmetricCoulomb(Effect):
         p["positive"] = tuple(m + s * (v - m) for m, v in zip(mean, p["positive"]))
         p["negative"] = tuple(m + s * (v - m) for m, v in zip(mean, p["negative"]))
         return p
+
+    def untouched(self, key: str, joint: int, joints) -> float:
+        return _mean(joints)[joint]
+
+    def arm_default(self, key: str, joints) -> object:
+        """An n-joint arm: ±`ARM_SPLIT` about the datasheet's mean level, or about `ARM_LEVEL` × the joint's
+        reference torque where the datasheet has none."""
+        sign = 1.0 if key == "positive" else -1.0
+        levels = [m if m > 0 else ARM_LEVEL * T for m, T in zip(_mean(joints), joints.scale.torque)]
+        return tuple(m * (1 + sign * ARM_SPLIT) for m in levels)
 
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
         mean = _mean(coulomb)
@@ -74,6 +87,9 @@ class AsymmetricCoulomb(Effect):
     def true_physical(self, physical: dict, p: dict) -> None:
         physical["fc_positive"], physical["fc_negative"] = list(p["positive"]), list(p["negative"])
         physical["fc"] = [0.5 * (a + b) for a, b in zip(p["positive"], p["negative"])]
+
+    def arm_plant(self, plant, p: dict) -> None:
+        plant.positive, plant.negative = np.array(p["positive"]), np.array(p["negative"])
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("positive", "negative")

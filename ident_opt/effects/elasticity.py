@@ -39,6 +39,7 @@ from ident_opt.effects.base import (
     signals,
     sim,
 )
+from ident_opt.errors import InputError
 
 #: Joint-2 angles [rad] the trajectories reach: |q2| ≤ 1.4 rad (the band of the mode over the workspace).
 Q2_RANGE = (0.0, 1.4)
@@ -48,6 +49,9 @@ Q2_RANGE = (0.0, 1.4)
 ELASTIC_BAND_HZ = (1.5, 12.0)
 #: Relative tolerance on a hidden mode's frequency.
 FREQUENCY_TOL = 0.20
+#: Highest mode the simulator accepts [Hz]: a stiffer spring is a rigid joint at any control rate it runs at
+#: (and its RK4 steps would grow without bound; `arm_loop.MAX_SUBSTEPS` bounds them too).
+MAX_FREQUENCY_HZ = 500.0
 
 
 @dataclass(frozen=True)
@@ -186,9 +190,11 @@ class Elasticity(Effect):
     summary = "a lightly damped mode: an elastic joint (two-mass, motor angle logged) or a flexible link"
     order = 4
     keys = {  # noqa: RUF012
-        "joint": Key("joint", 2, "1 or 2"),
-        "frequency_hz": Key("float", 3.0, "Hz, the mode's natural frequency with the joints held", 0.0, True),
-        "damping": Key("float", 0.02, "damping ratio of that mode"),
+        "joint": Key("joint", 2, "the elastic joint: 1 or 2 (1 … n, or its name, on an n-joint arm)"),
+        "frequency_hz": Key(
+            "float", 3.0, "Hz, the mode's natural frequency with the joints held", 0.0, True, maximum=MAX_FREQUENCY_HZ
+        ),
+        "damping": Key("float", 0.02, "damping ratio of that mode", maximum=10.0),
         "kind": Key(
             "choice",
             "joint",
@@ -210,6 +216,30 @@ class Elasticity(Effect):
     def mechanism(self, plant, p: dict) -> Elastic:
         make = elastic_joint if p["kind"] == "joint" else flexible
         return make(plant, p["joint"] - 1, p["frequency_hz"], p["damping"])
+
+    # ------------------------------------------------------------------ any arm: a two-mass joint
+    def arm_mechanism(self, plant, p: dict) -> tuple[int, float, float]:
+        if p["kind"] != "joint":
+            raise InputError(
+                f"effect elasticity: kind={p['kind']} is the planar two-link arm's flexible link; on "
+                f"{plant.robot.described_as} an elastic joint is kind=joint"
+            )
+        return p["joint"] - 1, p["frequency_hz"], p["damping"]
+
+    def arm_truth(self, plant, p: dict) -> dict:
+        e = plant.elastic
+        return {
+            "joint": e.index + 1,
+            "joint_name": plant.robot.joint_names[e.index],
+            "kind": "joint",
+            "frequency_hz": e.frequency_hz,
+            "damping": e.damping,
+            "stiffness": e.k,
+            "damper": e.d,
+            "motor_inertia": e.B,
+            "motor_inertia_added": e.motor_added,
+            "link_inertia": e.J_link,
+        }
 
     def truth_entry(self, truth, p: dict) -> dict:
         e = truth.elastic

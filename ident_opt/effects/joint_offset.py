@@ -36,7 +36,7 @@ CENTRE_ITERATIONS = 6
 class JointOffset(Effect):
     summary = "encoder zero offsets: the true angle is the logged q + offset"
     order = 7
-    keys = {"offset": Key("pair", (0.02, -0.03), "rad, per joint", None, magnitude=True)}  # noqa: RUF012
+    keys = {"offset": Key("pair", (0.02, -0.03), "rad, per joint", None, magnitude=True, maximum=4 * math.pi)}  # noqa: RUF012
 
     # ------------------------------------------------------------------ model: G rotated by δ
     parameters = (
@@ -64,6 +64,13 @@ class JointOffset(Effect):
     # ------------------------------------------------------------------ simulator: the encoders' zero
     def true_plant(self, plant, p: dict) -> None:
         plant.offset = [a + b for a, b in zip(plant.offset, p["offset"])]
+
+    def arm_default(self, key: str, joints) -> object:
+        """An n-joint arm: the planar default's two values in turn, 0.02 and −0.03 rad."""
+        return tuple(self.keys[key].default[j % 2] for j in range(joints.n))
+
+    def arm_plant(self, plant, p: dict) -> None:
+        plant.offset = plant.offset + np.asarray(p["offset"])
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("offset",)

@@ -23,12 +23,15 @@ class LoadFriction(Effect):
     summary = "Coulomb friction that grows with the transmitted torque: fc + mu |tau_load|"
     order = 9
     keys = {  # noqa: RUF012
-        "coefficient": Key("pair", (0.1, 0.1), "mu per joint, dimensionless", magnitude=True),
+        "coefficient": Key("pair", (0.1, 0.1), "mu per joint, dimensionless (< 0.9)", magnitude=True, maximum=0.9),
     }
 
     # ------------------------------------------------------------------ simulator: friction on the link torque
     def true_plant(self, plant, p: dict) -> None:
         plant.load_friction = [a + b for a, b in zip(plant.load_friction, p["coefficient"])]
+
+    def arm_plant(self, plant, p: dict) -> None:
+        plant.load_friction = plant.load_friction + np.asarray(p["coefficient"])
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("coefficient",)

@@ -6,19 +6,59 @@ Y·∂π/∂m (π is affine in a tip mass m), m ≥ 0, against the datasheet.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 from ident_opt.effects.base import Effect, Key, cands, datasheet, np, report, signals
+from ident_opt.errors import InputError
+
+#: Heaviest payload the simulator accepts [kg].
+MAX_MASS = 1e3
+#: An n-joint arm's default payload: this share of its moving links' mass, at `ARM_COM` [m] in the last link's frame.
+ARM_SHARE, ARM_COM = 0.05, (0.0, 0.0, 0.05)
 
 
 class Payload(Effect):
     summary = "an unmodelled point mass at the tip of link 2"
     order = 5
-    keys = {"mass": Key("float", 0.2, "kg", magnitude=True)}  # noqa: RUF012
+    keys = {  # noqa: RUF012
+        "mass": Key("float", 0.2, "kg", magnitude=True, maximum=MAX_MASS),
+        "com": Key(
+            "vector", None, "m, centre of mass in the last link's frame (n-joint arms; default [0,0,0.05])", None
+        ),
+    }
+
+    def checked(self, params: dict, where: str, coulomb) -> dict:
+        full = super().checked(params, where, coulomb)
+        reach = getattr(getattr(coulomb, "scale", None), "reach", None)
+        if full["com"] is not None and reach is not None and math.dist(full["com"], (0.0, 0.0, 0.0)) > reach:
+            raise InputError(
+                f"effect {where!r}: the payload's centre of mass {list(full['com'])} m lies "
+                f"{math.dist(full['com'], (0.0, 0.0, 0.0)):.3g} m from the last link's frame, beyond the arm's "
+                f"length ({reach:.3g} m): a payload rides on the last link"
+            )
+        return full
+
+    def arm_default(self, key: str, joints) -> object:
+        """An n-joint arm: `ARM_SHARE` of its moving mass, `ARM_COM` m out along the last link's z."""
+        return ARM_SHARE * (joints.scale.mass or 4.0) if key == "mass" else ARM_COM
 
     # ------------------------------------------------------------------ simulator: the robot carries it
     def true_robot(self, robot, p: dict):
+        if p.get("com") is not None:
+            raise InputError(
+                "effect payload: the planar two-link arm's payload is a point mass at the tip of link 2; it takes no com"
+            )
         return replace(robot, payload_mass=robot.payload_mass + p["mass"])
+
+    def truth_entry(self, truth, p: dict) -> dict:
+        return {"mass": p["mass"]}
+
+    def arm_plant(self, plant, p: dict) -> None:
+        plant.pi = plant.pi + plant.robot.payload(p["mass"], p["com"])
+
+    def arm_truth(self, plant, p: dict) -> dict:
+        return {"mass": p["mass"], "com": list(p["com"])}
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("mass",)

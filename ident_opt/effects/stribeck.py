@@ -36,6 +36,8 @@ from ident_opt.parameters import Parameter
 
 #: The default excess of the static level over the datasheet's mean Coulomb level [N m], per joint.
 DEFAULT_EXCESS = (0.3, 0.2)
+#: An n-joint arm's default excess, as a share of each joint's reference torque (`ArmScale.torque`).
+ARM_EXCESS = 0.02
 
 
 def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
@@ -77,8 +79,10 @@ class Stribeck(Effect):
     summary = "friction excess fs sgn(dq) exp(-(dq/vs)^2) above the Coulomb level at low speed"
     order = 3
     keys = {  # noqa: RUF012
-        "static": Key("pair", None, "N m, static (breakaway) level fs per joint (default: datasheet fc + [0.3,0.2])"),
-        "velocity": Key("pair", (0.05, 0.05), "rad/s, Stribeck velocity vs, per joint", 0.0, True),
+        "static": Key(
+            "pair", None, "N m, static (breakaway) level fs per joint (default: datasheet fc + [0.3,0.2])", maximum=1e4
+        ),
+        "velocity": Key("pair", (0.05, 0.05), "rad/s, Stribeck velocity vs, per joint", 0.0, True, maximum=100.0),
     }
 
     def default(self, key: str, coulomb: tuple[tuple, tuple]) -> object:
@@ -93,6 +97,24 @@ class Stribeck(Effect):
 
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
         return any(v != m for m, v in zip(_mean(coulomb), p["static"]))
+
+    def untouched(self, key: str, joint: int, joints) -> float:
+        return _mean(joints)[joint] if key == "static" else self.keys["velocity"].default[0]
+
+    def arm_default(self, key: str, joints) -> object:
+        """An n-joint arm: a static level `ARM_EXCESS` × the joint's reference torque above the datasheet's mean."""
+        if key == "static":
+            return tuple(m + ARM_EXCESS * T for m, T in zip(_mean(joints), joints.scale.torque))
+        return super().arm_default(key, joints)
+
+    # ------------------------------------------------------------------ any arm: the excess on the joint's velocity
+    def arm_plant(self, plant, p: dict) -> None:
+        mean = 0.5 * (plant.positive + plant.negative)  # the plant's own Coulomb level (asymmetric_coulomb first)
+        plant.excess = np.array(p["static"]) - mean
+        plant.velocity = np.array(p["velocity"])
+
+    def arm_truth(self, plant, p: dict) -> dict:
+        return {**p, "static_excess": plant.excess.tolist()}
 
     # ------------------------------------------------------------------ model: fsj sgn(dq_j) exp(−(dq_j/vs_j)²)
     parameters = tuple(

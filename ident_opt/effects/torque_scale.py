@@ -24,7 +24,9 @@ class TorqueScale(Effect):
     summary = "the logged torque is off by a factor per joint: the true joint torque is s x the logged one"
     order = 8
     keys = {  # noqa: RUF012
-        "scale": Key("pair", (1.1, 1.0), "s per joint (1: untouched); this effect's own scale", 0.0, True),
+        "scale": Key(
+            "pair", (1.1, 1.0), "s per joint (1: untouched); this effect's own scale", 0.0, True, maximum=100.0
+        ),
     }
 
     # ------------------------------------------------------------------ syntax: `scale` is the factor itself
@@ -32,8 +34,13 @@ class TorqueScale(Effect):
         return self.keys[key] if key in self.keys else super().key(key, where)
 
     def complete(self, params: dict, where: str, coulomb: tuple[tuple, tuple]) -> dict:
-        full = {k: self.check(k, v, where) for k, v in params.items()}
-        return {"scale": full.get("scale", self.keys["scale"].default)}
+        return self.checked(params, where, coulomb)
+
+    def untouched(self, key: str, joint: int, joints) -> float:
+        return 1.0
+
+    def arm_default(self, key: str, joints) -> object:
+        return (1.1,) + (1.0,) * (joints.n - 1)
 
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
         return any(s != 1.0 for s in p["scale"])
@@ -46,6 +53,9 @@ class TorqueScale(Effect):
     # ------------------------------------------------------------------ simulator: the logged channel / s
     def true_plant(self, plant, p: dict) -> None:
         plant.channel.append(partial(_logged, p["scale"]))
+
+    def arm_plant(self, plant, p: dict) -> None:
+        self.true_plant(plant, p)
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("scale",)
@@ -71,7 +81,7 @@ class TorqueScale(Effect):
 
 
 def _logged(scale: tuple[float, float], t: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """The torque (N, 2) [N m] as logged: the true τ / s per joint."""
+    """The torque (N, n) [N m] as logged: the true τ / s per joint."""
     return tau / np.asarray(scale)
 
 
