@@ -441,7 +441,7 @@ class ChainRobot:
 
     # ------------------------------------------------------------------ the `Robot` interface
     #: The commands that serve an n-joint arm.
-    serves = frozenset(("identify", "compare", "codegen", "check", "export", "fleet", "simulate"))
+    serves = frozenset(("identify", "compare", "codegen", "check", "export", "fleet", "simulate", "diagnose"))
     #: The fits `compare` runs, in report order: OLS on the base parameters, consistent without and with the
     #: URDF as a prior (`ident_opt.identify.estimators`).
     estimators = ("ols", "constrained", "consistent")

@@ -5,10 +5,26 @@ naming rule), `diagnosis` (the four questions in order), `report` (Markdown, fig
 `hidden` (hidden-effect trials for tests and benchmarks); `linear`, `signals` and `elastic_nlp` (the IPOPT
 polish of a lightly damped mode) are shared tools."""
 
-from ident_opt.diagnosis.loop import Diagnosis, diagnose
+from ident_opt.diagnosis import arm_diagnosis, loop
+from ident_opt.diagnosis.loop import Diagnosis
+from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
 from ident_opt.effects import CATALOGUE
 
 #: The catalogue's cause names, `none` first.
 CAUSES = ("none", *CATALOGUE)
 
 __all__ = ["CAUSES", "Diagnosis", "diagnose"]
+
+
+def diagnose(
+    robot,
+    trial,
+    unseen=None,
+    train_fraction: float = 0.7,
+    progress: bool = True,
+    torque_filter_hz: float | str | None = TORQUE_FILTER_HZ,
+) -> Diagnosis:
+    """Diagnose `trial` (and `unseen`, if given, as the held-out data) of `robot`'s arm: the planar two-link arm's
+    diagnosis (`loop.diagnose`) or any arm's (`arm_diagnosis.diagnose`), as the robot says (`Robot.engine`)."""
+    run = loop.diagnose if robot.engine == "planar" else arm_diagnosis.diagnose
+    return run(robot, trial, unseen, train_fraction, progress, torque_filter_hz)

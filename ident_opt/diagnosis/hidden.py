@@ -34,3 +34,9 @@ def errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
     cause's estimate keys, `docs/effects.md`). Every key the effect touches counts; none may miss."""
     checks = CATALOGUE[cause].judge(estimate, truth)
     return all(ok for ok, _ in checks), max(r for _, r in checks)
+
+
+def arm_errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
+    """`errors` on an n-joint arm (`Effect.arm_judge`: an untouched joint judged against the largest true value)."""
+    checks = CATALOGUE[cause].arm_judge(estimate, truth)
+    return all(ok for ok, _ in checks), max(r for _, r in checks)

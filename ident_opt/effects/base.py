@@ -60,6 +60,7 @@ DEFERRED = {
     "ca": "casadi",
     "cands": "ident_opt.diagnosis.candidates",
     "datasheet": "ident_opt.arm.datasheet",
+    "afit": "ident_opt.diagnosis.arm_fit",
     "elastic_nlp": "ident_opt.diagnosis.elastic_nlp",
     "flexible_link": "ident_opt.simulate.flexible_link",
     "linear": "ident_opt.diagnosis.linear",
@@ -205,7 +206,8 @@ class Effect:
         return any(spec.kind == "pair" for spec in self.keys.values())
 
     def key(self, key: str, where: str) -> Key:
-        """The `Key` of `key` (``scale`` and a per-joint effect's ``joint`` included); `InputError` for an unknown one."""
+        """The `Key` of `key` (``scale`` and a per-joint effect's ``joint`` included); `InputError` for an unknown
+        one."""
         if key == "scale":
             return _SCALE
         if key == "joint" and key not in self.keys and self.per_joint:
@@ -476,6 +478,32 @@ class Effect:
         """Keys for `simulate_trial(effects={name: keys})`, drawn from a realistic range."""
         return {}
 
+    # ------------------------------------------------------------------ any arm: diagnosis and hidden trials
+    def arm_families(self, robot, ctx) -> list:
+        """The candidate families (`diagnosis.arm_fit.ArmFamily`) of this cause on an n-joint arm (`ctx`: its
+        `ArmContext`, with the evidence per joint)."""
+        return []
+
+    def arm_draw(self, rng, joints: Joints, chosen: tuple[int, ...]) -> dict:
+        """Keys of a hidden instance on an n-joint arm (`joints.scale` its reference magnitudes), on the 0-based
+        joints `chosen` where the cause is per joint."""
+        return {}
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        """(within tolerance, relative error) per judged number on an n-joint arm: the planar rule (`judge`), with a
+        joint whose true value is 0 (untouched) judged relative to the largest true value of the same key."""
+        checks = []
+        for key in self.judged:
+            e, t = (
+                np.atleast_1d(np.asarray(estimate[key], dtype=float)),
+                np.atleast_1d(np.asarray(truth[key], dtype=float)),
+            )
+            largest = float(np.max(np.abs(t))) or 1.0
+            for ej, tj in zip(e, t):
+                rel = abs(ej - tj) / (abs(tj) if tj != 0 else largest)
+                checks.append((rel <= MAGNITUDE_TOL, rel))
+        return checks
+
     def judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         """(within tolerance, relative error) per judged number; by default `MAGNITUDE_TOL` relative."""
         checks = []
@@ -530,6 +558,11 @@ def discover(package: str, path: Sequence[str], skip: tuple[str, ...] = ()) -> d
         if info.name not in skip
     ]
     return {e.name: e for e in sorted(found, key=lambda e: e.order)}
+
+
+def arm_values(n: int, chosen: tuple[int, ...], untouched: float, draw) -> tuple[float, ...]:
+    """A hidden per-joint value on an n-joint arm: `draw(j)` on the 0-based joints `chosen`, `untouched` elsewhere."""
+    return tuple(float(draw(j)) if j in chosen else untouched for j in range(n))
 
 
 def per_joint_draw(rng, untouched: float, draw) -> tuple[float, float]:

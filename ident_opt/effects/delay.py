@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from functools import partial
 
-from ident_opt.effects.base import Effect, Key, linear, np, relative_error, report, signals
+from ident_opt.effects.base import Effect, Key, afit, linear, np, relative_error, report, signals
 
 #: Shortest delay [s] that counts as a cause (the tolerance on hidden delays is 2 ms, too).
 MIN_DELAY_S = 0.002
@@ -38,6 +38,24 @@ class Delay(Effect):
 
     def arm_plant(self, plant, p: dict) -> None:
         self.true_plant(plant, p)
+
+    def arm_families(self, robot, ctx) -> list:
+        """The whole prediction delayed by d, searched in 0–0.15 s (the measured torque read back by d while fitting,
+        so that π refitted is one projection), against both nominal models."""
+        return [
+            afit.ArmFamily(
+                self.name,
+                delay=lambda theta: theta["delay"],
+                axes=lambda rate, theta: [linear.Axis("delay", 0.0, 0.15, 31)],
+                estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {}),
+            )
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        return self.draw(rng, None)
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        return self.judge(estimate, truth)
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("seconds",)

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from ident_opt.effects.base import (
     Effect,
     Key,
+    afit,
     ca,
     edge_rule,
     elastic_nlp,
@@ -241,6 +242,31 @@ class Elasticity(Effect):
             "link_inertia": e.J_link,
         }
 
+    def arm_families(self, robot, ctx) -> list:
+        """An elastic joint on each of the joints whose residual rings most (`arm_fit.elastic_joints`): the link
+        behind it deflects by e, ë + 2ζω ė + ω² e = −u driven by the measured motion, and adds s M_link[:, j] ë to the
+        torque (`_arm_columns`); beside it, against the datasheet, the motor's inertia B ddq_j a datasheet may lack.
+        f and ζ searched as on the planar arm, against both nominal models."""
+        return [
+            afit.ArmFamily(
+                self.name,
+                extra=_arm_columns(joint),
+                axes=lambda rate, theta: [
+                    linear.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
+                    linear.Axis("damping", 0.005, 0.3, 6, True),
+                ],
+                nonnegative=("scale", "motor"),
+                estimate=_arm_estimate(joint),
+            )
+            for joint in afit.elastic_joints(ctx, _arm_columns)
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        return {"joint": chosen[0] + 1, "frequency_hz": rng.uniform(3.0, 8.0), "damping": rng.uniform(0.01, 0.05)}
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        return self.judge(estimate, truth)
+
     def truth_entry(self, truth, p: dict) -> dict:
         e = truth.elastic
         return {
@@ -338,6 +364,47 @@ def elastic_drive(joint: int, ds, ctx) -> tuple[np.ndarray, np.ndarray]:
     P = np.zeros((ds.n, 2))
     P[:, joint - 1], P[:, other] = m_link, m_cross
     return u, P
+
+
+def _arm_columns(joint: int):
+    """The elastic joint's columns on an n-joint arm (0-based `joint`): s · M_link[:, j] ë with ë the deflection
+    acceleration driven by u = (M_link[j, :] ddq) / M_link[j, j] (the link's acceleration when it follows its motor),
+    and, against the datasheet, B ddq_j on row j (the motor's inertia, which the datasheet may lack)."""
+
+    def columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
+        P = ctx.inertia_column(ds, joint)
+        u = np.einsum("nj,nj->n", P, ds.ddq) / P[:, joint]
+        e = signals.deflection_acceleration(
+            u, theta.get("frequency_hz", 5.0), theta.get("damping", 0.05), afit.step(ds)
+        )
+        X = (P * e[:, None])[:, :, None]
+        if baseline != "datasheet":
+            return X, ["scale"]
+        motor = np.zeros_like(X)
+        motor[:, joint, 0] = ds.ddq[:, joint]
+        return np.concatenate([X, motor], axis=2), ["scale", "motor"]
+
+    return columns
+
+
+def _arm_estimate(joint: int):
+    def estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+        m_link = float(np.mean(ctx.inertia_column(ctx.train, joint)[:, joint]))
+        m_eff = p["scale"] * m_link  # the link inertia the spring carries [kg m²]
+        w = 2 * math.pi * p["frequency_hz"]
+        return (
+            {"joint": joint + 1, "frequency_hz": p["frequency_hz"]},
+            {
+                "joint_name": ctx.robot.joint_names[joint],
+                "damping_ratio": p["damping"],
+                "inertia": m_eff,
+                "stiffness": m_eff * w * w,
+                "damping_coefficient": 2 * p["damping"] * w * m_eff,
+                "motor_inertia_beyond_datasheet": p.get("motor", 0.0),
+            },
+        )
+
+    return estimate
 
 
 def _columns(joint: int):

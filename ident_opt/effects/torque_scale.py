@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from functools import partial
 
-from ident_opt.effects.base import Effect, Key, np, per_joint_draw, relative_error, report
+from ident_opt.effects.base import Effect, Key, afit, arm_values, np, per_joint_draw, relative_error, report
 
 #: A hidden factor is found when the estimate is within this of it, per joint.
 SCALE_TOL = 0.02
@@ -56,6 +56,38 @@ class TorqueScale(Effect):
 
     def arm_plant(self, plant, p: dict) -> None:
         self.true_plant(plant, p)
+
+    def arm_families(self, robot, ctx) -> list:
+        """Against the datasheet: joint j's logged torque is c_j (Y π_datasheet)_j, c_j = 1/s_j, on the joints where
+        c_j is resolved from 1 (the others as the datasheet predicts them)."""
+
+        def units(p: dict) -> tuple[np.ndarray, tuple[str, ...]]:
+            s = np.array([1.0 / p[f"c{j + 1}"] if f"c{j + 1}" in p else 1.0 for j in range(ctx.n)])
+            return s, tuple(f"c{j + 1}" for j in range(ctx.n))
+
+        return [
+            afit.ArmFamily(
+                self.name,
+                rows=True,
+                baselines=("datasheet",),
+                estimate=lambda p, se, ctx: (
+                    {"scale": [1.0 / p[f"c{j + 1}"] if f"c{j + 1}" in p else 1.0 for j in range(ctx.n)]},
+                    {},
+                ),
+                screen=lambda p, se, ctx: afit.resolved_joints(p, se, ("c",), ctx.n, untouched=1.0),
+                units=units,
+            )
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        def factor(j: int) -> float:  # uniform over [0.8, 0.95] ∪ [1.05, 1.25]
+            x = rng.uniform(0.0, 0.35)
+            return 0.8 + x if x < 0.15 else 1.05 + (x - 0.15)
+
+        return {"scale": arm_values(joints.n, chosen, 1.0, factor)}
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        return self.judge(estimate, truth)
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("scale",)

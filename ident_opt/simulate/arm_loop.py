@@ -28,12 +28,9 @@ from ident_opt.cache import cache_root
 from ident_opt.cbuild import cached_library, load_external
 from ident_opt.errors import InputError
 from ident_opt.simulate.arm_plant import ArmPlant, centre, initial_state, mass_matrix, plant_function, state_size
-from ident_opt.simulate.closed_loop import BANDWIDTH_HZ, CHUNK, Gains
+from ident_opt.simulate.closed_loop import BANDWIDTH_HZ, CHUNK, MAX_SUBSTEPS, Gains
 from ident_opt.simulate.trajectories import Box, Reference
 
-#: Most RK4 sub-steps per control tick: beyond it the loop's fastest rate (a mode of hundreds of Hz, say) would
-#: take the simulator minutes per second of trial; such a trial is refused, naming what makes it stiff.
-MAX_SUBSTEPS = 64
 #: Ticks from which the loop is compiled to C (when it is not compiled yet): below, building costs more than it saves.
 COMPILE_TICKS = 20000
 

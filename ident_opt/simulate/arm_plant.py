@@ -162,6 +162,7 @@ def arm_scale(robot: Robot, limits, speed: np.ndarray) -> ArmScale:
     cruise speed [rad/s], the moving mass [kg] and the chain's length [m]."""
     arm, pi = robot.datasheets()[robot.datasheet]
     n = arm.n_joints
+    singular(robot, arm, pi, limits)
     rng = np.random.default_rng(0)
     q = rng.uniform(limits.q_min, limits.q_max, size=(64, n))
     tau = arm.predict(link_pi(arm, pi), q, rng.choice([-1.0, 1.0], size=(64, n)) * speed, np.zeros((64, n)))
@@ -178,6 +179,21 @@ def arm_scale(robot: Robot, limits, speed: np.ndarray) -> ArmScale:
         tuple(float(v) for v in speed),
         float(sum(masses.values())) if masses else 0.0,
         reach(robot),
+    )
+
+
+def singular(robot: Robot, arm: Arm, pi: np.ndarray, limits) -> None:
+    """InputError naming the joint when the nominal mass matrix is singular (a joint with no inertia about its axis:
+    a URDF without the rotor behind it), which no forward simulation can integrate."""
+    M = mass_matrix(arm, pi, centre(limits)[None, :])[0]
+    lam, V = np.linalg.eigh(M)
+    if lam[0] > 1e-9 * max(lam[-1], 1e-12):
+        return
+    j = int(np.argmax(np.abs(V[:, 0])))
+    raise InputError(
+        f"the nominal model's mass matrix is singular (smallest eigenvalue {lam[0]:.2g} kg m²): joint "
+        f"{robot.joint_names[j]} has no inertia about its axis (its link in the URDF, and no rotor); give its "
+        f"reflected rotor inertia in [robot.{robot.joint_tables[j]}] rotor_inertia to simulate it"
     )
 
 

@@ -68,6 +68,9 @@ PLANAR = Box(Q_MIN, Q_MAX, V_MAX, A_MAX, np.full(2, 0.2), np.full(2, 0.3))
 #: and the controller's overshoot stay inside), the share of its speed limit it cruises at (at most
 #: `CRUISE_MAX`) and the share of its acceleration limit it uses.
 RANGE_MARGIN, CRUISE_SHARE, CRUISE_MAX, ACCELERATION_SHARE = 0.15, 0.5, 1.5, 0.8
+#: An n-joint reference's last move ends this long [s] before the trial does: it ends at rest, where the derivatives'
+#: zero-phase filter has nothing to smear.
+END_REST_S = 0.5
 #: Acceleration limit [rad/s²] where neither [limits] nor the URDF gives one.
 DEFAULT_ACCELERATION = 4.0
 
@@ -104,6 +107,8 @@ def reference(name: str, duration: float, seed: int, dt: float, box: Box = PLANA
     if name not in TRAJECTORIES:
         raise InputError(f"trajectory {name!r}: unknown; known: {', '.join(TRAJECTORIES)}, or a *.csv file")
     rng = np.random.default_rng([seed, 7])  # the trajectory's own stream, independent of the noise
+    if box is not PLANAR and name == "fourier":  # an n-joint trial ends at rest (its derivatives' filter has edges)
+        return fourier(t, rng, fade_out=True, box=box)
     return {"tud01": tud01, "fourier": fourier, "mixed": mixed}[name](t, rng, box=box)
 
 
@@ -194,10 +199,12 @@ def tud01(t: np.ndarray, rng: np.random.Generator, home: np.ndarray | None = Non
 
     while start < duration:
         moving, targets = next_move(rng, pose, box)
+        ends = start + max(lasting(j, targets[j] - pose[j]) for j in range(m))
         if home is not None:  # the move, then the way home and a rest, must fit
-            ends = start + max(lasting(j, targets[j] - pose[j]) for j in range(m))
             if ends + max(lasting(j, home[j] - targets[j]) for j in range(m)) + 0.5 > duration:
                 break
+        elif box is not PLANAR and ends + END_REST_S > duration:  # an n-joint trial ends at rest
+            break
         end = start
         for j in range(m):
             if moving[j]:

@@ -214,8 +214,8 @@ def finite(out: np.ndarray, effects: Mapping) -> None:
     """InputError naming the hidden effects when the simulated loop's output is not finite (nothing is written)."""
     if not np.all(np.isfinite(out)):
         raise InputError(
-            f"the simulation diverged (non-finite angles or torques): the hidden effects ({', '.join(effects) or 'none'}) "
-            "or the trajectory are beyond what the arm can follow; nothing written"
+            "the simulation diverged (non-finite angles or torques): the hidden effects "
+            f"({', '.join(effects) or 'none'}) or the trajectory are beyond what the arm can follow; nothing written"
         )
 
 
@@ -304,8 +304,8 @@ def outside(ref: Reference, box: Box, robot: Robot, trajectory: str) -> None:
     if len(bad):
         k, j = bad[0]
         raise InputError(
-            f"{trajectory}: q{j + 1} ({robot.joint_names[j]}) reaches {ref.q[k, j]:g} rad at t = {ref.t[k]:g} s, outside "
-            "the joint's range ([limits] or the URDF's <limit>)"
+            f"{trajectory}: q{j + 1} ({robot.joint_names[j]}) reaches {ref.q[k, j]:g} rad at t = {ref.t[k]:g} s, "
+            "outside the joint's range ([limits] or the URDF's <limit>)"
         )
 
 
