@@ -3,11 +3,12 @@ a simulated trial of an n-joint arm is named, alone and within the tolerances of
 once are both named; a clean trial gives `none`.
 
 Written before the n-joint diagnosis was tuned, on arms, rates and magnitudes it was not tuned on: the diagnosis
-was developed on the KUKA LWR4+ (problems/kuka_lwr4.toml) at 1 kHz and its seeds 0–99; these trials run on the
+was developed on the KUKA LWR4+ (problems/kuka_lwr4.toml) at 1 kHz and its seeds 0–99. These trials run on the
 Panda (500 Hz), the TX40 (1 kHz, its coupled wrist; tests/arms/tx40_drives.toml: the shipped URDF gives its last
-link no inertia about its axis, so the simulator needs the drives' rotor inertias) and a 4-joint arm written for the
-tests (tests/arms/arm4.toml, 250 Hz), on seeds from 1000 on, each cause on a proximal or a distal joint. The whole matrix (every cause on every
-arm, proximal and distal, and the confusion tables) is `benchmarks/confusion_arms.py`.
+link no inertia about its axis, so the simulator needs the drives' rotor inertias) and a 4-joint arm written for
+the tests (tests/arms/arm4.toml, 250 Hz), on seeds from 1000 on, each cause on a proximal or a distal joint. The
+whole matrix (every cause on every arm, proximal and distal, and the confusion tables) is
+`benchmarks/confusion_arms.py`.
 """
 
 from __future__ import annotations

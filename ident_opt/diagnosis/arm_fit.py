@@ -473,7 +473,7 @@ def _final(family: ArmFamily, baseline: str, ctx: ArmContext, theta: dict) -> Ca
     """The candidate at θ: β (with π refitted by the estimator for rigid_fit), coupled θ settled, its estimate and
     predictor."""
     tr = ctx.train
-    ls, o, X, names, Y, delta = _solve(family, tr, theta, baseline, ctx, True)
+    ls, _, X, names, Y, delta = _solve(family, tr, theta, baseline, ctx, True)
     for _ in range(5 if family.coupled is not None else 0):
         update = family.coupled(dict(zip(names, map(float, ls.beta))), theta)
         if all(abs(v - theta.get(k, 0.0)) <= 1e-6 * (1 + abs(v)) for k, v in update.items()):
