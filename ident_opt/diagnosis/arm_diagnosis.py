@@ -106,6 +106,7 @@ def diagnose(
         dt,
         None,
         robot.default_estimator,
+        cutoff,
     )
     ctx.rest = ctx.labels(train)
     ctx.reweight(weights_of(ctx))

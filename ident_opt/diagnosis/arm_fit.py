@@ -34,6 +34,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 from scipy import sparse
+from scipy.signal import butter, filtfilt
 
 from ident_opt.arm.base import Arm, Robot
 from ident_opt.cache import cache_root
@@ -55,9 +56,9 @@ RESOLVED = 3.0
 SPAN_TOL = 1e-6
 #: Joints an elastic joint is tried on: those whose residual rings most in the elastic band.
 ELASTIC_CANDIDATES = 2
-#: Samples the nonlinear searches read (strided, never below `SEARCH_HZ` [Hz]: four times the torque filter's
-#: cut-off, so the search sees every mode and lag the data hold).
-SEARCH_SAMPLES, SEARCH_HZ = 4000, 60.0
+#: Samples the nonlinear searches read (strided, never below `SEARCH_HZ` [Hz]: the torque filter's default cut-off
+#: with room to spare, and a Stribeck hump crossed in tens of milliseconds still falls on samples).
+SEARCH_SAMPLES, SEARCH_HZ = 4000, 100.0
 #: Eigenvalues of the rigid columns' Gram matrix below this share of the largest are directions the data do not
 #: determine (`ArmContext.basis`): singular values below 1e-5 of the largest.
 RANK_TOL = 1e-10
@@ -80,6 +81,7 @@ class ArmContext:
     dt: float
     rest: np.ndarray
     estimator: str
+    filter_hz: float | None = None  # the torque's zero-phase low-pass [Hz] (`loop.prepare`), None: none
     rank: int = 0
     evidence: dict = field(default_factory=dict)
     pi_rigid: np.ndarray | None = None
@@ -230,6 +232,24 @@ class ArmContext:
             self._cache[key] = self.arm.predict(pi, ds.q, zero, unit) - self.arm.predict(pi, ds.q, zero, zero)
         return self._cache[key]
 
+    def lowpass(self, x: np.ndarray, ds: Dataset) -> np.ndarray:
+        """x (N, ...) along `ds` through the zero-phase low-pass the measured torque went through (`loop.prepare`):
+        a column that jumps within a few samples (a friction hump at a reversal) compared like with like."""
+        if not self.filter_hz or self.filter_hz >= 0.45 / step(ds) or ds.n <= 30:
+            return x
+        b, a = butter(4, self.filter_hz * 2 * step(ds))
+        return filtfilt(b, a, x, axis=0)
+
+    def stiffness_column(self, ds: Dataset, joint: int) -> np.ndarray:
+        """∂τ_link/∂q_j (N, n) [N m/rad]: how the datasheet's link-side torque along `ds` changes with joint j's
+        angle (gravity's stiffness and the motion's), remembered."""
+        key = ("K", *_identity(ds), joint)
+        if key not in self._cache:
+            J = self.torque_jacobian(ds, np.zeros(self.n), link_side(self.arm, self.datasheet))
+            for j in range(self.n):
+                self._cache[("K", *_identity(ds), j)] = np.ascontiguousarray(J[:, :, j])
+        return self._cache[key]
+
     def coulomb_terms(self) -> list[list[int]]:
         """For each joint, the parameters whose column is sgn(dq_j) on its row and 0 elsewhere (its Coulomb level),
         read from the regressor at random states (no parameter name is matched)."""
@@ -249,7 +269,7 @@ class ArmContext:
         """∂τ/∂q (N, n, n) [N m/rad] of the model at π along `ds` at the angles q + δ: row i, column j is ∂τ_i/∂q_j."""
         f = self._jacobian_function()
         x = np.hstack([ds.q + delta, ds.dq, ds.ddq, np.tile(pi, (ds.n, 1))])
-        return f(x).transpose(0, 2, 1)
+        return f(x)
 
     def _jacobian_function(self):
         if "dtau_dq" not in self._cache:

@@ -367,17 +367,21 @@ def elastic_drive(joint: int, ds, ctx) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _arm_columns(joint: int):
-    """The elastic joint's columns on an n-joint arm (0-based `joint`): s · M_link[:, j] ë with ë the deflection
-    acceleration driven by u = (M_link[j, :] ddq) / M_link[j, j] (the link's acceleration when it follows its motor),
-    and, against the datasheet, B ddq_j on row j (the motor's inertia, which the datasheet may lack)."""
+    """The elastic joint's columns on an n-joint arm (0-based `joint`): the link behind it sits at q_j = θ_j + e,
+    e driven by the link-side torque the measured motion demands at joint j (inertial, Coriolis, gravity: the
+    datasheet's), ë + 2ζω ė + ω² e = −τ_link,j / M_jj; the torques then differ from the rigid model's at θ by
+    s (M_link[:, j] ë + ∂τ_link/∂q_j e) (an inertia and a pose shift, scaled together by s ≥ 0); and, against the
+    datasheet, B ddq_j on row j (the motor's inertia, which the datasheet may lack)."""
 
     def columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
         P = ctx.inertia_column(ds, joint)
-        u = np.einsum("nj,nj->n", P, ds.ddq) / P[:, joint]
-        e = signals.deflection_acceleration(
-            u, theta.get("frequency_hz", 5.0), theta.get("damping", 0.05), afit.step(ds)
+        e, acceleration = signals.deflection(
+            ctx.link_torque(ds)[:, joint] / P[:, joint],
+            theta.get("frequency_hz", 5.0),
+            theta.get("damping", 0.05),
+            afit.step(ds),
         )
-        X = (P * e[:, None])[:, :, None]
+        X = (P * acceleration[:, None] + ctx.stiffness_column(ds, joint) * e[:, None])[:, :, None]
         if baseline != "datasheet":
             return X, ["scale"]
         motor = np.zeros_like(X)

@@ -274,7 +274,9 @@ def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
 
 def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
     """fs_j and fsstop_j columns (`_columns`' split near stops) at vs_j of θ (0.05 rad/s before the search) on the
-    joints θ selects."""
+    joints θ selects, through the torque's low-pass (`ArmContext.lowpass`): the hump lasts a few tens of
+    milliseconds at a reversal, and the filtered torque holds it smeared; read unfiltered it came out half as high
+    and half as wide again on the KUKA."""
     keep = trusted(ds)
     joints = afit.selected(theta, "stribeck", ctx.n)
     X = np.zeros((ds.n, ctx.n, 2 * len(joints)))
@@ -283,7 +285,7 @@ def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[
         f = shape(ds.dq[:, j], theta.get(f"vs{j + 1}", 0.05))
         X[:, j, 2 * k], X[:, j, 2 * k + 1] = f * keep[:, j], f * ~keep[:, j]
         names += [f"fs{j + 1}", f"fsstop{j + 1}"]
-    return X, names
+    return ctx.lowpass(X, ds), names
 
 
 def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:

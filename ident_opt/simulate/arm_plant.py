@@ -33,7 +33,7 @@ from ident_opt.errors import InputError
 
 #: An elastic joint whose nominal motor inertia (reflected rotor inertia) is 0 gets this share of its link-side
 #: inertia as a motor: a two-mass joint needs a motor side (`ElasticJoint`).
-MOTOR_SHARE = 0.1
+MOTOR_SHARE = 0.5
 #: Parameter kinds that are not the link-side rigid body (`link_pi`).
 JOINT_KINDS = ("friction", "armature", "other")
 
