@@ -68,12 +68,13 @@ def arm(repeat: int, duration: float = 60.0) -> None:
         ],
     }
     print(
-        f"\n7-joint arm (KUKA LWR4+), {duration:g} s at 1 kHz control, logged at 1 kHz; 5x real time = {duration / 5:g} s"
+        f"\n7-joint arm (KUKA LWR4+), {duration:g} s at 1 kHz control, logged at 1 kHz; "
+        f"5x real time = {duration / 5:g} s"
     )
     print(f"{'case':34s} {'first s':>8s} {'best s':>8s} {'x real time':>12s}")
     for name, effects in cases.items():
 
-        def simulate():
+        def simulate(effects=effects):
             return simulate_trial(
                 problem.robot,
                 duration=duration,
