@@ -40,7 +40,7 @@ from ident_opt.parameters import Parameter
 #: The default excess of the static level over the datasheet's mean Coulomb level [N m], per joint.
 DEFAULT_EXCESS = (0.3, 0.2)
 #: An n-joint arm's default excess, as a share of each joint's reference torque (`ArmScale.torque`).
-ARM_EXCESS = 0.02
+ARM_EXCESS = 0.01
 
 
 def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
@@ -137,12 +137,12 @@ class Stribeck(Effect):
         ]
 
     def arm_draw(self, rng, joints, chosen) -> dict:
-        """On each chosen joint an excess of 1.5–3 % of its reference torque over its mean Coulomb level, falling
+        """On each chosen joint an excess of 0.5–1 % of its reference torque over its mean Coulomb level, falling
         off over 3–8 % of its cruise speed."""
         mean = _mean(joints)
         return {
             "static": tuple(
-                mean[j] + rng.uniform(0.015, 0.03) * joints.scale.torque[j] if j in chosen else mean[j]
+                mean[j] + rng.uniform(0.005, 0.01) * joints.scale.torque[j] if j in chosen else mean[j]
                 for j in range(joints.n)
             ),
             "velocity": tuple(

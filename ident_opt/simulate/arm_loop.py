@@ -2,12 +2,13 @@
 (`arm_plant`), integrated with RK4, the way `closed_loop` does it for the planar arm.
 
 Controller, knowing only the datasheet: the nominal model's inverse dynamics at the reference plus a PD on the
-encoder (motor-side) angle,
-    τ = τ̂(q_r, dq_r, ddq_r; π_datasheet) + Kp (q_r − q_enc) + Kd (dq_r − dq_enc),
-with Kp = J ω_c², Kd = 2 J ω_c from the nominal diagonal inertia J at the centre pose (critically damped at
-`closed_loop.BANDWIDTH_HZ` per joint). The torque is constant over each tick (1 ms at 1 kHz); RK4 takes
-`substeps` sub-steps per tick, sized from the fastest rate of the loop (the PD against the smallest inertia it
-sees, M(q)⁻¹ Kd over poses spread across the ranges, an elastic mode's), |λ| h ≤ 0.25.
+encoder (motor-side) angle whose gains are the nominal mass matrix at the reference,
+    τ = τ̂(q_r, dq_r, ddq_r; π_datasheet) + M̂(q_r) [ω_c² (q_r − q_enc) + 2 ω_c (dq_r − dq_enc)],
+critically damped at `closed_loop.BANDWIDTH_HZ` on every joint whatever the coupling (a diagonal PD tuned on the
+diagonal of M drove the Panda's light, strongly coupled wrist unstable at 1 kHz). The torque is constant over each
+tick (1 ms at 1 kHz); RK4 takes `substeps` sub-steps per tick, sized from the fastest rate of the loop (the PD
+against the true inertia, eig(M(q)⁻¹ M̂(q)) ω_c² and 2 ω_c, over poses spread across the ranges; an elastic
+mode's), |λ| h ≤ 0.25.
 
 Speed: one tick is one CasADi function of (x, ref, p); `mapaccum` runs `closed_loop.CHUNK` of them per call. For a
 long trial it is generated as C, compiled once per machine and arm structure (`cbuild.cached_library`, in the URDF
@@ -36,36 +37,44 @@ COMPILE_TICKS = 20000
 
 
 def gains(plant: ArmPlant, box: Box, bandwidth_hz: float = BANDWIDTH_HZ) -> Gains:
-    """Critically damped PD gains on the nominal diagonal inertia at the centre pose [kg m²]."""
+    """The PD's gains at the centre pose [N m/rad, N m s/rad]: M̂ ω_c² and 2 M̂ ω_c, as the diagonal of M̂ (what
+    the truth file reports; the loop multiplies the whole M̂(q_r) at each tick, `controller`)."""
     J = np.diag(mass_matrix(plant.arm, plant.nominal, centre(box)[None, :])[0])
     w = 2 * math.pi * bandwidth_hz
     return Gains(tuple(J * w**2), tuple(2 * J * w))
 
 
-def controller(plant: ArmPlant, g: Gains) -> ca.Function:
-    """(ref = [q_r, dq_r, ddq_r], q_enc, dq_enc) -> τ [N m]: the nominal feedforward plus PD."""
+def controller(plant: ArmPlant, bandwidth_hz: float) -> ca.Function:
+    """(ref = [q_r, dq_r, ddq_r], q_enc, dq_enc) -> τ [N m]: the nominal feedforward plus the PD M̂(q_r) [ω² e + 2ω ė]."""
     n = plant.n
     ref, q, dq = ca.SX.sym("ref", 3 * n), ca.SX.sym("q", n), ca.SX.sym("dq", n)
-    ff = plant.arm.tau_expression(ref[:n], ref[n : 2 * n], ref[2 * n :], ca.DM(plant.nominal))
-    tau = ff + ca.DM(g.kp) * (ref[:n] - q) + ca.DM(g.kd) * (ref[n : 2 * n] - dq)
+    a = ca.SX.sym("a", n)
+    nominal = plant.arm.tau_expression(ref[:n], ref[n : 2 * n], a, ca.DM(plant.nominal))
+    M = ca.jacobian(nominal, a)
+    ff = ca.substitute(nominal, a, ref[2 * n :])
+    w = 2 * math.pi * bandwidth_hz
+    tau = ff + M @ (w**2 * (ref[:n] - q) + 2 * w * (ref[n : 2 * n] - dq))
     return ca.Function("controller", [ref, q, dq], [tau])
 
 
-def substeps(plant: ArmPlant, g: Gains, box: Box, control: float) -> int:
-    """RK4 sub-steps per tick of a `control` [Hz] loop: the fastest closed-loop rate |λ| (the PD's √(M⁻¹Kp) +
-    M⁻¹Kd over poses spread across the ranges, with the plant's own inertia; an elastic mode's, `ElasticJoint`)
-    times the step h ≤ 0.25. An `InputError` naming the cause when more than `MAX_SUBSTEPS` would be needed."""
+def substeps(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> int:
+    """RK4 sub-steps per tick of a `control` [Hz] loop: the fastest closed-loop rate |λ| (the PD against the true
+    inertia, √λ ω_c + 2 λ ω_c with λ the largest eigenvalue of M(q)⁻¹ M̂(q) over poses spread across the ranges; an
+    elastic mode's, `ElasticJoint`) times the step h ≤ 0.25. An `InputError` naming the cause when more than
+    `MAX_SUBSTEPS` would be needed."""
     poses = np.vstack([centre(box), np.random.default_rng(2).uniform(box.q_min, box.q_max, (16, plant.n))])
     M = mass_matrix(plant.arm, plant.pi, poses) + np.diag(plant.inertia)
+    M_hat = mass_matrix(plant.arm, plant.nominal, poses)
+    w = 2 * math.pi * bandwidth_hz
     rates = []
-    for Mk in M:
-        Minv = np.linalg.inv(Mk)
-        stiff = np.max(np.abs(np.linalg.eigvals(Minv @ np.diag(g.kp))))
-        damp = np.max(np.abs(np.linalg.eigvals(Minv @ np.diag(g.kd))))
-        rates.append(math.sqrt(stiff) + damp)
+    for Mk, Hk in zip(M, M_hat):
+        lam = float(np.max(np.abs(np.linalg.eigvals(np.linalg.solve(Mk, Hk)))))
+        rates.append(math.sqrt(lam) * w + 2 * lam * w)
+    rates.append(plant.friction_rate)
     e = plant.elastic
     if e is not None:
-        rates.append(e.fastest_rate + g.kd[e.index] / e.B)
+        M0 = mass_matrix(plant.arm, plant.nominal, centre(box)[None, :])[0]
+        rates.append(e.fastest_rate + 2 * w * M0[e.index, e.index] / e.B)
     needed = math.ceil(max(rates) / control / 0.25)
     if not np.isfinite(needed) or needed > MAX_SUBSTEPS:
         why = (
@@ -80,18 +89,18 @@ def substeps(plant: ArmPlant, g: Gains, box: Box, control: float) -> int:
     return max(2, needed)
 
 
-def tick(plant: ArmPlant, g: Gains, box: Box, control: float) -> tuple[ca.Function, int]:
+def tick(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> tuple[ca.Function, int]:
     """One tick of a `control` [Hz] loop: (x, ref, p) -> (x_next, out), out = [τ (n), y (3n + 1)] at its start, and
     the sub-steps it takes."""
     n, nx = plant.n, state_size(plant)
     f = plant_function(plant)
-    ctrl = controller(plant, g)
+    ctrl = controller(plant, bandwidth_hz)
     p = ca.SX.sym("p", f.size1_in(2))
     x, ref = ca.SX.sym("x", nx), ca.SX.sym("ref", 3 * n)
     _, y = f(x, ca.DM.zeros(n), p)
     tau = ctrl(ref, y[:n], y[n : 2 * n])
     _, y = f(x, tau, p)  # y's accelerations are those the dynamics produce under the applied torque
-    steps = substeps(plant, g, box, control)
+    steps = substeps(plant, bandwidth_hz, box, control)
     h = 1.0 / control / steps
     xk = x
     for _ in range(steps):
@@ -127,7 +136,7 @@ def run(
     """Simulate the loop over the reference (sampled at the control rate `control` [Hz]); returns (out (N, 4n + 1):
     τ, q_enc, dq_enc, ddq_enc, deflection at each tick; the gains; the RK4 sub-steps per tick)."""
     g = gains(plant, box, bandwidth_hz)
-    step, steps = tick(plant, g, box, control)
+    step, steps = tick(plant, bandwidth_hz, box, control)
     n = plant.n
     p = ca.DM(plant.parameters())
     x = ca.DM(initial_state(plant, ref.q[0]))

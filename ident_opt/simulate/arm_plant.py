@@ -31,6 +31,9 @@ from ident_opt.effects import CATALOGUE
 from ident_opt.effects.base import ArmScale, Joints
 from ident_opt.errors import InputError
 
+#: The fastest rate [1/s] the regularised friction of the effects may add (`ArmPlant.regularisation`): 32 RK4 steps
+#: per 1 ms tick at most, and its narrowest regularisation [rad/s].
+FRICTION_RATE, MIN_EPS = 8000.0, 1e-4
 #: An elastic joint whose nominal motor inertia (reflected rotor inertia) is 0 gets this share of its link-side
 #: inertia as a motor: a two-mass joint needs a motor side (`ElasticJoint`).
 MOTOR_SHARE = 0.5
@@ -114,9 +117,34 @@ class ArmPlant:
                 velocity,
                 self.load_friction,
                 self.offset,
+                self.regularisation,
                 spring,
             ]
         )
+
+    @property
+    def regularisation(self) -> np.ndarray:
+        """ε (n,) [rad/s]: the speed over which the effects' friction changes sign (`smooth_sign`). With a sharp
+        sign a friction step on a light joint (a wrist without its rotor) chatters at the control rate instead of
+        sticking; ε is the narrowest the integration resolves at `FRICTION_RATE` [1/s] (the step over half the
+        joint's nominal inertia), at least `MIN_EPS`: far below the Stribeck velocities drawn (3–8 % of the
+        cruise speed)."""
+        step = (
+            np.abs(self.positive - self.mean_coulomb) + np.abs(self.negative - self.mean_coulomb) + np.abs(self.excess)
+        )
+        step = step + self.load_friction * np.asarray(self.scale.torque)
+        inertia = 0.5 * np.maximum(np.asarray(self.scale.inertia) + self.inertia, 1e-9)
+        return np.where(step > 0, np.maximum(step / (inertia * FRICTION_RATE), MIN_EPS), 1.0)
+
+    @property
+    def friction_rate(self) -> float:
+        """The fastest rate [1/s] the regularised friction adds (the substeps' sizing, `arm_loop.substeps`)."""
+        step = (
+            np.abs(self.positive - self.mean_coulomb) + np.abs(self.negative - self.mean_coulomb) + np.abs(self.excess)
+        )
+        step = step + self.load_friction * np.asarray(self.scale.torque)
+        inertia = 0.5 * np.maximum(np.asarray(self.scale.inertia) + self.inertia, 1e-9)
+        return float(np.max(step / (inertia * self.regularisation)))
 
 
 def link_pi(arm: Arm, pi):
@@ -279,28 +307,43 @@ class Symbols:
     velocity: ca.SX
     mu: ca.SX
     offset: ca.SX
+    eps: ca.SX  # the friction sign's regularisation per joint [rad/s]
     spring: ca.SX  # k, d, B (elastic joint) or empty
 
     @classmethod
     def of(cls, plant: ArmPlant) -> Symbols:
         n, P = plant.n, len(plant.pi)
-        sizes = [P, n, n, n, n, n, n, n, 3 if plant.elastic is not None else 0]
-        names = ("pi", "inertia", "up", "down", "excess", "velocity", "mu", "offset", "spring")
+        sizes = [P, n, n, n, n, n, n, n, n, 3 if plant.elastic is not None else 0]
+        names = ("pi", "inertia", "up", "down", "excess", "velocity", "mu", "offset", "eps", "spring")
         return cls(*(ca.SX.sym(name, size) for name, size in zip(names, sizes)))
 
     def vector(self) -> ca.SX:
         """All of them, stacked (the functions' parameter input)."""
         return ca.vertcat(
-            self.pi, self.inertia, self.up, self.down, self.excess, self.velocity, self.mu, self.offset, self.spring
+            self.pi,
+            self.inertia,
+            self.up,
+            self.down,
+            self.excess,
+            self.velocity,
+            self.mu,
+            self.offset,
+            self.eps,
+            self.spring,
         )
+
+
+def smooth_sign(v, eps) -> ca.SX:
+    """tanh(v/ε): the sign of the effects' friction, regularised over ε [rad/s] (`ArmPlant.regularisation`)."""
+    return ca.tanh(v / eps)
 
 
 def extra_friction(s: Symbols, v) -> ca.SX:
     """The effects' friction at joint rates v (n,) [N m]: the per-direction levels' departure from the datasheet's
-    mean and the Stribeck excess fs sgn(v) exp(−(v/vs)²)."""
-    positive = ca.vertcat(*[ca.if_else(x > 0, 1, 0) for x in ca.vertsplit(v)])
-    negative = ca.vertcat(*[ca.if_else(x < 0, 1, 0) for x in ca.vertsplit(v)])
-    stribeck = s.excess * ca.sign(v) * ca.exp(-((v / s.velocity) ** 2))
+    mean and the Stribeck excess fs sgn(v) exp(−(v/vs)²), the sign regularised (`smooth_sign`)."""
+    sign = smooth_sign(v, s.eps)
+    positive, negative = 0.5 * (1 + sign), 0.5 * (1 - sign)
+    stribeck = s.excess * sign * ca.exp(-((v / s.velocity) ** 2))
     return s.up * positive - s.down * negative + stribeck
 
 
@@ -320,7 +363,7 @@ def forward(arm: Arm, pi, q, dq, tau, inertia=None) -> ca.SX:
     return ca.solve(M, tau - h)
 
 
-def loaded_forward(M, b, mu, rates, link_M, link_h) -> ca.SX:
+def loaded_forward(M, b, mu, rates, link_M, link_h, eps) -> ca.SX:
     """Accelerations of M a = b − μ ∘ sgn(v) ∘ |τ_load(a)|, the gears' load-dependent friction, with τ_load(a) =
     link_M a + link_h the link-side rigid torque (inertial without the rotors, Coriolis, gravity). |τ_load| =
     S τ_load with S the signs of τ_load at the load-free answer a₀ = M⁻¹ b, which makes the equation linear in a:
@@ -328,7 +371,7 @@ def loaded_forward(M, b, mu, rates, link_M, link_h) -> ca.SX:
     a (everywhere but the instants it crosses zero, where |τ_load| is small anyway)."""
     a0 = ca.solve(M, b)
     S = ca.sign(ca.mtimes(link_M, a0) + link_h)
-    D = mu * ca.sign(rates) * S
+    D = mu * smooth_sign(rates, eps) * S
     return ca.solve(M + ca.diag(D) @ link_M, b - D * link_h)
 
 
@@ -346,7 +389,7 @@ def plant_function(plant: ArmPlant) -> ca.Function:
     b = tau - friction - h
     if np.any(plant.load_friction):
         link_M, link_h = dynamics(arm, link_pi(arm, s.pi), q, dq)
-        ddq = loaded_forward(M, b, s.mu, dq, link_M, link_h)
+        ddq = loaded_forward(M, b, s.mu, dq, link_M, link_h, s.eps)
     else:
         ddq = ca.solve(M, b)
     y = ca.vertcat(q - s.offset, dq, ddq, 0)
@@ -393,6 +436,7 @@ def _elastic_function(plant: ArmPlant, s: Symbols) -> ca.Function:
             moving,
             ca.vertcat(load_M, ca.SX.zeros(1, n + 1)),
             ca.vertcat(load_h, spring),
+            ca.vertcat(s.eps, s.eps[j]),
         )
     else:
         acc = ca.solve(M, b)
