@@ -45,7 +45,8 @@ def gains(plant: ArmPlant, box: Box, bandwidth_hz: float = BANDWIDTH_HZ) -> Gain
 
 
 def controller(plant: ArmPlant, bandwidth_hz: float) -> ca.Function:
-    """(ref = [q_r, dq_r, ddq_r], q_enc, dq_enc) -> τ [N m]: the nominal feedforward plus the PD M̂(q_r) [ω² e + 2ω ė]."""
+    """(ref = [q_r, dq_r, ddq_r], q_enc, dq_enc) -> τ [N m]: the nominal feedforward plus the PD
+    M̂(q_r) [ω² e + 2ω ė]."""
     n = plant.n
     ref, q, dq = ca.SX.sym("ref", 3 * n), ca.SX.sym("q", n), ca.SX.sym("dq", n)
     a = ca.SX.sym("a", n)

@@ -129,22 +129,24 @@ class ArmPlant:
         sticking; ε is the narrowest the integration resolves at `FRICTION_RATE` [1/s] (the step over half the
         joint's nominal inertia), at least `MIN_EPS`: far below the Stribeck velocities drawn (3–8 % of the
         cruise speed)."""
-        step = (
-            np.abs(self.positive - self.mean_coulomb) + np.abs(self.negative - self.mean_coulomb) + np.abs(self.excess)
-        )
-        step = step + self.load_friction * np.asarray(self.scale.torque)
-        inertia = 0.5 * np.maximum(np.asarray(self.scale.inertia) + self.inertia, 1e-9)
+        step, inertia = self._friction_step()
         return np.where(step > 0, np.maximum(step / (inertia * FRICTION_RATE), MIN_EPS), 1.0)
 
     @property
     def friction_rate(self) -> float:
         """The fastest rate [1/s] the regularised friction adds (the substeps' sizing, `arm_loop.substeps`)."""
+        step, inertia = self._friction_step()
+        return float(np.max(step / (inertia * self.regularisation)))
+
+    def _friction_step(self) -> tuple[np.ndarray, np.ndarray]:
+        """The effects' friction step across zero speed per joint [N m] (per-direction departures, the Stribeck
+        excess, the load friction at the reference torque) and the inertia it acts on [kg m²] (half the joint's
+        nominal one plus the armature: the light side of an elastic joint)."""
         step = (
             np.abs(self.positive - self.mean_coulomb) + np.abs(self.negative - self.mean_coulomb) + np.abs(self.excess)
         )
         step = step + self.load_friction * np.asarray(self.scale.torque)
-        inertia = 0.5 * np.maximum(np.asarray(self.scale.inertia) + self.inertia, 1e-9)
-        return float(np.max(step / (inertia * self.regularisation)))
+        return step, 0.5 * np.maximum(np.asarray(self.scale.inertia) + self.inertia, 1e-9)
 
 
 def link_pi(arm: Arm, pi):
