@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PROBLEM ?= problems/tudor_2dof.toml
 
-.PHONY: identify test lint bench codegen audit calibration clean-venv fuzz
+.PHONY: identify test lint bench codegen audit calibration clean-venv fuzz cutoff-study
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -17,6 +17,8 @@ $(STAMP): pyproject.toml
 ## The main job: every step on the real MERIt/TUDOR trials; tables, figures and reports into results/; then the
 ## DFKI double pendulum (a second real robot: train on 8 trajectories, test on a swing-up) into results/dfki/.
 ## Each report records what it wrote and results/README.md is rebuilt from those records: any order works.
+## Last, design A.0 of the DFKI pendulum (other hardware; train on a swing-up, test on open-loop sines) into
+## results/dfki_a0/.
 identify: $(STAMP)
 	$(BIN)/ident-opt audit    --problem problems/tudor_2dof_paper.toml --out results
 	$(BIN)/ident-opt compare  --problem $(PROBLEM) --out results --json results/compare.json
@@ -27,6 +29,9 @@ identify: $(STAMP)
 	$(BIN)/ident-opt compare  --problem problems/dfki_c0.toml --no-progress \
 	    --json results/dfki/compare.json
 	$(BIN)/ident-opt identify --problem problems/dfki_c0.toml --no-variants --json results/dfki/identify.json
+	$(BIN)/ident-opt compare  --problem problems/dfki_a0.toml --no-progress \
+	    --json results/dfki_a0/compare.json
+	$(BIN)/ident-opt identify --problem problems/dfki_a0.toml --no-variants --json results/dfki_a0/identify.json
 
 ## The whole test suite (2 workers).
 test: $(STAMP)
@@ -62,6 +67,12 @@ excitation: $(STAMP)
 calibration: $(STAMP)
 	$(BIN)/ident-opt calibrate --problem problems/tudor_sim.toml --real $(PROBLEM) \
 	    --channel col10 --channel col11 --channel col12 --channel col13 --out results
+
+## Where the derivative cut-off rule and the recommended fit stand in simulation, against the best cut-off in
+## hindsight (results/cutoff_study_<seeds>.md; about 15 min per seed set on 2 cores). SEEDS=tuning|unseen.
+SEEDS ?= tuning
+cutoff-study: $(STAMP)
+	$(BIN)/python benchmarks/cutoff_study.py --seeds $(SEEDS) --out results
 
 ## Benchmarks: each prints ratios measured side by side in one run; the output is kept in results/benchmarks/.
 bench: $(STAMP)

@@ -4,7 +4,7 @@
 
     problem = io.load_problem("problems/kuka_lwr4.toml")
     training, testing = io.load_trials(problem)            # the problem's [data] (or paths)
-    fit = io.fit(problem, training)                         # the arm's consistent fit (or estimator="ols", …)
+    fit = io.fit(problem, training)                         # the recommended fit (or estimator="ols", …)
     tau = problem.robot.model().predict(fit.pi, q, dq, ddq)  # τ (N, n) [N m]
     comparison = io.compare(problem, training, testing)     # every fit side by side, held-out errors, warnings
     io.export(problem, fit, "arm.urdf")                     # or "arm.xml": MuJoCo MJCF
@@ -26,7 +26,7 @@ from ident_opt.identify import estimators
 from ident_opt.identify.fit import LinearFit
 from ident_opt.problem import Problem
 from ident_opt.studies.compare import Comparison, compare_estimators
-from ident_opt.studies.trust import stats_of
+from ident_opt.studies.recommend import recommended_fit
 
 
 def load_trials(
@@ -50,15 +50,17 @@ def load_trials(
 
 
 def fit(problem: Problem, trials: Sequence[Dataset], estimator: str | None = None, **options) -> LinearFit:
-    """π of the problem's arm (`problem.robot.model()`) fitted by `estimator` (default: the arm's physically
-    consistent fit, `Robot.default_estimator`) on all `trials` (their statistics add up), with standard errors;
-    `options` go to the estimator (e.g. `weights="wls"`, `margin=1e-6`)."""
+    """π of the problem's arm (`problem.robot.model()`) fitted by `estimator` (default: the recommended fit, chosen
+    from the trials' own evidence, `ident_opt.studies.recommend`) on all `trials` (their statistics add up), with
+    standard errors; `options` go to the estimator (e.g. `weights="wls"`, `margin=1e-6`)."""
     robot = problem.robot
-    name = estimator or robot.default_estimator
+    model = robot.model()
+    if estimator is None and not options:
+        return recommended_fit(robot, model, list(trials), problem)[0]
+    name = estimator or recommended_fit(robot, model, list(trials), problem)[1].recommendation.estimator
     if name not in robot.estimators:
         raise InputError(f"estimator {name!r} is not a fit of this arm; its fits: {', '.join(robot.estimators)}")
-    model = robot.model()
-    return estimators.fit_for(robot, name, stats_of(model, list(trials)), model, **options)
+    return estimators.fit_for(robot, name, estimators.statistics(model, list(trials), name), model, **options)
 
 
 def compare(problem: Problem, training: Sequence[Dataset], testing: Sequence[Dataset] = (), **options) -> Comparison:
@@ -72,6 +74,7 @@ def compare(problem: Problem, training: Sequence[Dataset], testing: Sequence[Dat
         list(testing) or None,
         reference=problem.reference,
         conversions=problem.data.conversions,
+        cutoff_setting=problem.data.derivative_cutoff_hz,
         **options,
     )
 

@@ -19,7 +19,14 @@ from ident_opt import rosbag
 from ident_opt.arm.base import Robot
 from ident_opt.arm.planar import PI_NAMES
 from ident_opt.columns import channel_names, locate
-from ident_opt.derivatives import estimate_derivatives, lowpass, resolve_cutoff
+from ident_opt.derivatives import (
+    choose_cutoff,
+    estimate_derivatives,
+    instrument_derivatives,
+    lowpass,
+    resolve_cutoff,
+    settled,
+)
 from ident_opt.errors import InputError
 from ident_opt.problem.spec import DataSpec
 
@@ -48,6 +55,9 @@ class Dataset:
     cutoff_hz: float | None = None  # the derivative filter's cut-off actually used (None: derivatives given)
     #: τ through the same zero-phase low-pass as the angles (parallel filtering), for fits; None: τ as logged
     tau_filtered: np.ndarray | None = None
+    #: (dq, ddq) of the instruments of IV, estimated at a lower cut-off than the regressor's
+    #: (`derivatives.instrument_derivatives`); None when not estimated
+    instruments: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def tau_fit(self) -> np.ndarray:
@@ -74,6 +84,7 @@ class Dataset:
             ddq=self.ddq[index],
             tau=self.tau[index],
             tau_filtered=None if self.tau_filtered is None else self.tau_filtered[index],
+            instruments=None if self.instruments is None else tuple(x[index] for x in self.instruments),
             extra=self.extra.iloc[np.arange(self.n)[index]].reset_index(drop=True),
         )
 
@@ -422,7 +433,30 @@ def load_dataset(
     extra = _extra_columns(frame, cols, keep)
     cutoff_hz = None if how == "given" else cutoff
     tau_filtered = None if cutoff_hz is None else lowpass(t, tau, cutoff_hz)
-    return Dataset(str(path), t, q, dq, ddq, tau, extra, how, dropped, notes, cutoff_hz, tau_filtered)
+    # Logged derivatives carry the logger's own filters; the instruments come from q at the cut-off the data support.
+    instruments = instrument_derivatives(t, q, cutoff_hz if cutoff_hz is not None else choose_cutoff(t, q))
+    trial = Dataset(str(path), t, q, dq, ddq, tau, extra, how, dropped, notes, cutoff_hz, tau_filtered, instruments)
+    return trial if cutoff_hz is None else _settled(trial, path, min_samples)
+
+
+def _settled(trial: Dataset, path: Path, min_samples: int) -> Dataset:
+    """The trial without the samples near its ends (and near gaps) whose estimated derivatives still carry the
+    zero-phase filter's edge error (`derivatives.settled`), with a note saying how many went."""
+    keep = settled(trial.t, trial.cutoff_hz)
+    if keep.sum() < max(min_samples, 2):
+        raise InputError(
+            f"{path}: only {int(keep.sum())} samples lie a filter period (1/{trial.cutoff_hz:.3g} Hz) away from the "
+            "trial's ends and gaps, where derivatives can be estimated; this command needs "
+            f"{max(min_samples, 2)}: record a longer trial, or log dq and ddq"
+        )
+    if keep.all():
+        return trial
+    cut = trial.subset(keep)
+    cut.notes.append(
+        f"{int((~keep).sum())} sample(s) within {1 / trial.cutoff_hz:.3g} s of the trial's ends or gaps left out: "
+        "the zero-phase filter's edge error is still in their derivatives there"
+    )
+    return cut
 
 
 def refiltered(d: Dataset, cutoff_hz: float) -> Dataset:
@@ -432,7 +466,15 @@ def refiltered(d: Dataset, cutoff_hz: float) -> Dataset:
     dq, ddq, how = estimate_derivatives(d.t, d.q, cutoff_hz, logged_dq)
     if "accelerations as logged" in d.derivatives:
         ddq = d.ddq
-    return replace(d, dq=dq, ddq=ddq, derivatives=how, cutoff_hz=cutoff_hz, tau_filtered=lowpass(d.t, d.tau, cutoff_hz))
+    return replace(
+        d,
+        dq=dq,
+        ddq=ddq,
+        derivatives=how,
+        cutoff_hz=cutoff_hz,
+        tau_filtered=lowpass(d.t, d.tau, cutoff_hz),
+        instruments=instrument_derivatives(d.t, d.q, cutoff_hz),
+    )
 
 
 def concat(trials: list[Dataset]) -> Dataset:
@@ -456,6 +498,9 @@ def concat(trials: list[Dataset]) -> Dataset:
         dropped_rows=sum(d.dropped_rows for d in trials),
         cutoff_hz=cutoffs.pop() if len(cutoffs) == 1 else None,
         tau_filtered=np.concatenate(filtered),
+        instruments=None
+        if any(d.instruments is None for d in trials)
+        else tuple(np.concatenate([d.instruments[i] for d in trials]) for i in (0, 1)),
     )
 
 

@@ -29,17 +29,16 @@ from ident_opt.arm.planar import RIGID
 from ident_opt.data import Dataset
 from ident_opt.gmr import GMR
 from ident_opt.identify import estimators
-from ident_opt.identify.stats import Stats
 from ident_opt.problem.spec import ResidualSpec
 
 #: Ridge penalties searched by (efficient leave-one-out) cross-validation.
 RIDGE_ALPHAS = tuple(np.logspace(-4, 4, 17))
 
 
-def fitted(robot) -> dict[str, str]:
+def fitted(robot, recommended: str | None = None) -> dict[str, str]:
     """The identified rigid-body models: key -> estimator (`ident_opt.identify.estimators`): pbr by OLS, cpbr by
-    the arm's physically consistent fit."""
-    return {"pbr": "ols", "cpbr": robot.default_estimator}
+    the recommended fit (`studies.recommend`; None: the arm's physically consistent fit, `Robot.default_estimator`)."""
+    return {"pbr": "ols", "cpbr": recommended or robot.default_estimator}
 
 
 def datasheet_keys(robot) -> dict[str, str]:
@@ -108,7 +107,7 @@ class RigidModel:
         """Identify π on the training trial (a no-op for a datasheet model)."""
         if self.estimator is None:
             return self
-        stats = Stats.from_data(self.arm, train.q, train.dq, train.ddq, train.tau)
+        stats = estimators.statistics(self.arm, [train], self.estimator)
         self.fit_ = estimators.fit(self.estimator, stats, self.arm, **self.options)
         self.pi = np.asarray(self.fit_.pi, dtype=float)
         return self
@@ -184,13 +183,17 @@ def make_gmr(
     )
 
 
-def parametric_models(robot, constrained: bool = True) -> list:
-    """Fresh, unfitted parametric models in report order: rr, the nominal models (dm, dm_…), pbr (, cpbr), the
-    fitted ones on the arm's rigid model (`Robot.model(())`) with the options its description gives them."""
+def parametric_models(robot, constrained: bool = True, recommended: str | None = None) -> list:
+    """Fresh, unfitted parametric models in report order: rr, the nominal models (dm, dm_…), pbr (, cpbr: the
+    `recommended` fit), the fitted ones on the arm's rigid model (`Robot.model(())`) with the options its
+    description gives them."""
     arm = robot.model(())
-    models = {key: name for key, name in fitted(robot).items() if constrained or key != "cpbr"}
+    models = {key: name for key, name in fitted(robot, recommended).items() if constrained or key != "cpbr"}
     return [
         RidgeModel(),
         *(datasheet_model(robot, name) for name in datasheet_keys(robot).values()),
-        *(RigidModel(key, arm, estimator=name, options=robot.fit_options(name)) for key, name in models.items()),
+        *(
+            RigidModel(key, arm, estimator=name, options=estimators.options_for(robot, name))
+            for key, name in models.items()
+        ),
     ]

@@ -1,5 +1,5 @@
 """Warnings a result carries to the terminal, the reports and the JSON (`warnings`: a list of objects with a
-`code` and a `sentence`). A warning says what is doubtful about a result and what to change."""
+`code` and a `message`). A warning says what is doubtful about a result and what to change."""
 
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ from dataclasses import asdict, dataclass
 
 @dataclass(frozen=True)
 class ResultWarning:
-    """`code`: a stable identifier (e.g. "ols_iv_disagree"); `sentence`: what is wrong and what to change."""
+    """`code`: a stable identifier (e.g. "ols_iv_disagree"); `message`: what is wrong and what to change."""
 
     code: str
-    sentence: str
+    message: str
 
     def as_dict(self) -> dict[str, str]:
-        """The JSON object: {"code": …, "sentence": …}."""
+        """The JSON object: {"code": …, "message": …}."""
         return asdict(self)
 
     def __str__(self) -> str:
-        return f"warning [{self.code}]: {self.sentence}"
+        return f"warning [{self.code}]: {self.message}"

@@ -371,6 +371,7 @@ def test_unmapping_refused_where_it_makes_no_sense(arm3, capsys, entry, named):
 
 
 def test_unmapping_on_a_planar_arm_and_in_the_stream(tmp_path):
+    from tests.conftest import kept
     from tests.test_data import minimal_problem, trial_frame
 
     frame = trial_frame()
@@ -379,7 +380,7 @@ def test_unmapping_on_a_planar_arm_and_in_the_stream(tmp_path):
     frame.to_csv(path, index=False)
     problem = load_problem(minimal_problem(tmp_path, "\n[data.columns]\ni1 = false\ni2 = false\n"))
     data = load_dataset(path, problem.data, problem.robot)
-    assert np.allclose(data.tau, frame[["tau1", "tau2"]].to_numpy())
+    assert np.allclose(data.tau, kept(frame, data)[["tau1", "tau2"]].to_numpy())
     positions, _ = Mapping.from_spec(problem.data).resolve_header(list(frame.columns))
     assert "i1" not in positions and "i2" not in positions and positions["tau1"] == 3
     mapped = load_problem(

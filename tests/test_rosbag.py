@@ -64,13 +64,17 @@ def test_a_bag_reads_as_the_same_trial_as_its_csv(tmp_path, frame, storage):
     bag = write_bag(tmp_path / "bag", frame, storage)
     problem = load_problem(bag_problem(tmp_path))
     d = load_dataset(bag, problem.data, problem.robot)
-    np.testing.assert_allclose(d.t, frame["time"] - frame["time"].iloc[0], atol=2e-9)
-    np.testing.assert_allclose(d.q[:, 0], frame["pos_meas1"] - np.pi / 2, atol=1e-12)  # by name, converted
-    np.testing.assert_allclose(d.q[:, 1], frame["pos_meas2"], atol=1e-12)
-    np.testing.assert_allclose(d.tau, frame[["tau_meas1", "tau_meas2"]], atol=1e-12)
-    np.testing.assert_allclose(d.dq, frame[["vel_meas1", "vel_meas2"]], atol=1e-12)  # logged velocities kept
+    t = (frame["time"] - frame["time"].iloc[0]).to_numpy()
+    first = int(np.argmin(np.abs(t - d.t[0])))  # accelerations estimated: the unsettled ends are left out
+    rows = frame.iloc[first : first + d.n]
+    assert 0.85 * len(frame) < d.n < len(frame)
+    np.testing.assert_allclose(d.t, t[first : first + d.n], atol=2e-9)
+    np.testing.assert_allclose(d.q[:, 0], rows["pos_meas1"] - np.pi / 2, atol=1e-12)  # by name, converted
+    np.testing.assert_allclose(d.q[:, 1], rows["pos_meas2"], atol=1e-12)
+    np.testing.assert_allclose(d.tau, rows[["tau_meas1", "tau_meas2"]], atol=1e-12)
+    np.testing.assert_allclose(d.dq, rows[["vel_meas1", "vel_meas2"]], atol=1e-12)  # logged velocities kept
     storage_file = next((tmp_path / "bag").glob("*.mcap" if storage == StoragePlugin.MCAP else "*.db3"))
-    assert load_dataset(storage_file, problem.data, problem.robot).n == len(frame)  # the storage file works too
+    assert load_dataset(storage_file, problem.data, problem.robot).n == d.n  # the storage file works too
 
 
 def test_check_reports_a_bag_without_velocities(tmp_path, frame):
@@ -78,7 +82,7 @@ def test_check_reports_a_bag_without_velocities(tmp_path, frame):
     out = tmp_path / "check.json"
     assert main(["check", "--problem", str(bag_problem(tmp_path)), "--data", str(bag), "--json", str(out)]) == 0
     trial = json.loads(out.read_text())["trials"][0]
-    assert trial["samples"] == len(frame) and "estimated" in trial["derivatives"]
+    assert 0.85 * len(frame) < trial["samples"] < len(frame) and "estimated" in trial["derivatives"]
 
 
 @pytest.mark.parametrize(

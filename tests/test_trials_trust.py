@@ -113,19 +113,27 @@ def default_run(tmp_path_factory):
     return compare_json(tmp, DFKI)
 
 
-def test_dfki_defaults_match_the_makers_held_out_accuracy_without_warnings(default_run):
+def test_dfki_defaults_stand_behind_a_fit_as_good_as_the_makers(default_run):
+    """The shipped DFKI C.0 problem with default settings: each trial's cut-off read from its spectrum, noise
+    biasing least squares at twice it (said once, without advising what the run already does), and the recommended
+    fit — the robust one — as accurate on the held-out swing-up as the makers' own identification, its inertial and
+    gravity parameters within 10 % of theirs (the gravity ones were 12–16 % low before the trials' ends were left
+    out of the fit)."""
     status, result = default_run
     assert status == 0
-    assert result["warnings"] == []
+    assert result["recommended"] == "robust" and "instrumental variables" in result["recommended_why"]
+    codes = [w["code"] for w in result["warnings"]]
+    assert "cutoff_outlier" not in codes and len(codes) == len(set(codes))
+    assert not any('"auto"' in w["message"] for w in result["warnings"])
     assert result["trials"]["test"][0].endswith("trajectory_12.csv.gz") and len(result["trials"]["train"]) == 8
     rmse = result["metrics"]["cross_trial"]["rmse"]
     for j in range(2):
-        assert min(rmse["ols"][j], rmse["iv"][j], rmse["constrained"][j]) <= 1.05 * rmse["reference"][j]
-    makers, iv = result["parameters"]["reference"], result["parameters"]["iv"]
-    for name in ("a1", "a3", "b1", "b2"):  # IV within 15 % of the makers' identification
-        assert iv[name] == pytest.approx(makers[name], rel=0.15)
-    assert set(result["standard_errors"]["iv"]) >= {"a1", "b1"}
-    assert all(2.0 < c < 7.0 for c in result["cutoff_hz"])
+        assert rmse["robust"][j] <= 1.05 * rmse["reference"][j]
+    makers, robust = result["parameters"]["reference"], result["parameters"]["robust"]
+    for name in ("a1", "a3", "b1", "b2"):
+        assert robust[name] == pytest.approx(makers[name], rel=0.10)
+    assert set(result["standard_errors"]["robust"]) >= {"a1", "b1"}
+    assert all(2.0 < c < 25.0 for c in result["cutoff_hz"])
     assert abs(result["gravity_direction"]["delta1"]) < 0.05
 
 
@@ -135,7 +143,7 @@ def test_a_bad_cutoff_warns_and_says_what_to_change(tmp_path, capsys):
     assert status == 0
     codes = {w["code"] for w in result["warnings"]}
     assert {"ols_iv_disagree", "cutoff_sensitivity"} <= codes
-    assert all("derivative_cutoff_hz" in w["sentence"] for w in result["warnings"])
+    assert all("derivative_cutoff_hz" in w["message"] for w in result["warnings"])
     assert "warning [ols_iv_disagree]" in capsys.readouterr().err
     assert "ols_iv_disagree" in (tmp_path / "out" / "compare.md").read_text()
 
@@ -145,7 +153,7 @@ def test_the_robots_own_zero_warns_with_the_offset_that_fixes_it(tmp_path, capsy
     status, result = compare_json(tmp_path, problem, "--data", trial(0), "--data", trial(1), "--test-data", trial(12))
     assert status == 0
     warning = next(w for w in result["warnings"] if w["code"] == "angle_convention")
-    offset = float(warning["sentence"].split("offset = ")[1].split()[0])
+    offset = float(warning["message"].split("offset = ")[1].split()[0])
     assert offset == pytest.approx(-math.pi / 2, abs=0.05)
     assert result["gravity_direction"]["delta1"] == pytest.approx(-math.pi / 2, abs=0.05)
     assert "angle_convention" in capsys.readouterr().err

@@ -96,7 +96,7 @@ def test_comparison_on_a_time_split_keeps_the_json_contract(tmp_path):
     result = json.loads(out.read_text())
     assert set(result["metrics"]) == {"chronological"} and result["joints"] == JOINTS
     scores = result["metrics"]["chronological"]
-    assert set(scores["rmse"]) == {"ols", "constrained", "consistent", "datasheet_urdf"}
+    assert set(scores["rmse"]) == {"ols", "constrained", "consistent", "robust", "datasheet_urdf"}
     assert all(len(v) == 7 for metric in ("rmse", "nmse") for v in scores[metric].values())
     params = result["parameters"]["consistent"]
     for name in (
@@ -115,7 +115,8 @@ def test_comparison_on_a_time_split_keeps_the_json_contract(tmp_path):
     masses = result["masses"]["consistent"]["links"]
     cad = result["masses"]["datasheet_urdf"]["links"]
     assert all(0.5 * cad[k] - 1e-6 <= v <= 1.5 * cad[k] + 1e-6 for k, v in masses.items())
-    assert isinstance(result["warnings"], list) and result["default_estimator"] == "consistent"
+    assert isinstance(result["warnings"], list) and result["recommended"] in ("consistent", "robust")
+    assert result["recommended_why"]
 
 
 def test_identify_writes_its_report(tmp_path):

@@ -444,7 +444,7 @@ class ChainRobot:
     serves = frozenset(("identify", "compare", "codegen", "check", "export", "fleet", "simulate", "diagnose"))
     #: The fits `compare` runs, in report order: OLS on the base parameters, consistent without and with the
     #: URDF as a prior (`ident_opt.identify.estimators`).
-    estimators = ("ols", "constrained", "consistent")
+    estimators = ("ols", "constrained", "consistent", "robust")
     #: The fit used downstream unless told otherwise: consistent and plausible.
     default_estimator = "consistent"
     #: The simulator and the diagnosis that serve it: those of any arm, through the `Arm` interface alone.

@@ -122,7 +122,7 @@ class PlanarRobot:
     #: Every command serves the planar two-link arm (the paper's own views included).
     serves = frozenset(ALL_COMMANDS)
     #: The fits `compare` runs, in report order (`ident_opt.identify.estimators`).
-    estimators = ("ols", "constrained", "nlp_physical")
+    estimators = ("ols", "constrained", "nlp_physical", "robust")
     #: The fit used downstream unless told otherwise.
     default_estimator = "constrained"
     #: The simulator and the diagnosis that serve it: the planar two-link arm's own, tuned on the MERIt trials

@@ -23,6 +23,7 @@ from ident_opt.identify.estimators import ESTIMATORS
 from ident_opt.problem import load_problem
 from ident_opt.report import codegen as report
 from ident_opt.studies import online_codegen, ship
+from ident_opt.studies.recommend import chosen
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -66,17 +67,17 @@ def run(args: argparse.Namespace) -> int:
     problem = load_problem(args.problem)
     require("codegen", problem)
     robot = problem.robot
-    args.estimator = args.estimator or robot.default_estimator
-    if args.estimator not in robot.estimators:
-        raise InputError(
-            f"codegen: --estimator {args.estimator} is not a fit of this arm ({robot.described_as}); "
-            f"its fits: {', '.join(robot.estimators)}"
-        )
+    if args.estimator is not None:
+        chosen("codegen", robot, robot.model(), [], problem, args.estimator)  # an unknown one fails before any work
     compiler = codegen.find_compiler()  # fail before any fitting when there is none
     saved = ship.read_parameters(args.parameters) if args.parameters else None
     model = _model(robot, args.extension, saved)
     trials = load(args, "codegen", problem=problem).training if saved is None or saved.get("gmr") is None else []
     train = concat(trials) if trials else None
+    if saved is None:
+        choice = chosen("codegen", robot, model, trials, problem, args.estimator)
+        args.estimator = choice.estimator
+        print(f"ident-opt codegen: the {choice.estimator} fit ({choice.why})", file=sys.stderr)
     if not (saved and saved.get("gmr")):
         _announce_gmr(problem.residual, args.components, train)
     out = output_dir(args, problem)  # only once every input is read and checked

@@ -95,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         reference=loaded.problem.reference,
         conversions=loaded.problem.data.conversions,
+        cutoff_setting=loaded.problem.data.derivative_cutoff_hz,
     )
     files = report.write(result, out, args.json)
     print(report.to_terminal(result))

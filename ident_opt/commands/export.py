@@ -15,14 +15,15 @@ from the file (`tests/test_export.py`).
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ident_opt import outputs
 from ident_opt.commands.common import add_problem_arguments, load, require, write_json
 from ident_opt.descriptions import identified, write_mjcf, write_urdf
-from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from ident_opt.studies.export import identified_arm
+from ident_opt.studies.recommend import chosen
 
 #: The formats of --format, and the file ending each expects.
 FORMATS = {"urdf": ".urdf", "mjcf": ".xml"}
@@ -36,8 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--estimator",
         metavar="NAME",
-        help="the fit to export, among the arm's (default: its physically consistent one: constrained for the "
-        "planar arm, consistent for an n-joint arm)",
+        help="the fit to export, among the arm's (default: the recommended fit, chosen from the data's own "
+        "evidence: the arm's physically consistent fit, or the robust one when noise biases it)",
     )
 
 
@@ -46,16 +47,15 @@ def run(args: argparse.Namespace) -> int:
     problem = load_problem(args.problem)
     require("export", problem)
     robot = problem.robot
-    estimator = args.estimator or robot.default_estimator
-    if estimator not in robot.estimators:
-        raise InputError(
-            f"export: --estimator {estimator} is not a fit of this arm ({robot.described_as}); its fits: "
-            f"{', '.join(robot.estimators)}"
-        )
     sidecar = Path(f"{args.out}.json")
     if args.format == "urdf":
         outputs.check_file_output(sidecar, "--out's sidecar")
+    if args.estimator is not None and args.estimator not in robot.estimators:
+        chosen("export", robot, robot.model(), [], problem, args.estimator)  # the InputError naming the arm's fits
     loaded = load(args, "export", min_samples=2 * robot.model().n_params, problem=problem)
+    choice = chosen("export", robot, robot.model(), loaded.training, problem, args.estimator)
+    print(f"ident-opt export: the {choice.estimator} fit ({choice.why})", file=sys.stderr)
+    estimator = choice.estimator
     exported = identified_arm(robot, loaded.training, estimator)
     record = {
         **identified(exported.model.names, exported.fit.pi, exported.fit.se, estimator),

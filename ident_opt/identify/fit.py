@@ -209,7 +209,8 @@ def finish(
     Hp = _pinv(H)
     sigma2 = _sigma2(stats, pi, w)
     meat = sum(w_j**2 * s2_j * G_j for w_j, s2_j, G_j in zip(w, sigma2, stats.G))
-    cov = Hp @ meat @ Hp
+    # Correlated residuals (torques low-passed with the derivatives) carry fewer independent values than samples.
+    cov = Hp @ meat @ Hp * max(1.0, stats.n / stats.effective if stats.effective else 1.0)
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     # A parameter the data do not determine (its direction leaves the regressor's row space) has no standard
     # error: what sets it is the estimator (a prior, a bound, the least-norm choice), not the data. Not "± 0".

@@ -8,14 +8,21 @@ parameter 60–70 % low). An instrument Z is a second regressor correlated with 
     π̂_IV = (Σ_j Z_jᵀ Y_j)⁻¹ Σ_j Z_jᵀ τ_j
 
 is consistent (Gautier, Janot et al., the IDIM-IV family). Here Z is the same model's regressor evaluated
-on an *independent derivative estimate*: the angles low-passed at `INSTRUMENT_RATIO` × the data's cut-off.
-The noise that biases OLS lives in the upper part of the pass band (its power grows as f⁴), which the
-instrument's filter removes, while the motion below is kept, so Z stays strongly correlated with Y₀.
-With Z = Y the estimate is exactly OLS (a test checks it).
+on an *independent derivative estimate*: the angles low-passed at `derivatives.INSTRUMENT_RATIO` × the data's
+cut-off (`Dataset.instruments`). The noise that biases OLS lives in the upper part of the pass band (its power
+grows as f⁴), which the instrument's filter removes, while the motion below is kept, so Z stays strongly
+correlated with Y₀. With Z = Y the estimate is exactly OLS (a test checks it).
 
 Everything is kept as statistics per joint, like `Stats`: A_j = Z_jᵀY_j, c_j = Z_jᵀτ_j, K_j = Z_jᵀZ_j.
 Standard errors are the IV sandwich Cov = A⁻¹ (Σ_j σ_j² K_j) A⁻ᵀ, with σ_j² the residual variance of
 joint j (from the ordinary statistics); like OLS's, they assume independent residuals.
+
+**Any estimator on instruments** (`InstrumentStats.two_stage`): two-stage least squares projects each joint's
+torque equation onto its instruments, Σ_j ‖P_Zj (τ_j − Y_j π)‖², which is a quadratic in π with the statistics
+G_j = A_jᵀK_j⁺A_j, b_j = A_jᵀK_j⁺c_j. Any estimator that works from statistics (the constrained and consistent
+fits included) run on these is an instrumental-variable estimator: without constraints it is the 2SLS estimate
+(each joint's own instruments), with them the consistent fit nearest to it in the IV metric. Its standard errors
+come out as the 2SLS sandwich, because the residuals it is given are those of the measured torques.
 """
 
 from __future__ import annotations
@@ -27,13 +34,12 @@ import numpy as np
 
 from ident_opt.arm.base import Arm
 from ident_opt.data import Dataset
-from ident_opt.derivatives import choose_cutoff, estimate_derivatives
+from ident_opt.derivatives import choose_cutoff, instrument_derivatives
 from ident_opt.identify.fit import LinearFit, check_stats, finish
 from ident_opt.identify.stats import Stats
 
-#: The instruments' derivative cut-off as a fraction of the data's (measured on DFKI C.0: 0.5 keeps the
-#: motion and removes most of the bias; see the module doc).
-INSTRUMENT_RATIO = 0.5
+#: Directions of the instruments' Gram matrix below this fraction of its largest eigenvalue are not instruments.
+TWO_STAGE_RCOND = 1e-12
 
 
 @dataclass
@@ -54,19 +60,59 @@ class InstrumentStats:
         return cls(A, c, K, Stats.from_regressor(Y, tau))
 
     @classmethod
-    def from_data(cls, arm: Arm, data: Dataset, ratio: float = INSTRUMENT_RATIO) -> InstrumentStats:
-        """Y from the trial's q, dq, ddq; Z from the same angles differentiated at `ratio` × its cut-off
-        (the trial's own, or for logged derivatives the one `derivatives.choose_cutoff` reads from its spectrum);
-        τ filtered like the regressor's inputs (`Dataset.tau_fit`)."""
-        cutoff = data.cutoff_hz if data.cutoff_hz is not None else choose_cutoff(data.t, data.q)
-        dq_z, ddq_z, _ = estimate_derivatives(data.t, data.q, ratio * cutoff)
+    def from_data(cls, arm: Arm, data: Dataset) -> InstrumentStats:
+        """Y from the trial's q, dq, ddq; Z from its instruments' kinematics (`Dataset.instruments`, else the
+        angles differentiated at `derivatives.INSTRUMENT_RATIO` × its cut-off, or × the one
+        `derivatives.choose_cutoff` reads for logged derivatives); τ filtered like the regressor's inputs
+        (`Dataset.tau_fit`)."""
+        if data.instruments is not None:
+            dq_z, ddq_z = data.instruments
+        else:
+            cutoff = data.cutoff_hz if data.cutoff_hz is not None else choose_cutoff(data.t, data.q)
+            dq_z, ddq_z = instrument_derivatives(data.t, data.q, cutoff)
         Y = arm.regressor(data.q, data.dq, data.ddq)
         Z = arm.regressor(data.q, dq_z, ddq_z)
         return cls.from_regressors(Y, Z, data.tau_fit)
 
+    @classmethod
+    def zeros(cls, n_params: int, n_joints: int) -> InstrumentStats:
+        """Empty statistics for P = `n_params` parameters and `n_joints` joints."""
+        J, P = n_joints, n_params
+        return cls(np.zeros((J, P, P)), np.zeros((J, P)), np.zeros((J, P, P)), Stats.zeros(P, J))
+
+    def two_stage(self) -> TwoStageStats:
+        """The two-stage statistics (module doc): what any estimator from statistics needs to be an IV one."""
+        G, b, s = [], [], []
+        for A, c, K in zip(self.A, self.c, self.K):
+            # K⁺ = U diag(1/λ) Uᵀ over the directions the instruments span: with W = diag(λ^-½) Uᵀ, G = (WA)ᵀ(WA)
+            # is a Gram matrix by construction (positive semi-definite whatever the rounding), b = (WA)ᵀ(Wc).
+            lam, U = np.linalg.eigh(0.5 * (K + K.T))
+            keep = lam > TWO_STAGE_RCOND * max(lam.max(), 0.0)
+            W = U[:, keep].T / np.sqrt(lam[keep])[:, None]
+            WA, Wc = W @ A, W @ c
+            G.append(WA.T @ WA)
+            b.append(WA.T @ Wc)
+            s.append(float(Wc @ Wc))
+        return TwoStageStats(
+            np.array(G), np.array(b), np.array(s), self.stats.n, self.stats.effective, measured=self.stats
+        )
+
     def __add__(self, other: InstrumentStats) -> InstrumentStats:
         """The statistics of both trials together (derivatives never straddle two trials)."""
         return InstrumentStats(self.A + other.A, self.c + other.c, self.K + other.K, self.stats + other.stats)
+
+
+@dataclass
+class TwoStageStats(Stats):
+    """Statistics G, b, s of the projected torque equations (`InstrumentStats.two_stage`) whose residuals
+    (`rss`) are those of the measured torques (`measured`): residual variances and standard errors come out as
+    the 2SLS ones."""
+
+    measured: Stats | None = None
+
+    def rss(self, pi: np.ndarray) -> np.ndarray:
+        """Residual sum of squares per joint of the measured torques, Σ_k (τ_kj − Y_kj π)² [N² m²]."""
+        return self.measured.rss(pi)
 
 
 def fit_iv(iv: InstrumentStats, arm: Arm) -> LinearFit:
@@ -83,5 +129,7 @@ def fit_iv(iv: InstrumentStats, arm: Arm) -> LinearFit:
     fit = finish(iv.stats, arm, pi, np.ones(arm.n_joints), "iv", solve_seconds=elapsed)
     A_inv = np.linalg.pinv(A)
     meat = sum(s2 * K for s2, K in zip(fit.sigma2, iv.K))
-    fit.se = np.sqrt(np.clip(np.diag(A_inv @ meat @ A_inv.T), 0.0, None))
+    n, effective = iv.stats.n, iv.stats.effective
+    inflation = max(1.0, n / effective if effective else 1.0)  # correlated residuals (`Stats.effective`)
+    fit.se = np.sqrt(np.clip(np.diag(A_inv @ meat @ A_inv.T) * inflation, 0.0, None))
     return fit

@@ -24,6 +24,10 @@ class Stats:
     b: np.ndarray
     s: np.ndarray
     n: int = 0
+    #: How many of the n residuals are independent (None: all). Torques low-passed at a cut-off f_c (parallel
+    #: filtering) leave residuals correlated over about 1/(2 f_c): a trial sampled at f_s then carries about
+    #: n · 2 f_c / f_s independent ones, and standard errors grow by √(n / effective) (`identify.fit.finish`).
+    effective: float | None = None
 
     @classmethod
     def zeros(cls, n_params: int, n_joints: int = 2) -> Stats:
@@ -55,7 +59,12 @@ class Stats:
 
     def __add__(self, other: Stats) -> Stats:
         """The statistics of both sample sets together."""
-        return Stats(self.G + other.G, self.b + other.b, self.s + other.s, self.n + other.n)
+        effective = None
+        if self.effective is not None or other.effective is not None:
+            effective = (self.n if self.effective is None else self.effective) + (
+                other.n if other.effective is None else other.effective
+            )
+        return Stats(self.G + other.G, self.b + other.b, self.s + other.s, self.n + other.n, effective)
 
     def add_sample(self, Y: np.ndarray, tau: np.ndarray) -> None:
         """In place: one new sample, Y (J, P) and τ (J,) — a rank-J update of G."""
@@ -66,7 +75,7 @@ class Stats:
 
     def copy(self) -> Stats:
         """An independent copy."""
-        return Stats(self.G.copy(), self.b.copy(), self.s.copy(), self.n)
+        return Stats(self.G.copy(), self.b.copy(), self.s.copy(), self.n, self.effective)
 
     def combined(self, weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
         """(G, b, s) summed over joints, each joint weighted by `weights` (e.g. 1/σ_j² for WLS)."""

@@ -77,10 +77,10 @@ def _unmapped(table: Table, key: str, n_joints: int) -> bool:
 
 def _cutoff(table: Table) -> float | str:
     """`derivative_cutoff_hz`: a number [Hz] or "auto" (read from each trial's spectrum: `choose_cutoff`)."""
-    if table.raw.get("derivative_cutoff_hz") == "auto":
-        table.raw.pop("derivative_cutoff_hz")
+    if table.raw.get("derivative_cutoff_hz", "auto") == "auto":
+        table.raw.pop("derivative_cutoff_hz", None)
         return "auto"
-    return table.positive("derivative_cutoff_hz", DataSpec.derivative_cutoff_hz, high=LIMITS["rate_hz"])
+    return table.positive("derivative_cutoff_hz", 15.0, high=LIMITS["rate_hz"])
 
 
 def _paths(table: Table, key: str) -> list[str]:

@@ -34,7 +34,7 @@ class DataSpec:
     header: bool = True
     sheet: str | None = None
     columns: dict[str, str | int] = field(default_factory=dict)
-    derivative_cutoff_hz: float | str = 15.0  # Hz, or "auto"
+    derivative_cutoff_hz: float | str = "auto"  # Hz, or "auto": read from each trial (`derivatives.cutoff_choice`)
     conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
     standard_by_name: bool = True
     train: tuple[Path, ...] = ()  # training trials (`train = [...]`): their statistics add up
@@ -114,6 +114,9 @@ class Problem:
     output_dir: Path | None = None
     limits: Limits | None = None
     reference: Reference | None = None
+    #: The fit a run stands behind, set by the command from the run's own evidence (`studies.recommend`); None:
+    #: the robot's physically consistent fit (`Robot.default_estimator`). Not read from the file.
+    estimator: str | None = None
 
 
 @dataclass(frozen=True)

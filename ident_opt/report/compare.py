@@ -218,23 +218,30 @@ def sensitivity_table(c: Comparison) -> pd.DataFrame:
 
 
 def warnings_json(c: Comparison) -> list[dict[str, str]]:
-    """The `warnings` key: [{"code": …, "sentence": …}]."""
+    """The `warnings` key: [{"code": …, "message": …}]."""
     return [w.as_dict() for w in c.trust.warnings]
 
 
 def _trust_section(c: Comparison) -> list[str]:
     """Warnings, the cut-off sensitivity and the fitted direction of gravity, as Markdown lines."""
-    parts = ["## Warnings", ""]
-    parts += [f"- **{w.code}**: {w.sentence}" for w in c.trust.warnings] or ["- none"]
+    parts = ["## The recommended fit", "", f"**{c.recommendation.estimator}**: {c.recommendation.why}.", ""]
+    parts += ["## Warnings", ""]
+    parts += [f"- **{w.code}**: {w.message}" for w in c.trust.warnings] or ["- none"]
     parts.append("")
     if c.trust.cutoffs:
         cut = ", ".join(f"{x:.3g}" for x in c.trust.cutoffs)
         parts += [
             "## Derivative cut-off",
             "",
-            f"Cut-off per training trial [Hz]: {cut}. The torque of each fit went through the same zero-phase "
-            "filter as the angles (parallel filtering); scores are against the measured torque. OLS with every "
-            "trial's derivatives at ½× and 2× its cut-off, beside IV (instruments at ½× the cut-off):",
+            f"Cut-off per training trial from its spectrum [Hz]: {cut}"
+            + (
+                f"; the fits use {c.recommendation.factor:g}× these (OLS and IV agree up to there)"
+                if c.recommendation.factor != 1
+                else ""
+            )
+            + ". The torque of each fit went through the same zero-phase filter as the angles (parallel filtering); "
+            "scores are against the measured torque. OLS with every trial's derivatives at ½× and 2× its cut-off, "
+            "beside IV (instruments at ½× the cut-off):",
             "",
             markdown_table(sensitivity_table(c).map(fmt)),
             "",
@@ -409,8 +416,14 @@ def to_terminal(c: Comparison) -> str:
                 "Consistency:\n" + consistency_table(c, brief=True).to_string(),
                 "Held-out nmse per joint:\n" + metrics_table(c, "nmse").to_string(float_format=lambda v: f"{v:.4g}"),
                 "\n".join(f"- {line}" for line in findings(c)),
+                recommended_line(c.recommendation),
             ]
         )
+
+
+def recommended_line(recommendation) -> str:
+    """The terminal's line on the recommended fit (`studies.recommend.Recommendation`)."""
+    return f"Recommended fit: {recommendation.estimator} — {recommendation.why}."
 
 
 def to_json(c: Comparison) -> dict:
@@ -427,12 +440,14 @@ def to_json(c: Comparison) -> dict:
         "physical_parameters": c.fits["nlp_physical"].details.get("physical", {}) if "nlp_physical" in c.fits else {},
         "model": list(c.model.names),
         "joints": list(c.joints),
-        "default_estimator": c.default,
+        "recommended": c.recommendation.estimator,
+        "recommended_why": c.recommendation.why,
         "sources": {key: shown(path) for key, path in c.sources.items()},
         "trials": {key: [shown(p) for p in paths] for key, paths in c.trials.items()},
         "metrics_by_test_trial": {shown(k): v for k, v in c.by_test_trial.items()},
         "warnings": warnings_json(c),
         "cutoff_hz": c.trust.cutoffs,
+        "cutoff_factor": c.recommendation.factor,
         "sensitivity": {f"ols_{f:g}x_cutoff": fit.as_dict() for f, fit in c.trust.sensitivity.items()},
         "gravity_direction": c.trust.gravity_direction,
         "reference": c.reference_label,

@@ -32,8 +32,10 @@ def readme_parts(
     paper, chrono, cross = P.get("paper"), P.get("chronological"), P.get("cross_trial")
     lines = _readme_intro(result, command, seconds)
     lines += _reproduction(result) if result.paper_robot else []
+    rec = result.recommendation
+    lines += ["", "## The recommended fit", "", f"cpbr is **{rec.estimator}**: {rec.why}."]
     lines += ["", "## Warnings", ""]
-    lines += [f"- **{w.code}**: {w.sentence}" for w in result.warnings] or ["- none"]
+    lines += [f"- **{w.code}**: {w.message}" for w in result.warnings] or ["- none"]
     lines += ["", "## Findings", ""]
     if paper is not None:
         lines += _findings(result, paper, chrono, cross, "cpbr" in paper.metrics["rmse"])

@@ -20,7 +20,6 @@ import pandas as pd
 from ident_opt.columns import columns_of, joint_columns
 from ident_opt.derivatives import estimate_derivatives
 from ident_opt.errors import InputError
-from ident_opt.problem.spec import DataSpec
 from ident_opt.simulate.closed_loop import CONTROL_HZ, MAX_CONTROL_HZ, control_hz
 
 ENCODER_COUNTS = 4096  # counts per motor revolution (a 1024-line encoder, quadrature)
@@ -28,7 +27,7 @@ TORQUE_NOISE = (
     0.16,
     0.054,
 )  # N m, white part of the real exp1 torque at rest (first 15 s, std of Δτ over √2)
-DERIVATIVE_CUTOFF_HZ = DataSpec.derivative_cutoff_hz  # the data loader's default
+DERIVATIVE_CUTOFF_HZ = 15.0  # Hz: the logger's fixed cut-off (the real exp1's pipeline, not the loader's rule)
 
 
 def decimation(rate_hz: float) -> int:

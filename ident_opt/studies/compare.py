@@ -24,8 +24,9 @@ from ident_opt.identify.base import base_parameters
 from ident_opt.identify.fit import LinearFit
 from ident_opt.metrics import all_metrics
 from ident_opt.studies import METRICS
+from ident_opt.studies.recommend import Recommendation, evidence
 from ident_opt.studies.seeds import FitFn, SplitResults, seed_study, split_fits
-from ident_opt.studies.trust import Trust, check_masses, checks, iv_fit, stats_of
+from ident_opt.studies.trust import Trust, check_masses
 
 PROTOCOLS = {
     "paper": "shuffled 70/30, mean over the paper's seeds (flattering: test samples have near-copies in training)",
@@ -76,7 +77,9 @@ class Comparison:
     reference_label: str | None = None  # the `[reference]`'s label, keyed "reference"
     #: what the tool applied to read the robot (`Robot.statement`)
     robot_statement: tuple[str, ...] = ()
-    default: str = "constrained"  # the fit the tool uses downstream (`Robot.default_estimator`)
+    default: str = "constrained"  # the fit the tool uses downstream: the recommended one
+    #: the recommended fit and why (`studies.recommend`)
+    recommendation: Recommendation | None = None
 
     def parameters(self) -> dict[str, dict[str, float]]:
         """π by estimator: "datasheet" (the problem's own), each nominal model, and every fit."""
@@ -203,19 +206,23 @@ def compare_estimators(
     progress: bool = True,
     reference=None,
     conversions: dict[str, tuple[float, float]] | None = None,
+    cutoff_setting: float | str | None = None,
 ) -> Comparison:
     """Fit every estimator of the arm on all training trials (statistics add up; IV beside them), score it on the
     protocols of the module doc, score the nominal models (and the problem's `[reference]`) on the same test
-    samples, run the trust checks (`studies.trust`). `weights`: None (plain least squares) or "wls" (joints
-    weighted by 1/σ_j², estimated per fit). Fits use the torque filtered like the regressor's inputs
+    samples, run the trust checks (`studies.trust`) and recommend a fit (`studies.recommend`; `cutoff_setting`: the
+    problem's `derivative_cutoff_hz`, which the advice takes into account). `weights`: None (plain least squares)
+    or "wls" (joints weighted by 1/σ_j², estimated per fit). Fits use the torque filtered like the regressor's inputs
     (`Dataset.tau_fit`); every score is against the measured torque."""
     model = model or robot.model()
     trains, tests = _as_list(train), _as_list(unseen)
+    found = evidence(robot, model, trains, conversions, cutoff_setting)
+    trains = found.trials  # at the recommendation's cut-off: every fit is compared on the same derivatives
     pool, test_pool = concat(trains), (concat(tests) if tests else None)
     fitters = fitted_estimators(robot, margin, weights)
-    whole = stats_of(model, trains)
+    whole = estimators.statistics(model, trains)
     fits = {key: fn(whole, model) for key, fn in fitters.items()}
-    fits["iv"] = iv_fit(model, trains)
+    fits["iv"] = estimators.iv(whole, model)
     seeds, metrics, test_sets = _within_trial(pool, model, split, fitters, robot.paper_views, progress)
     sheets = nominal_models(robot, reference)
     by_trial: dict[str, dict[str, dict[str, list[float]]]] = {}
@@ -228,7 +235,7 @@ def compare_estimators(
             for m, v in _scores(pairs, sheet_model, pi).items():
                 metrics[protocol][m][key] = v
     sources = {"train": pool.source, **({"unseen": test_pool.source} if test_pool is not None else {})}
-    trust = checks(model, trains, fits["ols"], fits["iv"], conversions, robot)
+    trust, recommendation = found.trust, found.recommendation
     nominal_arm, nominal_pi = sheets[f"datasheet_{robot.datasheet}"]
     estimates = {k: f.pi for k, f in fits.items() if "base_parameters" not in f.details}  # not a lifted base fit
     trust.warnings += check_masses(model, estimates, nominal_arm.link_masses(nominal_pi))
@@ -246,5 +253,6 @@ def compare_estimators(
         {"train": [d.source for d in trains], "test": [d.source for d in tests]},
         reference.label if reference is not None else None,
         tuple(robot.statement),
-        robot.default_estimator,
+        recommendation.estimator,
+        recommendation,
     )

@@ -12,7 +12,6 @@ from ident_opt.data import Dataset
 from ident_opt.errors import InputError
 from ident_opt.identify import estimators
 from ident_opt.identify.fit import LinearFit
-from ident_opt.studies.trust import stats_of
 
 
 @dataclass
@@ -33,7 +32,7 @@ def identified_arm(robot, trials: list[Dataset], estimator: str) -> Exported:
     parameters (an OLS fit can have a negative mass: the message names the link)."""
     model = robot.model()
     try:
-        fit = estimators.fit_for(robot, estimator, stats_of(model, trials), model)
+        fit = estimators.fit_for(robot, estimator, estimators.statistics(model, trials, estimator), model)
     except RuntimeError as exc:  # the solver failed: nothing to export
         raise InputError(f"export: the {estimator} fit failed ({exc}); try another --estimator") from None
     undetermined = fit.details.get("not_determined", [])

@@ -6,7 +6,7 @@ paper's seed study. `ident_opt.report.identify` writes it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -19,8 +19,9 @@ from ident_opt.paper import PI_TRUE
 from ident_opt.problem.spec import Problem
 from ident_opt.studies import METRICS
 from ident_opt.studies.protocols import ProtocolResult, chronological_protocol, cross_trial_protocol, paper_protocol
+from ident_opt.studies.recommend import Evidence, Recommendation, evidence
 from ident_opt.studies.seeds import SplitResults, seed_study
-from ident_opt.studies.trust import Trust, check_masses, checks, iv_fit, stats_of
+from ident_opt.studies.trust import Trust, check_masses
 
 #: The paper's protocol with other GMR settings: name -> label (`IdentifyResult.variants`).
 VARIANTS = {"diagonal_covariance": "diag GMM", "one_component": "K = 1"}
@@ -52,6 +53,7 @@ class IdentifyResult:
     #: what `consistency` measures, for the report (`Arm.consistency_measure` without its unit)
     consistency_note: str = "min eig M(q)"
     warnings: list = field(default_factory=list)  # `ident_opt.warnings.ResultWarning`s of the trust checks
+    recommendation: Recommendation | None = None  # the fit cpbr is, and why (`studies.recommend`)
     #: per held-out trial (when there are several): {file: {metric: {model: [one value per joint]}}}
     by_test_trial: dict = field(default_factory=dict)
 
@@ -92,6 +94,9 @@ def identify(
     paper's views apply (`Robot.paper_views`). The trust checks of `studies.trust` run on the training trials."""
     bar = progress or _Silent()
     robot = problem.robot
+    found = evidence(robot, robot.model(()), training, problem.data.conversions, problem.data.derivative_cutoff_hz)
+    problem = replace(problem, estimator=found.recommendation.estimator)
+    training = found.trials  # at the recommendation's cut-off
     trial = concat(training)
     unseen = concat(testing) if testing else None
     protocols, others, seeds = {}, {}, None
@@ -107,7 +112,7 @@ def identify(
         protocols["cross_trial"] = cross_trial_protocol(trial, unseen, problem, progress=bar.update)
     bar.set_postfix_str("parameters")
     params, ses, eig = whole_trial_parameters(problem, trial)
-    trust = _trust(problem, training, params)
+    trust = _trust(problem, found, params)
     result = IdentifyResult(
         problem.name,
         trial.source,
@@ -127,6 +132,7 @@ def identify(
         paper_views=robot.paper_views,
         consistency_note=robot.model(()).consistency_measure.removesuffix(" [kg m²]"),
         warnings=list(trust.warnings),
+        recommendation=found.recommendation,
         by_test_trial=_by_test_trial(protocols.get("cross_trial"), testing or []),
     )
     bar.update()
@@ -148,14 +154,14 @@ def _variants(trial: Dataset, problem: Problem, paper: ProtocolResult, bar) -> d
     }
 
 
-def _trust(problem: Problem, training: list[Dataset], params: dict) -> Trust:
-    """The trust checks (`studies.trust`: the angle convention, the cut-off, OLS against IV) on the training trials,
-    and the fits' masses against the nominal ones: what the JSON's `warnings` say."""
+def _trust(problem: Problem, found: Evidence, params: dict) -> Trust:
+    """The trust checks (`studies.trust`: the angle convention, the cut-off, OLS against IV) behind the
+    recommendation, and the fits' masses against the nominal ones: what the JSON's `warnings` say."""
     robot, model = problem.robot, problem.robot.model(())
-    ols = estimators.fit_for(robot, "ols", stats_of(model, training), model)
-    trust = checks(model, training, ols, iv_fit(model, training), problem.data.conversions, robot)
+    trust = found.trust
     nominal_arm, nominal_pi = robot.datasheets()[robot.datasheet]
-    estimates = {name: model.vector(params[name]) for name in fitted(robot).values() if name != "ols"}
+    fits = fitted(robot, problem.estimator).values()
+    estimates = {name: model.vector(params[name]) for name in fits if name != "ols"}
     trust.warnings += check_masses(model, estimates, nominal_arm.link_masses(nominal_pi))
     return trust
 
@@ -190,8 +196,9 @@ def whole_trial_parameters(problem: Problem, trial: Dataset):
     params.update({f"datasheet_{name}": arm.as_dict(pi) for name, (arm, pi) in others.items()})
     ses, eig = {}, {}
     arm = robot.model(())
-    for name in fitted(robot).values():
-        model = RigidModel(name, arm, estimator=name, options=robot.fit_options(name)).fit(trial)
+    # OLS, the arm's consistent fit (the JSON contract's "constrained" for the planar arm) and the recommended one
+    for name in dict.fromkeys([*fitted(robot).values(), *fitted(robot, problem.estimator).values()]):
+        model = RigidModel(name, arm, estimator=name, options=estimators.options_for(robot, name)).fit(trial)
         params[name] = model.params()
         ses[name] = model.fit_.se_dict()
         eig[name] = arm.min_mass_eigenvalue(model.pi)

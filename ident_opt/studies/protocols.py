@@ -95,7 +95,7 @@ def evaluate_split(
 
 def _evaluate_split(train, test, problem, constrained, components, covariance, random_state, level, validation):
     models: dict[str, object] = {}
-    for base in parametric_models(problem.robot, constrained):
+    for base in parametric_models(problem.robot, constrained, problem.estimator):
         base.fit(train)
         models[base.key] = base
         k = (components or {}).get(base.key + "+gmr")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -19,12 +20,13 @@ from ident_opt.arm.base import Arm
 from ident_opt.data import Dataset, shuffled_split
 from ident_opt.identify import estimators
 from ident_opt.identify.fit import LinearFit
+from ident_opt.identify.iv import InstrumentStats
 from ident_opt.identify.stats import Stats
 from ident_opt.metrics import all_metrics
 from ident_opt.studies import METRICS
 
-#: statistics + model -> fit.
-FitFn = Callable[[Stats, Arm], LinearFit]
+#: statistics (or instrument statistics, `identify.estimators.fit`) + model -> fit.
+FitFn = Callable[[Stats | InstrumentStats, Arm], LinearFit]
 
 
 @dataclass
@@ -59,15 +61,21 @@ def split_fits(
     progress: bool = False,
 ) -> SplitResults:
     """Fit each estimator on each split's training samples (from statistics) and score it on the test
-    samples — or on `test` (another trial) when given. The regressor is built once for the whole trial."""
+    samples — or on `test` (another trial) when given. The regressor is built once for the whole trial; with the
+    trial's instruments, each estimator gets `InstrumentStats` (`identify.estimators.fit` takes what it needs)."""
     Y = model.regressor(dataset.q, dataset.dq, dataset.ddq)
+    # The instruments' regressor too, so that estimators on instrumental variables fit the same splits.
+    Z = None if dataset.instruments is None else model.regressor(dataset.q, *dataset.instruments)
     Y_other = model.regressor(test.q, test.dq, test.ddq) if test is not None else None
     S, P = len(splits), model.n_params
     pi = {e: np.zeros((S, P)) for e in fits}
     ok = {e: np.zeros(S, dtype=bool) for e in fits}
     metrics = {e: {m: np.zeros((S, model.n_joints)) for m in METRICS} for e in fits}
     for s, (train, held) in enumerate(tqdm(splits, desc="splits", disable=not progress)):
-        stats = Stats.from_regressor(Y[train], dataset.tau[train])
+        if Z is None:
+            stats = Stats.from_regressor(Y[train], dataset.tau[train])
+        else:
+            stats = InstrumentStats.from_regressors(Y[train], Z[train], dataset.tau[train])
         if test is None:
             Y_test, tau_test = Y[held], dataset.tau[held]
         else:
@@ -85,7 +93,7 @@ def seed_study(
 ) -> SplitResults:
     """The paper's protocol: for each seed in `split.seeds`, a shuffled `split.train_fraction` split;
     `fits` default to OLS only. Returns parameters and held-out metrics per seed."""
-    fits = fits or {"ols": estimators.estimator("ols")}
+    fits = fits or {"ols": partial(estimators.fit, "ols")}
     splits = [shuffled_split(dataset.n, split.train_fraction, seed) for seed in split.seeds]
     return split_fits(dataset, model, splits, fits, labels=list(split.seeds), progress=progress)
 

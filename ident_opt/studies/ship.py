@@ -18,7 +18,6 @@ from ident_opt.data import Dataset
 from ident_opt.errors import InputError
 from ident_opt.gmr import GMR
 from ident_opt.identify import estimators
-from ident_opt.identify.stats import Stats
 from ident_opt.models import features, make_gmr
 from ident_opt.problem.spec import ResidualSpec
 
@@ -69,7 +68,7 @@ def prepare(
 
 def identify(robot, model: Arm, train: Dataset, estimator: str) -> tuple[np.ndarray, str, str]:
     """(π, estimator name, solver status) from the training samples, by the chosen estimator."""
-    stats = Stats.from_data(model, train.q, train.dq, train.ddq, train.tau)
+    stats = estimators.statistics(model, [train], estimator)
     try:
         fit = estimators.fit_for(robot, estimator, stats, model)
     except RuntimeError as exc:  # the solver failed: nothing consistent to generate

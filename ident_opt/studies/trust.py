@@ -33,9 +33,7 @@ from ident_opt.arm.base import Arm
 from ident_opt.data import Dataset, refiltered
 from ident_opt.derivatives import choose_cutoff
 from ident_opt.identify import estimators
-from ident_opt.identify.base import base_parameters, lifted_fit
 from ident_opt.identify.fit import LinearFit
-from ident_opt.identify.iv import InstrumentStats, fit_iv
 from ident_opt.identify.stats import Stats
 from ident_opt.warnings import ResultWarning
 
@@ -67,22 +65,13 @@ class Trust:
 
 def stats_of(model: Arm, trials: list[Dataset]) -> Stats:
     """Σ of each trial's statistics, with the torque the fits use (`Dataset.tau_fit`)."""
-    total = Stats.zeros(model.n_params, model.n_joints)
-    for d in trials:
-        total += Stats.from_data(model, d.q, d.dq, d.ddq, d.tau_fit)
-    return total
+    return estimators.statistics(model, trials, "ols")
 
 
 def iv_fit(model: Arm, trials: list[Dataset]) -> LinearFit:
     """IDIM-IV on all training trials (instrument statistics added up, each trial's derivatives its own), on the
-    base parameters when the regressor does not determine every parameter (`identify.base.lifted_fit`)."""
-    total = InstrumentStats.from_data(model, trials[0])
-    for d in trials[1:]:
-        total = total + InstrumentStats.from_data(model, d)
-    base = base_parameters(model)
-    if base.rank == model.n_params:
-        return fit_iv(total, model)
-    return lifted_fit(model, lambda view: fit_iv(base.instruments(total), view))
+    base parameters when the regressor does not determine every parameter (`estimators.iv`)."""
+    return estimators.iv(estimators.statistics(model, trials), model)
 
 
 def _judged(model: Arm) -> list[int]:
@@ -104,18 +93,38 @@ def _listing(moved: list[tuple[str, float, float]]) -> str:
     return ", ".join(f"{n} {x:.4g} vs {y:.4g}" for n, x, y in moved)
 
 
-def check_ols_iv(model: Arm, ols: LinearFit, iv: LinearFit, cutoffs: list[float]) -> list[ResultWarning]:
+def _remedy(trials: list[Dataset], setting: float | str | None) -> str:
+    """What to change so that least squares itself is not biased, never what the run already did: with a fixed
+    cut-off above the one the data support, that one (`derivatives.cutoff_choice`); otherwise less noise in the
+    regressor itself."""
+    if setting is not None and setting != "auto":
+        supported = [choose_cutoff(d.t, d.q) for d in trials]
+        if max(supported) < 0.8 * min(d.cutoff_hz for d in trials):
+            return (
+                f'Set [data] derivative_cutoff_hz = "auto": the data support {_hz(supported)} (where noise starts to '
+                "outweigh motion in the accelerations)."
+            )
+    return (
+        "The cut-off already sits where noise starts to outweigh motion; to take noise out of the regressor itself, "
+        "log the joint velocities (dq) from the drives or record at a higher rate."
+    )
+
+
+def check_ols_iv(
+    model: Arm, ols: LinearFit, iv: LinearFit, trials: list[Dataset], setting: float | str | None = None
+) -> list[ResultWarning]:
     """The OLS-against-IV rule (module doc)."""
     moved = _moved(model, ols, iv, OLS_IV_TOLERANCE)
-    if not moved or not cutoffs:
+    if not moved or any(d.cutoff_hz is None for d in trials):
         return []
-    where = f"at the derivative cut-off {_hz(cutoffs)}"
+    cutoffs = [d.cutoff_hz for d in trials]
     return [
         ResultWarning(
             "ols_iv_disagree",
-            f"OLS and the instrumental-variable fit disagree {where} ({_listing(moved)}): noise in the estimated "
-            'accelerations biases OLS toward zero. Lower [data] derivative_cutoff_hz (or set it to "auto"), '
-            "and prefer the IV parameters until the two agree.",
+            f"OLS and the instrumental-variable fit disagree at the derivative cut-off {_hz(cutoffs)} "
+            f"({_listing(moved)}): noise in the estimated accelerations biases OLS toward zero. The recommended fit is "
+            "therefore the robust one (consistent, on instrumental variables), and every command uses it. "
+            + _remedy(trials, setting),
         )
     ]
 
@@ -126,7 +135,7 @@ def _hz(cutoffs: list[float]) -> str:
 
 
 def check_cutoff(
-    model: Arm, trials: list[Dataset], ols: LinearFit
+    model: Arm, trials: list[Dataset], ols: LinearFit, setting: float | str | None = None
 ) -> tuple[dict[float, LinearFit], list[ResultWarning]]:
     """OLS at ½× and 2× each trial's cut-off; a warning when 2× moves a judged parameter (module doc)."""
     if any(d.cutoff_hz is None for d in trials):
@@ -138,12 +147,42 @@ def check_cutoff(
     moved = _moved(model, fits[2.0], ols, SENSITIVITY_TOLERANCE)
     if not moved:
         return fits, []
-    sentence = (
+    message = (
         f"the parameters depend on the derivative cut-off ({_hz([d.cutoff_hz for d in trials])}): at twice it, "
-        f"{_listing(moved)} (2× vs chosen). The regressor is noisy at this cut-off; lower [data] "
-        'derivative_cutoff_hz or set it to "auto" (the cut-off from where the motion\'s spectrum ends).'
+        f"{_listing(moved)} (2× vs chosen): noise is in the regressor. The recommended fit is therefore the robust "
+        "one (consistent, on instrumental variables), and every command uses it. " + _remedy(trials, setting)
     )
-    return fits, [ResultWarning("cutoff_sensitivity", sentence)]
+    return fits, [ResultWarning("cutoff_sensitivity", message)]
+
+
+#: A trial's cut-off this far from the median of the problem's trials (either way) is an outlier: trials differ in
+#: motion (DFKI C.0's single-joint sines end at a third of its other trials' band), a misread trial by far more (a
+#: joint at rest read as noise to a quarter of the rate: 20× and more).
+CUTOFF_OUTLIER = 4.0
+
+
+def check_cutoff_outliers(trials: list[Dataset]) -> list[ResultWarning]:
+    """A warning per training trial whose chosen cut-off is more than `CUTOFF_OUTLIER` × (or less than 1/that) the
+    median of the problem's trials (three or more, with cut-offs chosen per trial): its spectrum reads differently
+    from the others', which the user should look at rather than have it enter the fit silently."""
+    cutoffs = [d.cutoff_hz for d in trials]
+    if len(trials) < 3 or any(c is None for c in cutoffs) or len(set(cutoffs)) == 1:
+        return []
+    median = float(np.median(cutoffs))
+    out = []
+    for d in trials:
+        ratio = d.cutoff_hz / median
+        if not 1 / CUTOFF_OUTLIER <= ratio <= CUTOFF_OUTLIER:
+            out.append(
+                ResultWarning(
+                    "cutoff_outlier",
+                    f"{d.source}: its derivative cut-off ({d.cutoff_hz:.3g} Hz) is {ratio:.2g}× the median of the "
+                    f"training trials' ({median:.3g} Hz); its spectrum reads differently (a joint at rest, a burst of "
+                    "noise, another rate?). Its derivatives are estimated at its own cut-off; look at that trial, or "
+                    "pin [data] derivative_cutoff_hz for all.",
+                )
+            )
+    return out
 
 
 def check_convention(
@@ -193,17 +232,20 @@ def checks(
     iv: LinearFit,
     conversions: dict[str, tuple[float, float]] | None,
     robot,
+    setting: float | str | None = None,
 ) -> Trust:
     """Every check on the training trials: the convention first (a wrong zero spoils the others), where the arm
-    offers the joint-offset model that reads it (`Robot.extensions`: the planar arm's)."""
+    offers the joint-offset model that reads it (`Robot.extensions`: the planar arm's). `setting`: the problem's
+    `derivative_cutoff_hz`, so that advice never asks for what the run already did."""
     direction, warnings = {}, []
     if "joint_offset" in robot.extensions:
         direction, warnings = check_convention(robot, model, trials, conversions)
     logged = any(d.cutoff_hz is None for d in trials)
     cutoffs = [] if logged else [d.cutoff_hz for d in trials]
-    sensitivity, cut_warnings = check_cutoff(model, trials, ols)
+    sensitivity, cut_warnings = check_cutoff(model, trials, ols, setting)
     if not warnings:  # with the zero off, every parameter is off: fix the convention first
-        warnings += check_ols_iv(model, ols, iv, cutoffs) + cut_warnings
+        warnings += check_ols_iv(model, ols, iv, trials, setting) + cut_warnings
+    warnings += check_cutoff_outliers(trials)
     return Trust(sensitivity, cutoffs, direction, warnings)
 
 
