@@ -23,8 +23,12 @@ def diagnose(
     train_fraction: float = 0.7,
     progress: bool = True,
     torque_filter_hz: float | str | None = TORQUE_FILTER_HZ,
+    rigid_fit=None,
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data) of `robot`'s arm: the planar two-link arm's
-    diagnosis (`loop.diagnose`) or any arm's (`arm_diagnosis.diagnose`), as the robot says (`Robot.engine`)."""
-    run = loop.diagnose if robot.engine == "planar" else arm_diagnosis.diagnose
-    return run(robot, trial, unseen, train_fraction, progress, torque_filter_hz)
+    diagnosis (`loop.diagnose`) or any arm's (`arm_diagnosis.diagnose`), as the robot says (`Robot.engine`).
+    `rigid_fit`: the estimator π is fitted with on an n-joint arm and why (a `studies.recommend.Recommendation`;
+    None: the robot's default estimator); the planar diagnosis fits π by its own weighted least squares."""
+    if robot.engine == "planar":
+        return loop.diagnose(robot, trial, unseen, train_fraction, progress, torque_filter_hz)
+    return arm_diagnosis.diagnose(robot, trial, unseen, train_fraction, progress, torque_filter_hz, rigid_fit)

@@ -2,9 +2,10 @@
 rounds, scoring and JSON (`loop`), with the candidates of `arm_fit` and the arm's own nominal models.
 
 - The two nominal models: the **datasheet** (the problem's nominal arm, `Robot.datasheets()[Robot.datasheet]`:
-  the URDF's inertials with the problem's joint values) and the **rigid fit** (π by the robot's default estimator,
-  `Robot.default_estimator` through `identify.estimators.fit_for`, on the training part; joints weighted by 1/σ_j²
-  from a first least-squares pass).
+  the URDF's inertials with the problem's joint values) and the **rigid fit** (π by the recommended fit unless
+  --estimator says otherwise, `studies.recommend.chosen`, given as `rigid_fit`; the robot's default estimator when
+  none is given; through `identify.estimators.fit_for`, on the training part; joints weighted by 1/σ_j² from a
+  first least-squares pass). Every candidate refits π with the same estimator (`arm_fit.ArmContext.rigid`).
 - The split, the torque filter and the rest stretches are the planar diagnosis's (`loop.parts`). After the
   zero-phase filter the data hold nothing above its cut-off, so the diagnosis reads them every `decimation`-th
   sample (at about `DIAGNOSIS_HZ`, at most `MAX_SAMPLES` in all): a 7-joint minute at 1 kHz is diagnosed on 12 000
@@ -82,9 +83,12 @@ def diagnose(
     train_fraction: float = 0.7,
     progress: bool = True,
     torque_filter_hz: float | str | None = signals.TORQUE_FILTER_HZ,
+    rigid_fit=None,
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data) of an n-joint arm; see the module docstring
-    and `loop.diagnose`."""
+    and `loop.diagnose`. `rigid_fit`: a `studies.recommend.Recommendation` (estimator, why), None: the robot's
+    default estimator."""
+    estimator = robot.default_estimator if rigid_fit is None else rigid_fit.estimator
     t0 = time.perf_counter()
     trial, unseen = (None if d is None else inner(d, torque_filter_hz) for d in (trial, unseen))
     train, test, raw_test, how = loop.parts(trial, unseen, train_fraction, torque_filter_hz, robot.joint_names)
@@ -105,7 +109,7 @@ def diagnose(
         np.asarray(pi_ds, dtype=float),
         dt,
         None,
-        robot.default_estimator,
+        estimator,
         cutoff,
     )
     ctx.rest = ctx.labels(train)
@@ -126,7 +130,8 @@ def diagnose(
         }
         for b in nominal_pi
     }
-    nominal["rigid_fit"]["estimator"] = robot.default_estimator
+    nominal["rigid_fit"]["estimator"] = estimator
+    nominal["rigid_fit"]["why"] = "the robot's default estimator" if rigid_fit is None else rigid_fit.why
     nominal["rigid_fit"]["rank"] = ctx.rank
     t_nominal = time.perf_counter()
     var = np.var(test.tau, axis=0)

@@ -6,11 +6,12 @@ Every candidate is τ̂ = o(θ) + Y(q + δ) π + X(θ) β, delayed by d(θ) wher
 - ``datasheet``: π held at the robot's nominal model (`Robot.datasheets()[Robot.datasheet]`), o = Y π without the
   parameters the cause replaces (a Coulomb level by direction replaces the symmetric one); β by weighted least
   squares (nonnegative where the cause says so).
-- ``rigid_fit``: π refitted with the cause, by the robot's default estimator (`identify.estimators.fit_for`, in
-  `ArmContext.rigid`, the one place the diagnosis fits π): β first by variable projection against the rigid
-  columns (|P⊥(τ − X β)|² with P⊥ the projection off the weighted regressor's column space: the least-squares π
-  for any β, whatever the base parameters), then π by the estimator on τ − X β and β again on τ − Y π. With no
-  column, this is the nominal rigid fit exactly, so every candidate is compared like with like.
+- ``rigid_fit``: π refitted with the cause, by the diagnosis's estimator (the recommended fit unless --estimator
+  says otherwise; `identify.estimators.fit_for`, in `ArmContext.rigid`, the one place the diagnosis fits π): β
+  first by variable projection against the rigid columns (|P⊥(τ − X β)|² with P⊥ the projection off the
+  weighted regressor's column space: the least-squares π for any β, whatever the base parameters), then π by the
+  estimator on τ − X β and β again on τ − Y π. With no column, this is the nominal rigid fit exactly, so every
+  candidate is compared like with like.
 
 Evidence per joint first, then few candidates (the search never grows combinatorially with n): a per-joint cause
 (armature, asymmetric Coulomb, Stribeck, load friction, offsets, a torque scale) is one candidate with a column
@@ -45,7 +46,8 @@ from ident_opt.diagnosis.candidates import Candidate, hac_lag, physical_units
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
 from ident_opt.identify.base import base_parameters
-from ident_opt.identify.estimators import fit_for
+from ident_opt.identify.estimators import INSTRUMENTED, fit_for
+from ident_opt.identify.iv import InstrumentStats, instrument_kinematics
 from ident_opt.identify.stats import Stats
 
 #: A coefficient more than this many standard errors from its untouched value marks its joint as touched.
@@ -199,18 +201,29 @@ class ArmContext:
             del self._cache[k]
 
     def rigid(self, Y: np.ndarray, target: np.ndarray, ds: Dataset) -> np.ndarray:
-        """π (P,) of the robot's default estimator (`fit_for`) on τ = `target` (N, n) [N m] with regressor Y along
-        `ds`, rest stretches compared about their means, joints weighted by `weights`: the one place the diagnosis
-        fits π. (The statistics are built per joint by matrix products, the Gram part remembered per regressor.)"""
+        """π (P,) of the diagnosis's estimator (`estimator`: the recommended fit unless --estimator says otherwise;
+        `fit_for`) on τ = `target` (N, n) [N m] with regressor Y along `ds`, rest stretches compared about their
+        means, joints weighted by `weights`: the one place the diagnosis fits π. (The statistics are built per
+        joint by matrix products, the Gram part remembered per regressor; an instrumented estimator's instruments
+        Z are the regressor at `ds`'s instrument kinematics, `iv.instrument_kinematics`.)"""
         key = ("gram", id(Y), Y.shape)
+        instrumented = self.estimator in INSTRUMENTED
         if key not in self._cache:
             self._trim("gram", 3)
             Yd = self.demean(Y, ds)
-            self._cache[key] = (Yd, np.stack([Yd[:, j, :].T @ Yd[:, j, :] for j in range(self.n)]), Y)
-        Yd, G = self._cache[key][:2]
+            G = np.stack([Yd[:, j, :].T @ Yd[:, j, :] for j in range(self.n)])
+            Zd = A = K = None
+            if instrumented:
+                Zd = self.demean(self.arm.regressor(ds.q, *instrument_kinematics(ds, self.filter_hz)), ds)
+                A = np.stack([Zd[:, j, :].T @ Yd[:, j, :] for j in range(self.n)])
+                K = np.stack([Zd[:, j, :].T @ Zd[:, j, :] for j in range(self.n)])
+            self._cache[key] = (Yd, G, Y, Zd, A, K)
+        Yd, G, _, Zd, A, K = self._cache[key]
         t = self.demean(target, ds)
         b = np.stack([Yd[:, j, :].T @ t[:, j] for j in range(self.n)])
         stats = Stats(G, b, np.einsum("kj,kj->j", t, t), len(t))
+        if instrumented:
+            stats = InstrumentStats(A, np.stack([Zd[:, j, :].T @ t[:, j] for j in range(self.n)]), K, stats)
         return fit_for(self.robot, self.estimator, stats, self.arm, weights=self.weights).pi
 
     def link_torque(self, ds: Dataset) -> np.ndarray:

@@ -101,6 +101,12 @@ def polish_note(d: Diagnosis, key: str, unit: str) -> str:
     return f" (IPOPT polish of the grid search's {key}: {before} → {after}, {verdict})"
 
 
+def rigid_fit_sentence(d: Diagnosis) -> str:
+    """Which estimator gave the rigid fit and why (the recommended fit unless --estimator said otherwise)."""
+    rigid = d.nominal["rigid_fit"]
+    return f"the {rigid['estimator']} fit" + (f" ({rigid['why']})" if rigid.get("why") else "")
+
+
 def summary(d: Diagnosis) -> str:
     """The terminal summary: the four questions, briefly."""
     nom = d.nominal
@@ -281,6 +287,7 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         f"Held-out nMSE (MSE ÷ variance) per joint: datasheet {pair(nom['datasheet']['nmse'])}, "
         "best rigid fit "
         f"{pair(nom['rigid_fit']['nmse'])}.",
+        *(["", f"The rigid fit: {rigid_fit_sentence(d)}."] if "estimator" in nom["rigid_fit"] else []),
         "",
         *_evidence_table(d),
         "",
