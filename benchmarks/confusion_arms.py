@@ -18,6 +18,7 @@ tuning: run them with `--first-seed 500 --out results/diagnosis/confusion_arms_u
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -203,21 +204,25 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     jobs = jobs_for(args.arms, seeds, args.duration, args.rate, args.pairs)
+    results = []
     with ProcessPoolExecutor(args.jobs) as pool:
-        results = list(tqdm(pool.map(one, jobs), total=len(jobs), desc="hidden-effect trials", file=sys.stderr))
-    for r in results:
-        print(
-            f"{r['arm']:6s} {' + '.join(r['causes']) or 'clean':40s} {', '.join(r['joints']):28s} seed {r['seed']}: "
-            f"{' → '.join(r['named']) or 'none':40s} exact={r['exact']} within={r['within']} {_rounded(r['errors'])}"
-        )
+        for r in tqdm(pool.map(one, jobs), total=len(jobs), desc="hidden-effect trials", file=sys.stderr):
+            results.append(r)  # each trial as it comes: a long run interrupted still says what it found
+            print(
+                f"{r['arm']:6s} {' + '.join(r['causes']) or 'clean':40s} {', '.join(r['joints']):28s} "
+                f"seed {r['seed']}: {' → '.join(r['named']) or 'none':40s} exact={r['exact']} within={r['within']} "
+                f"{_rounded(r['errors'])} {r['cpu']:.0f} s",
+                flush=True,
+            )
     command = "python benchmarks/confusion_arms.py " + " ".join(argv if argv is not None else sys.argv[1:])
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(table(results, command.strip()))
+    Path(args.out).with_suffix(".json").write_text(json.dumps(_rounded(results), indent=1))
     record(
         Path(args.out).parent,
         Path(args.out).stem,
         f"the diagnosis on simulated trials of arms with n joints (seeds from {args.first_seed})",
-        [Path(args.out).name],
+        [Path(args.out).name, Path(args.out).with_suffix(".json").name],
     )
     print(f"wrote {args.out}")
     return 0

@@ -13,6 +13,7 @@ whole matrix (every cause on every arm, proximal and distal, and the confusion t
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -98,3 +99,41 @@ def test_a_clean_trial_names_none(arm, seed):
     assert len(payload["nmse_before"]) == n and len(payload["nmse_after"]) == n
     assert payload["joints"] == list(load_problem(PROBLEMS[arm]).robot.joint_names)
     assert np.allclose(payload["nmse_before"], payload["nmse_after"])
+
+
+def test_the_rigid_fit_is_the_recommended_fit_unless_an_estimator_is_asked(tmp_path, capsys):
+    """Issue 29's contract on the n-joint diagnosis: with the derivatives estimated from the angles, the rigid
+    fit's estimator is the one `studies.recommend` picks on the training part (computed here independently), named
+    with its reason on the terminal and in the report and JSON; --estimator robust is honoured (instrumented
+    statistics through every candidate) and an estimator the arm lacks exits 2 naming its fits."""
+    from ident_opt.cli import main
+    from ident_opt.data import load_dataset
+    from ident_opt.studies.recommend import evidence
+
+    problem = load_problem(PROBLEMS["arm4"])
+    trial = simulate_trial(problem.robot, duration=16.0, rate_hz=250.0, seed=1015, limits=problem.limits)
+    path = tmp_path / "angles.csv"
+    trial.frame.drop(columns=[c for c in trial.frame if c.startswith(("dq", "ddq"))]).to_csv(path, index=False)
+    ds = load_dataset(path, problem.data, problem.robot)
+    head = ds.subset(np.nonzero(ds.t <= ds.t[0] + 0.7 * (ds.t[-1] - ds.t[0]))[0])
+    expected = evidence(
+        problem.robot, problem.robot.model(), [head], problem.data.conversions, problem.data.derivative_cutoff_hz
+    )
+    base = ["diagnose", "--problem", str(PROBLEMS["arm4"]), "--data", str(path), "--no-progress"]
+    runs = {}
+    for asked in (None, "robust"):
+        out = tmp_path / f"out_{asked}"
+        extra = [] if asked is None else ["--estimator", asked]
+        assert main([*base, "--out", str(out), "--json", str(out / "d.json"), *extra]) == 0
+        err = capsys.readouterr().err
+        payload = json.loads((out / "d.json").read_text())
+        rigid = payload["nominal"]["rigid_fit"]
+        want = expected.recommendation.estimator if asked is None else asked
+        assert rigid["estimator"] == want and f"rigid fit: the {want} fit" in err
+        assert rigid["why"] in (out / "diagnosis.md").read_text() and isinstance(payload["warnings"], list)
+        runs[asked] = rigid["pi"]
+    if expected.recommendation.estimator != "robust":
+        assert runs[None] != runs["robust"], "the asked estimator changes the rigid fit"
+    assert main([*base, "--out", str(tmp_path / "x"), "--estimator", "nlp_physical"]) == 2
+    err = capsys.readouterr().err
+    assert "--estimator nlp_physical" in err and "consistent" in err and not (tmp_path / "x").exists()
