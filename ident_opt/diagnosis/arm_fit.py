@@ -64,6 +64,9 @@ SEARCH_SAMPLES, SEARCH_HZ = 4000, 100.0
 #: Eigenvalues of the rigid columns' Gram matrix below this share of the largest are directions the data do not
 #: determine (`ArmContext.basis`): singular values below 1e-5 of the largest.
 RANK_TOL = 1e-10
+#: A link whose inertia about its joint's axis is below this share of the largest link's carries none
+#: (`elastic_joints`).
+MASSLESS = 1e-9
 #: Gauss–Newton steps of the encoder offsets, and the step below which they stop [rad].
 OFFSET_STEPS, OFFSET_STOP = 5, 1e-5
 
@@ -632,17 +635,24 @@ SCREEN_HZ, SCREEN_DAMPING = (2.0, 3.0, 4.5, 6.5, 9.0), 0.03
 def elastic_joints(ctx: ArmContext, columns: Callable) -> list[int]:
     """The `ELASTIC_CANDIDATES` joints (0-based) whose elastic-joint column (`columns(joint)`, the elasticity
     cause's) explains most of the rigid fit's training residual at any of the screening modes `SCREEN_HZ`: the
-    per-joint evidence of a mode, n × 5 one-column fits."""
+    per-joint evidence of a mode, n × 5 one-column fits. A joint whose link carries no inertia about its axis in
+    the datasheet (the shipped TX40's last link) is not one: nothing behind its spring could ring (and the
+    deflection's drive, τ_link,j / M_jj, would be 0/0)."""
     tr = ctx.train
     Q = ctx.basis(tr)
+    inertia = np.array([float(np.mean(ctx.inertia_column(tr, j)[:, j])) for j in range(ctx.n)])
     gains = []
     for j in range(ctx.n):
+        if not inertia[j] > MASSLESS * max(float(np.max(inertia)), np.finfo(float).tiny):
+            gains.append(-np.inf)
+            continue
         costs = []
         for f in SCREEN_HZ:
             X, _ = columns(j)(tr, {"frequency_hz": f, "damping": SCREEN_DAMPING}, ctx, "rigid_fit")
             costs.append(projected(Q, X, tr.tau, tr, ctx, [0], False).cost)
         gains.append(-min(costs))
-    chosen = [int(j) for j in np.argsort(gains)[::-1][: min(ELASTIC_CANDIDATES, ctx.n)]]
+    ranked = [int(j) for j in np.argsort(gains)[::-1] if np.isfinite(gains[j])]
+    chosen = ranked[: min(ELASTIC_CANDIDATES, ctx.n)]
     ctx.evidence["elastic_joints"] = chosen
     return chosen
 
