@@ -137,3 +137,24 @@ def test_the_rigid_fit_is_the_recommended_fit_unless_an_estimator_is_asked(tmp_p
     assert main([*base, "--out", str(tmp_path / "x"), "--estimator", "nlp_physical"]) == 2
     err = capsys.readouterr().err
     assert "--estimator nlp_physical" in err and "consistent" in err and not (tmp_path / "x").exists()
+
+
+def test_forward_evidence_on_a_joint_without_inertia_is_null_not_a_crash():
+    """The shipped TX40's last link has no inertia about its axis and the problem gives no rotor: its mass matrix is
+    singular, and the diagnosis's forward simulation (`evidence.forward_error`) raised LinAlgError on the real log.
+    That joint's error is now not reported (NaN, null in the JSON) and the others' are finite."""
+    import pandas as pd
+
+    from ident_opt.data import Dataset
+    from ident_opt.diagnosis.evidence import forward_error
+
+    robot = load_problem(ROOT / "problems" / "staubli_tx40.toml").robot
+    arm, pi = robot.datasheets()[robot.datasheet]
+    t = np.arange(0.0, 2.0, 0.01)
+    q = 0.3 * np.sin(np.outer(t, np.arange(1, 7)))
+    dq = 0.3 * np.cos(np.outer(t, np.arange(1, 7))) * np.arange(1, 7)
+    ddq = -q * np.arange(1, 7) ** 2
+    ds = Dataset("synthetic", t, q, dq, ddq, arm.predict(np.asarray(pi), q, dq, ddq), pd.DataFrame(), "given", 0, [])
+    assert np.linalg.matrix_rank(arm.mass_matrices(np.asarray(pi), q[:1])[0]) < 6, "the case this test is about"
+    err = forward_error(arm, np.asarray(pi), ds, 0.01)
+    assert np.isnan(err[5]) and np.all(np.isfinite(err[:5]))

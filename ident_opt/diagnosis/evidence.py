@@ -131,17 +131,25 @@ def forward_error(
         return [float("nan")] * ds.q.shape[1]
     q, dq = ds.q[starts].copy(), ds.dq[starts].copy()
     zero = np.zeros_like(q)
+    inert = np.ones(q.shape[1], dtype=bool)  # joints whose model has inertia about their axis
     with np.errstate(all="ignore"):
         for step in range(L):
             tau = ds.tau[starts + step] - (extension[starts + step] if extension is not None else 0.0)
             bias = model.predict(pi, q, dq, zero)
             M = model.mass_matrices(pi, q)
-            ddq = np.linalg.solve(M, (tau - bias)[..., None])[..., 0]
+            try:
+                ddq = np.linalg.solve(M, (tau - bias)[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                # a joint with no inertia about its axis (a URDF link without it and no rotor): nothing to
+                # integrate there; the others by the least-norm answer, that joint's error not reported
+                diagonal = np.min(np.abs(np.diagonal(M, axis1=-2, axis2=-1)), axis=0)
+                inert &= diagonal > 1e-12 * max(float(np.max(diagonal)), np.finfo(float).tiny)
+                ddq = (np.linalg.pinv(M) @ (tau - bias)[..., None])[..., 0]
             dq = dq + dt * ddq
             q = q + dt * dq
         err = q - ds.q[starts + L]
         rms = np.sqrt(np.nanmean(err**2, axis=0))
-    return [float(v) if np.isfinite(v) else float("nan") for v in rms]
+    return [float(v) if np.isfinite(v) and ok else float("nan") for v, ok in zip(rms, inert)]
 
 
 #: Where the first modes of flexible-link arms lie [Hz]: the band searched in independent channels.
