@@ -131,20 +131,21 @@ def forward_error(
         return [float("nan")] * ds.q.shape[1]
     q, dq = ds.q[starts].copy(), ds.dq[starts].copy()
     zero = np.zeros_like(q)
-    inert = np.ones(q.shape[1], dtype=bool)  # joints whose model has inertia about their axis
+    # A joint whose model has no inertia about its axis (a URDF link without it and no rotor: the shipped TX40's
+    # last) has nothing to integrate: it follows its measured motion and its error is not reported.
+    diagonal = np.abs(np.diagonal(model.mass_matrices(pi, ds.q[starts]), axis1=-2, axis2=-1)).min(axis=0)
+    inert = diagonal > 1e-12 * max(float(np.max(diagonal)), np.finfo(float).tiny)
+    held = ~inert
     with np.errstate(all="ignore"):
         for step in range(L):
             tau = ds.tau[starts + step] - (extension[starts + step] if extension is not None else 0.0)
+            if held.any():
+                q[:, held], dq[:, held] = ds.q[starts + step][:, held], ds.dq[starts + step][:, held]
             bias = model.predict(pi, q, dq, zero)
             M = model.mass_matrices(pi, q)
-            try:
-                ddq = np.linalg.solve(M, (tau - bias)[..., None])[..., 0]
-            except np.linalg.LinAlgError:
-                # a joint with no inertia about its axis (a URDF link without it and no rotor): nothing to
-                # integrate there; the others by the least-norm answer, that joint's error not reported
-                diagonal = np.min(np.abs(np.diagonal(M, axis1=-2, axis2=-1)), axis=0)
-                inert &= diagonal > 1e-12 * max(float(np.max(diagonal)), np.finfo(float).tiny)
-                ddq = (np.linalg.pinv(M) @ (tau - bias)[..., None])[..., 0]
+            ddq = ds.ddq[starts + step].copy()
+            rhs = tau - bias - np.einsum("wij,wj->wi", M[:, :, held], ddq[:, held])
+            ddq[:, inert] = np.linalg.solve(M[:, inert][:, :, inert], rhs[:, inert][..., None])[..., 0]
             dq = dq + dt * ddq
             q = q + dt * dq
         err = q - ds.q[starts + L]
