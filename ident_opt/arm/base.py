@@ -253,11 +253,6 @@ class Robot(Protocol):
         """The nominal parameter sets (datasheet, URDF/CAD) by name, each with the arm it is evaluated with."""
         ...
 
-    def payload(self, mass: float, com) -> np.ndarray:
-        """Δπ of the model for a point mass `mass` [kg] rigidly attached to the last link, at `com` (3,) [m] in its
-        frame (the planar arm's sits at the tip of link 2: its `com` is None)."""
-        ...
-
     def bodies(self, arm: Arm, pi: np.ndarray, **options):
         """π of `arm` realised as rigid bodies (`ident_opt.arm.bodies.RobotDescription`, `ident_opt.arm.realise`):
         what `ident-opt export` writes."""
@@ -274,6 +269,16 @@ class Robot(Protocol):
 
     def limits(self) -> dict[str, tuple[float | None, ...]]:
         """Defaults for `[limits]` from the description (a URDF's <limit>): key → one value per joint."""
+        ...
+
+    def tool_directions(self, arm: Arm) -> np.ndarray:
+        """(P, r): the directions π of `arm` moves along when a rigid body (a tool, a payload) is fixed to the last
+        link: any such body changes π by a combination of these columns (`ident-opt fleet` names a payload so)."""
+        ...
+
+    def payload(self, arm: Arm, mass: float, at: tuple[float, ...] | None = None) -> np.ndarray:
+        """Δπ (P,) of `arm` for a point mass `mass` [kg] fixed to the last link at `at` [m] in that link's frame
+        (None: the arm's own tool point); a combination of `tool_directions`."""
         ...
 
     def summary(self) -> dict:

@@ -73,7 +73,7 @@ class Payload(Effect):
         return {"mass": p["mass"]}
 
     def arm_plant(self, plant, p: dict) -> None:
-        plant.pi = plant.pi + plant.robot.payload(p["mass"], p["com"])
+        plant.pi = plant.pi + plant.robot.payload(plant.arm, p["mass"], p["com"])
 
     def arm_truth(self, plant, p: dict) -> dict:
         return {"mass": p["mass"], "com": list(p["com"])}
@@ -148,7 +148,7 @@ class Payload(Effect):
 def _arm_column(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
     """Y Δπ (N, n, 1) of a 1 kg point mass at θ's centre of mass on the last link."""
     com = [theta.get(f"com_{a}", 0.0) for a in "xyz"]
-    return (ctx.regressor(ds) @ ctx.robot.payload(1.0, com))[:, :, None], ["mass"]
+    return (ctx.regressor(ds) @ ctx.robot.payload(ctx.arm, 1.0, com))[:, :, None], ["mass"]
 
 
 def _centre(family, baseline: str, ctx) -> dict:
@@ -156,9 +156,9 @@ def _centre(family, baseline: str, ctx) -> dict:
     training residual, the inertia of the point mass left out (second order in c); (0, 0, 0) when m ≤ 0."""
     tr = ctx.train
     Y = ctx.regressor(tr)
-    unit = ctx.robot.payload(1.0, (0.0, 0.0, 0.0))
+    unit = ctx.robot.payload(ctx.arm, 1.0, (0.0, 0.0, 0.0))
     eps = 1e-6
-    basis = [unit] + [(ctx.robot.payload(1.0, e) - unit) / eps for e in (eps * np.eye(3)).tolist()]
+    basis = [unit] + [(ctx.robot.payload(ctx.arm, 1.0, e) - unit) / eps for e in (eps * np.eye(3)).tolist()]
     X = np.stack([Y @ b for b in basis], axis=2)
     labels = ctx.labels(tr)
     r = tr.tau - Y @ ctx.datasheet
