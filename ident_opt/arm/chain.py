@@ -234,15 +234,6 @@ class ChainArm:
             pi[N_LINK * i : N_LINK * (i + 1)] = self._model.inertias[i + 1].toDynamicParameters()
         return pi
 
-    def point_mass(self, mass: float, com) -> np.ndarray:
-        """Δπ (P,) of a point mass `mass` [kg] at `com` (3,) [m] in the last link's frame, rigidly attached to it:
-        its 10 standard parameters (m, m c, m (|c|² 1 − c cᵀ) about the frame's origin) on the last link, 0
-        elsewhere."""
-        out = np.zeros(self.n_params)
-        point = pin.Inertia(float(mass), np.asarray(com, dtype=float), np.zeros((3, 3)))
-        out[N_LINK * (self.n_joints - 1) : N_LINK * self.n_joints] = point.toDynamicParameters()
-        return out
-
     def link_masses(self, pi: np.ndarray) -> dict[str, float]:
         """Each moving link's mass [kg] at π."""
         return {link: float(pi[N_LINK * i]) for i, link in enumerate(self.links)}
