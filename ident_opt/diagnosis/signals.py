@@ -47,6 +47,25 @@ def deflection_acceleration(ddq: np.ndarray, frequency_hz: float, damping: float
     return signal.lfilter(num / den[0], den / den[0], ddq, axis=0)
 
 
+def deflection(drive: np.ndarray, frequency_hz: float, damping: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(e, ë) of a deflection driven as `deflection_acceleration`'s, ë + 2ζω ė + ω² e = −drive [rad/s²]: the
+    deflection itself [rad] too (its stiffness torque, a gravity load's shift), by the same pre-warped bilinear
+    transform, from the static deflection of the first drive (not from zero: a load there from the start, gravity,
+    would otherwise ring the mode for seconds at the start of every stretch of data)."""
+    fs = 1.0 / dt
+    w = 2.0 * fs * np.tan(np.pi * frequency_hz / fs)
+    K = 2.0 * fs
+    den = np.array([K * K + 2 * damping * w * K + w * w, 2 * (w * w - K * K), K * K - 2 * damping * w * K + w * w])
+    a = den / den[0]
+    out = []
+    for num in (-np.array([1.0, 2.0, 1.0]), np.array([-K * K, 2 * K * K, -K * K])):
+        b = num / den[0]
+        # at rest in the first drive: a load present from the start (gravity) is a static deflection, not a step
+        zi = signal.lfilter_zi(b, a) * drive[0]
+        out.append(signal.lfilter(b, a, drive, axis=0, zi=zi)[0])
+    return out[0], out[1]
+
+
 @dataclass
 class Peak:
     """A spectral peak: frequency [Hz], damping ratio from the half-power bandwidth, prominence [dB]."""
