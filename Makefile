@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PROBLEM ?= problems/tudor_2dof.toml
 
-.PHONY: identify test lint bench codegen audit calibration clean-venv fuzz online-arms excitation-arms cutoff-study
+.PHONY: identify test test-arms lint bench codegen audit calibration clean-venv fuzz online-arms excitation-arms cutoff-study
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,6 +36,10 @@ identify: $(STAMP)
 ## The whole test suite (2 workers).
 test: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
+
+## The whole n-joint diagnosis test matrix (tests/test_diagnose_arm.py; make test runs its shorter cases): ~15 min.
+test-arms: $(STAMP)
+	IDENT_OPT_ARM_MATRIX=1 $(BIN)/python -m pytest -n 2 -q tests/test_diagnose_arm.py
 
 ## The long hostile-input fuzz (tests/test_fuzz.py; the suite runs 80 cases per property): FUZZ_EXAMPLES cases per
 ## property (6 properties: 5 there and the stream's first samples, tests/test_stream_start.py; >= 3,000 cases in all),

@@ -423,6 +423,11 @@ def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
     return replace(trial, tau=signal.filtfilt(b, a, trial.tau, axis=0))
 
 
+#: [rad/s] A joint whose speed never exceeds this is still: its derivatives re-estimated from a constant angle are
+#: round-off, not motion.
+STILL_SPEED = 1e-9
+
+
 def parts(
     trial: Dataset, unseen: Dataset | None, train_fraction: float, torque_filter_hz, names: tuple[str, ...]
 ) -> tuple[Dataset, Dataset, Dataset, str]:
@@ -441,7 +446,11 @@ def parts(
     for ds, part in ((train, "training"), (test, "held-out")):
         if np.any(np.var(ds.tau, axis=0) <= 0):
             raise InputError(f"{ds.source}: a torque channel is constant; nothing to diagnose")
-        still = [j for j in range(ds.dq.shape[1]) if not np.any(ds.dq[:, j] != 0)] if part == "training" else []
+        still = (
+            [j for j in range(ds.dq.shape[1]) if np.max(np.abs(ds.dq[:, j])) < STILL_SPEED]
+            if part == "training"
+            else []
+        )
         if still:
             joints = ", ".join(f"{names[j]} (q{j + 1})" for j in still)
             raise InputError(
