@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 from sklearn.model_selection import train_test_split
 
-from ident_opt import rosbag
+from ident_opt import outputs, rosbag
 from ident_opt.arm.base import Robot
 from ident_opt.arm.planar import PI_NAMES
 from ident_opt.columns import channel_names, locate
@@ -99,6 +99,7 @@ class Dataset:
 # ---------------------------------------------------------------------------------------------- reading
 def _read(path: Path, spec: DataSpec) -> pd.DataFrame:
     """The raw table of a data file, or of a ROS 2 bag (`ident_opt.rosbag`: already in the data format's names)."""
+    outputs.declare_inputs([path])
     if path.exists() and rosbag.is_bag(path):
         return rosbag.read_bag(path, spec.ros_topic, spec.ros_joints)
     return _read_table(path, spec)
@@ -394,16 +395,17 @@ def load_dataset(
 
     bad = np.zeros(len(frame), dtype=bool)
     values = {name: _numeric(frame, label, name, path, spec, drop_invalid, bad) for name, label in cols.items()}
+    # Converted first (a mapped t may be scaled by -1): every check below sees what the models will see.
+    # A URDF's angle zero and axis sign are the file's, not ident-opt's: the robot maps them (urdf_planar).
+    to_tool = robot.column_map
+    for name, v in values.items():
+        values[name] = convert(convert(v, *conversions.get(name, (1.0, 0.0))), *to_tool.get(name, (1.0, 0.0)))
     if drop_invalid:  # rows that break strict increase of t are dropped too (the first of a run is kept)
         bad |= _non_increasing(values["t"], bad)
     keep = ~bad
-    values = {name: convert(v[keep], *conversions.get(name, (1.0, 0.0))) for name, v in values.items()}
-    # A URDF's angle zero and axis sign are the file's, not ident-opt's: the robot maps them (urdf_planar).
-    to_tool = robot.column_map
-    values = {name: convert(v, *to_tool.get(name, (1.0, 0.0))) for name, v in values.items()}
+    values = {name: v[keep] for name, v in values.items()}
     t = values["t"]
-    if not drop_invalid:
-        _check_time(t, path, spec)
+    _check_time(t, path, spec)
     n = len(t)
     if n < max(min_samples, 2):
         raise InputError(f"{path}: only {n} valid samples, fewer than the {max(min_samples, 2)} this command needs")

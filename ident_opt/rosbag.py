@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ident_opt import outputs
 from ident_opt.errors import InputError
 
 #: File names of a ROS 2 bag's storage (its folder holds metadata.yaml beside them).
@@ -37,6 +38,7 @@ def read_bag(path: Path, topic: str, joints: tuple[str, ...]) -> pd.DataFrame:
     folder = path.parent if path.is_file() else path
     if not (folder / "metadata.yaml").is_file():
         raise InputError(f"{path}: not a ROS 2 bag: its folder has no metadata.yaml (give the bag's folder)")
+    outputs.declare_inputs([folder])  # the bag is its folder: metadata.yaml and the storage files in it
     rows: list[tuple[float, np.ndarray, np.ndarray | None, np.ndarray]] = []
     try:
         with AnyReader([folder]) as reader:

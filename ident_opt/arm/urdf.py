@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from ident_opt import outputs
 from ident_opt.errors import InputError
 
 #: Revolute joint types of the URDF format.
@@ -149,6 +150,7 @@ def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Elem
         raise InputError(f"{path}: not a valid URDF (XML error: {exc})") from None
     if root.tag != "robot":
         raise InputError(f"{path}: not a URDF: the root element is <{root.tag}>, not <robot>")
+    outputs.declare_inputs([path, *meshes(path, root)])
     links = {}
     for link in root.findall("link"):
         if not link.get("name"):
@@ -160,6 +162,20 @@ def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Elem
         joint = _joint(path, element, links)
         joints[joint.name] = joint
     return text, joints, links
+
+
+def meshes(path: Path, root: ET.Element) -> list[Path]:
+    """The mesh files the URDF at `path` references that exist here (relative or file:// names; a package://
+    name needs ROS to resolve and is left out): inputs of the run, like the URDF itself."""
+    found = []
+    for mesh in root.iter("mesh"):
+        name = mesh.get("filename") or ""
+        name = name.removeprefix("file://")
+        if name and "://" not in name:
+            candidate = path.parent / name
+            if candidate.is_file():
+                found.append(candidate)
+    return found
 
 
 def check_chain(path: Path, joints: dict[str, UrdfJoint], names: tuple[str, ...], base: str | None) -> str:

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ident_opt import outputs, simulate
+from ident_opt import outputs, report, simulate
 from ident_opt.arm.base import ALL_COMMANDS
 from ident_opt.data import load_dataset
 from ident_opt.errors import InputError
@@ -157,11 +157,14 @@ def fittable(trial, fit: bool = True) -> None:
             print(f"warning: {message}", file=sys.stderr)
 
 
-def output_dir(args: argparse.Namespace, problem, default: Path | None = None) -> Path:
-    """--out, else the problem's [output] dir, else `default` (the project's results/)."""
+def output_dir(args: argparse.Namespace, problem, default: Path | None = None, indexed: bool = True) -> Path:
+    """--out, else the problem's [output] dir, else `default` (the project's results/). `indexed`: the reports
+    there are indexed in its README.md (`report.record`), whose manifests and README are checked now."""
     out = getattr(args, "out", None)
     path = Path(out) if out else (problem.output_dir or default or Path("results"))
     outputs.check_folder_output(path, "--out")
+    if indexed:
+        report.check_folder(path)
     outputs.watch_folder(path)  # created here, so a failed run removes it again
     try:
         path.mkdir(parents=True, exist_ok=True)
