@@ -60,15 +60,20 @@ def _number(element: ET.Element, key: str, where: str, low: float, high: float) 
     return value
 
 
-def _floats(element: ET.Element | None, key: str, default: str, where: str) -> tuple[float, float, float]:
-    """Three floats from attribute `key` of `element` (default when absent); InputError naming `where`."""
+def _floats(
+    element: ET.Element | None, key: str, default: str, where: str, bound: float = 1e6
+) -> tuple[float, float, float]:
+    """Three floats from attribute `key` of `element` (default when absent), each of magnitude at most `bound`
+    (an origin's xyz: `SANE["length"]` m); InputError naming `where`."""
     text = default if element is None else element.get(key, default)
     try:
         values = tuple(float(v) for v in text.split())
     except ValueError:
         values = ()
-    if len(values) != 3 or not all(np.isfinite(values)) or max(map(abs, values), default=0) > 1e6:
+    if len(values) != 3 or not all(np.isfinite(values)):
         raise InputError(f"{where}: {key}={text!r} must be three finite numbers")
+    if max(map(abs, values)) > bound:
+        raise InputError(f"{where}: {key}={text!r} must be three numbers of magnitude at most {bound:g}")
     return values  # type: ignore[return-value]
 
 
@@ -83,7 +88,7 @@ def _check_inertial(path: Path, link: ET.Element) -> None:
     if mass is None or mass.get("value") is None:
         raise InputError(f"{where} <inertial> has no <mass value=…>")
     _number(mass, "value", where, 0.0, SANE["mass"])
-    _floats(inertial.find("origin"), "xyz", "0 0 0", f"{where} <inertial><origin>")
+    _floats(inertial.find("origin"), "xyz", "0 0 0", f"{where} <inertial><origin>", SANE["length"])
     _floats(inertial.find("origin"), "rpy", "0 0 0", f"{where} <inertial><origin>")
     element = inertial.find("inertia")
     if element is None:
@@ -91,10 +96,18 @@ def _check_inertial(path: Path, link: ET.Element) -> None:
     keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
     v = {k: _number(element, k, where, -SANE["inertia"], SANE["inertia"]) or 0.0 for k in keys}
     inertia = np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]], [v["ixz"], v["iyz"], v["izz"]]])
-    lowest = float(np.linalg.eigvalsh(inertia)[0])
-    if lowest < -1e-9 * max(1.0, float(np.abs(inertia).max())):
+    moments = np.linalg.eigvalsh(inertia)  # principal moments, ascending
+    tolerance = 1e-9 * max(1.0, float(np.abs(inertia).max()))
+    if moments[0] < -tolerance:
         raise InputError(
-            f"{where} <inertia>: not physically possible (its smallest principal moment is {lowest:.3g} kg m², below 0)"
+            f"{where} <inertia>: not physically possible (its smallest principal moment is "
+            f"{float(moments[0]):.3g} kg m², below 0)"
+        )
+    if moments[2] > moments[0] + moments[1] + tolerance:  # a rigid body's moments obey the triangle inequality
+        raise InputError(
+            f"{where} <inertia>: not physically possible: its largest principal moment ({float(moments[2]):.3g} "
+            f"kg m²) exceeds the sum of the other two ({float(moments[0]):.3g} + {float(moments[1]):.3g}); no "
+            "distribution of mass has it (the triangle inequality of principal moments)"
         )
 
 
@@ -129,8 +142,8 @@ def _joint(path: Path, j: ET.Element, links: dict[str, ET.Element]) -> UrdfJoint
         j.get("type"),
         parent.get("link"),
         child.get("link"),
-        _floats(origin, "xyz", "0 0 0", where),
-        _floats(origin, "rpy", "0 0 0", where),
+        _floats(origin, "xyz", "0 0 0", f"{where} <origin>", SANE["length"]),
+        _floats(origin, "rpy", "0 0 0", f"{where} <origin>"),
         axis,
         damping,
         friction,
@@ -160,6 +173,13 @@ def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Elem
     joints = {}
     for element in root.findall("joint"):
         joint = _joint(path, element, links)
+        if joint.name in links:  # Pinocchio keeps one frame per joint and per link, found by name
+            raise InputError(
+                f"{path}: <joint name={joint.name!r}> has the name of a <link>; joints and links need distinct "
+                "names (Pinocchio and most URDF tools find frames by name)"
+            )
+        if joint.name in joints:
+            raise InputError(f"{path}: two <joint> elements are named {joint.name!r}")
         joints[joint.name] = joint
     return text, joints, links
 
