@@ -50,6 +50,8 @@ def load_problem(path: str | Path) -> Problem:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not a valid TOML file ({exc})") from None
+    except RecursionError:  # tomllib parses nested arrays and tables recursively
+        raise InputError(f"{path}: not a problem file: arrays or tables nested too deeply to read") from None
     outputs.declare_inputs([path])  # before anything it names: an output onto this file is refused first
     top = Table(raw, "", path)
     base = path.resolve().parent
