@@ -27,7 +27,7 @@ from ident_opt.derivatives import (
     resolve_cutoff,
     settled,
 )
-from ident_opt.errors import InputError
+from ident_opt.errors import InputError, excerpt
 from ident_opt.problem.spec import DataSpec
 
 #: A standard joint column's name: its signal and its joint number (1-based).
@@ -182,8 +182,11 @@ def _locate(
 
 
 def _row_label(path: Path, row: int, spec: DataSpec) -> str:
+    """Where 0-based data row `row` is, as the user finds it: a CSV's line, a ROS 2 bag's message index."""
     if path.name.lower().endswith((".csv", ".csv.gz")):
         return f"data row {row + 1} (line {row + 1 + int(spec.header)} of the file)"
+    if path.exists() and rosbag.is_bag(path):
+        return rosbag.message_label(row, spec.ros_topic)
     return f"data row {row + 1}"
 
 
@@ -200,11 +203,8 @@ def _numeric(
         else:
             row = int(np.argmax(invalid))
             cell = raw.iloc[row]
-            what = (
-                "an empty cell"
-                if (isinstance(cell, str) and not cell.strip()) or pd.isna(cell)
-                else f"the value {cell!r}"
-            )
+            empty = cell is None or (isinstance(cell, str) and not cell.strip())  # a NaN read as a number is a value
+            what = "an empty cell" if empty else f"the value {excerpt(cell)}"
             raise InputError(
                 f"{path}: column '{name}' has {what} at {_row_label(path, row, spec)}; "
                 "every used cell must be a finite number (use --drop-invalid to skip such rows)"
@@ -293,7 +293,7 @@ def _check_time(t: np.ndarray, path: Path, spec: DataSpec) -> None:
         kind = "repeats" if steps[row - 1] == 0 else "goes back"
         raise InputError(
             f"{path}: column 't' is not strictly increasing: it {kind} at "
-            f"{_row_label(path, row, spec)} ({float(t[row - 1])!r} then {float(t[row])!r})"
+            f"{_row_label(path, row, spec)} ({excerpt(float(t[row - 1]))} then {excerpt(float(t[row]))})"
         )
 
 
@@ -336,7 +336,7 @@ def _check_plausible(
             if estimated:
                 hint = " (estimated from q and t: is t in seconds, q in radians?)"
             raise InputError(
-                f"{path}: column '{kind}{joint + 1}' has the implausible value {float(arr[row, joint])!r} at "
+                f"{path}: column '{kind}{joint + 1}' has the implausible value {excerpt(float(arr[row, joint]))} at "
                 f"{_row_label(path, original_row, spec)}: |{kind}| > {PLAUSIBLE[kind]:g} in SI units"
                 f"{hint}. Use --allow-implausible to proceed anyway."
             )

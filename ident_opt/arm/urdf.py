@@ -173,10 +173,10 @@ def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Elem
     joints = {}
     for element in root.findall("joint"):
         joint = _joint(path, element, links)
-        if joint.name in links:  # Pinocchio keeps one frame per joint and per link, found by name
+        if joint.name in links and joint.type != "fixed":  # Pinocchio finds a moving joint's frame by its name
             raise InputError(
-                f"{path}: <joint name={joint.name!r}> has the name of a <link>; joints and links need distinct "
-                "names (Pinocchio and most URDF tools find frames by name)"
+                f"{path}: <joint name={joint.name!r}> has the name of a <link>; a moving joint and a link need "
+                "distinct names (Pinocchio and most URDF tools find frames by name)"
             )
         if joint.name in joints:
             raise InputError(f"{path}: two <joint> elements are named {joint.name!r}")

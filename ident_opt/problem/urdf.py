@@ -112,7 +112,7 @@ def _planar(table: Table, urdf: Path, joints: list[str], gravity: tuple[float, f
             raise InputError(
                 f"{exc}. {table.path}: [robot.{planar_only[0]}] is the planar two-link form's table, and this arm "
                 f"is not one, so it is read as an n-joint arm: give its joints' values as [robot.<joint name>] "
-                f"({', '.join(f'[robot.{j}]' for j in joints)}), motor side unless side = \"joint\""
+                f'({", ".join(f"[robot.{j}]" for j in joints)}), motor side unless side = "joint"'
             ) from None
         return None
     for name in joints:
