@@ -15,6 +15,7 @@ from ident_opt.data import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from ident_opt.report import write_json  # noqa: F401  (every command's --json goes through it)
+from ident_opt.warnings import ResultWarning
 
 #: The largest |value| (SI units) of q, dq, ddq or τ that a fit can take: the regressor's products of four
 #: such values stay far from overflow. Far beyond any arm (1e8 rad/s, 1e8 N·m), so --allow-implausible keeps it.
@@ -117,6 +118,8 @@ def load(
     if min_samples is not None:
         kwargs["min_samples"] = min_samples
     outputs.declare_inputs(paths)
+    for warning in held_out_overlap(train, test):
+        print(warning, file=sys.stderr)
     trials = [load_dataset(p, problem.data, problem.robot, **kwargs) for p in paths]
     for trial in trials:
         if trial.dropped_rows:
@@ -133,6 +136,35 @@ def _trial_paths(args: argparse.Namespace, problem) -> tuple[list[Path], list[Pa
     if data:
         return data, test
     return list(problem.data.training), test or list(problem.data.testing)
+
+
+def held_out_overlap(train: list[Path], test: list[Path]) -> list[ResultWarning]:
+    """A warning per held-out trial that is also a training trial (the same file, or a copy of the same bytes):
+    its scores are then not held out."""
+    found = []
+    for held in test:
+        same = next((t for t in train if _same_trial(t, held)), None)
+        if same is not None:
+            found.append(
+                ResultWarning(
+                    "held_out_is_training",
+                    f"{held} (held out) is the training trial {same}: its scores measure the fit on its own data, "
+                    "not on unseen data; hold out another trial",
+                )
+            )
+    return found
+
+
+def _same_trial(a: Path, b: Path) -> bool:
+    """Whether two trial paths are one file (also through links) or two files with the same bytes."""
+    try:
+        if os.path.samefile(a, b):
+            return True
+        if a.is_file() and b.is_file() and a.stat().st_size == b.stat().st_size:
+            return a.read_bytes() == b.read_bytes()
+    except OSError:
+        pass
+    return False
 
 
 def fittable(trial, fit: bool = True) -> None:
