@@ -215,6 +215,8 @@ def check_chain(path: Path, joints: dict[str, UrdfJoint], names: tuple[str, ...]
     children = set(by_child)
     roots = sorted({j.parent for j in joints.values()} - children)
     if base is None:
+        if not roots:
+            raise InputError(f"{path}: every link of the URDF has a parent: its joints form a cycle; a URDF is a tree")
         if len(roots) != 1:
             raise InputError(f"{path}: the URDF has {len(roots)} root links ({', '.join(roots)}), not one")
         base = roots[0]
