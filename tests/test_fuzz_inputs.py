@@ -152,6 +152,13 @@ EXTRA_COLUMNS = ["q4", "tau4", "dq4", "i5", "q10", "ddq3", "tau0", "q-1", " q1",
 HOSTILE_CELLS = ["", "nan", "inf", "-inf", "1e308", "-1e308", "abc", "1e-320", "0x10", "9" * 400]
 MAPPINGS = [
     "",
+    "",
+    "",
+    "",
+    "",
+    "",
+    "",
+    "",  # most cases: the standard names, read as they are
     "[data.columns]\ni2 = false\n",
     "[data.columns]\ntau1 = false\n",
     '[data.columns]\ntau1 = { column = "i1", scale = 5.0 }\ni1 = false\n',
@@ -378,8 +385,8 @@ def test_fuzz_trial_gaps(case, command):
 INPUTS = {"p.toml": ("arm.urdf", "mesh.stl", "p.toml", "d.csv", "t2.csv"), "bag.toml": ("bag.toml", "b")}
 FILE_TARGETS = [
     "arm.urdf", "mesh.stl", "p.toml", "d.csv", "t2.csv", "./d.csv", "sub/../t2.csv", "b/metadata.yaml", "b/b.mcap",
-    "b/new.json", "b", "bag.toml", "r/README.md", "r/.manifest", "r", "new.json", "sub/new.json", "link_urdf", "linkdir/x.json",
-    "r/compare.md", "",
+    "b/new.json", "b", "bag.toml", "r/README.md", "r/.manifest", "r", "new.json", "sub/new.json", "link_urdf",
+    "linkdir/x.json", "r/compare.md", "",
 ]  # fmt: skip
 FOLDER_TARGETS = ["r", "b", "b/sub", ".", "new_dir", "arm.urdf", "r/.manifest", "linkdir", "linkdir/sub"]
 OUT_STATES = ["empty", "none", "user-readme", "manifest-file", "manifest-garbage", "manifest-folder", "readme-dir"]
