@@ -80,6 +80,10 @@ def check_outputs(args: argparse.Namespace) -> None:
     for dest in INPUT_FLAGS:
         value = getattr(args, dest, None)
         outputs.declare_inputs([value] if isinstance(value, str) else value or [])
+    for dest in (*OUTPUT_FLAGS, "out"):
+        value = getattr(args, dest, None)
+        if isinstance(value, str) and not value.strip():
+            raise InputError(f"--{dest}: an empty path; give a file or folder name")
     for dest in OUTPUT_FLAGS:
         if getattr(args, dest, None):
             outputs.check_file_output(getattr(args, dest), "--" + dest)

@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 from rosbags.rosbag2 import Writer
 from rosbags.rosbag2.enums import StoragePlugin
 
-from tests.test_fuzz import FUZZ, ONE_LINE, run_case
+from tests.test_fuzz import FUZZ, ONE_LINE, _scaled, run_case
 from tests.test_rosbag import CSV, JOINT_STATE, STORE
 from tests.test_urdf_arm import TWISTED
 
@@ -177,35 +177,36 @@ def n_joint_case(draw) -> tuple[str, str]:
     frame = motion(n=draw(st.sampled_from([50, 400])), joints=len(joints))
     if draw(st.booleans()):  # logged as currents
         frame = frame.rename(columns={f"tau{j + 1}": f"i{j + 1}" for j in range(len(joints))})
+    header = list(frame.columns)  # edited by position: a renamed column may repeat another's name
+    cells = [[repr(float(v)) for v in frame[c]] for c in header]
     for _ in range(draw(st.integers(0, 4))):
         op = draw(st.sampled_from(["add", "drop", "rename", "constant", "cell", "scale", "swap"]))
-        columns = list(frame.columns)
-        column = draw(st.sampled_from(columns))
-        if op == "add":
-            frame[draw(st.sampled_from(EXTRA_COLUMNS))] = frame[column].to_numpy()
-        elif op == "drop" and len(columns) > 1:
-            frame = frame.drop(columns=[column])
-        elif op == "rename":
-            frame = frame.rename(columns={column: draw(st.sampled_from(EXTRA_COLUMNS + columns))})
-        elif op == "constant":
-            frame[column] = draw(st.sampled_from([0.0, 0.5, 1e300]))
-        elif op == "cell":
-            frame[column] = frame[column].astype(object)
-            frame.iloc[draw(st.integers(0, len(frame) - 1)), columns.index(column)] = draw(
-                st.sampled_from(HOSTILE_CELLS)
-            )
-        elif op == "scale":
-            frame[column] = pd.to_numeric(frame[column], errors="coerce") * draw(st.sampled_from([0, -1, 1e6, 1e-9]))
-        else:
-            other = draw(st.sampled_from(columns))
-            frame[[column, other]] = frame[[other, column]].to_numpy()
+        i = draw(st.integers(0, len(header) - 1)) if header else 0
+        if op == "add" and header:
+            header.append(draw(st.sampled_from(EXTRA_COLUMNS)))
+            cells.append(list(cells[i]))
+        elif op == "drop" and len(header) > 1:
+            del header[i], cells[i]
+        elif op == "rename" and header:
+            header[i] = draw(st.sampled_from(EXTRA_COLUMNS + header))
+        elif op == "constant" and header:
+            cells[i] = [draw(st.sampled_from(["0", "0.5", "1e300"]))] * len(cells[i])
+        elif op == "cell" and header:
+            cells[i][draw(st.integers(0, len(cells[i]) - 1))] = draw(st.sampled_from(HOSTILE_CELLS))
+        elif op == "scale" and header:
+            factor = draw(st.sampled_from([0.0, -1.0, 1e6, 1e-9]))
+            cells[i] = [_scaled(c, factor) for c in cells[i]]
+        elif op == "swap" and header:
+            k = draw(st.integers(0, len(header) - 1))
+            cells[i], cells[k] = cells[k], cells[i]
     names = "[" + ", ".join(f'"{j}"' for j in joints) + "]"
     problem = ARM3.replace('["a", "b", "c"]', names) + 'form = "n-joint"\n' * (len(joints) == 2)
     problem += "".join(
         f"[robot.{j}]\ntorque_constant = 0.05\ngear_ratio = 100\n" for j in joints if draw(st.booleans())
     )
     problem += '[data]\ntrials = ["d.csv"]\n' + draw(st.sampled_from(MAPPINGS))
-    return problem, frame.to_csv(index=False)
+    rows = [",".join(header)] + [",".join(row) for row in zip(*cells)]
+    return problem, "\n".join(rows) + "\n"
 
 
 @share(16)

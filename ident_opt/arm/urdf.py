@@ -21,6 +21,9 @@ from ident_opt.errors import InputError
 
 #: Revolute joint types of the URDF format.
 REVOLUTE = ("revolute", "continuous")
+#: Every joint type of the URDF format; those that need a <limit effort velocity> (lower and upper too).
+JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+LIMITED = ("revolute", "prismatic")
 
 
 #: Largest magnitude of a URDF number the tool accepts, per kind: a mass [kg], a length [m], an inertia [kg m²],
@@ -121,6 +124,12 @@ def _joint(path: Path, j: ET.Element, links: dict[str, ET.Element]) -> UrdfJoint
     for end in (parent.get("link"), child.get("link")):
         if end not in links:
             raise InputError(f"{where}: refers to link {end!r}, which the file does not define")
+    if j.get("type") not in JOINT_TYPES:
+        raise InputError(f"{where}: type={j.get('type')!r} is not a URDF joint type ({', '.join(JOINT_TYPES)})")
+    if j.get("type") in LIMITED and (
+        j.find("limit") is None or None in (j.find("limit").get(k) for k in ("effort", "velocity"))
+    ):
+        raise InputError(f"{where}: a {j.get('type')} joint needs <limit effort=… velocity=…> (the URDF format's rule)")
     axis = _floats(j.find("axis"), "xyz", "1 0 0", where)
     if j.get("type") in REVOLUTE and not np.linalg.norm(axis) > 0:
         raise InputError(f"{where} <axis xyz={j.find('axis').get('xyz')!r}>: a revolute joint needs a non-zero axis")
@@ -132,10 +141,12 @@ def _joint(path: Path, j: ET.Element, links: dict[str, ET.Element]) -> UrdfJoint
     limit = {}
     element = j.find("limit")
     if element is not None:
-        for key in ("lower", "upper", "velocity", "effort"):
-            value = _number(element, key, where, -1e6, 1e6)
+        for key in ("lower", "upper", "velocity", "effort"):  # velocity and effort are magnitudes
+            value = _number(element, key, where, -1e6 if key in ("lower", "upper") else 0.0, 1e6)
             if value is not None:
                 limit[key] = value
+        if limit.get("lower", -math.inf) > limit.get("upper", math.inf):
+            raise InputError(f"{where} <limit>: lower {limit['lower']:g} is above upper {limit['upper']:g}")
     origin = j.find("origin")
     return UrdfJoint(
         name,
@@ -181,7 +192,37 @@ def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Elem
         if joint.name in joints:
             raise InputError(f"{path}: two <joint> elements are named {joint.name!r}")
         joints[joint.name] = joint
+    _check_tree(path, joints)
     return text, joints, links
+
+
+def _check_tree(path: Path, joints: dict[str, UrdfJoint]) -> None:
+    """The joints make a tree of links (what urdfdom and Pinocchio assume: on a loop they recurse without end):
+    no joint from a link to itself, no link the child of two joints, no cycle; InputError naming the culprit."""
+    parent_of: dict[str, UrdfJoint] = {}
+    for joint in joints.values():
+        if joint.parent == joint.child:
+            raise InputError(
+                f"{path}: <joint name={joint.name!r}>: its parent and child are the same link {joint.child!r}"
+            )
+        if joint.child in parent_of:
+            raise InputError(
+                f"{path}: link {joint.child!r} is the child of two joints ({parent_of[joint.child].name!r} and "
+                f"{joint.name!r}); a URDF is a tree: each link has one parent"
+            )
+        parent_of[joint.child] = joint
+    done: set[str] = set()  # links known to reach a root
+    for start in parent_of:
+        seen, link = [], start
+        while link in parent_of and link not in done:
+            if link in seen:
+                raise InputError(
+                    f"{path}: the joints above link {link!r} form a cycle ({' -> '.join(seen[seen.index(link) :])} -> "
+                    f"{link}); a URDF is a tree"
+                )
+            seen.append(link)
+            link = parent_of[link].parent
+        done.update(seen)
 
 
 def meshes(path: Path, root: ET.Element) -> list[Path]:
@@ -215,8 +256,6 @@ def check_chain(path: Path, joints: dict[str, UrdfJoint], names: tuple[str, ...]
     children = set(by_child)
     roots = sorted({j.parent for j in joints.values()} - children)
     if base is None:
-        if not roots:
-            raise InputError(f"{path}: every link of the URDF has a parent: its joints form a cycle; a URDF is a tree")
         if len(roots) != 1:
             raise InputError(f"{path}: the URDF has {len(roots)} root links ({', '.join(roots)}), not one")
         base = roots[0]
