@@ -248,6 +248,11 @@ def test_a_bag_whose_stamps_jump_a_megasecond_loads_as_two_segments(tmp_path, ca
 
 
 # ---------------------------------------------------------------------------------------------- URDF at load
+#: Links c1 and c2 hanging from each other by fixed joints (joint a moved onto c1 in the "fixed-cycle" case).
+CYCLE = (
+    '<link name="c1"/><link name="c2"/><joint name="x1" type="fixed"><parent link="c1"/><child link="c2"/></joint>'
+    '<joint name="x2" type="fixed"><parent link="c2"/><child link="c1"/></joint>'
+)
 #: A hostile edit of `TWISTED`: (text to replace, replacement, words the message must hold).
 URDF_CASES = {
     "mass-macro": ('<mass value="2.0"/>', '<mass value="${m}"/>', ("'l1'", "mass value='${m}'")),
@@ -261,12 +266,32 @@ URDF_CASES = {
     "joint-200-m": ('<origin xyz="0.4 0 0" rpy="0 1.2 0"/>', '<origin xyz="200 0 0" rpy="0 1.2 0"/>', ("'c'", "200")),
     "com-200-m": ('<origin xyz="0.2 0.01 0"/>', '<origin xyz="0.2 200 0"/>', ("'l2'", "200")),
     "joint-named-like-a-link": ('<link name="l1">', '<link name="b">', ("'b'", "name of a <link>")),
-    "fixed-cycle": (  # joint a hangs from c1, and c1 and c2 hang from each other by fixed joints
+    "fixed-cycle": (
         '<parent link="base"/>\n    <child link="l1"/>',
-        '<parent link="c1"/>\n    <child link="l1"/></joint><link name="c1"/><link name="c2"/><joint name="x1" '
-        'type="fixed"><parent link="c1"/><child link="c2"/></joint><joint name="x2" type="fixed"><parent link="c2"/>'
-        '<child link="c1"/>',
-        ("'c1'", "cycle"),
+        '<parent link="c1"/>\n    <child link="l1"/>',
+        ("cycle", "c1"),
+    ),
+    "self-loop": (  # urdfdom and Pinocchio recursed on this without end (a segfault, found by make fuzz)
+        "</robot>",
+        '<joint name="loop" type="fixed"><parent link="l2"/><child link="l2"/></joint></robot>',
+        ("'loop'", "the same link 'l2'"),
+    ),
+    "two-parents": (
+        "</robot>",
+        '<joint name="again" type="fixed"><parent link="l1"/><child link="l4"/></joint></robot>',
+        ("'l4'", "child of two joints"),
+    ),
+    "unknown-type": ('<joint name="c" type="revolute">', '<joint name="c" type="x">', ("'c'", "not a URDF joint type")),
+    "no-limit": (
+        '<limit effort="1" lower="-3" upper="3" velocity="1"/></joint>\n  <link name="l4">',
+        '</joint>\n  <link name="l4">',
+        ("'c'", "needs <limit"),
+    ),
+    "negative-effort": ('<limit effort="1" lower="-3"', '<limit effort="-1" lower="-3"', ("'a'", "effort='-1'")),
+    "lower-above-upper": (
+        'lower="-3" upper="3" velocity="1"/></joint>\n  <link name="l1">',
+        'lower="3" upper="-3" velocity="1"/></joint>\n  <link name="l1">',
+        ("'a'", "above upper"),
     ),
     "all-a-cycle": (
         '<link name="world"/>',
@@ -282,6 +307,8 @@ def test_a_bad_urdf_is_refused_at_load_naming_the_element(arm3, capsys, case):
     text = TWISTED.replace(old, new, 1)
     if case == "joint-named-like-a-link":
         text = text.replace('link="l1"', 'link="b"')
+    if case == "fixed-cycle":
+        text = text.replace("</robot>", CYCLE + "</robot>")
     assert text != TWISTED
     (arm3 / "arm.urdf").write_text(text)
     before = snapshot(arm3)
@@ -445,3 +472,38 @@ def test_held_out_trial_equal_to_the_training_trial_is_warned_about(tmp_path, mo
 def test_strict_json_of_a_check_on_a_bag(bag, capsys):
     assert main(["check", "--problem", "bag.toml", "--data", "b", "--json", "c.json"]) == 0
     json.loads((bag / "c.json").read_text(), parse_constant=lambda token: pytest.fail(f"non-strict JSON: {token}"))
+
+
+# ---------------------------------------------------------------------------------------------- fuzz findings
+@pytest.mark.parametrize("ratio", [1e-2, 1e-4, 1e-5])
+def test_the_zero_phase_filter_is_exact_far_below_nyquist(ratio):
+    """A cut-off at `ratio` of Nyquist over 4 of its periods: a sine at a tenth of it passes unchanged (as
+    (b, a) the filter gave 1e37 at 2e-5, then a traceback; found by make fuzz)."""
+    from ident_opt.derivatives import lowpass
+
+    fs, n = 1000.0, round(8 / ratio)
+    cutoff = ratio * fs / 2
+    t = np.arange(n) / fs
+    x = np.sin(2 * np.pi * 0.1 * cutoff * t)[:, None]
+    y = lowpass(t, x, cutoff)
+    assert np.isfinite(y).all() and np.abs(y - x)[n // 4 : -n // 4].max() < 1e-4
+
+
+def test_a_cut_off_far_below_the_trial_is_an_input_error_not_a_traceback(arm3, capsys):
+    frame = _motion(n=120, rate=1000.0)
+    frame["t"] += 1e-6 * np.sin(np.arange(120))  # jitter: the segment is resampled too
+    frame.to_csv(arm3 / "trial.csv", index=False, float_format="%.17g")
+    (arm3 / "p.toml").write_text(ARM3 + '[data]\ntrials = ["trial.csv"]\nderivative_cutoff_hz = 1e-3\n')
+    exits_2(capsys, ["compare", "--problem", "p.toml", "--json", "c.json", "--no-progress"], "trial.csv", "1/0.001 Hz")
+    assert not (arm3 / "c.json").exists()
+
+
+@pytest.mark.parametrize("flag", [["--json", ""], ["--out", " "]])
+def test_an_empty_output_path_is_refused_before_any_work(arm3, capsys, flag):
+    before = snapshot(arm3)
+    argv = (
+        ["export", "--problem", "p.toml", "--format", "urdf", *flag]
+        if flag[0] == "--out"
+        else ["check", "--problem", "p.toml", *flag]
+    )
+    unchanged(arm3, before, argv, capsys, flag[0], "empty path")
