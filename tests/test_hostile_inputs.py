@@ -161,6 +161,19 @@ def test_an_out_folder_readme_ident_opt_wrote_is_rebuilt_and_an_edited_one_kept(
     unchanged(tmp_path, before, argv, capsys, "r/README.md", "edited since")
 
 
+def test_a_folder_indexed_before_digests_were_kept_is_still_ident_opts(tmp_path, monkeypatch, capsys):
+    """results/ of an earlier version: manifests and a README.md but no digest of it: rebuilt, digest kept."""
+    small_problem(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    argv = ["compare", "--problem", "p.toml", "--out", "r", "--no-progress"]
+    assert main(argv) == 0
+    (tmp_path / "r" / ".manifest" / "README.md.sha256").unlink()
+    (tmp_path / "r" / "README.md").write_text("# Results\n\nan older index\n")
+    assert main(argv) == 0
+    assert "older index" not in (tmp_path / "r" / "README.md").read_text()
+    assert (tmp_path / "r" / ".manifest" / "README.md.sha256").is_file()
+
+
 @pytest.mark.parametrize(
     ("make", "named"),
     [
