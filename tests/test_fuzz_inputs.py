@@ -449,7 +449,7 @@ def test_fuzz_output_paths(case):
     state, argv = case
     with tempfile.TemporaryDirectory(prefix="fuzz-") as tmp:
         folder = Path(tmp)
-        keep = output_workspace(folder, state) + list(INPUTS[argv[2]])
-        keep = [k for k in keep if k not in argv]  # a file named as an output is the user's choice to replace
+        keep = output_workspace(folder, state)
+        keep = [k for k in keep if k not in argv] + list(INPUTS[argv[2]])  # the user's README named as the output
         outcome = run_case("outputs", folder, argv, inputs=keep)
     assert not outcome["problems"], outcome
