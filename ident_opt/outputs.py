@@ -159,7 +159,12 @@ def _files(folder: Path, depth: int = WATCH_DEPTH) -> Iterator[str]:
 
 def _inside(path: Path, folder: Path) -> bool:
     """Whether `path` is in the (existing) folder `folder` or one of its subfolders, also through links."""
-    return folder.is_dir() and Path(_key(path)).is_relative_to(_key(folder))
+    return folder.is_dir() and same_or_inside(path, folder)
+
+
+def same_or_inside(path: str | Path, target: str | Path) -> bool:
+    """Whether `path` names `target` or a path inside it (resolved, whether or not either exists yet)."""
+    return Path(_key(path)).is_relative_to(_key(target))
 
 
 def _refuse(output: Path, inp: Path) -> None:

@@ -235,8 +235,9 @@ def violations(folder, status, before, inputs, err, out, stdin) -> list[str]:
         found.append(f"modified input: {changed[:3]}")
     if any(".tmp" in name or name.endswith(".bak") for name in after):
         found.append("temporary file left")
-    if status == 2 and after != before:
-        found.append(f"partial output: {sorted(set(after.items()) - set(before.items()))[:3]}")
+    new = {name: h for name, h in after.items() if not name.startswith(".cache/")}  # the compiled-code cache stays
+    if status == 2 and new != {name: h for name, h in before.items() if not name.startswith(".cache/")}:
+        found.append(f"partial output: {sorted(set(new.items()) - set(before.items()))[:3]}")
     for name in after:  # the JSON this case wrote (a file it did not touch is not its output)
         if name.endswith(".json") and after[name] != before.get(name) and not _strict(folder / name):
             found.append(f"NaN or invalid JSON in {name}")

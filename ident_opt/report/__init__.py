@@ -64,6 +64,13 @@ def check_folder(out_dir: str | Path) -> None:
     (`_check_readme`); InputError naming the file otherwise. Nothing is written."""
     out_dir = Path(out_dir)
     folder = out_dir / MANIFESTS
+    run = outputs.current()
+    for path in run.outputs if run is not None else []:  # --json/--final onto the index this run writes
+        if outputs.same_or_inside(path, out_dir / "README.md") or outputs.same_or_inside(path, folder):
+            raise InputError(
+                f"{path}: the output folder {out_dir} keeps its index there (README.md, {MANIFESTS}/); "
+                "write this output elsewhere"
+            )
     if folder.exists() and not folder.is_dir():
         raise InputError(
             f"{folder}: exists and is not a folder; ident-opt keeps the manifests of its reports in a folder of "
