@@ -161,6 +161,16 @@ def test_an_out_folder_readme_ident_opt_wrote_is_rebuilt_and_an_edited_one_kept(
     unchanged(tmp_path, before, argv, capsys, "r/README.md", "edited since")
 
 
+@pytest.mark.parametrize("target", ["r/README.md", "r/.manifest", "r/.manifest/compare.json"])
+def test_a_json_onto_the_out_folders_index_is_refused_before_any_work(tmp_path, monkeypatch, capsys, target):
+    small_problem(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    before = snapshot(tmp_path)
+    argv = ["compare", "--problem", "p.toml", "--out", "r", "--json", target, "--no-progress"]
+    unchanged(tmp_path, before, argv, capsys, target, "keeps its index there")
+    assert not (tmp_path / "r").exists()
+
+
 def test_a_folder_indexed_before_digests_were_kept_is_still_ident_opts(tmp_path, monkeypatch, capsys):
     """results/ of an earlier version: manifests and a README.md but no digest of it: rebuilt, digest kept."""
     small_problem(tmp_path)
