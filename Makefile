@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PROBLEM ?= problems/tudor_2dof.toml
 
-.PHONY: identify test lint bench codegen audit calibration clean-venv fuzz cutoff-study
+.PHONY: identify test lint bench codegen audit calibration clean-venv fuzz online-arms excitation-arms cutoff-study
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -37,15 +37,16 @@ identify: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
 
-## The long hostile-input fuzz (tests/test_fuzz.py: data, problem, command line, stream; tests/test_fuzz_inputs.py:
-## URDF, n-joint columns, ROS 2 bags, trial gaps, output paths; the suite runs a small share of each):
-## FUZZ_EXAMPLES cases per property (10 properties, >= 8,000 cases in all), each logged to build/fuzz.log, then
-## summed up (cases per property; tracebacks, NaN, modified inputs, partial outputs, hangs).
+## The long hostile-input fuzz (tests/test_fuzz.py: data, problem, command line, stream; tests/test_stream_start.py:
+## the stream's first samples; tests/test_fuzz_inputs.py: URDF, n-joint columns, ROS 2 bags, trial gaps, output
+## paths; the suite runs a small share of each): FUZZ_EXAMPLES cases per property (11 properties, >= 8,800 cases in
+## all), each logged to build/fuzz.log, then summed up (cases per property; tracebacks, NaN, modified inputs,
+## partial outputs, hangs).
 FUZZ_EXAMPLES ?= 800
 fuzz: $(STAMP)
 	mkdir -p build && rm -f build/fuzz.log
 	IDENT_OPT_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) IDENT_OPT_FUZZ_LOG=build/fuzz.log $(BIN)/python -m pytest -n 2 -q \
-	    tests/test_fuzz.py tests/test_fuzz_inputs.py
+	    tests/test_fuzz.py tests/test_stream_start.py::test_fuzz_stream_start tests/test_fuzz_inputs.py
 	$(BIN)/python -m tests.test_fuzz build/fuzz.log
 
 ## Style: ruff's lint rules (with complexity limits, see pyproject.toml) and its formatter, checked not applied.
@@ -64,6 +65,19 @@ audit: $(STAMP)
 ## D-, cond-optimal and discriminating 20 s trajectories against MERIt-like and random ones, 10 noise seeds each.
 excitation: $(STAMP)
 	$(BIN)/ident-opt excite --problem $(PROBLEM) --proof 10 --out results/excitation.md --no-progress
+
+## Online identification on the real n-joint arms (results/online_arms.md: KUKA, Panda, TX40): the replay against
+## from-scratch re-solves, the generated update against Python and its time, the stream on t, q and currents only.
+online-arms: $(STAMP)
+	$(BIN)/python -m ident_opt.studies.online_arms --out results
+
+## The D-optimal excitation against random Fourier motions within the same limits and duration, on the 7-joint KUKA
+## (rigid inverse dynamics + noise) and the planar arm (the closed-loop simulator), 20 unseen noise seeds each
+## (results/excitation_arms.md; about 15 min on 2 cores). The base frequencies were chosen on the development seeds
+## (0-4); seeds 1000-1019 were looked at once after that (results in git history, abc5cb1), 3000-3019 decide.
+excitation-arms: $(STAMP)
+	$(BIN)/python -m ident_opt.studies.excitation_benefit --problem problems/kuka_lwr4.toml --base-hz 0.2 \
+	    --problem $(PROBLEM) --base-hz 0.1 --seeds 20 --unseen-from 3000 --no-progress --out results
 
 ## The simulator's default trial against the real exp1 (results/simulator_calibration.md); col10-col13 are
 ## the MERIt trials' strain gauges.

@@ -38,7 +38,7 @@ from ident_opt.arm.planar import RIGID  # noqa: E402
 from ident_opt.gmr import GMR, Support  # noqa: E402
 from ident_opt.identify.bounded import WarmConsistentLS, default_bounds  # noqa: E402
 from ident_opt.identify.stats import Stats  # noqa: E402
-from ident_opt.online import Estimator, OnlineIdentifier  # noqa: E402
+from ident_opt.online import ArmDesign, Estimator, OnlineIdentifier  # noqa: E402
 from ident_opt.online_kernel import attach  # noqa: E402
 from ident_opt.report import record  # noqa: E402
 
@@ -70,7 +70,7 @@ def ours(
         ident = OnlineIdentifier(
             RIGID.regressor, estimator_factory(), np.zeros(9), Stats.from_regressor(Y[:N], tau[:N])
         )
-        if compiled and not attach(ident, RIGID):
+        if compiled and not attach(ident, ArmDesign(RIGID)):
             raise SystemExit("bench_online: the compiled update needs a C compiler")
         add = ident.add
         out = np.empty((steps, 9))
@@ -118,7 +118,7 @@ def full_step(q, dq, ddq, tau, N: int, steps: int, repeats: int, compiled: bool)
             support=support,
         )
         if compiled:
-            attach(ident, RIGID)
+            attach(ident, ArmDesign(RIGID))
         step, add = ident.step, ident.add
         t0 = time.perf_counter()
         for k in range(N, N + steps):

@@ -42,6 +42,10 @@ _EXPORTS = {
     "Diagnosis": "ident_opt.diagnosis",
     "simulate_trial": "ident_opt.simulate",
     "export": "ident_opt.api",
+    # a fleet: every robot every day, and what changed (Dask)
+    "run_fleet": "ident_opt.studies.fleet",
+    "FleetResult": "ident_opt.studies.fleet",
+    "simulate_fleet": "ident_opt.fleet.simulated",
     # bad input
     "InputError": "ident_opt.errors",
 }

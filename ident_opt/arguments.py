@@ -28,6 +28,9 @@ RANGES: dict[tuple[str, str] | str, tuple[float, float]] = {
     ("excite", "starts"): (1, 100),
     ("excite", "harmonics"): (1, 20),
     ("excite", "base_hz"): (1e-4, 100.0),  # Hz
+    ("fleet", "workers"): (1, 4096),
+    ("fleet", "baseline_days"): (2, 3650),  # days: a scatter needs two
+    ("fleet", "connect_timeout"): (0.1, 3600.0),  # s
     "components": (1, MAX_COMPONENTS),
     "seed": (0, MAX_SEED),
 }

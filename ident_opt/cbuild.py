@@ -80,9 +80,9 @@ def compile_library(source: Path, out_dir: Path, compiler: list[str] | None = No
     return lib
 
 
-def compile_shared(sources: list[str], library: Path, compiler: list[str]) -> Path:
-    """Compile C `sources` into the shared `library` with `CFLAGS`; `InputError` when the compiler fails."""
-    run_compiler([*compiler, *CFLAGS, "-shared", *sources, "-o", str(library), "-lm"], compiler[0])
+def compile_shared(sources: list[str], library: Path, compiler: list[str], flags: tuple[str, ...] = CFLAGS) -> Path:
+    """Compile C `sources` into the shared `library` with `flags`; `InputError` when the compiler fails."""
+    run_compiler([*compiler, *flags, "-shared", *sources, "-o", str(library), "-lm"], compiler[0])
     return Path(library)
 
 

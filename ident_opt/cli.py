@@ -46,6 +46,7 @@ COMMANDS = {
     "excite": "design the trajectory to run next: a Fourier excitation optimised by IPOPT within [limits]",
     "calibrate": "how close the simulator's default trial is to a real one (residual size, spectrum, strain)",
     "export": "write the identified arm as a robot description: URDF (with a JSON sidecar) or MuJoCo MJCF",
+    "fleet": "every robot of a fleet identified every day on Dask, and what changed (wear, payload, drive), named",
 }
 
 

@@ -8,6 +8,7 @@ dq/ddq, and either joint torques tau1 … taun or motor currents i1 … in. Ever
 from __future__ import annotations
 
 import re
+import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -118,7 +119,7 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
             frame = pd.read_csv(path, header=header, sep=",", dtype=str, keep_default_na=False, skipinitialspace=True)
         elif name.endswith(".parquet"):
             frame = pd.read_parquet(path)
-            if not spec.header:
+            if not spec.header and not _standard_names(frame.columns, spec):
                 frame.columns = range(frame.shape[1])
         elif name.endswith(".xlsx"):
             frame = pd.read_excel(path, sheet_name=spec.sheet or 0, header=header)
@@ -140,13 +141,22 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
     return frame
 
 
+def _standard_names(labels, spec: DataSpec) -> bool:
+    """Whether a table's own column names are the data format's (t and q1 among them) and may be read so
+    (`[data] standard_by_name`, the default)."""
+    return spec.standard_by_name and {"t", "q1"} <= {str(c).strip() for c in labels}
+
+
 def _header_row(frame: pd.DataFrame, spec: DataSpec) -> tuple[pd.DataFrame, DataSpec]:
     """A file read without a header row (`[data] header = false`) whose first row has the standard names (t, q1) is
-    a file with a header after all (unless `[data] standard_by_name = false`): that row becomes the header."""
+    a file with a header after all (unless `[data] standard_by_name = false`): that row becomes the header. A
+    Parquet file always names its columns: standard names there are read as such too."""
     if spec.header or not spec.standard_by_name:
         return frame, spec
+    if _standard_names(frame.columns, spec):
+        return frame, replace(spec, header=True)
     first = [str(v).strip() for v in frame.iloc[0]]
-    if not {"t", "q1"} <= set(first):
+    if not _standard_names(first, spec):
         return frame, spec
     body = frame.iloc[1:].reset_index(drop=True)
     body.columns = first
@@ -504,6 +514,33 @@ def concat(trials: list[Dataset]) -> Dataset:
         if any(d.instruments is None for d in trials)
         else tuple(np.concatenate([d.instruments[i] for d in trials]) for i in (0, 1)),
     )
+
+
+#: The largest |value| (SI units) of q, dq, ddq or τ that a fit can take: the regressor's products of four
+#: such values stay far from overflow. Far beyond any arm (1e8 rad/s, 1e8 N·m), so --allow-implausible keeps it.
+MAX_MAGNITUDE = 1e8
+
+
+def fittable(trial, fit: bool = True) -> None:
+    """InputError when `trial` cannot be fitted in double precision (a value beyond `MAX_MAGNITUDE`) or, with
+    `fit`, when a joint's torque never varies (its NMSE would be 0/0); without `fit` the latter is a warning."""
+    for name, values in (("q", trial.q), ("dq", trial.dq), ("ddq", trial.ddq), ("tau", trial.tau)):
+        worst = float(abs(values).max()) if values.size else 0.0
+        if not worst <= MAX_MAGNITUDE:
+            raise InputError(
+                f"{trial.source}: |{name}| reaches {worst:.3g} (SI units), beyond {MAX_MAGNITUDE:.0e}: no fit is "
+                "possible in double precision; check the column's unit (--allow-implausible does not lift this)"
+            )
+    for j in range(trial.tau.shape[1]):
+        column = trial.tau[:, j]
+        if column.size and float(column.max() - column.min()) == 0.0:
+            message = (
+                f"{trial.source}: the torque of joint {j + 1} is constant ({float(column[0]):g} N·m in every row): "
+                "nothing to identify on that joint, and its NMSE would be 0/0; check the column mapping"
+            )
+            if fit:
+                raise InputError(message)
+            print(f"warning: {message}", file=sys.stderr)
 
 
 # ---------------------------------------------------------------------------------------------- splits

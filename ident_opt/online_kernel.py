@@ -1,11 +1,12 @@
 """The bounded online update in generated C, for the Python online path (`OnlineIdentifier.add`).
 
-`attach(identifier)` generates `pi_update` (`codegen.generate_pi_update`) with the identifier's current state
-(normal equations, θ, active set, bounds) baked in, compiles it into a temporary folder, loads it with ctypes and
-makes the identifier's H, h and θ views of the C state, so each `add` is one C call: the rank-J statistics update,
-the warm-started bounded re-solve (the same active-set method as `identify.bounded.solve_bounded`) and the running
-mean square of the one-step residual. All or nothing: a refused sample leaves the state as it was. Without a C
-compiler (or for another estimator) nothing is attached and the NumPy path is used.
+`attach(identifier, design)` generates `pi_update` (`codegen.generate_pi_update`) with the identifier's current
+state (normal equations, θ, active set, bounds) baked in, compiles it into a temporary folder, loads it with ctypes
+and makes the identifier's θ a view of the C state, so each `add` is one C call: the rank-J update of the
+statistics' square-root factor, the warm-started bounded re-solve (the active-set method of
+`identify.bounded.solve_bounded`, in range-space form on the factor) and the running mean square of the one-step
+residual. All or nothing: a refused sample leaves the state as it was. Without a C compiler (or for another
+estimator) nothing is attached and the NumPy path is used.
 """
 
 from __future__ import annotations
@@ -25,14 +26,20 @@ from ident_opt.identify.bounded import KKT_TOL
 
 
 def load_pi_update(library: Path, n_params: int) -> tuple[ctypes.CDLL, ctypes.Structure]:
-    """The compiled `pi_update` library and its state, initialised to the offline start: the C struct
-    {H (P×P), h (P), θ (P), active-set state (P), n, iterations} as ctypes, in one place."""
+    """The compiled `pi_update` library and its state, initialised to the offline start: the C struct of
+    pi_update.h {R (2 buffers of P×P), cur, m, order (P), z, h, diag H (P each), θ (P), active-set state (P), n,
+    iterations} as ctypes, in one place."""
     P = n_params
 
     class State(ctypes.Structure):
         _fields_ = [
-            ("H", ctypes.c_double * (P * P)),
+            ("R", ctypes.c_double * (2 * P * P)),
+            ("cur", ctypes.c_int),
+            ("m", ctypes.c_int),
+            ("order", ctypes.c_int * P),
+            ("z", ctypes.c_double * P),
             ("h", ctypes.c_double * P),
+            ("hdiag", ctypes.c_double * P),
             ("theta", ctypes.c_double * P),
             ("state", ctypes.c_byte * P),
             ("n", ctypes.c_long),
@@ -55,22 +62,21 @@ class Kernel:
         self.rows = self.lib.pi_update_rows
         self.rows.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double]
         self.rows.restype = ctypes.c_int
-        self.H = np.ctypeslib.as_array(self.state.H).reshape(P, P)  # views: the C update writes them in place
-        self.h = np.ctypeslib.as_array(self.state.h)
-        self.theta = np.ctypeslib.as_array(self.state.theta)
+        self.theta = np.ctypeslib.as_array(self.state.theta)  # a view: the C update writes it in place
         self.D, self.tau = np.zeros((n_joints, P)), np.zeros(n_joints)  # one sample's rows and torques
         self.D_address, self.tau_address = self.D.ctypes.data, self.tau.ctypes.data
 
 
-def predictor_function(identifier, model) -> ca.Function:
+def predictor_function(identifier, design) -> ca.Function:
     """pi_step(q, dq, ddq, theta, pvar) -> (Yt, tau, std, logp, parametric): one sample's regressor (as Yᵀ, P×J, i.e.
     Y row-major), the hybrid prediction with its standard deviation and the GMR input log-density, exactly the
     formulas of `OnlineIdentifier.predict` (mean-only consistency transform from θ, extrapolation guard if any),
-    as a CasADi expression for code generation. The identifier must have a GMR (without cross-covariance)."""
-    s = model.symbols
+    as a CasADi expression for code generation. The identifier must have a GMR (without cross-covariance); `design`:
+    its `online.ArmDesign` (an arm and the columns of its regressor θ is about)."""
+    s = design.arm.symbols
     q, dq, ddq = s["q"], s["dq"], s["ddq"]
-    theta, pvar = ca.SX.sym("theta", model.n_params), ca.SX.sym("pvar", model.n_joints)
-    Y = ca.densify(s["Y"])
+    theta, pvar = ca.SX.sym("theta", len(design.names)), ca.SX.sym("pvar", design.n_joints)
+    Y = design.expression()
     parametric = ca.mtimes(Y, theta)
     fast, gmr = identifier._fast, identifier.gmr0
     d = gmr.n_inputs
@@ -93,7 +99,7 @@ def predictor_function(identifier, model) -> ca.Function:
     var = (
         sum(
             (ek * (ca.DM(fast.C_diag[k]) + (mk - mean) ** 2) for k, (ek, mk) in enumerate(zip(e, means))),
-            ca.DM.zeros(2),
+            ca.DM.zeros(design.n_joints),
         )
         / total
     )
@@ -144,36 +150,59 @@ class Predictor:
         return self.fn(*self.args)
 
 
-def attach(identifier, model, compiler: list[str] | None = None) -> bool:
-    """Give a bounded `OnlineIdentifier` (on `model`'s regressor) the generated C update; False (and nothing
-    changed) when the estimator is not bounded or no C compiler is available."""
-    if identifier.estimator.kind != "bounded" or identifier._solve is None:
+def update_state(ident) -> codegen.UpdateState:
+    """The state of a bounded online identifier (NumPy path), for `codegen.generate_pi_update`: its normal
+    equations, or its square-root factor (a ``factor`` estimator)."""
+    bounds = ident.estimator.bounds
+    factor = ident._factor
+    if factor is not None:
+        return codegen.UpdateState(
+            None,
+            factor.h.copy(),
+            ident.theta.copy(),
+            factor.last.state.copy(),
+            ident.stats.n,
+            bounds.lower,
+            bounds.upper,
+            factor.R.copy(),
+            factor.z.copy(),
+            factor.hdiag.copy(),
+        )
+    solver = ident._solve.__self__  # WarmBoundedLS: its last active set
+    return codegen.UpdateState(
+        ident._H.copy(),
+        ident._h.copy(),
+        ident.theta.copy(),
+        solver.last.state.copy(),
+        ident.stats.n,
+        bounds.lower,
+        bounds.upper,
+    )
+
+
+def attach(identifier, design, compiler: list[str] | None = None) -> bool:
+    """Give a bounded `OnlineIdentifier` (on `design`, an `online.ArmDesign`: columns of an arm's regressor) the
+    generated C update; False (and nothing changed) when the estimator is not bounded or no C compiler is
+    available."""
+    if identifier.estimator.kind not in ("bounded", "factor"):
         return False
     try:
         compiler = list(compiler or codegen.find_compiler())
     except InputError:
         return False
-    solver = identifier._solve.__self__
-    bounds = identifier.estimator.bounds
-    start = codegen.UpdateState(
-        identifier._H.copy(),
-        identifier._h.copy(),
-        identifier.theta.copy(),
-        solver.last.state.copy() if solver.last is not None else np.zeros(model.n_params, dtype=np.int8),
-        identifier.n_updates,
-        bounds.lower,
-        bounds.upper,
-    )
+    start = update_state(identifier)
     folder = Path(tempfile.mkdtemp(prefix="ident_opt_update_"))
     try:
-        codegen.generate_pi_update(model, start, folder, KKT_TOL)
+        codegen.generate_pi_update(design.arm, start, folder, KKT_TOL, design.columns)
         sources = [str(folder / f"{codegen.UPDATE}.c"), str(folder / f"{codegen.UPDATE}_casadi.c")]
-        predicts = identifier._fast is not None and model.n_joints == 2
+        predicts = identifier._fast is not None
         if predicts:
-            step_c, _ = codegen.generate_sources([predictor_function(identifier, model)], folder, name="pi_step")
+            step_c, _ = codegen.generate_sources([predictor_function(identifier, design)], folder, name="pi_step")
             sources.append(str(step_c))
-        library = codegen.compile_shared(sources, folder / codegen.library_name(codegen.UPDATE), compiler)
-        kernel = Kernel(library, model.n_params, model.n_joints)  # loaded: the file may go
+        library = codegen.compile_shared(
+            sources, folder / codegen.library_name(codegen.UPDATE), compiler, codegen.UPDATE_CFLAGS
+        )
+        kernel = Kernel(library, len(design.names), design.n_joints)  # loaded: the file may go
     except InputError:
         return False
     finally:

@@ -31,12 +31,15 @@ KINDS = {
 
 @dataclass(frozen=True)
 class Parameter:
-    """One entry of π: `name` (the JSON name), `unit` (SI), `meaning` (one line), `kind` (see module doc)."""
+    """One entry of π: `name` (the JSON name), `unit` (SI), `meaning` (one line), `kind` (see module doc), and
+    `joint`: the joint (1-based) whose drive the term belongs to (its friction, armature, offset), None for a
+    link's inertial or gravity parameter (`ident-opt fleet` reads a joint's friction so)."""
 
     name: str
     unit: str
     meaning: str
     kind: str = "other"
+    joint: int | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:

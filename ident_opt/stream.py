@@ -29,14 +29,21 @@ import numpy as np
 
 from ident_opt.columns import channel_names, data_columns, locate
 from ident_opt.data import PLAUSIBLE
-from ident_opt.derivatives import CausalDerivatives, NonIncreasingTime
+from ident_opt.data import _current_to_torque as current_to_torque  # the batch loader's rule and message
+from ident_opt.derivatives import CausalDerivatives, NonIncreasingTime, RateError
 from ident_opt.errors import InputError
 from ident_opt.online import OnlineIdentifier, Prediction
 
+#: The UTF-8 byte-order mark some writers put before a file's first line.
+BOM = "\ufeff"
 #: Default robust outlier threshold: residuals beyond this many robust standard deviations update nothing.
 OUTLIER_K = 10.0
 #: Memory (samples) of the robust residual scale; an outlier moves it by 1/`OUTLIER_MEMORY` of its clipped square.
 OUTLIER_MEMORY = 500.0
+
+
+#: Where a sample keeps its input line number (for errors found later, in the causal derivatives' window).
+LINE = "_line"
 
 
 class BadLine(ValueError):
@@ -138,6 +145,7 @@ class LineParser:
     header: list[str] = field(default_factory=list)
     current_to_torque: tuple[float, ...] | None = None  # N m / A per joint, for samples of currents
     mapping: Mapping = field(default_factory=Mapping)
+    currents_refused: str = ""  # why samples of currents cannot be read (no torque constant), for their error
     positions: dict[str, int] = field(default_factory=dict)
     conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
     width: int = 0
@@ -146,6 +154,8 @@ class LineParser:
         """The sample on `line`, or None for a blank line or the CSV header; raises BadLine (a bad sample) or
         InputError (a header or mapping the stream cannot be read with)."""
         text = line.strip()
+        if self.format is None:
+            text = text.removeprefix(BOM).strip()  # a byte-order mark before the first line, as the batch loader reads
         if not text:
             return None
         if self.format is None:
@@ -169,7 +179,7 @@ class LineParser:
             if len(cells) != self.width:
                 raise BadLine(f"{len(cells)} fields, the {'header' if self.header else 'first line'} has {self.width}")
             raw = {name: cells[i] for name, i in self.positions.items()}
-        sample = _sample(raw, self.mapping.names, self.current_to_torque, self.conversions)
+        sample = _sample(raw, self.mapping.names, self.current_to_torque, self.conversions, self.currents_refused)
         for name, (scale, offset) in self.mapping.to_tool.items():  # currents are torques by now: tau's sign
             if name in sample:
                 sample[name] = scale * sample[name] + offset
@@ -222,10 +232,12 @@ def _sample(
     names: dict[str, tuple[str, ...]],
     current_to_torque: tuple[float, ...] | None = None,
     conversions: dict | None = None,
+    currents_refused: str = "",
 ) -> dict[str, float]:
     """The numeric fields of a sample, checked: every angle present, each other signal for every joint or none,
     torques or currents, every used value a finite number within `data.PLAUSIBLE`; conversions applied; currents
-    become torques [N m]. `names`: the standard names per signal (`columns.channel_names`)."""
+    become torques [N m]. `names`: the standard names per signal (`columns.channel_names`); `currents_refused`: why
+    the problem cannot turn currents into torques (the joints' tables that lack a torque constant)."""
 
     def present(name):
         return name in raw and raw[name] not in ("", None)
@@ -239,7 +251,8 @@ def _sample(
     if groups["tau"] and groups["i"]:
         raise BadLine(f"give torques {' '.join(names['tau'])} or currents {' '.join(names['i'])}, not both")
     if groups["i"] and current_to_torque is None:
-        raise BadLine(f"currents {' '.join(names['i'])} need the problem's torque constants and gear ratios")
+        why = currents_refused or "the problem gives no torque constants and gear ratios"
+        raise BadLine(f"currents {' '.join(names['i'])} cannot become torques: {why}")
     used = [*names["q"], *(c for g in ("dq", "ddq", "tau", "i") for c in groups[g]), *(["t"] if present("t") else [])]
     out = {name: _value(name, raw[name], conversions) for name in used}
     for current, torque, k in zip(groups["i"], names["tau"], current_to_torque or ()):
@@ -300,14 +313,24 @@ class Counts:
         self.skipped[kind] = self.skipped.get(kind, 0) + 1
 
 
+def currents_to_torques(robot) -> tuple[tuple[float, ...] | None, str]:
+    """(joint-side torque per ampere [N m/A] per joint, or None when a joint lacks its torque constant or gear ratio;
+    and then why, naming the joints' tables), the batch loader's rule and message."""
+    try:
+        return tuple(float(k) for k in current_to_torque(robot, "stream")), ""
+    except InputError as exc:
+        return None, str(exc).removeprefix("stream: the file logs motor currents, but ")
+
+
 @dataclass
 class StreamOptions:
-    """How `serve` reads and guards: the column `mapping`, `current_to_torque` [N m/A per joint],
-    `cutoff_hz` of the causal derivative filter (used when dq/ddq are not given), `outlier_k` (0: no residual
-    test), `snapshot_every` updates."""
+    """How `serve` reads and guards: the column `mapping`, `current_to_torque` [N m/A per joint] (None: currents
+    are refused, `currents_refused` says why), `cutoff_hz` of the causal derivative filter (used when dq/ddq are
+    not given), `outlier_k` (0: no residual test), `snapshot_every` updates."""
 
     mapping: Mapping = field(default_factory=Mapping)
-    current_to_torque: tuple[float, float] | None = None
+    current_to_torque: tuple[float, ...] | None = None
+    currents_refused: str = ""
     cutoff_hz: float = 15.0
     outlier_k: float = OUTLIER_K
     snapshot_every: int = 1000
@@ -322,10 +345,15 @@ class Service:
 
     def __init__(self, identifier: OnlineIdentifier, names: tuple[str, ...], options: StreamOptions):
         self.ident, self.names, self.options = identifier, names, options
-        self.parser = LineParser(current_to_torque=options.current_to_torque, mapping=options.mapping)
+        self.parser = LineParser(
+            current_to_torque=options.current_to_torque,
+            mapping=options.mapping,
+            currents_refused=options.currents_refused,
+        )
         self.derivatives = CausalDerivatives(options.cutoff_hz)
         self.counts = Counts()
         self.scale2: np.ndarray | None = None  # robust residual variance per joint [N² m²]
+        self.errors: list[dict] = []  # error records about earlier lines (times found stray later), to report
 
     def line(self, raw: str | bytes, lineno: int) -> list[dict]:
         """The output records for one input line; raises BadLine or InputError."""
@@ -342,10 +370,15 @@ class Service:
         if names["dq"][0] not in sample or names["ddq"][0] not in sample:
             if "t" not in sample:
                 raise BadLine("t is needed to estimate dq and ddq (the sample gives neither both)")
+            sample[LINE] = lineno
             try:
                 sample = self.derivatives.push(sample)
             except NonIncreasingTime as exc:
                 raise BadLine(str(exc), "time") from None
+            except RateError as exc:
+                raise InputError(f"stream: {exc}") from None
+            finally:
+                self._stray_times()
             if sample is None:
                 return []
             for name in (*names["dq"], *names["ddq"]):
@@ -353,6 +386,13 @@ class Service:
                 if not abs(sample[name]) <= PLAUSIBLE[kind]:
                     raise BadLine(f"estimated {name} = {sample[name]:.6g} is implausible", "implausible")
         return self.step(sample)
+
+    def _stray_times(self) -> None:
+        """Samples the causal derivatives left out after seeing later ones (a time that jumps ahead): their errors."""
+        for sample, why in self.derivatives.rejected:
+            self.counts.skip("time")
+            self.errors.append({"error": why, "kind": "time", "line": sample.get(LINE)})
+        self.derivatives.rejected.clear()
 
     def step(self, sample: dict[str, float]) -> list[dict]:
         """Predict one complete sample and, when it has a torque that passes the residual test, fold it in."""
@@ -437,7 +477,7 @@ def serve(
     errstream: TextIO,
     snapshot_every: int = 1000,
     on_final: Callable[[dict], None] | None = None,
-    current_to_torque: tuple[float, float] | None = None,
+    current_to_torque: tuple[float, ...] | None = None,
     options: StreamOptions | None = None,
 ) -> dict:
     """Run the stream until end of input, SIGINT or SIGTERM; returns (and writes) the final record.
@@ -496,12 +536,15 @@ def _loop(service: Service, instream, outstream: TextIO, errstream: TextIO, stat
             raise
         except BadLine as exc:
             service.counts.skip(exc.kind)
-            _emit(errstream, {"error": str(exc), "kind": exc.kind, "line": lineno})
-            continue
+            records, errors = [], [{"error": str(exc), "kind": exc.kind, "line": lineno}]
         except Exception as exc:  # the stream never dies on input: report, skip, go on
             service.counts.skip("internal")
-            _emit(errstream, {"error": f"{type(exc).__name__}: {exc}", "kind": "internal", "line": lineno})
-            continue
+            records, errors = [], [{"error": f"{type(exc).__name__}: {exc}", "kind": "internal", "line": lineno}]
+        else:
+            errors = []
+        for error in [*service.errors, *errors]:
+            _emit(errstream, error)
+        service.errors.clear()
         for record in records:
             _emit(outstream, record)
 

@@ -59,10 +59,13 @@ class Fourier:
         """Where joint j's coefficients sit in x."""
         return slice(j * self.per_joint, (j + 1) * self.per_joint)
 
-    def evaluate(self, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """q, dq, ddq (N, n) [rad, rad/s, rad/s²] of coefficients x at times t [s]."""
+    def evaluate(
+        self, x: np.ndarray, t: np.ndarray | None, basis: tuple[np.ndarray, ...] | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, dq, ddq (N, n) [rad, rad/s, rad/s²] of coefficients x at times t [s] (or at those of `basis`, the
+        `basis` of some times computed once)."""
         x = np.asarray(x, dtype=float)
-        B = self.basis(t)
+        B = self.basis(t) if basis is None else basis
         return tuple(np.column_stack([b @ x[self.joint_slice(j)] for j in range(self.n_joints)]) for b in B)
 
     def rest_matrix(self) -> np.ndarray:

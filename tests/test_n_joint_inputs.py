@@ -464,7 +464,7 @@ BAD = {
 }
 
 
-@pytest.mark.parametrize("command", ["check", "compare", "identify", "codegen", "export"])
+@pytest.mark.parametrize("command", ["check", "compare", "identify", "codegen", "export", "online", "excite"])
 @pytest.mark.parametrize("case", sorted(BAD))
 def test_bad_input_on_each_new_path_exits_2_writing_nothing(workspace, capsys, tmp_path, command, case):
     (workspace / "missing_joint.urdf").write_text(TWISTED.replace('joint name="c"', 'joint name="c2"'))
@@ -475,10 +475,10 @@ def test_bad_input_on_each_new_path_exits_2_writing_nothing(workspace, capsys, t
     path.write_text(text.replace(old, new, 1))
     out = tmp_path / "out"
     args = [command, "--problem", str(path)] + ([] if command == "check" else ["--out", str(out)])
-    if command == "export":  # --out is the file to write; nothing may appear in its folder
+    if command in ("export", "excite"):  # --out is the file to write; nothing may appear in its folder
         out.mkdir()
-        args[-1] = str(out / "arm.urdf")
-        args += ["--format", "urdf"]
+        args[-1] = str(out / ("arm.urdf" if command == "export" else "trajectory.csv"))
+        args += ["--format", "urdf"] if command == "export" else ["--starts", "1"]
     if command == "compare":
         args.append("--no-progress")
     status, message = _run(args, capsys)

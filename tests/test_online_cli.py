@@ -78,7 +78,13 @@ def test_outputs_written(run):
 
 @pytest.mark.parametrize(
     "argv",
-    [["--snapshot-every", "-1"], ["--stream", "--model", "gp"], ["--checks", "-2"], ["--stream", "--model", "pbr+nn"]],
+    [
+        ["--snapshot-every", "-1"],
+        ["--stream", "--model", "gp"],
+        ["--checks", "-2"],
+        ["--stream", "--model", "pbr+nn"],
+        ["--consistent-every", "0"],
+    ],
 )
 def test_bad_usage_exit_2(argv, capsys):
     assert main(["online", "--problem", str(PROBLEM), *argv]) == 2

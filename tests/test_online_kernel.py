@@ -11,7 +11,7 @@ import pytest
 from ident_opt.arm.planar import RIGID
 from ident_opt.identify.bounded import default_bounds
 from ident_opt.identify.stats import Stats
-from ident_opt.online import Estimator, OnlineIdentifier
+from ident_opt.online import ArmDesign, Estimator, OnlineIdentifier
 from ident_opt.online_kernel import attach
 
 PI = np.array([0.7527, 0.05218, -0.03602, 3.752, 0.3125, 1.568, 0.02847, 0.5806, 0.3739])  # a3 < 0: bound active
@@ -32,7 +32,7 @@ def test_kernel_follows_the_numpy_path_exactly():
         Stats.from_regressor(Y[:500], tau[:500]),
     )
     b = copy.deepcopy(a)
-    assert attach(b, RIGID)
+    assert attach(b, ArmDesign(RIGID))
     assert b.theta[2] == 0.0  # the active bound a3 ≥ 0
     for k in range(500, 3000):
         a.add(Y[k], tau[k])
@@ -50,13 +50,15 @@ def test_kernel_refuses_non_finite_rows_and_changes_nothing():
         np.zeros(9),
         Stats.from_regressor(Y[:500], tau[:500]),
     )
-    assert attach(ident, RIGID)
-    theta, H, n = ident.theta.copy(), ident._H.copy(), ident.n_updates
+    assert attach(ident, ArmDesign(RIGID))
+    state = ident._kernel.state
+    theta, R, n = ident.theta.copy(), np.array(state.R[state.cur * 81 : (state.cur + 1) * 81]), ident.n_updates
     bad = Y[500].copy()
     bad[0, 0] = np.inf
     with pytest.raises(FloatingPointError):
         ident.add(bad, tau[500])
-    assert np.array_equal(ident.theta, theta) and np.array_equal(ident._H, H) and ident.n_updates == n
+    assert np.array_equal(ident.theta, theta) and ident.n_updates == n
+    assert np.array_equal(np.array(state.R[state.cur * 81 : (state.cur + 1) * 81]), R)
 
 
 def test_attach_declines_other_estimators():
@@ -64,7 +66,7 @@ def test_attach_declines_other_estimators():
     ident = OnlineIdentifier(
         RIGID.regressor, Estimator("ridge", penalty=np.full(9, 1e-3)), np.zeros(9), Stats.from_regressor(Y, tau)
     )
-    assert not attach(ident, RIGID)
+    assert not attach(ident, ArmDesign(RIGID))
 
 
 def test_compiled_step_predicts_as_python_with_the_guard():
@@ -88,7 +90,7 @@ def test_compiled_step_predicts_as_python_with_the_guard():
         support=Support.fit(gmr, X[:2000]),
     )
     fast = copy.deepcopy(ref)
-    assert attach(fast, RIGID) and fast._predictor is not None
+    assert attach(fast, ArmDesign(RIGID)) and fast._predictor is not None
     far = 0
     for k in range(2000, n):
         x = (q[k], dq[k], ddq[k]) if k % 7 else (q[k], 20 * dq[k], 30 * ddq[k])  # some far outside

@@ -45,7 +45,8 @@ def test_causal_derivatives_at_rest_are_exactly_zero_and_restart_on_gaps():
     assert done and all(o["dq1"] == 0.0 and o["ddq1"] == 0.0 for o in done)
     assert done[0]["t"] == pytest.approx(0.01 * d.delay)  # the sample `delay` steps back
     assert d.lost == d.delay * 2 and REST > 0
-    assert d.push({"t": 5.0, "q1": 1.0, "q2": 0.0}) is None and d.restarts == 1  # a gap restarts the window
+    assert d.push({"t": 5.0, "q1": 1.0, "q2": 0.0}) is None and d.restarts == 0  # a long step is held back …
+    assert d.push({"t": 5.01, "q1": 1.0, "q2": 0.0}) is None and d.restarts == 1  # … and is a gap: a new window
 
 
 def test_mapping_and_conversions_apply_to_the_stream():
@@ -87,6 +88,7 @@ def test_exp2_stream_with_t_q_i_only_matches_the_batch_fit(physical_problem, exp
             timeout=600,
         )
     assert done.returncode == 0, done.stderr[-2000:]
+    assert "ident-opt online: cpbr starts from the constrained fit (" in done.stderr  # the recommended fit, why
     final = json.loads(final_path.read_text())["final"]
     assert final["derivatives"]["estimated"] and final["derivatives"]["delay_samples"] > 0
     assert final["updates"] + final["outliers"] + final["derivatives"]["lost"] == len(raw)

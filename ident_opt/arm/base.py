@@ -267,6 +267,16 @@ class Robot(Protocol):
         """Defaults for `[limits]` from the description (a URDF's <limit>): key → one value per joint."""
         ...
 
+    def tool_directions(self, arm: Arm) -> np.ndarray:
+        """(P, r): the directions π of `arm` moves along when a rigid body (a tool, a payload) is fixed to the last
+        link: any such body changes π by a combination of these columns (`ident-opt fleet` names a payload so)."""
+        ...
+
+    def payload(self, arm: Arm, mass: float, at: tuple[float, ...] | None = None) -> np.ndarray:
+        """Δπ (P,) of `arm` for a point mass `mass` [kg] fixed to the last link at `at` [m] in that link's frame
+        (None: the arm's own tool point); a combination of `tool_directions`."""
+        ...
+
     def summary(self) -> dict:
         """A JSON-ready description (`ident-opt check --json`, key "robot")."""
         ...

@@ -190,7 +190,7 @@ class ChainArm:
         ]
         for term in self.joint_terms:
             unit, kind, meaning = JOINT_TERMS[term]
-            out += [Parameter(f"{term}_{j}", unit, f"{j}: {meaning}", kind) for j in self.joints]
+            out += [Parameter(f"{term}_{j}", unit, f"{j}: {meaning}", kind, i + 1) for i, j in enumerate(self.joints)]
         return tuple(out)
 
     @cached_property
@@ -432,7 +432,7 @@ class ChainRobot:
 
     # ------------------------------------------------------------------ the `Robot` interface
     #: The commands that serve an n-joint arm.
-    serves = frozenset(("identify", "compare", "codegen", "check", "export", "fleet"))
+    serves = frozenset(("identify", "compare", "codegen", "check", "export", "fleet", "online", "excite"))
     #: The fits `compare` runs, in report order: OLS on the base parameters, consistent without and with the
     #: URDF as a prior (`ident_opt.identify.estimators`).
     estimators = ("ols", "constrained", "consistent", "robust")
@@ -560,6 +560,18 @@ class ChainRobot:
             if any(v is not None for v in values):
                 out[key] = values
         return out
+
+    def tool_directions(self, arm: ChainArm) -> np.ndarray:
+        """(P, 10): a body fixed to the last link moves that link's 10 standard parameters (unit columns)."""
+        start = arm.n_link_params - N_LINK
+        return np.eye(arm.n_params)[:, start : start + N_LINK]
+
+    def payload(self, arm: ChainArm, mass: float, at: tuple[float, ...] | None = None) -> np.ndarray:
+        """Δπ (P,) for a point mass `mass` [kg] at `at` (3,) [m] in the last link's frame (None: at the last link's
+        centre of mass in the URDF): m, m c and m (|c|² 1 − c cᵀ) added to that link's parameters."""
+        c = np.asarray(at, dtype=float) if at is not None else arm._model.inertias[arm.n_joints].lever.copy()
+        point = pin.Inertia(float(mass), c, np.zeros((3, 3))).toDynamicParameters()
+        return self.tool_directions(arm) @ point
 
     @property
     def headline(self) -> str:

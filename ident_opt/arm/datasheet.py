@@ -197,6 +197,24 @@ class PlanarRobot:
         """Defaults of `[limits]` the description gives: none."""
         return {}
 
+    def tool_directions(self, arm: PlanarArm) -> np.ndarray:
+        """(P, 3): how the grouped π of `arm` moves per unit of a rigid body fixed to link 2 — its mass m [kg], its
+        first moment m x along the link about joint 2 [kg m] and its inertia J about joint 2 [kg m²]: α1 gains
+        m l1² + J, α2 gains l1 m x, α3 gains J, β1 gains g l1 m, β2 gains g m x (`grouped`; under the paper's
+        printed gravity, β1 = its physical value − β2)."""
+        l1, g = self.link1.length, self.gravity
+        paper = -g if arm.gravity == "paper" else 0.0
+        per_unit = ({"a1": l1**2, "b1": g * l1}, {"a2": l1, "b2": g, "b1": paper}, {"a1": 1.0, "a3": 1.0})
+        return np.column_stack([arm.vector(d) for d in per_unit])
+
+    def payload(self, arm: PlanarArm, mass: float, at: tuple[float, ...] | None = None) -> np.ndarray:
+        """Δπ (P,) for a point mass `mass` [kg] on link 2 at `at` = (x,) [m] along the link from joint 2 (None: its
+        tip, where `[robot.payload]` puts one); the grouped model has no offset across the link."""
+        x, *across = at if at is not None else (self.link2.length,)
+        if any(across):
+            raise ValueError("a planar two-link arm's payload sits on the line of link 2: give at = (x,)")
+        return self.tool_directions(arm) @ np.array([mass, mass * x, mass * x**2])
+
     def summary(self) -> dict:
         """What `ident-opt check --json` says of the robot (key "robot")."""
         return {"form": "planar two-link", "description": self.description, "convention": self.convention}

@@ -49,10 +49,10 @@ RIGID_PARAMETERS = (
     Parameter("a3", "kg m^2", "I2 + m2 lc2²", "inertia"),
     Parameter("b1", "N m", "g (m1 lc1 + m2 l1)", "gravity"),
     Parameter("b2", "N m", "g m2 lc2", "gravity"),
-    Parameter("fv1", "N m s/rad", "joint-1 viscous friction", "friction"),
-    Parameter("fv2", "N m s/rad", "joint-2 viscous friction", "friction"),
-    Parameter("fc1", "N m", "joint-1 Coulomb friction", "friction"),
-    Parameter("fc2", "N m", "joint-2 Coulomb friction", "friction"),
+    Parameter("fv1", "N m s/rad", "joint-1 viscous friction", "friction", 1),
+    Parameter("fv2", "N m s/rad", "joint-2 viscous friction", "friction", 2),
+    Parameter("fc1", "N m", "joint-1 Coulomb friction", "friction", 1),
+    Parameter("fc2", "N m", "joint-2 Coulomb friction", "friction", 2),
 )
 assert tuple(p.name for p in RIGID_PARAMETERS) == PI_NAMES
 

@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     update = _pi_update(args, problem, trials, out, compiler)
     if update is not None:
         data["pi_update"] = update
-        errors["pi_update"] = update["max_relative_difference"] if not update["failures"] else float("inf")
+        errors["pi_update"] = update["max_difference_vs_size_or_se"] if not update["failures"] else float("inf")
     print(report.write(data, built, out, getattr(args, "json", None)))
     if update is not None:
         print(_update_line(update, ship.TOLERANCE["pi_update"]))
@@ -160,9 +160,10 @@ def _pi_update(args: argparse.Namespace, problem, trials: list, out, compiler) -
 def _update_line(update: dict, limit: float) -> str:
     """The terminal line on the pi_update check (`limit`: its tolerance)."""
     return (
-        f"  pi_update: generated C vs the Python online path over {update['samples']} samples, max relative "
-        f"difference {update['max_relative_difference']:.2e} (limit {limit:.0e}); "
-        f"{update['c_ns_per_update']:.0f} ns per update from a C loop"
+        f"  pi_update: generated C vs the Python online path over {update['samples']} samples, largest difference "
+        f"{update['max_difference_vs_size_or_se']:.2e} of a parameter's size (or of its standard error, nearer 0; "
+        f"limit {limit:.0e}; relative to the size alone {update['max_relative_difference']:.1e}), of the torques "
+        f"{update['max_torque_relative_difference']:.1e}; {update['c_ns_per_update']:.0f} ns per update from a C loop"
     )
 
 

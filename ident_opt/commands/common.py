@@ -11,15 +11,11 @@ from typing import Any
 
 from ident_opt import outputs, report, simulate
 from ident_opt.arm.base import ALL_COMMANDS
-from ident_opt.data import load_dataset
+from ident_opt.data import fittable, load_dataset
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from ident_opt.report import write_json  # noqa: F401  (every command's --json goes through it)
 from ident_opt.warnings import ResultWarning
-
-#: The largest |value| (SI units) of q, dq, ddq or τ that a fit can take: the regressor's products of four
-#: such values stay far from overflow. Far beyond any arm (1e8 rad/s, 1e8 N·m), so --allow-implausible keeps it.
-MAX_MAGNITUDE = 1e8
 
 
 def add_problem_arguments(parser: argparse.ArgumentParser, data: bool = True, json_out: bool = True) -> None:
@@ -165,28 +161,6 @@ def _same_trial(a: Path, b: Path) -> bool:
     except OSError:
         pass
     return False
-
-
-def fittable(trial, fit: bool = True) -> None:
-    """InputError when `trial` cannot be fitted in double precision (a value beyond `MAX_MAGNITUDE`) or, with
-    `fit`, when a joint's torque never varies (its NMSE would be 0/0); without `fit` the latter is a warning."""
-    for name, values in (("q", trial.q), ("dq", trial.dq), ("ddq", trial.ddq), ("tau", trial.tau)):
-        worst = float(abs(values).max()) if values.size else 0.0
-        if not worst <= MAX_MAGNITUDE:
-            raise InputError(
-                f"{trial.source}: |{name}| reaches {worst:.3g} (SI units), beyond {MAX_MAGNITUDE:.0e}: no fit is "
-                "possible in double precision; check the column's unit (--allow-implausible does not lift this)"
-            )
-    for j in range(trial.tau.shape[1]):
-        column = trial.tau[:, j]
-        if column.size and float(column.max() - column.min()) == 0.0:
-            message = (
-                f"{trial.source}: the torque of joint {j + 1} is constant ({float(column[0]):g} N·m in every row): "
-                "nothing to identify on that joint, and its NMSE would be 0/0; check the column mapping"
-            )
-            if fit:
-                raise InputError(message)
-            print(f"warning: {message}", file=sys.stderr)
 
 
 def output_dir(args: argparse.Namespace, problem, default: Path | None = None, indexed: bool = True) -> Path:

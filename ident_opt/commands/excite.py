@@ -21,6 +21,7 @@ import argparse
 import math
 from pathlib import Path
 
+from ident_opt import outputs
 from ident_opt.commands.common import add_problem_arguments, require
 from ident_opt.data import load_dataset
 from ident_opt.errors import InputError
@@ -51,6 +52,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--between", metavar="A,B", help="the two causes a discriminating design tells apart")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the starts (default 0)")
     parser.add_argument("--starts", type=int, default=6, metavar="K", help="random starts (default 6)")
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=excitation.cores(),
+        metavar="K",
+        help=f"processes running the starts at once (default: the cores available, {excitation.cores()} here; the "
+        "design does not depend on it)",
+    )
     parser.add_argument("--harmonics", type=int, metavar="H", help="harmonics per joint (default 5; discriminate: 16)")
     parser.add_argument(
         "--base-hz",
@@ -85,6 +94,8 @@ def _check(args: argparse.Namespace) -> None:
         raise InputError(f"--harmonics must be an integer in [1, {MAX_HARMONICS}], got {args.harmonics}")
     if not 1 <= args.starts <= MAX_STARTS:
         raise InputError(f"--starts must be an integer in [1, {MAX_STARTS}], got {args.starts}")
+    if not 1 <= args.workers <= MAX_STARTS:
+        raise InputError(f"--workers must be an integer in [1, {MAX_STARTS}], got {args.workers}")
     if args.seed < 0:
         raise InputError(f"--seed must be ≥ 0, got {args.seed}")
     if not (math.isfinite(args.rate) and 10.0 <= args.rate <= 10000.0):
@@ -110,11 +121,22 @@ def run(args: argparse.Namespace) -> int:
         args.base_hz = args.base_hz or default_base_hz(args.duration, discrimination.BASE_HZ)
     args.harmonics = args.harmonics or 5
     _check(args)
+    if (args.criterion == "discriminate" or args.proof is not None) and not problem.robot.extensions:
+        what = "--proof (its discriminating design)" if args.proof is not None else "--criterion discriminate"
+        raise InputError(
+            f"{what} tells two causes of the diagnosis apart, which only an arm with model extensions has; "
+            f"{problem.robot.described_as} has none: design with --criterion d or cond (and see "
+            "`python -m ident_opt.studies.excitation_benefit` for the proof against random motions)"
+        )
     if problem.limits is None:
         raise InputError(
             f"{problem.path}: section [limits] is required to design an excitation (docs/problem-files.md)"
         )
     data = args.data or [str(p) for p in problem.data.trials]
+    outputs.declare_inputs(data)  # the problem's own trials too: --out (declared by the CLI) is refused if one
+    written = report.proof_paths(args.out)[:3] if args.proof is not None else report.paths(args.out)
+    for path in written:
+        outputs.check_file_output(path, "--out")  # the figure and JSON beside it, the proof's tables
     kwargs = {"allow_implausible": args.allow_implausible, "drop_invalid": args.drop_invalid}
     trial = load_dataset(data[0], problem.data, problem.robot, **kwargs) if data else None
     if args.proof is not None:
@@ -144,10 +166,17 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             rate=args.rate,
             progress=not args.no_progress,
+            workers=args.workers,
         )
     else:
         design = excitation.design(
-            setup, args.criterion, starts=args.starts, seed=args.seed, rate=args.rate, progress=not args.no_progress
+            setup,
+            args.criterion,
+            starts=args.starts,
+            seed=args.seed,
+            rate=args.rate,
+            progress=not args.no_progress,
+            workers=args.workers,
         )
     files = report.write(design, setup, args.out, args.json)
     print(report.terminal(design))
@@ -171,6 +200,7 @@ def _proof(args: argparse.Namespace, problem, trial) -> int:
         between=args.between or "asymmetric_coulomb,elasticity",
         starts=args.starts,
         progress=not args.no_progress,
+        workers=args.workers,
     )
     report.write_proof(proof, args.out)
     print(report.proof_terminal(proof, Path(args.out)))

@@ -1,11 +1,13 @@
 """`ident-opt online`: offline fit on the first part of the trial, then exact sequential updates on the rest.
 
-Replay (default): every model (rr, dm, dm_physical, pbr, cpbr, each with and without its GMR residual) is
-fitted on the first `[split] train_fraction` of the trial in time; the rest is replayed sample by sample
-in time order, each sample first predicted (one step ahead) and then folded in (RR, PBR, CPBR re-solve
-exactly on all data seen; DM stays fixed; GMRs follow by the mean-only consistency transform). Writes
-the online-vs-frozen error table, the parameter trajectories (figure), the initial and final parameters,
-and checks the online parameters against from-scratch batch solves at random steps.
+Replay (default): every model (rr, the nominal ones dm, dm_…, pbr, cpbr, each with and without its GMR residual;
+`online.model_keys`) is fitted on the first `[split] train_fraction` of the trial in time; the rest is replayed
+sample by sample in time order, each sample first predicted (one step ahead) and then folded in (RR and PBR
+re-solve exactly on all data seen, CPBR too where its estimator has an exact online form, else from scratch every
+--consistent-every samples; DM stays fixed; GMRs follow by the mean-only consistency transform). Writes the
+online-vs-frozen error table, the parameter trajectories (figure), the initial and final parameters, checks the
+online parameters against from-scratch batch solves at random steps and, on an n-joint arm, measures how far PBR's
+exact sign-bounded parameters are from the consistent re-solves.
 
 Streaming (`--stream`): the same offline fit, then samples from standard input (CSV with a header, or JSON
 lines), one JSON line out per sample; see `ident_opt.stream`.
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 from ident_opt.commands.common import (
     add_components,
@@ -27,10 +30,14 @@ from ident_opt.commands.common import (
 from ident_opt.data import chronological_split
 from ident_opt.derivatives import resolve_cutoff
 from ident_opt.errors import InputError
-from ident_opt.online import serving_identifier
+from ident_opt.online import CONSISTENT_EVERY, serving_identifier
 from ident_opt.report import online as report
-from ident_opt.stream import Mapping, StreamOptions, serve
+from ident_opt.stream import Mapping, StreamOptions, currents_to_torques, serve
 from ident_opt.studies.online_replay import replay
+from ident_opt.studies.recommend import chosen
+
+#: Largest accepted --consistent-every.
+MAX_EVERY = 10**7
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -64,7 +71,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             "--no-guard": "--stream: no GMR extrapolation guard (the residual is used even outside its training "
             "support)",
             "--cross-covariance": "also apply the first-order cross-covariance update to the GMRs",
+            "--no-progress": "no progress bars",
         },
+    )
+    parser.add_argument(
+        "--consistent-every",
+        type=int,
+        default=CONSISTENT_EVERY,
+        metavar="N",
+        help="samples between two from-scratch re-solves of a consistent fit that has no exact online form "
+        f"(an n-joint arm's cpbr; default {CONSISTENT_EVERY})",
     )
     parser.add_argument(
         "--checks",
@@ -73,6 +89,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="K",
         help="random steps at which the online parameters are checked against a batch "
         "re-solve (plus the last step; default 10)",
+    )
+    parser.add_argument(
+        "--estimator",
+        metavar="NAME",
+        help="the fit cpbr starts from and follows, among the arm's (default: the recommended fit, chosen from the "
+        "training part's own evidence: the arm's physically consistent fit, or the robust one when noise biases it)",
     )
     add_components(parser)
 
@@ -87,12 +109,19 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--outlier-k must be ≥ 0")
     if args.components is not None and args.components < 1:
         raise InputError("--components must be ≥ 1")
+    if not 1 <= args.consistent_every <= MAX_EVERY:
+        raise InputError(f"--consistent-every must be an integer in [1, {MAX_EVERY}], got {args.consistent_every}")
     loaded = load(args, "online")
     problem, trial = loaded.problem, loaded.train
+    if args.estimator is not None:  # an unknown one fails before any work
+        chosen("online", problem.robot, problem.robot.model(()), [], problem, args.estimator)
     train_idx, test_idx = chronological_split(trial.n, problem.split.train_fraction)
     train, test = trial.subset(train_idx), trial.subset(test_idx)
     if train.n < 20 or test.n < 1:
         raise InputError(f"{trial.source}: too few samples for an offline part and an online part ({trial.n})")
+    choice = chosen("online", problem.robot, problem.robot.model(()), [train], problem, args.estimator)
+    problem = replace(problem, estimator=choice.estimator)
+    print(f"ident-opt online: cpbr starts from the {choice.estimator} fit ({choice.why})", file=sys.stderr)
     if args.stream:
         return _stream(args, problem, train)
     out = output_dir(args, problem)
@@ -104,8 +133,11 @@ def run(args: argparse.Namespace) -> int:
         checks=args.checks,
         components=args.components,
         seed=int(problem.split.seeds[0]),
+        progress=not args.no_progress,
+        every=args.consistent_every,
     )
     data = report.payload(result, problem, trial.source, args.cross_covariance)
+    data["estimator"], data["estimator_why"] = choice.estimator, choice.why
     report.write(result, data, out, args.json)
     print(report.terminal(data, out))
     return 0
@@ -114,12 +146,20 @@ def run(args: argparse.Namespace) -> int:
 def _stream(args: argparse.Namespace, problem, train) -> int:
     """The offline fit of --model, then samples from standard input until its end or a signal."""
     start, ident = serving_identifier(
-        args.model, problem, train, args.components, args.cross_covariance, guard=not args.no_guard
+        args.model,
+        problem,
+        train,
+        args.components,
+        args.cross_covariance,
+        guard=not args.no_guard,
+        every=args.consistent_every,
     )
     cutoff = train.cutoff_hz or resolve_cutoff(problem.data.derivative_cutoff_hz, train.t, train.q)[0]
+    scale, refused = currents_to_torques(problem.robot)
     options = StreamOptions(
         mapping=Mapping.from_spec(problem.data, problem.robot),
-        current_to_torque=tuple(j.current_to_torque for j in problem.robot.joints),
+        current_to_torque=scale,
+        currents_refused=refused,
         cutoff_hz=float(cutoff),
         outlier_k=args.outlier_k,
     )

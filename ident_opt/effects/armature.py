@@ -19,7 +19,7 @@ class Armature(Effect):
     }
 
     # ------------------------------------------------------------------ model: ia2 on M22
-    parameters = (Parameter("ia2", "kg m^2", "joint-2 reflected rotor inertia N² J", "armature"),)
+    parameters = (Parameter("ia2", "kg m^2", "joint-2 reflected rotor inertia N² J", "armature", 2),)
 
     def columns(self, model) -> dict:
         return {"ia2": lambda q, dq, a: (np.zeros_like(a[:, 1]), a[:, 1])}

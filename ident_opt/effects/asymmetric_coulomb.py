@@ -43,7 +43,7 @@ class AsymmetricCoulomb(Effect):
 
     # ------------------------------------------------------------------ model: fcjp [dq_j > 0] − fcjn [dq_j < 0]
     parameters = tuple(
-        Parameter(f"fc{j}{s}", "N m", f"joint-{j} Coulomb level for {d} velocity", "friction")
+        Parameter(f"fc{j}{s}", "N m", f"joint-{j} Coulomb level for {d} velocity", "friction", j)
         for j in (1, 2)
         for s, d in (("p", "positive"), ("n", "negative"))
     )

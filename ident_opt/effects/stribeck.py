@@ -96,7 +96,7 @@ class Stribeck(Effect):
 
     # ------------------------------------------------------------------ model: fsj sgn(dq_j) exp(−(dq_j/vs_j)²)
     parameters = tuple(
-        Parameter(f"fs{j}", "N m", f"joint-{j} Stribeck excess over the Coulomb level", "friction") for j in (1, 2)
+        Parameter(f"fs{j}", "N m", f"joint-{j} Stribeck excess over the Coulomb level", "friction", j) for j in (1, 2)
     )
 
     def columns(self, model) -> dict:

@@ -198,9 +198,11 @@ def audit_torque_figure(trial, predictions: dict[str, np.ndarray], path: Path) -
     return _save(fig, path, dpi=120)
 
 
-def online_trajectories_figure(names: tuple[str, ...], theta: dict, theta0: dict, path: Path) -> Path:
+def online_trajectories_figure(
+    names: tuple[str, ...], theta: dict, theta0: dict, path: Path, title: str | None = None
+) -> Path:
     """Parameters over an online replay, one panel per parameter: `theta` model key -> (N, P) trajectory,
-    `theta0` model key -> the offline values (P,) drawn dotted."""
+    `theta0` model key -> the offline values (P,) drawn dotted; `title` (default: the planar arm's units)."""
     cols = 3
     rows = int(np.ceil(len(names) / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(11, 2.4 * rows), sharex=True)
@@ -214,7 +216,7 @@ def online_trajectories_figure(names: tuple[str, ...], theta: dict, theta0: dict
         ax.set_visible(False)
     axes.flat[0].legend(fontsize=7)
     fig.supxlabel("online samples")
-    fig.suptitle("Online parameter trajectories (dotted: offline fit); a kg·m², b N·m, fv N·m·s/rad, fc N·m")
+    fig.suptitle(title or "Online parameter trajectories (dotted: offline fit); a kg·m², b N·m, fv N·m·s/rad, fc N·m")
     fig.tight_layout()
     return _save(fig, path, dpi=120)
 
@@ -254,3 +256,38 @@ def calibration_figure(summaries: list, path: Path) -> Path:
     ax[1, 1].legend(fontsize=8)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def daily_figure(
+    days: list[str], panels: list[dict], shaded_days: int, band_label: str, title: str, path: Path
+) -> Path:
+    """Parameters day by day (`ident-opt fleet`, one robot): one panel per dict of `panels` (name, values and se
+    (D,), mean (or None), band (D,) half-width, moved: bool, since: the first day of its change or None), each day's
+    value ± one standard error, the mean and its band shaded, the first `shaded_days` (the baseline) tinted. The
+    x axis counts days from the first (at most 6 dates labelled: date axes cost seconds per figure)."""
+    cols = 3 if len(panels) > 4 else max(len(panels), 1)
+    rows = -(-len(panels) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.5 * rows), squeeze=False, sharex=True)
+    ordinal = np.array([np.datetime64(d, "D").astype(int) for d in days])
+    x = ordinal - ordinal[0]
+    ticks = np.unique(np.linspace(0, len(x) - 1, min(len(x), 6)).round().astype(int))
+    for ax, p in zip(axes.flat, panels):
+        colour = PARAMETRIC if p["moved"] else "tab:blue"
+        ax.errorbar(x, p["values"], yerr=p["se"], fmt="o-", ms=3, lw=0.8, color=colour)
+        if p["mean"] is not None:
+            ax.fill_between(x, p["mean"] - p["band"], p["mean"] + p["band"], color="0.85", zorder=0, label=band_label)
+            ax.axhline(p["mean"], color="0.4", lw=0.8)
+            ax.axvspan(x[0], x[min(shaded_days, len(x)) - 1], color="tab:green", alpha=0.08, zorder=0)
+        if p["since"] is not None:
+            ax.axvline(np.datetime64(p["since"], "D").astype(int) - ordinal[0], color=PARAMETRIC, ls="--", lw=0.8)
+        ax.set_title(p["name"] + (" (moved)" if p["moved"] else ""), fontsize=9)
+        ax.tick_params(labelsize=7)
+        ax.set_xticks(x[ticks], [days[i][5:] for i in ticks])
+    for ax in list(axes.flat)[len(panels) :]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    height = 2.5 * rows  # inches
+    fig.suptitle(title, fontsize=11, y=1 - 0.1 / height, va="top")
+    # fixed margins: tight_layout would cost a third of the figure's time, once per robot of a fleet
+    fig.subplots_adjust(left=0.06, right=0.99, bottom=0.25 / height, top=1 - 0.65 / height, wspace=0.28, hspace=0.5)
+    return _save(fig, path, dpi=90)

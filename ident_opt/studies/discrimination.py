@@ -279,8 +279,10 @@ def design(
     rate: float = excitation.CHECK_HZ,
     progress: bool = True,
     max_iter: int = MAX_ITER,
+    workers: int = 1,
 ) -> Design:
-    """The T-optimal design between the two causes of `between` ("A,B"), fitted on `trial` (required)."""
+    """The T-optimal design between the two causes of `between` ("A,B"), fitted on `trial` (required); `workers`:
+    processes running the starts at once (`excitation.design`)."""
     causes = parse_between(between)
     if trial is None:
         raise InputError(
@@ -311,6 +313,7 @@ def design(
         progress=progress,
         max_iter=max_iter,
         expand=False,
+        workers=workers,
     )
     ref = reference_gaps(rivals, trial, setup.duration)
     source = shown(trial.source)

@@ -159,8 +159,10 @@ def run(
     starts: int = 6,
     progress: bool = True,
     designs: dict[str, Design] | None = None,
+    workers: int = 1,
 ) -> Proof:
-    """Design (unless `designs` are given: "d", "cond", "discriminate"), then simulate and score (module doc)."""
+    """Design (unless `designs` are given: "d", "cond", "discriminate"; `workers`: processes running each design's
+    starts), then simulate and score (module doc)."""
     t0 = time.perf_counter()
     causes = discrimination.parse_between(between)
     setup = excitation.make_setup(problem.robot, problem.limits, duration, trial=trial)
@@ -173,9 +175,11 @@ def run(
         trial=trial,
     )
     if designs is None:
-        designs = {c: excitation.design(setup, c, starts=starts, progress=progress) for c in ("d", "cond")}
+        designs = {
+            c: excitation.design(setup, c, starts=starts, progress=progress, workers=workers) for c in ("d", "cond")
+        }
         designs["discriminate"] = discrimination.design(
-            disc_setup, problem.robot, trial, between, starts=max(1, starts // 2), progress=progress
+            disc_setup, problem.robot, trial, between, starts=max(1, starts // 2), progress=progress, workers=workers
         )
     t_design = time.perf_counter()
     hidden = _hidden(designs["discriminate"], causes)

@@ -131,7 +131,7 @@ class Evidence:
     trials: list[Dataset]
 
 
-def _raised(trials: list[Dataset], factor: float) -> list[Dataset]:
+def raised(trials: list[Dataset], factor: float) -> list[Dataset]:
     """The trials with their derivatives at `factor` × their cut-off (at most a quarter of their rate)."""
     return [refiltered(d, min(factor * d.cutoff_hz, CUTOFF_MAX_FRACTION * d.rate_hz)) for d in trials]
 
@@ -140,11 +140,11 @@ def _highest_agreeing(model: Arm, trials: list[Dataset]) -> tuple[float, list[Da
     """(factor, trials at it): the highest of `FACTORS_UP` up to which OLS and IV keep agreeing (1: none)."""
     factor, chosen_trials = 1.0, trials
     for f in FACTORS_UP:
-        raised = _raised(trials, f)
-        stats = estimators.statistics(model, raised)
+        raised_trials = raised(trials, f)
+        stats = estimators.statistics(model, raised_trials)
         if not agree(model, estimators.fit("ols", stats, model), estimators.iv(stats, model)):
             break
-        factor, chosen_trials = f, raised
+        factor, chosen_trials = f, raised_trials
     return factor, chosen_trials
 
 

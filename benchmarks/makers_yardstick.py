@@ -1,0 +1,63 @@
+"""The recommended fit against the makers' own identified parameters, on held-out trials of the DFKI double pendulum
+(designs C.0 and A.0): held-out torque RMSE per joint, ours / theirs, computed on the same samples.
+
+    .venv/bin/python benchmarks/makers_yardstick.py
+
+Each split trains on some of a design's shipped trials with the problem's default settings (the derivative cut-off
+"auto", the recommended fit) and tests on the others. The makers' parameters are the problem's [reference]
+(model_2.0 of each design, from the makers' repository). Also prints the recommended fit's parameters against
+theirs. Writes nothing; the issue-29 closing note quotes its output.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+import ident_opt as io
+from ident_opt.data import Dataset
+from ident_opt.studies.recommend import recommended_fit
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# (problem, folder, training trials, test trials): the shipped splits, and the other way round where it makes sense.
+SPLITS = (
+    ("dfki_c0.toml", "dfki", ("00", "01", "02", "03", "04", "05", "06", "13"), ("12",)),
+    ("dfki_c0.toml", "dfki", ("03", "04", "05", "06", "12", "13"), ("00", "01", "02")),
+    ("dfki_a0.toml", "dfki_a0", ("11",), ("00",)),
+    ("dfki_a0.toml", "dfki_a0", ("00",), ("11",)),
+)
+
+
+def rmse(arm, pi: np.ndarray, trials: list[Dataset]) -> np.ndarray:
+    """Per-joint RMSE [N·m] of the torque that parameters `pi` predict on `trials`."""
+    e = np.vstack([d.tau - arm.predict(pi, d.q, d.dq, d.ddq) for d in trials])
+    return np.sqrt((e**2).mean(axis=0))
+
+
+def main() -> None:
+    """Print, per split, the recommended fit's held-out RMSE over the makers' and its parameters over theirs."""
+    for name, folder, train_ids, test_ids in SPLITS:
+        problem = io.load_problem(ROOT / "problems" / name)
+        path = ROOT / "data" / folder / "trajectory_{}.csv.gz"
+        train, test = io.load_trials(
+            problem, data=[str(path).format(i) for i in train_ids], test=[str(path).format(i) for i in test_ids]
+        )
+        arm = problem.robot.model()
+        fit, found = recommended_fit(problem.robot, arm, train, problem)
+        makers = np.array([problem.reference.parameters[n] for n in arm.names])
+        ratio = rmse(arm, fit.pi, test) / rmse(arm, makers, test)
+        print(f"{name}: train {'+'.join(train_ids)} -> test {'+'.join(test_ids)}")
+        print(f"  recommended: {found.recommendation.estimator} ({found.recommendation.why})")
+        print(f"  cut-offs [Hz]: {', '.join(f'{d.cutoff_hz:.1f}' for d in found.trials)}")
+        print(f"  held-out RMSE / makers': {'  '.join(f'joint {j + 1} {r:.3f}' for j, r in enumerate(ratio))}")
+        ours = fit.as_dict()
+        print(
+            "  parameters / makers': "
+            + "  ".join(f"{k} {ours[k] / v:.3f}" for k, v in problem.reference.parameters.items() if k in ours and v)
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,114 @@
+"""`ident-opt fleet`: every robot of a fleet identified every day on Dask, and what changed, named.
+
+    ident-opt fleet --problem P --logs ROOT [--out DIR] [--json F] [--scheduler ADDRESS] [--workers N]
+                    [--baseline-days K] [--estimator NAME] [--connect-timeout S] [--no-progress]
+
+ROOT holds the logs in the fleet layout, ROOT/robot=<id>/day=<YYYY-MM-DD>/*.parquet|csv|csv.gz (a local folder or a
+URL the installed filesystem libraries read); every file is a trial of the problem's arm, read with its column
+mapping. One Dask task per file reads it, estimates the derivatives and reduces it to sufficient statistics (the
+samples never leave the worker); each robot-day gets the recommended fit (judged once per robot on its first
+readable day, as identify judges its trials; --estimator NAME: that fit instead), with standard errors. Each
+robot's first K days (default 5) are its baseline; a parameter the data determine that leaves its baseline on 3 or
+more consecutive days, by more on average than the fleet's day-to-day scatter allows, has changed, and the change is
+named: wear (a joint's friction), payload (a body on the last link), drive (one factor on a joint's torque) or other
+(docs/fleet.md). A file that fails validation is listed as skipped, with the
+reason, and the run goes on.
+
+Without --scheduler: a local cluster of --workers processes (default: the cores). With --scheduler tcp://host:8786:
+an existing cluster (`dask scheduler`, `dask worker`), whose workers need ident-opt and the problem file and logs
+at the same paths; a scheduler that does not answer within --connect-timeout (10 s) is an error (exit 2).
+
+Writes to --out (default: the problem's [output] dir, else results/): fleet.md, fleet_changes.csv,
+fleet_series.csv and .parquet, figures/fleet_<robot>.png; with --json the result of `docs/cli.md` (fleet).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from tqdm import tqdm
+
+from ident_opt.commands.common import add_problem_arguments, output_dir, require
+from ident_opt.errors import InputError
+from ident_opt.fleet.engine import CONNECT_TIMEOUT_S
+from ident_opt.problem import load_problem
+from ident_opt.report import fleet as report
+from ident_opt.studies.fleet import run_fleet
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """--problem, --logs, --out, --json, --scheduler, --workers, --baseline-days, --estimator, --no-progress and the
+    loader's switches."""
+    add_problem_arguments(parser, data=False)
+    parser.add_argument("--logs", required=True, metavar="ROOT", help="the fleet's logs: ROOT/robot=<id>/day=<date>/")
+    parser.add_argument("--out", metavar="DIR", help="output folder (default: the problem's [output] dir)")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (default: a local cluster)")
+    parser.add_argument("--workers", type=int, metavar="N", help="local cluster's worker processes (default: cores)")
+    parser.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=CONNECT_TIMEOUT_S,
+        metavar="S",
+        help=f"seconds to wait for --scheduler to answer and have a worker ({CONNECT_TIMEOUT_S:g})",
+    )
+    parser.add_argument(
+        "--baseline-days", type=int, default=5, metavar="K", help="each robot's first K days are its baseline (5)"
+    )
+    parser.add_argument(
+        "--estimator",
+        metavar="NAME",
+        help="the fit of every robot-day, among the arm's (default: each robot's recommended fit, judged on its first "
+        "readable day)",
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Check the flags, run the fleet on the cluster, write the reports, print the changes and the warnings."""
+    problem = load_problem(args.problem)
+    require("fleet", problem)
+    if args.scheduler and args.workers:
+        raise InputError("--workers sets the local cluster's size; with --scheduler the cluster's own workers run")
+    out = output_dir(args, problem)
+    _outside(out, args.logs)
+    result = run_fleet(
+        problem.path,
+        args.logs,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        baseline_days=args.baseline_days,
+        allow_implausible=args.allow_implausible,
+        drop_invalid=args.drop_invalid,
+        progress=not args.no_progress,
+        connect_timeout=args.connect_timeout,
+        estimator=args.estimator,
+    )
+    print(report.recommended_line(result), file=sys.stderr)
+    with tqdm(
+        total=len(result.robots), desc="fleet: figures", unit="robot", file=sys.stderr, disable=args.no_progress
+    ) as bar:
+        report.write(result, out, args.json, _command(args), bar.update)
+    print(report.terminal(result, out, args.json))
+    for warning in result.warnings:
+        print(warning, file=sys.stderr)
+    return 0
+
+
+def _outside(out: Path, logs: str) -> None:
+    """The output folder must not lie inside the logs (a later run would find the reports in its layout)."""
+    root = Path(logs)
+    if root.is_dir() and out.resolve().is_relative_to(root.resolve()):
+        raise InputError(f"--out {out}: inside --logs {logs}; write the reports elsewhere")
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command line, rebuilt from the parsed flags (for fleet.md)."""
+    parts = ["ident-opt fleet", f"--problem {args.problem}", f"--logs {args.logs}"]
+    parts += [f"--out {args.out}"] if args.out else []
+    parts += [f"--scheduler {args.scheduler}"] if args.scheduler else []
+    parts += [f"--workers {args.workers}"] if args.workers else []
+    parts += [f"--baseline-days {args.baseline_days}"] if args.baseline_days != 5 else []
+    parts += [f"--estimator {args.estimator}"] if args.estimator else []
+    return " ".join(parts)

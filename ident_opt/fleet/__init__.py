@@ -1,0 +1,16 @@
+"""`ident-opt fleet`: every robot of a fleet identified every day, and what changed, on Dask.
+
+Sufficient statistics make identification a map-reduce: a trial becomes YᵀY, Yᵀτ, τᵀτ and n (`identify.stats`),
+and those add up. The modules, in the order a run uses them:
+
+| module      | what it holds                                                                                   |
+|-------------|-------------------------------------------------------------------------------------------------|
+| `layout`    | the fleet layout ROOT/robot=<id>/day=<YYYY-MM-DD>/<file> found and checked (`data-format.md`)   |
+| `tasks`     | what runs on a worker: a file's statistics (the loader every command uses), a day's fit, a      |
+|             | robot's baseline model and each day's evidence for the named causes; samples never leave it     |
+| `engine`    | the Dask client (a local cluster, or an existing scheduler) and the task graph with its progress |
+| `changes`   | per robot: the baseline, the test that separates a change from day-to-day scatter, its cause    |
+| `simulated` | a simulated fleet with hidden changes, for tests and the benchmark (`python -m ...simulated`)   |
+
+`ident_opt.studies.fleet` runs them in that order; `ident_opt.report.fleet` writes what they found.
+"""

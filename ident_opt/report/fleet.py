@@ -1,0 +1,280 @@
+"""What `ident-opt fleet` writes: fleet.md (the fleet table a maintenance engineer reads: robot, change, joint,
+since, size, confidence; the run's numbers; skipped files; warnings), fleet_changes.csv, the daily series for
+dashboards (fleet_series.csv and fleet_series.parquet: one row per robot, day and parameter), a figure per robot
+(figures/fleet_<robot>.png: each tested parameter's daily values with their standard errors and the baseline's band),
+the JSON of the contract (`docs/cli.md`, fleet) and the terminal summary."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ident_opt import outputs
+from ident_opt.fleet.changes import BAND_Z, DAY_Z, RUN_DAYS, WINDOW_Z
+from ident_opt.report import record, write_json
+from ident_opt.report.figures import daily_figure
+from ident_opt.report.tables import markdown_table, write_table
+from ident_opt.studies.fleet import FleetResult, RobotResult
+
+#: The files every run writes (figures besides, one per robot).
+FILES = ("fleet.md", "fleet_changes.csv", "fleet_series.csv", "fleet_series.parquet")
+#: At most this many panels per robot's figure: the moved parameters first, then the others in order.
+MAX_PANELS = 12
+
+
+def payload(result: FleetResult) -> dict:
+    """The `fleet --json` payload (`docs/cli.md`): the fit the robot-days got and why, robots (days, parameters, se,
+    their fit, and the tested parameters with their test), changes, skipped, fleet, warnings."""
+    return {
+        "problem": result.problem,
+        "logs": result.logs,
+        "estimator": result.estimator,
+        "recommended_why": result.why,
+        "baseline_days": result.baseline_days,
+        "robots": {name: _robot(result, r) for name, r in result.robots.items()},
+        "changes": [c.as_dict() for c in result.changes],
+        "skipped": result.skipped,
+        "fleet": result.fleet,
+        "tested_definitions": result.definitions,
+        "warnings": [w.as_dict() for w in result.warnings],
+    }
+
+
+def _series(values: np.ndarray) -> list[float | None]:
+    return [float(v) if np.isfinite(v) else None for v in values]
+
+
+def _robot(result: FleetResult, r: RobotResult) -> dict:
+    out = {
+        "days": r.days,
+        "files": r.files,
+        "samples": r.samples,
+        "parameters": {name: _series(r.pi[:, i]) for i, name in enumerate(result.names)},
+        "se": {name: _series(r.se[:, i]) for i, name in enumerate(result.names)},
+    }
+    if r.choice is not None:
+        rec = r.choice.recommendation
+        out.update(estimator=rec.estimator, recommended_why=rec.why, cutoff_factor=rec.factor, judged_on=r.choice.day)
+    tested = {}
+    for q, name in enumerate(result.tested_names):
+        entry = {"values": _series(r.tested.values[:, q]), "se": _series(r.tested.se[:, q])}
+        if r.test is not None:
+            entry.update(z=_series(r.test.z[:, q]), baseline=float(r.test.mean[q]), scatter=float(r.test.sigma[q]))
+        tested[name] = entry
+    out["tested"] = tested
+    return out
+
+
+def series_frame(result: FleetResult) -> pd.DataFrame:
+    """Every daily value as a row: robot, day, kind ("fit": the fit's parameter; "tested": an identifiable one, with
+    its baseline, band and z), parameter, value, se, baseline, band_low, band_high, z."""
+    parts = []
+    for r in result.robots.values():
+        D = len(r.days)
+        if not D:
+            continue
+        days = np.repeat(r.days, len(result.names))
+        parts.append(
+            pd.DataFrame(
+                {
+                    "robot": r.robot,
+                    "day": days,
+                    "kind": "fit",
+                    "parameter": np.tile(result.names, D),
+                    "value": r.pi.ravel(),
+                    "se": r.se.ravel(),
+                }
+            )
+        )
+        Q = len(result.tested_names)
+        tested = {
+            "robot": r.robot,
+            "day": np.repeat(r.days, Q),
+            "kind": "tested",
+            "parameter": np.tile(result.tested_names, D),
+            "value": r.tested.values.ravel(),
+            "se": r.tested.se.ravel(),
+        }
+        if r.test is not None:
+            mean = np.tile(r.test.mean, D)
+            tested.update(
+                baseline=mean,
+                band_low=mean - r.test.band.ravel(),
+                band_high=mean + r.test.band.ravel(),
+                z=r.test.z.ravel(),
+            )
+        parts.append(pd.DataFrame(tested))
+    columns = ["robot", "day", "kind", "parameter", "value", "se", "baseline", "band_low", "band_high", "z"]
+    frame = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=columns)
+    return frame.reindex(columns=columns)
+
+
+def changes_frame(result: FleetResult) -> pd.DataFrame:
+    """The fleet table: robot, change (its cause), joint, since (first day), size, confidence, and the rest."""
+    rows = [
+        {
+            "robot": c.robot,
+            "change": c.cause,
+            "joint": c.joint if c.joint is not None else "–",
+            "since": c.first_day,
+            "size": _size(c),
+            "confidence": f"z {c.z:+.1f}, explains {c.explained:.0%}",
+            "pattern": c.pattern,
+            "parameters": ", ".join(c.parameters),
+            "detected": c.detected,
+        }
+        for c in result.changes
+    ]
+    columns = ["robot", "change", "joint", "since", "size", "confidence", "pattern", "parameters", "detected"]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def _size(change) -> str:
+    """A change's size in words: the drive's factor, else the lead parameter's relative change."""
+    if change.scale is not None:
+        return f"torque × {change.scale:.3f}"
+    return f"{change.size:+.0%} {change.lead}"
+
+
+def write(result: FleetResult, out: Path, json_path: str | Path | None, command: str, progress=None) -> list[Path]:
+    """Every file into `out` (a figure per robot under figures/), the JSON to `json_path`; returns the files."""
+    data = payload(result)
+    series = series_frame(result)
+    table = changes_frame(result)
+    write_table(table.set_index("robot"), out / "fleet_changes.csv")
+    write_table(series.set_index(["robot", "day"]), out / "fleet_series.csv")
+    buffer = io.BytesIO()
+    series.to_parquet(buffer, index=False)
+    outputs.write_bytes(out / "fleet_series.parquet", buffer.getvalue())
+    figures = []
+    for r in result.robots.values():
+        if r.days:
+            figures.append(robot_figure(result, r, out / "figures" / f"fleet_{r.robot}.png"))
+        if progress is not None:
+            progress()
+    outputs.write_text(out / "fleet.md", markdown(result, table, command, figures, out))
+    files = [out / f for f in FILES] + figures
+    record(out, "fleet", "fleet: every robot identified every day, and what changed", files)
+    write_json(json_path, data)
+    return files
+
+
+def markdown(result: FleetResult, table: pd.DataFrame, command: str, figures: list[Path], out: Path) -> str:
+    """fleet.md: the run, the fleet table, the robots with no change, skipped files, warnings, figures."""
+    f = result.fleet
+    unchanged = [name for name, r in result.robots.items() if r.test is not None and not r.test.moved]
+    untested = [name for name, r in result.robots.items() if r.test is None]
+    lines = [
+        "# Fleet: what changed",
+        "",
+        f"`{command}`",
+        "",
+        f"{result.arm}; {f['robots']} robots, {f['robot_days']} robot-days, {f['files']} files, {f['samples']:,} "
+        f"samples; {f['workers']} worker(s) on {f['engine']} (scheduler: {f['scheduler']}), {f['seconds']:.1f} s in "
+        f"all, {_rate(f)} samples/s through the cluster.",
+        "",
+        f"Each robot-day's fit (the series of `fleet_series`, kind `fit`): **{result.estimator}**: {result.why}. "
+        "The recommended fit is judged once per robot, on its first readable day, and kept for all its days so that "
+        "its series compare like with like.",
+        "",
+        f"A parameter has changed when {RUN_DAYS} or more consecutive days after a robot's first "
+        f"{result.baseline_days} (its baseline) lie more than {DAY_Z:g} scatter units from its baseline mean on one "
+        f"side, and their mean more than {WINDOW_Z:g} standard errors; the scatter is the fleet's day-to-day scatter "
+        "of that parameter, wider on days whose motion excites it less. The cause is "
+        "the one (wear: a joint's friction; payload: a body on the last link; drive: one factor on a joint's torque) "
+        "that explains most of the change in the pooled data from its first day on; `other` when none explains "
+        "most of it.",
+        "",
+        "## Changes",
+        "",
+        markdown_table(table, index=False) if len(table) else "No change in any robot.",
+        "",
+        f"No change: {', '.join(unchanged) or 'none'}.",
+    ]
+    if untested:
+        lines += ["", f"Not tested (too few fitted days): {', '.join(untested)}."]
+    if result.skipped:
+        skipped = pd.DataFrame(result.skipped, columns=["file", "reason"])
+        lines += ["", f"## Skipped files ({len(skipped)})", "", markdown_table(skipped, index=False)]
+    if result.warnings:
+        lines += ["", "## Warnings", "", *(f"- `{w.code}`: {w.message}" for w in result.warnings)]
+    lines += [
+        "",
+        "## Files",
+        "",
+        "- `fleet_changes.csv`: the table above; `fleet_series.csv`, `fleet_series.parquet`: every robot's daily "
+        "values (kind `fit`: the fit's parameters with standard errors; kind `tested`: the identifiable parameters "
+        "tested, with the baseline, the band and z)",
+        *(f"- [{p.name}]({p.relative_to(out).as_posix()})" for p in figures),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _rate(fleet: dict) -> str:
+    rate = fleet.get("samples_per_second")
+    return f"{rate:,.0f}" if rate else "–"
+
+
+def _panels(result: FleetResult, r: RobotResult) -> list[int]:
+    """The tested parameters drawn for a robot: those that moved, then the others, at most `MAX_PANELS`."""
+    moved = sorted(r.test.moved) if r.test is not None else []
+    rest = [q for q in range(len(result.tested_names)) if q not in moved]
+    return (moved + rest)[:MAX_PANELS]
+
+
+def robot_figure(result: FleetResult, r: RobotResult, path: Path) -> Path:
+    """One robot's tested parameters day by day with the baseline's band and the first day of its change
+    (`figures.daily_figure`)."""
+    change = next((c for c in result.changes if c.robot == r.robot), None)
+    panels = []
+    for q in _panels(result, r):
+        name = result.tested_names[q]
+        panels.append(
+            {
+                "name": name,
+                "values": r.tested.values[:, q],
+                "se": r.tested.se[:, q],
+                "mean": r.test.mean[q] if r.test is not None else None,
+                "band": r.test.band[:, q] if r.test is not None else None,
+                "moved": r.test is not None and q in r.test.moved,
+                "since": change.first_day if change is not None and name in change.parameters else None,
+            }
+        )
+    title = f"robot {r.robot}: " + (_headline(change) if change else "no change")
+    return daily_figure(r.days, panels, result.baseline_days, f"baseline ± {BAND_Z:g} σ", title, path)
+
+
+def _headline(change) -> str:
+    """ "wear of joint 2 since 2026-03-14" and the like."""
+    where = f" of joint {change.joint}" if change.joint else ""
+    return f"{change.cause}{where} since {change.first_day}"
+
+
+def recommended_line(result: FleetResult) -> str:
+    """The terminal's line on the fit the robot-days got (stderr, as `codegen` says its fit)."""
+    return f"ident-opt fleet: each robot-day's fit: {result.estimator} ({result.why})"
+
+
+def terminal(result: FleetResult, out: Path, json_path) -> str:
+    """The run in a line, the changes, the files."""
+    f = result.fleet
+    lines = [
+        f"ident-opt fleet: {f['robots']} robots, {f['robot_days']} robot-days, {f['files']} files, "
+        f"{f['samples']:,} samples in {f['seconds']:.1f} s ({f['workers']} workers, {f['scheduler']}; "
+        f"{_rate(f)} samples/s); {len(result.skipped)} skipped",
+    ]
+    if result.changes:
+        lines.append(f"{'robot':<10}{'change':<9}{'joint':<7}{'since':<12}{'size':<26}confidence")
+        for _, row in changes_frame(result).iterrows():
+            lines.append(
+                f"{row['robot']:<10}{row['change']:<9}{row['joint']!s:<7}{row['since']:<12}{row['size']:<26}"
+                f"{row['confidence']}"
+            )
+    else:
+        lines.append("no change in any robot")
+    lines.append(f"wrote {out / 'fleet.md'} (and the series, figures)" + (f", {json_path}" if json_path else ""))
+    return "\n".join(lines)
