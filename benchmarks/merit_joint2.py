@@ -11,6 +11,14 @@ one family of extra columns at a time. Each family is a hypothesis about the arm
 - `tau1`: joint 1's measured torque (sensor cross-talk);
 - `tanh(dq2/s)`, `dq2|dq2|`: friction shapes.
 The rigid model's own gravity on joint 2 depends on q1 + q2 only; a term in q1 alone is outside it.
+
+Then the rival stories against the sensors no model uses (issue 30): the strain gauge eps31 on link 2 (column 12,
+µm/m) reads link 2's bending moment, the torque link 2 actually carries; the gauges on link 1 (eps21, eps22)
+read link 1's. A torque that acts on link 2 (a cable or hose pulling it, a mass on it, link 1's bending tilting
+it) must show in eps31 in proportion to its size; a torque that stays in the torque channel (a sensor coupling)
+must not. A potential energy (a cable loop hanging at the joint) must show on joint 1's row too. The figure
+`results/diagnosis/merit_joint2_strain.png` shows joint 2's residual torque and link 2's residual strain (scaled
+to N m) against q1.
 """
 
 from __future__ import annotations
@@ -19,8 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import RIGID
 from ident_opt.data import load_dataset
+from ident_opt.derivatives import lowpass
 from ident_opt.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,6 +54,141 @@ FAMILIES = {
 }
 
 
+def nmse(residual: np.ndarray, y: np.ndarray) -> float:
+    """MSE of `residual` ÷ variance of `y`."""
+    return float(np.mean(residual**2) / np.var(y))
+
+
+def ols(columns, y, train, test) -> tuple[np.ndarray, float, float]:
+    """β of y(train) ≈ columns(train) β, and the nMSE on train and on test."""
+    A, B = columns(train), columns(test)
+    beta, *_ = np.linalg.lstsq(A, y(train), rcond=None)
+    return beta, nmse(A @ beta - y(train), y(train)), nmse(B @ beta - y(test), y(test))
+
+
+STRAIN_CUTOFF_HZ = 3.0  # Hz: the gauges' static and slow part (link 1's mode at 3.2 Hz rings above it)
+
+
+def strain(column: str):
+    """A gauge's signal [µm/m], low-passed at `STRAIN_CUTOFF_HZ`."""
+    return lambda d: lowpass(d.t, d.extra[column].to_numpy(float), STRAIN_CUTOFF_HZ)
+
+
+def q1_harmonic(d) -> np.ndarray:
+    """sin q1, cos q1."""
+    return harmonics(d.q[:, 0], range(1, 2))
+
+
+def strain_tests(train, test, robot) -> list[str]:
+    """The rival stories of the q1 torque against the gauges and joint 1's row (module docstring), as lines."""
+    rows = lambda d, j: RIGID.regressor(d.q, d.dq, d.ddq)[:, j, :]  # noqa: E731
+    tau = lambda j: lambda d: d.tau[:, j]  # noqa: E731
+    link_side = lambda d: np.column_stack([rows(d, 1)[:, [1, 2, 4]], np.ones(d.n)])  # noqa: E731 (a2, a3, b2, zero)
+    beta_t, *_ = ols(lambda d: np.column_stack([rows(d, 1), q1_harmonic(d)]), tau(1), train, test)
+    c_tau = beta_t[-2:]
+    eps31 = strain("col12")
+    beta_s, s_tr, s_te = ols(link_side, eps31, train, test)
+    kappa = beta_s[2] / datasheet_pi(robot, "physical")["b2"]  # µm/m per N m of link 2's gravity moment
+    beta_f, f_tr, f_te = ols(lambda d: np.column_stack([link_side(d), q1_harmonic(d)]), eps31, train, test)
+    forced = lambda d: eps31(d) - kappa * q1_harmonic(d) @ c_tau  # noqa: E731
+    beta_x, *_ = ols(link_side, forced, train, test)
+    x_te = nmse(link_side(test) @ beta_x + kappa * q1_harmonic(test) @ c_tau - eps31(test), eps31(test))
+    x_tr = nmse(link_side(train) @ beta_x + kappa * q1_harmonic(train) @ c_tau - eps31(train), eps31(train))
+    fr = lambda d: np.column_stack([d.dq[:, 1], np.sign(d.dq[:, 1]), d.ddq, np.ones(d.n)])  # noqa: E731
+    _, g_tr, g_te = ols(lambda d: np.column_stack([eps31(d), fr(d)]), tau(1), train, test)
+    beta_h, h_tr, h_te = ols(lambda d: np.column_stack([eps31(d), fr(d), q1_harmonic(d)]), tau(1), train, test)
+    # A potential V = c sin(q1 + q2/2 + ψ) (a cable loop at the joint) puts 2 × joint 2's term on joint 1.
+    half = lambda d: harmonics(d.q[:, 0] + d.q[:, 1] / 2, range(1, 2))  # noqa: E731
+    beta_2, *_ = ols(lambda d: np.column_stack([rows(d, 1), half(d)]), tau(1), train, test)
+    _, r1_tr, r1_te = ols(lambda d: rows(d, 0), tau(0), train, test)
+    forced1 = lambda d: d.tau[:, 0] - 2 * half(d) @ beta_2[-2:]  # noqa: E731
+    beta_1, *_ = ols(lambda d: rows(d, 0), forced1, train, test)
+    p1_te = nmse(rows(test, 0) @ beta_1 + 2 * half(test) @ beta_2[-2:] - test.tau[:, 0], test.tau[:, 0])
+    amplitude = float(np.hypot(*c_tau))
+    # Where the term lives: joint 2 rests (|dq2| < 0.02 rad/s) or moves (> 0.1 rad/s); one q1 pair per regime.
+    regimes = []
+    for d in (train, test):
+        v = np.abs(d.dq[:, 1])
+        masks = (v < 0.02, v > 0.1, (v >= 0.02) & (v <= 0.1))
+        X = np.column_stack([rows(d, 1), *(q1_harmonic(d) * m[:, None] for m in masks)])
+        beta_r, *_ = np.linalg.lstsq(X, d.tau[:, 1], rcond=None)
+        pairs = [np.hypot(*beta_r[9 + 2 * k : 11 + 2 * k]) for k in range(3)]
+        regimes.append(
+            f"{Path(d.source).name}: rests {masks[0].mean():.0%} of samples, q1 term {pairs[0]:.3f} N m "
+            f"at rest, {pairs[1]:.3f} moving, {pairs[2]:.3f} between"
+        )
+    moving = [np.abs(d.dq[:, 1]) > 0.1 for d in (train, test)]
+    on_moving = []
+    for d, m in zip((train, test), moving):
+        X = np.column_stack([link_side(d), q1_harmonic(d)])[m]
+        beta_m, *_ = np.linalg.lstsq(X, eps31(d)[m], rcond=None)
+        beta_q, *_ = np.linalg.lstsq(np.column_stack([rows(d, 1), q1_harmonic(d)])[m], d.tau[m, 1], rcond=None)
+        on_moving.append(
+            f"{Path(d.source).name}: torque {np.hypot(*beta_q[-2:]):.3f} N m, strain "
+            f"{np.hypot(*beta_m[-2:]) / kappa:.3f} N m"
+        )
+    return [
+        "",
+        f"Rival stories of the q1 torque (amplitude {amplitude:.3f} N m on joint 2) against link 2's gauge eps31 "
+        f"(low-passed at {STRAIN_CUTOFF_HZ:g} Hz):",
+        f"  eps31 ~ link 2's rigid link-side columns (a2, a3, b2, zero): nMSE {s_tr:.4f} train, {s_te:.4f} held out; "
+        f"gain {kappa:.1f} µm/m per N m of link 2's gravity moment",
+        f"  + sin/cos q1, free: nMSE {f_tr:.4f} / {f_te:.4f}; its q1 term {np.hypot(*beta_f[-2:]):.2f} µm/m "
+        f"= {np.hypot(*beta_f[-2:]) / kappa:.4f} N m",
+        "  + the q1 torque forced in (a torque on link 2: cable, mass, link 1's bending): "
+        f"nMSE {x_tr:.3f} / {x_te:.3f}",
+        f"  -> eps31 carries {np.hypot(*beta_f[-2:]) / kappa / amplitude:.1%} of the q1 torque: "
+        "it does not reach link 2",
+        "Joint 2's torque with link 2's gauge as its link-side torque (eps31, friction, ddq, zero): "
+        f"nMSE {g_tr:.3f} / {g_te:.3f}; + sin/cos q1: {h_tr:.3f} / {h_te:.3f} "
+        f"(q1 term {np.hypot(*beta_h[-2:]):.3f} N m beyond what link 2 carries)",
+        f"A potential at the joint (cable loop, sin/cos(q1 + q2/2)): joint 1's held-out nMSE {r1_te:.4f} (rigid) -> "
+        f"{p1_te:.4f} with the 2 x term it implies there ({r1_tr:.4f} train)",
+        "Joint 2's q1 term by regime (one pair each, fitted on each trial alone): " + "; ".join(regimes),
+        "Moving samples only (|dq2| > 0.1 rad/s), q1 term of each fit alone: " + "; ".join(on_moving),
+    ]
+
+
+def figure(train, robot, path: Path) -> None:
+    """Joint 2's torque and link 2's strain (in N m), each minus the rigid part of a fit with sin/cos q1 beside
+    it (the q1 term plus the residual), binned against q1, with the q1 term fitted."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    Y = RIGID.regressor(train.q, train.dq, train.ddq)
+    H = q1_harmonic(train)
+    eps = strain("col12")(train)
+    S = np.column_stack([Y[:, 1, [1, 2, 4]], np.ones(train.n)])
+    beta_s, *_ = np.linalg.lstsq(S, eps, rcond=None)
+    kappa = beta_s[2] / datasheet_pi(robot, "physical")["b2"]
+    edges = np.linspace(train.q[:, 0].min(), train.q[:, 0].max(), 25)
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    which = np.digitize(train.q[:, 0], edges[1:-1])
+    grid = np.column_stack([np.sin(mid), np.cos(mid)])
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for rigid, y, scale, label in (
+        (Y[:, 1, :], train.tau[:, 1], 1.0, "joint 2's torque (current)"),
+        (S, eps, kappa, "link 2's strain eps31, as N m"),
+    ):
+        beta, *_ = np.linalg.lstsq(np.column_stack([rigid, H]), y, rcond=None)
+        partial = (y - rigid @ beta[: rigid.shape[1]]) / scale
+        offset = np.mean(partial)
+        line = ax.plot(mid, [partial[which == k].mean() - offset for k in range(len(mid))], "o", label=label)[0]
+        ax.plot(mid, (grid @ beta[-2:]) / scale - np.mean(H @ beta[-2:]) / scale, "-", color=line.get_color())
+    ax.set(
+        xlabel="q1 [rad]",
+        ylabel="q1 term + residual [N m], bin mean",
+        title="MERIt exp1: the q1 torque is in joint 2's current, not in link 2",
+    )
+    ax.axhline(0, color="k", lw=0.5)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def main() -> None:
     problem = load_problem(ROOT / "problems" / "tudor_2dof.toml")
     train, test = (load_dataset(p, problem.data, problem.robot) for p in problem.data.trials[:2])
@@ -56,6 +201,8 @@ def main() -> None:
         nmse = [np.mean((A @ beta - d.tau[:, 1]) ** 2) / np.var(d.tau[:, 1]) for A, d in ((X, train), (Xt, test))]
         coefficients = np.array2string(beta[len(RIGID.names) :], precision=3, max_line_width=60)
         print(f"{name:32s} {nmse[0]:7.3f} {nmse[1]:9.3f}  {coefficients}")
+    print("\n".join(strain_tests(train, test, problem.robot)))
+    figure(train, problem.robot, ROOT / "results" / "diagnosis" / "merit_joint2_strain.png")
 
 
 if __name__ == "__main__":

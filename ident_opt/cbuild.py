@@ -101,6 +101,26 @@ def load_external(lib: Path, fname: str) -> ca.Function:
     return ca.external(fname, str(Path(lib).resolve()))
 
 
+def cached_library(function: ca.Function, folder: Path, build: bool = True) -> Path | None:
+    """The shared library of `function`'s generated C, cached in `folder` under the hash of its source, so a
+    machine compiles each function once; written under a temporary name and renamed, so parallel processes never
+    load a half-written file. With `build=False`, None when it is not cached yet (nothing compiled)."""
+    name = function.name()
+    with tempfile.TemporaryDirectory() as tmp:
+        source, _ = generate_sources([function], Path(tmp), name)
+        key = hashlib.sha256(source.read_bytes() + " ".join(CFLAGS).encode()).hexdigest()[:16]
+        lib = Path(folder) / library_name(f"{name}_{key}")
+        if not lib.is_file():
+            if not build:
+                return None
+            built = compile_library(source, Path(tmp), name=name)
+            lib.parent.mkdir(parents=True, exist_ok=True)
+            partial = lib.with_name(f"{lib.name}.{os.getpid()}.part")
+            partial.write_bytes(built.read_bytes())
+            os.replace(partial, lib)
+    return lib
+
+
 #: Samples per call of the compiled regressor: its input and output buffers (~4 kB a sample) stay cache-sized.
 REGRESSOR_CHUNK = 512
 
@@ -118,16 +138,7 @@ class CompiledRows:
         self.shape = (function.size2_out(0), function.size1_out(0))
         self.chunk = chunk
         name = function.name()
-        with tempfile.TemporaryDirectory() as tmp:
-            source, _ = generate_sources([function], Path(tmp), name)
-            key = hashlib.sha256(source.read_bytes() + " ".join(CFLAGS).encode()).hexdigest()[:16]
-            lib = Path(folder) / library_name(f"{name}_{key}")
-            if not lib.is_file():
-                built = compile_library(source, Path(tmp), name=name)
-                lib.parent.mkdir(parents=True, exist_ok=True)
-                partial = lib.with_name(f"{lib.name}.{os.getpid()}.part")
-                partial.write_bytes(built.read_bytes())
-                os.replace(partial, lib)
+        lib = cached_library(function, folder)
         self.mapped = load_external(lib, name).map(chunk, "serial")
         self._buffer, self._run = self.mapped.buffer()
         self._x = np.zeros((chunk, self.n_in))  # the last, partial chunk goes through these

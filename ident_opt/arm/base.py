@@ -213,6 +213,10 @@ class Robot(Protocol):
     described_as: str
     #: Whether the paper's own views apply (its shuffled protocol, its tables): the planar two-link arm's.
     paper_views: bool
+    #: Which simulator and diagnosis serve it: "planar" (the two-link closed form's own, tuned on the MERIt trials:
+    #: grouped π, flexible links, the paper's trajectories) or "arm" (any n joints, through `Arm` and `Robot` alone:
+    #: `simulate.arm_plant`, `diagnosis.arm_fit`).
+    engine: str
 
     @property
     def column_map(self) -> Mapping[str, tuple[float, float]]:

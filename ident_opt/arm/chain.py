@@ -432,12 +432,16 @@ class ChainRobot:
 
     # ------------------------------------------------------------------ the `Robot` interface
     #: The commands that serve an n-joint arm.
-    serves = frozenset(("identify", "compare", "codegen", "check", "export", "fleet", "online", "excite"))
+    serves = frozenset(
+        ("identify", "compare", "codegen", "check", "export", "fleet", "online", "excite", "simulate", "diagnose")
+    )
     #: The fits `compare` runs, in report order: OLS on the base parameters, consistent without and with the
     #: URDF as a prior (`ident_opt.identify.estimators`).
     estimators = ("ols", "constrained", "consistent", "robust")
     #: The fit used downstream unless told otherwise: consistent and plausible.
     default_estimator = "consistent"
+    #: The simulator and the diagnosis that serve it: those of any arm, through the `Arm` interface alone.
+    engine = "arm"
     model_note = None
     paper_views = False
     #: The nominal model's key in `datasheets()`.

@@ -125,6 +125,9 @@ class PlanarRobot:
     estimators = ("ols", "constrained", "nlp_physical", "robust")
     #: The fit used downstream unless told otherwise.
     default_estimator = "constrained"
+    #: The simulator and the diagnosis that serve it: the planar two-link arm's own, tuned on the MERIt trials
+    #: (its datasheet conventions, flexible links, trajectories and candidate models in grouped parameters).
+    engine = "planar"
     angle_convention = ANGLE_CONVENTION
     described_as = "a planar two-link arm"
     paper_views = True

@@ -117,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
         output=output,
         noise=not args.no_noise,
         exact_derivatives=args.exact_derivatives,
+        limits=problem.limits,
         **{k: v for k, v in (("bandwidth_hz", args.bandwidth), ("noise_scale", args.noise_scale)) if v is not None},
     )
     path = trial.write(args.out)
@@ -129,6 +130,6 @@ def run(args: argparse.Namespace) -> int:
     background = trial.truth.get("background") or {}
     if background:
         print("background terms: " + ", ".join(f"{name} {values}" for name, values in background.items()))
-    print(f"max tracking error: {track[0]:.2e} / {track[1]:.2e} rad")
+    print(f"max tracking error: {' / '.join(f'{e:.2e}' for e in track)} rad")
     write_json(args.json, {"csv": str(path), "truth_json": str(truth_path(path)), "truth": trial.truth})
     return 0

@@ -5,10 +5,30 @@ naming rule), `diagnosis` (the four questions in order), `report` (Markdown, fig
 `hidden` (hidden-effect trials for tests and benchmarks); `linear`, `signals` and `elastic_nlp` (the IPOPT
 polish of a lightly damped mode) are shared tools."""
 
-from ident_opt.diagnosis.loop import Diagnosis, diagnose
+from ident_opt.diagnosis import arm_diagnosis, loop
+from ident_opt.diagnosis.loop import Diagnosis
+from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
 from ident_opt.effects import CATALOGUE
 
 #: The catalogue's cause names, `none` first.
 CAUSES = ("none", *CATALOGUE)
 
 __all__ = ["CAUSES", "Diagnosis", "diagnose"]
+
+
+def diagnose(
+    robot,
+    trial,
+    unseen=None,
+    train_fraction: float = 0.7,
+    progress: bool = True,
+    torque_filter_hz: float | str | None = TORQUE_FILTER_HZ,
+    rigid_fit=None,
+) -> Diagnosis:
+    """Diagnose `trial` (and `unseen`, if given, as the held-out data) of `robot`'s arm: the planar two-link arm's
+    diagnosis (`loop.diagnose`) or any arm's (`arm_diagnosis.diagnose`), as the robot says (`Robot.engine`).
+    `rigid_fit`: the estimator π is fitted with on an n-joint arm and why (a `studies.recommend.Recommendation`;
+    None: the robot's default estimator); the planar diagnosis fits π by its own weighted least squares."""
+    if robot.engine == "planar":
+        return loop.diagnose(robot, trial, unseen, train_fraction, progress, torque_filter_hz)
+    return arm_diagnosis.diagnose(robot, trial, unseen, train_fraction, progress, torque_filter_hz, rigid_fit)

@@ -437,6 +437,16 @@ def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
     )
 
 
+def frozen(family: Family, theta: dict) -> Family:
+    """`family` with its θ held at `theta`: no search, no polish (a cause refitted linearly only)."""
+    return replace(family, axes=lambda rate: [], polish=None, refine=None, center=None, fixed=dict(theta))
+
+
+def theta(family: Family, cand: Candidate, ctx: Context) -> dict:
+    """The θ a later round holds a cause at: the candidate's values on the family's axes."""
+    return {a.name: cand.parameters[a.name] for a in family.axes(1.0 / ctx.dt)}
+
+
 # ---------------------------------------------------------------------------------------------- families
 def families(robot: PlanarRobot) -> list[Family]:
     """Every catalogue cause's families (`Effect.families`), in catalogue order."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident_opt.arm.planar import PlanarArm
+from ident_opt.arm.base import Arm
 from ident_opt.data import Dataset
 from ident_opt.diagnosis import signals
 
@@ -58,8 +58,18 @@ def pose_r2(r: np.ndarray, q: np.ndarray) -> float:
     return float(1.0 - np.var(r - A @ coef) / var) if var > 0 else 0.0
 
 
-def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float) -> dict:
-    """Residual features per joint (see the module docstring), plus the torque-channel lag."""
+def pose_r2_any(r: np.ndarray, q: np.ndarray) -> float:
+    """Share of the residual's variance explained by pose functions of an n-joint arm (cos and sin of each joint
+    angle): what a rotated gravity or a mis-placed mass leaves."""
+    A = np.column_stack([np.ones(len(r)), np.cos(q), np.sin(q)])
+    coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+    var = float(np.var(r))
+    return float(1.0 - np.var(r - A @ coef) / var) if var > 0 else 0.0
+
+
+def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float, pose=pose_r2) -> dict:
+    """Residual features per joint (see the module docstring), plus the torque-channel lag; `pose(r, q)` the share
+    of a residual explained by the pose (`pose_r2` for the planar arm, `pose_r2_any` for any)."""
     r = ds.tau - tau_hat
     out: dict = {
         "rms": [],
@@ -72,7 +82,7 @@ def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float) -> dict:
         "pose_r2": [],
         "lag_s": [],
     }
-    for j in range(2):
+    for j in range(r.shape[1]):
         rj, dqj = r[:, j], ds.dq[:, j]
         _, rest, slow, fast = _speed_classes(dqj)
         moving = ~rest
@@ -92,7 +102,7 @@ def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float) -> dict:
         out["low_speed_excess"].append(
             float(np.mean(signed[slow]) - np.mean(signed[fast])) if slow.any() and fast.any() else float("nan")
         )
-        out["pose_r2"].append(pose_r2(rj, ds.q))
+        out["pose_r2"].append(pose(rj, ds.q))
         out["lag_s"].append(signals.lag(tau_hat[:, j], ds.tau[:, j], dt))
     out["rest_fraction"] = float(
         np.mean(np.all(np.abs(ds.dq) < 0.01 * np.quantile(np.abs(ds.dq), 0.95, axis=0), axis=1))
@@ -101,7 +111,7 @@ def residual_evidence(ds: Dataset, tau_hat: np.ndarray, dt: float) -> dict:
 
 
 def forward_error(
-    model: PlanarArm,
+    model: Arm,
     pi: np.ndarray,
     ds: Dataset,
     dt: float,
@@ -118,20 +128,29 @@ def forward_error(
     L = max(2, round(window_s / dt))
     starts = np.arange(0, ds.n - L, L)
     if len(starts) == 0:
-        return [float("nan"), float("nan")]
+        return [float("nan")] * ds.q.shape[1]
     q, dq = ds.q[starts].copy(), ds.dq[starts].copy()
     zero = np.zeros_like(q)
+    # A joint whose model has no inertia about its axis (a URDF link without it and no rotor: the shipped TX40's
+    # last) has nothing to integrate: it follows its measured motion and its error is not reported.
+    diagonal = np.abs(np.diagonal(model.mass_matrices(pi, ds.q[starts]), axis1=-2, axis2=-1)).min(axis=0)
+    inert = diagonal > 1e-12 * max(float(np.max(diagonal)), np.finfo(float).tiny)
+    held = ~inert
     with np.errstate(all="ignore"):
         for step in range(L):
             tau = ds.tau[starts + step] - (extension[starts + step] if extension is not None else 0.0)
+            if held.any():
+                q[:, held], dq[:, held] = ds.q[starts + step][:, held], ds.dq[starts + step][:, held]
             bias = model.predict(pi, q, dq, zero)
-            M = model.mass_matrix(pi, q[:, 1])
-            ddq = np.linalg.solve(M, (tau - bias)[..., None])[..., 0]
+            M = model.mass_matrices(pi, q)
+            ddq = ds.ddq[starts + step].copy()
+            rhs = tau - bias - np.einsum("wij,wj->wi", M[:, :, held], ddq[:, held])
+            ddq[:, inert] = np.linalg.solve(M[:, inert][:, :, inert], rhs[:, inert][..., None])[..., 0]
             dq = dq + dt * ddq
             q = q + dt * dq
         err = q - ds.q[starts + L]
         rms = np.sqrt(np.nanmean(err**2, axis=0))
-    return [float(v) if np.isfinite(v) else float("nan") for v in rms]
+    return [float(v) if np.isfinite(v) and ok else float("nan") for v, ok in zip(rms, inert)]
 
 
 #: Where the first modes of flexible-link arms lie [Hz]: the band searched in independent channels.

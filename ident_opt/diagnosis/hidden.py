@@ -34,3 +34,26 @@ def errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
     cause's estimate keys, `docs/effects.md`). Every key the effect touches counts; none may miss."""
     checks = CATALOGUE[cause].judge(estimate, truth)
     return all(ok for ok, _ in checks), max(r for _, r in checks)
+
+
+def arm_errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
+    """`errors` on an n-joint arm (`Effect.arm_judge`: an untouched joint judged against the largest true value)."""
+    checks = CATALOGUE[cause].arm_judge(estimate, truth)
+    return all(ok for ok, _ in checks), max(r for _, r in checks)
+
+
+def arm_joints(robot, limits=None):
+    """The effect syntax's view of an n-joint arm's joints (`effects.base.Joints`: the datasheet's Coulomb levels,
+    the names, the reference magnitudes the draws are relative to), as the simulator builds it for `limits`."""
+    from ident_opt.simulate.arm_plant import arm_scale, joints_of
+    from ident_opt.simulate.trial import box_of
+
+    box = box_of(robot, limits)
+    return joints_of(robot, arm_scale(robot, box, box.v_max))
+
+
+def arm_draw(cause: str, rng: np.random.Generator, joints, chosen: tuple[int, ...]) -> dict:
+    """Keys of a hidden `cause` on an n-joint arm (`Effect.arm_draw`), on the 0-based joints `chosen`."""
+    if cause not in CATALOGUE:
+        raise ValueError(f"unknown cause {cause!r}")
+    return CATALOGUE[cause].arm_draw(rng, joints, tuple(chosen))

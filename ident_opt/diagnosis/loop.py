@@ -17,7 +17,8 @@ from scipy import signal
 from tqdm import tqdm
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
-from ident_opt.data import Dataset, chronological_split
+from ident_opt.data import Dataset, chronological_split, refiltered
+from ident_opt.derivatives import choose_cutoff
 from ident_opt.diagnosis import candidates as cands
 from ident_opt.diagnosis import evidence, linear, scoring, signals
 from ident_opt.errors import InputError
@@ -83,6 +84,7 @@ class Diagnosis:
     dropped: list[dict] = field(default_factory=list)  # causes a later one made redundant
     rounds: list[list[dict]] = field(default_factory=list)  # every round's candidates, best first (`ROUND_KEYS`)
     timings: dict[str, float] = field(default_factory=dict)
+    joints: list[str] = field(default_factory=list)  # the joints' names, in the order of every per-joint list
 
     def as_json(self) -> dict:
         """The `--json` payload (`docs/cli.md`), plus extra keys (NaN, e.g. no reversal, as null)."""
@@ -100,6 +102,7 @@ class Diagnosis:
         return {
             "cause": self.cause,
             "estimate": self.estimate,
+            "joints": self.joints,
             "baseline": self.baseline,
             "nmse_before": self.nmse_before,
             "nmse_after": self.nmse_after,
@@ -176,12 +179,7 @@ def _refit_better(v: Fitted, current: dict) -> bool:
     )
 
 
-def _frozen(family: cands.Family, theta: dict) -> cands.Family:
-    """`family` with its θ held at `theta`: no search, no polish (a cause refitted linearly only)."""
-    return replace(family, axes=lambda rate: [], polish=None, refine=None, center=None, fixed=dict(theta))
-
-
-def _prune(named: list, chain: list, current: dict, ctx, version, var) -> tuple[list, list, dict, list]:
+def _prune(named: list, chain: list, current: dict, ctx, version, var, engine=cands) -> tuple[list, list, dict, list]:
     """Drop earlier causes the newest one made redundant: refit the chain without each (θ held, same fit
     kind as the newest); a cause whose removal does not lose the margin or the score is dropped."""
     gone = []
@@ -190,10 +188,10 @@ def _prune(named: list, chain: list, current: dict, ctx, version, var) -> tuple[
     full = max(current.values(), key=lambda w: w.common)
     for i in range(len(named) - 2, -1, -1):
         rest = [named[k] for k in range(len(named)) if k != i]
-        family = cands.compose([(_frozen(f, t), t) for f, t in rest[:-1]], _frozen(*rest[-1]))
+        family = engine.compose([(engine.frozen(f, t), t) for f, t in rest[:-1]], engine.frozen(*rest[-1]))
         if full.baseline not in family.baselines:
             continue
-        cand = cands.fit(family, full.baseline, ctx)
+        cand = engine.fit(family, full.baseline, ctx)
         without = version(cand, full.baseline, cand.predict(ctx.test), tuple(f.cause for f, _ in rest), *rest[-1])
         gain = full.common - without.common
         if gain <= 0 or not scoring.clears_margin(without.mse, full.mse, gain, var):
@@ -203,11 +201,12 @@ def _prune(named: list, chain: list, current: dict, ctx, version, var) -> tuple[
     return named, chain, current, gone
 
 
-def _rounds(robot: PlanarRobot, ctx, current: dict, version, row, var, progress: bool) -> tuple:
+def _rounds(robot, ctx, current: dict, version, row, var, progress: bool, engine=cands) -> tuple:
     """The loop of question 2: name the best cause, extend the model with it, ask again against the extended
     model, until nothing clears the margin (at most `MAX_CAUSES`). Every candidate of a round is scored
     against the same reference (the best model so far). Returns (chain, versions of the final model, the
-    first round's candidate rows, dropped causes, every round's rows cut to `ROUND_KEYS`)."""
+    first round's candidate rows, dropped causes, every round's rows cut to `ROUND_KEYS`). `engine`: how candidates
+    are built and fitted (`candidates` for the planar arm, `arm_fit.Engine` for n joints)."""
     chain: list[dict] = []
     history: list[list[dict]] = []
     named: list[tuple[cands.Family, dict]] = []  # each cause's own family and its θ, in the order named
@@ -219,7 +218,7 @@ def _rounds(robot: PlanarRobot, ctx, current: dict, version, row, var, progress:
     for round_ in range(MAX_CAUSES):
         # The round's reference: the current model with the datasheet's π where it has that version.
         ref = current.get("datasheet") or max(current.values(), key=lambda v: v.common)
-        fits = _fit_round(robot, ctx, named, ref, version, bar, searched)
+        fits = _fit_round(robot, ctx, named, ref, version, bar, searched, engine)
         best: dict[str, Fitted] = {}
         for v in fits:
             if v.cand.cause not in best or v.common > best[v.cand.cause].common:
@@ -242,7 +241,7 @@ def _rounds(robot: PlanarRobot, ctx, current: dict, version, row, var, progress:
         named.append((top.family, top.theta))
         chain.append({"cause": top.cand.cause, "score": top.common - ref.common, "fitted": top, "round": round_ + 1})
         current = {v.baseline: v for v in fits if v.family is top.family}
-        named, chain, current, gone = _prune(named, chain, current, ctx, version, var)
+        named, chain, current, gone = _prune(named, chain, current, ctx, version, var, engine)
         dropped += gone
     if tentative is not None:  # a cause on trial found no partner: back to the model before the trial
         named, chain, current, dropped = tentative
@@ -273,7 +272,7 @@ def _promising(v: Fitted, without: Fitted) -> bool:
     return v.common > without.common and bool(np.any(without.mse - v.mse >= 0.5 * scoring.MARGIN * without.mse))
 
 
-def _fit_round(robot: PlanarRobot, ctx, named: list, ref: Fitted, version, bar, searched: dict | None) -> list[Fitted]:
+def _fit_round(robot, ctx, named: list, ref: Fitted, version, bar, searched: dict | None, engine=cands) -> list[Fitted]:
     """Every cause not yet named, composed with those named, fitted against every baseline it allows.
 
     After the first round (`searched` given) a cause whose first-round fit was `_promising` is searched
@@ -283,16 +282,16 @@ def _fit_round(robot: PlanarRobot, ctx, named: list, ref: Fitted, version, bar, 
     costly searches and polishes run only where they can change the answer."""
     taken = {f.cause for f, _ in named}
     fits = []
-    for family in cands.families(robot):
+    for family in engine.families(robot):
         if family.cause in taken:
             continue
         held = searched.get(family.cause) if searched is not None else None
-        own = _frozen(family, held) if held is not None else family
-        composed = cands.compose(named, own)
+        own = engine.frozen(family, held) if held is not None else family
+        composed = engine.compose(named, own)
         for baseline in composed.baselines:
-            cand = cands.fit(composed, baseline, ctx)
+            cand = engine.fit(composed, baseline, ctx)
             bar.update()
-            theta = held if held is not None else {a.name: cand.parameters[a.name] for a in family.axes(1.0 / ctx.dt)}
+            theta = held if held is not None else engine.theta(family, cand, ctx)
             fits.append(version(cand, baseline, cand.predict(ctx.test), (*ref.causes, family.cause), own, theta))
     return fits
 
@@ -380,10 +379,31 @@ def rigid_fit(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
     return linear.solve(zero, Y, tau, weights).beta, weights
 
 
+def logged_bandwidth(trial: Dataset) -> tuple[Dataset, float | None]:
+    """(The trial, the torque's cut-off [Hz]) for derivatives as logged, under "auto".
+
+    The logger's filter is unknown; its bandwidth is read from the logged accelerations
+    (`signals.matched_cutoff`). Where it is narrower than what the angles support (`derivatives.choose_cutoff`,
+    the rule the loader uses for a file without derivatives), the derivatives are estimated again from the
+    angles at that cut-off (`data.refiltered`): a narrow logger filter (a Savitzky–Golay filter of 21 samples at
+    100 Hz passes 4.7 Hz) smears Coulomb steps and modes that the data hold. Assumption: the angles are logged
+    at the full rate and resolution, so they carry the motion's whole band. The trial keeps every sample (the
+    held-out part is aligned with the raw torque's)."""
+    matched = signals.matched_cutoff(trial.t, trial.q, trial.ddq)
+    if matched is None:
+        return trial, None
+    supported = choose_cutoff(trial.t, trial.q)
+    if matched >= supported:
+        return trial, matched
+    return refiltered(trial, supported), supported
+
+
 def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
     """`at_rest`, then the torque low-passed by the zero-phase filter the derivatives are estimated with
     (4th-order Butterworth at `torque_filter_hz`, forward-backward; "auto": the cut-off the trial's derivatives
-    were estimated with, `Dataset.cutoff_hz`; None: no filter).
+    were estimated with, `Dataset.cutoff_hz`, or for derivatives as logged the bandwidth of the logger's own
+    filter, with the derivatives estimated again where that filter is narrower than the data, `logged_bandwidth`;
+    None: no filter).
 
     Estimated accelerations are a smoothed version of the true ones (a step in acceleration becomes a ramp
     over tens of ms); the measured torque steps. Filtering τ the same way puts both sides of τ = Y π in the
@@ -391,9 +411,9 @@ def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
     and noise above the cut-off goes too. Modes and delays inside the band are untouched (the filter is
     zero-phase and linear).
     """
-    trial = at_rest(trial)
     if torque_filter_hz == "auto":  # the problem's `derivative_cutoff_hz = "auto"`: the one this trial was read with
-        torque_filter_hz = trial.cutoff_hz
+        trial, torque_filter_hz = (trial, trial.cutoff_hz) if trial.cutoff_hz is not None else logged_bandwidth(trial)
+    trial = at_rest(trial)
     if torque_filter_hz is None:
         return trial
     dt = float(np.median(np.diff(trial.t)))
@@ -401,6 +421,35 @@ def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
         return trial
     b, a = signal.butter(4, torque_filter_hz * 2 * dt)
     return replace(trial, tau=signal.filtfilt(b, a, trial.tau, axis=0))
+
+
+def parts(
+    trial: Dataset, unseen: Dataset | None, train_fraction: float, torque_filter_hz, names: tuple[str, ...]
+) -> tuple[Dataset, Dataset, Dataset, str]:
+    """(training part, held-out part, the held-out part's measured torque as logged, the split in words): `prepare`d
+    and `split`; an InputError when there is too little data, a torque channel is constant, or a joint never
+    moves in the training part (named: nothing about it can be fitted, and its rows would be one rest stretch)."""
+    _, raw_test, _ = split(trial, unseen, train_fraction)  # the measured torque, as compare and identify see it
+    trial = prepare(trial, torque_filter_hz)
+    unseen = prepare(unseen, torque_filter_hz) if unseen is not None else None
+    train, test, how = split(trial, unseen, train_fraction)
+    if train.n < MIN_SAMPLES or test.n < MIN_SAMPLES:
+        raise InputError(
+            f"{trial.source}: too little data to diagnose ({train.n} training and {test.n} held-out "
+            f"samples; at least {MIN_SAMPLES} each)"
+        )
+    for ds, part in ((train, "training"), (test, "held-out")):
+        if np.any(np.var(ds.tau, axis=0) <= 0):
+            raise InputError(f"{ds.source}: a torque channel is constant; nothing to diagnose")
+        still = [j for j in range(ds.dq.shape[1]) if not np.any(ds.dq[:, j] != 0)] if part == "training" else []
+        if still:
+            joints = ", ".join(f"{names[j]} (q{j + 1})" for j in still)
+            raise InputError(
+                f"{ds.source}: joint{'s' if len(still) > 1 else ''} {joints} never move{'' if len(still) > 1 else 's'} "
+                f"in the {part} part; the diagnosis needs every joint in motion (move it, or leave it out of the "
+                "problem)"
+            )
+    return train, test, raw_test, how
 
 
 def diagnose(
@@ -414,19 +463,8 @@ def diagnose(
     """Diagnose `trial` (and `unseen`, if given, as the held-out data); see the module docstring.
     `torque_filter_hz`: see `prepare` (the problem's derivative cut-off is the natural choice)."""
     t0 = time.perf_counter()
-    _, raw_test, _ = split(trial, unseen, train_fraction)  # the measured torque, as compare and identify see it
-    trial = prepare(trial, torque_filter_hz)
-    unseen = prepare(unseen, torque_filter_hz) if unseen is not None else None
-    train, test, how = split(trial, unseen, train_fraction)
-    if train.n < MIN_SAMPLES or test.n < MIN_SAMPLES:
-        raise InputError(
-            f"{trial.source}: too little data to diagnose ({train.n} training and {test.n} held-out "
-            f"samples; at least {MIN_SAMPLES} each)"
-        )
-    for ds in (train, test):
-        if np.any(np.var(ds.tau, axis=0) <= 0):
-            raise InputError(f"{ds.source}: a torque channel is constant; nothing to diagnose")
-    dt = float(np.median(np.diff(trial.t)))
+    train, test, raw_test, how = parts(trial, unseen, train_fraction, torque_filter_hz, robot.joint_names)
+    dt = float(np.median(np.diff(train.t)))
     ds_pi = datasheet_pi(robot, "physical")
     pi_rigid, weights = rigid_fit(train)
     rest_test = signals.rest_runs(test.dq)
@@ -441,22 +479,17 @@ def diagnose(
         rigid_body(robot, "physical").armature,
     )
 
-    nominal_pred = {
-        "datasheet": cands.NOMINAL.predict(cands.NOMINAL.vector(ds_pi), test.q, test.dq, test.ddq),
-        "rigid_fit": cands.NOMINAL.predict(pi_rigid, test.q, test.dq, test.ddq),
-    }
+    model = cands.NOMINAL
+    nominal_pi = {"datasheet": model.vector(ds_pi), "rigid_fit": pi_rigid}
+    nominal_pred = {b: model.predict(pi, test.q, test.dq, test.ddq) for b, pi in nominal_pi.items()}
     nominal_mse = {b: scoring.mse(test.tau, p, rest_test) for b, p in nominal_pred.items()}
     nominal = {
-        "datasheet": {
-            "pi": cands.NOMINAL.as_dict(cands.NOMINAL.vector(ds_pi)),
-            "nmse": scoring.nmse(test.tau, nominal_pred["datasheet"], rest_test),
-            "nmse_raw": nmse(test.tau, nominal_pred["datasheet"]).tolist(),
-        },
-        "rigid_fit": {
-            "pi": cands.NOMINAL.as_dict(pi_rigid),
-            "nmse": scoring.nmse(test.tau, nominal_pred["rigid_fit"], rest_test),
-            "nmse_raw": nmse(test.tau, nominal_pred["rigid_fit"]).tolist(),
-        },
+        b: {
+            "pi": model.as_dict(nominal_pi[b]),
+            "nmse": scoring.nmse(test.tau, nominal_pred[b], rest_test),
+            "nmse_raw": nmse(test.tau, nominal_pred[b]).tolist(),
+        }
+        for b in nominal_pi
     }
     t_nominal = time.perf_counter()
 
@@ -472,9 +505,33 @@ def diagnose(
         return _row(v, score, current, raw_test.tau, test, rest_test, var, dt, gap)
 
     current = {b: version(None, b, nominal_pred[b], (), None, {}) for b in nominal_pred}
-    chain, current, candidates, dropped, history = _rounds(robot, ctx, current, version, row, var, progress)
+    rounds = _rounds(robot, ctx, current, version, row, var, progress)
     t_fit = time.perf_counter()
 
+    def forward_after(final: Fitted | None, baseline: str) -> list:
+        return _forward_after(final, baseline, ds_pi, pi_rigid, test, dt)
+
+    return conclude(
+        rounds,
+        (nominal, nominal_pi, nominal_pred),
+        (train, test, raw_test, how, trial if unseen is not None else None),
+        model,
+        forward_after,
+        {"nominal": t_nominal - t0, "candidates": t_fit - t_nominal, "t0": t0},
+        robot.joint_names,
+    )
+
+
+def conclude(rounds, nominals, data, model, forward_after, timings: dict, joints, pose=evidence.pose_r2) -> Diagnosis:
+    """The `Diagnosis` from the loop's `rounds` (`_rounds`' result), the nominal models (their JSON entries, π and
+    held-out predictions by baseline), the data (training, held-out and measured held-out parts, the split, the
+    unseen trial's source trial or None), the nominal `model`, `forward_after(final, baseline)` (question 4's motion
+    error), the stages' timings so far and the joints' names: the named chain, its gain and the evidence."""
+    chain, current, candidates, dropped, history = rounds
+    nominal, nominal_pi, nominal_pred = nominals
+    train, test, raw_test, how, trial = data
+    dt = float(np.median(np.diff(train.t)))
+    rest_test = signals.rest_runs(test.dq)
     final = max(current.values(), key=lambda v: v.common)
     if chain:
         baseline = chain[0]["fitted"].baseline
@@ -503,15 +560,13 @@ def diagnose(
     before_pred = nominal_pred[baseline]
     named_cand = _with_joint_errors(final.cand) if chain else None
 
-    ev = {b: evidence.residual_evidence(test, p, dt) for b, p in nominal_pred.items()}
-    ev["forward_error_rad"] = {
-        "datasheet": evidence.forward_error(cands.NOMINAL, cands.NOMINAL.vector(ds_pi), test, dt),
-        "rigid_fit": evidence.forward_error(cands.NOMINAL, pi_rigid, test, dt),
-    }
-    ev["after"] = evidence.residual_evidence(test, after_pred, dt)
-    ev["forward_error_rad"]["after"] = _forward_after(final if chain else None, baseline, ds_pi, pi_rigid, test, dt)
-    ev["other_channels"] = evidence.channel_peaks(test if unseen is None else trial, dt)
+    ev = {b: evidence.residual_evidence(test, p, dt, pose) for b, p in nominal_pred.items()}
+    ev["forward_error_rad"] = {b: evidence.forward_error(model, pi, test, dt) for b, pi in nominal_pi.items()}
+    ev["after"] = evidence.residual_evidence(test, after_pred, dt, pose)
+    ev["forward_error_rad"]["after"] = forward_after(final if chain else None, baseline)
+    ev["other_channels"] = evidence.channel_peaks(test if trial is None else trial, dt)
     t_end = time.perf_counter()
+    t0, t_fit = timings.pop("t0"), timings["nominal"] + timings["candidates"]
     return Diagnosis(
         cause=cause,
         estimate=estimate,
@@ -531,10 +586,6 @@ def diagnose(
         nominal=nominal,
         test=test,
         predictions={"before": before_pred, "after": after_pred},
-        timings={
-            "nominal": t_nominal - t0,
-            "candidates": t_fit - t_nominal,
-            "evidence": t_end - t_fit,
-            "total": t_end - t0,
-        },
+        timings={**timings, "evidence": t_end - t0 - t_fit, "total": t_end - t0},
+        joints=list(joints),
     )

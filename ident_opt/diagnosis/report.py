@@ -26,8 +26,16 @@ def pair(xs, unit: str = "") -> str:
     return "[" + ", ".join(num(float(x)) for x in xs) + "]" + (f" {unit}" if unit else "")
 
 
+def joint(d: Diagnosis, j: int) -> str:
+    """Joint j (0-based) as the report names it: "joint 1" on the planar arm, its name (the URDF's) otherwise."""
+    names = d.joints or []
+    if j < len(names) and names[j] != f"joint{j + 1}":
+        return names[j]
+    return f"joint {j + 1}"
+
+
 def _gain(d: Diagnosis) -> str:
-    return "; ".join(f"joint {j + 1} {num(b)} → {num(a)}" for j, (b, a) in enumerate(zip(d.nmse_before, d.nmse_after)))
+    return "; ".join(f"{joint(d, j)} {num(b)} → {num(a)}" for j, (b, a) in enumerate(zip(d.nmse_before, d.nmse_after)))
 
 
 def cause_sentence(d: Diagnosis) -> str:
@@ -51,7 +59,7 @@ def chain_sentences(d: Diagnosis) -> list[str]:
         return []
     out, before, names = [], d.nmse_before, []
     for c in d.causes:
-        step = "; ".join(f"joint {j + 1} {num(b)} → {num(a)}" for j, (b, a) in enumerate(zip(before, c["nmse_after"])))
+        step = "; ".join(f"{joint(d, j)} {num(b)} → {num(a)}" for j, (b, a) in enumerate(zip(before, c["nmse_after"])))
         given = f"with {', '.join(names)} in the model, " if names else ""
         out.append(
             f"Round {c['round']}: {given}**{c['cause']}** clears the margin (score {c['score']:.1f}, fitted "
@@ -93,6 +101,12 @@ def polish_note(d: Diagnosis, key: str, unit: str) -> str:
     return f" (IPOPT polish of the grid search's {key}: {before} → {after}, {verdict})"
 
 
+def rigid_fit_sentence(d: Diagnosis) -> str:
+    """Which estimator gave the rigid fit and why (the recommended fit unless --estimator said otherwise)."""
+    rigid = d.nominal["rigid_fit"]
+    return f"the {rigid['estimator']} fit" + (f" ({rigid['why']})" if rigid.get("why") else "")
+
+
 def summary(d: Diagnosis) -> str:
     """The terminal summary: the four questions, briefly."""
     nom = d.nominal
@@ -124,13 +138,14 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
     import matplotlib.pyplot as plt
 
     t, tau = d.test.t, d.test.tau
+    n = tau.shape[1]
     before, after = tau - d.predictions["before"], tau - d.predictions["after"]
     label_after = "after" if d.cause != "none" else "after (no extension)"
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    fig, axes = plt.subplots(n, 1, figsize=(10, 6 if n == 2 else 1.8 * n + 1), sharex=True)
     for j, ax in enumerate(axes):
         ax.plot(t, before[:, j], lw=0.7, label=f"before ({d.baseline})")
         ax.plot(t, after[:, j], lw=0.7, label=f"{label_after} ({d.cause})", alpha=0.8)
-        ax.set_ylabel(f"joint {j + 1} residual [N m]")
+        ax.set_ylabel(f"{joint(d, j)} residual [N m]", fontsize=8 if n > 2 else None)
         ax.legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time [s] (held-out part)")
     fig.suptitle("Torque residual τ − τ̂ on held-out data")
@@ -140,7 +155,14 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
     plt.close(fig)
 
     dt = 1.0 / d.rate_hz
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    if n == 2:
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    else:
+        rows = -(-n // 2)
+        fig, grid = plt.subplots(rows, 2, figsize=(11, 3.2 * rows), squeeze=False)
+        axes = grid.ravel()[:n]
+        for spare in grid.ravel()[n:]:
+            spare.set_visible(False)
     for j, ax in enumerate(axes):
         for r, lab in ((before, "before"), (after, label_after)):
             f, p = signals.spectrum(r[:, j], dt)
@@ -150,7 +172,7 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
         for marker in (m for m in markers if m is not None):
             ax.axvline(marker, color="k", ls=":", lw=0.8, label=f"identified mode {marker:.3g} Hz")
         ax.set_xlabel("frequency [Hz]")
-        ax.set_ylabel(f"joint {j + 1} residual PSD [(N m)²/Hz]")
+        ax.set_ylabel(f"{joint(d, j)} residual PSD [(N m)²/Hz]", fontsize=8 if n > 2 else None)
         ax.legend(fontsize=8)
     fig.suptitle("Residual spectrum on held-out data")
     fig.tight_layout()
@@ -161,13 +183,13 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
 
 
 def _evidence_table(d: Diagnosis) -> list[str]:
-    rows = [
-        "| evidence (held-out) | datasheet j1 | datasheet j2 | rigid fit j1 | rigid fit j2 |",
-        "|---|---|---|---|---|",
-    ]
+    n = len(d.nmse_before)
+    short = {"datasheet": "datasheet", "rigid_fit": "rigid fit"}
+    heads = [f"{short[b]} {f'j{j + 1}' if n == 2 else joint(d, j)}" for b in short for j in range(n)]
+    rows = ["| evidence (held-out) | " + " | ".join(heads) + " |", "|---" * (len(heads) + 1) + "|"]
 
     def row(name, fn):
-        vals = [fn(d.evidence[b], j) for b in ("datasheet", "rigid_fit") for j in range(2)]
+        vals = [fn(d.evidence[b], j) for b in ("datasheet", "rigid_fit") for j in range(n)]
         rows.append(f"| {name} | " + " | ".join(vals) + " |")
 
     row("residual RMS [N m]", lambda e, j: num(e["rms"][j]))
@@ -198,7 +220,7 @@ def _evidence_table(d: Diagnosis) -> list[str]:
     fe = d.evidence["forward_error_rad"]
     rows.append(
         "| forward simulation, 0.5 s windows, RMS angle error [rad] | "
-        + " | ".join(num(fe[b][j]) for b in ("datasheet", "rigid_fit") for j in range(2))
+        + " | ".join(num(fe[b][j]) for b in ("datasheet", "rigid_fit") for j in range(n))
         + " |"
     )
     return rows
@@ -265,6 +287,7 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         f"Held-out nMSE (MSE ÷ variance) per joint: datasheet {pair(nom['datasheet']['nmse'])}, "
         "best rigid fit "
         f"{pair(nom['rigid_fit']['nmse'])}.",
+        *(["", f"The rigid fit: {rigid_fit_sentence(d)}."] if "estimator" in nom["rigid_fit"] else []),
         "",
         *_evidence_table(d),
         "",
@@ -278,7 +301,8 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "Every catalogue effect was fitted on the training part (with the datasheet's π held, and/or with π "
         "refitted) and scored on the held-out part against the same reference for all: score = (n/2) Σ_j "
         "ln(MSE_ref,j / MSE_cand,j) − (Δk/2) ln n, the reference being the current model with the datasheet's π "
-        "(first round: the datasheet) and Δk the parameters fitted beyond it (a refitted π counts all 10). A "
+        "(first round: the datasheet) and Δk the parameters fitted beyond it (a refitted π counts all "
+        f"{d.nominal['rigid_fit'].get('rank', 10)}). A "
         "cause is named when its score is positive and, on some joint, it removes at least 5 % of the held-out "
         "MSE of the same kind of fit without it and at least 0.01 % of the torque's variance; a cause holding "
         f"the datasheet's π must also explain {scoring.RECOVER:.0%} of what a refitted π gains over it"

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, signal
 
+from ident_opt.derivatives import lowpass
+
 #: The diagnosis's default torque filter cut-off [Hz] (`diagnosis.prepare`): the data loader's and the
 #: simulator's derivative cut-off, so both sides of τ = Y π share one bandwidth.
 TORQUE_FILTER_HZ = 15.0
@@ -43,6 +45,25 @@ def deflection_acceleration(ddq: np.ndarray, frequency_hz: float, damping: float
     den = np.array([K * K + 2 * damping * w * K + w * w, 2 * (w * w - K * K), K * K - 2 * damping * w * K + w * w])
     num = np.array([-K * K, 2 * K * K, -K * K])
     return signal.lfilter(num / den[0], den / den[0], ddq, axis=0)
+
+
+def deflection(drive: np.ndarray, frequency_hz: float, damping: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(e, ë) of a deflection driven as `deflection_acceleration`'s, ë + 2ζω ė + ω² e = −drive [rad/s²]: the
+    deflection itself [rad] too (its stiffness torque, a gravity load's shift), by the same pre-warped bilinear
+    transform, from the static deflection of the first drive (not from zero: a load there from the start, gravity,
+    would otherwise ring the mode for seconds at the start of every stretch of data)."""
+    fs = 1.0 / dt
+    w = 2.0 * fs * np.tan(np.pi * frequency_hz / fs)
+    K = 2.0 * fs
+    den = np.array([K * K + 2 * damping * w * K + w * w, 2 * (w * w - K * K), K * K - 2 * damping * w * K + w * w])
+    a = den / den[0]
+    out = []
+    for num in (-np.array([1.0, 2.0, 1.0]), np.array([-K * K, 2 * K * K, -K * K])):
+        b = num / den[0]
+        # at rest in the first drive: a load present from the start (gravity) is a static deflection, not a step
+        zi = signal.lfilter_zi(b, a) * drive[0]
+        out.append(signal.lfilter(b, a, drive, axis=0, zi=zi)[0])
+    return out[0], out[1]
 
 
 @dataclass
@@ -172,3 +193,33 @@ def demean_runs(x: np.ndarray, labels: np.ndarray) -> np.ndarray:
             flat[:, c] -= (np.bincount(lab, weights=flat[:, c]) / counts)[lab]
         out[rest, j] = flat.reshape(block.shape)
     return out
+
+
+#: Cut-offs [Hz] `matched_cutoff` tries, from this lowest one up to `MATCH_TOP` of the sampling rate.
+MATCH_LOWEST_HZ, MATCH_TOP, MATCH_GRID = 1.0, 0.45, 48
+#: A logged acceleration that the best Butterworth of the grid imitates worse than this (relative squared error)
+#: is not a low-passed second derivative of the angles at all (zeros, another signal): the torque is then left
+#: unfiltered. A Savitzky–Golay filter's side lobes leave up to 0.18 on a motion with lines in them (21 samples
+#: at 100 Hz, a line at 6.7 Hz); exact accelerations are imitated best by the grid's top (no filter either).
+MATCH_MISFIT = 0.5
+
+
+def matched_cutoff(t: np.ndarray, q: np.ndarray, ddq: np.ndarray) -> float | None:
+    """The cut-off [Hz] of the zero-phase Butterworth (`derivatives.lowpass`) that, applied to the angles' second
+    difference, best reproduces the logged accelerations `ddq`: the bandwidth of a logger's own derivative filter
+    (a Savitzky–Golay filter, say), which the torque must share for τ = Y π to compare like with like. None when
+    none imitates them (`MATCH_MISFIT`) or the best is the grid's top (the accelerations are not low-passed).
+
+    The second difference (q[k+1] − 2 q[k] + q[k−1]) / dt² passes (sin(ω dt/2) / (ω dt/2))² of the amplitude,
+    0.93 at 15 Hz in a 100 Hz log: close enough to 1 within the band that matters."""
+    dt = float(np.median(np.diff(t)))
+    second = np.zeros_like(q)
+    second[1:-1] = (q[2:] - 2 * q[1:-1] + q[:-2]) / dt**2
+    second[0], second[-1] = second[1], second[-2]
+    inner = slice(50, len(t) - 50)  # the filters' edges disagree whatever the bandwidth
+    grid = np.geomspace(MATCH_LOWEST_HZ, MATCH_TOP / dt, MATCH_GRID)
+    errors = [float(np.sum((lowpass(t, second, f) - ddq)[inner] ** 2)) for f in grid]
+    best = int(np.argmin(errors))
+    if best == len(grid) - 1 or errors[best] > MATCH_MISFIT * float(np.sum(ddq[inner] ** 2)):
+        return None
+    return float(grid[best])

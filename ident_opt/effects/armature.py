@@ -7,15 +7,18 @@ J2·ddq2 on joint 2's (the a1 and ia2 directions), J ≥ 0, against the datashee
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, np, report
+from ident_opt.effects.base import Effect, Key, afit, arm_values, np, report
 from ident_opt.parameters import Parameter
+
+#: An n-joint arm's default extra inertia, as a share of each joint's nominal diagonal inertia.
+ARM_SHARE = 0.3
 
 
 class Armature(Effect):
     summary = "extra reflected rotor inertia on the diagonal of M, beyond the datasheet's"
     order = 1
     keys = {  # noqa: RUF012
-        "inertia": Key("pair", (0.25, 0.025), "kg m^2, joint side, per joint", magnitude=True),
+        "inertia": Key("pair", (0.25, 0.025), "kg m^2, joint side, per joint", magnitude=True, maximum=1e3),
     }
 
     # ------------------------------------------------------------------ model: ia2 on M22
@@ -36,6 +39,33 @@ class Armature(Effect):
 
     def true_physical(self, physical: dict, p: dict) -> None:
         physical["armature"] = [a + J for a, J in zip(physical["armature"], p["inertia"])]
+
+    # ------------------------------------------------------------------ any arm: J on the diagonal of M
+    def arm_default(self, key: str, joints) -> object:
+        """An n-joint arm: a third of each joint's nominal diagonal inertia (`ArmScale.inertia`)."""
+        return tuple(ARM_SHARE * J for J in joints.scale.inertia)
+
+    def arm_plant(self, plant, p: dict) -> None:
+        plant.inertia = plant.inertia + np.asarray(p["inertia"])
+
+    def arm_families(self, robot, ctx) -> list:
+        """J_j ddq_j on joint j's row, J ≥ 0, on the joints where it is resolved, against the datasheet."""
+        return [
+            afit.ArmFamily(
+                self.name,
+                extra=_arm_columns,
+                baselines=("datasheet",),
+                nonnegative=("j",),
+                estimate=lambda p, se, ctx: (
+                    {"inertia": afit.per_joint(p, "j", ctx.n)},
+                    {"se": afit.per_joint(se, "j", ctx.n)},
+                ),
+                screen=lambda p, se, ctx: afit.resolved_joints(p, se, ("j",), ctx.n),
+            )
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        return {"inertia": arm_values(joints.n, chosen, 0.0, lambda j: rng.uniform(0.2, 0.5) * joints.scale.inertia[j])}
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("inertia",)
@@ -71,6 +101,11 @@ def _columns(ds, theta: dict, dt: float, ctx) -> tuple[np.ndarray, list[str]]:
 
 def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
     return {"inertia": [p["j1"], p["j2"]]}, {"se": [se["j1"], se["j2"]]}
+
+
+def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
+    """J_j ddq_j on joint j's row, for the joints θ selects (an n-joint arm)."""
+    return afit.per_joint_columns(ds.ddq, afit.selected(theta, "armature", ctx.n), "j")
 
 
 EFFECT = Armature()

@@ -8,11 +8,14 @@ friction. Diagnosis: the extension's four levels fitted, against both nominal mo
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, ca, cands, datasheet, np, report, robot_model
+from ident_opt.effects.base import Effect, Key, afit, ca, cands, datasheet, np, report, robot_model
 from ident_opt.parameters import Parameter
 
 #: Least direction difference |fc+ − fc−|, relative to the joint's mean level, that makes friction asymmetric.
 ASYMMETRY = 0.1
+#: An n-joint arm's default: levels ±40 % about the mean, which is 2 % of the joint's reference torque where the
+#: datasheet gives no Coulomb friction.
+ARM_SPLIT, ARM_LEVEL = 0.4, 0.02
 
 
 def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
@@ -24,8 +27,8 @@ class AsymmetricCoulomb(Effect):
     summary = "Coulomb friction that differs by direction (replaces the datasheet mean)"
     order = 2
     keys = {  # noqa: RUF012
-        "positive": Key("pair", None, "N m, level for dq > 0 (default: the datasheet's, x gear ratio)"),
-        "negative": Key("pair", None, "N m, level for dq < 0 (default: the datasheet's, x gear ratio)"),
+        "positive": Key("pair", None, "N m, level for dq > 0 (default: the datasheet's, x gear ratio)", maximum=1e4),
+        "negative": Key("pair", None, "N m, level for dq < 0 (default: the datasheet's, x gear ratio)", maximum=1e4),
     }
 
     def default(self, key: str, coulomb: tuple[tuple, tuple]) -> object:
@@ -36,6 +39,16 @@ class AsymmetricCoulomb(Effect):
         p["positive"] = tuple(m + s * (v - m) for m, v in zip(mean, p["positive"]))
         p["negative"] = tuple(m + s * (v - m) for m, v in zip(mean, p["negative"]))
         return p
+
+    def untouched(self, key: str, joint: int, joints) -> float:
+        return _mean(joints)[joint]
+
+    def arm_default(self, key: str, joints) -> object:
+        """An n-joint arm: ±`ARM_SPLIT` about the datasheet's mean level, or about `ARM_LEVEL` × the joint's
+        reference torque where the datasheet has none."""
+        sign = 1.0 if key == "positive" else -1.0
+        levels = [m if m > 0 else ARM_LEVEL * T for m, T in zip(_mean(joints), joints.scale.torque)]
+        return tuple(m * (1 + sign * ARM_SPLIT) for m in levels)
 
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
         mean = _mean(coulomb)
@@ -75,6 +88,35 @@ class AsymmetricCoulomb(Effect):
         physical["fc_positive"], physical["fc_negative"] = list(p["positive"]), list(p["negative"])
         physical["fc"] = [0.5 * (a + b) for a, b in zip(p["positive"], p["negative"])]
 
+    def arm_plant(self, plant, p: dict) -> None:
+        plant.positive, plant.negative = np.array(p["positive"]), np.array(p["negative"])
+
+    def arm_families(self, robot, ctx) -> list:
+        """A Coulomb level per direction on the joints where they differ: against the datasheet, the levels
+        fc+ [dq_j > 0] − fc− [dq_j < 0] replace the datasheet's; against the rigid fit, a_j [dq_j ≠ 0] beside the
+        refitted symmetric level (fc± = fc ± a; beside torque offsets a constant while moving is theirs, and the
+        rigid fit cannot tell the asymmetry)."""
+        return [
+            afit.ArmFamily(
+                self.name,
+                extra=_arm_columns,
+                removed=_arm_removed,
+                estimate=_arm_estimate,
+                screen=_arm_screen,
+            )
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        """On each chosen joint a split of ±30..60 % about its mean level (the datasheet's, or 1.5–3 % of its
+        reference torque where the datasheet has none); the datasheet's mean level elsewhere."""
+        mean = _mean(joints)
+        level = {j: mean[j] if mean[j] > 0 else rng.uniform(0.015, 0.03) * joints.scale.torque[j] for j in chosen}
+        split = {j: rng.uniform(0.3, 0.6) * rng.choice([-1.0, 1.0]) for j in chosen}
+        return {
+            key: tuple(level[j] * (1 + sign * split[j]) if j in chosen else mean[j] for j in range(joints.n))
+            for key, sign in (("positive", 1.0), ("negative", -1.0))
+        }
+
     # ------------------------------------------------------------------ diagnosis
     judged = ("positive", "negative")
     resolution = (
@@ -103,7 +145,9 @@ class AsymmetricCoulomb(Effect):
         return (
             f"The residual of the {base} model differs by direction of motion (mean while moving "
             f"positive / negative: "
-            + ", ".join(f"joint {j + 1} {num(m['positive'])} / {num(m['negative'])} N m" for j, m in enumerate(mm))
+            + ", ".join(
+                f"{report.joint(d, j)} {num(m['positive'])} / {num(m['negative'])} N m" for j, m in enumerate(mm)
+            )
             + f"): Coulomb friction is asymmetric, fc+ = {pair(e['positive'], 'N m')}, "
             f"fc− = {pair(e['negative'], 'N m')}; {gain}"
         )
@@ -116,6 +160,60 @@ class AsymmetricCoulomb(Effect):
             pos.append(fc * (1 + a))
             neg.append(fc * (1 - a))
         return {"positive": tuple(pos), "negative": tuple(neg)}
+
+
+def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
+    """Against the datasheet: [dq_j > 0] and −[dq_j < 0] (levels fp_j, fn_j); against the rigid fit: [dq_j ≠ 0]
+    (a_j), on the joints θ selects."""
+    joints = afit.selected(theta, "asymmetric_coulomb", ctx.n)
+    if baseline == "datasheet":
+        up, _ = afit.per_joint_columns((ds.dq > 0).astype(float), joints, "fp")
+        down, _ = afit.per_joint_columns(-(ds.dq < 0).astype(float), joints, "fn")
+        names = [f"{k}{j + 1}" for j in joints for k in ("fp", "fn")]
+        X = np.stack([up, down], axis=3).reshape(ds.n, ctx.n, 2 * len(joints))
+        return X, names
+    return afit.per_joint_columns((ds.dq != 0).astype(float), joints, "a")
+
+
+def _arm_removed(theta: dict, ctx) -> list[int]:
+    """The datasheet's Coulomb parameters of the joints θ selects (their levels per direction replace them)."""
+    terms = ctx.coulomb_terms()
+    return [i for j in afit.selected(theta, "asymmetric_coulomb", ctx.n) for i in terms[j]]
+
+
+def _coulomb(p: dict, ctx, j: int) -> float:
+    """Joint j's symmetric Coulomb level [N m]: the refitted π's where the fit has it, else the datasheet's."""
+    terms, names = ctx.coulomb_terms()[j], ctx.arm.names
+    return sum(float(p.get(names[i], ctx.datasheet[i])) for i in terms)
+
+
+def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+    """fc+ and fc− per joint: the fitted levels, fc ± a beside a refitted level, the symmetric level elsewhere."""
+    positive, negative = [], []
+    for j in range(ctx.n):
+        k = str(j + 1)
+        if "fp" + k in p:
+            positive.append(float(p["fp" + k]))
+            negative.append(float(p["fn" + k]))
+        else:
+            fc, a = _coulomb(p, ctx, j), float(p.get("a" + k, 0.0))
+            positive.append(fc + a)
+            negative.append(fc - a)
+    return {"positive": positive, "negative": negative}, {}
+
+
+def _arm_screen(p: dict, se: dict, ctx) -> list[int]:
+    """The joints whose levels differ by direction by more than `afit.RESOLVED` standard errors."""
+    out = []
+    for j in range(ctx.n):
+        k = str(j + 1)
+        if "fp" + k in p:
+            diff, err = p["fp" + k] - p["fn" + k], np.hypot(se["fp" + k], se["fn" + k])
+        else:
+            diff, err = p.get("a" + k, 0.0), se.get("a" + k, np.inf)
+        if abs(diff) > afit.RESOLVED * err:
+            out.append(j)
+    return out
 
 
 def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:

@@ -60,6 +60,7 @@ DEFERRED = {
     "ca": "casadi",
     "cands": "ident_opt.diagnosis.candidates",
     "datasheet": "ident_opt.arm.datasheet",
+    "afit": "ident_opt.diagnosis.arm_fit",
     "elastic_nlp": "ident_opt.diagnosis.elastic_nlp",
     "flexible_link": "ident_opt.simulate.flexible_link",
     "linear": "ident_opt.diagnosis.linear",
@@ -100,7 +101,8 @@ def edge_rule(what: str, bounds: tuple[float, float], unit: str, reason: str) ->
 
 @dataclass(frozen=True)
 class Key:
-    """One key of an effect: its kind ("pair", "float", "joint", "choice"), default, meaning and lower bound.
+    """One key of an effect: its kind ("pair": one value per joint, "float", "vector": x, y, z, "joint", "joints",
+    "choice"), default, meaning and bounds.
 
     `magnitude`: the key carries the effect's size, so ``scale`` multiplies it (see `Effect.scaled`)."""
 
@@ -111,9 +113,70 @@ class Key:
     strict: bool = False  # minimum excluded
     choices: tuple[str, ...] = ()  # for kind "choice"
     magnitude: bool = False
+    maximum: float | None = None  # the largest value the simulator accepts (bounds its work and its numbers)
 
 
-_SCALE = Key("float", 1.0, "multiplies the effect's magnitude; 0 gives the clean trial")
+_SCALE = Key("float", 1.0, "multiplies the effect's magnitude; 0 gives the clean trial", maximum=1e3)
+#: The joint selector of a per-joint effect: which joints it touches (1-based indices or the joints' names); the
+#: others are untouched, and a per-joint key may then be one number for each selected joint.
+SELECT = Key("joints", None, "the joint(s) it touches: 1-based index or name, or a list [2,5]; the others untouched")
+
+
+@dataclass(frozen=True)
+class ArmScale:
+    """Reference magnitudes of an n-joint arm (tuples: one per joint): what its effects' defaults and hidden draws
+    are relative to, so one rule serves a 1 kg and a 30 kg arm (`simulate.arm_plant.arm_scale`)."""
+
+    torque: tuple[float, ...]  # N m: each joint's effort limit, else its nominal torque's 95th percentile in motion
+    inertia: tuple[float, ...]  # kg m²: the nominal diagonal inertia at the centre of the joint ranges
+    speed: tuple[float, ...]  # rad/s: the speed the reference motions cruise at
+    mass: float  # kg: the moving links' total
+    reach: float  # m: base to last joint, along the chain
+
+
+class Joints(tuple):
+    """The arm's joints as the effect syntax sees them. A pair, as the hooks have always read it: the datasheet's
+    per-direction Coulomb levels (positive, negative) [N m, joint side], one per joint; plus the joints' `names`
+    and, from the n-joint simulator, `scale`: reference magnitudes the defaults of an n-joint arm are relative to
+    (`ArmScale`), None for the planar two-link arm (its defaults are the table's, in absolute units)."""
+
+    names: tuple[str, ...]
+    scale: object
+
+    def __new__(cls, positive, negative, names=None, scale=None):
+        self = super().__new__(cls, (tuple(positive), tuple(negative)))
+        n = len(self[0])
+        self.names = tuple(names) if names is not None else tuple(f"joint{j + 1}" for j in range(n))
+        self.scale = scale
+        return self
+
+    @property
+    def n(self) -> int:
+        """The number of joints."""
+        return len(self[0])
+
+    def position(self, value: object, where: str, effect: str, key: str = "joint") -> int:
+        """The 0-based index of a joint given as a 1-based number or by name; `InputError` naming the arm's."""
+        if isinstance(value, str) and value.strip() in self.names:
+            return self.names.index(value.strip())
+        try:
+            j = int(value) if not isinstance(value, bool) and float(value) == int(float(value)) else 0
+        except (TypeError, ValueError):
+            j = 0
+        if 1 <= j <= self.n:
+            return j - 1
+        if self.n == 2 and self.names == ("joint1", "joint2"):
+            raise InputError(f"effect {where!r}: key {key!r} of {effect} must be 1 or 2, got {value!r}")
+        shown = ", ".join(self.names[:8]) + (", …" if self.n > 8 else "")
+        raise InputError(
+            f"effect {where!r}: key {key!r} of {effect} names joint {value!r}, which the arm does not have: give "
+            f"1 to {self.n} or a joint's name ({shown})"
+        )
+
+
+def as_joints(coulomb) -> Joints:
+    """`coulomb` as `Joints` (a plain (positive, negative) pair becomes one, joints named joint1, joint2, …)."""
+    return coulomb if isinstance(coulomb, Joints) else Joints(coulomb[0], coulomb[1])
 
 
 class Effect:
@@ -137,13 +200,22 @@ class Effect:
             cls.name = cls.__module__.rpartition(".")[2]
 
     # ------------------------------------------------------------------ syntax
+    @property
+    def per_joint(self) -> bool:
+        """Whether the effect has per-joint keys (it then takes the `joint` selector, `SELECT`)."""
+        return any(spec.kind == "pair" for spec in self.keys.values())
+
     def key(self, key: str, where: str) -> Key:
-        """The `Key` of `key` (``scale`` included); `InputError` for an unknown one."""
+        """The `Key` of `key` (``scale`` and a per-joint effect's ``joint`` included); `InputError` for an unknown
+        one."""
         if key == "scale":
             return _SCALE
+        if key == "joint" and key not in self.keys and self.per_joint:
+            return SELECT
         if key not in self.keys:
+            extra = ", joint" if self.per_joint and "joint" not in self.keys else ""
             raise InputError(
-                f"effect {where!r}: unknown key {key!r} for {self.name}; known: {', '.join(self.keys)}, scale"
+                f"effect {where!r}: unknown key {key!r} for {self.name}; known: {', '.join(self.keys)}{extra}, scale"
             )
         return self.keys[key]
 
@@ -164,28 +236,40 @@ class Effect:
 
     def _parse_value(self, text: str, key: str, value: str) -> object:
         spec = self.key(key, text)
+        bracketed = value[1:-1] if value.startswith("[") and value.endswith("]") else None
         try:
-            if spec.kind == "pair":
-                inner = value[1:-1] if value.startswith("[") and value.endswith("]") else None
-                if inner is None:
+            if spec.kind in ("pair", "vector"):
+                if bracketed is None:
+                    if spec.kind == "pair":  # one number: every joint, or each joint `joint` selects
+                        return float(value)
                     raise ValueError
-                return tuple(float(v) for v in inner.split(","))
+                return tuple(float(v) for v in bracketed.split(","))
+            if spec.kind == "joints":
+                items = bracketed.split(",") if bracketed is not None else [value]
+                return tuple(_joint_word(v) for v in items)
             if spec.kind == "joint":
-                return int(value)
+                return _joint_word(value)
             if spec.kind == "choice":
                 return value
             return float(value)
         except ValueError:
-            shape = "[v1,v2]" if spec.kind == "pair" else ("1 or 2" if spec.kind == "joint" else "a number")
-            raise InputError(f"effect {text!r}: key {key!r} of {self.name} must be {shape}, got {value!r}") from None
+            shape = {"pair": "[v1,v2]", "vector": "[x,y,z]", "joint": "1 or 2", "joints": "a joint or a list"}
+            raise InputError(
+                f"effect {text!r}: key {key!r} of {self.name} must be {shape.get(spec.kind, 'a number')}, got {value!r}"
+            ) from None
 
-    def check(self, key: str, value: object, where: str) -> object:
-        """Validate one value against its key; returns it in canonical form (tuple of 2 floats, float, int)."""
+    def check(self, key: str, value: object, where: str, joints: Joints | None = None) -> object:
+        """Validate one value against its key; returns it in canonical form (a tuple of one float per joint, a
+        float, a 1-based joint index). `joints`: the arm's (default: a two-link arm's)."""
+        joints = joints or as_joints(((0.0, 0.0), (0.0, 0.0)))
         spec = self.key(key, where)
         if spec.kind == "joint":
-            if isinstance(value, bool) or value not in (1, 2):
-                raise InputError(f"effect {where!r}: key 'joint' of {self.name} must be 1 or 2, got {value!r}")
-            return int(value)
+            return joints.position(value, where, self.name) + 1
+        if spec.kind == "joints":
+            picked = [joints.position(v, where, self.name) for v in (value if isinstance(value, tuple) else (value,))]
+            if len(set(picked)) != len(picked):
+                raise InputError(f"effect {where!r}: key 'joint' of {self.name} names a joint twice")
+            return tuple(sorted(picked))
         if spec.kind == "choice":
             if value not in spec.choices:
                 raise InputError(
@@ -193,9 +277,12 @@ class Effect:
                     f"got {value!r}"
                 )
             return value
-        values = value if spec.kind == "pair" else (value,)
-        if isinstance(values, str) or not isinstance(values, Sequence) or (spec.kind == "pair" and len(values) != 2):
-            raise InputError(f"effect {where!r}: key {key!r} of {self.name} must be a pair [v1,v2], got {value!r}")
+        size = {"pair": joints.n, "vector": 3}.get(spec.kind)
+        values = value if size else (value,)
+        if isinstance(values, str) or not isinstance(values, Sequence) or (size and len(values) != size):
+            raise InputError(
+                f"effect {where!r}: key {key!r} of {self.name} must be {_shape(spec, joints)}, got {value!r}"
+            )
         return self._numbers(key, spec, values, where)
 
     def _numbers(self, key: str, spec: Key, values: Sequence, where: str) -> object:
@@ -203,31 +290,84 @@ class Effect:
         for v in values:
             if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
                 raise InputError(f"effect {where!r}: key {key!r} of {self.name} must be a finite number, got {v!r}")
-            low = spec.minimum
+            low, high = spec.minimum, spec.maximum
             if low is not None and (v < low or (spec.strict and v == low)):
                 bound = f"> {low:g}" if spec.strict else f">= {low:g}"
                 raise InputError(f"effect {where!r}: key {key!r} of {self.name} must be {bound}, got {v!r}")
+            if high is not None and abs(v) > high:
+                raise InputError(
+                    f"effect {where!r}: key {key!r} of {self.name} must be at most {high:g} in size (the simulator's "
+                    f"bound), got {v!r}"
+                )
             out.append(float(v))
-        return tuple(out) if spec.kind == "pair" else out[0]
+        return tuple(out) if spec.kind in ("pair", "vector") else out[0]
 
     def complete(self, params: dict, where: str, coulomb: tuple[tuple, tuple]) -> dict:
-        """`params` checked, with defaults for the keys omitted and ``scale`` applied."""
-        full = {k: self.check(k, v, where) for k, v in params.items()}
-        for key in self.keys:
-            if key not in full:
-                full[key] = self.default(key, coulomb)
+        """`params` checked, with defaults for the keys omitted and ``scale`` applied (`checked`)."""
+        full = self.checked(params, where, coulomb)
         scale = full.pop("scale", 1.0)
         return self.scaled(full, scale, coulomb)
 
+    def checked(self, params: dict, where: str, coulomb: tuple[tuple, tuple]) -> dict:
+        """`params` checked, with defaults for the keys omitted. A per-joint key given as one number applies to
+        every joint, or to each joint the ``joint`` selector names (the others untouched, `untouched`)."""
+        joints = as_joints(coulomb)
+        params = dict(params)
+        selected = None
+        if "joint" in params and "joint" not in self.keys and self.per_joint:
+            selected = self.check("joint", params.pop("joint"), where, joints)
+        full = {k: self.check(k, self._spread(k, v, selected, joints, where), where, joints) for k, v in params.items()}
+        for key in self.keys:
+            if key not in full:
+                full[key] = self.default(key, joints) if joints.scale is None else self.arm_default(key, joints)
+        return full if selected is None else self._untouched(full, selected, joints)
+
+    def _spread(self, key: str, value: object, selected: tuple[int, ...] | None, joints: Joints, where: str) -> object:
+        """A per-joint key's value as one per joint: one number for every (selected) joint, or one per selected
+        joint when `joint` selects some (the others untouched, `untouched`)."""
+        spec = self.key(key, where)
+        if spec.kind != "pair" or (selected is None and not isinstance(value, float)):
+            return value
+        if selected is None:
+            return (value,) * joints.n
+        given = (value,) * len(selected) if isinstance(value, float) else value
+        if isinstance(given, tuple) and len(given) == len(selected) and len(selected) != joints.n:
+            out = [self.untouched(key, j, joints) for j in range(joints.n)]
+            for j, v in zip(selected, given):
+                out[j] = v
+            return tuple(out)
+        return given
+
+    def _untouched(self, full: dict, selected: tuple[int, ...], joints: Joints) -> dict:
+        """`full` with every per-joint key at its untouched value on the joints the selector leaves out."""
+        for key, spec in self.keys.items():
+            if spec.kind == "pair":
+                full[key] = tuple(
+                    v if j in selected else self.untouched(key, j, joints) for j, v in enumerate(full[key])
+                )
+        return full
+
+    def untouched(self, key: str, joint: int, joints: Joints) -> float:
+        """The value of per-joint key `key` on a joint the effect leaves alone (0-based `joint`): 0 by default."""
+        return 0.0
+
     def default(self, key: str, coulomb: tuple[tuple, tuple]) -> object:
-        """The value of an omitted key."""
+        """The value of an omitted key (the planar two-link arm's, in absolute units)."""
         return self.keys[key].default
+
+    def arm_default(self, key: str, joints: Joints) -> object:
+        """The value of an omitted key on an n-joint arm (`joints.scale` holds its reference magnitudes): by
+        default the planar one, a per-joint key's repeated over the joints (its first joint's value)."""
+        value = self.default(key, joints)
+        if self.keys[key].kind == "pair" and isinstance(value, tuple):
+            return (value[0],) * joints.n
+        return value
 
     def scaled(self, p: dict, s: float, coulomb: tuple[tuple, tuple]) -> dict:
         """Multiply the effect's magnitude (its `magnitude` keys) by `s`."""
         for key, spec in self.keys.items():
             if spec.magnitude:
-                p[key] = tuple(s * x for x in p[key]) if spec.kind == "pair" else p[key] * s
+                p[key] = tuple(s * x for x in p[key]) if spec.kind in ("pair", "vector") else p[key] * s
         return p
 
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
@@ -239,7 +379,9 @@ class Effect:
         """Lines for `--help`: the effect, then each key with its default and meaning."""
         lines = [f"  {self.name}: {self.summary}"]
         for key, spec in self.keys.items():
-            default = "datasheet" if spec.default is None else _show(spec.default)
+            default = (
+                ("per arm" if spec.kind == "vector" else "datasheet") if spec.default is None else _show(spec.default)
+            )
             lines.append(f"      {key}={default}  ({spec.doc})")
         return lines
 
@@ -283,6 +425,20 @@ class Effect:
     def true_physical(self, physical: dict, p: dict) -> None:
         """Change the truth file's rigid-body description of the true plant, in place."""
 
+    # ------------------------------------------------------------------ simulator truth, any arm (`simulate.arm_plant`)
+    def arm_plant(self, plant, p: dict) -> None:
+        """Change the true plant of an n-joint arm (`simulate.arm_plant.ArmPlant`: π, extra inertia, friction
+        terms, encoder offsets, the logged torque channel), in place."""
+
+    def arm_mechanism(self, plant, p: dict) -> tuple[int, float, float] | None:
+        """An elastic joint that replaces the rigid one: (0-based joint, natural frequency [Hz], damping ratio),
+        or None."""
+        return None
+
+    def arm_truth(self, plant, p: dict) -> dict:
+        """The effect in an n-joint trial's truth file, in the diagnosis's estimate keys."""
+        return dict(p)
+
     # ------------------------------------------------------------------ diagnosis
     #: (rule, reason) when `resolved` can refuse an estimate: the rule goes into the reports.
     resolution: tuple[str, str] | None = None
@@ -321,6 +477,32 @@ class Effect:
     def draw(self, rng, robot) -> dict:
         """Keys for `simulate_trial(effects={name: keys})`, drawn from a realistic range."""
         return {}
+
+    # ------------------------------------------------------------------ any arm: diagnosis and hidden trials
+    def arm_families(self, robot, ctx) -> list:
+        """The candidate families (`diagnosis.arm_fit.ArmFamily`) of this cause on an n-joint arm (`ctx`: its
+        `ArmContext`, with the evidence per joint)."""
+        return []
+
+    def arm_draw(self, rng, joints: Joints, chosen: tuple[int, ...]) -> dict:
+        """Keys of a hidden instance on an n-joint arm (`joints.scale` its reference magnitudes), on the 0-based
+        joints `chosen` where the cause is per joint."""
+        return {}
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        """(within tolerance, relative error) per judged number on an n-joint arm: the planar rule (`judge`), with a
+        joint whose true value is 0 (untouched) judged relative to the largest true value of the same key."""
+        checks = []
+        for key in self.judged:
+            e, t = (
+                np.atleast_1d(np.asarray(estimate[key], dtype=float)),
+                np.atleast_1d(np.asarray(truth[key], dtype=float)),
+            )
+            largest = float(np.max(np.abs(t))) or 1.0
+            for ej, tj in zip(e, t):
+                rel = abs(ej - tj) / (abs(tj) if tj != 0 else largest)
+                checks.append((rel <= MAGNITUDE_TOL, rel))
+        return checks
 
     def judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         """(within tolerance, relative error) per judged number; by default `MAGNITUDE_TOL` relative."""
@@ -378,6 +560,11 @@ def discover(package: str, path: Sequence[str], skip: tuple[str, ...] = ()) -> d
     return {e.name: e for e in sorted(found, key=lambda e: e.order)}
 
 
+def arm_values(n: int, chosen: tuple[int, ...], untouched: float, draw) -> tuple[float, ...]:
+    """A hidden per-joint value on an n-joint arm: `draw(j)` on the 0-based joints `chosen`, `untouched` elsewhere."""
+    return tuple(float(draw(j)) if j in chosen else untouched for j in range(n))
+
+
 def per_joint_draw(rng, untouched: float, draw) -> tuple[float, float]:
     """A hidden per-joint value: joint 1, joint 2 or both (equally likely) take `draw()`, the others `untouched`."""
     values = [untouched, untouched]
@@ -389,6 +576,28 @@ def per_joint_draw(rng, untouched: float, draw) -> tuple[float, float]:
 def relative_error(estimate: float, true: float) -> float:
     """|estimate − true| / |true| (|estimate| when true is 0)."""
     return abs(estimate - true) / abs(true) if true != 0 else abs(estimate)
+
+
+def _joint_word(value: str) -> int | str:
+    """A joint as written: a 1-based index, or a name."""
+    value = value.strip()
+    if not value:
+        raise ValueError
+    try:
+        return int(value)
+    except ValueError:
+        return value
+
+
+def _shape(spec: Key, joints: Joints) -> str:
+    """What a value of `spec` must look like on this arm, in words."""
+    if spec.kind == "vector":
+        return "a vector [x,y,z]"
+    if spec.kind != "pair":
+        return "a number"
+    if joints.n == 2:
+        return "a pair [v1,v2]"
+    return f"one number or a list of {joints.n} (one per joint: {', '.join(joints.names[:3])}, …)"
 
 
 def _show(value: object) -> str:

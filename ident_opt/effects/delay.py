@@ -17,22 +17,45 @@ from __future__ import annotations
 
 from functools import partial
 
-from ident_opt.effects.base import Effect, Key, linear, np, relative_error, report, signals
+from ident_opt.effects.base import Effect, Key, afit, linear, np, relative_error, report, signals
 
 #: Shortest delay [s] that counts as a cause (the tolerance on hidden delays is 2 ms, too).
 MIN_DELAY_S = 0.002
 #: A hidden delay is found when the estimate is within this [s] or this relative error.
 DELAY_TOL = (0.002, 0.20)
+#: Longest delay the simulator accepts [s].
+MAX_DELAY_S = 10.0
 
 
 class Delay(Effect):
     summary = "the torque (or current) channel lags the encoder channel"
     order = 6
-    keys = {"seconds": Key("float", 0.02, "s", magnitude=True)}  # noqa: RUF012
+    keys = {"seconds": Key("float", 0.02, "s", magnitude=True, maximum=MAX_DELAY_S)}  # noqa: RUF012
 
     # ------------------------------------------------------------------ simulator: the logged torque lags
     def true_plant(self, plant, p: dict) -> None:
         plant.channel.append(partial(delayed, p["seconds"]))
+
+    def arm_plant(self, plant, p: dict) -> None:
+        self.true_plant(plant, p)
+
+    def arm_families(self, robot, ctx) -> list:
+        """The whole prediction delayed by d, searched in 0–0.15 s (the measured torque read back by d while fitting,
+        so that π refitted is one projection), against both nominal models."""
+        return [
+            afit.ArmFamily(
+                self.name,
+                delay=lambda theta: theta["delay"],
+                axes=lambda rate, theta: [linear.Axis("delay", 0.0, 0.15, 31)],
+                estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {}),
+            )
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        return self.draw(rng, None)
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        return self.judge(estimate, truth)
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("seconds",)
@@ -75,9 +98,9 @@ def _delayed_prediction(offset, X, names: list[str], theta: dict, step: float) -
 
 
 def delayed(seconds: float, t: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """τ (N, 2) at the ticks t [s] as a channel lagging by `seconds` logs it: what is logged at t was applied
+    """τ (N, n) at the ticks t [s] as a channel lagging by `seconds` logs it: what is logged at t was applied
     at t − d (linear interpolation; held at the start before that)."""
-    return np.column_stack([np.interp(t - seconds, t, tau[:, j]) for j in range(2)])
+    return np.column_stack([np.interp(t - seconds, t, tau[:, j]) for j in range(tau.shape[1])])
 
 
 EFFECT = Delay()

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from ident_opt.effects.base import (
     Effect,
     Key,
+    afit,
     ca,
     edge_rule,
     elastic_nlp,
@@ -39,6 +40,7 @@ from ident_opt.effects.base import (
     signals,
     sim,
 )
+from ident_opt.errors import InputError
 
 #: Joint-2 angles [rad] the trajectories reach: |q2| ≤ 1.4 rad (the band of the mode over the workspace).
 Q2_RANGE = (0.0, 1.4)
@@ -48,6 +50,9 @@ Q2_RANGE = (0.0, 1.4)
 ELASTIC_BAND_HZ = (1.5, 12.0)
 #: Relative tolerance on a hidden mode's frequency.
 FREQUENCY_TOL = 0.20
+#: Highest mode the simulator accepts [Hz]: a stiffer spring is a rigid joint at any control rate it runs at
+#: (and its RK4 steps would grow without bound; `arm_loop.MAX_SUBSTEPS` bounds them too).
+MAX_FREQUENCY_HZ = 500.0
 
 
 @dataclass(frozen=True)
@@ -78,6 +83,15 @@ class Elastic:
         """The fastest closed-loop rate [1/s] the mode adds under PD damping gains kd [N m s/rad]."""
         return [self.fastest_rate + kd[self.index] / self.B]
 
+    def spring(self, e, de):
+        """The joint's spring and damper torque [N m] at deflection e = θ − q_j [rad] and its rate [rad/s] (linear
+        here; `simulate.unseen.NonlinearJoint` shapes it)."""
+        return self.k * e + self.d * de
+
+    def static_deflection(self, torque: float) -> float:
+        """The deflection [rad] at which the spring holds `torque` [N m] at rest."""
+        return torque / self.k
+
     def plant(self, truth) -> ca.Function:
         """(x, τ) -> (ẋ, y) as `simulate.truth.plant`, y's deflection θ − q_j (joint) or φ (link)."""
         x, tau = ca.SX.sym("x", self.state_size), ca.SX.sym("tau", 2)
@@ -88,7 +102,7 @@ class Elastic:
         q, theta, dq, dtheta = x[:2], x[2], x[3:5], x[5]
         link = pi - sim.friction_only(model, pi, j)  # the link side: no friction and no motor inertia at j
         link[model.names.index("a1" if j == 0 else "ia2")] -= self.B
-        spring = self.k * (theta - q[j]) + self.d * (dtheta - dq[j])
+        spring = self.spring(theta - q[j], dtheta - dq[j])
         v = ca.vertcat(dtheta, 0) if j == 0 else ca.vertcat(0, dtheta)
         motor_friction = model.tau_expression(q, v, ca.DM.zeros(2), ca.DM(sim.friction_only(model, pi, j)))[j]
         other = 1 - j
@@ -148,7 +162,7 @@ class Elastic:
         gravity = sim.TRUTH_MODEL.function("G")
         link_pi = sim.TRUTH_MODEL.vector(truth.pi_rigid)
         for _ in range(20):  # fixed point of k (θ − q_j) = G_j(q): the spring holds the link against gravity
-            q[self.index] = theta - float(gravity(q, [0, 0], [0, 0], link_pi)[self.index]) / self.k
+            q[self.index] = theta - self.static_deflection(float(gravity(q, [0, 0], [0, 0], link_pi)[self.index]))
         return np.concatenate([q, [theta], [0.0, 0.0, 0.0]])
 
 
@@ -186,9 +200,11 @@ class Elasticity(Effect):
     summary = "a lightly damped mode: an elastic joint (two-mass, motor angle logged) or a flexible link"
     order = 4
     keys = {  # noqa: RUF012
-        "joint": Key("joint", 2, "1 or 2"),
-        "frequency_hz": Key("float", 3.0, "Hz, the mode's natural frequency with the joints held", 0.0, True),
-        "damping": Key("float", 0.02, "damping ratio of that mode"),
+        "joint": Key("joint", 2, "the elastic joint: 1 or 2 (1 … n, or its name, on an n-joint arm)"),
+        "frequency_hz": Key(
+            "float", 3.0, "Hz, the mode's natural frequency with the joints held", 0.0, True, maximum=MAX_FREQUENCY_HZ
+        ),
+        "damping": Key("float", 0.02, "damping ratio of that mode", maximum=10.0),
         "kind": Key(
             "choice",
             "joint",
@@ -210,6 +226,55 @@ class Elasticity(Effect):
     def mechanism(self, plant, p: dict) -> Elastic:
         make = elastic_joint if p["kind"] == "joint" else flexible
         return make(plant, p["joint"] - 1, p["frequency_hz"], p["damping"])
+
+    # ------------------------------------------------------------------ any arm: a two-mass joint
+    def arm_mechanism(self, plant, p: dict) -> tuple[int, float, float]:
+        if p["kind"] != "joint":
+            raise InputError(
+                f"effect elasticity: kind={p['kind']} is the planar two-link arm's flexible link; on "
+                f"{plant.robot.described_as} an elastic joint is kind=joint"
+            )
+        return p["joint"] - 1, p["frequency_hz"], p["damping"]
+
+    def arm_truth(self, plant, p: dict) -> dict:
+        e = plant.elastic
+        return {
+            "joint": e.index + 1,
+            "joint_name": plant.robot.joint_names[e.index],
+            "kind": "joint",
+            "frequency_hz": e.frequency_hz,
+            "damping": e.damping,
+            "stiffness": e.k,
+            "damper": e.d,
+            "motor_inertia": e.B,
+            "motor_inertia_added": e.motor_added,
+            "link_inertia": e.J_link,
+        }
+
+    def arm_families(self, robot, ctx) -> list:
+        """An elastic joint on each of the joints whose residual rings most (`arm_fit.elastic_joints`): the link
+        behind it deflects by e, ë + 2ζω ė + ω² e = −u driven by the measured motion, and adds s M_link[:, j] ë to the
+        torque (`_arm_columns`); beside it, against the datasheet, the motor's inertia B ddq_j a datasheet may lack.
+        f and ζ searched as on the planar arm, against both nominal models."""
+        return [
+            afit.ArmFamily(
+                self.name,
+                extra=_arm_columns(joint),
+                axes=lambda rate, theta: [
+                    linear.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
+                    linear.Axis("damping", 0.005, 0.3, 6, True),
+                ],
+                nonnegative=("scale", "motor"),
+                estimate=_arm_estimate(joint),
+            )
+            for joint in afit.elastic_joints(ctx, _arm_columns)
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        return {"joint": chosen[0] + 1, "frequency_hz": rng.uniform(3.0, 8.0), "damping": rng.uniform(0.01, 0.05)}
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        return self.judge(estimate, truth)
 
     def truth_entry(self, truth, p: dict) -> dict:
         e = truth.elastic
@@ -308,6 +373,51 @@ def elastic_drive(joint: int, ds, ctx) -> tuple[np.ndarray, np.ndarray]:
     P = np.zeros((ds.n, 2))
     P[:, joint - 1], P[:, other] = m_link, m_cross
     return u, P
+
+
+def _arm_columns(joint: int):
+    """The elastic joint's columns on an n-joint arm (0-based `joint`): the link behind it sits at q_j = θ_j + e,
+    e driven by the link-side torque the measured motion demands at joint j (inertial, Coriolis, gravity: the
+    datasheet's), ë + 2ζω ė + ω² e = −τ_link,j / M_jj; the torques then differ from the rigid model's at θ by
+    s (M_link[:, j] ë + ∂τ_link/∂q_j e) (an inertia and a pose shift, scaled together by s ≥ 0); and, against the
+    datasheet, B ddq_j on row j (the motor's inertia, which the datasheet may lack)."""
+
+    def columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
+        P = ctx.inertia_column(ds, joint)
+        e, acceleration = signals.deflection(
+            ctx.link_torque(ds)[:, joint] / P[:, joint],
+            theta.get("frequency_hz", 5.0),
+            theta.get("damping", 0.05),
+            afit.step(ds),
+        )
+        X = (P * acceleration[:, None] + ctx.stiffness_column(ds, joint) * e[:, None])[:, :, None]
+        if baseline != "datasheet":
+            return X, ["scale"]
+        motor = np.zeros_like(X)
+        motor[:, joint, 0] = ds.ddq[:, joint]
+        return np.concatenate([X, motor], axis=2), ["scale", "motor"]
+
+    return columns
+
+
+def _arm_estimate(joint: int):
+    def estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+        m_link = float(np.mean(ctx.inertia_column(ctx.train, joint)[:, joint]))
+        m_eff = p["scale"] * m_link  # the link inertia the spring carries [kg m²]
+        w = 2 * math.pi * p["frequency_hz"]
+        return (
+            {"joint": joint + 1, "frequency_hz": p["frequency_hz"]},
+            {
+                "joint_name": ctx.robot.joint_names[joint],
+                "damping_ratio": p["damping"],
+                "inertia": m_eff,
+                "stiffness": m_eff * w * w,
+                "damping_coefficient": 2 * p["damping"] * w * m_eff,
+                "motor_inertia_beyond_datasheet": p.get("motor", 0.0),
+            },
+        )
+
+    return estimate
 
 
 def _columns(joint: int):

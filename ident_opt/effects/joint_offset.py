@@ -14,6 +14,8 @@ import time
 from ident_opt.effects.base import (
     Effect,
     Key,
+    afit,
+    arm_values,
     ca,
     cands,
     elastic_nlp,
@@ -36,7 +38,7 @@ CENTRE_ITERATIONS = 6
 class JointOffset(Effect):
     summary = "encoder zero offsets: the true angle is the logged q + offset"
     order = 7
-    keys = {"offset": Key("pair", (0.02, -0.03), "rad, per joint", None, magnitude=True)}  # noqa: RUF012
+    keys = {"offset": Key("pair", (0.02, -0.03), "rad, per joint", None, magnitude=True, maximum=4 * math.pi)}  # noqa: RUF012
 
     # ------------------------------------------------------------------ model: G rotated by δ
     parameters = (
@@ -64,6 +66,33 @@ class JointOffset(Effect):
     # ------------------------------------------------------------------ simulator: the encoders' zero
     def true_plant(self, plant, p: dict) -> None:
         plant.offset = [a + b for a, b in zip(plant.offset, p["offset"])]
+
+    def arm_default(self, key: str, joints) -> object:
+        """An n-joint arm: the planar default's two values in turn, 0.02 and −0.03 rad."""
+        return tuple(self.keys[key].default[j % 2] for j in range(joints.n))
+
+    def arm_plant(self, plant, p: dict) -> None:
+        plant.offset = plant.offset + np.asarray(p["offset"])
+
+    def arm_families(self, robot, ctx) -> list:
+        """The nominal model at q + δ, δ by Gauss–Newton on the torque's angle Jacobian (`arm_fit.offset_search`) on
+        every joint, then on the joints where it is resolved; against both nominal models."""
+        return [
+            afit.ArmFamily(
+                self.name,
+                angles=lambda theta: np.array([theta.get(f"delta{j + 1}", 0.0) for j in range(ctx.n)]),
+                search=afit.offset_search,
+                estimate=lambda p, se, ctx: ({"offset": afit.per_joint(p, "delta", ctx.n)}, {}),
+            )
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        return {
+            "offset": arm_values(joints.n, chosen, 0.0, lambda j: rng.uniform(0.02, 0.06) * rng.choice([-1.0, 1.0]))
+        }
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        return self.judge(estimate, truth)
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("offset",)

@@ -10,7 +10,7 @@ the diagnosis has found, τ_load includes the payload's torque (the mass re-read
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, cands, np, per_joint_draw, report, sim
+from ident_opt.effects.base import Effect, Key, afit, arm_values, cands, np, per_joint_draw, report, sim
 from ident_opt.effects.payload import EFFECT as PAYLOAD
 
 #: A hidden coefficient is found within this relative error (or within `ZERO_TOL` of an untouched 0).
@@ -23,12 +23,39 @@ class LoadFriction(Effect):
     summary = "Coulomb friction that grows with the transmitted torque: fc + mu |tau_load|"
     order = 9
     keys = {  # noqa: RUF012
-        "coefficient": Key("pair", (0.1, 0.1), "mu per joint, dimensionless", magnitude=True),
+        "coefficient": Key("pair", (0.1, 0.1), "mu per joint, dimensionless (< 0.9)", magnitude=True, maximum=0.9),
     }
 
     # ------------------------------------------------------------------ simulator: friction on the link torque
     def true_plant(self, plant, p: dict) -> None:
         plant.load_friction = [a + b for a, b in zip(plant.load_friction, p["coefficient"])]
+
+    def arm_plant(self, plant, p: dict) -> None:
+        plant.load_friction = plant.load_friction + np.asarray(p["coefficient"])
+
+    def arm_families(self, robot, ctx) -> list:
+        """sgn(dq_j)|τ_load,j| on joint j's row (τ_load the datasheet's link-side torque at the measured motion),
+        μ ≥ 0, on the joints where it is resolved; against both nominal models."""
+        return [
+            afit.ArmFamily(
+                self.name,
+                extra=lambda ds, theta, ctx, baseline: afit.per_joint_columns(
+                    np.abs(ctx.link_torque(ds)) * np.sign(ds.dq), afit.selected(theta, self.name, ctx.n), "mu"
+                ),
+                nonnegative=("mu",),
+                estimate=lambda p, se, ctx: (
+                    {"coefficient": afit.per_joint(p, "mu", ctx.n)},
+                    {"se": afit.per_joint(se, "mu", ctx.n)},
+                ),
+                screen=lambda p, se, ctx: afit.resolved_joints(p, se, ("mu",), ctx.n),
+            )
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        return {"coefficient": arm_values(joints.n, chosen, 0.0, lambda j: rng.uniform(0.08, 0.25))}
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        return self.judge(estimate, truth)
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("coefficient",)

@@ -6,19 +6,111 @@ Y·∂π/∂m (π is affine in a tip mass m), m ≥ 0, against the datasheet.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
-from ident_opt.effects.base import Effect, Key, cands, datasheet, np, report, signals
+from ident_opt.effects.base import (
+    MAGNITUDE_TOL,
+    Effect,
+    Key,
+    afit,
+    cands,
+    datasheet,
+    linear,
+    np,
+    relative_error,
+    report,
+    signals,
+)
+from ident_opt.errors import InputError
+
+#: How far [m] the centre-of-mass search reaches on each axis around its centre (`_centre`).
+COM_SPAN = 0.06
+#: A hidden payload's centre of mass is found within this distance [m] or this share of its distance from the
+#: last link's origin.
+COM_TOL = (0.02, 0.25)
+#: Heaviest payload the simulator accepts [kg].
+MAX_MASS = 1e3
+#: An n-joint arm's default payload: this share of its moving links' mass, at `ARM_COM` [m] in the last link's frame.
+ARM_SHARE, ARM_COM = 0.05, (0.0, 0.0, 0.05)
 
 
 class Payload(Effect):
     summary = "an unmodelled point mass at the tip of link 2"
     order = 5
-    keys = {"mass": Key("float", 0.2, "kg", magnitude=True)}  # noqa: RUF012
+    keys = {  # noqa: RUF012
+        "mass": Key("float", 0.2, "kg", magnitude=True, maximum=MAX_MASS),
+        "com": Key(
+            "vector", None, "m, centre of mass in the last link's frame (n-joint arms; default [0,0,0.05])", None
+        ),
+    }
+
+    def checked(self, params: dict, where: str, coulomb) -> dict:
+        full = super().checked(params, where, coulomb)
+        reach = getattr(getattr(coulomb, "scale", None), "reach", None)
+        if full["com"] is not None and reach is not None and math.dist(full["com"], (0.0, 0.0, 0.0)) > reach:
+            raise InputError(
+                f"effect {where!r}: the payload's centre of mass {list(full['com'])} m lies "
+                f"{math.dist(full['com'], (0.0, 0.0, 0.0)):.3g} m from the last link's frame, beyond the arm's "
+                f"length ({reach:.3g} m): a payload rides on the last link"
+            )
+        return full
+
+    def arm_default(self, key: str, joints) -> object:
+        """An n-joint arm: `ARM_SHARE` of its moving mass, `ARM_COM` m out along the last link's z."""
+        return ARM_SHARE * (joints.scale.mass or 4.0) if key == "mass" else ARM_COM
 
     # ------------------------------------------------------------------ simulator: the robot carries it
     def true_robot(self, robot, p: dict):
+        if p.get("com") is not None:
+            raise InputError(
+                "effect payload: the planar two-link arm's payload is a point mass at the tip of link 2; it takes "
+                "no com"
+            )
         return replace(robot, payload_mass=robot.payload_mass + p["mass"])
+
+    def truth_entry(self, truth, p: dict) -> dict:
+        return {"mass": p["mass"]}
+
+    def arm_plant(self, plant, p: dict) -> None:
+        plant.pi = plant.pi + plant.robot.payload(plant.arm, p["mass"], p["com"])
+
+    def arm_truth(self, plant, p: dict) -> dict:
+        return {"mass": p["mass"], "com": list(p["com"])}
+
+    def arm_families(self, robot, ctx) -> list:
+        """m · Y Δπ(1 kg at c) (`Robot.payload`: π is linear in the mass for a given centre of mass c), m ≥ 0,
+        against the datasheet; c searched ±`COM_SPAN` m per axis around the centre a linear fit of (m, m c) gives
+        (`_centre`)."""
+        return [
+            afit.ArmFamily(
+                self.name,
+                extra=_arm_column,
+                axes=lambda rate, theta: [linear.Axis(f"com_{a}", -COM_SPAN, COM_SPAN, 7) for a in "xyz"],
+                center=_centre,
+                baselines=("datasheet",),
+                nonnegative=("mass",),
+                estimate=lambda p, se, ctx: (
+                    {"mass": p["mass"], "com": [p["com_x"], p["com_y"], p["com_z"]]},
+                    {"se_mass": se.get("mass")},
+                ),
+            )
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        """3–8 % of the arm's moving mass, a few centimetres off the last link's origin (z outward)."""
+        u = rng.uniform
+        return {
+            "mass": u(0.03, 0.08) * (joints.scale.mass or 4.0),
+            "com": (u(-0.03, 0.03), u(-0.03, 0.03), u(0.02, 0.08)),
+        }
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        """The mass within `MAGNITUDE_TOL`; the centre of mass within `COM_TOL` m, or that share of its distance."""
+        mass = relative_error(estimate["mass"], truth["mass"])
+        miss = math.dist(estimate["com"], truth["com"])
+        far = math.dist(truth["com"], (0.0, 0.0, 0.0))
+        return [(mass <= MAGNITUDE_TOL, mass), (miss <= max(COM_TOL[0], COM_TOL[1] * far), miss / max(far, 1e-9))]
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("mass",)
@@ -51,6 +143,32 @@ class Payload(Effect):
 
     def draw(self, rng, robot) -> dict:
         return {"mass": rng.uniform(0.1, 0.4)}
+
+
+def _arm_column(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
+    """Y Δπ (N, n, 1) of a 1 kg point mass at θ's centre of mass on the last link."""
+    com = [theta.get(f"com_{a}", 0.0) for a in "xyz"]
+    return (ctx.regressor(ds) @ ctx.robot.payload(ctx.arm, 1.0, com))[:, :, None], ["mass"]
+
+
+def _centre(family, baseline: str, ctx) -> dict:
+    """Where the centre-of-mass search is centred [m]: c = h / m from a linear fit of (m, h = m c) to the datasheet's
+    training residual, the inertia of the point mass left out (second order in c); (0, 0, 0) when m ≤ 0."""
+    tr = ctx.train
+    Y = ctx.regressor(tr)
+    unit = ctx.robot.payload(ctx.arm, 1.0, (0.0, 0.0, 0.0))
+    eps = 1e-6
+    basis = [unit] + [(ctx.robot.payload(ctx.arm, 1.0, e) - unit) / eps for e in (eps * np.eye(3)).tolist()]
+    X = np.stack([Y @ b for b in basis], axis=2)
+    labels = ctx.labels(tr)
+    r = tr.tau - Y @ ctx.datasheet
+    fit = linear.solve(
+        np.zeros_like(r), signals.demean_runs(X, labels), signals.demean_runs(r, labels), ctx.weights, False
+    )
+    m, h = fit.beta[0], fit.beta[1:]
+    if not m > 0:
+        return {"com_x": 0.0, "com_y": 0.0, "com_z": 0.0}
+    return {f"com_{a}": float(np.clip(v / m, -1.0, 1.0)) for a, v in zip("xyz", h)}
 
 
 def _moving_and_held(column: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, list[str]]:

@@ -19,8 +19,10 @@ comes out 5–15 % low and vs too wide (`docs/effects.md`); smooth reversals kee
 from __future__ import annotations
 
 from ident_opt.effects.base import (
+    MAGNITUDE_TOL,
     Effect,
     Key,
+    afit,
     ca,
     cands,
     datasheet,
@@ -29,6 +31,7 @@ from ident_opt.effects.base import (
     linear,
     nlp,
     np,
+    relative_error,
     report,
     signals,
 )
@@ -36,6 +39,8 @@ from ident_opt.parameters import Parameter
 
 #: The default excess of the static level over the datasheet's mean Coulomb level [N m], per joint.
 DEFAULT_EXCESS = (0.3, 0.2)
+#: An n-joint arm's default excess, as a share of each joint's reference torque (`ArmScale.torque`).
+ARM_EXCESS = 0.01
 
 
 def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
@@ -77,8 +82,10 @@ class Stribeck(Effect):
     summary = "friction excess fs sgn(dq) exp(-(dq/vs)^2) above the Coulomb level at low speed"
     order = 3
     keys = {  # noqa: RUF012
-        "static": Key("pair", None, "N m, static (breakaway) level fs per joint (default: datasheet fc + [0.3,0.2])"),
-        "velocity": Key("pair", (0.05, 0.05), "rad/s, Stribeck velocity vs, per joint", 0.0, True),
+        "static": Key(
+            "pair", None, "N m, static (breakaway) level fs per joint (default: datasheet fc + [0.3,0.2])", maximum=1e4
+        ),
+        "velocity": Key("pair", (0.05, 0.05), "rad/s, Stribeck velocity vs, per joint", 0.0, True, maximum=100.0),
     }
 
     def default(self, key: str, coulomb: tuple[tuple, tuple]) -> object:
@@ -93,6 +100,73 @@ class Stribeck(Effect):
 
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
         return any(v != m for m, v in zip(_mean(coulomb), p["static"]))
+
+    def untouched(self, key: str, joint: int, joints) -> float:
+        return _mean(joints)[joint] if key == "static" else self.keys["velocity"].default[0]
+
+    def arm_default(self, key: str, joints) -> object:
+        """An n-joint arm: a static level `ARM_EXCESS` × the joint's reference torque above the datasheet's mean."""
+        if key == "static":
+            return tuple(m + ARM_EXCESS * T for m, T in zip(_mean(joints), joints.scale.torque))
+        return super().arm_default(key, joints)
+
+    # ------------------------------------------------------------------ any arm: the excess on the joint's velocity
+    def arm_plant(self, plant, p: dict) -> None:
+        mean = 0.5 * (plant.positive + plant.negative)  # the plant's own Coulomb level (asymmetric_coulomb first)
+        plant.excess = np.array(p["static"]) - mean
+        plant.velocity = np.array(p["velocity"])
+
+    def arm_truth(self, plant, p: dict) -> dict:
+        return {**p, "static_excess": plant.excess.tolist()}
+
+    def arm_families(self, robot, ctx) -> list:
+        """fs_j sgn(dq_j) exp(−(dq_j/vs_j)²) on the joints where it is resolved (screened at vs = the middle of its
+        range), away from stops and near them with coefficients of their own (`_columns`), vs_j searched per joint;
+        against both nominal models."""
+        return [
+            afit.ArmFamily(
+                self.name,
+                extra=_arm_columns,
+                axes=lambda rate, theta: [
+                    linear.Axis(f"vs{j + 1}", *VS_RANGE, 11, True) for j in afit.selected(theta, self.name, ctx.n)
+                ],
+                nonnegative=("fs", "fsstop"),
+                estimate=_arm_estimate,
+                screen=lambda p, se, ctx: afit.resolved_joints(p, se, ("fs",), ctx.n),
+            )
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        """On each chosen joint an excess of 0.5–1 % of its reference torque over its mean Coulomb level, falling
+        off over 3–8 % of its cruise speed."""
+        mean = _mean(joints)
+        return {
+            "static": tuple(
+                mean[j] + rng.uniform(0.005, 0.01) * joints.scale.torque[j] if j in chosen else mean[j]
+                for j in range(joints.n)
+            ),
+            "velocity": tuple(
+                rng.uniform(0.03, 0.08) * joints.scale.speed[j] if j in chosen else self.keys["velocity"].default[0]
+                for j in range(joints.n)
+            ),
+        }
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        """Per joint: where the truth has an excess, fs and vs within `MAGNITUDE_TOL`; elsewhere the estimate must
+        report none (0) or a static level within `MAGNITUDE_TOL` of the largest true excess of the mean level."""
+        excess = np.asarray(truth["static_excess"], dtype=float)
+        largest = float(np.max(np.abs(excess))) or 1.0
+        checks = []
+        for j, ex in enumerate(excess):
+            fs, vs = estimate["static"][j], estimate["velocity"][j]
+            if ex != 0:
+                for e, t in ((fs, truth["static"][j]), (vs, truth["velocity"][j])):
+                    rel = relative_error(e, t)
+                    checks.append((rel <= MAGNITUDE_TOL, rel))
+            else:
+                rel = 0.0 if fs == 0 else abs(fs - (truth["static"][j] - ex)) / largest
+                checks.append((rel <= MAGNITUDE_TOL, rel))
+        return checks
 
     # ------------------------------------------------------------------ model: fsj sgn(dq_j) exp(−(dq_j/vs_j)²)
     parameters = tuple(
@@ -196,6 +270,42 @@ def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
         "se_static": [se["fs1"], se["fs2"]],
         "excess": [p["fs1"], p["fs2"]],
     }
+
+
+def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
+    """fs_j and fsstop_j columns (`_columns`' split near stops) at vs_j of θ (0.05 rad/s before the search) on the
+    joints θ selects, through the torque's low-pass (`ArmContext.lowpass`): the hump lasts a few tens of
+    milliseconds at a reversal, and the filtered torque holds it smeared; read unfiltered it came out half as high
+    and half as wide again on the KUKA."""
+    keep = trusted(ds)
+    joints = afit.selected(theta, "stribeck", ctx.n)
+    X = np.zeros((ds.n, ctx.n, 2 * len(joints)))
+    names = []
+    for k, j in enumerate(joints):
+        f = shape(ds.dq[:, j], theta.get(f"vs{j + 1}", 0.05))
+        X[:, j, 2 * k], X[:, j, 2 * k + 1] = f * keep[:, j], f * ~keep[:, j]
+        names += [f"fs{j + 1}", f"fsstop{j + 1}"]
+    return ctx.lowpass(X, ds), names
+
+
+def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+    """fs = the joint's Coulomb level (per-direction levels averaged where found beside) + the excess, vs; 0 and 0
+    where the excess is not resolved."""
+    static, velocity = [], []
+    for j in range(ctx.n):
+        k = str(j + 1)
+        fs = p.get("fs" + k, 0.0)
+        if "fs" + k not in p or fs <= afit.RESOLVED * se.get("fs" + k, np.inf):
+            static.append(0.0)
+            velocity.append(0.0)
+            continue
+        if "fp" + k in p:
+            fc = 0.5 * (p["fp" + k] + p["fn" + k])
+        else:
+            fc = sum(float(p.get(ctx.arm.names[i], ctx.datasheet[i])) for i in ctx.coulomb_terms()[j])
+        static.append(fc + fs)
+        velocity.append(float(p["vs" + k]))
+    return {"static": static, "velocity": velocity}, {"excess": afit.per_joint(p, "fs", ctx.n)}
 
 
 def polish(

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from functools import partial
 
-from ident_opt.effects.base import Effect, Key, np, per_joint_draw, relative_error, report
+from ident_opt.effects.base import Effect, Key, afit, arm_values, np, per_joint_draw, relative_error, report
 
 #: A hidden factor is found when the estimate is within this of it, per joint.
 SCALE_TOL = 0.02
@@ -24,7 +24,9 @@ class TorqueScale(Effect):
     summary = "the logged torque is off by a factor per joint: the true joint torque is s x the logged one"
     order = 8
     keys = {  # noqa: RUF012
-        "scale": Key("pair", (1.1, 1.0), "s per joint (1: untouched); this effect's own scale", 0.0, True),
+        "scale": Key(
+            "pair", (1.1, 1.0), "s per joint (1: untouched); this effect's own scale", 0.0, True, maximum=100.0
+        ),
     }
 
     # ------------------------------------------------------------------ syntax: `scale` is the factor itself
@@ -32,8 +34,13 @@ class TorqueScale(Effect):
         return self.keys[key] if key in self.keys else super().key(key, where)
 
     def complete(self, params: dict, where: str, coulomb: tuple[tuple, tuple]) -> dict:
-        full = {k: self.check(k, v, where) for k, v in params.items()}
-        return {"scale": full.get("scale", self.keys["scale"].default)}
+        return self.checked(params, where, coulomb)
+
+    def untouched(self, key: str, joint: int, joints) -> float:
+        return 1.0
+
+    def arm_default(self, key: str, joints) -> object:
+        return (1.1,) + (1.0,) * (joints.n - 1)
 
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
         return any(s != 1.0 for s in p["scale"])
@@ -46,6 +53,41 @@ class TorqueScale(Effect):
     # ------------------------------------------------------------------ simulator: the logged channel / s
     def true_plant(self, plant, p: dict) -> None:
         plant.channel.append(partial(_logged, p["scale"]))
+
+    def arm_plant(self, plant, p: dict) -> None:
+        self.true_plant(plant, p)
+
+    def arm_families(self, robot, ctx) -> list:
+        """Against the datasheet: joint j's logged torque is c_j (Y π_datasheet)_j, c_j = 1/s_j, on the joints where
+        c_j is resolved from 1 (the others as the datasheet predicts them)."""
+
+        def units(p: dict) -> tuple[np.ndarray, tuple[str, ...]]:
+            s = np.array([1.0 / p[f"c{j + 1}"] if f"c{j + 1}" in p else 1.0 for j in range(ctx.n)])
+            return s, tuple(f"c{j + 1}" for j in range(ctx.n))
+
+        return [
+            afit.ArmFamily(
+                self.name,
+                rows=True,
+                baselines=("datasheet",),
+                estimate=lambda p, se, ctx: (
+                    {"scale": [1.0 / p[f"c{j + 1}"] if f"c{j + 1}" in p else 1.0 for j in range(ctx.n)]},
+                    {},
+                ),
+                screen=lambda p, se, ctx: afit.resolved_joints(p, se, ("c",), ctx.n, untouched=1.0),
+                units=units,
+            )
+        ]
+
+    def arm_draw(self, rng, joints, chosen) -> dict:
+        def factor(j: int) -> float:  # uniform over [0.8, 0.95] ∪ [1.05, 1.25]
+            x = rng.uniform(0.0, 0.35)
+            return 0.8 + x if x < 0.15 else 1.05 + (x - 0.15)
+
+        return {"scale": arm_values(joints.n, chosen, 1.0, factor)}
+
+    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        return self.judge(estimate, truth)
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("scale",)
@@ -71,7 +113,7 @@ class TorqueScale(Effect):
 
 
 def _logged(scale: tuple[float, float], t: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """The torque (N, 2) [N m] as logged: the true τ / s per joint."""
+    """The torque (N, n) [N m] as logged: the true τ / s per joint."""
     return tau / np.asarray(scale)
 
 

@@ -65,11 +65,7 @@ class InstrumentStats:
         angles differentiated at `derivatives.INSTRUMENT_RATIO` × its cut-off, or × the one
         `derivatives.choose_cutoff` reads for logged derivatives); τ filtered like the regressor's inputs
         (`Dataset.tau_fit`)."""
-        if data.instruments is not None:
-            dq_z, ddq_z = data.instruments
-        else:
-            cutoff = data.cutoff_hz if data.cutoff_hz is not None else choose_cutoff(data.t, data.q)
-            dq_z, ddq_z = instrument_derivatives(data.t, data.q, cutoff)
+        dq_z, ddq_z = instrument_kinematics(data)
         Y = arm.regressor(data.q, data.dq, data.ddq)
         Z = arm.regressor(data.q, dq_z, ddq_z)
         return cls.from_regressors(Y, Z, data.tau_fit)
@@ -100,6 +96,16 @@ class InstrumentStats:
     def __add__(self, other: InstrumentStats) -> InstrumentStats:
         """The statistics of both trials together (derivatives never straddle two trials)."""
         return InstrumentStats(self.A + other.A, self.c + other.c, self.K + other.K, self.stats + other.stats)
+
+
+def instrument_kinematics(data: Dataset, cutoff_hz: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(dq, ddq) of the instruments of trial `data` [rad/s, rad/s²]: its own (`Dataset.instruments`), else its
+    angles differentiated at `derivatives.INSTRUMENT_RATIO` × `cutoff_hz` (default: its derivatives' cut-off, or
+    the one `derivatives.choose_cutoff` reads for logged derivatives)."""
+    if data.instruments is not None:
+        return data.instruments
+    cutoff = cutoff_hz or (data.cutoff_hz if data.cutoff_hz is not None else choose_cutoff(data.t, data.q))
+    return instrument_derivatives(data.t, data.q, cutoff)
 
 
 @dataclass

@@ -30,6 +30,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi
+from ident_opt.errors import InputError
 from ident_opt.simulate import background
 from ident_opt.simulate.trajectories import Reference
 from ident_opt.simulate.truth import TRUTH_MODEL, Truth, initial_state, plant, state_size
@@ -38,6 +39,9 @@ CONTROL_HZ = 1000.0  # the controller's rate [Hz] for logging rates up to it
 MAX_CONTROL_HZ = 5000.0  # fastest loop [Hz]: memory grows with the tick count (9 floats per tick)
 BANDWIDTH_HZ = 6.0  # closed-loop bandwidth of the PD [Hz]
 CHUNK = 2000  # ticks per mapaccum call (progress granularity)
+#: Most RK4 sub-steps per control tick: beyond it a trial would take the simulator minutes per second (a mode of
+#: hundreds of Hz); such a trial is refused, naming why.
+MAX_SUBSTEPS = 64
 #: Stated tracking limits [rad], max |encoder angle − reference| over a trial: the exact feedforward keeps the
 #: clean trial well inside the first; hidden effects are unknown to the controller, only the PD corrects them.
 MAX_TRACKING_ERROR = {"clean": 1e-3, "effects": 0.05}
@@ -83,7 +87,13 @@ def substeps(truth: Truth, g: Gains, robot: PlanarRobot, control: float = CONTRO
         rates += truth.elastic.rates(g.kd)
     # Joint 1's inertia drops to a1 + 2 a2 cos(1.4) at the trajectories' widest q2; halve for margin.
     rates += background.rates(truth.background, 0.5 * np.array([p["a1"] + 2 * p["a2"] * math.cos(1.4), J[1]]))
-    return max(2, math.ceil(max(rates) / control / 0.25))
+    needed = math.ceil(max(rates) / control / 0.25)
+    if not math.isfinite(needed) or needed > MAX_SUBSTEPS:
+        raise InputError(
+            f"the simulation is too stiff to integrate: it needs {needed:g} RK4 steps per {1e3 / control:g} ms tick "
+            f"(at most {MAX_SUBSTEPS}); an elastic mode that fast is a rigid joint: use a lower frequency_hz"
+        )
+    return max(2, needed)
 
 
 def tick(truth: Truth, robot: PlanarRobot, g: Gains, control: float = CONTROL_HZ) -> ca.Function:

@@ -17,7 +17,6 @@ from collections.abc import Callable
 import numpy as np
 import pandas as pd
 
-from ident_opt.arm.datasheet import PlanarRobot
 from ident_opt.columns import columns_of, joint_columns
 from ident_opt.derivatives import estimate_derivatives
 from ident_opt.errors import InputError
@@ -47,7 +46,7 @@ def decimation(rate_hz: float) -> int:
 def log(
     out: np.ndarray,
     q_ref: np.ndarray,
-    robot: PlanarRobot,
+    robot,
     *,
     rate_hz: float,
     channel: Callable[[np.ndarray, np.ndarray], np.ndarray],
@@ -57,34 +56,41 @@ def log(
     output: str,
     rng: np.random.Generator,
     deflection_column: str | None,
+    noise_std: np.ndarray | None = None,
+    encoder_step: np.ndarray | None = None,
 ) -> pd.DataFrame:
-    """The logged trial as a data-format frame, from the per-tick loop output (N, 9) (see closed_loop.run).
+    """The logged trial as a data-format frame, from the per-tick loop output (N, 4n + 1): τ, q_enc, dq_enc, ddq_enc
+    (n each) and a deflection (see closed_loop.run).
 
-    `channel`: (t [s], τ (N, 2) [N m]) -> the torque as logged, at the ticks; `deflection_column`: where the
-    spring deflection goes (None: the plant has none)."""
+    `channel`: (t [s], τ (N, n) [N m]) -> the torque as logged, at the ticks; `deflection_column`: where the
+    spring deflection goes (None: the plant has none); `noise_std` (n,) [N m] and `encoder_step` (n,) [rad]: the
+    torque noise's σ and the encoders' joint-side step (default: the planar arm's, `TORQUE_NOISE` and
+    `ENCODER_COUNTS` per motor revolution through its gears)."""
     every = decimation(rate_hz)
-    n_ticks = out.shape[0]
+    n_ticks, n = out.shape[0], q_ref.shape[1]
     t_tick = np.arange(n_ticks) / control_hz(rate_hz)
     idx = np.arange(0, n_ticks, every)
     t = t_tick[idx]
     tau_tick, q_enc, dq_enc, ddq_enc, deflection = (
-        out[:, :2],
-        out[:, 2:4],
-        out[:, 4:6],
-        out[:, 6:8],
-        out[:, 8],
+        out[:, :n],
+        out[:, n : 2 * n],
+        out[:, 2 * n : 3 * n],
+        out[:, 3 * n : 4 * n],
+        out[:, 4 * n],
     )
     tau = channel(t_tick, tau_tick)[idx]
     q = q_enc[idx].copy()
     if noise:
-        step = 2 * np.pi / (ENCODER_COUNTS * np.array([j.gear_ratio for j in robot.joints]))
-        q = np.round(q / step) * step
-        tau = tau + rng.normal(size=tau.shape) * (noise_scale * np.asarray(TORQUE_NOISE))
+        if encoder_step is None:
+            encoder_step = 2 * np.pi / (ENCODER_COUNTS * np.array([j.gear_ratio for j in robot.joints]))
+        sigma = np.asarray(TORQUE_NOISE) if noise_std is None else np.asarray(noise_std)
+        q = np.round(q / encoder_step) * encoder_step
+        tau = tau + rng.normal(size=tau.shape) * (noise_scale * sigma)
     if exact_derivatives:
         dq, ddq = dq_enc[idx], ddq_enc[idx]
     else:
         dq, ddq, _ = estimate_derivatives(t, q, DERIVATIVE_CUTOFF_HZ)
-    load = tau / np.array([j.current_to_torque for j in robot.joints]) if output == "current" else tau
+    load = tau / current_factors(robot) if output == "current" else tau
     signals = {"q": q, "dq": dq, "ddq": ddq, "i" if output == "current" else "tau": load}
     cols = {"t": t, **columns_of(signals)}
     # Extra columns a real logger has: the commanded angles, and a strain-like deflection of a spring.
@@ -92,3 +98,18 @@ def log(
     if deflection_column is not None:
         cols[deflection_column] = deflection[idx]
     return pd.DataFrame(cols)
+
+
+def current_factors(robot) -> np.ndarray:
+    """Each joint's torque per ampere [N m/A] (torque constant × gear ratio); an InputError naming the first joint
+    whose problem file does not give both (currents cannot be logged or read without them)."""
+    factors = []
+    for name, table, joint in zip(robot.joint_names, robot.joint_tables, robot.joints):
+        k = joint.current_to_torque
+        if k is None or not np.isfinite(k) or k == 0:
+            raise InputError(
+                f"currents need each joint's torque constant and gear ratio; [robot.{table}] ({name}) does not give "
+                "both (torque_constant, gear_ratio): log torques instead, or add them"
+            )
+        factors.append(float(k))
+    return np.array(factors)

@@ -36,13 +36,61 @@ A_MAX = np.array([4.0, 5.0])  # rad/s²
 TAU_MAX = np.array([15.0, 4.0])
 
 TRAJECTORIES = ("tud01", "fourier", "mixed")
+#: Largest |q| [rad], |dq| [rad/s] and |ddq| [rad/s²] a trajectory file may hold: beyond them it is not a motion
+#: an arm makes (a unit mistake, a corrupted file), and the simulation would overflow.
+FILE_BOUNDS = (100.0, 100.0, 1e4)
 #: Length [s] of one block of the `mixed` reference.
 MIXED_BLOCK_S = 10.0
 
 
 @dataclass(frozen=True)
+class Box:
+    """Where a reference moves, per joint (n,): angles in [q_min, q_max] [rad], cruise speed v_max [rad/s],
+    acceleration a_max [rad/s²]; point-to-point poses start `margin` [rad] inside the range and moves cover at
+    least `step` [rad]."""
+
+    q_min: np.ndarray
+    q_max: np.ndarray
+    v_max: np.ndarray
+    a_max: np.ndarray
+    margin: np.ndarray
+    step: np.ndarray
+
+    @property
+    def n(self) -> int:
+        """The number of joints."""
+        return len(self.q_min)
+
+
+#: The planar two-link arm's box: the real exp1's range, speeds and accelerations.
+PLANAR = Box(Q_MIN, Q_MAX, V_MAX, A_MAX, np.full(2, 0.2), np.full(2, 0.3))
+#: Of each joint's range an n-joint reference keeps away from either limit (the tracking error, a hidden offset
+#: and the controller's overshoot stay inside), the share of its speed limit it cruises at (at most
+#: `CRUISE_MAX`) and the share of its acceleration limit it uses.
+RANGE_MARGIN, CRUISE_SHARE, CRUISE_MAX, ACCELERATION_SHARE = 0.15, 0.5, 1.5, 0.8
+#: An n-joint reference's last move ends this long [s] before the trial does: it ends at rest, where the derivatives'
+#: zero-phase filter has nothing to smear.
+END_REST_S = 0.5
+#: Acceleration limit [rad/s²] where neither [limits] nor the URDF gives one.
+DEFAULT_ACCELERATION = 4.0
+
+
+def arm_box(q_min, q_max, velocity, acceleration) -> Box:
+    """The box of an n-joint arm whose joints' limits are q_min, q_max [rad], |dq| ≤ velocity [rad/s] and |ddq| ≤
+    acceleration [rad/s²]: the range less `RANGE_MARGIN` at both ends, cruising at `CRUISE_SHARE` of the speed
+    limit (at most `CRUISE_MAX`), `ACCELERATION_SHARE` of the acceleration limit; moves of at least 15 % of the
+    range."""
+    low, high = np.asarray(q_min, dtype=float), np.asarray(q_max, dtype=float)
+    span = high - low
+    inner_low, inner_high = low + RANGE_MARGIN * span, high - RANGE_MARGIN * span
+    v = np.minimum(CRUISE_SHARE * np.asarray(velocity, dtype=float), CRUISE_MAX)
+    a = ACCELERATION_SHARE * np.asarray(acceleration, dtype=float)
+    return Box(inner_low, inner_high, v, a, 0.1 * span, 0.15 * span)
+
+
+@dataclass(frozen=True)
 class Reference:
-    """A reference sampled at times t (N,), with q, dq, ddq (N, 2)."""
+    """A reference sampled at times t (N,), with q, dq, ddq (N, n)."""
 
     t: np.ndarray
     q: np.ndarray
@@ -50,21 +98,23 @@ class Reference:
     ddq: np.ndarray
 
 
-def reference(name: str, duration: float, seed: int, dt: float) -> Reference:
+def reference(name: str, duration: float, seed: int, dt: float, box: Box = PLANAR) -> Reference:
     """The reference `name` ("tud01", "fourier", "mixed" or a trajectory file *.csv) over [0, duration] s every
-    dt s."""
+    dt s, within `box` (default: the planar two-link arm's)."""
     t = np.arange(round(duration / dt)) * dt
     if str(name).lower().endswith(".csv"):
-        return from_file(Path(name), t)
+        return from_file(Path(name), t, box.n)
     if name not in TRAJECTORIES:
         raise InputError(f"trajectory {name!r}: unknown; known: {', '.join(TRAJECTORIES)}, or a *.csv file")
     rng = np.random.default_rng([seed, 7])  # the trajectory's own stream, independent of the noise
-    return {"tud01": tud01, "fourier": fourier, "mixed": mixed}[name](t, rng)
+    if box is not PLANAR and name == "fourier":  # an n-joint trial ends at rest (its derivatives' filter has edges)
+        return fourier(t, rng, fade_out=True, box=box)
+    return {"tud01": tud01, "fourier": fourier, "mixed": mixed}[name](t, rng, box=box)
 
 
 def from_file(path: Path, t: np.ndarray, n_joints: int = 2) -> Reference:
     """The trajectory in the CSV file `path` (t, q, dq, ddq of `n_joints` joints: `columns.kinematic_columns`; t from
-    0, increasing) at times t [s]."""
+    0, increasing; |q|, |dq|, |ddq| within `FILE_BOUNDS`) at times t [s]."""
     try:
         frame = pd.read_csv(path)
     except (OSError, ValueError) as exc:
@@ -73,9 +123,20 @@ def from_file(path: Path, t: np.ndarray, n_joints: int = 2) -> Reference:
     missing = [c for c in columns if c not in frame.columns]
     if missing:
         raise InputError(f"{path}: the trajectory file lacks column(s) {', '.join(missing)}")
-    values = frame[list(columns)].to_numpy(dtype=float)
+    try:
+        values = frame[list(columns)].to_numpy(dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: the trajectory file's columns {', '.join(columns)} must hold numbers") from None
     if len(values) < 2 or not np.all(np.isfinite(values)) or np.any(np.diff(values[:, 0]) <= 0):
         raise InputError(f"{path}: the trajectory file needs finite values and increasing times t")
+    for k, (signal, bound) in enumerate(zip(("q", "dq", "ddq"), FILE_BOUNDS)):
+        block = np.abs(values[:, 1 + k * n_joints : 1 + (k + 1) * n_joints])
+        if np.any(block > bound):
+            row, j = np.unravel_index(int(np.argmax(block)), block.shape)
+            raise InputError(
+                f"{path}: column {signal}{j + 1}, data row {row + 1}: {values[row, 1 + k * n_joints + j]:g} is beyond "
+                f"{bound:g} (no arm moves like that; a unit mistake?)"
+            )
     tf = values[:, 0]
     if tf[0] > t[0] + 1e-9 or tf[-1] < t[-1] - 1e-9:
         raise InputError(
@@ -112,56 +173,80 @@ def _trapezoid(tau: np.ndarray, distance: float, vmax: float, amax: float) -> tu
     return s * x, s * v, s * a, T
 
 
-def tud01(t: np.ndarray, rng: np.random.Generator, home: np.ndarray | None = None) -> Reference:
-    """Point-to-point moves with rests (see the module docstring); deterministic for the generator.
+def tud01(t: np.ndarray, rng: np.random.Generator, home: np.ndarray | None = None, box: Box = PLANAR) -> Reference:
+    """Point-to-point moves with rests (see the module docstring) within `box`; deterministic for the generator.
     `home` [rad]: start there and return there, at rest, by the end (else a random start, no return)."""
-    n = len(t)
-    q, dq, ddq = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
-    pose = rng.uniform(Q_MIN + 0.2, Q_MAX - 0.2) if home is None else np.array(home, dtype=float)
+    n, m = len(t), box.n
+    q, dq, ddq = np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m))
+    pose = rng.uniform(box.q_min + box.margin, box.q_max - box.margin) if home is None else np.array(home, dtype=float)
     q[:] = pose
     duration = t[-1] if n else 0.0
     start = min(0.15 * duration, 12.0)  # the real trial starts with a long rest (15 s of 80)
+    next_move = _next_move if box is PLANAR else _next_arm_move
 
     def move(j: int, target: float, at: float) -> float:
         if abs(target - pose[j]) <= 1e-9:  # already there
             return at
         after = t >= at
-        x, v, a, T = _trapezoid(t[after] - at, target - pose[j], V_MAX[j], A_MAX[j])
+        x, v, a, T = _trapezoid(t[after] - at, target - pose[j], box.v_max[j], box.a_max[j])
         q[after, j] = pose[j] + x
         dq[after, j], ddq[after, j] = v, a
         pose[j] = target
         return at + T
 
     def lasting(j: int, distance: float) -> float:  # a move's duration [s] (0: no move)
-        return _trapezoid(np.zeros(1), distance, V_MAX[j], A_MAX[j])[3] if abs(distance) > 1e-9 else 0.0
+        return _trapezoid(np.zeros(1), distance, box.v_max[j], box.a_max[j])[3] if abs(distance) > 1e-9 else 0.0
 
     while start < duration:
-        moving, targets = _next_move(rng, pose)
+        moving, targets = next_move(rng, pose, box)
+        ends = start + max(lasting(j, targets[j] - pose[j]) for j in range(m))
         if home is not None:  # the move, then the way home and a rest, must fit
-            ends = start + max(lasting(j, targets[j] - pose[j]) for j in range(2))
-            if ends + max(lasting(j, home[j] - targets[j]) for j in range(2)) + 0.5 > duration:
+            if ends + max(lasting(j, home[j] - targets[j]) for j in range(m)) + 0.5 > duration:
                 break
+        elif box is not PLANAR and ends + END_REST_S > duration:  # an n-joint trial ends at rest
+            break
         end = start
-        for j in range(2):
+        for j in range(m):
             if moving[j]:
                 end = max(end, move(j, targets[j], start))
         start = end + rng.uniform(0.2, 2.0)
     if home is not None:
-        at = min(start, duration - 0.5 - max(lasting(j, home[j] - pose[j]) for j in range(2)))
-        for j in range(2):
+        at = min(start, duration - 0.5 - max(lasting(j, home[j] - pose[j]) for j in range(m)))
+        for j in range(m):
             move(j, float(home[j]), at)
     return Reference(t, q, dq, ddq)
 
 
-def _next_move(rng: np.random.Generator, pose: np.ndarray) -> tuple[list[bool], np.ndarray]:
+def _next_move(rng: np.random.Generator, pose: np.ndarray, box: Box = PLANAR) -> tuple[list[bool], np.ndarray]:
     """(which joints move, their targets [rad]): both joints, joint 1 only or joint 2 only, each by ≥ 0.3 rad."""
     kind = rng.choice(3, p=[0.6, 0.15, 0.25])
     moving = [kind in (0, 1), kind in (0, 2)]
+    return moving, _targets(rng, pose, box, moving)
+
+
+def _next_arm_move(rng: np.random.Generator, pose: np.ndarray, box: Box) -> tuple[list[bool], np.ndarray]:
+    """(which joints move, their targets [rad]) of an n-joint arm: every joint (half the moves), one joint, or a
+    random subset (a quarter each), each by at least `box.step`."""
+    n = box.n
+    kind = rng.choice(3, p=[0.5, 0.25, 0.25])
+    if kind == 0:
+        moving = [True] * n
+    elif kind == 1:
+        moving = [j == int(rng.integers(n)) for j in range(n)]
+    else:
+        moving = list(rng.random(n) < 0.5) or [True] * n
+        if not any(moving):
+            moving[int(rng.integers(n))] = True
+    return moving, _targets(rng, pose, box, moving)
+
+
+def _targets(rng: np.random.Generator, pose: np.ndarray, box: Box, moving: list[bool]) -> np.ndarray:
+    """Targets [rad] drawn in the box for the `moving` joints, each at least `box.step` from where it is."""
     targets = pose.copy()
-    for j in range(2):
-        while moving[j] and abs(targets[j] - pose[j]) < 0.3:
-            targets[j] = rng.uniform(Q_MIN[j], Q_MAX[j])
-    return moving, targets
+    for j in range(box.n):
+        while moving[j] and abs(targets[j] - pose[j]) < box.step[j]:
+            targets[j] = rng.uniform(box.q_min[j], box.q_max[j])
+    return targets
 
 
 def fourier(
@@ -171,6 +256,7 @@ def fourier(
     base_hz: float = 0.1,
     fade: float = 2.0,
     fade_out: bool = False,
+    box: Box = PLANAR,
 ) -> Reference:
     """A Swevers-style Fourier excitation (5 harmonics of 0.1 Hz), faded in over `fade` s from rest at the
     centre pose (and, with `fade_out`, faded out to rest there over the last `fade` s).
@@ -180,7 +266,7 @@ def fourier(
     kept, so that trials stay as published). With `fade_out` the whole motion is scaled back inside."""
     w = 2 * np.pi * base_hz
     l = np.arange(1, harmonics + 1)
-    a, b = rng.normal(size=(2, 2, harmonics)) / l  # decaying harmonics: smooth, mostly low frequency
+    a, b = rng.normal(size=(2, box.n, harmonics)) / l  # decaying harmonics: smooth, mostly low frequency
     arg = np.outer(t, l * w)
     s, c = np.sin(arg), np.cos(arg)
     # Per joint: deviation x = Σ a/(lω) sin − b/(lω) cos, and its two derivatives.
@@ -189,9 +275,9 @@ def fourier(
     acc = -(s @ (a * l * w).T) + c @ (b * l * w).T
     x = x - x[:1]  # start at the centre pose
     # Scale each joint to the limits (position half-range with margin, speed, acceleration).
-    half = 0.45 * (Q_MAX - Q_MIN)
+    half = 0.45 * (box.q_max - box.q_min)
     ratio = np.max(
-        [np.abs(x).max(0) / half, np.abs(v).max(0) / (0.9 * V_MAX), np.abs(acc).max(0) / (0.6 * A_MAX)],
+        [np.abs(x).max(0) / half, np.abs(v).max(0) / (0.9 * box.v_max), np.abs(acc).max(0) / (0.6 * box.a_max)],
         axis=0,
     )
     x, v, acc = x / ratio, v / ratio, acc / ratio
@@ -206,9 +292,11 @@ def fourier(
     dq = dg * x + g * v
     ddq = ddg * x + 2 * dg * v + g * acc
     if fade_out:  # the fade-out acts where x is large: scale back into the speed and acceleration limits
-        again = np.maximum(np.max([np.abs(dq).max(0) / (0.9 * V_MAX), np.abs(ddq).max(0) / (0.6 * A_MAX)], axis=0), 1)
+        again = np.maximum(
+            np.max([np.abs(dq).max(0) / (0.9 * box.v_max), np.abs(ddq).max(0) / (0.6 * box.a_max)], axis=0), 1
+        )
         dev, dq, ddq = dev / again, dq / again, ddq / again
-    return Reference(t, 0.5 * (Q_MIN + Q_MAX) + dev, dq, ddq)
+    return Reference(t, 0.5 * (box.q_min + box.q_max) + dev, dq, ddq)
 
 
 def _fade(tau: np.ndarray, fade: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -221,16 +309,17 @@ def _fade(tau: np.ndarray, fade: float) -> tuple[np.ndarray, np.ndarray, np.ndar
     return e, de, dde
 
 
-def mixed(t: np.ndarray, rng: np.random.Generator, block: float = MIXED_BLOCK_S) -> Reference:
+def mixed(t: np.ndarray, rng: np.random.Generator, block: float = MIXED_BLOCK_S, box: Box = PLANAR) -> Reference:
     """`MIXED_BLOCK_S` blocks, point-to-point (`tud01`) and smooth (`fourier`) in turn, each from and to rest
     at the centre pose (see the module docstring)."""
-    centre = 0.5 * (Q_MIN + Q_MAX)
-    q, dq, ddq = np.tile(centre, (len(t), 1)), np.zeros((len(t), 2)), np.zeros((len(t), 2))
+    centre = 0.5 * (box.q_min + box.q_max)
+    m = box.n
+    q, dq, ddq = np.tile(centre, (len(t), 1)), np.zeros((len(t), m)), np.zeros((len(t), m))
     index = np.floor(t / block).astype(int)  # the block each sample falls in
     for k in np.unique(index):
         inside = index == k
         if inside.sum() > 1:
             local = t[inside] - k * block
-            r = tud01(local, rng, home=centre) if k % 2 == 0 else fourier(local, rng, fade_out=True)
+            r = tud01(local, rng, home=centre, box=box) if k % 2 == 0 else fourier(local, rng, fade_out=True, box=box)
             q[inside], dq[inside], ddq[inside] = r.q, r.dq, r.ddq
     return Reference(t, q, dq, ddq)

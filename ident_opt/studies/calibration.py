@@ -17,6 +17,7 @@ from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import RIGID
 from ident_opt.data import Dataset, load_dataset
 from ident_opt.effects import BACKGROUND, parse_effect
+from ident_opt.errors import InputError
 from ident_opt.identify.ols import solve_ols
 from ident_opt.identify.stats import Stats
 from ident_opt.problem.spec import Problem
@@ -112,10 +113,15 @@ def calibrate(real: Problem, sim: Problem, channels: Sequence[str] = ()) -> Cali
     """`real`'s trials against `sim`'s default simulated trial (seeds s and s + 1 of its [simulate] section,
     and seed s without its background terms); `channels`: the real trials' link-deflection columns."""
     spec = sim.simulate
-    summaries = [
-        summarise(f"exp{i + 1}", load_dataset(p, real.data, real.robot), channels)
-        for i, p in enumerate(real.data.trials)
-    ]
+    trials = [load_dataset(p, real.data, real.robot) for p in real.data.trials]
+    for name in channels:
+        lacking = [t.source for t in trials if name not in t.extra]
+        if lacking:
+            known = ", ".join(map(str, trials[0].extra.columns)) or "none"
+            raise InputError(
+                f"--channel {name!r}: no such column in {lacking[0]} (its columns beyond t, q, dq, ddq, tau: {known})"
+            )
+    summaries = [summarise(f"exp{i + 1}", d, channels) for i, d in enumerate(trials)]
     catalogue_only = [e for e in spec.effects if parse_effect(e)[0] not in BACKGROUND]
     for label, seed, effects in (
         (f"sim s{spec.seed}", spec.seed, list(spec.effects)),

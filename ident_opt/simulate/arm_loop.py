@@ -1,0 +1,165 @@
+"""The closed loop of an arm with n joints: a digital controller (zero-order hold) on the true plant
+(`arm_plant`), integrated with RK4, the way `closed_loop` does it for the planar arm.
+
+Controller, knowing only the datasheet: the nominal model's inverse dynamics at the reference plus a PD on the
+encoder (motor-side) angle whose gains are the nominal mass matrix at the reference,
+    τ = τ̂(q_r, dq_r, ddq_r; π_datasheet) + M̂(q_r) [ω_c² (q_r − q_enc) + 2 ω_c (dq_r − dq_enc)],
+critically damped at `closed_loop.BANDWIDTH_HZ` on every joint whatever the coupling (a diagonal PD tuned on the
+diagonal of M drove the Panda's light, strongly coupled wrist unstable at 1 kHz). The torque is constant over each
+tick (1 ms at 1 kHz); RK4 takes `substeps` sub-steps per tick, sized from the fastest rate of the loop (the PD
+against the true inertia, eig(M(q)⁻¹ M̂(q)) ω_c² and 2 ω_c, over poses spread across the ranges; an elastic
+mode's), |λ| h ≤ 0.25.
+
+Speed: one tick is one CasADi function of (x, ref, p); `mapaccum` runs `closed_loop.CHUNK` of them per call. For a
+long trial it is generated as C, compiled once per machine and arm structure (`cbuild.cached_library`, in the URDF
+project's cache) and loaded back: a 7-joint arm's 60 s at 1 kHz then takes well under a second of integration
+(benchmarks/bench_simulate.py). Short trials, or a machine without a C compiler, run CasADi's own virtual machine.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+from tqdm import tqdm
+
+from ident_opt.cache import cache_root
+from ident_opt.cbuild import cached_library, load_external
+from ident_opt.errors import InputError
+from ident_opt.simulate.arm_plant import ArmPlant, centre, initial_state, mass_matrix, plant_function, state_size
+from ident_opt.simulate.closed_loop import BANDWIDTH_HZ, CHUNK, MAX_SUBSTEPS, Gains
+from ident_opt.simulate.trajectories import Box, Reference
+
+#: Ticks from which the loop is compiled to C (when it is not compiled yet): below, building costs more than it saves.
+COMPILE_TICKS = 20000
+
+
+def gains(plant: ArmPlant, box: Box, bandwidth_hz: float = BANDWIDTH_HZ) -> Gains:
+    """The PD's gains at the centre pose [N m/rad, N m s/rad]: M̂ ω_c² and 2 M̂ ω_c, as the diagonal of M̂ (what
+    the truth file reports; the loop multiplies the whole M̂(q_r) at each tick, `controller`)."""
+    J = np.diag(mass_matrix(plant.arm, plant.nominal, centre(box)[None, :])[0])
+    w = 2 * math.pi * bandwidth_hz
+    return Gains(tuple(J * w**2), tuple(2 * J * w))
+
+
+def controller(plant: ArmPlant, bandwidth_hz: float) -> ca.Function:
+    """(ref = [q_r, dq_r, ddq_r], q_enc, dq_enc) -> τ [N m]: the nominal feedforward plus the PD
+    M̂(q_r) [ω² e + 2ω ė]."""
+    n = plant.n
+    ref, q, dq = ca.SX.sym("ref", 3 * n), ca.SX.sym("q", n), ca.SX.sym("dq", n)
+    a = ca.SX.sym("a", n)
+    nominal = plant.arm.tau_expression(ref[:n], ref[n : 2 * n], a, ca.DM(plant.nominal))
+    M = ca.jacobian(nominal, a)
+    ff = ca.substitute(nominal, a, ref[2 * n :])
+    w = 2 * math.pi * bandwidth_hz
+    tau = ff + M @ (w**2 * (ref[:n] - q) + 2 * w * (ref[n : 2 * n] - dq))
+    return ca.Function("controller", [ref, q, dq], [tau])
+
+
+def substeps(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> int:
+    """RK4 sub-steps per tick of a `control` [Hz] loop: the fastest closed-loop rate |λ| (the PD against the true
+    inertia, √λ ω_c + 2 λ ω_c with λ the largest eigenvalue of M(q)⁻¹ M̂(q) over poses spread across the ranges; an
+    elastic mode's, `ElasticJoint`) times the step h ≤ 0.25. An `InputError` naming the cause when more than
+    `MAX_SUBSTEPS` would be needed."""
+    poses = np.vstack([centre(box), np.random.default_rng(2).uniform(box.q_min, box.q_max, (16, plant.n))])
+    M = mass_matrix(plant.arm, plant.pi, poses) + np.diag(plant.inertia)
+    M_hat = mass_matrix(plant.arm, plant.nominal, poses)
+    w = 2 * math.pi * bandwidth_hz
+    rates = []
+    for Mk, Hk in zip(M, M_hat):
+        lam = float(np.max(np.abs(np.linalg.eigvals(np.linalg.solve(Mk, Hk)))))
+        rates.append(math.sqrt(lam) * w + 2 * lam * w)
+    rates.append(plant.friction_rate)
+    e = plant.elastic
+    if e is not None:
+        M0 = mass_matrix(plant.arm, plant.nominal, centre(box)[None, :])[0]
+        rates.append(e.fastest_rate + 2 * w * M0[e.index, e.index] / e.B)
+    needed = math.ceil(max(rates) / control / 0.25)
+    if not np.isfinite(needed) or needed > MAX_SUBSTEPS:
+        why = (
+            f"the elastic joint's mode at {e.frequency_hz:g} Hz"
+            if e is not None and e.fastest_rate >= 0.5 * max(rates)
+            else "the controller against the arm's smallest inertia"
+        )
+        raise InputError(
+            f"the simulation is too stiff to integrate: {why} needs {needed:g} RK4 steps per {1e3 / control:g} ms tick "
+            f"(at most {MAX_SUBSTEPS}); use a lower frequency or a faster control rate"
+        )
+    return max(2, needed)
+
+
+def tick(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> tuple[ca.Function, int]:
+    """One tick of a `control` [Hz] loop: (x, ref, p) -> (x_next, out), out = [τ (n), y (3n + 1)] at its start, and
+    the sub-steps it takes."""
+    n, nx = plant.n, state_size(plant)
+    f = plant_function(plant)
+    ctrl = controller(plant, bandwidth_hz)
+    p = ca.SX.sym("p", f.size1_in(2))
+    x, ref = ca.SX.sym("x", nx), ca.SX.sym("ref", 3 * n)
+    _, y = f(x, ca.DM.zeros(n), p)
+    tau = ctrl(ref, y[:n], y[n : 2 * n])
+    _, y = f(x, tau, p)  # y's accelerations are those the dynamics produce under the applied torque
+    steps = substeps(plant, bandwidth_hz, box, control)
+    h = 1.0 / control / steps
+    xk = x
+    for _ in range(steps):
+        k1 = f(xk, tau, p)[0]
+        k2 = f(xk + h / 2 * k1, tau, p)[0]
+        k3 = f(xk + h / 2 * k2, tau, p)[0]
+        k4 = f(xk + h * k3, tau, p)[0]
+        xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return ca.Function("arm_tick", [x, ref, p], [xk, ca.vertcat(tau, y)], ["x", "ref", "p"], ["x_next", "out"]), steps
+
+
+def chunked(step: ca.Function, plant: ArmPlant, ticks: int) -> ca.Function:
+    """`step` accumulated over `CHUNK` ticks, compiled to C when the trial is long or it is compiled already
+    (cached per machine, `cbuild.cached_library`); CasADi's virtual machine otherwise, or without a compiler."""
+    accumulated = step.mapaccum(CHUNK)
+    urdf = getattr(plant.robot, "urdf", None)
+    folder = cache_root(Path(urdf) if urdf else Path.cwd() / "x") / "simulate"
+    try:
+        lib = cached_library(accumulated, folder, build=ticks >= COMPILE_TICKS)
+    except (InputError, OSError):
+        lib = None
+    return load_external(lib, accumulated.name()) if lib is not None else accumulated
+
+
+def run(
+    plant: ArmPlant,
+    ref: Reference,
+    box: Box,
+    progress: bool = True,
+    control: float = 1000.0,
+    bandwidth_hz: float = BANDWIDTH_HZ,
+) -> tuple[np.ndarray, Gains, int]:
+    """Simulate the loop over the reference (sampled at the control rate `control` [Hz]); returns (out (N, 4n + 1):
+    τ, q_enc, dq_enc, ddq_enc, deflection at each tick; the gains; the RK4 sub-steps per tick)."""
+    g = gains(plant, box, bandwidth_hz)
+    step, steps = tick(plant, bandwidth_hz, box, control)
+    n = plant.n
+    p = ca.DM(plant.parameters())
+    x = ca.DM(initial_state(plant, ref.q[0]))
+    refs = np.hstack([ref.q, ref.dq, ref.ddq]).T
+    total = refs.shape[1]
+    width = 4 * n + 1
+    out = np.empty((width, total))
+    full = chunked(step, plant, total)
+    bar = tqdm(total=total, unit="tick", desc="simulate", disable=not progress, leave=False, unit_scale=True)
+    for start in range(0, total, CHUNK):
+        m = min(CHUNK, total - start)
+        block = refs[:, start : start + m]
+        if m < CHUNK:  # the last, partial chunk: pad with its final reference and keep what is asked for
+            block = np.hstack([block, np.repeat(block[:, -1:], CHUNK - m, axis=1)])
+        xs, outs = full(x, block, p)
+        out[:, start : start + m] = np.asarray(outs)[:, :m]
+        x = xs[:, m - 1]
+        bar.update(m)
+    bar.close()
+    if not np.all(np.isfinite(out)):
+        raise InputError(
+            "the simulation diverged (non-finite angles or torques): the hidden effects "
+            f"({', '.join(plant.effects) or 'none'}) or the trajectory are beyond what the arm can follow"
+        )
+    return out.T, g, steps

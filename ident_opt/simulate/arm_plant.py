@@ -1,0 +1,481 @@
+"""The true plant of an arm with n joints, through the `Arm` and `Robot` interfaces alone.
+
+Without effects the plant is the robot's nominal model (`Robot.datasheets()[Robot.datasheet]`: the URDF's
+inertials with the problem's joint values) as τ = Y(q, dq, ddq) π = M(q) ddq + h(q, dq): its inverse dynamics
+is the arm's own CasADi expression (`Arm.tau_expression`), and its forward dynamics solves it for ddq,
+
+    M(q) = ∂τ/∂ddq,   h(q, dq) = τ(q, dq, 0),   ddq = M(q)⁻¹ (τ_applied − h(q, dq)),
+
+which `tests/test_simulate_arm.py` checks against Pinocchio's ABA. Each hidden effect of
+`ident_opt.effects.CATALOGUE` shapes it through its hook `Effect.arm_plant` (applied in catalogue order), on any
+joint: extra diagonal inertia (armature), per-direction Coulomb levels and a Stribeck excess on the joint's
+velocity, load-dependent friction, a point mass on the last link (π changes), encoder zero offsets, the logged
+torque channel (a delay, a scale), and `Effect.arm_mechanism`: an elastic joint (`ElasticJoint`), whose motor
+side is logged and driven and whose link side sits behind a spring.
+
+Every number that sizes the plant (π, the extra terms, the spring) is an input of the CasADi functions, not a
+constant in them, so the compiled closed loop (`arm_loop`) is built once per arm and structure.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from ident_opt.arm.base import Arm, Robot
+from ident_opt.effects import CATALOGUE
+from ident_opt.effects.base import ArmScale, Joints
+from ident_opt.errors import InputError
+
+#: The fastest rate [1/s] the regularised friction of the effects may add (`ArmPlant.regularisation`): 32 RK4 steps
+#: per 1 ms tick at most, and its narrowest regularisation [rad/s].
+FRICTION_RATE, MIN_EPS = 8000.0, 1e-4
+#: An elastic joint whose nominal motor inertia (reflected rotor inertia) is 0 gets this share of its link-side
+#: inertia as a motor: a two-mass joint needs a motor side (`ElasticJoint`).
+MOTOR_SHARE = 0.5
+#: Parameter kinds that are not the link-side rigid body (`link_pi`).
+JOINT_KINDS = ("friction", "armature", "other")
+
+
+@dataclass
+class ElasticJoint:
+    """Joint `index` (0-based) elastic: motor inertia B [kg m²] (logged and driven), spring k [N m/rad] and
+    damper d [N m s/rad] to the link, whose inertia J_link [kg m²] at the centre pose set k for the natural
+    frequency `frequency_hz` with the other joints held, damping ratio `damping`; `motor_added`: B was not in the
+    datasheet (`MOTOR_SHARE`); `fastest_rate` [1/s] a bound of the mode's rate with the joint free."""
+
+    index: int
+    k: float
+    d: float
+    B: float
+    J_link: float
+    frequency_hz: float
+    damping: float
+    motor_added: bool
+    fastest_rate: float
+
+    @property
+    def deflection_column(self) -> str:
+        """The logged column of the spring's deflection θ − q_j."""
+        return f"deflection{self.index + 1}"
+
+
+@dataclass
+class ArmPlant:
+    """The true plant while the hidden effects shape it (`Effect.arm_plant` changes it in place). Arrays are per
+    joint (n,) unless said."""
+
+    robot: Robot
+    arm: Arm
+    pi: np.ndarray  # true π (P,) in the arm's order
+    nominal: np.ndarray  # the datasheet's π (P,): the controller's model
+    scale: ArmScale
+    joints: Joints  # the datasheet's per-direction Coulomb levels, names, reference magnitudes
+    inertia: np.ndarray  # extra diagonal inertia [kg m²] beyond π's (armature)
+    positive: np.ndarray  # true Coulomb level for dq > 0 [N m] (the datasheet's mean unless an effect changes it)
+    negative: np.ndarray  # true Coulomb level for dq < 0 [N m]
+    excess: np.ndarray  # Stribeck excess over the Coulomb level [N m]
+    velocity: np.ndarray  # Stribeck velocity [rad/s] (> 0)
+    load_friction: np.ndarray  # μ: Coulomb level grows by μ |τ_load|
+    offset: np.ndarray  # encoder zero offsets δ [rad]: the true angle is the logged one + δ
+    channel: list[Callable] = field(default_factory=list)  # the logged torque: (t [s], τ (N, n)) -> logged τ
+    elastic: ElasticJoint | None = None
+    effects: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        """The number of joints."""
+        return self.arm.n_joints
+
+    @property
+    def mean_coulomb(self) -> np.ndarray:
+        """The datasheet's symmetric Coulomb level per joint [N m] (what π holds)."""
+        return np.array([0.5 * (a + b) for a, b in zip(*self.joints)])
+
+    def logged_torque(self, t: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """The torque channel as logged at the ticks t [s]: τ (N, n) [N m] through the channel's effects, in order."""
+        for transform in self.channel:
+            tau = transform(t, tau)
+        return tau
+
+    def parameters(self) -> np.ndarray:
+        """Every number the plant's functions take (`Symbols`), in their order."""
+        e = self.elastic
+        spring = [e.k, e.d, e.B] if e is not None else []
+        velocity = np.where(self.excess != 0, self.velocity, 1.0)  # any vs > 0 where there is no excess
+        return np.concatenate(
+            [
+                self.pi,
+                self.inertia,
+                self.positive - self.mean_coulomb,
+                self.negative - self.mean_coulomb,
+                self.excess,
+                velocity,
+                self.load_friction,
+                self.offset,
+                self.regularisation,
+                spring,
+            ]
+        )
+
+    @property
+    def regularisation(self) -> np.ndarray:
+        """ε (n,) [rad/s]: the speed over which the effects' friction changes sign (`smooth_sign`). With a sharp
+        sign a friction step on a light joint (a wrist without its rotor) chatters at the control rate instead of
+        sticking; ε is the narrowest the integration resolves at `FRICTION_RATE` [1/s] (the step over half the
+        joint's nominal inertia), at least `MIN_EPS`: far below the Stribeck velocities drawn (3–8 % of the
+        cruise speed)."""
+        step, inertia = self._friction_step()
+        return np.where(step > 0, np.maximum(step / (inertia * FRICTION_RATE), MIN_EPS), 1.0)
+
+    @property
+    def friction_rate(self) -> float:
+        """The fastest rate [1/s] the regularised friction adds (the substeps' sizing, `arm_loop.substeps`)."""
+        step, inertia = self._friction_step()
+        return float(np.max(step / (inertia * self.regularisation)))
+
+    def _friction_step(self) -> tuple[np.ndarray, np.ndarray]:
+        """The effects' friction step across zero speed per joint [N m] (per-direction departures, the Stribeck
+        excess, the load friction at the reference torque) and the inertia it acts on [kg m²] (half the joint's
+        nominal one plus the armature: the light side of an elastic joint)."""
+        step = (
+            np.abs(self.positive - self.mean_coulomb) + np.abs(self.negative - self.mean_coulomb) + np.abs(self.excess)
+        )
+        step = step + self.load_friction * np.asarray(self.scale.torque)
+        return step, 0.5 * np.maximum(np.asarray(self.scale.inertia) + self.inertia, 1e-9)
+
+
+def link_pi(arm: Arm, pi):
+    """π of the link side: the joint terms (friction, armature, offsets: `JOINT_KINDS`) zeroed, so that Y π is the
+    link-side rigid-body torque (inertial, Coriolis/centrifugal, gravity). Works on NumPy and CasADi vectors."""
+    mask = np.array([p.kind not in JOINT_KINDS for p in arm.parameters], dtype=float)
+    return pi * (ca.DM(mask) if isinstance(pi, ca.SX | ca.MX) else mask)
+
+
+def joint_terms_of(arm: Arm, joint: int) -> np.ndarray:
+    """(P,) 0/1: the joint terms (friction, armature) that act on joint `joint` (0-based) alone (a structural
+    non-zero of the symbolic Y on its row only): its motor side, behind an elastic joint's spring."""
+    Y = arm.symbols["Y"].sparsity()
+    rows = range(arm.n_joints)
+    return np.array(
+        [
+            float(
+                p.kind in ("friction", "armature")
+                and Y.has_nz(joint, i)
+                and not any(Y.has_nz(r, i) for r in rows if r != joint)
+            )
+            for i, p in enumerate(arm.parameters)
+        ]
+    )
+
+
+def mass_matrix(arm: Arm, pi: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """M(q) (N, n, n) [kg m²] of the arm's own expression at poses q (N, n) (armature included)."""
+    f = arm.function("M")
+    n = arm.n_joints
+    zero = np.zeros(n)
+    return np.array([np.asarray(f(qk, zero, zero, pi)) for qk in np.atleast_2d(q)])
+
+
+def centre(limits) -> np.ndarray:
+    """The centre of each joint's range [rad] (`limits`: `trajectories.ArmLimits`)."""
+    return 0.5 * (np.asarray(limits.q_min) + np.asarray(limits.q_max))
+
+
+def arm_scale(robot: Robot, limits, speed: np.ndarray) -> ArmScale:
+    """The arm's reference magnitudes (`ArmScale`): effort limits (else the nominal torque's 95th percentile over
+    poses spread across the ranges, moving at `speed`), the nominal diagonal inertia at the centre pose, the
+    cruise speed [rad/s], the moving mass [kg] and the chain's length [m]."""
+    arm, pi = robot.datasheets()[robot.datasheet]
+    n = arm.n_joints
+    singular(robot, arm, pi, limits)
+    rng = np.random.default_rng(0)
+    q = rng.uniform(limits.q_min, limits.q_max, size=(64, n))
+    tau = arm.predict(link_pi(arm, pi), q, rng.choice([-1.0, 1.0], size=(64, n)) * speed, np.zeros((64, n)))
+    effort = robot.limits().get("torque")
+    torque = [
+        float(effort[j]) if effort is not None and effort[j] else max(float(np.quantile(np.abs(tau[:, j]), 0.95)), 1e-3)
+        for j in range(n)
+    ]
+    inertia = np.diag(mass_matrix(arm, pi, centre(limits)[None, :])[0])
+    masses = arm.link_masses(pi)
+    return ArmScale(
+        tuple(torque),
+        tuple(float(v) for v in inertia),
+        tuple(float(v) for v in speed),
+        float(sum(masses.values())) if masses else 0.0,
+        reach(robot),
+    )
+
+
+def singular(robot: Robot, arm: Arm, pi: np.ndarray, limits) -> None:
+    """InputError naming the joint when the nominal mass matrix is singular (a joint with no inertia about its axis:
+    a URDF without the rotor behind it), which no forward simulation can integrate."""
+    M = mass_matrix(arm, pi, centre(limits)[None, :])[0]
+    lam, V = np.linalg.eigh(M)
+    if lam[0] > 1e-9 * max(lam[-1], 1e-12):
+        return
+    j = int(np.argmax(np.abs(V[:, 0])))
+    raise InputError(
+        f"the nominal model's mass matrix is singular (smallest eigenvalue {lam[0]:.2g} kg m²): joint "
+        f"{robot.joint_names[j]} has no inertia about its axis (its link in the URDF, and no rotor); give its "
+        f"reflected rotor inertia in [robot.{robot.joint_tables[j]}] rotor_inertia to simulate it"
+    )
+
+
+def reach(robot: Robot) -> float:
+    """The chain's length [m]: the sum of the joints' placement distances (an upper bound of the arm's reach)."""
+    arm = robot.datasheets()[robot.datasheet][0]
+    chain = getattr(arm, "chain", ())
+    return float(sum(np.linalg.norm(j.translation) for j in chain)) or 1.0
+
+
+def joints_of(robot: Robot, scale: ArmScale | None) -> Joints:
+    """The effect syntax's view of the robot's joints: the datasheet's per-direction Coulomb levels (joint side),
+    the joints' names and the reference magnitudes."""
+    positive = [j.coulomb_friction.positive for j in robot.joints]
+    negative = [j.coulomb_friction.negative for j in robot.joints]
+    return Joints(positive, negative, robot.joint_names, scale)
+
+
+def build_plant(robot: Robot, effects: dict[str, dict], scale: ArmScale, joints: Joints, limits) -> ArmPlant:
+    """The true plant for the (normalised, active) `effects`, each applied by its `Effect.arm_plant` in catalogue
+    order, then the mechanism (`Effect.arm_mechanism`) of the one that has one."""
+    arm, pi = robot.datasheets()[robot.datasheet]
+    n = arm.n_joints
+    mean = np.array([0.5 * (a + b) for a, b in zip(*joints)])
+    plant = ArmPlant(
+        robot,
+        arm,
+        np.array(pi, dtype=float),
+        np.array(pi, dtype=float),
+        scale,
+        joints,
+        np.zeros(n),
+        mean.copy(),
+        mean.copy(),
+        np.zeros(n),
+        np.full(n, 0.05),
+        np.zeros(n),
+        np.zeros(n),
+        effects=dict(effects),
+    )
+    hidden = [(e, effects[name]) for name, e in CATALOGUE.items() if name in effects]
+    for effect, p in hidden:
+        effect.arm_plant(plant, p)
+    for effect, p in hidden:
+        joint = effect.arm_mechanism(plant, p)
+        if joint is not None:
+            plant.elastic = elastic_joint(plant, *joint, limits)
+    return plant
+
+
+def elastic_joint(plant: ArmPlant, joint: int, frequency_hz: float, damping: float, limits) -> ElasticJoint:
+    """Joint `joint` (0-based) elastic at `frequency_hz` [Hz] with the other joints held, damping ratio `damping`:
+    k = J_link (2π f)², d = 2 ζ √(k J_link), J_link the link-side inertia at the centre pose; the motor is the
+    joint's reflected rotor inertia (π's armature on that joint plus any extra), or `MOTOR_SHARE` × J_link."""
+    arm = plant.arm
+    motor_terms = joint_terms_of(arm, joint)
+    link = plant.pi * (1 - motor_terms)
+    poses = np.vstack([centre(limits), np.random.default_rng(1).uniform(limits.q_min, limits.q_max, (16, plant.n))])
+    M_link = mass_matrix(arm, link, poses)[:, joint, joint]
+    M_full = mass_matrix(arm, plant.pi, centre(limits)[None, :])[0, joint, joint]
+    J_link = float(M_link[0])
+    B = float(M_full - J_link + plant.inertia[joint])
+    added = B <= 1e-12 * max(J_link, 1e-12)
+    if added:
+        B = MOTOR_SHARE * J_link
+    k = J_link * (2 * math.pi * frequency_hz) ** 2
+    d = 2 * damping * math.sqrt(k * J_link)
+    J_min = float(np.min(M_link))
+    rate = math.sqrt(k * (1 / B + 1 / J_min)) + d * (1 / B + 1 / J_min)
+    return ElasticJoint(joint, k, d, B, J_link, frequency_hz, damping, added, rate)
+
+
+# ---------------------------------------------------------------------------------------------- CasADi
+@dataclass
+class Symbols:
+    """The plant's parameters as CasADi symbols, in `ArmPlant.parameters` order."""
+
+    pi: ca.SX
+    inertia: ca.SX
+    up: ca.SX  # the positive level's excess over the datasheet's mean
+    down: ca.SX
+    excess: ca.SX
+    velocity: ca.SX
+    mu: ca.SX
+    offset: ca.SX
+    eps: ca.SX  # the friction sign's regularisation per joint [rad/s]
+    spring: ca.SX  # k, d, B (elastic joint) or empty
+
+    @classmethod
+    def of(cls, plant: ArmPlant) -> Symbols:
+        n, P = plant.n, len(plant.pi)
+        sizes = [P, n, n, n, n, n, n, n, n, 3 if plant.elastic is not None else 0]
+        names = ("pi", "inertia", "up", "down", "excess", "velocity", "mu", "offset", "eps", "spring")
+        return cls(*(ca.SX.sym(name, size) for name, size in zip(names, sizes)))
+
+    def vector(self) -> ca.SX:
+        """All of them, stacked (the functions' parameter input)."""
+        return ca.vertcat(
+            self.pi,
+            self.inertia,
+            self.up,
+            self.down,
+            self.excess,
+            self.velocity,
+            self.mu,
+            self.offset,
+            self.eps,
+            self.spring,
+        )
+
+
+def smooth_sign(v, eps) -> ca.SX:
+    """tanh(v/ε): the sign of the effects' friction, regularised over ε [rad/s] (`ArmPlant.regularisation`)."""
+    return ca.tanh(v / eps)
+
+
+def extra_friction(s: Symbols, v) -> ca.SX:
+    """The effects' friction at joint rates v (n,) [N m]: the per-direction levels' departure from the datasheet's
+    mean and the Stribeck excess fs sgn(v) exp(−(v/vs)²), the sign regularised (`smooth_sign`)."""
+    sign = smooth_sign(v, s.eps)
+    positive, negative = 0.5 * (1 + sign), 0.5 * (1 - sign)
+    stribeck = s.excess * sign * ca.exp(-((v / s.velocity) ** 2))
+    return s.up * positive - s.down * negative + stribeck
+
+
+def dynamics(arm: Arm, pi, q, dq, inertia=None) -> tuple[ca.SX, ca.SX]:
+    """(M(q), h(q, dq)) of the arm's inverse dynamics τ = M ddq + h (+ diag(inertia) ddq): M = ∂τ/∂ddq, h = τ at
+    ddq = 0 (`Arm.tau_expression`, one source of truth)."""
+    a = ca.SX.sym("a", arm.n_joints)
+    expr = arm.tau_expression(q, dq, a, pi)
+    if inertia is not None:
+        expr = expr + inertia * a
+    return ca.jacobian(expr, a), ca.substitute(expr, a, ca.DM.zeros(arm.n_joints))
+
+
+def forward(arm: Arm, pi, q, dq, tau, inertia=None) -> ca.SX:
+    """ddq = M(q)⁻¹ (τ − h(q, dq)) from the arm's inverse dynamics (`dynamics`)."""
+    M, h = dynamics(arm, pi, q, dq, inertia)
+    return ca.solve(M, tau - h)
+
+
+def loaded_forward(M, b, mu, rates, link_M, link_h, eps) -> ca.SX:
+    """Accelerations of M a = b − μ ∘ sgn(v) ∘ |τ_load(a)|, the gears' load-dependent friction, with τ_load(a) =
+    link_M a + link_h the link-side rigid torque (inertial without the rotors, Coriolis, gravity). |τ_load| =
+    S τ_load with S the signs of τ_load at the load-free answer a₀ = M⁻¹ b, which makes the equation linear in a:
+    (M + D S link_M) a = b − D S link_h, D = diag(μ sgn v) — exact wherever τ_load keeps its sign between a₀ and
+    a (everywhere but the instants it crosses zero, where |τ_load| is small anyway)."""
+    a0 = ca.solve(M, b)
+    S = ca.sign(ca.mtimes(link_M, a0) + link_h)
+    D = mu * smooth_sign(rates, eps) * S
+    return ca.solve(M + ca.diag(D) @ link_M, b - D * link_h)
+
+
+def plant_function(plant: ArmPlant) -> ca.Function:
+    """The plant as a CasADi Function (x, τ, p) -> (ẋ, y), y = [q_enc (n), dq_enc (n), ddq_enc (n), deflection]:
+    encoder angles (true − δ), their rates and the accelerations the dynamics produce; p = `ArmPlant.parameters`."""
+    s = Symbols.of(plant)
+    if plant.elastic is not None:
+        return _elastic_function(plant, s)
+    n, arm = plant.n, plant.arm
+    x, tau = ca.SX.sym("x", 2 * n), ca.SX.sym("tau", n)
+    q, dq = x[:n], x[n:]
+    friction = extra_friction(s, dq)
+    M, h = dynamics(arm, s.pi, q, dq, s.inertia)
+    b = tau - friction - h
+    if np.any(plant.load_friction):
+        link_M, link_h = dynamics(arm, link_pi(arm, s.pi), q, dq)
+        ddq = loaded_forward(M, b, s.mu, dq, link_M, link_h, s.eps)
+    else:
+        ddq = ca.solve(M, b)
+    y = ca.vertcat(q - s.offset, dq, ddq, 0)
+    return ca.Function("plant", [x, tau, s.vector()], [ca.vertcat(dq, ddq), y], ["x", "tau", "p"], ["xdot", "y"])
+
+
+def _elastic_function(plant: ArmPlant, s: Symbols) -> ca.Function:
+    """The plant with an elastic joint j: x = [q (n), θ, dq (n), dθ]; the link side is the rigid arm without joint
+    j's own friction and armature, driven at joint j by the spring τ_s = k (θ − q_j) + d (dθ − dq_j); the motor,
+    B θ̈ = τ_j − τ_s − F_j(dθ) (its gear friction, on the motor side), is what the encoder and the controller see."""
+    n, arm, e = plant.n, plant.arm, plant.elastic
+    j = e.index
+    k, d, B = s.spring[0], s.spring[1], s.spring[2]
+    x, tau = ca.SX.sym("x", 2 * n + 2), ca.SX.sym("tau", n)
+    q, theta, dq, dtheta = x[:n], x[n], x[n + 1 : 2 * n + 1], x[2 * n + 1]
+    motor = ca.DM(joint_terms_of(arm, j))
+    link_side = s.pi * (1 - motor)
+    spring = k * (theta - q[j]) + d * (dtheta - dq[j])
+    unit = ca.DM.zeros(n)
+    unit[j] = 1
+    rates = ca.vertcat(*[dtheta if i == j else dq[i] for i in range(n)])  # the gears turn at the motor's rate
+    friction = extra_friction(s, rates)
+    v = unit * dtheta
+    # joint j's own friction (and its share of the effects' friction) acts on the motor, before the spring
+    motor_friction = arm.tau_expression(q, v, ca.DM.zeros(n), s.pi * motor)[j] + friction[j]
+    others = ca.DM.ones(n) - unit
+    link_inertia = s.inertia * others
+    # The state's accelerations [ddq (n), ddθ] solve one linear system: the link side, M_l ddq + h_l = the joint
+    # torques with the spring at joint j, and the motor, B ddθ = τ_j − τ_s − its friction.
+    M_l, h_l = dynamics(arm, link_side, q, dq, link_inertia)
+    M = ca.blockcat([[M_l, ca.SX.zeros(n, 1)], [ca.SX.zeros(1, n), B]])
+    b = ca.vertcat(tau * others + unit * spring - friction * others - h_l, tau[j] - spring - motor_friction)
+    if np.any(plant.load_friction):
+        # joint j's gears carry the spring torque (no acceleration term); the others their link-side torque
+        link_M, link_h = dynamics(arm, link_pi(arm, s.pi), q, dq)
+        select = ca.diag(others)
+        load_M = ca.horzcat(select @ link_M, ca.SX.zeros(n, 1))
+        load_h = select @ link_h + unit * spring
+        moving = ca.vertcat(rates, dtheta)
+        acc = loaded_forward(
+            M,
+            b,
+            ca.vertcat(s.mu * others, s.mu[j]),
+            moving,
+            ca.vertcat(load_M, ca.SX.zeros(1, n + 1)),
+            ca.vertcat(load_h, spring),
+            ca.vertcat(s.eps, s.eps[j]),
+        )
+    else:
+        acc = ca.solve(M, b)
+    ddq, ddtheta = acc[:n], acc[n]
+    xdot = ca.vertcat(dq, dtheta, ddq, ddtheta)
+    encoder = ca.vertcat(*[theta if i == j else q[i] for i in range(n)])
+    y = ca.vertcat(
+        encoder - s.offset, rates, ca.vertcat(*[ddtheta if i == j else ddq[i] for i in range(n)]), theta - q[j]
+    )
+    return ca.Function("plant", [x, tau, s.vector()], [xdot, y], ["x", "tau", "p"], ["xdot", "y"])
+
+
+def state_size(plant: ArmPlant) -> int:
+    """Length of the state x: [q (n), dq (n)], or [q (n), θ, dq (n), dθ] with an elastic joint."""
+    return 2 * plant.n + (2 if plant.elastic is not None else 0)
+
+
+def initial_state(plant: ArmPlant, q_enc: np.ndarray) -> np.ndarray:
+    """A state at rest whose encoders read `q_enc` [rad]; behind an elastic joint the link hangs at the spring's
+    static deflection, k (θ − q_j) = G_j(q)."""
+    q = np.asarray(q_enc, dtype=float) + plant.offset
+    n = plant.n
+    if plant.elastic is None:
+        return np.concatenate([q, np.zeros(n)])
+    e = plant.elastic
+    theta = q[e.index]
+    gravity = plant.arm.function("G")
+    rigid = link_pi(plant.arm, plant.pi)
+    zero = np.zeros(n)
+    for _ in range(30):  # fixed point of k (θ − q_j) = G_j(q): the spring holds the link against gravity
+        q[e.index] = theta - float(gravity(q, zero, zero, rigid)[e.index]) / e.k
+    return np.concatenate([q, [theta], zero, [0.0]])
+
+
+def check_finite(plant: ArmPlant, where: str) -> None:
+    """InputError naming the effects when the plant's numbers are not finite (a magnitude too large to simulate)."""
+    if not np.all(np.isfinite(plant.parameters())):
+        raise InputError(
+            f"{where}: the hidden effects ({', '.join(plant.effects) or 'none'}) make the plant's numbers non-finite"
+        )
