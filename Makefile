@@ -41,14 +41,16 @@ test: $(STAMP)
 test-arms: $(STAMP)
 	IDENT_OPT_ARM_MATRIX=1 $(BIN)/python -m pytest -n 2 -q tests/test_diagnose_arm.py
 
-## The long hostile-input fuzz (tests/test_fuzz.py; the suite runs 80 cases per property): FUZZ_EXAMPLES cases per
-## property (6 properties: 5 there and the stream's first samples, tests/test_stream_start.py; >= 3,000 cases in all),
-## each logged to build/fuzz.log, then summed up.
+## The long hostile-input fuzz (tests/test_fuzz.py: data, problem, command line, stream; tests/test_stream_start.py:
+## the stream's first samples; tests/test_fuzz_inputs.py: URDF, n-joint columns, ROS 2 bags, trial gaps, output
+## paths; the suite runs a small share of each): FUZZ_EXAMPLES cases per property (11 properties, >= 8,800 cases in
+## all), each logged to build/fuzz.log, then summed up (cases per property; tracebacks, NaN, modified inputs,
+## partial outputs, hangs).
 FUZZ_EXAMPLES ?= 800
 fuzz: $(STAMP)
 	mkdir -p build && rm -f build/fuzz.log
-	IDENT_OPT_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) IDENT_OPT_FUZZ_LOG=build/fuzz.log $(BIN)/python -m pytest -n 2 -q tests/test_fuzz.py \
-	    tests/test_stream_start.py::test_fuzz_stream_start
+	IDENT_OPT_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) IDENT_OPT_FUZZ_LOG=build/fuzz.log $(BIN)/python -m pytest -n 2 -q \
+	    tests/test_fuzz.py tests/test_stream_start.py::test_fuzz_stream_start tests/test_fuzz_inputs.py
 	$(BIN)/python -m tests.test_fuzz build/fuzz.log
 
 ## Style: ruff's lint rules (with complexity limits, see pyproject.toml) and its formatter, checked not applied.

@@ -9,9 +9,12 @@ are added to the parser then): `ident-opt --help` lists the commands without imp
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import signal
 import sys
-from collections.abc import Iterable
+import threading
+from collections.abc import Iterable, Iterator
 
 from ident_opt import __version__, outputs
 from ident_opt.arguments import validate_numbers
@@ -78,6 +81,10 @@ def check_outputs(args: argparse.Namespace) -> None:
     for dest in INPUT_FLAGS:
         value = getattr(args, dest, None)
         outputs.declare_inputs([value] if isinstance(value, str) else value or [])
+    for dest in (*OUTPUT_FLAGS, "out"):
+        value = getattr(args, dest, None)
+        if isinstance(value, str) and not value.strip():
+            raise InputError(f"--{dest}: an empty path; give a file or folder name")
     for dest in OUTPUT_FLAGS:
         if getattr(args, dest, None):
             outputs.check_file_output(getattr(args, dest), "--" + dest)
@@ -92,21 +99,47 @@ def _module(name: str):
     return importlib.import_module(f"ident_opt.commands.{name}")
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the console script; returns the exit status."""
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived: handled as an interrupt (the run's outputs rolled back), reported as termination."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM raises `Terminated` in the main thread while a command runs (start-up included), so that the run
+    ends with a message and rolls back what it wrote; the previous handler is put back after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
-        argv = sys.argv[1:] if argv is None else list(argv)
-        parser = build_parser(argv[:1])  # the command comes first: only its module is imported
-        args = parser.parse_args(argv)
-        if args.command is None:
-            parser.print_help()
-            return 2
-        with outputs.run():
-            check_outputs(args)
-            return int(_module(args.command).run(args) or 0)
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script; returns the exit status (SIGTERM: 143, Ctrl-C: 130)."""
+    try:
+        with _sigterm_as_interrupt():
+            argv = sys.argv[1:] if argv is None else list(argv)
+            parser = build_parser(argv[:1])  # the command comes first: only its module is imported
+            args = parser.parse_args(argv)
+            if args.command is None:
+                parser.print_help()
+                return 2
+            with outputs.run():
+                check_outputs(args)
+                return int(_module(args.command).run(args) or 0)
     except InputError as exc:
         print(f"ident-opt: error: {exc}", file=sys.stderr)
         return 2
+    except Terminated:
+        print("ident-opt: terminated (SIGTERM); nothing it was writing was left behind", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print("ident-opt: interrupted", file=sys.stderr)
         return 130

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 from sklearn.model_selection import train_test_split
 
-from ident_opt import rosbag
+from ident_opt import outputs, rosbag
 from ident_opt.arm.base import Robot
 from ident_opt.arm.planar import PI_NAMES
 from ident_opt.columns import channel_names, locate
@@ -28,7 +28,7 @@ from ident_opt.derivatives import (
     resolve_cutoff,
     settled,
 )
-from ident_opt.errors import InputError
+from ident_opt.errors import InputError, excerpt
 from ident_opt.problem.spec import DataSpec
 
 #: A standard joint column's name: its signal and its joint number (1-based).
@@ -100,6 +100,7 @@ class Dataset:
 # ---------------------------------------------------------------------------------------------- reading
 def _read(path: Path, spec: DataSpec) -> pd.DataFrame:
     """The raw table of a data file, or of a ROS 2 bag (`ident_opt.rosbag`: already in the data format's names)."""
+    outputs.declare_inputs([path])
     if path.exists() and rosbag.is_bag(path):
         return rosbag.read_bag(path, spec.ros_topic, spec.ros_joints)
     return _read_table(path, spec)
@@ -191,8 +192,11 @@ def _locate(
 
 
 def _row_label(path: Path, row: int, spec: DataSpec) -> str:
+    """Where 0-based data row `row` is, as the user finds it: a CSV's line, a ROS 2 bag's message index."""
     if path.name.lower().endswith((".csv", ".csv.gz")):
         return f"data row {row + 1} (line {row + 1 + int(spec.header)} of the file)"
+    if path.exists() and rosbag.is_bag(path):
+        return rosbag.message_label(row, spec.ros_topic)
     return f"data row {row + 1}"
 
 
@@ -209,11 +213,8 @@ def _numeric(
         else:
             row = int(np.argmax(invalid))
             cell = raw.iloc[row]
-            what = (
-                "an empty cell"
-                if (isinstance(cell, str) and not cell.strip()) or pd.isna(cell)
-                else f"the value {cell!r}"
-            )
+            empty = cell is None or (isinstance(cell, str) and not cell.strip())  # a NaN read as a number is a value
+            what = "an empty cell" if empty else f"the value {excerpt(cell)}"
             raise InputError(
                 f"{path}: column '{name}' has {what} at {_row_label(path, row, spec)}; "
                 "every used cell must be a finite number (use --drop-invalid to skip such rows)"
@@ -302,7 +303,7 @@ def _check_time(t: np.ndarray, path: Path, spec: DataSpec) -> None:
         kind = "repeats" if steps[row - 1] == 0 else "goes back"
         raise InputError(
             f"{path}: column 't' is not strictly increasing: it {kind} at "
-            f"{_row_label(path, row, spec)} ({float(t[row - 1])!r} then {float(t[row])!r})"
+            f"{_row_label(path, row, spec)} ({excerpt(float(t[row - 1]))} then {excerpt(float(t[row]))})"
         )
 
 
@@ -345,7 +346,7 @@ def _check_plausible(
             if estimated:
                 hint = " (estimated from q and t: is t in seconds, q in radians?)"
             raise InputError(
-                f"{path}: column '{kind}{joint + 1}' has the implausible value {float(arr[row, joint])!r} at "
+                f"{path}: column '{kind}{joint + 1}' has the implausible value {excerpt(float(arr[row, joint]))} at "
                 f"{_row_label(path, original_row, spec)}: |{kind}| > {PLAUSIBLE[kind]:g} in SI units"
                 f"{hint}. Use --allow-implausible to proceed anyway."
             )
@@ -404,16 +405,17 @@ def load_dataset(
 
     bad = np.zeros(len(frame), dtype=bool)
     values = {name: _numeric(frame, label, name, path, spec, drop_invalid, bad) for name, label in cols.items()}
+    # Converted first (a mapped t may be scaled by -1): every check below sees what the models will see.
+    # A URDF's angle zero and axis sign are the file's, not ident-opt's: the robot maps them (urdf_planar).
+    to_tool = robot.column_map
+    for name, v in values.items():
+        values[name] = convert(convert(v, *conversions.get(name, (1.0, 0.0))), *to_tool.get(name, (1.0, 0.0)))
     if drop_invalid:  # rows that break strict increase of t are dropped too (the first of a run is kept)
         bad |= _non_increasing(values["t"], bad)
     keep = ~bad
-    values = {name: convert(v[keep], *conversions.get(name, (1.0, 0.0))) for name, v in values.items()}
-    # A URDF's angle zero and axis sign are the file's, not ident-opt's: the robot maps them (urdf_planar).
-    to_tool = robot.column_map
-    values = {name: convert(v, *to_tool.get(name, (1.0, 0.0))) for name, v in values.items()}
+    values = {name: v[keep] for name, v in values.items()}
     t = values["t"]
-    if not drop_invalid:
-        _check_time(t, path, spec)
+    _check_time(t, path, spec)
     n = len(t)
     if n < max(min_samples, 2):
         raise InputError(f"{path}: only {n} valid samples, fewer than the {max(min_samples, 2)} this command needs")

@@ -89,28 +89,34 @@ def _uniform(t: np.ndarray) -> tuple[bool, float]:
 #: at the ends, which puts up to half the peak acceleration into the estimate there; the cubic keeps the
 #: curvature (measured on sines below the cut-off: the error one period in falls from 4–14 % to 1.5–2 %).
 EDGE_FIT, EDGE_PAD = 0.5, 3.0
+#: The padding is at most this many times the segment's own length on each side.
+EDGE_PAD_MAX = 3
 #: Samples closer than this many periods of the cut-off to a segment's end keep an edge error (about 2 % of the
 #: peak acceleration at one period): the loader drops them (`settled`).
 SETTLE_PERIODS = 1.0
 
 
 def _butter(cutoff_hz: float, fs: float):
-    """The 4th-order Butterworth low-pass at `cutoff_hz` for sampling rate `fs` [Hz], or None at or above Nyquist."""
-    return None if cutoff_hz >= 0.5 * fs else signal.butter(4, cutoff_hz / (0.5 * fs))
+    """The 4th-order Butterworth low-pass at `cutoff_hz` for sampling rate `fs` [Hz] as second-order sections
+    (exact at any cut-off: as (b, a) it breaks down below about 10⁻⁴ of Nyquist, giving 10³⁷ for a sine), or None
+    at or above Nyquist."""
+    return None if cutoff_hz >= 0.5 * fs else signal.butter(4, cutoff_hz / (0.5 * fs), output="sos")
 
 
-def _filtfilt(ba, x: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
-    """Zero-phase filtering of `x` (N, J) along axis 0, its ends extended by local cubics (`EDGE_FIT`)."""
+def _filtfilt(sos, x: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
+    """Zero-phase filtering of `x` (N, J) along axis 0, its ends extended by local cubics (`EDGE_FIT`) over at most
+    `EDGE_PAD` periods of the cut-off and at most the segment's own length again on each side (a cut-off far
+    below what the segment can show must not ask for millions of padding samples)."""
     n = len(x)
     fit = max(4, min(n, round(EDGE_FIT * fs / cutoff_hz)))
-    pad = round(EDGE_PAD * fs / cutoff_hz)
+    pad = min(round(EDGE_PAD * fs / cutoff_hz), EDGE_PAD_MAX * n)
     s = np.arange(fit) / fs  # time into the segment from its first (last) sample
     beyond = -np.arange(1, pad + 1) / fs  # before the first (after the last) sample, nearest first
     head = np.polynomial.polynomial.polyfit(s, x[:fit], 3)
     tail = np.polynomial.polynomial.polyfit(s, x[::-1][:fit], 3)
     left = np.polynomial.polynomial.polyval(beyond, head).T[::-1]
     right = np.polynomial.polynomial.polyval(beyond, tail).T
-    y = signal.filtfilt(*ba, np.concatenate([left, x, right]), axis=0, padtype=None)
+    y = signal.sosfiltfilt(sos, np.concatenate([left, x, right]), axis=0, padtype=None)
     return y[pad : pad + n]
 
 

@@ -101,7 +101,7 @@ class GMR:
             k = self._select(Zs, rng)
         k = _checked_k(k, len(Zs))
         self.n_components_ = k
-        gm = self._mixture(k).fit(Zs)
+        gm = self._em(k, Zs)
         covs = gm.covariances_ if self.covariance == "full" else _diag_to_full(gm.covariances_)
         # Back to original units: z = shift + scale ⊙ zs, so μ = shift + scale ⊙ μs, Σ = D Σs D.
         self.weights_ = gm.weights_.copy()
@@ -118,6 +118,20 @@ class GMR:
             max_iter=200,
         )
 
+    def _em(self, k: int, Zs: np.ndarray) -> GaussianMixture:
+        """EM with `k` components on the standardised samples `Zs`; InputError naming the `[residual]` settings
+        when a component collapses (too many components for the samples, too small a regulariser)."""
+        try:
+            return self._mixture(k).fit(Zs)
+        except ValueError as exc:
+            if "ill-defined empirical covariance" not in str(exc):
+                raise
+            raise InputError(
+                f"[residual]: the GMR with {k} components on {len(Zs)} training samples has a component with no "
+                f"spread, which reg_covar = {self.reg_covar:g} is too small to keep invertible: use fewer "
+                "components, more samples (max_train_samples) or a larger reg_covar (the default is 1e-4)"
+            ) from None
+
     def _select(self, Zs: np.ndarray, rng: np.random.Generator) -> int:
         """The number of components with the best validation error (or BIC) among `candidates`."""
         # candidates larger than the data allow are skipped (a short trial), not an error
@@ -129,7 +143,7 @@ class GMR:
         scores: dict[int, float] = {}
         if self.selection == "bic":
             for k in candidates:
-                scores[k] = float(self._mixture(k).fit(Zs).bic(Zs))
+                scores[k] = float(self._em(k, Zs).bic(Zs))
         else:
             n_val = max(1, round(self.validation_fraction * len(Zs)))
             if self.validation == "blocked":
@@ -141,7 +155,7 @@ class GMR:
             for k in candidates:
                 if k > len(train):
                     continue
-                gm = self._mixture(k).fit(train)
+                gm = self._em(k, train)
                 covs = gm.covariances_ if self.covariance == "full" else _diag_to_full(gm.covariances_)
                 mean = conditional_mean(gm.weights_, gm.means_, covs, d, val[:, :d])
                 scores[k] = float(np.mean((val[:, d:] - mean) ** 2))  # standardised: variance-weighted

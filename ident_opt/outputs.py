@@ -54,15 +54,17 @@ class Run:
     def __init__(self) -> None:
         self.inputs: list[Path] = []
         self.outputs: list[Path] = []
+        self.folders: list[Path] = []  # output folders (--out)
         self.backups: dict[str, Path | None] = {}  # written path -> backup of its old content (None: was new)
         self.created: list[Path] = []
         self.watched: dict[str, set[str]] = {}
 
     def declare_inputs(self, paths: Iterable[str | Path]) -> None:
-        """Note input files; an output already declared that is one of them is refused."""
+        """Note input files (or folders: a ROS 2 bag, every file inside it an input); an output already declared
+        that is one of them, or an output folder inside an input folder, is refused."""
         for path in paths:
             path = Path(path)
-            for out in self.outputs:
+            for out in [*self.outputs, *self.folders]:
                 _refuse(out, path)
             self.inputs.append(path)
 
@@ -72,6 +74,13 @@ class Run:
         for inp in self.inputs:
             _refuse(path, inp)
         self.outputs.append(path)
+
+    def declare_folder(self, path: str | Path) -> None:
+        """Note an output folder; refused when it is an input folder or inside one (a ROS 2 bag)."""
+        path = Path(path)
+        for inp in self.inputs:
+            _refuse(path, inp)
+        self.folders.append(path)
 
     def before_write(self, path: Path) -> None:
         """Refuse a write over an input; keep what `path` holds now (once) so a rollback can restore it."""
@@ -148,9 +157,25 @@ def _files(folder: Path, depth: int = WATCH_DEPTH) -> Iterator[str]:
             yield _key(entry.path)
 
 
+def _inside(path: Path, folder: Path) -> bool:
+    """Whether `path` is in the (existing) folder `folder` or one of its subfolders, also through links."""
+    return folder.is_dir() and same_or_inside(path, folder)
+
+
+def same_or_inside(path: str | Path, target: str | Path) -> bool:
+    """Whether `path` names `target` or a path inside it (resolved, whether or not either exists yet)."""
+    return Path(_key(path)).is_relative_to(_key(target))
+
+
 def _refuse(output: Path, inp: Path) -> None:
+    """InputError when `output` is the input `inp` or lies inside the input folder `inp`."""
     if _same(output, inp):
         raise InputError(f"{output}: this output is also an input ({inp}); inputs are never overwritten")
+    if _inside(output, inp):
+        raise InputError(
+            f"{output}: this output is inside the input folder {inp} (a ROS 2 bag's files are its inputs); "
+            "inputs are never overwritten: write it elsewhere"
+        )
 
 
 #: The run of the command in progress (None outside `cli.main`).
@@ -215,6 +240,8 @@ def check_folder_output(path: str | Path, flag: str) -> Path:
         raise InputError(f"{flag} {path}: cannot create the output folder ({parent} is not a folder)")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"{flag} {path}: the output folder is not writable")
+    if _current is not None:
+        _current.declare_folder(path)
     return path
 
 

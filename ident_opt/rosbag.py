@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ident_opt import outputs
 from ident_opt.errors import InputError
 
 #: File names of a ROS 2 bag's storage (its folder holds metadata.yaml beside them).
@@ -37,6 +38,7 @@ def read_bag(path: Path, topic: str, joints: tuple[str, ...]) -> pd.DataFrame:
     folder = path.parent if path.is_file() else path
     if not (folder / "metadata.yaml").is_file():
         raise InputError(f"{path}: not a ROS 2 bag: its folder has no metadata.yaml (give the bag's folder)")
+    outputs.declare_inputs([folder])  # the bag is its folder: metadata.yaml and the storage files in it
     rows: list[tuple[float, np.ndarray, np.ndarray | None, np.ndarray]] = []
     try:
         with AnyReader([folder]) as reader:
@@ -44,8 +46,14 @@ def read_bag(path: Path, topic: str, joints: tuple[str, ...]) -> pd.DataFrame:
             if not connections:
                 have = ", ".join(sorted(reader.topics)) or "none"
                 raise InputError(f"{path}: the bag has no topic '{topic}' ([data] ros_topic); its topics: {have}")
+            other = sorted({c.msgtype for c in connections} - {JOINT_STATE})
+            if other:
+                raise InputError(
+                    f"{path}: the topic '{topic}' ([data] ros_topic) carries {other[0]} messages, not {JOINT_STATE}"
+                )
             for connection, stamp, raw in reader.messages(connections=connections):
-                rows.append(_sample(path, reader.deserialize(raw, connection.msgtype), stamp, joints, len(rows)))
+                msg = reader.deserialize(raw, connection.msgtype)
+                rows.append(_sample(path, msg, stamp, joints, message_label(len(rows), topic)))
     except InputError:
         raise
     except (AnyReaderError, OSError, ValueError, KeyError, AttributeError) as exc:
@@ -55,21 +63,30 @@ def read_bag(path: Path, topic: str, joints: tuple[str, ...]) -> pd.DataFrame:
     return _frame(rows, len(joints))
 
 
-def _sample(path: Path, msg, stamp_ns: int, joints: tuple[str, ...], index: int):
-    """(t [s], q, dq or None, tau) of one JointState message, in the order of `joints`."""
+#: The message type a bag's topic must carry.
+JOINT_STATE = "sensor_msgs/msg/JointState"
+
+
+def message_label(index: int, topic: str) -> str:
+    """Message `index` (0-based, in the bag's order) of `topic` as messages name it: counted from 1."""
+    return f"message {index + 1} of topic '{topic}'"
+
+
+def _sample(path: Path, msg, stamp_ns: int, joints: tuple[str, ...], where: str):
+    """(t [s], q, dq or None, tau) of one JointState message (`where`: its `message_label`), in the order of
+    `joints`."""
     names = list(getattr(msg, "name", []))
     missing = [j for j in joints if j not in names]
     if missing:
         raise InputError(
-            f"{path}: message {index} has no joint '{missing[0]}' ([data] ros_joints); "
-            f"its joints: {', '.join(names) or 'none'}"
+            f"{path}: {where} has no joint '{missing[0]}' ([data] ros_joints); its joints: {', '.join(names) or 'none'}"
         )
     at = [names.index(j) for j in joints]
     position, velocity, effort = (np.asarray(getattr(msg, k), dtype=float) for k in ("position", "velocity", "effort"))
     if len(effort) != len(names):
-        raise InputError(f"{path}: message {index} has no effort for its joints (tau comes from effort)")
+        raise InputError(f"{path}: {where} has no effort for its joints (tau comes from effort)")
     if len(position) != len(names):
-        raise InputError(f"{path}: message {index} has no position for its joints (q comes from position)")
+        raise InputError(f"{path}: {where} has no position for its joints (q comes from position)")
     header = getattr(msg, "header", None)
     t = header.stamp.sec + 1e-9 * header.stamp.nanosec if header is not None else 0.0
     t = t if t > 0 else 1e-9 * stamp_ns

@@ -16,9 +16,12 @@ import hashlib
 import io
 import json
 import os
+import signal
 import sys
 import tempfile
+import time
 from collections import Counter
+from collections.abc import Iterable
 from pathlib import Path
 
 import pytest
@@ -146,40 +149,77 @@ def problem_text(draw) -> str:
 
 
 def files(folder: Path) -> dict[str, str]:
-    """Every file under `folder` by relative path -> SHA-256 of its bytes and its mode."""
+    """Every file under `folder` by relative path -> SHA-256 of its bytes and its mode (a link: where it points)."""
     return {
-        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() + oct(p.stat().st_mode)
+        str(p.relative_to(folder)): (
+            "link to " + os.readlink(p)
+            if p.is_symlink()
+            else hashlib.sha256(p.read_bytes()).hexdigest() + oct(p.stat().st_mode)
+        )
         for p in sorted(folder.rglob("*"))
         if p.is_file() or p.is_symlink()
     }
 
 
-def run_case(kind: str, folder: Path, argv: list[str], stdin: bytes | None = None) -> dict:
-    """Run `argv` in `folder` (in-process); return its outcome and every violation of the contract."""
-    inputs = {name: h for name, h in files(folder).items() if name in ("d.csv", "p.toml")}
+#: A case running longer than this [s] is a hang (each case is a few seconds at most on a busy machine).
+HANG_S = int(os.environ.get("IDENT_OPT_FUZZ_HANG_S", "120"))
+
+
+class Hang(BaseException):
+    """A case ran past `HANG_S` (a BaseException: no handler of the tool's catches it)."""
+
+
+def _alarm(signum, frame):
+    raise Hang
+
+
+def run_case(
+    kind: str,
+    folder: Path,
+    argv: list[str],
+    stdin: bytes | None = None,
+    inputs: Iterable[str] = ("d.csv", "p.toml"),
+) -> dict:
+    """Run `argv` in `folder` (in-process); return its outcome and every violation of the contract. `inputs`:
+    the files (relative to `folder`; a folder stands for every file in it) that must come out unchanged."""
+    inputs = {name: h for name, h in files(folder).items() if any(_under(name, i) for i in inputs)}
     before = files(folder)
     out, err = io.StringIO(), io.StringIO()
     cwd, stdin_was = Path.cwd(), sys.stdin
     os.chdir(folder)
     outcome = {"kind": kind, "argv": argv, "problems": []}
+    previous = signal.signal(signal.SIGALRM, _alarm)
+    signal.alarm(HANG_S)
+    started = time.monotonic()
     try:
         if stdin is not None:
             sys.stdin = io.TextIOWrapper(io.BytesIO(stdin), encoding="utf-8", errors="replace")
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             status = main(argv)
+    except Hang:
+        status = None
+        outcome["problems"].append(f"hang: still running after {HANG_S} s")
     except Exception as exc:  # the fuzz's first finding: an uncaught exception
         status = None
         outcome["problems"].append(f"uncaught {type(exc).__name__}: {exc}"[:300])
     finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
         os.chdir(cwd)
         sys.stdin = stdin_was
     outcome["status"] = status
+    outcome["seconds"] = round(time.monotonic() - started, 3)
     outcome["message"] = err.getvalue().strip().splitlines()[-1][:200] if err.getvalue().strip() else ""
     outcome["problems"] += violations(folder, status, before, inputs, err.getvalue(), out.getvalue(), stdin)
     if LOG:
         with open(LOG, "a", encoding="utf-8") as fh:
             fh.write(json.dumps(outcome) + "\n")
     return outcome
+
+
+def _under(name: str, top: str) -> bool:
+    """Whether the relative path `name` is `top` or lies inside the folder `top`."""
+    return name == top or name.startswith(top.rstrip("/") + "/")
 
 
 def violations(folder, status, before, inputs, err, out, stdin) -> list[str]:
@@ -190,14 +230,16 @@ def violations(folder, status, before, inputs, err, out, stdin) -> list[str]:
     if "Traceback" in err or "np.float64(" in err or "array(" in err:
         found.append("traceback or repr in the message: " + err[-300:])
     after = files(folder)
-    if any(after.get(name) != h for name, h in inputs.items()):
-        found.append("modified input")
+    changed = [name for name, h in inputs.items() if after.get(name) != h]
+    if changed:
+        found.append(f"modified input: {changed[:3]}")
     if any(".tmp" in name or name.endswith(".bak") for name in after):
         found.append("temporary file left")
-    if status == 2 and after != before:
-        found.append(f"partial output: {sorted(set(after.items()) - set(before.items()))[:3]}")
-    for name in after:
-        if name.endswith(".json") and not _strict(folder / name):
+    new = {name: h for name, h in after.items() if not name.startswith(".cache/")}  # the compiled-code cache stays
+    if status == 2 and new != {name: h for name, h in before.items() if not name.startswith(".cache/")}:
+        found.append(f"partial output: {sorted(set(new.items()) - set(before.items()))[:3]}")
+    for name in after:  # the JSON this case wrote (a file it did not touch is not its output)
+        if name.endswith(".json") and after[name] != before.get(name) and not _strict(folder / name):
             found.append(f"NaN or invalid JSON in {name}")
     if stdin is not None:
         for line in out.splitlines():
@@ -343,17 +385,24 @@ def summary(log: str) -> str:
         for problem in case["problems"]:
             counts[problem.split(":")[0].split(" in ")[0]] += 1
     by_kind = Counter((c["kind"], c["status"]) for c in cases)
-    lines = [f"{len(cases)} cases"]
+    per_kind = Counter(c["kind"] for c in cases)
+    lines = [f"{len(cases)} cases; per property: " + ", ".join(f"{k} {n}" for k, n in sorted(per_kind.items()))]
     lines += [f"  {kind}: exit {status}: {n}" for (kind, status), n in sorted(by_kind.items(), key=str)]
+    slowest = max(cases, key=lambda c: c.get("seconds", 0.0), default={})
+    if slowest:
+        lines.append(
+            f"slowest case: {slowest.get('seconds', 0.0):.1f} s ({slowest['kind']}: {' '.join(slowest['argv'])})"
+        )
     lines.append(
         "uncaught exceptions: {}, NaN/invalid JSON: {}, modified inputs: {}, partial outputs: {}, "
-        "temporary files: {}, tracebacks/reprs: {}".format(
+        "temporary files: {}, tracebacks/reprs: {}, hangs: {}".format(
             sum(n for k, n in counts.items() if k.startswith("uncaught")),
             sum(n for k, n in counts.items() if k.startswith("NaN")),
             counts["modified input"],
             counts["partial output"],
             counts["temporary file left"],
             counts["traceback or repr"],
+            counts["hang"],
         )
     )
     return "\n".join(lines)

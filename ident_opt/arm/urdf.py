@@ -16,10 +16,14 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from ident_opt import outputs
 from ident_opt.errors import InputError
 
 #: Revolute joint types of the URDF format.
 REVOLUTE = ("revolute", "continuous")
+#: Every joint type of the URDF format; those that need a <limit effort velocity> (lower and upper too).
+JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+LIMITED = ("revolute", "prismatic")
 
 
 #: Largest magnitude of a URDF number the tool accepts, per kind: a mass [kg], a length [m], an inertia [kg m²],
@@ -59,15 +63,20 @@ def _number(element: ET.Element, key: str, where: str, low: float, high: float) 
     return value
 
 
-def _floats(element: ET.Element | None, key: str, default: str, where: str) -> tuple[float, float, float]:
-    """Three floats from attribute `key` of `element` (default when absent); InputError naming `where`."""
+def _floats(
+    element: ET.Element | None, key: str, default: str, where: str, bound: float = 1e6
+) -> tuple[float, float, float]:
+    """Three floats from attribute `key` of `element` (default when absent), each of magnitude at most `bound`
+    (an origin's xyz: `SANE["length"]` m); InputError naming `where`."""
     text = default if element is None else element.get(key, default)
     try:
         values = tuple(float(v) for v in text.split())
     except ValueError:
         values = ()
-    if len(values) != 3 or not all(np.isfinite(values)) or max(map(abs, values), default=0) > 1e6:
+    if len(values) != 3 or not all(np.isfinite(values)):
         raise InputError(f"{where}: {key}={text!r} must be three finite numbers")
+    if max(map(abs, values)) > bound:
+        raise InputError(f"{where}: {key}={text!r} must be three numbers of magnitude at most {bound:g}")
     return values  # type: ignore[return-value]
 
 
@@ -82,7 +91,7 @@ def _check_inertial(path: Path, link: ET.Element) -> None:
     if mass is None or mass.get("value") is None:
         raise InputError(f"{where} <inertial> has no <mass value=…>")
     _number(mass, "value", where, 0.0, SANE["mass"])
-    _floats(inertial.find("origin"), "xyz", "0 0 0", f"{where} <inertial><origin>")
+    _floats(inertial.find("origin"), "xyz", "0 0 0", f"{where} <inertial><origin>", SANE["length"])
     _floats(inertial.find("origin"), "rpy", "0 0 0", f"{where} <inertial><origin>")
     element = inertial.find("inertia")
     if element is None:
@@ -90,10 +99,18 @@ def _check_inertial(path: Path, link: ET.Element) -> None:
     keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
     v = {k: _number(element, k, where, -SANE["inertia"], SANE["inertia"]) or 0.0 for k in keys}
     inertia = np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]], [v["ixz"], v["iyz"], v["izz"]]])
-    lowest = float(np.linalg.eigvalsh(inertia)[0])
-    if lowest < -1e-9 * max(1.0, float(np.abs(inertia).max())):
+    moments = np.linalg.eigvalsh(inertia)  # principal moments, ascending
+    tolerance = 1e-9 * max(1.0, float(np.abs(inertia).max()))
+    if moments[0] < -tolerance:
         raise InputError(
-            f"{where} <inertia>: not physically possible (its smallest principal moment is {lowest:.3g} kg m², below 0)"
+            f"{where} <inertia>: not physically possible (its smallest principal moment is "
+            f"{float(moments[0]):.3g} kg m², below 0)"
+        )
+    if moments[2] > moments[0] + moments[1] + tolerance:  # a rigid body's moments obey the triangle inequality
+        raise InputError(
+            f"{where} <inertia>: not physically possible: its largest principal moment ({float(moments[2]):.3g} "
+            f"kg m²) exceeds the sum of the other two ({float(moments[0]):.3g} + {float(moments[1]):.3g}); no "
+            "distribution of mass has it (the triangle inequality of principal moments)"
         )
 
 
@@ -107,6 +124,12 @@ def _joint(path: Path, j: ET.Element, links: dict[str, ET.Element]) -> UrdfJoint
     for end in (parent.get("link"), child.get("link")):
         if end not in links:
             raise InputError(f"{where}: refers to link {end!r}, which the file does not define")
+    if j.get("type") not in JOINT_TYPES:
+        raise InputError(f"{where}: type={j.get('type')!r} is not a URDF joint type ({', '.join(JOINT_TYPES)})")
+    if j.get("type") in LIMITED and (
+        j.find("limit") is None or None in (j.find("limit").get(k) for k in ("effort", "velocity"))
+    ):
+        raise InputError(f"{where}: a {j.get('type')} joint needs <limit effort=… velocity=…> (the URDF format's rule)")
     axis = _floats(j.find("axis"), "xyz", "1 0 0", where)
     if j.get("type") in REVOLUTE and not np.linalg.norm(axis) > 0:
         raise InputError(f"{where} <axis xyz={j.find('axis').get('xyz')!r}>: a revolute joint needs a non-zero axis")
@@ -118,18 +141,20 @@ def _joint(path: Path, j: ET.Element, links: dict[str, ET.Element]) -> UrdfJoint
     limit = {}
     element = j.find("limit")
     if element is not None:
-        for key in ("lower", "upper", "velocity", "effort"):
-            value = _number(element, key, where, -1e6, 1e6)
+        for key in ("lower", "upper", "velocity", "effort"):  # velocity and effort are magnitudes
+            value = _number(element, key, where, -1e6 if key in ("lower", "upper") else 0.0, 1e6)
             if value is not None:
                 limit[key] = value
+        if limit.get("lower", -math.inf) > limit.get("upper", math.inf):
+            raise InputError(f"{where} <limit>: lower {limit['lower']:g} is above upper {limit['upper']:g}")
     origin = j.find("origin")
     return UrdfJoint(
         name,
         j.get("type"),
         parent.get("link"),
         child.get("link"),
-        _floats(origin, "xyz", "0 0 0", where),
-        _floats(origin, "rpy", "0 0 0", where),
+        _floats(origin, "xyz", "0 0 0", f"{where} <origin>", SANE["length"]),
+        _floats(origin, "rpy", "0 0 0", f"{where} <origin>"),
         axis,
         damping,
         friction,
@@ -149,6 +174,7 @@ def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Elem
         raise InputError(f"{path}: not a valid URDF (XML error: {exc})") from None
     if root.tag != "robot":
         raise InputError(f"{path}: not a URDF: the root element is <{root.tag}>, not <robot>")
+    outputs.declare_inputs([path, *meshes(path, root)])
     links = {}
     for link in root.findall("link"):
         if not link.get("name"):
@@ -158,8 +184,59 @@ def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Elem
     joints = {}
     for element in root.findall("joint"):
         joint = _joint(path, element, links)
+        if joint.name in links and joint.type != "fixed":  # Pinocchio finds a moving joint's frame by its name
+            raise InputError(
+                f"{path}: <joint name={joint.name!r}> has the name of a <link>; a moving joint and a link need "
+                "distinct names (Pinocchio and most URDF tools find frames by name)"
+            )
+        if joint.name in joints:
+            raise InputError(f"{path}: two <joint> elements are named {joint.name!r}")
         joints[joint.name] = joint
+    _check_tree(path, joints)
     return text, joints, links
+
+
+def _check_tree(path: Path, joints: dict[str, UrdfJoint]) -> None:
+    """The joints make a tree of links (what urdfdom and Pinocchio assume: on a loop they recurse without end):
+    no joint from a link to itself, no link the child of two joints, no cycle; InputError naming the culprit."""
+    parent_of: dict[str, UrdfJoint] = {}
+    for joint in joints.values():
+        if joint.parent == joint.child:
+            raise InputError(
+                f"{path}: <joint name={joint.name!r}>: its parent and child are the same link {joint.child!r}"
+            )
+        if joint.child in parent_of:
+            raise InputError(
+                f"{path}: link {joint.child!r} is the child of two joints ({parent_of[joint.child].name!r} and "
+                f"{joint.name!r}); a URDF is a tree: each link has one parent"
+            )
+        parent_of[joint.child] = joint
+    done: set[str] = set()  # links known to reach a root
+    for start in parent_of:
+        seen, link = [], start
+        while link in parent_of and link not in done:
+            if link in seen:
+                raise InputError(
+                    f"{path}: the joints above link {link!r} form a cycle ({' -> '.join(seen[seen.index(link) :])} -> "
+                    f"{link}); a URDF is a tree"
+                )
+            seen.append(link)
+            link = parent_of[link].parent
+        done.update(seen)
+
+
+def meshes(path: Path, root: ET.Element) -> list[Path]:
+    """The mesh files the URDF at `path` references that exist here (relative or file:// names; a package://
+    name needs ROS to resolve and is left out): inputs of the run, like the URDF itself."""
+    found = []
+    for mesh in root.iter("mesh"):
+        name = mesh.get("filename") or ""
+        name = name.removeprefix("file://")
+        if name and "://" not in name:
+            candidate = path.parent / name
+            if candidate.is_file():
+                found.append(candidate)
+    return found
 
 
 def check_chain(path: Path, joints: dict[str, UrdfJoint], names: tuple[str, ...], base: str | None) -> str:

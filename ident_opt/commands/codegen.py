@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"ident-opt codegen: the {choice.estimator} fit ({choice.why})", file=sys.stderr)
     if not (saved and saved.get("gmr")):
         _announce_gmr(problem.residual, args.components, train)
-    out = output_dir(args, problem)  # only once every input is read and checked
+    out = output_dir(args, problem, indexed=False)  # only once every input is read and checked
     written = _written(args, robot, trials)
     outputs.guard_owned(out, written, force=args.force)
     shipped = ship.prepare(robot, model, train, problem.residual, args.estimator, args.components, saved)

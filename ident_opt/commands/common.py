@@ -9,12 +9,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ident_opt import outputs, simulate
+from ident_opt import outputs, report, simulate
 from ident_opt.arm.base import ALL_COMMANDS
 from ident_opt.data import fittable, load_dataset
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from ident_opt.report import write_json  # noqa: F401  (every command's --json goes through it)
+from ident_opt.warnings import ResultWarning
 
 
 def add_problem_arguments(parser: argparse.ArgumentParser, data: bool = True, json_out: bool = True) -> None:
@@ -113,6 +114,8 @@ def load(
     if min_samples is not None:
         kwargs["min_samples"] = min_samples
     outputs.declare_inputs(paths)
+    for warning in held_out_overlap(train, test):
+        print(warning, file=sys.stderr)
     trials = [load_dataset(p, problem.data, problem.robot, **kwargs) for p in paths]
     for trial in trials:
         if trial.dropped_rows:
@@ -131,11 +134,43 @@ def _trial_paths(args: argparse.Namespace, problem) -> tuple[list[Path], list[Pa
     return list(problem.data.training), test or list(problem.data.testing)
 
 
-def output_dir(args: argparse.Namespace, problem, default: Path | None = None) -> Path:
-    """--out, else the problem's [output] dir, else `default` (the project's results/)."""
+def held_out_overlap(train: list[Path], test: list[Path]) -> list[ResultWarning]:
+    """A warning per held-out trial that is also a training trial (the same file, or a copy of the same bytes):
+    its scores are then not held out."""
+    found = []
+    for held in test:
+        same = next((t for t in train if _same_trial(t, held)), None)
+        if same is not None:
+            found.append(
+                ResultWarning(
+                    "held_out_is_training",
+                    f"{held} (held out) is the training trial {same}: its scores measure the fit on its own data, "
+                    "not on unseen data; hold out another trial",
+                )
+            )
+    return found
+
+
+def _same_trial(a: Path, b: Path) -> bool:
+    """Whether two trial paths are one file (also through links) or two files with the same bytes."""
+    try:
+        if os.path.samefile(a, b):
+            return True
+        if a.is_file() and b.is_file() and a.stat().st_size == b.stat().st_size:
+            return a.read_bytes() == b.read_bytes()
+    except OSError:
+        pass
+    return False
+
+
+def output_dir(args: argparse.Namespace, problem, default: Path | None = None, indexed: bool = True) -> Path:
+    """--out, else the problem's [output] dir, else `default` (the project's results/). `indexed`: the reports
+    there are indexed in its README.md (`report.record`), whose manifests and README are checked now."""
     out = getattr(args, "out", None)
     path = Path(out) if out else (problem.output_dir or default or Path("results"))
     outputs.check_folder_output(path, "--out")
+    if indexed:
+        report.check_folder(path)
     outputs.watch_folder(path)  # created here, so a failed run removes it again
     try:
         path.mkdir(parents=True, exist_ok=True)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+from ident_opt import outputs
 from ident_opt.errors import InputError
 from ident_opt.problem.robot import parse_planar
 from ident_opt.problem.sections import (
@@ -49,6 +50,9 @@ def load_problem(path: str | Path) -> Problem:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not a valid TOML file ({exc})") from None
+    except RecursionError:  # tomllib parses nested arrays and tables recursively
+        raise InputError(f"{path}: not a problem file: arrays or tables nested too deeply to read") from None
+    outputs.declare_inputs([path])  # before anything it names: an output onto this file is refused first
     top = Table(raw, "", path)
     base = path.resolve().parent
     name = top.take("name", str)
@@ -69,9 +73,11 @@ def load_problem(path: str | Path) -> Problem:
     out_dir = output.take("dir", str, None)
     output.done()
     top.done()
-    return Problem(
+    problem = Problem(
         name=name, path=path, robot=robot, output_dir=relative(base, out_dir) if out_dir else None, **sections
     )
+    outputs.declare_inputs([*problem.data.trials, *problem.data.train, *problem.data.test])  # every trial listed
+    return problem
 
 
 def _robot(table: Table):

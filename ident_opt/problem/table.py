@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from ident_opt.errors import InputError
+from ident_opt.errors import InputError, excerpt
 
 _REQUIRED = object()
 
@@ -106,14 +106,6 @@ class Table:
             keys = ", ".join(sorted(self.raw))
             place = f"[{self.where}]" if self.where else "the top level"
             raise InputError(f"{self.path}: unknown key(s) {keys} in {place} (check the spelling)")
-
-
-def excerpt(value: Any, limit: int = 60) -> str:
-    """A short repr of a value for a message (a huge list must not become a megabyte-long line)."""
-    text = repr(value)
-    return (
-        text if len(text) <= limit else text[: limit - 5] + " ...]" if isinstance(value, list) else text[:limit] + "..."
-    )
 
 
 def _kind_name(kinds: tuple[type, ...]) -> str:

@@ -93,7 +93,8 @@ def _joint_names(table: Table) -> list[str]:
 
 def _planar(table: Table, urdf: Path, joints: list[str], gravity: tuple[float, float, float], base: str | None):
     """The planar two-link robot (`ident_opt.arm.planar_urdf`) when `form` asks for it or allows it and the URDF
-    is one; None for the n-joint path. A URDF that is not planar is an error only under form = "planar"."""
+    is one; None for the n-joint path. A URDF that is not planar is an error under form = "planar", and when the
+    section has the planar form's [robot.joint1] / [robot.joint2] tables (the reason named: not "unknown key")."""
     form = table.take("form", str, "auto")
     if form not in FORMS:
         raise InputError(f"{table.path}: key 'form' in [robot] must be one of {', '.join(FORMS)}, got {form!r}")
@@ -103,9 +104,16 @@ def _planar(table: Table, urdf: Path, joints: list[str], gravity: tuple[float, f
         raise InputError(f'{table.path}: form = "planar" in [robot] needs exactly two joints, got {len(joints)}')
     try:
         geometry = planar_urdf.planar_geometry(urdf, tuple(joints), gravity, base)
-    except planar_urdf.NotPlanar:
+    except planar_urdf.NotPlanar as exc:
+        planar_only = [f"joint{k}" for k in (1, 2) if f"joint{k}" in table.raw and f"joint{k}" not in joints]
         if form == "planar":
             raise
+        if planar_only:
+            raise InputError(
+                f"{exc}. {table.path}: [robot.{planar_only[0]}] is the planar two-link form's table, and this arm "
+                f"is not one, so it is read as an n-joint arm: give its joints' values as [robot.<joint name>] "
+                f'({", ".join(f"[robot.{j}]" for j in joints)}), motor side unless side = "joint"'
+            ) from None
         return None
     for name in joints:
         if name in table.raw:

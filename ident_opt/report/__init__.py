@@ -13,6 +13,7 @@ between them, in `ORDER`, each as its first file with its title.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import sys
@@ -21,10 +22,13 @@ from pathlib import Path
 from typing import Any
 
 from ident_opt import outputs
+from ident_opt.errors import InputError
 from ident_opt.outputs import shown  # noqa: F401  (re-exported: every writer names its inputs so)
 
 #: Where the manifests live inside an output folder.
 MANIFESTS = ".manifest"
+#: The SHA-256 of the README.md the index last wrote (so that a README.md of the user's is never replaced).
+README_DIGEST = f"{MANIFESTS}/README.md.sha256"
 #: The order of the reports in the index (studies not listed follow, by name).
 ORDER = ("audit", "compare", "constraints", "diagnosis", "confusion", "online", "online_benchmark", "calibration")
 
@@ -46,7 +50,7 @@ def record(
     rel = [_relative(Path(f), out_dir) for f in files]
     manifest = {"study": study, "title": title, "files": rel, "readme_head": readme_head, "readme_tail": readme_tail}
     folder = out_dir / MANIFESTS
-    folder.mkdir(parents=True, exist_ok=True)
+    check_folder(out_dir)
     outputs.write_text(folder / f"{study}.json", json.dumps(manifest, indent=1, ensure_ascii=False) + "\n")
     in_parent = (out_dir.parent / MANIFESTS).is_dir()
     own = write_index(out_dir) if _has_main(out_dir) or not in_parent else None
@@ -54,11 +58,60 @@ def record(
     return own or parent
 
 
+def check_folder(out_dir: str | Path) -> None:
+    """Before a report goes into `out_dir`: its `.manifest` (and its parent's, when that is a results folder too)
+    a folder of well-formed manifests, and each README.md the index would replace one that ident-opt wrote
+    (`_check_readme`); InputError naming the file otherwise. Nothing is written."""
+    out_dir = Path(out_dir)
+    folder = out_dir / MANIFESTS
+    run = outputs.current()
+    for path in run.outputs if run is not None else []:  # --json/--final onto the index this run writes
+        if outputs.same_or_inside(path, out_dir / "README.md") or outputs.same_or_inside(path, folder):
+            raise InputError(
+                f"{path}: the output folder {out_dir} keeps its index there (README.md, {MANIFESTS}/); "
+                "write this output elsewhere"
+            )
+    if folder.exists() and not folder.is_dir():
+        raise InputError(
+            f"{folder}: exists and is not a folder; ident-opt keeps the manifests of its reports in a folder of "
+            "that name: move the file away or choose another --out"
+        )
+    in_parent = (out_dir.parent / MANIFESTS).is_dir()
+    roots = ([out_dir] if _has_main(out_dir) or not in_parent else []) + ([out_dir.parent] if in_parent else [])
+    for root in roots:
+        _manifests(root)  # every manifest read (InputError naming a malformed one)
+        _check_readme(root)
+
+
+def _check_readme(root: Path) -> None:
+    """`root`/README.md may be replaced by the index: it is absent, or it is what ident-opt last wrote there (its
+    SHA-256 in `README_DIGEST`), or, with no digest kept (written by a version that kept none), the folder holds
+    manifests already. A README.md of the user's is never replaced."""
+    readme, digest = root / "README.md", root / README_DIGEST
+    if not readme.exists():
+        return
+    if readme.is_dir() or not readme.is_file():
+        raise InputError(f"{readme}: is not a file; ident-opt writes the folder's index there: move it away")
+    if digest.is_file():
+        ours = digest.read_text(encoding="utf-8", errors="replace").strip() == _sha256(readme)
+    else:
+        ours = any((root / MANIFESTS).glob("*.json")) if (root / MANIFESTS).is_dir() else False
+    if not ours:
+        raise InputError(
+            f"{readme}: exists and was not written by ident-opt (or was edited since); ident-opt writes the "
+            "folder's index there: move it away or choose another --out"
+        )
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
 def _has_main(folder: Path) -> bool:
     """Whether `folder` holds a main report (a manifest with a README head or tail): it then has its own README
     (another robot's results, e.g. results/dfki), linked from the parent's instead of merged into it."""
     for path in folder.glob(f"{MANIFESTS}/*.json"):
-        manifest = json.loads(path.read_text(encoding="utf-8"))
+        manifest = _load(path)
         if manifest.get("readme_head") or manifest.get("readme_tail"):
             return True
     return False
@@ -75,7 +128,10 @@ def write_index(root: Path) -> Path:
         parts += [f"- [{m['files'][0]}]({m['files'][0]}): {m['title']}" for m in others]
     parts += [m["readme_tail"] for m in main if m["readme_tail"]]
     path = root / "README.md"
-    return outputs.write_text(path, "\n".join(parts) + "\n")
+    _check_readme(root)
+    outputs.write_text(path, "\n".join(parts) + "\n")
+    outputs.write_text(root / README_DIGEST, _sha256(path) + "\n")
+    return path
 
 
 def _manifests(root: Path) -> list[dict]:
@@ -107,8 +163,33 @@ def _manifests(root: Path) -> list[dict]:
     return sorted(found, key=lambda m: (rank.get(m["study"], len(ORDER)), m["study"]))
 
 
+#: The keys of a manifest and their types.
+MANIFEST_KEYS = {"study": str, "title": str, "files": list, "readme_head": str, "readme_tail": str}
+
+
 def _load(path: Path) -> dict:
-    return json.loads(path.read_text(encoding="utf-8"))
+    """A manifest, checked: a JSON object with `MANIFEST_KEYS` (files: names of files); InputError naming it."""
+    fault = None
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        fault = f"cannot be read ({getattr(exc, 'strerror', None) or type(exc).__name__})"
+    except ValueError as exc:
+        fault = f"is not JSON ({exc})"
+    else:
+        wrong = [
+            k
+            for k, kind in MANIFEST_KEYS.items()
+            if not isinstance(manifest, dict) or not isinstance(manifest.get(k), kind)
+        ]
+        if wrong or not all(isinstance(f, str) for f in manifest["files"]):
+            fault = f"is not a manifest of ident-opt (key {(wrong or ['files'])[0]!r} missing or of the wrong type)"
+    if fault:
+        raise InputError(
+            f"{path}: {fault}; ident-opt keeps one manifest per report in {MANIFESTS}/ to index the folder: "
+            "remove the file (the next run of that report writes it again)"
+        )
+    return manifest
 
 
 def _relative(path: Path, out_dir: Path) -> str:

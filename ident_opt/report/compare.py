@@ -120,11 +120,11 @@ def _with_se(c: Comparison) -> pd.DataFrame:
         silent = set(c.fits[key].details.get("not_determined", [])) if key in c.fits else set()
         cells = []
         for i, (name, v) in enumerate(zip(table.index, table[key])):
-            if np.isnan(v):
+            if pd.isna(v):  # a column with a missing standard error is of objects (None), not floats
                 cells.append("–")
             elif name in silent:
                 cells.append(f"{fmt(v)} {NOT_DETERMINED}")
-            elif se is None or np.isnan(se.iloc[i]):
+            elif se is None or pd.isna(se.iloc[i]):
                 cells.append(fmt(v))
             else:
                 cells.append(f"{fmt(v)} ± {fmt(se.iloc[i], 2)}")
