@@ -112,7 +112,8 @@ def trial(tmp_path, rate: float, noise: float, seed: int):
     strict=True,
     reason="a known limit, kept in view: on a smooth multisine (lines to 1.5 Hz) with heavy white angle noise and "
     "noise-free torque, the spectra's cut-off (3–4 Hz) sits close enough to the motion for the filter to distort the "
-    "dynamics; the default pipeline's error is 2.7–6.7 % where OLS at 15 Hz has 0.5–5 % (results/cutoff_study.md)",
+    "dynamics; the default pipeline's error is 2.7–6.7 % where OLS at 15 Hz has 0.5–5 % (the study: "
+    "results/cutoff_study_unseen.md)",
 )
 def test_the_default_pipeline_beats_a_fixed_15_hz(tmp_path):
     """The default settings ("auto" and the recommended fit) on noisy trials of the TUDOR model: the inertial and
