@@ -8,12 +8,15 @@ critically damped at `closed_loop.BANDWIDTH_HZ` on every joint whatever the coup
 diagonal of M drove the Panda's light, strongly coupled wrist unstable at 1 kHz). The torque is constant over each
 tick (1 ms at 1 kHz); RK4 takes `substeps` sub-steps per tick, sized from the fastest rate of the loop (the PD
 against the true inertia, eig(M(q)⁻¹ M̂(q)) ω_c² and 2 ω_c, over poses spread across the ranges; an elastic
-mode's), |λ| h ≤ 0.25.
+mode's), |λ| h ≤ 0.25. The effects' friction is stiff only near a reversal: a tick takes the fine steps sized for
+it only there (`tick`), the coarse ones elsewhere, and matches the fine integration everywhere to a few
+hundredths of the torque noise (tests/test_simulate_arm.py).
 
-Speed: one tick is one CasADi function of (x, ref, p); `mapaccum` runs `closed_loop.CHUNK` of them per call. For a
-long trial it is generated as C, compiled once per machine and arm structure (`cbuild.cached_library`, in the URDF
-project's cache) and loaded back: a 7-joint arm's 60 s at 1 kHz then takes well under a second of integration
-(benchmarks/bench_simulate.py). Short trials, or a machine without a C compiler, run CasADi's own virtual machine.
+Speed: one tick is one CasADi function of (x, ref, p, band), its RK4 step looped (`rk4`), not unrolled;
+`mapaccum` runs `closed_loop.CHUNK` ticks per call. For a long trial it is generated as C, compiled once per
+machine and arm structure (`cbuild.cached_library`, in the URDF project's cache; seconds of gcc) and loaded back: a
+7-joint arm's 60 s at 1 kHz then takes about a second clean, 4–10 s with every effect (benchmarks/bench_simulate.py).
+Short trials, or a machine without a C compiler, run CasADi's own virtual machine.
 """
 
 from __future__ import annotations

@@ -32,7 +32,7 @@ from ident_opt.effects.base import ArmScale, Joints
 from ident_opt.errors import InputError
 
 #: The fastest rate [1/s] the regularised friction of the effects may add (`ArmPlant.regularisation`): 32 RK4 steps
-#: per 1 ms tick at most, and its narrowest regularisation [rad/s].
+#: per 1 ms tick near a reversal (`arm_loop.tick`), and its narrowest regularisation [rad/s].
 FRICTION_RATE, MIN_EPS = 8000.0, 1e-4
 #: An elastic joint whose nominal motor inertia (reflected rotor inertia) is 0 gets this share of its link-side
 #: inertia as a motor: a two-mass joint needs a motor side (`ElasticJoint`).
