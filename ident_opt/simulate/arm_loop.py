@@ -34,6 +34,7 @@ from ident_opt.cbuild import cached_library, load_external
 from ident_opt.errors import InputError
 from ident_opt.simulate.arm_plant import ArmPlant, centre, initial_state, mass_matrix, plant_function, state_size
 from ident_opt.simulate.closed_loop import BANDWIDTH_HZ, CHUNK, MAX_SUBSTEPS, Gains
+from ident_opt.simulate.integrate import rk4_step
 from ident_opt.simulate.trajectories import Box, Reference
 
 #: Ticks from which the loop is compiled to C (when it is not compiled yet): below, building costs more than it saves.
@@ -111,11 +112,7 @@ def rk4(plant: ArmPlant, steps: int, control: float) -> ca.Function:
     f = plant_function(plant)
     x, tau, p = ca.SX.sym("x", f.size1_in(0)), ca.SX.sym("tau", f.size1_in(1)), ca.SX.sym("p", f.size1_in(2))
     h = 1.0 / control / steps
-    k1 = f(x, tau, p)[0]
-    k2 = f(x + h / 2 * k1, tau, p)[0]
-    k3 = f(x + h / 2 * k2, tau, p)[0]
-    k4 = f(x + h * k3, tau, p)[0]
-    one = ca.Function("rk4_step", [x, tau, p], [x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
+    one = ca.Function("rk4_step", [x, tau, p], [rk4_step(lambda z: f(z, tau, p)[0], x, h)])
     X, T, P = (ca.MX.sym(name, v.sparsity()) for name, v in zip(("x", "tau", "p"), (x, tau, p)))
     return ca.Function(f"rk4_{steps}", [X, T, P], [one.fold(steps)(X, T, P)], ["x", "tau", "p"], ["x_next"])
 

@@ -32,6 +32,7 @@ from tqdm import tqdm
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi
 from ident_opt.errors import InputError
 from ident_opt.simulate import background
+from ident_opt.simulate.integrate import rk4_step
 from ident_opt.simulate.trajectories import Reference
 from ident_opt.simulate.truth import TRUTH_MODEL, Truth, initial_state, plant, state_size
 
@@ -116,11 +117,7 @@ def tick(truth: Truth, robot: PlanarRobot, g: Gains, control: float = CONTROL_HZ
     h = 1.0 / control / n
     xk = x
     for _ in range(n):
-        k1 = f(xk, tau, d)[0]
-        k2 = f(xk + h / 2 * k1, tau, d)[0]
-        k3 = f(xk + h / 2 * k2, tau, d)[0]
-        k4 = f(xk + h * k3, tau, d)[0]
-        xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        xk = rk4_step(lambda z: f(z, tau, d)[0], xk, h)
     return ca.Function("tick", [x, ref], [xk, ca.vertcat(tau, y)], ["x", "ref"], ["x_next", "out"])
 
 
