@@ -23,6 +23,7 @@ from ident_opt.diagnosis import candidates as cands
 from ident_opt.diagnosis import evidence, linear, scoring, signals
 from ident_opt.errors import InputError
 from ident_opt.metrics import nmse
+from ident_opt.outputs import shown
 
 #: A joint moving slower than this fraction of its speed scale (95th percentile of |dq|) is at rest.
 REST_FRACTION = 0.01
@@ -331,14 +332,16 @@ def _finite(value):
 
 
 def split(train: Dataset, test: Dataset | None, train_fraction: float) -> tuple[Dataset, Dataset, str]:
-    """(training part, held-out part, description); see the module docstring."""
+    """(training part, held-out part, description); see the module docstring. The description names the trials as
+    every output does (`outputs.shown`: relative to the working folder when inside it), never the absolute paths
+    the problem file resolved them to."""
     if test is not None:
-        return train, test, f"train on {train.source}, held out: {test.source}"
+        return train, test, f"train on {shown(train.source)}, held out: {shown(test.source)}"
     tr, te = chronological_split(train.n, train_fraction)
     return (
         train.subset(tr),
         train.subset(te),
-        f"chronological: first {train_fraction:.0%} of {train.source} trains, the rest is held out",
+        f"chronological: first {train_fraction:.0%} of {shown(train.source)} trains, the rest is held out",
     )
 
 
