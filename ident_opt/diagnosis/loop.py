@@ -86,6 +86,8 @@ class Diagnosis:
     rounds: list[list[dict]] = field(default_factory=list)  # every round's candidates, best first (`ROUND_KEYS`)
     timings: dict[str, float] = field(default_factory=dict)
     joints: list[str] = field(default_factory=list)  # the joints' names, in the order of every per-joint list
+    #: what is doubtful about the result (`ident_opt.warnings.ResultWarning`: the trials', the rigid fit's evidence)
+    warnings: list = field(default_factory=list)
 
     def as_json(self) -> dict:
         """The `--json` payload (`docs/cli.md`), plus extra keys (NaN, e.g. no reversal, as null)."""
@@ -130,6 +132,7 @@ class Diagnosis:
             "extended_model": extended,
             "evidence": self.evidence,
             "timings_s": self.timings,
+            "warnings": [w.as_dict() for w in self.warnings],
         }
 
 

@@ -14,6 +14,7 @@ from ident_opt.diagnosis import scoring, signals
 from ident_opt.diagnosis.loop import Diagnosis
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
+from ident_opt.warnings import markdown_lines
 
 
 def num(x: float, unit: str = "", digits: int = 3) -> str:
@@ -281,6 +282,10 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "low-passed by the same zero-phase filter the derivatives are estimated with, and where a joint "
         "rests its residual is compared about its mean over the rest (stiction holds a level no model "
         "predicts); `nmse_raw_*` in the JSON are without that.",
+        "",
+        "## Warnings",
+        "",
+        *markdown_lines(d.warnings),
         "",
         "## 1. What the nominal models get wrong",
         "",
