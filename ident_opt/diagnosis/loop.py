@@ -89,6 +89,17 @@ class Diagnosis:
     #: what is doubtful about the result (`ident_opt.warnings.ResultWarning`: the trials', the rigid fit's evidence)
     warnings: list = field(default_factory=list)
 
+    def detail_of(self, cause: str) -> dict:
+        """What the extended model's joint fit says of `cause` beyond its estimate (e.g. an elastic joint's
+        stiffness, link inertia and damping ratio): its entry in the joint fit's `member_details` when several
+        causes are named, the fit's own detail when `cause` is the only one; {} when it is not named."""
+        if self.named is None:
+            return {}
+        details = self.named.detail.get("member_details")
+        if details is not None:
+            return details.get(cause, {})
+        return self.named.detail if self.named.cause == cause else {}
+
     def as_json(self) -> dict:
         """The `--json` payload (`docs/cli.md`), plus extra keys (NaN, e.g. no reversal, as null)."""
         return _finite(self._payload())
