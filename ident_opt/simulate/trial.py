@@ -297,7 +297,9 @@ def _arm_trial(robot: Robot, effects, settings: dict, scale: np.ndarray, progres
         "bandwidth_hz": settings["bandwidth_hz"],
         "kp": list(g.kp),
         "kd": list(g.kd),
-        "rk4_substeps": steps,
+        "rk4_substeps": steps.fine,
+        "rk4_substeps_away_from_reversals": steps.coarse,
+        "fine_tick_share": steps.fine_share,
     }
     truth["tracking"] = {"rms_error": np.sqrt((error**2).mean(0)).tolist(), "max_error": np.abs(error).max(0).tolist()}
     truth["limits"] = {"position_min": box.q_min.tolist(), "position_max": box.q_max.tolist()}
