@@ -27,13 +27,13 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
-from tqdm import tqdm
 
 from ident_opt.cache import cache_root
 from ident_opt.cbuild import cached_library, load_external
 from ident_opt.errors import InputError
 from ident_opt.simulate.arm_plant import ArmPlant, centre, initial_state, mass_matrix, plant_function, state_size
 from ident_opt.simulate.closed_loop import BANDWIDTH_HZ, CHUNK, MAX_SUBSTEPS, Gains
+from ident_opt.simulate.integrate import march, rk4_step
 from ident_opt.simulate.trajectories import Box, Reference
 
 #: Ticks from which the loop is compiled to C (when it is not compiled yet): below, building costs more than it saves.
@@ -111,11 +111,7 @@ def rk4(plant: ArmPlant, steps: int, control: float) -> ca.Function:
     f = plant_function(plant)
     x, tau, p = ca.SX.sym("x", f.size1_in(0)), ca.SX.sym("tau", f.size1_in(1)), ca.SX.sym("p", f.size1_in(2))
     h = 1.0 / control / steps
-    k1 = f(x, tau, p)[0]
-    k2 = f(x + h / 2 * k1, tau, p)[0]
-    k3 = f(x + h / 2 * k2, tau, p)[0]
-    k4 = f(x + h * k3, tau, p)[0]
-    one = ca.Function("rk4_step", [x, tau, p], [x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
+    one = ca.Function("rk4_step", [x, tau, p], [rk4_step(lambda z: f(z, tau, p)[0], x, h)])
     X, T, P = (ca.MX.sym(name, v.sparsity()) for name, v in zip(("x", "tau", "p"), (x, tau, p)))
     return ca.Function(f"rk4_{steps}", [X, T, P], [one.fold(steps)(X, T, P)], ["x", "tau", "p"], ["x_next"])
 
@@ -183,30 +179,15 @@ def run(
     ticks that took the fine ones)."""
     g = gains(plant, box, bandwidth_hz)
     step, steps = tick(plant, bandwidth_hz, box, control)
-    n = plant.n
     p = ca.DM(plant.parameters())
     band = ca.DM(plant.stiff_band(0.25 * control * steps.coarse))
     x = ca.DM(initial_state(plant, ref.q[0]))
     refs = np.hstack([ref.q, ref.dq, ref.ddq]).T
-    total = refs.shape[1]
-    width = 4 * n + 2
-    out = np.empty((width, total))
-    full = chunked(step, plant, total)
-    bar = tqdm(total=total, unit="tick", desc="simulate", disable=not progress, leave=False, unit_scale=True)
-    for start in range(0, total, CHUNK):
-        m = min(CHUNK, total - start)
-        block = refs[:, start : start + m]
-        if m < CHUNK:  # the last, partial chunk: pad with its final reference and keep what is asked for
-            block = np.hstack([block, np.repeat(block[:, -1:], CHUNK - m, axis=1)])
-        xs, outs = full(x, block, p, band)
-        out[:, start : start + m] = np.asarray(outs)[:, :m]
-        x = xs[:, m - 1]
-        bar.update(m)
-    bar.close()
+    out = march(chunked(step, plant, refs.shape[1]), x, refs, (p, band), CHUNK, progress)
     if not np.all(np.isfinite(out)):
         raise InputError(
             "the simulation diverged (non-finite angles or torques): the hidden effects "
             f"({', '.join(plant.effects) or 'none'}) or the trajectory are beyond what the arm can follow"
         )
-    steps.fine_share = float(out[-1].mean()) if total else 0.0
+    steps.fine_share = float(out[-1].mean()) if out.size else 0.0
     return out[:-1].T, g, steps
