@@ -52,7 +52,7 @@ def one(job: tuple) -> dict:
     robot = problem.robot
     rng = np.random.default_rng([seed, list(ARMS).index(arm), *(CAUSES.index(c) for c in causes), *joints, 7])
     view = hidden.arm_joints(robot, problem.limits)
-    effects = {c: hidden.arm_draw(c, rng, view, joints) for c in causes}
+    effects = hidden.arm_draws(causes, rng, view, joints)
     trajectory = "tud01"
     if "stribeck" in causes:
         trajectory = "fourier" if len(causes) == 1 else "mixed"

@@ -264,3 +264,18 @@ def test_fine_steps_only_near_reversals_give_the_fine_integration(arm4, monkeypa
     for j in range(4):
         diff = np.abs(adaptive.frame[f"tau{j + 1}"] - fine.frame[f"tau{j + 1}"]).max()
         assert diff < 0.1 * sigma[j], (j, diff, sigma[j])
+
+
+def test_stribeck_drawn_beside_asymmetric_coulomb_rises_above_its_levels(arm4):
+    """Hidden causes drawn together see each other's Coulomb levels: a Stribeck static level drawn after an
+    asymmetric Coulomb friction on the same joint lies above that joint's mean level (a positive excess in the
+    plant), not merely above the datasheet's."""
+    from ident_opt.diagnosis import hidden
+
+    view = hidden.arm_joints(arm4.robot, arm4.limits)
+    for seed in range(5):
+        keys = hidden.arm_draws(("asymmetric_coulomb", "stribeck"), np.random.default_rng(seed), view, (1,))
+        levels = 0.5 * (keys["asymmetric_coulomb"]["positive"][1] + keys["asymmetric_coulomb"]["negative"][1])
+        assert keys["stribeck"]["static"][1] > levels
+    trial = simulate_trial(arm4.robot, duration=1.0, effects=keys, limits=arm4.limits, progress=False)
+    assert trial.truth["effects"]["stribeck"]["static_excess"][1] > 0

@@ -57,3 +57,18 @@ def arm_draw(cause: str, rng: np.random.Generator, joints, chosen: tuple[int, ..
     if cause not in CATALOGUE:
         raise ValueError(f"unknown cause {cause!r}")
     return CATALOGUE[cause].arm_draw(rng, joints, tuple(chosen))
+
+
+def arm_draws(causes, rng: np.random.Generator, joints, chosen: tuple[int, ...]) -> dict:
+    """Keys of several hidden `causes` on the same n-joint arm, drawn in order, each seeing the Coulomb levels the
+    earlier ones set: Stribeck friction drawn beside asymmetric Coulomb friction rises above those levels, not
+    above the datasheet's (drawn alone against the datasheet's level, its static level could sit below the
+    per-direction ones: a friction that falls at low speed, which no catalogue cause is)."""
+    out = {}
+    for cause in causes:
+        keys = arm_draw(cause, rng, joints, chosen)
+        out[cause] = keys
+        if "positive" in keys and "negative" in keys:
+            joints = type(joints)(keys["positive"], keys["negative"], joints.names, joints.scale)
+    return out
+
