@@ -127,16 +127,45 @@ class ArmContext:
         v_m = C[m] · dq): the joints' rule (`loop.at_rest`) for a drive whose joints move while it stands still,
         as a wrist's motor does when its joints counter-rotate. Its friction is set-valued there, and
         sgn(v_m) of a velocity of a few 1e-4 rad/s (the encoders' noise) a random ±fc on every row it reaches."""
-        C = self.arm.drive_matrix
-        coupled = [m for m in range(self.n) if np.count_nonzero(C[m]) > 1]
-        if not coupled or ds.n < 2:
+        v = self.drive_velocity(ds)
+        coupled = self.coupled
+        if not coupled:
             return Y
-        rest = signals.resting(ds.dq @ C[coupled].T, step(ds))
         terms = self.coulomb_terms()
         Y = np.array(Y, copy=True)
-        for k, m in enumerate(coupled):
-            Y[np.ix_(rest[:, k], np.arange(self.n), terms[m])] = 0.0
+        for m in coupled:
+            Y[np.ix_(v[:, m] == 0, np.arange(self.n), terms[m])] = 0.0
         return Y
+
+    @property
+    def coupled(self) -> list[int]:
+        """The drives (0-based) that turn more than their own joint (`Arm.drive_matrix`: a coupled wrist's motor)."""
+        C = self.arm.drive_matrix
+        return [m for m in range(self.n) if np.count_nonzero(C[m]) > 1]
+
+    def drive_velocity(self, ds: Dataset) -> np.ndarray:
+        """v = dq Cᵀ (N, n) [rad/s]: each drive's joint-side velocity along `ds`, a coupled drive's exactly 0 where it
+        rests (`signals.resting`; a drive of its own joint rests with it, `loop.at_rest`), remembered per view."""
+        key = ("v", *_identity(ds))
+        if key not in self._cache:
+            v = ds.dq @ self.arm.drive_matrix.T
+            coupled = self.coupled
+            if coupled and ds.n > 1:
+                rest = np.zeros_like(v, dtype=bool)
+                rest[:, coupled] = signals.resting(v[:, coupled], step(ds))
+                v = np.where(rest, 0.0, v)
+            self._cache[key] = v
+        return self._cache[key]
+
+    def drive_columns(self, values: np.ndarray, joints: tuple[int, ...], prefix: str) -> tuple[np.ndarray, list[str]]:
+        """(X (N, n, k), names): one column per drive m of `joints`, `values[:, m]` × C[m, i] on each row i it
+        reaches (`Arm.drive_matrix`; on row m alone for a drive of its own joint: `per_joint_columns`), named
+        `<prefix><m + 1>`. A drive's friction, reaching every joint its motor turns."""
+        X, names = per_joint_columns(values, joints, prefix)
+        C = self.arm.drive_matrix
+        for k, m in enumerate(joints):
+            X[:, :, k] = values[:, m][:, None] * C[m][None, :]
+        return X, names
 
     def basis(self, ds: Dataset, delta: np.ndarray | None = None) -> np.ndarray:
         """Q (N n, r): an orthonormal basis of the weighted, rest-demeaned rigid columns (`rows`), remembered (the
@@ -557,6 +586,9 @@ def _final(family: ArmFamily, baseline: str, ctx: ArmContext, theta: dict) -> Ca
         params.update(ctx.arm.as_dict(pi))
     estimate, detail = family.estimate({**params, **theta}, se, ctx)
     detail["theta"] = dict(theta)
+    if theta.get(f"{family.cause}.joints", None) == ():
+        # screened to no joint: the candidate is the model without the cause, whatever it scores (`loop._row`)
+        detail["empty"] = True
     params.update({k: v for k, v in theta.items() if isinstance(v, float)})
     searched = [k for k in theta if isinstance(theta[k], float) and k not in family.fixed]
     n_added = len(names) + len(searched)

@@ -139,7 +139,9 @@ def _row(
     `needs_partner`: clears the margin but explains less than `RECOVER` alone (`_rounds`)."""
     c = v.cand
     without = current.get(v.baseline) or max(current.values(), key=lambda w: w.common)
-    ok = scoring.resolved(c.cause, c.estimate, dt)
+    # a per-joint cause the n-joint screen found on no joint (`arm_fit`) adds nothing: a round's chain refitted
+    # against another baseline can still score, and without this the cause would take that score as its own
+    ok = scoring.resolved(c.cause, c.estimate, dt) and not c.detail.get("empty", False)
     share = None
     if gap is not None and v.baseline == "datasheet":
         share = scoring.recovered(gap[0].mse, v.mse, gap[1].mse)
