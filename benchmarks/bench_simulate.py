@@ -52,35 +52,46 @@ def main() -> None:
     arm(args.repeat)
 
 
+#: Every catalogue effect at once on the 7-joint arm (an elastic joint, friction of every kind, ...).
+EVERY_EFFECT = [
+    "armature:joint=3",
+    "asymmetric_coulomb:joint=2",
+    "stribeck:joint=5",
+    "elasticity:joint=4,frequency_hz=5",
+    "payload",
+    "delay",
+    "joint_offset:joint=6",
+    "torque_scale:joint=1",
+    "load_friction:joint=2",
+]
+
+
 def arm(repeat: int, duration: float = 60.0) -> None:
-    """A 7-joint arm (the KUKA LWR4+): 60 s at 1 kHz, clean and with every catalogue effect (an elastic joint, load
-    friction, …). The first run of each also compiles the loop to C (once per machine and arm structure); the best
-    of `repeat` is the simulator's own speed."""
+    """A 7-joint arm (the KUKA LWR4+): 60 s at 1 kHz, clean and with every catalogue effect, on the point-to-point
+    `tud01` (moves and rests) and the `fourier` reference (always moving). The first run of each also compiles the
+    loop to C (once per machine and arm structure); the best of `repeat` is the simulator's own speed. The share of
+    ticks that took the fine RK4 steps (a joint near a reversal or at rest with an effect's friction) explains
+    the difference between the two references."""
     problem = load_problem(ROOT / "problems" / "kuka_lwr4.toml")
     cases = {
-        "7-joint clean": [],
-        "7-joint, every catalogue effect": [
-            "armature:joint=3",
-            "asymmetric_coulomb:joint=2",
-            "stribeck:joint=5",
-            "elasticity:joint=4,frequency_hz=5",
-            "payload",
-            "delay",
-            "joint_offset:joint=6",
-            "torque_scale:joint=1",
-            "load_friction:joint=2",
-        ],
+        "7-joint clean, tud01": ([], "tud01"),
+        "7-joint every effect, tud01": (EVERY_EFFECT, "tud01"),
+        "7-joint clean, fourier": ([], "fourier"),
+        "7-joint every effect, fourier": (EVERY_EFFECT, "fourier"),
     }
     print(
         f"\n7-joint arm (KUKA LWR4+), {duration:g} s at 1 kHz control, logged at 1 kHz; "
         f"5x real time = {duration / 5:g} s"
     )
-    print(f"{'case':34s} {'first s':>8s} {'best s':>8s} {'x real time':>12s} {'cpu s':>6s} {'x real (cpu)':>12s}")
-    for name, effects in cases.items():
+    head = f"{'case':32s} {'first s':>8s} {'best s':>8s} {'x real time':>12s} {'cpu s':>6s} {'x real (cpu)':>12s}"
+    print(f"{head} {'steps':>6s} {'fine ticks':>10s}")
+    for name, (effects, trajectory) in cases.items():
+        found = {}
 
-        def simulate(effects=effects):
-            return simulate_trial(
+        def simulate(effects=effects, trajectory=trajectory, found=found):
+            found["trial"] = simulate_trial(
                 problem.robot,
+                trajectory=trajectory,
                 duration=duration,
                 rate_hz=1000.0,
                 effects=effects,
@@ -92,7 +103,12 @@ def arm(repeat: int, duration: float = 60.0) -> None:
         c0 = time.process_time()
         t = best_time(simulate, repeat)
         cpu = (time.process_time() - c0) / repeat  # one core's work per trial, whatever else the machine runs
-        print(f"{name:34s} {first:8.2f} {t:8.2f} {duration / t:12.1f} {cpu:6.2f} {duration / cpu:12.1f}")
+        loop = found["trial"].truth["controller"]
+        steps = f"{loop['rk4_substeps_away_from_reversals']}/{loop['rk4_substeps']}"
+        print(
+            f"{name:32s} {first:8.2f} {t:8.2f} {duration / t:12.1f} {cpu:6.2f} {duration / cpu:12.1f} "
+            f"{steps:>6s} {loop['fine_tick_share']:10.1%}"
+        )
     print("target: >= 5x real time on one core")
 
 

@@ -17,7 +17,7 @@ import pytest
 from ident_opt.cli import main
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
-from ident_opt.simulate import simulate_trial
+from ident_opt.simulate import arm_plant, simulate_trial
 from ident_opt.simulate.arm_plant import forward
 from ident_opt.simulate.trial import box_of
 
@@ -221,3 +221,46 @@ def test_input_errors_name_the_key_before_any_work(arm4):
         simulate_trial(
             arm4.robot, duration=1.0, effects=["load_friction:coefficient=[1e9,1e9,1e9,1e9]"], progress=False
         )
+
+
+@pytest.mark.parametrize(
+    "trajectory, effects",
+    [
+        ("fourier", ["stribeck:joint=2", "asymmetric_coulomb:joint=4"]),
+        ("tud01", ["load_friction:joint=3", "elasticity:joint=2,frequency_hz=6"]),
+    ],
+)
+def test_fine_steps_only_near_reversals_give_the_fine_integration(arm4, monkeypatch, trajectory, effects):
+    """The loop takes the fine RK4 steps only where the effects' friction is stiff or a joint may reverse; every
+    tick fine is the reference it must equal (to a small share of the torque noise), and on a reference that keeps
+    moving most ticks must be coarse (else the rule does nothing)."""
+
+    def trial():
+        return simulate_trial(
+            arm4.robot,
+            trajectory=trajectory,
+            duration=3.0,
+            rate_hz=1000.0,
+            effects=effects,
+            limits=arm4.limits,
+            progress=False,
+            noise=False,
+        )
+
+    adaptive = trial()
+    band = arm_plant.ArmPlant.stiff_band
+    monkeypatch.setattr(arm_plant.ArmPlant, "stiff_band", lambda self, rate: np.where(band(self, rate) > 0, 1e9, 0))
+    fine = trial()
+    loop = adaptive.truth["controller"]
+    assert loop["rk4_substeps_away_from_reversals"] < loop["rk4_substeps"]
+    assert fine.truth["controller"]["fine_tick_share"] == 1.0
+    if trajectory == "fourier":
+        assert loop["fine_tick_share"] < 0.5
+    sigma = np.array(
+        simulate_trial(arm4.robot, duration=1.0, limits=arm4.limits, progress=False).truth["measurement"][
+            "torque_noise_std"
+        ]
+    )
+    for j in range(4):
+        diff = np.abs(adaptive.frame[f"tau{j + 1}"] - fine.frame[f"tau{j + 1}"]).max()
+        assert diff < 0.1 * sigma[j], (j, diff, sigma[j])

@@ -8,32 +8,46 @@ critically damped at `closed_loop.BANDWIDTH_HZ` on every joint whatever the coup
 diagonal of M drove the Panda's light, strongly coupled wrist unstable at 1 kHz). The torque is constant over each
 tick (1 ms at 1 kHz); RK4 takes `substeps` sub-steps per tick, sized from the fastest rate of the loop (the PD
 against the true inertia, eig(M(q)⁻¹ M̂(q)) ω_c² and 2 ω_c, over poses spread across the ranges; an elastic
-mode's), |λ| h ≤ 0.25.
+mode's), |λ| h ≤ 0.25. The effects' friction is stiff only near a reversal: a tick takes the fine steps sized for
+it only there (`tick`), the coarse ones elsewhere, and matches the fine integration everywhere to a few
+hundredths of the torque noise (tests/test_simulate_arm.py).
 
-Speed: one tick is one CasADi function of (x, ref, p); `mapaccum` runs `closed_loop.CHUNK` of them per call. For a
-long trial it is generated as C, compiled once per machine and arm structure (`cbuild.cached_library`, in the URDF
-project's cache) and loaded back: a 7-joint arm's 60 s at 1 kHz then takes well under a second of integration
-(benchmarks/bench_simulate.py). Short trials, or a machine without a C compiler, run CasADi's own virtual machine.
+Speed: one tick is one CasADi function of (x, ref, p, band), its RK4 step looped (`rk4`), not unrolled;
+`mapaccum` runs `closed_loop.CHUNK` ticks per call. For a long trial it is generated as C, compiled once per
+machine and arm structure (`cbuild.cached_library`, in the URDF project's cache; seconds of gcc) and loaded back: a
+7-joint arm's 60 s at 1 kHz then takes about a second clean, 4–10 s with every effect (benchmarks/bench_simulate.py).
+Short trials, or a machine without a C compiler, run CasADi's own virtual machine.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
-from tqdm import tqdm
 
 from ident_opt.cache import cache_root
 from ident_opt.cbuild import cached_library, load_external
 from ident_opt.errors import InputError
 from ident_opt.simulate.arm_plant import ArmPlant, centre, initial_state, mass_matrix, plant_function, state_size
 from ident_opt.simulate.closed_loop import BANDWIDTH_HZ, CHUNK, MAX_SUBSTEPS, Gains
+from ident_opt.simulate.integrate import march, rk4_step
 from ident_opt.simulate.trajectories import Box, Reference
 
 #: Ticks from which the loop is compiled to C (when it is not compiled yet): below, building costs more than it saves.
 COMPILE_TICKS = 20000
+
+
+@dataclass
+class Steps:
+    """RK4 sub-steps per tick: `coarse` away from the friction's reversals, `fine` near one (equal without a
+    friction effect); `fine_share` the share of a run's ticks that took the fine ones."""
+
+    coarse: int
+    fine: int
+    fine_share: float = 0.0
 
 
 def gains(plant: ArmPlant, box: Box, bandwidth_hz: float = BANDWIDTH_HZ) -> Gains:
@@ -58,11 +72,11 @@ def controller(plant: ArmPlant, bandwidth_hz: float) -> ca.Function:
     return ca.Function("controller", [ref, q, dq], [tau])
 
 
-def substeps(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> int:
+def substeps(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float, friction: bool = True) -> int:
     """RK4 sub-steps per tick of a `control` [Hz] loop: the fastest closed-loop rate |λ| (the PD against the true
     inertia, √λ ω_c + 2 λ ω_c with λ the largest eigenvalue of M(q)⁻¹ M̂(q) over poses spread across the ranges; an
-    elastic mode's, `ElasticJoint`) times the step h ≤ 0.25. An `InputError` naming the cause when more than
-    `MAX_SUBSTEPS` would be needed."""
+    elastic mode's, `ElasticJoint`; with `friction`, the effects' friction at a reversal, `ArmPlant.friction_rate`)
+    times the step h ≤ 0.25. An `InputError` naming the cause when more than `MAX_SUBSTEPS` would be needed."""
     poses = np.vstack([centre(box), np.random.default_rng(2).uniform(box.q_min, box.q_max, (16, plant.n))])
     M = mass_matrix(plant.arm, plant.pi, poses) + np.diag(plant.inertia)
     M_hat = mass_matrix(plant.arm, plant.nominal, poses)
@@ -71,7 +85,8 @@ def substeps(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> 
     for Mk, Hk in zip(M, M_hat):
         lam = float(np.max(np.abs(np.linalg.eigvals(np.linalg.solve(Mk, Hk)))))
         rates.append(math.sqrt(lam) * w + 2 * lam * w)
-    rates.append(plant.friction_rate)
+    if friction:
+        rates.append(plant.friction_rate)
     e = plant.elastic
     if e is not None:
         M0 = mass_matrix(plant.arm, plant.nominal, centre(box)[None, :])[0]
@@ -90,27 +105,52 @@ def substeps(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> 
     return max(2, needed)
 
 
-def tick(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> tuple[ca.Function, int]:
-    """One tick of a `control` [Hz] loop: (x, ref, p) -> (x_next, out), out = [τ (n), y (3n + 1)] at its start, and
-    the sub-steps it takes."""
-    n, nx = plant.n, state_size(plant)
+def rk4(plant: ArmPlant, steps: int, control: float) -> ca.Function:
+    """(x, τ, p) -> x one `control` [Hz] tick later: `steps` RK4 steps of the plant under the held torque τ, as
+    one step looped (`fold`), so the generated C holds the plant once, not once per step."""
+    f = plant_function(plant)
+    x, tau, p = ca.SX.sym("x", f.size1_in(0)), ca.SX.sym("tau", f.size1_in(1)), ca.SX.sym("p", f.size1_in(2))
+    h = 1.0 / control / steps
+    one = ca.Function("rk4_step", [x, tau, p], [rk4_step(lambda z: f(z, tau, p)[0], x, h)])
+    X, T, P = (ca.MX.sym(name, v.sparsity()) for name, v in zip(("x", "tau", "p"), (x, tau, p)))
+    return ca.Function(f"rk4_{steps}", [X, T, P], [one.fold(steps)(X, T, P)], ["x", "tau", "p"], ["x_next"])
+
+
+def tick(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> tuple[ca.Function, Steps]:
+    """One tick of a `control` [Hz] loop: (x, ref, p, band) -> (x_next, out), out = [τ (n), y (3n + 1), fine] at
+    its start, and its sub-steps.
+
+    The effects' friction is stiff only near a reversal (its sign is regularised over ε ≪ the cruise speed,
+    `ArmPlant.regularisation`), so a tick takes the fine steps (sized for it) only when some joint's rate dq is
+    inside its `band` (`ArmPlant.stiff_band` at the coarse steps' rate) or could reach it within the tick, and
+    when some joint's rate could change sign within it (|dq| < 2 |ddq| Δt: the arm's own Coulomb friction is a
+    sharp sign, whose crossing a coarse step smears); the coarse steps (sized for the rest of the loop) otherwise.
+    `fine` = 1 marks the first. Without an effect's friction every tick takes the same steps."""
+    n = plant.n
     f = plant_function(plant)
     ctrl = controller(plant, bandwidth_hz)
-    p = ca.SX.sym("p", f.size1_in(2))
-    x, ref = ca.SX.sym("x", nx), ca.SX.sym("ref", 3 * n)
+    steps = Steps(
+        substeps(plant, bandwidth_hz, box, control, friction=False), substeps(plant, bandwidth_hz, box, control)
+    )
+    x, ref = ca.MX.sym("x", state_size(plant)), ca.MX.sym("ref", 3 * n)
+    p, band = ca.MX.sym("p", f.size1_in(2)), ca.MX.sym("band", n)
     _, y = f(x, ca.DM.zeros(n), p)
     tau = ctrl(ref, y[:n], y[n : 2 * n])
     _, y = f(x, tau, p)  # y's accelerations are those the dynamics produce under the applied torque
-    steps = substeps(plant, bandwidth_hz, box, control)
-    h = 1.0 / control / steps
-    xk = x
-    for _ in range(steps):
-        k1 = f(xk, tau, p)[0]
-        k2 = f(xk + h / 2 * k1, tau, p)[0]
-        k3 = f(xk + h / 2 * k2, tau, p)[0]
-        k4 = f(xk + h * k3, tau, p)[0]
-        xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return ca.Function("arm_tick", [x, ref, p], [xk, ca.vertcat(tau, y)], ["x", "ref", "p"], ["x_next", "out"]), steps
+    if steps.fine == steps.coarse:
+        fine = ca.MX(0)
+        x_next = rk4(plant, steps.fine, control)(x, tau, p)
+    else:
+        speed, change = ca.fabs(y[n : 2 * n]), 2.0 / control * ca.fabs(y[2 * n : 3 * n])
+        fine = ca.logic_or(ca.mmax(ca.logic_and(band > 0, speed < band + change)), ca.mmax(speed < change))
+        switch = ca.Function.conditional(
+            "substeps", [rk4(plant, steps.coarse, control)], rk4(plant, steps.fine, control)
+        )
+        x_next = switch(fine, x, tau, p)
+    out = ca.vertcat(tau, y, fine)
+    return ca.Function(
+        "arm_tick", [x, ref, p, band], [x_next, out], ["x", "ref", "p", "band"], ["x_next", "out"]
+    ), steps
 
 
 def chunked(step: ca.Function, plant: ArmPlant, ticks: int) -> ca.Function:
@@ -133,33 +173,21 @@ def run(
     progress: bool = True,
     control: float = 1000.0,
     bandwidth_hz: float = BANDWIDTH_HZ,
-) -> tuple[np.ndarray, Gains, int]:
+) -> tuple[np.ndarray, Gains, Steps]:
     """Simulate the loop over the reference (sampled at the control rate `control` [Hz]); returns (out (N, 4n + 1):
-    τ, q_enc, dq_enc, ddq_enc, deflection at each tick; the gains; the RK4 sub-steps per tick)."""
+    τ, q_enc, dq_enc, ddq_enc, deflection at each tick; the gains; the RK4 sub-steps per tick and the share of
+    ticks that took the fine ones)."""
     g = gains(plant, box, bandwidth_hz)
     step, steps = tick(plant, bandwidth_hz, box, control)
-    n = plant.n
     p = ca.DM(plant.parameters())
+    band = ca.DM(plant.stiff_band(0.25 * control * steps.coarse))
     x = ca.DM(initial_state(plant, ref.q[0]))
     refs = np.hstack([ref.q, ref.dq, ref.ddq]).T
-    total = refs.shape[1]
-    width = 4 * n + 1
-    out = np.empty((width, total))
-    full = chunked(step, plant, total)
-    bar = tqdm(total=total, unit="tick", desc="simulate", disable=not progress, leave=False, unit_scale=True)
-    for start in range(0, total, CHUNK):
-        m = min(CHUNK, total - start)
-        block = refs[:, start : start + m]
-        if m < CHUNK:  # the last, partial chunk: pad with its final reference and keep what is asked for
-            block = np.hstack([block, np.repeat(block[:, -1:], CHUNK - m, axis=1)])
-        xs, outs = full(x, block, p)
-        out[:, start : start + m] = np.asarray(outs)[:, :m]
-        x = xs[:, m - 1]
-        bar.update(m)
-    bar.close()
+    out = march(chunked(step, plant, refs.shape[1]), x, refs, (p, band), CHUNK, progress)
     if not np.all(np.isfinite(out)):
         raise InputError(
             "the simulation diverged (non-finite angles or torques): the hidden effects "
             f"({', '.join(plant.effects) or 'none'}) or the trajectory are beyond what the arm can follow"
         )
-    return out.T, g, steps
+    steps.fine_share = float(out[-1].mean()) if out.size else 0.0
+    return out[:-1].T, g, steps

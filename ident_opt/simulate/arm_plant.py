@@ -32,7 +32,7 @@ from ident_opt.effects.base import ArmScale, Joints
 from ident_opt.errors import InputError
 
 #: The fastest rate [1/s] the regularised friction of the effects may add (`ArmPlant.regularisation`): 32 RK4 steps
-#: per 1 ms tick at most, and its narrowest regularisation [rad/s].
+#: per 1 ms tick near a reversal (`arm_loop.tick`), and its narrowest regularisation [rad/s].
 FRICTION_RATE, MIN_EPS = 8000.0, 1e-4
 #: An elastic joint whose nominal motor inertia (reflected rotor inertia) is 0 gets this share of its link-side
 #: inertia as a motor: a two-mass joint needs a motor side (`ElasticJoint`).
@@ -137,6 +137,20 @@ class ArmPlant:
         """The fastest rate [1/s] the regularised friction adds (the substeps' sizing, `arm_loop.substeps`)."""
         step, inertia = self._friction_step()
         return float(np.max(step / (inertia * self.regularisation)))
+
+    def stiff_band(self, rate: float) -> np.ndarray:
+        """(n,) [rad/s]: per joint, the speed below which the effects' friction changes faster than `rate` [1/s]
+        (|∂F/∂v| / inertia, the sign's `smooth_sign` and the Stribeck fall-off together; `_friction_step`'s
+        inertia), 0 where it never does. Away from a reversal an explicit step sized for the rest of the loop
+        integrates it; inside the band the loop takes the fine step (`arm_loop.tick`)."""
+        step, inertia = self._friction_step()
+        eps, excess, vs = self.regularisation, np.abs(self.excess), np.where(self.excess != 0, self.velocity, 1.0)
+        v = np.geomspace(1e-7, 1e2, 2000)[:, None]  # a grid fine enough for the band's edge within 1 %
+        sech2 = 1.0 / np.cosh(np.minimum(v / eps, 350.0)) ** 2
+        slope = step / eps * sech2 + excess * 2 * v / vs**2 * np.exp(-((v / vs) ** 2))
+        fast = slope / inertia > rate
+        edge = np.where(fast.any(0), v[::-1][np.argmax(fast[::-1], axis=0), 0], 0.0)
+        return np.where(step > 0, edge, 0.0)
 
     def _friction_step(self) -> tuple[np.ndarray, np.ndarray]:
         """The effects' friction step across zero speed per joint [N m] (per-direction departures, the Stribeck

@@ -27,11 +27,11 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-from tqdm import tqdm
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi
 from ident_opt.errors import InputError
 from ident_opt.simulate import background
+from ident_opt.simulate.integrate import march, rk4_step
 from ident_opt.simulate.trajectories import Reference
 from ident_opt.simulate.truth import TRUTH_MODEL, Truth, initial_state, plant, state_size
 
@@ -116,11 +116,7 @@ def tick(truth: Truth, robot: PlanarRobot, g: Gains, control: float = CONTROL_HZ
     h = 1.0 / control / n
     xk = x
     for _ in range(n):
-        k1 = f(xk, tau, d)[0]
-        k2 = f(xk + h / 2 * k1, tau, d)[0]
-        k3 = f(xk + h / 2 * k2, tau, d)[0]
-        k4 = f(xk + h * k3, tau, d)[0]
-        xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        xk = rk4_step(lambda z: f(z, tau, d)[0], xk, h)
     return ca.Function("tick", [x, ref], [xk, ca.vertcat(tau, y)], ["x", "ref"], ["x_next", "out"])
 
 
@@ -143,17 +139,5 @@ def run(
     x = ca.DM(np.concatenate([initial_state(truth, ref.q[0]), z0]))
     d = background.disturbance(bg, len(ref.t), 1.0 / control, np.random.default_rng([seed, 13]))
     refs = np.hstack([ref.q, ref.dq, ref.ddq, d]).T
-    n = refs.shape[1]
-    out = np.empty((9, n))
-    chunked = {}
-    bar = tqdm(total=n, unit="tick", desc="simulate", disable=not progress, leave=False, unit_scale=True)
-    for start in range(0, n, CHUNK):
-        m = min(CHUNK, n - start)
-        if m not in chunked:
-            chunked[m] = step.mapaccum(m)
-        xs, outs = chunked[m](x, refs[:, start : start + m])
-        out[:, start : start + m] = np.asarray(outs)
-        x = xs[:, -1]
-        bar.update(m)
-    bar.close()
-    return out.T
+    chunk = max(1, min(CHUNK, refs.shape[1]))  # a short trial in one call of its own length
+    return march(step.mapaccum(chunk), x, refs, (), chunk, progress).T

@@ -203,21 +203,29 @@ def _planar_trial(
         truth, robot, ref, progress=progress, seed=int(seed), control=control, bandwidth_hz=settings["bandwidth_hz"]
     )
     finite(out, active)
-    frame = measurement.log(
+    frame = logged(out, ref, robot, settings, scale, truth.logged_torque, truth.elastic)
+    settings["effects_requested"] = {k: _plain(v) for k, v in wanted.items()}
+    return SimTrial(frame, _truth_dict(robot, truth, out, ref.q, settings), robot)
+
+
+def logged(out: np.ndarray, ref: Reference, robot, settings: dict, scale, channel, elastic, **sensors) -> pd.DataFrame:
+    """The loop's output as logged (`measurement.log`) with the trial's settings (rate, noise, derivatives, output)
+    and the measurement noise's own random stream; `elastic`: the plant's elastic joint (its deflection is
+    logged) or None; `sensors`: the arm's noise σ and encoder steps, where not the planar arm's."""
+    return measurement.log(
         out,
         ref.q,
         robot,
-        rate_hz=rate_hz,
-        channel=truth.logged_torque,
+        rate_hz=settings["rate_hz"],
+        channel=channel,
         noise=settings["noise"],
         noise_scale=scale,
         exact_derivatives=settings["exact_derivatives"],
         output=settings["output"],
-        rng=np.random.default_rng([seed, 11]),  # the measurement noise's own stream
-        deflection_column=truth.elastic.deflection_column if truth.elastic else None,
+        rng=np.random.default_rng([settings["seed"], 11]),
+        deflection_column=elastic.deflection_column if elastic else None,
+        **sensors,
     )
-    settings["effects_requested"] = {k: _plain(v) for k, v in wanted.items()}
-    return SimTrial(frame, _truth_dict(robot, truth, out, ref.q, settings), robot)
 
 
 def finite(out: np.ndarray, effects: Mapping) -> None:
@@ -274,18 +282,14 @@ def _arm_trial(robot: Robot, effects, settings: dict, scale: np.ndarray, progres
         plant, ref, box, progress=progress, control=control, bandwidth_hz=settings["bandwidth_hz"]
     )
     sigma = NOISE_SHARE * np.asarray(arm_scale.torque)
-    frame = measurement.log(
+    frame = logged(
         out,
-        ref.q,
+        ref,
         robot,
-        rate_hz=rate_hz,
-        channel=plant.logged_torque,
-        noise=settings["noise"],
-        noise_scale=scale,
-        exact_derivatives=settings["exact_derivatives"],
-        output=settings["output"],
-        rng=np.random.default_rng([settings["seed"], 11]),
-        deflection_column=plant.elastic.deflection_column if plant.elastic else None,
+        settings,
+        scale,
+        plant.logged_torque,
+        plant.elastic,
         noise_std=sigma,
         encoder_step=encoder_steps(robot),
     )
@@ -297,7 +301,9 @@ def _arm_trial(robot: Robot, effects, settings: dict, scale: np.ndarray, progres
         "bandwidth_hz": settings["bandwidth_hz"],
         "kp": list(g.kp),
         "kd": list(g.kd),
-        "rk4_substeps": steps,
+        "rk4_substeps": steps.fine,
+        "rk4_substeps_away_from_reversals": steps.coarse,
+        "fine_tick_share": steps.fine_share,
     }
     truth["tracking"] = {"rms_error": np.sqrt((error**2).mean(0)).tolist(), "max_error": np.abs(error).max(0).tolist()}
     truth["limits"] = {"position_min": box.q_min.tolist(), "position_max": box.q_max.tolist()}

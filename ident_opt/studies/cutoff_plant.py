@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from ident_opt.arm.base import Arm
+from ident_opt.simulate.integrate import rk4_step
 
 KINDS = ("driven", "passive", "swing_up", "steps")
 #: Measurement noise at noise factor 1: encoder step [rad] (15 bits a turn), angle noise [rad], torque noise and
@@ -88,11 +89,7 @@ def _step(arm: Arm, substeps: int) -> ca.Function:
 
     y, dt = x, h / substeps
     for _ in range(substeps):
-        k1 = f(y)
-        k2 = f(y + dt / 2 * k1)
-        k3 = f(y + dt / 2 * k2)
-        k4 = f(y + dt * k3)
-        y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        y = rk4_step(f, y, dt)
     return ca.Function("step", [x, tau, pi, h], [y])
 
 

@@ -28,7 +28,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
@@ -198,68 +197,17 @@ def _objective_value(
     return float(np.log(np.sum(np.exp(-k * (logs - logs.min())))) / k - logs.min()), gaps["thetas"]
 
 
-class _Callback(ca.Callback):
-    """The NumPy objective as a CasADi function of x. Its gradient: central finite differences with the
-    rivals' θ held at their minimisers at x (the envelope theorem: the minimum's gradient is the gradient at
-    the minimiser), so each gradient costs one θ search, not one per perturbation."""
-
-    def __init__(self, fn, size: int):
-        ca.Callback.__init__(self)
-        self._fn, self._size = fn, size
-        self.construct("discrimination", {})
-
-    def get_n_in(self) -> int:
-        return 1
-
-    def get_n_out(self) -> int:
-        return 1
-
-    def get_sparsity_in(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(self._size, 1)
-
-    def get_sparsity_out(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(1, 1)
-
-    def eval(self, arg):
-        return [self._fn(np.array(arg[0]).ravel())[0]]
-
-    def has_jacobian(self) -> bool:
-        return True
-
-    def get_jacobian(self, name, inames, onames, opts):
-        self._jacobian = _Gradient(name, self._fn, self._size, opts)  # kept: CasADi holds no Python reference
-        return self._jacobian
-
-
-class _Gradient(ca.Callback):
-    """(x, f) -> ∂f/∂x (1 × size) for `_Callback`."""
-
-    def __init__(self, name: str, fn, size: int, opts: dict):
-        ca.Callback.__init__(self)
-        self._fn, self._size = fn, size
-        self.construct(name, opts)
-
-    def get_n_in(self) -> int:
-        return 2
-
-    def get_n_out(self) -> int:
-        return 1
-
-    def get_sparsity_in(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(self._size, 1) if i == 0 else ca.Sparsity.dense(1, 1)
-
-    def get_sparsity_out(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(1, self._size)
-
-    def eval(self, arg):
-        x = np.array(arg[0]).ravel()
-        _, thetas = self._fn(x)
-        grad = np.zeros(self._size)
-        for i in range(self._size):
-            e = np.zeros(self._size)
-            e[i] = FD_STEP
-            grad[i] = (self._fn(x + e, thetas)[0] - self._fn(x - e, thetas)[0]) / (2 * FD_STEP)
-        return [ca.DM(grad).T]
+def _gradient(fn, x: np.ndarray) -> np.ndarray:
+    """∂f/∂x (1, size) of the objective `fn` (x, θ) -> (f, θ*) by central differences of `FD_STEP`, with the
+    rivals' θ held at their minimisers at x (the envelope theorem: the minimum's gradient is the gradient at the
+    minimiser), so the gradient costs one θ search, not one per perturbation."""
+    _, thetas = fn(x)
+    grad = np.zeros(x.size)
+    for i in range(x.size):
+        e = np.zeros(x.size)
+        e[i] = FD_STEP
+        grad[i] = (fn(x + e, thetas)[0] - fn(x - e, thetas)[0]) / (2 * FD_STEP)
+    return grad[None, :]
 
 
 def reference_gaps(rivals: Rivals, trial: Dataset, duration: float) -> dict:
@@ -292,8 +240,12 @@ def design(
     t = np.arange(round(setup.duration / rivals.dt)) * rivals.dt  # the data's rate: the diagnosis's samples
     # The NLP sees the first two periods (the start from rest, then the steady state), standing for all of them.
     t_nlp = t[t < min(setup.duration, 2 * setup.fourier.period)]
-    callback = _Callback(
-        lambda x, thetas=None: _objective_value(rivals, setup, t_nlp, len(t), x, thetas), setup.fourier.size
+
+    def objective(x: np.ndarray, thetas: dict | None = None) -> tuple[float, dict]:
+        return _objective_value(rivals, setup, t_nlp, len(t), x, thetas)
+
+    callback = excitation.NumpyFunction(
+        "discrimination", setup.fourier.size, 1, lambda x: [objective(x)[0]], lambda x: _gradient(objective, x)
     )
 
     def evaluate(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> dict:

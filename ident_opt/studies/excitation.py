@@ -329,9 +329,10 @@ def criterion_value(criterion: str, Fw: np.ndarray, Fu: np.ndarray) -> tuple[flo
 
 
 # ---------------------------------------------------------------------------------------------- numeric callbacks
-class _Numeric(ca.Callback):
-    """x (size) → y (m): a NumPy function `value(x)` as a CasADi function, with `jacobian(x)` (m, size) its exact
-    Jacobian (so IPOPT calls compiled C through NumPy instead of CasADi's expression interpreter)."""
+class NumpyFunction(ca.Callback):
+    """x (size) → y (m): a NumPy function `value(x)` as a CasADi function, with `jacobian(x)` (m, size) its
+    Jacobian (exact here, so IPOPT calls compiled C through NumPy instead of CasADi's expression interpreter; the
+    discrimination design's, central differences with its rivals held)."""
 
     def __init__(self, name: str, size: int, m: int, value, jacobian, opts: dict | None = None):
         ca.Callback.__init__(self)
@@ -362,7 +363,7 @@ class _Numeric(ca.Callback):
 
 
 class _Jacobian(ca.Callback):
-    """(x, y) → ∂y/∂x (m, size) for `_Numeric`."""
+    """(x, y) → ∂y/∂x (m, size) for `NumpyFunction`."""
 
     def __init__(self, name: str, size: int, m: int, jacobian, opts: dict):
         ca.Callback.__init__(self)
@@ -417,7 +418,7 @@ class _Trajectory:
         return out.reshape(N * m, self.f.size)
 
 
-def information_callback(setup: Setup, criterion: str, functions: SampleFunctions | None = None) -> _Numeric:
+def information_callback(setup: Setup, criterion: str, functions: SampleFunctions | None = None) -> NumpyFunction:
     """x → the NLP objective of `criterion` ("d": −log det F; "cond": the surrogate of log cond) on the
     objective grid (`OBJECTIVE_HZ` over a period), with its exact gradient (`criterion_value`, the pullback)."""
     functions = functions or SampleFunctions(setup)
@@ -444,15 +445,15 @@ def information_callback(setup: Setup, criterion: str, functions: SampleFunction
         M = (2.0 / len(S)) * scale * (Y @ dF)  # ∂value/∂Y_B per sample (dF symmetric)
         return path.back(functions.pullback(S, M))[None, :]
 
-    return _Numeric(f"excite_{criterion}", setup.fourier.size, 1, value, gradient)
+    return NumpyFunction(f"excite_{criterion}", setup.fourier.size, 1, value, gradient)
 
 
-def torque_callback(setup: Setup, t: np.ndarray, functions: SampleFunctions | None = None) -> _Numeric:
+def torque_callback(setup: Setup, t: np.ndarray, functions: SampleFunctions | None = None) -> NumpyFunction:
     """x → the nominal model's τ at times t (N·n, sample by sample), with its exact Jacobian."""
     functions = functions or SampleFunctions(setup)
     path = _Trajectory(setup, t)
     n = setup.fourier.n_joints
-    return _Numeric(
+    return NumpyFunction(
         "excite_torques",
         setup.fourier.size,
         len(t) * n,
