@@ -29,6 +29,7 @@ import numpy as np
 from ident_opt.diagnosis import CAUSES
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
+from ident_opt.report.confusion import chain, confusion_matrix, exact_set_summary, rounded
 
 ROOT = Path(__file__).resolve().parents[1]
 ARMS = {
@@ -114,23 +115,23 @@ def jobs_for(arms: list[str], seeds: range, duration: float, rate: float, pairs:
     return out
 
 
-def _rounded(value):
-    if isinstance(value, dict):
-        return {k: _rounded(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_rounded(v) for v in value]
-    return round(value, 4) if isinstance(value, float) else value
-
-
 def table(results: list[dict], command: str) -> str:
     """The Markdown report: the confusion matrix of single causes per arm, the exact-set rates, every trial."""
     singles = [r for r in results if len(r["causes"]) == 1]
     pairs = [r for r in results if len(r["causes"]) == 2]
     clean = [r for r in results if not r["causes"]]
-    effect_trials = singles + pairs
-    n_exact = sum(r["exact"] for r in effect_trials)
-    n_within = sum(r["within"] for r in effect_trials)
     cpu = [r["cpu"] for r in results]
+
+    def counts(label: str, rows: list[dict]) -> tuple[str, int, int, int]:
+        return label, len(rows), sum(r["exact"] for r in rows), sum(r["within"] for r in rows)
+
+    def single(cause: str) -> list[dict]:  # the trials hiding `cause` alone (`none`: the clean ones)
+        return [r for r in singles + clean if (r["causes"] or ["none"])[0] == cause and len(r["causes"]) <= 1]
+
+    def tallies(cause: str, rows: list[dict]) -> tuple[str, str]:
+        within = sum(r["within"] for r in rows) if cause != "none" else "—"
+        return f"{sum(r['exact'] for r in rows)}/{len(rows)}", f"{within}/{len(rows)}"
+
     lines = [
         "# Diagnosis on hidden-effect trials of arms with n joints",
         "",
@@ -140,35 +141,30 @@ def table(results: list[dict], command: str) -> str:
         "",
         "## Summary",
         "",
-        "| trials | count | exact set named | exact set, every estimate within tolerance |",
-        "|---|---|---|---|",
-        f"| single cause | {len(singles)} | {sum(r['exact'] for r in singles)} | {sum(r['within'] for r in singles)} |",
-        f"| two causes | {len(pairs)} | {sum(r['exact'] for r in pairs)} | {sum(r['within'] for r in pairs)} |",
-        f"| all with a cause | {len(effect_trials)} | {n_exact} ({n_exact / max(len(effect_trials), 1):.0%}) | "
-        f"{n_within} ({n_within / max(len(effect_trials), 1):.0%}) |",
-        f"| clean | {len(clean)} | {sum(r['exact'] for r in clean)} | "
-        f"{len(clean) - sum(r['exact'] for r in clean)} false alarms |",
+        *exact_set_summary(
+            [counts("single cause", singles), counts("two causes", pairs)],
+            "all with a cause",
+            ("clean", len(clean), sum(r["exact"] for r in clean)),
+        ),
         "",
         f"Diagnosis CPU time per trial: median {np.median(cpu):.1f} s, max {np.max(cpu):.1f} s.",
         "",
         "## Single causes: true × first named",
         "",
-        "| true \\ named | " + " | ".join(CAUSES) + " | exact set | within tolerance |",
-        "|---|" + "---|" * (len(CAUSES) + 2),
+        *confusion_matrix(
+            "true \\ named",
+            CAUSES,
+            [(cause, single(cause)) for cause in CAUSES],
+            lambda r, c: r["first"] == c,
+            (("exact set", "within tolerance"), tallies),
+        ),
     ]
-    for cause in CAUSES:
-        rows = [r for r in singles + clean if (r["causes"] or ["none"])[0] == cause and len(r["causes"]) <= 1]
-        counts = [sum(r["first"] == c for r in rows) for c in CAUSES]
-        lines.append(
-            f"| {cause} | " + " | ".join(map(str, counts)) + f" | {sum(r['exact'] for r in rows)}/{len(rows)} | "
-            f"{sum(r['within'] for r in rows) if cause != 'none' else '—'}/{len(rows)} |"
-        )
     misses = [r for r in results if not (r["within"] if r["causes"] else r["exact"])]
     lines += ["", "## Misses", ""]
     lines += [
         f"- {r['arm']} {' + '.join(r['causes']) or 'clean'} on {', '.join(r['joints']) or '—'} (seed {r['seed']}): "
-        f"named {' → '.join(r['named']) or 'none'}; errors {_rounded(r['errors'])}; estimates "
-        f"`{_rounded(r['estimates'])}`; truth `{_rounded(r['truth'])}`"
+        f"named {chain(r['named'])}; errors {rounded(r['errors'])}; estimates "
+        f"`{rounded(r['estimates'])}`; truth `{rounded(r['truth'])}`"
         for r in misses
     ] or ["none"]
     lines += [
@@ -182,7 +178,7 @@ def table(results: list[dict], command: str) -> str:
         worst = f"{max(r['errors'].values()):.3f}" if r["errors"] else "—"
         lines.append(
             f"| {r['arm']} | {' + '.join(r['causes']) or 'none'} | {', '.join(r['joints']) or '—'} | {r['seed']} | "
-            f"{r['trajectory']} | {' → '.join(r['named']) or 'none'} | {r['exact']} | {r['within']} | {worst} |"
+            f"{r['trajectory']} | {chain(r['named'])} | {r['exact']} | {r['within']} | {worst} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -210,14 +206,14 @@ def main(argv: list[str] | None = None) -> int:
             results.append(r)  # each trial as it comes: a long run interrupted still says what it found
             print(
                 f"{r['arm']:6s} {' + '.join(r['causes']) or 'clean':40s} {', '.join(r['joints']):28s} "
-                f"seed {r['seed']}: {' → '.join(r['named']) or 'none':40s} exact={r['exact']} within={r['within']} "
-                f"{_rounded(r['errors'])} {r['cpu']:.0f} s",
+                f"seed {r['seed']}: {chain(r['named']):40s} exact={r['exact']} within={r['within']} "
+                f"{rounded(r['errors'])} {r['cpu']:.0f} s",
                 flush=True,
             )
     command = "python benchmarks/confusion_arms.py " + " ".join(argv if argv is not None else sys.argv[1:])
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(table(results, command.strip()))
-    Path(args.out).with_suffix(".json").write_text(json.dumps(_rounded(results), indent=1))
+    Path(args.out).with_suffix(".json").write_text(json.dumps(rounded(results), indent=1))
     record(
         Path(args.out).parent,
         Path(args.out).stem,

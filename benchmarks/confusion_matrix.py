@@ -30,6 +30,7 @@ import numpy as np
 from ident_opt.diagnosis import CAUSES
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
+from ident_opt.report.confusion import chain, confusion_matrix, exact_set_summary, rounded
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -127,33 +128,29 @@ def one(job: tuple) -> dict:
     return out
 
 
-def chain(named: list[str]) -> str:
-    """The causes named, in order, as the reports write them ("none" for none)."""
-    return " → ".join(named) or "none"
-
-
 def compound_table(results: list[dict], pairs: list[dict]) -> list[str]:
     """The exact-set summary over single, clean and paired trials, and the paired trials one by one."""
     singles = [r for r in results if r["cause"] != "none"]
     clean = [r for r in results if r["cause"] == "none"]
-    n_exact = sum(r["exact"] for r in singles) + sum(p["exact"] for p in pairs)
-    n_within = sum(bool(r["ok"]) and r["exact"] for r in singles) + sum(p["within"] for p in pairs)
-    total = len(singles) + len(pairs)
     lines = [
         "## The exact set of causes",
         "",
         "`causes` of the diagnosis (the whole chain) against the hidden set: single-effect trials must name "
         "that one cause and nothing else, paired trials both and nothing else, clean trials nothing.",
         "",
-        "| trials | count | exact set named | exact set, every estimate within tolerance |",
-        "|---|---|---|---|",
-        f"| single | {len(singles)} | {sum(r['exact'] for r in singles)} | "
-        f"{sum(bool(r['ok']) and r['exact'] for r in singles)} |",
-        f"| paired | {len(pairs)} | {sum(p['exact'] for p in pairs)} | {sum(p['within'] for p in pairs)} |",
-        f"| single + paired | {total} | {n_exact} ({n_exact / max(total, 1):.0%}) | "
-        f"{n_within} ({n_within / max(total, 1):.0%}) |",
-        f"| clean (false alarms) | {len(clean)} | {sum(r['exact'] for r in clean)} | "
-        f"{len(clean) - sum(r['exact'] for r in clean)} false alarms |",
+        *exact_set_summary(
+            [
+                (
+                    "single",
+                    len(singles),
+                    sum(r["exact"] for r in singles),
+                    sum(bool(r["ok"]) and r["exact"] for r in singles),
+                ),
+                ("paired", len(pairs), sum(p["exact"] for p in pairs), sum(p["within"] for p in pairs)),
+            ],
+            "single + paired",
+            ("clean (false alarms)", len(clean), sum(r["exact"] for r in clean)),
+        ),
         "",
     ]
     if pairs:
@@ -168,25 +165,21 @@ def compound_table(results: list[dict], pairs: list[dict]) -> list[str]:
         for p in pairs:
             worst = max(p["errors"].values()) if p["errors"] else float("nan")
             lines.append(
-                f"| {' + '.join(p['causes'])} | {p['seed']} | {p['trajectory']} | {' → '.join(p['named']) or 'none'} "
-                f"| {p['exact']} | {p['within']} | {worst:.3f} | `{_rounded(p['estimates'])}` | "
-                f"`{_rounded(p['truth'])}` |"
+                f"| {' + '.join(p['causes'])} | {p['seed']} | {p['trajectory']} | {chain(p['named'])} "
+                f"| {p['exact']} | {p['within']} | {worst:.3f} | `{rounded(p['estimates'])}` | "
+                f"`{rounded(p['truth'])}` |"
             )
         lines.append("")
     return lines
 
 
-def _rounded(value):
-    if isinstance(value, dict):
-        return {k: _rounded(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_rounded(v) for v in value]
-    return round(value, 4) if isinstance(value, float) else value
-
-
 def table(results: list[dict], command: str, pairs: list[dict] | None = None) -> str:
     """The Markdown report: confusion matrix, success and median errors, runtimes."""
-    named = [c for c in CAUSES]
+
+    def tallies(cause: str, rows: list[dict]) -> tuple[str, str]:  # within tolerance, median relative error
+        errs = [r["error"] for r in rows if r["error"] is not None]
+        return f"{sum(bool(r['ok']) for r in rows)}/{len(rows)}", f"{np.median(errs):.3f}" if errs else "—"
+
     lines = [
         "# Diagnosis on hidden-effect trials",
         "",
@@ -200,16 +193,14 @@ def table(results: list[dict], command: str, pairs: list[dict] | None = None) ->
         "follows the `mixed` reference, 10 s blocks of the two in turn (on `fourier` alone a mode or a delay "
         "has next to nothing to show); the simulator's background terms (stiction, drift, ripple) are off.",
         "",
-        "| true \\ named | " + " | ".join(named) + " | within tolerance | median rel. error |",
-        "|---|" + "---|" * (len(named) + 2),
+        *confusion_matrix(
+            "true \\ named",
+            CAUSES,
+            [(cause, [r for r in results if r["cause"] == cause]) for cause in CAUSES],
+            lambda r, c: r["named"] == c,
+            (("within tolerance", "median rel. error"), tallies),
+        ),
     ]
-    for cause in CAUSES:
-        rows = [r for r in results if r["cause"] == cause]
-        counts = [sum(r["named"] == n for r in rows) for n in named]
-        ok = sum(bool(r["ok"]) for r in rows)
-        errs = [r["error"] for r in rows if r["error"] is not None]
-        med = f"{np.median(errs):.3f}" if errs else "—"
-        lines.append(f"| {cause} | " + " | ".join(str(c) for c in counts) + f" | {ok}/{len(rows)} | {med} |")
     secs = [r["seconds"] for r in results]
     lines += [
         "",

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt.report.confusion import chain, confusion_matrix, rounded, share
+
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = {"tuning": (0, 1), "unseen": (700, 701)}
 
@@ -173,8 +175,7 @@ def tables(results: list[dict], command: str) -> str:
     real = [r for r in results if r["hidden"]]
     n_exact, n_within = sum(r["exact"] for r in real), sum(r["within"] for r in real)
     lines += [
-        f"| all | {len(real)} | {n_exact} ({n_exact / max(len(real), 1):.0%}) | "
-        f"{n_within} ({n_within / max(len(real), 1):.0%}) | |",
+        f"| all | {len(real)} | {share(n_exact, len(real))} | {share(n_within, len(real))} | |",
         "",
         *confusion(results),
         "| hidden | seed | logger | reference | named (in order) | exact | within | worst rel. error | estimates "
@@ -185,8 +186,8 @@ def tables(results: list[dict], command: str) -> str:
         worst = max(r["errors"].values()) if r["errors"] else float("nan")
         truth = {c: _judged(c, v) for c, v in r["truth"].items()}
         lines.append(
-            f"| {r['case']} | {r['seed']} | {r['pipeline']} | {r['trajectory']} | {' → '.join(r['named']) or 'none'} | "
-            f"{r['exact']} | {r['within']} | {worst:.3f} | `{_rounded(r['estimates'])}` | `{_rounded(truth)}` |"
+            f"| {r['case']} | {r['seed']} | {r['pipeline']} | {r['trajectory']} | {chain(r['named'])} | "
+            f"{r['exact']} | {r['within']} | {worst:.3f} | `{rounded(r['estimates'])}` | `{rounded(truth)}` |"
         )
     secs = [r["seconds_diagnose"] for r in results]
     lines += ["", f"diagnose runtime per trial: median {np.median(secs):.1f} s, max {np.max(secs):.1f} s.", ""]
@@ -197,14 +198,13 @@ def confusion(results: list[dict]) -> list[str]:
     """Hidden case × cause named (anywhere in the chain; `none` for an empty chain): trial counts."""
     from ident_opt.diagnosis import CAUSES
 
-    lines = [
-        "| hidden \\ named | " + " | ".join(CAUSES) + " | trials |",
-        "|---|" + "---|" * (len(CAUSES) + 1),
-    ]
-    for label in dict.fromkeys(r["case"] for r in results):
-        rows = [r for r in results if r["case"] == label]
-        counts = [sum((c in r["named"]) or (c == "none" and not r["named"]) for r in rows) for c in CAUSES]
-        lines.append(f"| {label} | " + " | ".join(str(n) for n in counts) + f" | {len(rows)} |")
+    lines = confusion_matrix(
+        "hidden \\ named",
+        CAUSES,
+        [(label, [r for r in results if r["case"] == label]) for label in dict.fromkeys(r["case"] for r in results)],
+        lambda r, c: (c in r["named"]) or (c == "none" and not r["named"]),
+        (("trials",), lambda label, rows: (str(len(rows)),)),
+    )
     return [*lines, ""]
 
 
@@ -214,25 +214,22 @@ def _judged(cause: str, truth: dict) -> dict:
     return {k: v for k, v in truth.items() if k in CATALOGUE[cause].judged}
 
 
-def _rounded(value):
-    if isinstance(value, dict):
-        return {k: _rounded(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_rounded(v) for v in value]
-    return round(value, 4) if isinstance(value, float) else value
+def saved_trials(paths: list[str | Path], seed_set: str) -> list[dict]:
+    """The trial records of `seed_set` in trial logs (JSON lines), each case and seed once (the last record wins), in
+    matrix order."""
+    latest = {}
+    for path in paths:
+        for line in Path(path).read_text().splitlines():
+            r = json.loads(line)
+            if r["seed"] in SEEDS[seed_set]:
+                latest[(r["case"], r["seed"])] = r
+    labels = [c[0] for c in CASES]
+    return sorted(latest.values(), key=lambda r: (r["seed"], labels.index(r["case"])))
 
 
 def _tables_only(args, command: str) -> int:
     """Write `unseen_plants_<set>.md` from trial logs (`--tables`): each case and seed once, in matrix order."""
-    latest = {}
-    for path in args.tables:
-        for line in Path(path).read_text().splitlines():
-            r = json.loads(line)
-            if r["seed"] in SEEDS[args.set]:
-                latest[(r["case"], r["seed"])] = r
-    labels = [c[0] for c in CASES]
-    results = sorted(latest.values(), key=lambda r: (r["seed"], labels.index(r["case"])))
-    text = tables(results, command)
+    text = tables(saved_trials(args.tables, args.set), command)
     (Path(args.out_dir) / f"unseen_plants_{args.set}.md").write_text(text)
     print(text.split("\n\n| hidden")[0])
     return 0
@@ -274,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
             log.flush()
             print(
                 f"{r['case']:28s} seed {r['seed']:4d} {r['pipeline']:15s} named {r['named']} exact={r['exact']} "
-                f"within={r['within']} errors={_rounded(r['errors'])}",
+                f"within={r['within']} errors={rounded(r['errors'])}",
                 flush=True,
             )
     order = {job: k for k, job in enumerate(jobs)}

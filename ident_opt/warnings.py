@@ -19,3 +19,8 @@ class ResultWarning:
 
     def __str__(self) -> str:
         return f"warning [{self.code}]: {self.message}"
+
+
+def markdown_lines(warnings: list[ResultWarning]) -> list[str]:
+    """A report's list of warnings, one Markdown item each ("- **code**: message"), or "- none"."""
+    return [f"- **{w.code}**: {w.message}" for w in warnings] or ["- none"]

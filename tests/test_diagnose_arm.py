@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -215,3 +216,77 @@ def test_a_coupled_drive_at_rest_has_no_coulomb_sign_and_its_friction_reaches_bo
     (fc2,) = ctx.coulomb_terms()[1]
     assert names == ["a2", "a6"]
     assert np.array_equal(X[:, :, 1], Y[:, :, fc6]) and np.array_equal(X[:, :, 0], Y[:, :, fc2])
+
+
+@pytest.fixture(scope="module")
+def elastic_chain(tmp_path_factory):
+    """`ident-opt diagnose` run from the problem's folder on a copy of arm4.toml given by a relative path, its
+    trial listed under [data] (so the problem file resolves it): 40 s at 250 Hz with an elastic joint 2 and a
+    torque scale on joint 1, which the diagnosis names in that order (seed 1016). (folder, JSON, report, truth)."""
+    from ident_opt.cli import main
+
+    folder = tmp_path_factory.mktemp("relative")
+    for name in ("arm4.toml", "arm4.urdf"):
+        (folder / name).write_text((PROBLEMS["arm4"].parent / name).read_text())
+    with (folder / "arm4.toml").open("a") as toml:
+        toml.write('\n[data]\ntrain = ["trial.csv"]\n')
+    problem = load_problem(folder / "arm4.toml")
+    trial = simulate_trial(
+        problem.robot,
+        trajectory="tud01",
+        duration=40.0,
+        rate_hz=250.0,
+        seed=1016,
+        effects=["elasticity:joint=2,frequency_hz=5", "torque_scale:joint=1,scale=0.88"],
+        limits=problem.limits,
+        progress=False,
+    )
+    trial.write(folder / "trial.csv")
+    here = Path.cwd()
+    os.chdir(folder)
+    try:
+        assert main(["diagnose", "--problem", "arm4.toml", "--out", "out", "--json", "d.json", "--no-progress"]) == 0
+    finally:
+        os.chdir(here)
+    text = (folder / "d.json").read_text()
+    payload = json.loads(text, parse_constant=lambda token: pytest.fail(f"non-strict JSON: {token}"))
+    return folder, payload, (folder / "out" / "diagnosis.md").read_text(), trial.truth
+
+
+def test_the_split_names_the_trials_as_given_not_as_absolute_paths(elastic_chain):
+    """The problem given by a relative path: the JSON's and the report's `split` name the trial relative to the
+    working folder (`outputs.shown`, as identify and compare name theirs), not by the absolute path the problem
+    file resolved it to."""
+    folder, payload, report, _ = elastic_chain
+    split = payload["split"]
+    assert split == "chronological: first 70% of trial.csv trains, the rest is held out", split
+    assert str(folder) not in json.dumps(payload["split"]) and str(folder) not in report
+
+
+def test_an_elastic_joint_named_before_another_cause_reports_its_spring_not_nan(elastic_chain):
+    """An n-joint diagnosis that names an elastic joint and then another cause: the report's sentence gives the
+    joint fit's k, link inertia and damping ratio (they read NaN: the sentence looked for them in the last cause's
+    detail), consistent with each other (k = J (2π f)², ζ the searched damping), in the JSON too; cells the data
+    do not resolve (a reversal jump on a joint that never reverses) read "—", never "nan"."""
+    _, payload, report, truth = elastic_chain
+    assert [c["cause"] for c in payload["causes"]] == ["elasticity", "torque_scale"], payload["causes"]
+    f = payload["causes"][0]["estimate"]["frequency_hz"]
+    detail = payload["extended_model"]["detail"]
+    spring = detail["member_details"]["elasticity"]
+    assert spring["stiffness"] == pytest.approx(spring["inertia"] * (2 * np.pi * f) ** 2, rel=1e-9)
+    assert spring["damping_ratio"] == pytest.approx(detail["theta"]["damping"], rel=1e-12)
+    # The diagnosis judges the joint and the frequency only (docs/effects.md); k is the same order as the truth's.
+    true_k = truth["effects"]["elasticity"]["stiffness"]
+    assert 0.5 < spring["stiffness"] / true_k < 2.0, (spring, true_k)
+    assert f"k = {spring['stiffness']:.3g} N m/rad" in report
+    assert f"link inertia {spring['inertia']:.3g} kg m²" in report
+    assert f"damping ratio {spring['damping_ratio']:.3g}" in report
+    assert not re.search(r"\bnan\b", report, re.IGNORECASE), re.findall(r".{40}\bnan\b.{10}", report, re.IGNORECASE)
+    reversal = next(line for line in report.splitlines() if line.startswith("| reversal jump"))
+    unresolved = [s for b in ("datasheet", "rigid_fit") for s in payload["evidence"][b]["reversal_steps"]]
+    cells = [c.strip() for c in reversal.split("|")[2:-1]]
+    for cell, steps in zip(cells, unresolved, strict=True):
+        if steps["negative_to_positive"] is None and steps["positive_to_negative"] is None:
+            assert cell == "—"
+        else:
+            assert "—" not in cell or None in steps.values()

@@ -492,6 +492,32 @@ def test_held_out_trial_equal_to_the_training_trial_is_warned_about(tmp_path, mo
     assert "held_out_is_training" not in capsys.readouterr().err
 
 
+#: The commands that score held-out trials, each with its flags beyond --problem/--data/--test-data/--json and the
+#: report that must carry the warning (relative to the working folder).
+SCORING = {
+    "identify": (["--out", "out", "--no-variants"], "out/README.md"),
+    "compare": (["--out", "out", "--no-progress"], "out/compare.md"),
+    "diagnose": (["--out", "out", "--no-progress"], "out/diagnosis.md"),
+    "audit": (["--out", "out"], "out/paper_audit.md"),
+}
+
+
+@pytest.mark.parametrize("command", list(SCORING))
+def test_a_held_out_trial_that_trains_is_a_warning_of_the_result(command, tmp_path, monkeypatch, capsys):
+    """The warning is part of the result wherever a held-out score is written: terminal, report and JSON
+    `warnings` (it was printed on the terminal only)."""
+    small_problem(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    flags, report = SCORING[command]
+    base = [command, "--problem", "p.toml", "--data", "small.csv", *flags, "--json", "r.json"]
+    assert main([*base, "--test-data", "./small.csv"]) == 0
+    assert "warning [held_out_is_training]" in capsys.readouterr().err
+    codes = [w["code"] for w in json.loads(Path("r.json").read_text())["warnings"]]
+    assert codes.count("held_out_is_training") == 1, codes
+    text = Path(report).read_text()
+    assert "held_out_is_training" in text and "small.csv (held out) is the training trial" in text
+
+
 def test_strict_json_of_a_check_on_a_bag(bag, capsys):
     assert main(["check", "--problem", "bag.toml", "--data", "b", "--json", "c.json"]) == 0
     json.loads((bag / "c.json").read_text(), parse_constant=lambda token: pytest.fail(f"non-strict JSON: {token}"))

@@ -9,6 +9,7 @@ Writes `paper_audit.md`, `paper_audit_parameters.csv`, `paper_audit_data.csv` an
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
@@ -26,6 +27,9 @@ def run(args: argparse.Namespace) -> int:
     loaded = load(args, "audit")
     out = output_dir(args, loaded.problem, Path("results"))
     result = audit(loaded.problem, loaded.train, loaded.unseen)
+    result.warnings = list(loaded.warnings)  # the trials' own: an unseen trial that is the identification trial
     report.write(result, out, args.json)
     print(report.terminal(result, out))
+    for warning in result.warnings:
+        print(warning, file=sys.stderr)
     return 0

@@ -7,6 +7,7 @@ robot's logs: every fault is reported with the file, column and first offending 
 from __future__ import annotations
 
 import argparse
+import sys
 
 from ident_opt.commands.common import add_problem_arguments, load, write_json
 from ident_opt.identify.base import base_parameters
@@ -59,5 +60,8 @@ def run(args: argparse.Namespace) -> int:
         for name, ranges in rep["ranges"].items():
             joints = ", ".join(f"joint {j} [{lo:.4g}, {hi:.4g}]" for j, (lo, hi) in enumerate(ranges, 1))
             print(f"  {name:>3} [{UNITS[name]}]: {joints}")
-    write_json(args.json, {"problem": loaded.problem.name, "robot": robot, "trials": reports})
+    for warning in loaded.warnings:  # nothing is scored here, but the held-out trials are not held out
+        print(warning, file=sys.stderr)
+    payload = {"problem": loaded.problem.name, "robot": robot, "trials": reports}
+    write_json(args.json, {**payload, "warnings": [w.as_dict() for w in loaded.warnings]})
     return 0

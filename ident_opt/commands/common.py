@@ -63,12 +63,15 @@ class Loaded:
     """A problem with its trials: `training` (every --data, or the problem's) and `testing` (every --test-data,
     or the problem's); `trials` is both, in that order. `train`/`unseen` are the first of each (for a command
     that takes one trial of each); with no held-out trial, `unseen` is the second training trial (the legacy
-    reading of a repeated --data)."""
+    reading of a repeated --data). `warnings`: what is doubtful about the trials themselves (a held-out trial that
+    is a training trial, `held_out_overlap`): a command that scores held-out trials makes them part of its result
+    (terminal, report, JSON `warnings`)."""
 
     problem: Any
     trials: list
     training: list = field(default_factory=list)
     testing: list = field(default_factory=list)
+    warnings: list[ResultWarning] = field(default_factory=list)
 
     def __post_init__(self):
         if not self.training and not self.testing:  # built from one list: the first trains, the second is unseen
@@ -101,7 +104,9 @@ def load(
 ) -> Loaded:
     """The problem file (`problem` when the command read it already) and its data (from --data, the problem's
     [data] trials, or its [simulate] section), once `command` is known to serve its arm. `fit`: the trials will be
-    fitted, so a joint whose torque never varies is an error (else a warning)."""
+    fitted, so a joint whose torque never varies is an error (else a warning). The trials' own warnings are in
+    `Loaded.warnings`, not printed: the command prints them with its result (and writes them in its report and
+    JSON)."""
     problem = problem or load_problem(args.problem)
     require(command, problem)
     train, test = _trial_paths(args, problem)
@@ -114,14 +119,12 @@ def load(
     if min_samples is not None:
         kwargs["min_samples"] = min_samples
     outputs.declare_inputs(paths)
-    for warning in held_out_overlap(train, test):
-        print(warning, file=sys.stderr)
     trials = [load_dataset(p, problem.data, problem.robot, **kwargs) for p in paths]
     for trial in trials:
         if trial.dropped_rows:
             print(f"note: {trial.source}: dropped {trial.dropped_rows} invalid row(s)", file=sys.stderr)
         fittable(trial, fit)
-    return Loaded(problem, trials, trials[:n_train], trials[n_train:])
+    return Loaded(problem, trials, trials[:n_train], trials[n_train:], held_out_overlap(train, test))
 
 
 def _trial_paths(args: argparse.Namespace, problem) -> tuple[list[Path], list[Path]]:

@@ -97,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
         conversions=loaded.problem.data.conversions,
         cutoff_setting=loaded.problem.data.derivative_cutoff_hz,
     )
+    result.trust.warnings[:0] = loaded.warnings  # the trials' own (a held-out trial that trains) come first
     files = report.write(result, out, args.json)
     print(report.to_terminal(result))
     for warning in result.trust.warnings:

@@ -72,6 +72,7 @@ def rigid_fit(loaded, asked: str | None) -> tuple[Recommendation, list[ResultWar
 def run(args: argparse.Namespace) -> int:
     loaded = load(args, "diagnose")
     choice, warnings = rigid_fit(loaded, args.estimator)
+    warnings = [*loaded.warnings, *warnings]  # the trials' own (a held-out trial that trains) come first
     print(f"ident-opt diagnose: rigid fit: the {choice.estimator} fit ({choice.why})", file=sys.stderr)
     for w in warnings:
         print(w, file=sys.stderr)
@@ -85,12 +86,12 @@ def run(args: argparse.Namespace) -> int:
         rigid_fit=None if loaded.problem.robot.engine == "planar" else choice,
     )
     result.nominal["rigid_fit"].update(estimator=choice.estimator, why=choice.why)
+    result.warnings = warnings
     out = output_dir(args, loaded.problem)
     files = report.write(result, out)
     print(report.summary(result))
     print(f"report: {out / 'diagnosis.md'}", file=sys.stderr)
     payload = result.as_json()
     payload["files"] = [str(out / f) for f in files]
-    payload["warnings"] = [w.as_dict() for w in warnings]
     write_json(args.json, payload)
     return 0

@@ -42,7 +42,7 @@ from ident_opt.cache import cache_root
 from ident_opt.cbuild import CompiledRows
 from ident_opt.data import Dataset
 from ident_opt.diagnosis import linear, signals
-from ident_opt.diagnosis.candidates import Candidate, hac_lag, physical_units
+from ident_opt.diagnosis.candidates import Candidate, hac_lag, joint_estimate, physical_units
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
 from ident_opt.identify.base import base_parameters
@@ -607,7 +607,8 @@ def _final(family: ArmFamily, baseline: str, ctx: ArmContext, theta: dict) -> Ca
 def compose(earlier: list[tuple[ArmFamily, dict]], new: ArmFamily) -> ArmFamily:
     """One family for several causes: the earlier ones (each with its θ held) and `new` (searched): every family's
     columns, the parameters any replaces, the angle shift and the delay of the one that has them, the torque-scale
-    rows if any has them; the baselines every member allows; each cause's estimate in `detail["members"]`."""
+    rows if any has them; the baselines every member allows; each cause's estimate and detail in
+    `detail["members"]` and `detail["member_details"]` (`candidates.joint_estimate`)."""
     fams = [f for f, _ in earlier] + [new]
     fixed = {**{k: v for _, th in earlier for k, v in th.items()}, **new.fixed}
     extras = [f.extra for f in fams if f.extra is not None]
@@ -622,11 +623,7 @@ def compose(earlier: list[tuple[ArmFamily, dict]], new: ArmFamily) -> ArmFamily:
     def replaced(theta, ctx):
         return sorted({i for r in removed for i in r(theta, ctx)})
 
-    def estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
-        members = {f.cause: f.estimate(p, se, ctx) for f in fams}
-        est, det = members[new.cause]
-        return est, {**det, "members": {c: e for c, (e, _) in members.items()}}
-
+    estimate = joint_estimate(fams, new.cause)
     coupled_parts = [f.coupled for f in fams if f.coupled is not None]
 
     def coupled(p: dict, theta: dict) -> dict:

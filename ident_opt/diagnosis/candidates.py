@@ -378,13 +378,32 @@ def merged_model(models: list[PlanarArm]) -> PlanarArm:
     return PlanarArm(tuple(extensions), stribeck_velocity=velocity)
 
 
+def joint_estimate(families: list, new: str) -> Callable[[dict, dict, object], tuple[dict, dict]]:
+    """The estimate of a joint fit of several causes (`families`, each with its own `estimate`), `new` the cause
+    added last: its estimate and detail, plus every cause's estimate (`members`) and detail (`member_details`: what
+    the report says of a cause named in an earlier round, e.g. an elastic joint's k, link inertia and damping
+    ratio, from the joint fit's coefficients rather than the new cause's)."""
+
+    def estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
+        members = {f.cause: f.estimate(p, se, ctx) for f in families}
+        est, det = members[new]
+        return est, {
+            **det,
+            "members": {c: e for c, (e, _) in members.items()},
+            "member_details": {c: d for c, (_, d) in members.items()},
+        }
+
+    return estimate
+
+
 def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
     """One family for several causes: the earlier ones (each with its θ held) and `new` (searched, polished).
 
     Columns: the union of the models' extensions, every family's extra columns (the new one's last, so its
     polish sees them where it expects), the angle shift of the one that has one, every transform in
     catalogue order. Baselines: those every member allows. The estimate is the new cause's; each cause's
-    estimate in the joint fit is `detail["members"]`."""
+    estimate and detail in the joint fit are `detail["members"]` and `detail["member_details"]`
+    (`joint_estimate`)."""
     fams = [f for f, _ in earlier] + [new]
     fixed = {**{k: v for _, th in earlier for k, v in th.items()}, **new.fixed}
     extras = [f.extra for f in fams if f.extra is not None]
@@ -404,11 +423,7 @@ def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
             o, X, names = t(o, X, names, theta, step)
         return o, X, names
 
-    def estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
-        members = {f.cause: f.estimate(p, se, ctx) for f in fams}
-        est, det = members[new.cause]
-        return est, {**det, "members": {c: e for c, (e, _) in members.items()}}
-
+    estimate = joint_estimate(fams, new.cause)
     units = next((f.units for f in fams if f.units is not None), None)
     coupled_parts = [f.coupled for f in fams if f.coupled is not None]
 

@@ -23,6 +23,7 @@ from ident_opt.diagnosis import candidates as cands
 from ident_opt.diagnosis import evidence, linear, scoring, signals
 from ident_opt.errors import InputError
 from ident_opt.metrics import nmse
+from ident_opt.outputs import shown
 
 #: Fewest held-out / training samples that make a diagnosis meaningful.
 MIN_SAMPLES = 200
@@ -81,6 +82,19 @@ class Diagnosis:
     rounds: list[list[dict]] = field(default_factory=list)  # every round's candidates, best first (`ROUND_KEYS`)
     timings: dict[str, float] = field(default_factory=dict)
     joints: list[str] = field(default_factory=list)  # the joints' names, in the order of every per-joint list
+    #: what is doubtful about the result (`ident_opt.warnings.ResultWarning`: the trials', the rigid fit's evidence)
+    warnings: list = field(default_factory=list)
+
+    def detail_of(self, cause: str) -> dict:
+        """What the extended model's joint fit says of `cause` beyond its estimate (e.g. an elastic joint's
+        stiffness, link inertia and damping ratio): its entry in the joint fit's `member_details` when several
+        causes are named, the fit's own detail when `cause` is the only one; {} when it is not named."""
+        if self.named is None:
+            return {}
+        details = self.named.detail.get("member_details")
+        if details is not None:
+            return details.get(cause, {})
+        return self.named.detail if self.named.cause == cause else {}
 
     def as_json(self) -> dict:
         """The `--json` payload (`docs/cli.md`), plus extra keys (NaN, e.g. no reversal, as null)."""
@@ -125,6 +139,7 @@ class Diagnosis:
             "extended_model": extended,
             "evidence": self.evidence,
             "timings_s": self.timings,
+            "warnings": [w.as_dict() for w in self.warnings],
         }
 
 
@@ -219,6 +234,8 @@ def _rounds(robot, ctx, current: dict, version, row, var, progress: bool, engine
         fits = _fit_round(robot, ctx, named, ref, version, bar, searched, engine)
         best: dict[str, Fitted] = {}
         for v in fits:
+            if v.cand.n_added == 0 and v.baseline == "rigid_fit":
+                continue  # nothing of its own (its screen kept no joint): the refitted π alone, not this cause
             if v.cand.cause not in best or v.common > best[v.cand.cause].common:
                 best[v.cand.cause] = v
         if searched is None:
@@ -329,14 +346,16 @@ def _finite(value):
 
 
 def split(train: Dataset, test: Dataset | None, train_fraction: float) -> tuple[Dataset, Dataset, str]:
-    """(training part, held-out part, description); see the module docstring."""
+    """(training part, held-out part, description); see the module docstring. The description names the trials as
+    every output does (`outputs.shown`: relative to the working folder when inside it), never the absolute paths
+    the problem file resolved them to."""
     if test is not None:
-        return train, test, f"train on {train.source}, held out: {test.source}"
+        return train, test, f"train on {shown(train.source)}, held out: {shown(test.source)}"
     tr, te = chronological_split(train.n, train_fraction)
     return (
         train.subset(tr),
         train.subset(te),
-        f"chronological: first {train_fraction:.0%} of {train.source} trains, the rest is held out",
+        f"chronological: first {train_fraction:.0%} of {shown(train.source)} trains, the rest is held out",
     )
 
 

@@ -14,10 +14,17 @@ from ident_opt.diagnosis import scoring, signals
 from ident_opt.diagnosis.loop import Diagnosis
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
+from ident_opt.warnings import markdown_lines
+
+#: What a report writes for a number the data did not resolve (NaN: e.g. no velocity reversal to measure a jump
+#: at, a joint whose forward simulation is not reported), as the report's other tables do for an empty cell.
+NOT_RESOLVED = "—"
 
 
 def num(x: float, unit: str = "", digits: int = 3) -> str:
-    """A number to `digits` significant digits, with its unit."""
+    """A number to `digits` significant digits, with its unit; `NOT_RESOLVED` for NaN (never "nan")."""
+    if not np.isfinite(x):
+        return NOT_RESOLVED
     return f"{x:.{digits}g}{(' ' + unit) if unit else ''}"
 
 
@@ -207,13 +214,7 @@ def _evidence_table(d: Diagnosis) -> list[str]:
         "mean residual moving +/− [N m]",
         lambda e, j: f"{num(e['moving_mean'][j]['positive'])} / {num(e['moving_mean'][j]['negative'])}",
     )
-    row(
-        "reversal jump −→+ / +→− [N m]",
-        lambda e, j: (
-            f"{num(e['reversal_steps'][j]['negative_to_positive'])} / "
-            f"{num(e['reversal_steps'][j]['positive_to_negative'])}"
-        ),
-    )
+    row("reversal jump −→+ / +→− [N m]", lambda e, j: _either_way(e["reversal_steps"][j]))
     row("low-speed excess [N m]", lambda e, j: num(e["low_speed_excess"][j]))
     row("pose-explained share (gravity-like)", lambda e, j: num(e["pose_r2"][j]))
     row("lag of measured vs predicted [ms]", lambda e, j: num(1e3 * e["lag_s"][j]))
@@ -224,6 +225,14 @@ def _evidence_table(d: Diagnosis) -> list[str]:
         + " |"
     )
     return rows
+
+
+def _either_way(steps: dict) -> str:
+    """A reversal-jump cell: "up / down" [N m], one `NOT_RESOLVED` cell when neither direction reverses."""
+    up, down = steps["negative_to_positive"], steps["positive_to_negative"]
+    if not (np.isfinite(up) or np.isfinite(down)):
+        return NOT_RESOLVED
+    return f"{num(up)} / {num(down)}"
 
 
 def channels_paragraph(d: Diagnosis) -> list[str]:
@@ -281,6 +290,10 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "low-passed by the same zero-phase filter the derivatives are estimated with, and where a joint "
         "rests its residual is compared about its mean over the rest (stiction holds a level no model "
         "predicts); `nmse_raw_*` in the JSON are without that.",
+        "",
+        "## Warnings",
+        "",
+        *markdown_lines(d.warnings),
         "",
         "## 1. What the nominal models get wrong",
         "",

@@ -317,14 +317,18 @@ class Elasticity(Effect):
         ]
 
     def sentence(self, d, base: str, gain: str) -> str:
-        e, det, num = d.estimate, d.named.detail if d.named else {}, report.num
+        e, det, num = d.estimate, d.detail_of(self.name), report.num
+        # k and the link inertia come from the fitted scale s; without them (no such fit) the mode alone is said.
+        spring = (
+            f"k = {num(det['stiffness'], 'N m/rad')} (link inertia {num(det['inertia'], 'kg m²')}, damping ratio "
+            f"{num(det['damping_ratio'])})"
+            if all(np.isfinite(det.get(key, np.nan)) for key in ("stiffness", "inertia", "damping_ratio"))
+            else f"its mode at {num(e['frequency_hz'], 'Hz')}"
+        )
         return (
             f"Joint {e['joint']} shows a lightly damped {num(e['frequency_hz'], 'Hz')} oscillation that the "
-            f"rigid model cannot produce; an elastic joint with "
-            f"k = {num(det.get('stiffness', float('nan')), 'N m/rad')} "
-            f"(link inertia {num(det.get('inertia', float('nan')), 'kg m²')}, damping ratio "
-            f"{num(det.get('damping_ratio', float('nan')))}) driven by the measured motor-side angle explains "
-            "it"
+            f"rigid model cannot produce; an elastic joint with {spring} driven by the measured motor-side angle "
+            "explains it"
             f"{report.polish_note(d, 'frequency_hz', 'Hz')}; {gain}"
         )
 

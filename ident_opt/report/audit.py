@@ -12,6 +12,7 @@ from ident_opt.report import record, write_json
 from ident_opt.report.figures import audit_torque_figure
 from ident_opt.report.tables import markdown_table, write_table
 from ident_opt.studies.audit import SHUFFLED, Audit
+from ident_opt.warnings import markdown_lines
 
 #: The causes, in plain words, each with the parameters it moves.
 CAUSES = [
@@ -116,6 +117,10 @@ def _data_section(audit: Audit) -> list[str]:
         "(blue), on the whole identification trial: the paper's reading is off by a large, pose-dependent offset "
         "at joint 1; the physical reading follows the measurement without any fitting.",
         "",
+        "## Warnings",
+        "",
+        *markdown_lines(audit.warnings),
+        "",
     ]
 
 
@@ -129,6 +134,7 @@ def payload(audit: Audit) -> dict:
         },
         "physical_closer": audit.closer,
         "metrics": {f"{m} | {p}": row.to_dict() for (m, p), row in audit.data.table.iterrows()},
+        "warnings": [w.as_dict() for w in audit.warnings],
     }
 
 

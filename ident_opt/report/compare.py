@@ -16,6 +16,7 @@ from ident_opt.report.tables import fmt, markdown_table, write_table
 from ident_opt.studies import METRICS
 from ident_opt.studies.compare import PROTOCOLS, Comparison
 from ident_opt.studies.seeds import deviation_from_mean, rmse_table
+from ident_opt.warnings import markdown_lines
 
 #: The files `write` puts in the output folder, the report first.
 FILES = (
@@ -226,7 +227,7 @@ def _trust_section(c: Comparison) -> list[str]:
     """Warnings, the cut-off sensitivity and the fitted direction of gravity, as Markdown lines."""
     parts = ["## The recommended fit", "", f"**{c.recommendation.estimator}**: {c.recommendation.why}.", ""]
     parts += ["## Warnings", ""]
-    parts += [f"- **{w.code}**: {w.message}" for w in c.trust.warnings] or ["- none"]
+    parts += markdown_lines(c.trust.warnings)
     parts.append("")
     if c.trust.cutoffs:
         cut = ", ".join(f"{x:.3g}" for x in c.trust.cutoffs)

@@ -16,6 +16,7 @@ from ident_opt.report.identify_tables import PROTOCOL_TITLES, dm_key, model_name
 from ident_opt.report.tables import fmt, markdown_table
 from ident_opt.studies.identify import IdentifyResult
 from ident_opt.studies.protocols import ProtocolResult
+from ident_opt.warnings import markdown_lines
 
 
 # ---------------------------------------------------------------------------------------------- README
@@ -35,7 +36,7 @@ def readme_parts(
     rec = result.recommendation
     lines += ["", "## The recommended fit", "", f"cpbr is **{rec.estimator}**: {rec.why}."]
     lines += ["", "## Warnings", ""]
-    lines += [f"- **{w.code}**: {w.message}" for w in result.warnings] or ["- none"]
+    lines += markdown_lines(result.warnings)
     lines += ["", "## Findings", ""]
     if paper is not None:
         lines += _findings(result, paper, chrono, cross, "cpbr" in paper.metrics["rmse"])

@@ -9,7 +9,7 @@ the paper's published numbers (`ident_opt.paper`), and on the real trials withou
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -144,7 +144,8 @@ def rigid_body_table(robot: PlanarRobot) -> pd.DataFrame:
 class Audit:
     """Everything the audit report shows: the published π̂ beside both datasheet readings (`parameter_table`),
     the rigid-body parameters behind them, the data audit and which parameters the physical reading gets
-    closer; with the problem file and the trials it ran on."""
+    closer; with the problem file and the trials it ran on, and what is doubtful about them (`warnings`:
+    `ident_opt.warnings.ResultWarning`s, e.g. an unseen trial that is the identification trial)."""
 
     parameters: pd.DataFrame
     body: pd.DataFrame
@@ -153,6 +154,7 @@ class Audit:
     problem_file: str
     train: Dataset
     unseen: Dataset | None
+    warnings: list = field(default_factory=list)
 
 
 def audit(problem, train: Dataset, unseen: Dataset | None = None) -> Audit:
