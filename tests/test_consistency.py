@@ -60,6 +60,10 @@ class DragArm:
     def n_params(self) -> int:
         return self.base.n_params + 1
 
+    @property
+    def drive_matrix(self) -> np.ndarray:
+        return self.base.drive_matrix
+
     def vector(self, pi) -> np.ndarray:
         return np.array([pi.get(n, 0.0) for n in self.names], dtype=float)
 

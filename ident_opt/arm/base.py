@@ -85,6 +85,12 @@ class Arm(Protocol):
         """Y (N, n, P) with τ[k] = Y[k] @ π [N m]."""
         ...
 
+    @property
+    def drive_matrix(self) -> np.ndarray:
+        """C (n, n): drive m turns at C[m] · dq [rad/s, joint side] and its friction reaches joint j as C[m, j] × it;
+        the identity where each drive turns its own joint only (a coupled wrist's motor adds off-diagonal terms)."""
+        ...
+
     def predict(self, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
         """τ (N, n) [N m] for parameters π."""
         ...

@@ -116,6 +116,11 @@ class PlanarArm:
         """n = 2 joints."""
         return 2
 
+    @property
+    def drive_matrix(self) -> np.ndarray:
+        """C = I (2, 2): each joint has a drive of its own."""
+        return np.eye(2)
+
     def vector(self, pi: dict[str, float]) -> np.ndarray:
         """π as a vector in this model's order; names absent from `pi` are 0 (an extension's parameter may
         default to a rigid one when that is given, e.g. the asymmetric fc1p to the symmetric fc1)."""

@@ -112,13 +112,60 @@ class ArmContext:
         return self._cache[key]
 
     def regressor(self, ds: Dataset, delta: np.ndarray | None = None) -> np.ndarray:
-        """Y (N, n, P) of `ds` at the angles q + δ (δ None: as logged), remembered for the last few."""
+        """Y (N, n, P) of `ds` at the angles q + δ (δ None: as logged), a coupled drive's Coulomb column 0 where the
+        drive rests (`drive_rest`), remembered for the last few."""
         key = ("Y", *_identity(ds), None if delta is None else np.asarray(delta).tobytes())
         if key not in self._cache:
             q = ds.q if delta is None else ds.q + delta
             self._trim("Y")
-            self._cache[key] = self.arm.regressor(q, ds.dq, ds.ddq)
+            self._cache[key] = self.drive_rest(self.arm.regressor(q, ds.dq, ds.ddq), ds)
         return self._cache[key]
+
+    def drive_rest(self, Y: np.ndarray, ds: Dataset) -> np.ndarray:
+        """Y (N, n, P) with the Coulomb column of each coupled drive (a row of `Arm.drive_matrix` other than its own
+        joint's, a coupled wrist's motor) set to 0 where that drive rests (`signals.resting` on its velocity
+        v_m = C[m] · dq): the joints' rule (`loop.at_rest`) for a drive whose joints move while it stands still,
+        as a wrist's motor does when its joints counter-rotate. Its friction is set-valued there, and
+        sgn(v_m) of a velocity of a few 1e-4 rad/s (the encoders' noise) a random ±fc on every row it reaches."""
+        v = self.drive_velocity(ds)
+        coupled = self.coupled
+        if not coupled:
+            return Y
+        terms = self.coulomb_terms()
+        Y = np.array(Y, copy=True)
+        for m in coupled:
+            Y[np.ix_(v[:, m] == 0, np.arange(self.n), terms[m])] = 0.0
+        return Y
+
+    @property
+    def coupled(self) -> list[int]:
+        """The drives (0-based) that turn more than their own joint (`Arm.drive_matrix`: a coupled wrist's motor)."""
+        C = self.arm.drive_matrix
+        return [m for m in range(self.n) if np.count_nonzero(C[m]) > 1]
+
+    def drive_velocity(self, ds: Dataset) -> np.ndarray:
+        """v = dq Cᵀ (N, n) [rad/s]: each drive's joint-side velocity along `ds`, a coupled drive's exactly 0 where it
+        rests (`signals.resting`; a drive of its own joint rests with it, `loop.at_rest`), remembered per view."""
+        key = ("v", *_identity(ds))
+        if key not in self._cache:
+            v = ds.dq @ self.arm.drive_matrix.T
+            coupled = self.coupled
+            if coupled and ds.n > 1:
+                rest = np.zeros_like(v, dtype=bool)
+                rest[:, coupled] = signals.resting(v[:, coupled], step(ds))
+                v = np.where(rest, 0.0, v)
+            self._cache[key] = v
+        return self._cache[key]
+
+    def drive_columns(self, values: np.ndarray, joints: tuple[int, ...], prefix: str) -> tuple[np.ndarray, list[str]]:
+        """(X (N, n, k), names): one column per drive m of `joints`, `values[:, m]` × C[m, i] on each row i it
+        reaches (`Arm.drive_matrix`; on row m alone for a drive of its own joint: `per_joint_columns`), named
+        `<prefix><m + 1>`. A drive's friction, reaching every joint its motor turns."""
+        X, names = per_joint_columns(values, joints, prefix)
+        C = self.arm.drive_matrix
+        for k, m in enumerate(joints):
+            X[:, :, k] = values[:, m][:, None] * C[m][None, :]
+        return X, names
 
     def basis(self, ds: Dataset, delta: np.ndarray | None = None) -> np.ndarray:
         """Q (N n, r): an orthonormal basis of the weighted, rest-demeaned rigid columns (`rows`), remembered (the
@@ -217,7 +264,8 @@ class ArmContext:
             G = np.stack([Yd[:, j, :].T @ Yd[:, j, :] for j in range(self.n)])
             Zd = A = K = None
             if instrumented:
-                Zd = self.demean(self.arm.regressor(ds.q, *instrument_kinematics(ds, self.filter_hz)), ds)
+                Z = self.drive_rest(self.arm.regressor(ds.q, *instrument_kinematics(ds, self.filter_hz)), ds)
+                Zd = self.demean(Z, ds)
                 A = np.stack([Zd[:, j, :].T @ Yd[:, j, :] for j in range(self.n)])
                 K = np.stack([Zd[:, j, :].T @ Zd[:, j, :] for j in range(self.n)])
             self._cache[key] = (Yd, G, Y, Zd, A, K)
@@ -267,16 +315,18 @@ class ArmContext:
         return self._cache[key]
 
     def coulomb_terms(self) -> list[list[int]]:
-        """For each joint, the parameters whose column is sgn(dq_j) on its row and 0 elsewhere (its Coulomb level),
+        """For each joint j, the Coulomb level of its drive: the parameters whose column is sgn(v_j) C[j, i] on each
+        row i (v = C dq, C the arm's `drive_matrix`; sgn(dq_j) on row j alone where the drive turns its joint only),
         read from the regressor at random states (no parameter name is matched)."""
         if "coulomb" not in self._cache:
             rng = np.random.default_rng(0)
             q, dq, ddq = rng.normal(size=(3, 16, self.n))
             Y = self.arm.regressor(q, dq, ddq)
+            C = self.arm.drive_matrix
+            v = dq @ C.T
             found = []
             for j in range(self.n):
-                target = np.zeros((16, self.n))
-                target[:, j] = np.sign(dq[:, j])
+                target = np.sign(v[:, j])[:, None] * C[j][None, :]
                 found.append([p for p in range(Y.shape[2]) if np.allclose(Y[:, :, p], target, atol=1e-12)])
             self._cache["coulomb"] = found
         return self._cache["coulomb"]
@@ -536,6 +586,9 @@ def _final(family: ArmFamily, baseline: str, ctx: ArmContext, theta: dict) -> Ca
         params.update(ctx.arm.as_dict(pi))
     estimate, detail = family.estimate({**params, **theta}, se, ctx)
     detail["theta"] = dict(theta)
+    if theta.get(f"{family.cause}.joints", None) == ():
+        # screened to no joint: the candidate is the model without the cause, whatever it scores (`loop._row`)
+        detail["empty"] = True
     params.update({k: v for k, v in theta.items() if isinstance(v, float)})
     searched = [k for k in theta if isinstance(theta[k], float) and k not in family.fixed]
     n_added = len(names) + len(searched)

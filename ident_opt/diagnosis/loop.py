@@ -25,10 +25,6 @@ from ident_opt.errors import InputError
 from ident_opt.metrics import nmse
 from ident_opt.outputs import shown
 
-#: A joint moving slower than this fraction of its speed scale (95th percentile of |dq|) is at rest.
-REST_FRACTION = 0.01
-#: How long [s] a joint must stay slow, before or after a sample, for it to count as at rest.
-REST_WINDOW_S = 0.01
 #: Fewest held-out / training samples that make a diagnosis meaningful.
 MIN_SAMPLES = 200
 #: Most causes one diagnosis names (rounds of the loop).
@@ -158,7 +154,9 @@ def _row(
     `needs_partner`: clears the margin but explains less than `RECOVER` alone (`_rounds`)."""
     c = v.cand
     without = current.get(v.baseline) or max(current.values(), key=lambda w: w.common)
-    ok = scoring.resolved(c.cause, c.estimate, dt)
+    # a per-joint cause the n-joint screen found on no joint (`arm_fit`) adds nothing: a round's chain refitted
+    # against another baseline can still score, and without this the cause would take that score as its own
+    ok = scoring.resolved(c.cause, c.estimate, dt) and not c.detail.get("empty", False)
     share = None
     if gap is not None and v.baseline == "datasheet":
         share = scoring.recovered(gap[0].mse, v.mse, gap[1].mse)
@@ -366,22 +364,14 @@ def at_rest(trial: Dataset) -> Dataset:
 
     Coulomb friction at rest is set-valued (stiction holds whatever the controller pushes, up to the
     breakaway level), and the sign of an estimated velocity at rest is noise: a rigid model's fc·sgn(dq)
-    there is a random ±fc that no cause explains. A joint is at rest at a sample when |dq| is below
-    REST_FRACTION of its speed scale (95th percentile of |dq|) there and stays below it for REST_WINDOW_S
+    there is a random ±fc that no cause explains. A joint is at rest at a sample (`signals.resting`) when |dq| is
+    below REST_FRACTION of its speed scale (95th percentile of |dq|) there and stays below it for REST_WINDOW_S
     before or after (so the filter ringing just before a start or after a stop counts as rest, but a smooth
     velocity reversal, slow only for an instant, does not). Every model (nominal and candidates) sees the
     same velocities, so scores compare like with like; the rest samples stay in (ringing and gravity live
     there too).
     """
-    v_ref = np.quantile(np.abs(trial.dq), 0.95, axis=0)
-    dt = float(np.median(np.diff(trial.t)))
-    w = max(1, round(REST_WINDOW_S / dt))
-    slow = np.abs(trial.dq) < REST_FRACTION * v_ref
-    padded = np.pad(slow, ((w, w), (0, 0)), mode="edge").astype(float)
-    windows = np.lib.stride_tricks.sliding_window_view(padded, w + 1, axis=0)  # (N + w, 2, w + 1)
-    quiet = windows.min(axis=-1) > 0  # slow throughout the w + 1 samples starting at each index
-    before, after = quiet[: trial.n], quiet[w : w + trial.n]
-    dq = np.where(slow & (before | after), 0.0, trial.dq)
+    dq = np.where(signals.resting(trial.dq, float(np.median(np.diff(trial.t)))), 0.0, trial.dq)
     return replace(trial, dq=dq)
 
 

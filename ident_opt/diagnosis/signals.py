@@ -148,6 +148,27 @@ def lag(reference: np.ndarray, x: np.ndarray, dt: float, max_s: float = 0.2) -> 
     return float((shifts[i] + offset) * dt)
 
 
+#: A joint (or drive) moving slower than this fraction of its speed scale (95th percentile of |v|) is at rest.
+REST_FRACTION = 0.01
+#: How long [s] it must stay slow, before or after a sample, for it to count as at rest.
+REST_WINDOW_S = 0.01
+
+
+def resting(v: np.ndarray, dt: float) -> np.ndarray:
+    """(N, m) bool: the samples where each velocity column of v (N, m) [rad/s] at step `dt` [s] is at rest: below
+    `REST_FRACTION` of its speed scale (95th percentile of |v|) there, and staying below it for `REST_WINDOW_S`
+    before or after (the filter ringing just before a start or after a stop counts as rest, a smooth reversal,
+    slow only for an instant, does not). The rule of `loop.at_rest` (joints) and `arm_fit.ArmContext` (drives)."""
+    v_ref = np.quantile(np.abs(v), 0.95, axis=0)
+    w = max(1, round(REST_WINDOW_S / dt))
+    slow = np.abs(v) < REST_FRACTION * v_ref
+    padded = np.pad(slow, ((w, w), (0, 0)), mode="edge").astype(float)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, w + 1, axis=0)  # (N + w, m, w + 1)
+    quiet = windows.min(axis=-1) > 0  # slow throughout the w + 1 samples starting at each index
+    before, after = quiet[: len(v)], quiet[w : w + len(v)]
+    return slow & (before | after)
+
+
 def rest_runs(dq: np.ndarray) -> np.ndarray:
     """Labels (N, 2): for each joint, the index of the rest stretch a sample belongs to (a run of dq = 0
     exactly, as `diagnosis.at_rest` leaves it), −1 where the joint moves."""

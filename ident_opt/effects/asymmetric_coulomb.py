@@ -163,16 +163,19 @@ class AsymmetricCoulomb(Effect):
 
 
 def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
-    """Against the datasheet: [dq_j > 0] and −[dq_j < 0] (levels fp_j, fn_j); against the rigid fit: [dq_j ≠ 0]
-    (a_j), on the joints θ selects."""
+    """Against the datasheet: [v_j > 0] and −[v_j < 0] (levels fp_j, fn_j); against the rigid fit: [v_j ≠ 0]
+    (a_j), on the drives θ selects: v_j is drive j's velocity and its columns reach every joint its motor turns
+    (`ArmContext.drive_velocity`, `drive_columns`; the joint's own dq_j on its row alone where the drive turns
+    only its joint), as the Coulomb level they replace (`_arm_removed`) does."""
     joints = afit.selected(theta, "asymmetric_coulomb", ctx.n)
+    v = ctx.drive_velocity(ds)
     if baseline == "datasheet":
-        up, _ = afit.per_joint_columns((ds.dq > 0).astype(float), joints, "fp")
-        down, _ = afit.per_joint_columns(-(ds.dq < 0).astype(float), joints, "fn")
+        up, _ = ctx.drive_columns((v > 0).astype(float), joints, "fp")
+        down, _ = ctx.drive_columns(-(v < 0).astype(float), joints, "fn")
         names = [f"{k}{j + 1}" for j in joints for k in ("fp", "fn")]
         X = np.stack([up, down], axis=3).reshape(ds.n, ctx.n, 2 * len(joints))
         return X, names
-    return afit.per_joint_columns((ds.dq != 0).astype(float), joints, "a")
+    return ctx.drive_columns((v != 0).astype(float), joints, "a")
 
 
 def _arm_removed(theta: dict, ctx) -> list[int]:
