@@ -71,4 +71,3 @@ def arm_draws(causes, rng: np.random.Generator, joints, chosen: tuple[int, ...])
         if "positive" in keys and "negative" in keys:
             joints = type(joints)(keys["positive"], keys["negative"], joints.names, joints.scale)
     return out
-
