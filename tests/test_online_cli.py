@@ -21,6 +21,8 @@ def run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("online_cli")
     data = tmp / "exp1_small.csv"
     data.write_text("\n".join((ROOT / "data" / "merit" / "exp1.csv").read_text().splitlines()[:3000]) + "\n")
+    held = tmp / "exp2_small.csv"  # given with --test-data, which online does not score: a warning says so
+    held.write_text("\n".join((ROOT / "data" / "merit" / "exp2.csv").read_text().splitlines()[:1500]) + "\n")
     out = tmp / "out"
     code = main(
         [
@@ -29,6 +31,8 @@ def run(tmp_path_factory):
             str(PROBLEM),
             "--data",
             str(data),
+            "--test-data",
+            str(held),
             "--out",
             str(out),
             "--json",
@@ -57,6 +61,17 @@ def test_json_contract(run):
     assert check["max_relative_difference"] == js["batch_check"] and len(check["steps"]) == 5
     assert check["pbr_vs_lsq_linear"] <= 1e-9
     assert set(check["by_model"]) == {"rr", "pbr", "cpbr"}
+
+
+def test_a_held_out_trial_it_does_not_score_is_a_warning(run):
+    """online replays its own trial's later part: a --test-data trial is named as unused in the JSON warnings
+    and in online.md, not read and silently dropped."""
+    _, js, out = run
+    codes = [w["code"] for w in js["warnings"]]
+    assert codes.count("test_data_unused") == 1
+    message = next(w["message"] for w in js["warnings"] if w["code"] == "test_data_unused")
+    assert "exp2_small.csv" in message and "--data" in message
+    assert "test_data_unused" in (out / "online.md").read_text()
 
 
 def test_online_differs_from_frozen_only_where_models_adapt(run):

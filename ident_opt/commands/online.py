@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 from ident_opt.commands.common import (
     add_components,
@@ -31,10 +32,12 @@ from ident_opt.data import chronological_split
 from ident_opt.derivatives import resolve_cutoff
 from ident_opt.errors import InputError
 from ident_opt.online import CONSISTENT_EVERY, serving_identifier
+from ident_opt.outputs import shown
 from ident_opt.report import online as report
 from ident_opt.stream import Mapping, StreamOptions, currents_to_torques, serve
 from ident_opt.studies.online_replay import replay
 from ident_opt.studies.recommend import chosen
+from ident_opt.warnings import ResultWarning
 
 #: Largest accepted --consistent-every.
 MAX_EVERY = 10**7
@@ -138,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
     )
     data = report.payload(result, problem, trial.source, args.cross_covariance)
     data["estimator"], data["estimator_why"] = choice.estimator, choice.why
+    data["warnings"] += [w.as_dict() for w in unused_test_data(args)]
     report.write(result, data, out, args.json)
     print(report.terminal(data, out))
     return 0
@@ -179,3 +183,19 @@ def _stream(args: argparse.Namespace, problem, train) -> int:
         options=options,
     )
     return 0
+
+
+def unused_test_data(args: argparse.Namespace) -> list[ResultWarning]:
+    """A warning when --test-data is given: the replay streams the later part of its own trial (the problem's
+    split) and scores nothing else, so a held-out trial would otherwise be read and silently left unused."""
+    given = getattr(args, "test_data", None) or []
+    if not given:
+        return []
+    names = ", ".join(shown(Path(p)) for p in given)
+    return [
+        ResultWarning(
+            "test_data_unused",
+            f"--test-data {names}: online replays the later part of the trial it trains on (the problem's "
+            "[split]) and scores no held-out trial; to replay that trial, give it with --data",
+        )
+    ]

@@ -15,6 +15,7 @@ from ident_opt.report import record, shown, write_json
 from ident_opt.report.figures import online_trajectories_figure
 from ident_opt.report.tables import markdown_table, write_table
 from ident_opt.studies.online_replay import Replay
+from ident_opt.warnings import ResultWarning, markdown_lines
 
 #: The adapted gray-box model the JSON's `parameters` describe (the paper's Model 3).
 GRAY_BOX = "pbr"
@@ -193,6 +194,10 @@ def markdown(data: dict, nmse: pd.DataFrame) -> str:
             f"at {len(data['batch_check_detail']['steps'])} steps.",
             "",
             *_consistency_lines(data),
+            "## Warnings",
+            "",
+            *markdown_lines([ResultWarning(**w) for w in data.get("warnings", [])]),
+            "",
         ]
     )
 
