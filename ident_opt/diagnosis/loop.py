@@ -234,8 +234,8 @@ def _rounds(robot, ctx, current: dict, version, row, var, progress: bool, engine
         fits = _fit_round(robot, ctx, named, ref, version, bar, searched, engine)
         best: dict[str, Fitted] = {}
         for v in fits:
-            if v.cand.n_added == 0 and v.baseline == "rigid_fit":
-                continue  # nothing of its own (its screen kept no joint): the refitted π alone, not this cause
+            if v.baseline == "rigid_fit" and v.cand.detail.get("empty", False):
+                continue  # screened to no joint (`arm_fit`): the refitted π alone, hiding the cause's other version
             if v.cand.cause not in best or v.common > best[v.cand.cause].common:
                 best[v.cand.cause] = v
         if searched is None:
