@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -178,6 +179,19 @@ def test_cli_stream_equals_cli_replay(physical_problem, small, tmp_path):
     assert '"line": 11' in err
 
 
+def _read_lines(proc: subprocess.Popen, k: int, timeout: float = 120.0) -> list[str]:
+    """The next `k` lines of the service's stdout, or a failure (the process killed) when they do not come within
+    `timeout` s: a bare readline would wait for ever on a service that never answers."""
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(proc.stdout.readline() for _ in range(k)), daemon=True)
+    reader.start()
+    reader.join(timeout)
+    if reader.is_alive():
+        proc.kill()
+        pytest.fail(f"the stream answered {len(lines)} of {k} samples within {timeout:g} s")
+    return lines
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_signal_shuts_down_cleanly_with_final_parameters(small, sig):
     _, _, test = small
@@ -185,7 +199,7 @@ def test_signal_shuts_down_cleanly_with_final_parameters(small, sig):
     for row in _rows(test, 5):
         proc.stdin.write(json.dumps({k: float(v) for k, v in row.items()}) + "\n")
     proc.stdin.flush()
-    got = [proc.stdout.readline() for _ in range(5)]  # the service answered: it is waiting for input now
+    got = _read_lines(proc, 5)  # the service answered: it is waiting for input now
     assert all('"tau"' in g for g in got)
     time.sleep(0.2)
     proc.send_signal(sig)

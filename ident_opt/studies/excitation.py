@@ -30,6 +30,8 @@ import multiprocessing
 import os
 import time
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -682,25 +684,28 @@ def _solve_start(x0: np.ndarray, nlp: tuple | None = None) -> tuple[np.ndarray, 
 
 def _run_starts(nlp: tuple, x0s: list[np.ndarray], workers: int, done: Callable[[], object]) -> list:
     """`_solve_start` from every start in `x0s`, in order; `workers` > 1: that many forked processes at once (each
-    start's answer is the same as in one process: IPOPT is deterministic and the starts are drawn beforehand)."""
+    start's answer is the same as in one process: IPOPT is deterministic and the starts are drawn beforehand).
+
+    A worker that dies (a crash inherited through the fork) breaks the pool instead of leaving it waiting for ever
+    (`concurrent.futures`, unlike `multiprocessing.Pool`); the starts it did not answer then run here."""
     global _FORKED
     workers = min(workers, len(x0s))
-    if workers <= 1 or "fork" not in multiprocessing.get_all_start_methods():
-        out = []
-        for x0 in x0s:
-            out.append(_solve_start(x0, nlp))
-            done()
-        return out
-    _FORKED = nlp
-    try:
-        with multiprocessing.get_context("fork").Pool(workers) as pool:
-            out = []
-            for answer in pool.imap(_solve_start, x0s):
-                out.append(answer)
-                done()
-            return out
-    finally:
-        _FORKED = None
+    out: list = []
+    if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+        _FORKED = nlp
+        try:
+            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
+                for answer in pool.map(_solve_start, x0s):
+                    out.append(answer)
+                    done()
+        except BrokenProcessPool:
+            pass  # out holds the answers that came back, in order; the rest run below
+        finally:
+            _FORKED = None
+    for x0 in x0s[len(out) :]:
+        out.append(_solve_start(x0, nlp))
+        done()
+    return out
 
 
 def design(
