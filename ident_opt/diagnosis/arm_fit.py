@@ -389,8 +389,10 @@ class ArmFamily:
     `delay(θ)` [s], whether each joint's datasheet prediction becomes a column (`rows`: a torque scale), the θ axes
     and the nonlinear search of its own (`search(family, baseline, ctx) -> θ`), the baselines it allows, the
     nonnegative coefficients, how to read its estimate, `screen(params, se, ctx) -> joints` (the joints where it is
-    resolved; None: not screened), `center` (θ the axes are centred on) and `coupled` (θ read from the coefficients,
-    re-solved to a fixed point). `polish` and `refine` are the planar engine's (unused here)."""
+    resolved; None: not screened), `center` (θ the axes are centred on), `coupled` (θ read from the coefficients,
+    re-solved to a fixed point) and `check(predict, θ, ctx) -> (detail, reason or None)` (a test of the fitted
+    candidate on evidence its fit did not weigh alone; a reason marks it unresolved). `polish` and `refine` are the
+    planar engine's (unused here)."""
 
     cause: str
     extra: Callable | None = None
@@ -406,6 +408,7 @@ class ArmFamily:
     screen: Callable | None = None
     center: Callable | None = None
     coupled: Callable | None = None
+    check: Callable | None = None
     polish: Callable | None = None
     refine: Callable | None = None
     fixed: dict = field(default_factory=dict)
@@ -600,6 +603,11 @@ def _final(family: ArmFamily, baseline: str, ctx: ArmContext, theta: dict) -> Ca
             out = out + Y_ @ pi
         return out if family.delay is None else signals.delayed(out, family.delay(theta), step(ds))
 
+    if family.check is not None:
+        found, reason = family.check(predict, theta, ctx)
+        detail.update(found)
+        if reason is not None:
+            detail["unresolved"] = reason
     return Candidate(family.cause, baseline, estimate, params, se, n_added, predict, detail)
 
 
@@ -644,6 +652,7 @@ def compose(earlier: list[tuple[ArmFamily, dict]], new: ArmFamily) -> ArmFamily:
         screen=new.screen,
         center=new.center,
         coupled=coupled if coupled_parts else None,
+        check=new.check,
         fixed=fixed,
         members=tuple((f.cause, f) for f in fams),
         units=next((f.units for f in fams if f.units is not None), None),
@@ -652,7 +661,9 @@ def compose(earlier: list[tuple[ArmFamily, dict]], new: ArmFamily) -> ArmFamily:
 
 def frozen(family: ArmFamily, theta: dict) -> ArmFamily:
     """`family` with θ held (its joints included): no search, no screen; only its linear coefficients move."""
-    return replace(family, axes=lambda rate, theta: [], search=None, center=None, screen=None, fixed=dict(theta))
+    return replace(
+        family, axes=lambda rate, theta: [], search=None, center=None, screen=None, check=None, fixed=dict(theta)
+    )
 
 
 def theta_of(family: ArmFamily, cand: Candidate, ctx: ArmContext) -> dict:
