@@ -30,7 +30,7 @@ import numpy as np
 from ident_opt.diagnosis import CAUSES
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
-from ident_opt.report.confusion import chain, confusion_matrix, exact_set_summary, rounded
+from ident_opt.report.confusion import chain, confusion_matrix, exact_set_summary, rounded, worst
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -163,10 +163,10 @@ def compound_table(results: list[dict], pairs: list[dict]) -> list[str]:
             "|---|---|---|---|---|---|---|---|---|",
         ]
         for p in pairs:
-            worst = max(p["errors"].values()) if p["errors"] else float("nan")
+            cell = worst(p["errors"])
             lines.append(
                 f"| {' + '.join(p['causes'])} | {p['seed']} | {p['trajectory']} | {chain(p['named'])} "
-                f"| {p['exact']} | {p['within']} | {worst:.3f} | `{rounded(p['estimates'])}` | "
+                f"| {p['exact']} | {p['within']} | {cell} | `{rounded(p['estimates'])}` | "
                 f"`{rounded(p['truth'])}` |"
             )
         lines.append("")

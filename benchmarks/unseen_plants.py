@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ident_opt.report.confusion import chain, confusion_matrix, rounded, share
+from ident_opt.report.confusion import chain, confusion_matrix, rounded, share, worst
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = {"tuning": (0, 1), "unseen": (700, 701)}
@@ -183,11 +183,11 @@ def tables(results: list[dict], command: str) -> str:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
-        worst = max(r["errors"].values()) if r["errors"] else float("nan")
+        cell = worst(r["errors"])
         truth = {c: _judged(c, v) for c, v in r["truth"].items()}
         lines.append(
             f"| {r['case']} | {r['seed']} | {r['pipeline']} | {r['trajectory']} | {chain(r['named'])} | "
-            f"{r['exact']} | {r['within']} | {worst:.3f} | `{rounded(r['estimates'])}` | `{rounded(truth)}` |"
+            f"{r['exact']} | {r['within']} | {cell} | `{rounded(r['estimates'])}` | `{rounded(truth)}` |"
         )
     secs = [r["seconds_diagnose"] for r in results]
     lines += ["", f"diagnose runtime per trial: median {np.median(secs):.1f} s, max {np.max(secs):.1f} s.", ""]

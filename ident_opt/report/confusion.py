@@ -27,6 +27,11 @@ def chain(named: Sequence[str]) -> str:
     return " → ".join(named) or "none"
 
 
+def worst(errors: dict) -> str:
+    """A trial's worst relative error as a table cell: "—" when no named cause had an estimate to judge."""
+    return f"{max(errors.values()):.3f}" if errors else "—"
+
+
 def share(count: int, total: int) -> str:
     """ "count (percent of total)", 0 % of nothing."""
     return f"{count} ({count / max(total, 1):.0%})"
