@@ -12,8 +12,8 @@ n − 1 (distal) at a drawn magnitude (`Effect.arm_draw`: relative to the arm's 
 and a payload once; a clean trial; with `--pairs`, the catalogue's causes two at a time (each with the next). The
 reference is the point-to-point `tud01`, `fourier` for Stribeck friction alone and `mixed` for a pair with it. The
 n-joint diagnosis was developed on the KUKA at seeds 0–99 (1 kHz) and the TX40 at seed 0; seed 500's first 27
-trials were reported once (not tuned on); seeds from 600 on were never looked at while tuning:
-`--first-seed 600 --out results/diagnosis/confusion_arms_unseen.md`.
+trials and seed 600's 78 were each reported once, not tuned on (seed 600's table: git history, bc1ddb8); seeds from
+700 on were never looked at while tuning: `--first-seed 700 --out results/diagnosis/confusion_arms_unseen.md`.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import numpy as np
 from ident_opt.diagnosis import CAUSES
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
-from ident_opt.report.confusion import chain, confusion_matrix, exact_set_summary, rounded
+from ident_opt.report.confusion import chain, confusion_matrix, exact_set_summary, rounded, worst
 
 ROOT = Path(__file__).resolve().parents[1]
 ARMS = {
@@ -176,10 +176,9 @@ def table(results: list[dict], command: str) -> str:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
-        worst = f"{max(r['errors'].values()):.3f}" if r["errors"] else "—"
         lines.append(
             f"| {r['arm']} | {' + '.join(r['causes']) or 'none'} | {', '.join(r['joints']) or '—'} | {r['seed']} | "
-            f"{r['trajectory']} | {chain(r['named'])} | {r['exact']} | {r['within']} | {worst} |"
+            f"{r['trajectory']} | {chain(r['named'])} | {r['exact']} | {r['within']} | {worst(r['errors'])} |"
         )
     return "\n".join(lines) + "\n"
 
