@@ -72,11 +72,12 @@ def controller(plant: ArmPlant, bandwidth_hz: float) -> ca.Function:
     return ca.Function("controller", [ref, q, dq], [tau])
 
 
-def substeps(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float, friction: bool = True) -> int:
-    """RK4 sub-steps per tick of a `control` [Hz] loop: the fastest closed-loop rate |λ| (the PD against the true
-    inertia, √λ ω_c + 2 λ ω_c with λ the largest eigenvalue of M(q)⁻¹ M̂(q) over poses spread across the ranges; an
-    elastic mode's, `ElasticJoint`; with `friction`, the effects' friction at a reversal, `ArmPlant.friction_rate`)
-    times the step h ≤ 0.25. An `InputError` naming the cause when more than `MAX_SUBSTEPS` would be needed."""
+def substeps(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> Steps:
+    """RK4 sub-steps per tick of a `control` [Hz] loop, coarse and fine: the fastest closed-loop rate |λ| (the PD
+    against the true inertia, √λ ω_c + 2 λ ω_c with λ the largest eigenvalue of M(q)⁻¹ M̂(q) over poses spread
+    across the ranges; an elastic mode's, `ElasticJoint`) times the step h ≤ 0.25, and for the fine steps the
+    effects' friction at a reversal too (`ArmPlant.friction_rate`). An `InputError` naming the cause when more than
+    `MAX_SUBSTEPS` would be needed."""
     poses = np.vstack([centre(box), np.random.default_rng(2).uniform(box.q_min, box.q_max, (16, plant.n))])
     M = mass_matrix(plant.arm, plant.pi, poses) + np.diag(plant.inertia)
     M_hat = mass_matrix(plant.arm, plant.nominal, poses)
@@ -85,24 +86,26 @@ def substeps(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float, fri
     for Mk, Hk in zip(M, M_hat):
         lam = float(np.max(np.abs(np.linalg.eigvals(np.linalg.solve(Mk, Hk)))))
         rates.append(math.sqrt(lam) * w + 2 * lam * w)
-    if friction:
-        rates.append(plant.friction_rate)
     e = plant.elastic
     if e is not None:
         M0 = mass_matrix(plant.arm, plant.nominal, centre(box)[None, :])[0]
         rates.append(e.fastest_rate + 2 * w * M0[e.index, e.index] / e.B)
-    needed = math.ceil(max(rates) / control / 0.25)
-    if not np.isfinite(needed) or needed > MAX_SUBSTEPS:
-        why = (
-            f"the elastic joint's mode at {e.frequency_hz:g} Hz"
-            if e is not None and e.fastest_rate >= 0.5 * max(rates)
-            else "the controller against the arm's smallest inertia"
-        )
-        raise InputError(
-            f"the simulation is too stiff to integrate: {why} needs {needed:g} RK4 steps per {1e3 / control:g} ms tick "
-            f"(at most {MAX_SUBSTEPS}); use a lower frequency or a faster control rate"
-        )
-    return max(2, needed)
+
+    def needed(rate: float) -> int:
+        k = math.ceil(rate / control / 0.25)
+        if not np.isfinite(k) or k > MAX_SUBSTEPS:
+            why = (
+                f"the elastic joint's mode at {e.frequency_hz:g} Hz"
+                if e is not None and e.fastest_rate >= 0.5 * rate
+                else "the controller against the arm's smallest inertia"
+            )
+            raise InputError(
+                f"the simulation is too stiff to integrate: {why} needs {k:g} RK4 steps per {1e3 / control:g} ms "
+                f"tick (at most {MAX_SUBSTEPS}); use a lower frequency or a faster control rate"
+            )
+        return max(2, k)
+
+    return Steps(needed(max(rates)), needed(max(*rates, plant.friction_rate)))
 
 
 def rk4(plant: ArmPlant, steps: int, control: float) -> ca.Function:
@@ -129,9 +132,7 @@ def tick(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> tupl
     n = plant.n
     f = plant_function(plant)
     ctrl = controller(plant, bandwidth_hz)
-    steps = Steps(
-        substeps(plant, bandwidth_hz, box, control, friction=False), substeps(plant, bandwidth_hz, box, control)
-    )
+    steps = substeps(plant, bandwidth_hz, box, control)
     x, ref = ca.MX.sym("x", state_size(plant)), ca.MX.sym("ref", 3 * n)
     p, band = ca.MX.sym("p", f.size1_in(2)), ca.MX.sym("band", n)
     _, y = f(x, ca.DM.zeros(n), p)
