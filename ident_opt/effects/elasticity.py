@@ -22,7 +22,7 @@ jointly with every β by multiple shooting (`diagnose/elastic_nlp.py`), against 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ident_opt.effects.base import (
     Effect,
@@ -56,9 +56,12 @@ MAX_FREQUENCY_HZ = 500.0
 
 
 @dataclass(frozen=True)
-class Elastic:
-    """An elastic joint or flexible link: which (0-based), stiffness k [N m/rad], damping d [N m s/rad],
-    motor inertia B [kg m²], the inertia J [kg m²] used for k, and the natural frequency f [Hz]."""
+class Mode:
+    """A lightly damped mode behind joint `index` (0-based): a spring k [N m/rad] and a damper d [N m s/rad] between
+    a driven motor inertia B [kg m²] and a link inertia J_link [kg m²], which set its natural frequency
+    `frequency_hz` [Hz] and damping ratio `damping` (`spring_for`); `fastest_rate` [1/s] bounds the mode's rate with
+    the joints free (it sizes the RK4 step). The planar arm's `Elastic` and the n-joint plant's
+    `simulate.arm_plant.ElasticJoint` are modes."""
 
     index: int
     k: float
@@ -67,17 +70,31 @@ class Elastic:
     J_link: float
     frequency_hz: float
     damping: float
-    frequency_range_hz: tuple[float, float]  # over the workspace (joint 1: J_l depends on q2)
-    kind: str = "joint"  # "joint" (two-mass) or "link" (flexible link, see flexible_link.py)
-    fastest_rate: float = 0.0  # rad/s, a bound of the mode's rate with free joints (sizes the RK4 step)
-
-    #: The state: [q (2), θ, dq (2), dθ] (elastic joint) or [q (2), φ, dq (2), dφ] (flexible link).
-    state_size = 6
+    fastest_rate: float
 
     @property
     def deflection_column(self) -> str:
         """The logged column of the spring's deflection."""
         return f"deflection{self.index + 1}"
+
+
+def spring_for(J_link: float, frequency_hz: float, damping: float) -> tuple[float, float]:
+    """(k [N m/rad], d [N m s/rad]) of a mode of `frequency_hz` [Hz] and damping ratio `damping` on the inertia
+    J_link [kg m²]: k = J_link (2π f)², d = 2 ζ √(k J_link)."""
+    k = J_link * (2 * math.pi * frequency_hz) ** 2
+    return k, 2 * damping * math.sqrt(k * J_link)
+
+
+@dataclass(frozen=True)
+class Elastic(Mode):
+    """The planar arm's elastic joint (two-mass, `kind` "joint") or flexible link ("link", `flexible_link`), with
+    its frequency's range over the workspace [Hz] (joint 1's link inertia depends on q2)."""
+
+    frequency_range_hz: tuple[float, float] = field(kw_only=True)
+    kind: str = field(default="joint", kw_only=True)
+
+    #: The state: [q (2), θ, dq (2), dθ] (elastic joint) or [q (2), φ, dq (2), dφ] (flexible link).
+    state_size = 6
 
     def rates(self, kd: tuple[float, float]) -> list[float]:
         """The fastest closed-loop rate [1/s] the mode adds under PD damping gains kd [N m s/rad]."""
@@ -171,29 +188,27 @@ def elastic_joint(plant, j: int, f: float, zeta: float) -> Elastic:
     pi = plant.pi
     B = plant.armature[j]  # the motor side: reflected rotor inertia
     J_link = (pi["a1"] - B + 2 * pi["a2"]) if j == 0 else pi["a3"]
-    k = J_link * (2 * math.pi * f) ** 2
+    k, d = spring_for(J_link, f, zeta)
     if j == 0:  # J_l(q2) = a1 − B + 2 a2 cos q2 over the trajectories' range of q2
         inertias = [pi["a1"] - B + 2 * pi["a2"] * math.cos(q2) for q2 in Q2_RANGE]
     else:
         inertias = [J_link, J_link]
     band = tuple(math.sqrt(k / J) / (2 * math.pi) for J in inertias)
-    d = 2 * zeta * math.sqrt(k * J_link)
     w_free = math.sqrt(k * (1 / B + 1 / min(inertias)))
     rate = w_free + d * (1 / B + 1 / min(inertias))
-    return Elastic(j, k, d, B, J_link, f, zeta, band, "joint", rate)
+    return Elastic(j, k, d, B, J_link, f, zeta, rate, frequency_range_hz=band, kind="joint")
 
 
 def flexible(plant, j: int, f: float, zeta: float) -> Elastic:
     """Link j (0-based) flexible at f [Hz] with damping ratio ζ, on the true plant `plant` (a `PlantSpec`)."""
     robot, armature = plant.robot, tuple(plant.armature)
     J = flexible_link.mode_inertia(robot, j, armature, 0.0)
-    k = J * (2 * math.pi * f) ** 2
+    k, d = spring_for(J, f, zeta)
     inertias = [flexible_link.mode_inertia(robot, j, armature, q2) for q2 in Q2_RANGE]
     band = tuple(math.sqrt(k / Jq) / (2 * math.pi) for Jq in inertias)
-    d = 2 * zeta * math.sqrt(k * J)
     w_free = flexible_link.free_rate(robot, j, armature, k)
     rate = w_free + d * w_free**2 / k  # d (M⁻¹)_φφ, with (M⁻¹)_φφ = ω²/k
-    return Elastic(j, k, d, armature[j], J, f, zeta, band, "link", rate)
+    return Elastic(j, k, d, armature[j], J, f, zeta, rate, frequency_range_hz=band, kind="link")
 
 
 class Elasticity(Effect):

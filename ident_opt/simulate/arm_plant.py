@@ -29,6 +29,7 @@ import numpy as np
 from ident_opt.arm.base import Arm, Robot
 from ident_opt.effects import CATALOGUE
 from ident_opt.effects.base import ArmScale, Joints
+from ident_opt.effects.elasticity import Mode, spring_for
 from ident_opt.errors import InputError
 
 #: The fastest rate [1/s] the regularised friction of the effects may add (`ArmPlant.regularisation`): 32 RK4 steps
@@ -41,27 +42,13 @@ MOTOR_SHARE = 0.5
 JOINT_KINDS = ("friction", "armature", "other")
 
 
-@dataclass
-class ElasticJoint:
-    """Joint `index` (0-based) elastic: motor inertia B [kg m²] (logged and driven), spring k [N m/rad] and
-    damper d [N m s/rad] to the link, whose inertia J_link [kg m²] at the centre pose set k for the natural
-    frequency `frequency_hz` with the other joints held, damping ratio `damping`; `motor_added`: B was not in the
-    datasheet (`MOTOR_SHARE`); `fastest_rate` [1/s] a bound of the mode's rate with the joint free."""
+@dataclass(frozen=True)
+class ElasticJoint(Mode):
+    """Joint `index` (0-based) elastic (`Mode`): the motor side B is logged and driven, J_link is the link-side
+    inertia at the centre pose (the frequency with the other joints held); `motor_added`: B was not in the datasheet
+    (`MOTOR_SHARE`)."""
 
-    index: int
-    k: float
-    d: float
-    B: float
-    J_link: float
-    frequency_hz: float
-    damping: float
-    motor_added: bool
-    fastest_rate: float
-
-    @property
-    def deflection_column(self) -> str:
-        """The logged column of the spring's deflection θ − q_j."""
-        return f"deflection{self.index + 1}"
+    motor_added: bool = field(kw_only=True)
 
 
 @dataclass
@@ -303,11 +290,10 @@ def elastic_joint(plant: ArmPlant, joint: int, frequency_hz: float, damping: flo
     added = B <= 1e-12 * max(J_link, 1e-12)
     if added:
         B = MOTOR_SHARE * J_link
-    k = J_link * (2 * math.pi * frequency_hz) ** 2
-    d = 2 * damping * math.sqrt(k * J_link)
+    k, d = spring_for(J_link, frequency_hz, damping)
     J_min = float(np.min(M_link))
     rate = math.sqrt(k * (1 / B + 1 / J_min)) + d * (1 / B + 1 / J_min)
-    return ElasticJoint(joint, k, d, B, J_link, frequency_hz, damping, added, rate)
+    return ElasticJoint(joint, k, d, B, J_link, frequency_hz, damping, rate, motor_added=added)
 
 
 # ---------------------------------------------------------------------------------------------- CasADi
