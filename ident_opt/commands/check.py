@@ -11,6 +11,7 @@ import sys
 
 from ident_opt.commands.common import add_problem_arguments, load, write_json
 from ident_opt.identify.base import base_parameters
+from ident_opt.outputs import shown
 
 #: Units of the ranges printed per signal.
 UNITS = {"q": "rad", "dq": "rad/s", "ddq": "rad/s²", "tau": "N·m"}
@@ -23,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def summary(trial) -> dict:
     """A JSON-able description of one loaded trial."""
     return {
-        "source": trial.source,
+        "source": shown(trial.source),
         "samples": trial.n,
         "duration_s": float(trial.t[-1] - trial.t[0]),
         "rate_hz": trial.rate_hz,
@@ -42,6 +43,8 @@ def robot_summary(problem) -> tuple[dict, list[str]]:
     robot = problem.robot
     arm = robot.model()
     info = {**robot.summary(), "base_parameters": base_parameters(arm).rank}
+    if "urdf" in info:  # as people read it: relative to the working folder when inside it
+        info["urdf"] = shown(info["urdf"])
     lines = [f"problem {problem.name!r} ({problem.path}): {robot.headline}", *robot.describe()]
     lines.append(f"  identifiable: {info['base_parameters']} base parameters of the {arm.n_params} of its model")
     return info, lines
