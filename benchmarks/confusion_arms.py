@@ -47,6 +47,7 @@ def one(job: tuple) -> dict:
     from ident_opt.diagnosis import diagnose, hidden
     from ident_opt.problem import load_problem
     from ident_opt.simulate import simulate_trial
+    from ident_opt.studies.recommend import for_diagnosis
 
     arm, causes, joints, seed, duration, rate = job
     problem = load_problem(ARMS[arm])
@@ -68,7 +69,8 @@ def one(job: tuple) -> dict:
         progress=False,
     )
     t0, c0 = time.perf_counter(), time.process_time()
-    d = diagnose(robot, trial.dataset(), progress=False)
+    ds = trial.dataset()  # π by the recommended fit, as the command takes it
+    d = diagnose(robot, ds, progress=False, rigid_fit=for_diagnosis(robot, ds).recommendation)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     named = [c["cause"] for c in d.causes]
     truth = trial.truth["effects"]

@@ -40,6 +40,7 @@ def pair(job: tuple[tuple[str, str], int, float, str]) -> dict:
     from ident_opt.diagnosis import diagnose, hidden
     from ident_opt.problem import load_problem
     from ident_opt.simulate import simulate_trial
+    from ident_opt.studies.recommend import for_diagnosis
 
     causes, seed, duration, trajectory = job
     if trajectory == "auto":
@@ -52,7 +53,8 @@ def pair(job: tuple[tuple[str, str], int, float, str]) -> dict:
     effects = {c: hidden.draw(c, rng, robot) for c in causes}
     trial = simulate_trial(robot, trajectory=trajectory, duration=duration, seed=seed, effects=effects, progress=False)
     t0 = time.perf_counter()
-    d = diagnose(robot, trial.dataset(), progress=False)
+    ds = trial.dataset()  # π by the recommended fit, as the command takes it
+    d = diagnose(robot, ds, progress=False, rigid_fit=for_diagnosis(robot, ds).recommendation)
     seconds = time.perf_counter() - t0
     named = [c["cause"] for c in d.causes]
     truth = trial.truth["effects"]
@@ -80,6 +82,7 @@ def one(job: tuple) -> dict:
     from ident_opt.diagnosis import diagnose, hidden
     from ident_opt.problem import load_problem
     from ident_opt.simulate import simulate_trial
+    from ident_opt.studies.recommend import for_diagnosis
 
     cause, seed, duration, trajectory, *rest = job
     condition = rest[0] if rest else {}
@@ -101,7 +104,8 @@ def one(job: tuple) -> dict:
         **condition.get("simulate", {}),
     )
     t0 = time.perf_counter()
-    d = diagnose(robot, trial.dataset(), progress=False)
+    ds = trial.dataset()  # π by the recommended fit, as the command takes it
+    d = diagnose(robot, ds, progress=False, rigid_fit=for_diagnosis(robot, ds).recommendation)
     seconds = time.perf_counter() - t0
     out = {
         "cause": cause,

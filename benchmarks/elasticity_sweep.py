@@ -30,12 +30,14 @@ def one(job: tuple[str, int, float, int]) -> dict:
     from ident_opt.diagnosis import diagnose
     from ident_opt.problem import load_problem
     from ident_opt.simulate import simulate_trial
+    from ident_opt.studies.recommend import for_diagnosis
 
     kind, joint, f, seed = job
     robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
     effect = f"elasticity:joint={joint},frequency_hz={f},damping=0.02,kind={kind}"
     trial = simulate_trial(robot, trajectory="tud01", duration=80.0, seed=seed, effects=[effect], progress=False)
-    d = diagnose(robot, trial.dataset(), progress=False)
+    ds = trial.dataset()  # π by the recommended fit, as the command takes it
+    d = diagnose(robot, ds, progress=False, rigid_fit=for_diagnosis(robot, ds).recommendation)
     found = next((c["estimate"] for c in d.causes if c["cause"] == "elasticity"), None)
     ok = found is not None and found["joint"] == joint and abs(found["frequency_hz"] / f - 1) <= FREQUENCY_TOL
     return {"kind": kind, "joint": joint, "f": f, "named": [c["cause"] for c in d.causes], "found": found, "ok": ok}

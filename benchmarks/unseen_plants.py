@@ -95,6 +95,7 @@ def trial(job: tuple[int, int]) -> dict:
     from ident_opt.effects import CATALOGUE
     from ident_opt.problem import load_problem
     from ident_opt.simulate import simulate_trial, unseen
+    from ident_opt.studies.recommend import for_diagnosis
 
     index, seed = job
     label, plant, causes, special = CASES[index]
@@ -116,7 +117,8 @@ def trial(job: tuple[int, int]) -> dict:
         el["frequency_hz"] = _effective(sim, robot, effects, mechanism)
     ds = unseen.derived(sim, pipeline, robot)
     t0 = time.perf_counter()
-    d = diagnose(robot, ds, progress=False, torque_filter_hz="auto")
+    fit = for_diagnosis(robot, ds, setting="auto").recommendation  # π by the recommended fit, as the command
+    d = diagnose(robot, ds, progress=False, torque_filter_hz="auto", rigid_fit=fit)
     seconds = time.perf_counter() - t0
     named = [c["cause"] for c in d.causes]
     judged = {

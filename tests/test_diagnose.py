@@ -70,6 +70,7 @@ def test_robust_to_how_the_data_arrive(physical_problem, tmp_path, how):
     from dataclasses import replace
 
     from ident_opt.data import load_dataset
+    from ident_opt.studies.recommend import for_diagnosis
 
     robot = physical_problem.robot
     spec = replace(physical_problem.data, header=True, columns={})
@@ -91,7 +92,9 @@ def test_robust_to_how_the_data_arrive(physical_problem, tmp_path, how):
         assert trial.truth["controller"]["control_hz"] == 2000.0
         ds = load_dataset(_write_without_derivatives(trial, tmp_path / "t.csv"), spec, robot)
         assert abs(ds.rate_hz - 2000.0) < 1e-6 and ds.derivatives.startswith("estimated")
-    d = diagnose(robot, ds, progress=False, torque_filter_hz=spec.derivative_cutoff_hz)
+    # π by the recommended fit, as the command takes it: `robust` where the derivatives are estimated here
+    rigid = for_diagnosis(robot, ds, setting=spec.derivative_cutoff_hz).recommendation
+    d = diagnose(robot, ds, progress=False, torque_filter_hz=spec.derivative_cutoff_hz, rigid_fit=rigid)
     _check_found(d, "delay", trial.truth["effects"]["delay"])
 
 

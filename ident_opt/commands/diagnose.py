@@ -3,9 +3,9 @@ model and its held-out gain (`docs/cli.md`, `docs/effects.md`).
 
 With two --data files the first trains and the second is held out; with one, its first part (the problem's
 train_fraction, in time) trains and the rest is held out. Writes diagnosis.md and two figures to --out
-(default: the problem's output folder) and, with --json, the machine-readable result. On an arm with n joints the
-rigid fit is the recommended fit (`studies.recommend`, judged on the training part) unless --estimator says
-otherwise; its name and reason go to the terminal, the report and the JSON.
+(default: the problem's output folder) and, with --json, the machine-readable result. The rigid fit is the
+recommended fit (`studies.recommend`, judged on the training part) unless --estimator says otherwise, on every
+arm; its name and reason go to the terminal, the report and the JSON.
 """
 
 from __future__ import annotations
@@ -13,20 +13,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
 from ident_opt.commands.common import add_problem_arguments, load, output_dir, write_json
-from ident_opt.data import Dataset
 from ident_opt.diagnosis import diagnose, report
 from ident_opt.errors import InputError
 from ident_opt.identify.estimators import ESTIMATORS
-from ident_opt.studies.recommend import Recommendation, chosen, evidence
+from ident_opt.studies.recommend import Recommendation, chosen, for_diagnosis
 from ident_opt.warnings import ResultWarning
-
-#: What the planar two-link diagnosis fits π with (it does not take the recommended fit).
-PLANAR_RIGID_FIT = Recommendation(
-    "wls", "the planar diagnosis's weighted least squares, on the objective every candidate is scored on"
-)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,36 +28,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--estimator",
         choices=tuple(ESTIMATORS),
         default=None,
-        help="how the rigid fit's π is identified on an arm with n joints, among the arm's fits (default: the "
-        "recommended fit, chosen from the training part's evidence)",
+        help="how the rigid fit's π is identified, among the arm's fits (default: the recommended fit, chosen from "
+        "the training part's evidence)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def _training(trial: Dataset, unseen: Dataset | None, fraction: float) -> Dataset:
-    """The part of the data the diagnosis trains on: all of `trial` when a held-out trial is given, else its first
-    `fraction` in time."""
-    if unseen is not None:
-        return trial
-    return trial.subset(np.nonzero(trial.t <= trial.t[0] + fraction * (trial.t[-1] - trial.t[0]))[0])
-
-
 def rigid_fit(loaded, asked: str | None) -> tuple[Recommendation, list[ResultWarning]]:
     """The estimator of the rigid fit and why, with the warnings of the evidence behind it: `asked` (--estimator),
-    else the recommended fit on the training part (`studies.recommend`); the planar diagnosis's own fit."""
+    else the recommended fit on the training part (`studies.recommend`)."""
     problem = loaded.problem
     robot = problem.robot
-    if robot.engine == "planar":
-        if asked is not None:
-            raise InputError(
-                f"diagnose --estimator {asked}: the planar two-link diagnosis fits its rigid model by its own "
-                "weighted least squares; --estimator serves arms with n joints"
-            )
-        return PLANAR_RIGID_FIT, []
+    if robot.engine == "planar" and asked == "nlp_physical":
+        # Its π comes from physical parameters of the rigid arm alone; the candidates extend the grouped π.
+        raise InputError(
+            "diagnose --estimator nlp_physical: the planar diagnosis refits the grouped π together with each "
+            "cause's parameters, which the physical-parameter NLP does not model; use ols, constrained or robust"
+        )
     if asked is not None:
         return chosen("diagnose", robot, robot.model(), [], problem, asked), []
-    train = _training(loaded.train, loaded.unseen, problem.split.train_fraction)
-    found = evidence(robot, robot.model(), [train], problem.data.conversions, problem.data.derivative_cutoff_hz)
+    data = problem.data
+    found = for_diagnosis(
+        robot, loaded.train, loaded.unseen, problem.split.train_fraction, data.conversions, data.derivative_cutoff_hz
+    )
     return found.recommendation, list(found.trust.warnings)
 
 
@@ -83,9 +68,8 @@ def run(args: argparse.Namespace) -> int:
         train_fraction=loaded.problem.split.train_fraction,
         progress=not args.no_progress,
         torque_filter_hz=loaded.problem.data.derivative_cutoff_hz,
-        rigid_fit=None if loaded.problem.robot.engine == "planar" else choice,
+        rigid_fit=choice,
     )
-    result.nominal["rigid_fit"].update(estimator=choice.estimator, why=choice.why)
     result.warnings = warnings
     out = output_dir(args, loaded.problem)
     files = report.write(result, out)

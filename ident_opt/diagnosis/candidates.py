@@ -29,6 +29,9 @@ from ident_opt.arm.planar import PHYSICAL, PlanarArm
 from ident_opt.data import Dataset
 from ident_opt.diagnosis import linear, signals
 from ident_opt.effects import CATALOGUE
+from ident_opt.identify.estimators import INSTRUMENTED, fit_for
+from ident_opt.identify.iv import InstrumentStats, instrument_kinematics
+from ident_opt.identify.stats import Stats
 
 #: The nominal structure under the physical convention (the datasheet has the joint-2 armature ia2).
 NOMINAL = PHYSICAL
@@ -55,6 +58,27 @@ class Context:
     dt: float
     rest: np.ndarray  # rest-stretch labels of the training part (`signals.rest_runs`)
     armature: tuple[float, float] = (0.0, 0.0)  # the datasheet's reflected rotor inertia per joint [kg m²]
+    #: How a refitted π is estimated (`identify.estimators`: the recommended fit; `rigid`); None: jointly with the
+    #: effect's coefficients by weighted least squares (the studies that compare causes' families use that).
+    estimator: str | None = None
+
+    def rigid(self, model: PlanarArm, Y: np.ndarray, target: np.ndarray, Z: np.ndarray | None = None) -> np.ndarray:
+        """π (P,) of `model` by the context's estimator on τ = `target` (N, 2) [N m] with regressor Y (N, 2, P) along
+        the training part (instruments Z (N, 2, P) for an instrumented estimator), rest stretches compared about
+        their means and the joints weighted as every candidate is: the one place the planar diagnosis fits π."""
+        Yd, t = signals.demean_runs(Y, self.rest), signals.demean_runs(target, self.rest)
+        stats = Stats.from_regressor(Yd, t)
+        if self.estimator in INSTRUMENTED:
+            stats = InstrumentStats.from_regressors(Yd, signals.demean_runs(Z, self.rest), t)
+        return fit_for(self.robot, self.estimator, stats, model, weights=self.weights).pi
+
+    def instrumented(self) -> Dataset | None:
+        """The training part at its instruments' kinematics (velocities at rest held at 0, as `loop.at_rest` holds
+        the measured ones), or None when the estimator takes no instruments."""
+        if self.estimator not in INSTRUMENTED:
+            return None
+        dq, ddq = instrument_kinematics(self.train)
+        return replace(self.train, dq=np.where(self.train.dq == 0.0, 0.0, dq), ddq=ddq)
 
 
 @dataclass
@@ -215,6 +239,34 @@ def _couple(family: Family, baseline: str, ctx: Context, theta: dict, o, X, name
     return coupling, o, X, ls
 
 
+def _estimated(
+    family: Family, baseline: str, ctx: Context, theta: dict, columns: tuple, beta: np.ndarray
+) -> np.ndarray:
+    """β against the `rigid_fit` baseline with the model's π estimated by the context's estimator (`Context.rigid`)
+    rather than jointly by least squares (as is for the datasheet baseline, or a context without an estimator):
+    π on τ − o − X_e β_e (X_e the effect's own columns, β_e from the joint fit: least squares for any β_e is
+    variable projection), then β_e again on τ − o − Y π (sign constraints kept). With no column of its own this is
+    the nominal rigid fit exactly, so every candidate is compared with it like with like. An instrumented
+    estimator's instruments are the same design at the instruments' kinematics."""
+    if baseline != "rigid_fit" or ctx.estimator is None:
+        return beta
+    o, X, names = columns
+    model = family.model(theta)
+    P = model.n_params  # the design against rigid_fit starts with the model's π (`design`)
+    Xe, tau = X[:, :, P:], ctx.train.tau
+    Z = None
+    at = ctx.instrumented()
+    if at is not None:
+        Z = design(family, at, theta, "rigid_fit", ctx)[1][:, :, :P]
+    pi = ctx.rigid(model, X[:, :, :P], tau - o - np.einsum("njk,k->nj", Xe, beta[P:]), Z)
+    out = beta.copy()
+    out[:P] = pi
+    if Xe.shape[2]:
+        offset = o + np.einsum("njk,k->nj", X[:, :, :P], pi)
+        out[P:] = _solve(family, ctx, offset, Xe, names[P:], tau, ctx.rest, False).beta
+    return out
+
+
 def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     """Fit one family against one baseline on the training part (θ by variable projection, β by WLS)."""
     stride = max(1, -(-ctx.train.n // SEARCH_ROWS))  # ceil: at most SEARCH_ROWS rows
@@ -239,6 +291,7 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
     beta, polished = ls.beta.copy(), []
     if family.refine is not None:
         beta, theta, polished = family.refine(ctx, o, X, names, beta, theta)
+    beta = _estimated(family, baseline, ctx, {**theta, **coupling}, (o, X, names), beta)
     params = dict(zip(names, map(float, beta)))
     se = dict(zip(names, map(float, ls.se)))
     if family.units is not None:

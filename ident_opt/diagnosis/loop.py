@@ -376,7 +376,7 @@ def at_rest(trial: Dataset) -> Dataset:
     return replace(trial, dq=dq)
 
 
-def rigid_fit(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
+def least_squares_fit(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
     """(π̂ of the nominal structure, joint weights 1/σ_j²): OLS, then WLS with the OLS residual variances,
     on the same objective as every candidate (rest stretches compared about their mean)."""
     rest = signals.rest_runs(ds.dq)
@@ -387,6 +387,15 @@ def rigid_fit(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
     var = np.maximum(first.rss / ds.n, 1e-12 * np.maximum(np.var(ds.tau, axis=0), 1e-30))
     weights = 1.0 / var
     return linear.solve(zero, Y, tau, weights).beta, weights
+
+
+def nominal_fit(ctx: cands.Context) -> np.ndarray:
+    """π̂ of the nominal structure by the context's estimator on the training part (`Context.rigid`): what every
+    candidate that refits π reduces to without a column of its own."""
+    tr, model = ctx.train, cands.NOMINAL
+    at = ctx.instrumented()
+    Z = model.regressor(at.q, at.dq, at.ddq) if at is not None else None
+    return ctx.rigid(model, model.regressor(tr.q, tr.dq, tr.ddq), tr.tau, Z)
 
 
 def logged_bandwidth(trial: Dataset) -> tuple[Dataset, float | None]:
@@ -478,14 +487,18 @@ def diagnose(
     train_fraction: float = 0.7,
     progress: bool = True,
     torque_filter_hz: float | str | None = signals.TORQUE_FILTER_HZ,
+    rigid_fit=None,
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data); see the module docstring.
-    `torque_filter_hz`: see `prepare` (the problem's derivative cut-off is the natural choice)."""
+    `torque_filter_hz`: see `prepare` (the problem's derivative cut-off is the natural choice). `rigid_fit`: how the
+    rigid fit's π is identified and why (a `studies.recommend.Recommendation`: the recommended fit, which the command
+    gives; None: the robot's default estimator), for the nominal rigid fit and every candidate that refits π."""
+    estimator = robot.default_estimator if rigid_fit is None else rigid_fit.estimator
     t0 = time.perf_counter()
     train, test, raw_test, how = parts(trial, unseen, train_fraction, torque_filter_hz, robot.joint_names)
     dt = float(np.median(np.diff(train.t)))
     ds_pi = datasheet_pi(robot, "physical")
-    pi_rigid, weights = rigid_fit(train)
+    _, weights = least_squares_fit(train)
     rest_test = signals.rest_runs(test.dq)
     ctx = cands.Context(
         robot,
@@ -496,7 +509,9 @@ def diagnose(
         dt,
         signals.rest_runs(train.dq),
         rigid_body(robot, "physical").armature,
+        estimator,
     )
+    pi_rigid = nominal_fit(ctx)
 
     model = cands.NOMINAL
     nominal_pi = {"datasheet": model.vector(ds_pi), "rigid_fit": pi_rigid}
@@ -510,6 +525,8 @@ def diagnose(
         }
         for b in nominal_pi
     }
+    nominal["rigid_fit"]["estimator"] = estimator
+    nominal["rigid_fit"]["why"] = "the robot's default estimator" if rigid_fit is None else rigid_fit.why
     t_nominal = time.perf_counter()
 
     var = np.var(test.tau, axis=0)

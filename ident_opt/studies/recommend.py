@@ -202,3 +202,20 @@ def chosen(command: str, robot: Robot, model: Arm, trials: list[Dataset], proble
         return Recommendation(asked, "chosen with --estimator")
     data = problem.data
     return evidence(robot, model, trials, data.conversions, data.derivative_cutoff_hz).recommendation
+
+
+def for_diagnosis(
+    robot: Robot,
+    trial: Dataset,
+    unseen: Dataset | None = None,
+    train_fraction: float = 0.7,
+    conversions: dict[str, tuple[float, float]] | None = None,
+    setting: float | str | None = None,
+) -> Evidence:
+    """The evidence (and the recommendation) on the part of the data `diagnose` trains on: all of `trial` when a
+    held-out `unseen` trial is given, else its first `train_fraction` in time (`diagnosis.loop.split`, the
+    diagnosis's own split). The command and the benchmarks that stand for it both ask here."""
+    from ident_opt.diagnosis.loop import split  # the diagnosis sits on the estimators, not on the studies
+
+    train = split(trial, unseen, train_fraction)[0]
+    return evidence(robot, robot.model(), [train], conversions, setting)
