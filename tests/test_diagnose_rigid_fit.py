@@ -97,3 +97,13 @@ def test_the_command_uses_the_recommended_fit_on_a_planar_arm(physical_problem, 
     assert main([*base, "--out", str(tmp_path / "x"), "--estimator", "nlp_physical"]) == 2
     err = capsys.readouterr().err
     assert "--estimator nlp_physical" in err and "Traceback" not in err and not (tmp_path / "x").exists()
+
+
+def test_report_lists_show_a_level_held_at_its_bound_as_zero():
+    """A Coulomb level the consistent fit holds at 0 comes out of the conic solver at ~1e-11 N m: the report's
+    per-joint lists show it as 0 beside levels of 1 N m, and keep small numbers that are all of a list."""
+    from ident_opt.diagnosis.report import pair
+
+    assert pair([1.0301, 6.12e-11], "N m") == "[1.03, 0] N m"
+    assert pair([2e-5, 3e-5]) == "[2e-05, 3e-05]"
+    assert pair([float("nan"), 0.5]) == "[—, 0.5]"

@@ -28,9 +28,17 @@ def num(x: float, unit: str = "", digits: int = 3) -> str:
     return f"{x:.{digits}g}{(' ' + unit) if unit else ''}"
 
 
+#: A per-joint number below this share of the list's largest is shown as 0: solver round-off (a friction level the
+#: consistent fit holds at its bound comes out at ~1e-11 N m beside levels of 1 N m).
+ROUND_OFF = 1e-9
+
+
 def pair(xs, unit: str = "") -> str:
-    """Per-joint numbers as "[a, b] unit"."""
-    return "[" + ", ".join(num(float(x)) for x in xs) + "]" + (f" {unit}" if unit else "")
+    """Per-joint numbers as "[a, b] unit" (round-off next to the others as 0, `ROUND_OFF`)."""
+    values = [float(x) for x in xs]
+    scale = max((abs(v) for v in values if np.isfinite(v)), default=0.0)
+    shown = (num(0.0 if abs(v) < ROUND_OFF * scale else v) for v in values)
+    return "[" + ", ".join(shown) + "]" + (f" {unit}" if unit else "")
 
 
 def joint(d: Diagnosis, j: int) -> str:
