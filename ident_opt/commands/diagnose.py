@@ -15,7 +15,6 @@ import sys
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir, write_json
 from ident_opt.diagnosis import diagnose, report
-from ident_opt.errors import InputError
 from ident_opt.identify.estimators import ESTIMATORS
 from ident_opt.studies.recommend import Recommendation, chosen, for_diagnosis
 from ident_opt.warnings import ResultWarning
@@ -39,12 +38,6 @@ def rigid_fit(loaded, asked: str | None) -> tuple[Recommendation, list[ResultWar
     else the recommended fit on the training part (`studies.recommend`)."""
     problem = loaded.problem
     robot = problem.robot
-    if robot.engine == "planar" and asked == "nlp_physical":
-        # Its π comes from physical parameters of the rigid arm alone; the candidates extend the grouped π.
-        raise InputError(
-            "diagnose --estimator nlp_physical: the planar diagnosis refits the grouped π together with each "
-            "cause's parameters, which the physical-parameter NLP does not model; use ols, constrained or robust"
-        )
     if asked is not None:
         return chosen("diagnose", robot, robot.model(), [], problem, asked), []
     data = problem.data

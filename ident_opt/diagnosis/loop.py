@@ -480,6 +480,10 @@ def parts(
     return train, test, raw_test, how
 
 
+#: The estimators that refit the grouped π of any model the candidates build (extensions and columns included).
+REFITS = ("ols", "constrained", "robust")
+
+
 def diagnose(
     robot: PlanarRobot,
     trial: Dataset,
@@ -494,6 +498,11 @@ def diagnose(
     rigid fit's π is identified and why (a `studies.recommend.Recommendation`: the recommended fit, which the command
     gives; None: the robot's default estimator), for the nominal rigid fit and every candidate that refits π."""
     estimator = robot.default_estimator if rigid_fit is None else rigid_fit.estimator
+    if estimator not in REFITS:  # e.g. nlp_physical: π from the rigid arm's physical parameters alone
+        raise InputError(
+            f"diagnose: the rigid fit {estimator!r} cannot carry a cause's parameters beside the grouped π, as the "
+            f"planar diagnosis refits them together; use one of {', '.join(REFITS)}"
+        )
     t0 = time.perf_counter()
     train, test, raw_test, how = parts(trial, unseen, train_fraction, torque_filter_hz, robot.joint_names)
     dt = float(np.median(np.diff(train.t)))
