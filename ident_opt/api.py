@@ -60,7 +60,8 @@ def fit(problem: Problem, trials: Sequence[Dataset], estimator: str | None = Non
     name = estimator or recommended_fit(robot, model, list(trials), problem)[1].recommendation.estimator
     if name not in robot.estimators:
         raise InputError(f"estimator {name!r} is not a fit of this arm; its fits: {', '.join(robot.estimators)}")
-    return estimators.fit_for(robot, name, estimators.statistics(model, list(trials), name), model, **options)
+    stats = estimators.statistics(model, list(trials), name, probes=True)
+    return estimators.fit_for(robot, name, stats, model, **options)
 
 
 def compare(problem: Problem, training: Sequence[Dataset], testing: Sequence[Dataset] = (), **options) -> Comparison:

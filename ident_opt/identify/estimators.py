@@ -11,7 +11,8 @@
 | `consistent`   | `identify.physical.fit_physical`: consistent and plausible, a log-det prior toward  | —          |
 |                | the URDF's inertials, masses and centres of mass bounded around them                |            |
 | `robust`       | the arm's consistent fit (`Robot.default_estimator`) on the instruments' two-stage  | —          |
-|                | statistics (`identify.iv`): consistent, and without the errors-in-variables bias    |            |
+|                | statistics (`identify.iv`): consistent, and without the errors-in-variables bias;   |            |
+|                | with probes in its statistics, standard errors that cover the bias it keeps         |            |
 
 Which of them an arm offers, and the options each takes from its description (a datasheet, a prior), the arm says
 (`Robot.estimators`, `Robot.fit_options`). Estimators in `INSTRUMENTED` take `identify.iv.InstrumentStats`
@@ -26,13 +27,15 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 
+import numpy as np
+
 from ident_opt.arm.base import Arm, Robot
 from ident_opt.data import Dataset
 from ident_opt.identify import nlp, physical
 from ident_opt.identify.base import base_parameters, fit_least_squares, lifted_fit
 from ident_opt.identify.constrained import fit_constrained
 from ident_opt.identify.fit import LinearFit
-from ident_opt.identify.iv import InstrumentStats, fit_iv
+from ident_opt.identify.iv import InstrumentStats, fit_iv, probe_trials
 from ident_opt.identify.stats import Stats
 
 #: (statistics, arm, **options) -> LinearFit. Options: `weights` for all, `margin`, `bounds`… for `constrained`,
@@ -46,9 +49,22 @@ def _nlp_physical(stats: Stats, arm: Arm, *, robot, **options) -> LinearFit:
 
 
 def _robust(stats: InstrumentStats, arm: Arm, *, consistent: str, **options) -> LinearFit:
-    """The consistent estimator `consistent` on the two-stage statistics of the instruments (`identify.iv`)."""
-    result = fit(consistent, stats.two_stage(), arm, **options)
-    return replace(result, method="robust")
+    """The consistent estimator `consistent` on the two-stage statistics of the instruments (`identify.iv`).
+
+    With the statistics' bias probes (`iv.probe_trials`: the instruments, and the whole derivative cut-off, at half
+    theirs), its standard errors cover its bias: se = √(se_IV² + Σ_k b_k²), b_k per parameter how far the estimate
+    moves from the trials as read to probe k. An unbiased fit would move by noise alone; the two sources of bias an
+    IV fit keeps move it more, each under its own probe: what is left of the noise's correlation between
+    instruments and regressor (the instruments' cut-off), and the filter's distortion of the dynamics (the
+    derivatives' cut-off); taken as independent, they add in quadrature. `details` keeps `se_noise` (the 2SLS
+    errors alone) and `bias_bound` (√Σ b_k²)."""
+    result = replace(fit(consistent, stats.two_stage(), arm, **options), method="robust")
+    if not stats.probes:
+        return result
+    moved = [np.abs(fit(consistent, p.two_stage(), arm, **options).pi - result.pi) for p in stats.probes.values()]
+    bias = np.sqrt(np.sum(np.square(moved), axis=0))
+    details = {**result.details, "se_noise": result.se, "bias_bound": bias}
+    return replace(result, se=np.sqrt(result.se**2 + bias**2), details=details)
 
 
 ESTIMATORS: dict[str, FitFn] = {
@@ -106,9 +122,14 @@ def fit_for(robot: Robot, name: str, stats: Stats | InstrumentStats, arm: Arm, *
     return fit(name, stats, arm, **options_for(robot, name), **options)
 
 
-def statistics(arm: Arm, trials: Sequence[Dataset], name: str | None = None) -> Stats | InstrumentStats:
+def statistics(
+    arm: Arm, trials: Sequence[Dataset], name: str | None = None, probes: bool = False
+) -> Stats | InstrumentStats:
     """The statistics of `arm` over `trials` (they add up; each trial's derivatives its own; τ as fits use it,
-    `Dataset.tau_fit`): `InstrumentStats` when estimator `name` takes them (or when `name` is None), else `Stats`."""
+    `Dataset.tau_fit`): `InstrumentStats` when estimator `name` takes them (or when `name` is None), else `Stats`.
+    `probes`: with the instrument statistics, those of each trial read the ways of `iv.probe_trials`, which the
+    robust fit's standard errors use to cover its bias (whole trials only: a shuffled subset has no derivatives to
+    estimate again)."""
     if name is not None and name not in INSTRUMENTED:
         total = Stats.zeros(arm.n_params, arm.n_joints)
         for d in trials:
@@ -117,7 +138,8 @@ def statistics(arm: Arm, trials: Sequence[Dataset], name: str | None = None) -> 
     total = InstrumentStats.zeros(arm.n_params, arm.n_joints)
     for d in trials:
         one = InstrumentStats.from_data(arm, d)
-        total = total + replace(one, stats=_independent(one.stats, d))
+        read = {k: InstrumentStats.from_data(arm, p) for k, p in probe_trials(d).items()} if probes else {}
+        total = total + replace(one, stats=_independent(one.stats, d), probes=read)
     return total
 
 

@@ -23,23 +23,32 @@ G_j = A_jᵀK_j⁺A_j, b_j = A_jᵀK_j⁺c_j. Any estimator that works from stat
 fits included) run on these is an instrumental-variable estimator: without constraints it is the 2SLS estimate
 (each joint's own instruments), with them the consistent fit nearest to it in the IV metric. Its standard errors
 come out as the 2SLS sandwich, because the residuals it is given are those of the measured torques.
+
+**What IV keeps of bias** (`probe_trials`): instruments filtered from the same angles still share some of the
+regressor's noise, and the low-pass that makes the regressor smooth distorts the dynamics it passes. Neither is
+noise that averages out, so the 2SLS errors do not cover them. Statistics built with `probes` carry the same trials
+read with the instruments, and with all the derivatives, at half their cut-off; the robust fit (`estimators`) adds
+what each read moves it by to its standard errors.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ident_opt.arm.base import Arm
-from ident_opt.data import Dataset
+from ident_opt.data import Dataset, refiltered
 from ident_opt.derivatives import choose_cutoff, instrument_derivatives
 from ident_opt.identify.fit import LinearFit, check_stats, finish
 from ident_opt.identify.stats import Stats
 
 #: Directions of the instruments' Gram matrix below this fraction of its largest eigenvalue are not instruments.
 TWO_STAGE_RCOND = 1e-12
+#: The bias probes read a trial again at this factor × its instruments' cut-off, and × its own cut-off
+#: (`probe_trials`).
+PROBE_FACTOR = 0.5
 
 
 @dataclass
@@ -50,6 +59,8 @@ class InstrumentStats:
     c: np.ndarray
     K: np.ndarray
     stats: Stats
+    #: The same trials' statistics read the ways of `probe_trials`, by name (empty: no probe was asked for).
+    probes: dict[str, InstrumentStats] = field(default_factory=dict)
 
     @classmethod
     def from_regressors(cls, Y: np.ndarray, Z: np.ndarray, tau: np.ndarray) -> InstrumentStats:
@@ -94,8 +105,26 @@ class InstrumentStats:
         )
 
     def __add__(self, other: InstrumentStats) -> InstrumentStats:
-        """The statistics of both trials together (derivatives never straddle two trials)."""
-        return InstrumentStats(self.A + other.A, self.c + other.c, self.K + other.K, self.stats + other.stats)
+        """The statistics of both trials together (derivatives never straddle two trials); a probe survives when
+        both sides have it (or one side holds no sample yet)."""
+        if self.stats.n == 0 or other.stats.n == 0:
+            probes = self.probes or other.probes
+        else:
+            probes = {k: self.probes[k] + other.probes[k] for k in self.probes.keys() & other.probes.keys()}
+        return InstrumentStats(self.A + other.A, self.c + other.c, self.K + other.K, self.stats + other.stats, probes)
+
+
+def probe_trials(data: Dataset) -> dict[str, Dataset]:
+    """Trial `data` read again two ways an unbiased instrumental-variable fit does not care about (`PROBE_FACTOR`):
+    "instruments", its instruments at half their cut-off (noise shared by instruments and regressor moves the fit);
+    "cutoff", its regressor and instruments at half its derivative cut-off (the filter's distortion of the dynamics
+    moves it; only for derivatives estimated here). What the estimate moves by bounds its bias (`estimators`,
+    "robust"). Whole trials only: derivatives are estimated again along the samples."""
+    cutoff = data.cutoff_hz if data.cutoff_hz is not None else choose_cutoff(data.t, data.q)
+    out = {"instruments": replace(data, instruments=instrument_derivatives(data.t, data.q, PROBE_FACTOR * cutoff))}
+    if data.cutoff_hz is not None:
+        out["cutoff"] = refiltered(data, PROBE_FACTOR * data.cutoff_hz)
+    return out
 
 
 def instrument_kinematics(data: Dataset, cutoff_hz: float | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -457,6 +457,14 @@ def to_json(c: Comparison) -> dict:
         "base_parameters": {"ols": ols.details["base_parameters"]} if "base_parameters" in ols.details else {},
         "not_determined": {"ols": ols.details.get("not_determined", [])},
         "ols_impossible_base_values": c.impossible_base_values(),
+        "standard_error_parts": {
+            key: {
+                part: {n: float(v) if np.isfinite(v) else None for n, v in zip(fit.names, fit.details[part])}
+                for part in ("se_noise", "bias_bound")
+            }
+            for key, fit in c.fits.items()
+            if "bias_bound" in fit.details
+        },
     }
     if c.seeds is not None:
         out["seed_study"] = {

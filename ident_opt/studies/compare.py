@@ -220,7 +220,7 @@ def compare_estimators(
     trains = found.trials  # at the recommendation's cut-off: every fit is compared on the same derivatives
     pool, test_pool = concat(trains), (concat(tests) if tests else None)
     fitters = fitted_estimators(robot, margin, weights)
-    whole = estimators.statistics(model, trains)
+    whole = estimators.statistics(model, trains, probes=True)  # the robust fit's errors cover its bias
     fits = {key: fn(whole, model) for key, fn in fitters.items()}
     fits["iv"] = estimators.iv(whole, model)
     seeds, metrics, test_sets = _within_trial(pool, model, split, fitters, robot.paper_views, progress)

@@ -32,7 +32,8 @@ def identified_arm(robot, trials: list[Dataset], estimator: str) -> Exported:
     parameters (an OLS fit can have a negative mass: the message names the link)."""
     model = robot.model()
     try:
-        fit = estimators.fit_for(robot, estimator, estimators.statistics(model, trials, estimator), model)
+        stats = estimators.statistics(model, trials, estimator, probes=True)
+        fit = estimators.fit_for(robot, estimator, stats, model)
     except RuntimeError as exc:  # the solver failed: nothing to export
         raise InputError(f"export: the {estimator} fit failed ({exc}); try another --estimator") from None
     undetermined = fit.details.get("not_determined", [])

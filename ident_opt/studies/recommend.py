@@ -186,7 +186,7 @@ def recommended_fit(robot: Robot, model: Arm, trials: list[Dataset], problem=Non
         data.derivative_cutoff_hz if data is not None else None,
     )
     name = found.recommendation.estimator
-    fit = estimators.fit_for(robot, name, estimators.statistics(model, found.trials, name), model)
+    fit = estimators.fit_for(robot, name, estimators.statistics(model, found.trials, name, probes=True), model)
     return fit, found
 
 
