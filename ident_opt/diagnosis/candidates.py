@@ -8,7 +8,8 @@ against one or both nominal models:
 - ``datasheet``: the problem file's π held fixed; only the effect's own parameters are fitted (this is
   where parameter-level causes show: armature, payload, mis-scaled or asymmetric friction).
 - ``rigid_fit``: every π of the nominal structure refitted together with the effect (structural causes
-  that no choice of π absorbs: friction shape, elasticity, delay, offsets).
+  that no choice of π absorbs: friction shape, elasticity, delay, offsets); π by the diagnosis's estimator
+  (`Context.rigid`), the effect's coefficients by variable projection (`_estimated`).
 
 After the search, a family may polish θ with IPOPT (`Family.polish`: a proposal re-solved and kept only
 if it lowers the training objective; its estimates before and after land in the candidate's

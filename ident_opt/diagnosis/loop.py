@@ -3,8 +3,9 @@
 Split: with a second (unseen) trial, the first trial trains and the second is held out; with one trial,
 the first `train_fraction` of it in time trains and the rest is held out (contiguous, so delays and modes
 survive the split). Both nominal models are examined: the datasheet (no fitting) and the best rigid fit of
-the nominal structure (`candidates.NOMINAL`, weighted least squares with joint weights 1/σ_j² from a first
-unweighted pass).
+the nominal structure (`candidates.NOMINAL`, by the recommended fit — the robot's default estimator unless the
+caller gives one, `diagnose`'s `rigid_fit` — with joint weights 1/σ_j² from a first unweighted least-squares pass,
+`nominal_fit`).
 """
 
 from __future__ import annotations
