@@ -14,7 +14,7 @@ from ident_opt.columns import kinematic_columns
 from ident_opt.data import Dataset, concat
 from ident_opt.identify import estimators
 from ident_opt.metrics import all_metrics
-from ident_opt.models import RidgeModel, RigidModel, fitted
+from ident_opt.models import RidgeModel, fitted
 from ident_opt.paper import PI_TRUE
 from ident_opt.problem.spec import Problem
 from ident_opt.studies import METRICS
@@ -111,7 +111,7 @@ def identify(
         bar.set_postfix_str("cross-trial")
         protocols["cross_trial"] = cross_trial_protocol(trial, unseen, problem, progress=bar.update)
     bar.set_postfix_str("parameters")
-    params, ses, eig = whole_trial_parameters(problem, trial)
+    params, ses, eig = whole_trial_parameters(problem, training)
     trust = _trust(problem, found, params)
     result = IdentifyResult(
         problem.name,
@@ -184,10 +184,13 @@ def _by_test_trial(cross: ProtocolResult | None, testing: list[Dataset]) -> dict
     return out
 
 
-def whole_trial_parameters(problem: Problem, trial: Dataset):
-    """π on the whole first trial: the robot's nominal models ("datasheet" its own, "datasheet_<name>" the others),
-    every fitted estimator (`models.fitted`) with SEs; and each one's consistency margin (`Arm.min_mass_eigenvalue`,
-    for the planar arm the smallest eigenvalue of M(q) over q) [kg m²] (rounded to 1e-12)."""
+def whole_trial_parameters(problem: Problem, training: list[Dataset]):
+    """π on all the training trials: the robot's nominal models ("datasheet" its own, "datasheet_<name>" the
+    others), every fitted estimator (`models.fitted`) with SEs; and each one's consistency margin
+    (`Arm.min_mass_eigenvalue`, for the planar arm the smallest eigenvalue of M(q) over q) [kg m²] (rounded to
+    1e-12). The statistics add up trial by trial (`estimators.statistics`), as `compare`'s do: each trial's
+    residuals counted at its own cut-off, and the robust fit's errors covering its bias (`probes`); a pool of
+    trials with different cut-offs would count every sample as independent."""
     robot = problem.robot
     sheets = robot.datasheets()
     own_arm, own_pi = sheets[robot.datasheet]
@@ -198,10 +201,10 @@ def whole_trial_parameters(problem: Problem, trial: Dataset):
     arm = robot.model(())
     # OLS, the arm's consistent fit (the JSON contract's "constrained" for the planar arm) and the recommended one
     for name in dict.fromkeys([*fitted(robot).values(), *fitted(robot, problem.estimator).values()]):
-        model = RigidModel(name, arm, estimator=name, options=estimators.options_for(robot, name)).fit(trial)
-        params[name] = model.params()
-        ses[name] = model.fit_.se_dict()
-        eig[name] = arm.min_mass_eigenvalue(model.pi)
+        fit = estimators.fit_for(robot, name, estimators.statistics(arm, training, name, probes=True), arm)
+        params[name] = fit.as_dict()
+        ses[name] = fit.se_dict()
+        eig[name] = arm.min_mass_eigenvalue(fit.pi)
     eig["datasheet"] = own_arm.min_mass_eigenvalue(own_pi)
     return params, ses, {k: float(np.round(v, 12)) for k, v in eig.items()}
 
