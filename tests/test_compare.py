@@ -125,3 +125,37 @@ def test_constraints_study_cli(tmp_path):
     payload = json.loads((tmp_path / "s.json").read_text())
     assert payload["multisine"]["summary"]["trials"] == 4 and payload["simulator"]["summary"]["trials"] == 4
     assert payload["simulator"]["summary"]["constrained_inconsistent"] == 0
+
+
+def test_identify_reports_the_standard_errors_compare_does_on_trials_with_different_cut_offs(tmp_path):
+    """Two trials whose spectra give different derivative cut-offs (200 and 500 Hz logs of angles only): identify's
+    whole-trial fits (`studies.identify.whole_trial_parameters`) carry the same standard errors as compare's for
+    every estimator both run. identify used to fit a pool of the trials, which has no single cut-off, so it counted
+    every sample as independent and its errors came out √(f_s / 2 f_c) too narrow."""
+    from dataclasses import replace
+
+    from ident_opt.data import load_dataset
+    from ident_opt.problem import load_problem
+    from ident_opt.simulate import simulate_trial
+    from ident_opt.studies.compare import compare_estimators
+    from ident_opt.studies.identify import whole_trial_parameters
+
+    from .conftest import PROBLEMS
+
+    problem = load_problem(PROBLEMS / "tudor_2dof.toml")
+    spec = replace(problem.data, header=True, columns={}, derivative_cutoff_hz="auto")
+    trials = []
+    for seed, rate in ((81, 200.0), (82, 500.0)):
+        sim = simulate_trial(
+            problem.robot, trajectory="fourier", duration=20.0, rate_hz=rate, seed=seed, progress=False
+        )
+        path = tmp_path / f"t{seed}.csv"
+        sim.frame.drop(columns=["dq1", "dq2", "ddq1", "ddq2"]).to_csv(path, index=False)
+        trials.append(load_dataset(path, spec, problem.robot))
+    assert abs(trials[0].cutoff_hz - trials[1].cutoff_hz) > 1.0, "the two trials' cut-offs differ"
+    compared = compare_estimators(trials, problem.robot, problem.split, progress=False, cutoff_setting="auto")
+    assert compared.recommendation.factor == 1.0  # both studies then fit the trials as read
+    _, errors, _ = whole_trial_parameters(replace(problem, data=spec, estimator=compared.default), trials)
+    for name, se in errors.items():
+        theirs = compared.fits[name].se_dict()
+        np.testing.assert_allclose([se[k] for k in se], [theirs[k] for k in se], rtol=1e-9, err_msg=name)
