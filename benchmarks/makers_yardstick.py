@@ -16,10 +16,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import butter, filtfilt
 
 import ident_opt as io
 from ident_opt.data import Dataset
+from ident_opt.derivatives import lowpass
 from ident_opt.studies.recommend import recommended_fit
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,20 +35,12 @@ SPLITS = (
 
 def rmse(arm, pi: np.ndarray, trials: list[Dataset], band: bool = False) -> np.ndarray:
     """Per-joint RMSE [N·m] of the torque that parameters `pi` predict on `trials`; `band`: the error's part below
-    each trial's derivative cut-off (the motion band, where a prediction from the filtered derivatives lives)."""
-    e = np.vstack(
-        [
-            _below(d, d.tau - arm.predict(pi, d.q, d.dq, d.ddq)) if band else d.tau - arm.predict(pi, d.q, d.dq, d.ddq)
-            for d in trials
-        ]
-    )
-    return np.sqrt((e**2).mean(axis=0))
-
-
-def _below(d: Dataset, x: np.ndarray) -> np.ndarray:
-    """x (N, n) through the zero-phase 4th-order Butterworth low-pass at trial `d`'s derivative cut-off."""
-    b, a = butter(4, 2.0 * d.cutoff_hz / d.rate_hz)
-    return filtfilt(b, a, x, axis=0)
+    each trial's derivative cut-off (the motion band, where a prediction from the filtered derivatives lives),
+    through the derivative estimate's own zero-phase low-pass (`derivatives.lowpass`)."""
+    errors = [d.tau - arm.predict(pi, d.q, d.dq, d.ddq) for d in trials]
+    if band:
+        errors = [lowpass(d.t, e, d.cutoff_hz) for d, e in zip(trials, errors)]
+    return np.sqrt((np.vstack(errors) ** 2).mean(axis=0))
 
 
 def main() -> None:

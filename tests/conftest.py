@@ -38,3 +38,26 @@ def kept(frame, data, t: str = "t"):
     import numpy as np
 
     return frame[np.isin(frame[t].to_numpy(), data.t)]
+
+
+def rigid_fit_runs(capsys, base: list[str], out_dir: Path, recommended: str, asked: str) -> dict:
+    """Run `ident-opt` with the argv `base` (a `diagnose` call) as is and with `--estimator asked`: each run exits 0,
+    its rigid fit is the one expected (`recommended` when none is asked) and named, with its reason, on the terminal,
+    in the report and in the JSON (which has its `warnings` list). Returns {None: π, asked: π} of the rigid fits."""
+    import json
+
+    from ident_opt.cli import main
+
+    fits = {}
+    for choice in (None, asked):
+        out = out_dir / f"out_{choice}"
+        extra = [] if choice is None else ["--estimator", choice]
+        assert main([*base, "--out", str(out), "--json", str(out / "d.json"), *extra]) == 0
+        err = capsys.readouterr().err
+        payload = json.loads((out / "d.json").read_text())
+        rigid = payload["nominal"]["rigid_fit"]
+        want = recommended if choice is None else choice
+        assert rigid["estimator"] == want and f"rigid fit: the {want} fit" in err
+        assert rigid["why"] in (out / "diagnosis.md").read_text() and isinstance(payload["warnings"], list)
+        fits[choice] = rigid["pi"]
+    return fits

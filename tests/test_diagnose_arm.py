@@ -25,6 +25,8 @@ from ident_opt.diagnosis import diagnose, hidden
 from ident_opt.problem import load_problem
 from ident_opt.simulate import simulate_trial
 
+from .conftest import rigid_fit_runs
+
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = {
     "panda": ROOT / "problems" / "franka_panda.toml",
@@ -175,18 +177,7 @@ def test_the_rigid_fit_is_the_recommended_fit_unless_an_estimator_is_asked(tmp_p
         problem.robot, problem.robot.model(), [head], problem.data.conversions, problem.data.derivative_cutoff_hz
     )
     base = ["diagnose", "--problem", str(PROBLEMS["arm4"]), "--data", str(path), "--no-progress"]
-    runs = {}
-    for asked in (None, "robust"):
-        out = tmp_path / f"out_{asked}"
-        extra = [] if asked is None else ["--estimator", asked]
-        assert main([*base, "--out", str(out), "--json", str(out / "d.json"), *extra]) == 0
-        err = capsys.readouterr().err
-        payload = json.loads((out / "d.json").read_text())
-        rigid = payload["nominal"]["rigid_fit"]
-        want = expected.recommendation.estimator if asked is None else asked
-        assert rigid["estimator"] == want and f"rigid fit: the {want} fit" in err
-        assert rigid["why"] in (out / "diagnosis.md").read_text() and isinstance(payload["warnings"], list)
-        runs[asked] = rigid["pi"]
+    runs = rigid_fit_runs(capsys, base, tmp_path, expected.recommendation.estimator, "robust")
     if expected.recommendation.estimator != "robust":
         assert runs[None] != runs["robust"], "the asked estimator changes the rigid fit"
     assert main([*base, "--out", str(tmp_path / "x"), "--estimator", "nlp_physical"]) == 2

@@ -8,7 +8,6 @@ References are independent of the diagnosis's plumbing: the estimator registry's
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 
 import numpy as np
@@ -19,6 +18,8 @@ from ident_opt.diagnosis import candidates as cands
 from ident_opt.diagnosis import loop, signals
 from ident_opt.identify import estimators
 from ident_opt.simulate import simulate_trial
+
+from .conftest import rigid_fit_runs
 
 
 def _angles_only(robot, path, seed: int, trajectory: str = "fourier", duration: float = 20.0):
@@ -46,7 +47,7 @@ def test_the_rigid_fit_is_the_estimators_own_fit_and_a_candidate_without_columns
     train = angles
     rest = signals.rest_runs(train.dq)
     assert np.all(rest < 0) and train.n > 1000, "no rest stretch left"
-    _, weights = loop.least_squares_fit(train)
+    weights = loop.weights_of(train)
     ctx = cands.Context(robot, train, train, weights, {}, 1.0 / train.rate_hz, rest, (0.0, 0.0), name)
     pi = loop.nominal_fit(ctx)
 
@@ -80,18 +81,7 @@ def test_the_command_uses_the_recommended_fit_on_a_planar_arm(physical_problem, 
     expected = evidence(robot, robot.model(), [head], spec.conversions, spec.derivative_cutoff_hz).recommendation
 
     base = ["diagnose", "--problem", str(problem), "--data", str(path), "--no-progress"]
-    fits = {}
-    for asked in (None, "ols"):
-        out = tmp_path / f"out_{asked}"
-        extra = [] if asked is None else ["--estimator", asked]
-        assert main([*base, "--out", str(out), "--json", str(out / "d.json"), *extra]) == 0
-        err = capsys.readouterr().err
-        payload = json.loads((out / "d.json").read_text())
-        rigid = payload["nominal"]["rigid_fit"]
-        want = expected.estimator if asked is None else asked
-        assert rigid["estimator"] == want and f"rigid fit: the {want} fit" in err
-        assert rigid["why"] in (out / "diagnosis.md").read_text()
-        fits[asked] = rigid["pi"]
+    fits = rigid_fit_runs(capsys, base, tmp_path, expected.estimator, "ols")
     if expected.estimator != "ols":
         assert fits[None] != fits["ols"], "the asked estimator changes the rigid fit"
     assert main([*base, "--out", str(tmp_path / "x"), "--estimator", "nlp_physical"]) == 2

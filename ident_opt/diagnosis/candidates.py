@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -73,9 +74,10 @@ class Context:
             stats = InstrumentStats.from_regressors(Yd, signals.demean_runs(Z, self.rest), t)
         return fit_for(self.robot, self.estimator, stats, model, weights=self.weights).pi
 
+    @cached_property
     def instrumented(self) -> Dataset | None:
         """The training part at its instruments' kinematics (velocities at rest held at 0, as `loop.at_rest` holds
-        the measured ones), or None when the estimator takes no instruments."""
+        the measured ones), or None when the estimator takes no instruments; built once per context."""
         if self.estimator not in INSTRUMENTED:
             return None
         dq, ddq = instrument_kinematics(self.train)
@@ -256,7 +258,7 @@ def _estimated(
     P = model.n_params  # the design against rigid_fit starts with the model's π (`design`)
     Xe, tau = X[:, :, P:], ctx.train.tau
     Z = None
-    at = ctx.instrumented()
+    at = ctx.instrumented
     if at is not None:
         Z = design(family, at, theta, "rigid_fit", ctx)[1][:, :, :P]
     pi = ctx.rigid(model, X[:, :, :P], tau - o - np.einsum("njk,k->nj", Xe, beta[P:]), Z)

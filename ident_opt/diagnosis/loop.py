@@ -4,7 +4,7 @@ Split: with a second (unseen) trial, the first trial trains and the second is he
 the first `train_fraction` of it in time trains and the rest is held out (contiguous, so delays and modes
 survive the split). Both nominal models are examined: the datasheet (no fitting) and the best rigid fit of
 the nominal structure (`candidates.NOMINAL`, by the recommended fit — the robot's default estimator unless the
-caller gives one, `diagnose`'s `rigid_fit` — with joint weights 1/σ_j² from a first unweighted least-squares pass,
+caller gives one, `diagnose`'s `rigid_fit` — with joint weights 1/σ_j² from a least-squares pass (`weights_of`),
 `nominal_fit`).
 """
 
@@ -377,24 +377,21 @@ def at_rest(trial: Dataset) -> Dataset:
     return replace(trial, dq=dq)
 
 
-def least_squares_fit(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
-    """(π̂ of the nominal structure, joint weights 1/σ_j²): OLS, then WLS with the OLS residual variances,
-    on the same objective as every candidate (rest stretches compared about their mean)."""
+def weights_of(ds: Dataset) -> np.ndarray:
+    """1/σ_j² [1/(N m)²] per joint, σ_j² the residual variance of the nominal structure's least-squares fit, on the
+    same objective as every candidate (rest stretches compared about their mean)."""
     rest = signals.rest_runs(ds.dq)
     Y = signals.demean_runs(cands.NOMINAL.regressor(ds.q, ds.dq, ds.ddq), rest)
     tau = signals.demean_runs(ds.tau, rest)
-    zero = np.zeros((ds.n, 2))
-    first = linear.solve(zero, Y, tau, np.ones(2))
-    var = np.maximum(first.rss / ds.n, 1e-12 * np.maximum(np.var(ds.tau, axis=0), 1e-30))
-    weights = 1.0 / var
-    return linear.solve(zero, Y, tau, weights).beta, weights
+    first = linear.solve(np.zeros((ds.n, 2)), Y, tau, np.ones(2), with_se=False)
+    return 1.0 / np.maximum(first.rss / ds.n, 1e-12 * np.maximum(np.var(ds.tau, axis=0), 1e-30))
 
 
 def nominal_fit(ctx: cands.Context) -> np.ndarray:
     """π̂ of the nominal structure by the context's estimator on the training part (`Context.rigid`): what every
     candidate that refits π reduces to without a column of its own."""
     tr, model = ctx.train, cands.NOMINAL
-    at = ctx.instrumented()
+    at = ctx.instrumented
     Z = model.regressor(at.q, at.dq, at.ddq) if at is not None else None
     return ctx.rigid(model, model.regressor(tr.q, tr.dq, tr.ddq), tr.tau, Z)
 
@@ -508,7 +505,7 @@ def diagnose(
     train, test, raw_test, how = parts(trial, unseen, train_fraction, torque_filter_hz, robot.joint_names)
     dt = float(np.median(np.diff(train.t)))
     ds_pi = datasheet_pi(robot, "physical")
-    _, weights = least_squares_fit(train)
+    weights = weights_of(train)
     rest_test = signals.rest_runs(test.dq)
     ctx = cands.Context(
         robot,

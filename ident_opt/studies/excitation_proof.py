@@ -37,7 +37,7 @@ from tqdm import tqdm
 
 from ident_opt.arm.planar import PHYSICAL
 from ident_opt.data import Dataset
-from ident_opt.diagnosis.loop import at_rest, diagnose, least_squares_fit, prepare
+from ident_opt.diagnosis.loop import at_rest, diagnose, prepare, weights_of
 from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
 from ident_opt.effects import CATALOGUE
 from ident_opt.identify import estimators
@@ -208,13 +208,13 @@ def run(
 
 
 def residual_sigma(problem: Problem, duration: float, scale: float | np.ndarray) -> np.ndarray:
-    """σ_j [N m] of the rigid refit's residual as the diagnosis weighs it (`least_squares_fit` after `prepare`'s
+    """σ_j [N m] of the rigid refit's residual as the diagnosis weighs it (`weights_of` after `prepare`'s
     torque filter) on a clean simulated MERIt-like trial (seed 0) with the torque noise scaled by
     `scale` (0: no sensor noise, the loop's and the derivative filter's own mismatch)."""
     sim = simulate_trial(
         problem.robot, trajectory="tud01", duration=duration, seed=0, noise_scale=scale, progress=False
     )
-    _, weights = least_squares_fit(prepare(sim.dataset(), TORQUE_FILTER_HZ))
+    weights = weights_of(prepare(sim.dataset(), TORQUE_FILTER_HZ))
     return np.sqrt(1.0 / weights)
 
 
