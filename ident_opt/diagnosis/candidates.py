@@ -42,6 +42,9 @@ NOMINAL = PHYSICAL
 SEARCH_ROWS = 12000
 #: Most samples an IPOPT polish is set up on (per joint for Stribeck).
 POLISH_ROWS = 6000
+#: Later rounds search again only the causes the first round found promising (`loop._fit_round`): the planar
+#: searches and IPOPT polishes are the diagnosis's main cost.
+SEARCH_AGAIN = False
 #: Most re-solves of a family whose columns depend on its coefficients (`Family.coupled`).
 COUPLING_STEPS = 5
 #: Relative step of the central differences in θ (`joint_errors`).

@@ -241,7 +241,10 @@ def _rounds(robot, ctx, current: dict, version, row, var, progress: bool, engine
             if v.cand.cause not in best or v.common > best[v.cand.cause].common:
                 best[v.cand.cause] = v
         if searched is None:
-            searched = {c: None if _promising(v, current[v.baseline]) else (v.theta or None) for c, v in best.items()}
+            again = engine.SEARCH_AGAIN
+            searched = {
+                c: None if again or _promising(v, current[v.baseline]) else (v.theta or None) for c, v in best.items()
+            }
         ranked = sorted(best.values(), key=lambda v: v.common, reverse=True)
         rows = [row(v, v.common - ref.common, current, gap) for v in ranked]
         if round_ == 0:
@@ -292,11 +295,11 @@ def _promising(v: Fitted, without: Fitted) -> bool:
 def _fit_round(robot, ctx, named: list, ref: Fitted, version, bar, searched: dict | None, engine=cands) -> list[Fitted]:
     """Every cause not yet named, composed with those named, fitted against every baseline it allows.
 
-    After the first round (`searched` given) a cause whose first-round fit was `_promising` is searched
-    again in full; any other is refitted with its θ held at the first-round value (`searched[cause]`): only
-    its linear coefficients move. A cause masked by a larger one in the first round (a weak mode under a
-    strong friction asymmetry) thus still gets its chance once the larger one is in the model, while the
-    costly searches and polishes run only where they can change the answer."""
+    After the first round (`searched` given) a cause whose first-round fit was `_promising` (every cause, where
+    the engine's `SEARCH_AGAIN` says so) is searched again in full; any other is refitted with its θ held at the
+    first-round value (`searched[cause]`): only its linear coefficients move. A cause masked by a larger one in
+    the first round (a weak mode under a strong friction asymmetry) thus still gets its chance once the larger
+    one is in the model, while the costly searches and polishes run only where they can change the answer."""
     taken = {f.cause for f, _ in named}
     fits = []
     for family in engine.families(robot):
