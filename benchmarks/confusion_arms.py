@@ -11,9 +11,10 @@ simulator needs the rotors'). For each arm and seed, each per-joint cause hides 
 n − 1 (distal) at a drawn magnitude (`Effect.arm_draw`: relative to the arm's torques, inertias and speeds), a delay
 and a payload once; a clean trial; with `--pairs`, the catalogue's causes two at a time (each with the next). The
 reference is the point-to-point `tud01`, `fourier` for Stribeck friction alone and `mixed` for a pair with it. The
-n-joint diagnosis was developed on the KUKA at seeds 0–99 (1 kHz) and the TX40 at seed 0; seed 500's first 27
-trials and seed 600's 78 were each reported once, not tuned on (seed 600's table: git history, bc1ddb8); seeds from
-700 on were never looked at while tuning: `--first-seed 700 --out results/diagnosis/confusion_arms_unseen.md`.
+n-joint diagnosis was developed on the KUKA at seeds 0–99 (1 kHz) and the TX40 at seed 0 (seed 1's Stribeck trials
+of all three arms were looked at once, for a rule not kept); seed 500's first 27 trials and seed 600's 78 were each
+reported once, not tuned on (seed 600's table: git history, bc1ddb8); seeds from 700 on were never looked at while
+tuning: `--first-seed 700 --out results/diagnosis/confusion_arms_unseen.md`.
 """
 
 from __future__ import annotations
