@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from confusion_arms import ARMS, WHOLE
+from confusion_arms import ARMS, draws, places, reference
 
 from ident_opt.derivatives import lowpass
-from ident_opt.diagnosis import CAUSES, hidden, signals
+from ident_opt.diagnosis import hidden, signals
 from ident_opt.diagnosis.arm_fit import link_side
 from ident_opt.diagnosis.loop import at_rest
 from ident_opt.effects import stribeck
@@ -38,7 +38,6 @@ LINEAR = ("armature", "asymmetric_coulomb", "stribeck", "joint_offset", "torque_
 def footprint(cause: str, keys: dict, j: int, ds, arm, pi: np.ndarray) -> np.ndarray:
     """The torque (N,) [N m] `cause` with `keys` adds on joint j along the measured motion of `ds`."""
     q, dq, ddq = ds.q, ds.dq, ds.ddq
-    tau = arm.predict(pi, q, dq, ddq)
     if cause == "armature":
         return keys["inertia"][j] * ddq[:, j]
     if cause == "asymmetric_coulomb":
@@ -48,9 +47,9 @@ def footprint(cause: str, keys: dict, j: int, ds, arm, pi: np.ndarray) -> np.nda
         return keys["excess"] * stribeck.shape(dq[:, j], keys["velocity"][j])
     if cause == "joint_offset":
         delta = np.asarray(keys["offset"], dtype=float)
-        return (arm.predict(pi, q + delta, dq, ddq) - tau)[:, j]
+        return (arm.predict(pi, q + delta, dq, ddq) - arm.predict(pi, q, dq, ddq))[:, j]
     if cause == "torque_scale":
-        return (keys["scale"][j] - 1.0) * tau[:, j]
+        return (keys["scale"][j] - 1.0) * arm.predict(pi, q, dq, ddq)[:, j]
     if cause == "load_friction":
         load = arm.predict(link_side(arm, pi), q, dq, ddq)[:, j]
         return keys["coefficient"][j] * np.abs(load) * np.sign(dq[:, j])
@@ -75,15 +74,12 @@ def rows_for(arm_name: str, seed: int) -> list[dict]:
         clean[trajectory] = (ds, signals.demean_runs(residual, labels), labels)
     out = []
     for cause in LINEAR:
-        if cause in WHOLE:
-            continue
-        for joints in ((1,), (n - 2,)):
-            rng = np.random.default_rng([seed, list(ARMS).index(arm_name), CAUSES.index(cause), *joints, 7])
-            keys = dict(hidden.arm_draws((cause,), rng, view, joints)[cause])
+        for joints in places(cause, n):
+            keys = dict(draws(arm_name, problem, (cause,), joints, seed)[cause])
             j = joints[0]
             if cause == "stribeck":
                 keys["excess"] = keys["static"][j] - 0.5 * (view[0][j] + view[1][j])
-            ds, residual, labels = clean["fourier" if cause == "stribeck" else "tud01"]
+            ds, residual, labels = clean[reference((cause,))]
             f = np.zeros_like(ds.tau)
             f[:, j] = footprint(cause, keys, j, ds, arm, pi)
             f = signals.demean_runs(lowpass(ds.t, f, signals.TORQUE_FILTER_HZ), labels)[:, j]

@@ -43,6 +43,27 @@ ARMS = {
 WHOLE = ("delay", "payload")
 
 
+def draws(arm: str, problem, causes: tuple[str, ...], joints: tuple[int, ...], seed: int) -> dict:
+    """The hidden effects' keys of one trial of `arm` (`hidden.arm_draws` on the 0-based `joints`), from a generator
+    seeded by the arm, the causes, the joints and `seed`: the same trial draws the same magnitudes in every run."""
+    from ident_opt.diagnosis import hidden
+
+    rng = np.random.default_rng([seed, list(ARMS).index(arm), *(CAUSES.index(c) for c in causes), *joints, 7])
+    return hidden.arm_draws(causes, rng, hidden.arm_joints(problem.robot, problem.limits), joints)
+
+
+def reference(causes: tuple[str, ...]) -> str:
+    """The trial's reference trajectory: `tud01`, `fourier` for Stribeck friction alone, `mixed` for a pair with it."""
+    if "stribeck" in causes:
+        return "fourier" if len(causes) == 1 else "mixed"
+    return "tud01"
+
+
+def places(cause: str, n: int) -> list[tuple[int, ...]]:
+    """Where a cause hides on an arm of n joints (0-based): joint 2 and joint n − 1, a whole-trial cause once."""
+    return [(1,)] if cause in WHOLE else [(1,), (n - 2,)]
+
+
 def one(job: tuple) -> dict:
     """Simulate one trial of `arm` hiding `causes` (on the 0-based `joints`) and diagnose it."""
     from ident_opt.diagnosis import diagnose, hidden
@@ -53,12 +74,8 @@ def one(job: tuple) -> dict:
     arm, causes, joints, seed, duration, rate = job
     problem = load_problem(ARMS[arm])
     robot = problem.robot
-    rng = np.random.default_rng([seed, list(ARMS).index(arm), *(CAUSES.index(c) for c in causes), *joints, 7])
-    view = hidden.arm_joints(robot, problem.limits)
-    effects = hidden.arm_draws(causes, rng, view, joints)
-    trajectory = "tud01"
-    if "stribeck" in causes:
-        trajectory = "fourier" if len(causes) == 1 else "mixed"
+    effects = draws(arm, problem, causes, joints, seed)
+    trajectory = reference(causes)
     trial = simulate_trial(
         robot,
         trajectory=trajectory,
@@ -112,8 +129,7 @@ def jobs_for(arms: list[str], seeds: range, duration: float, rate: float, pairs:
         for seed in seeds:
             out.append((arm, (), (), seed, duration, rate))
             for cause in causes:
-                places = [(1,)] if cause in WHOLE else [(1,), (n - 2,)]
-                out += [(arm, (cause,), joints, seed, duration, rate) for joints in places]
+                out += [(arm, (cause,), joints, seed, duration, rate) for joints in places(cause, n)]
             if pairs:
                 out += [(arm, (a, b), (1,), seed, duration, rate) for a, b in zip(causes, causes[1:] + causes[:1])]
     return out
