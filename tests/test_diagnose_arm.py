@@ -118,6 +118,22 @@ def test_two_causes_at_once_are_both_named():
     _named_within(d, truth, {"asymmetric_coulomb", "delay"})
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 27, open: the Stribeck velocity runs to the edge of the band read as rest (0.0118 rad/s for a true "
+    "0.05, excess 6.9 N m for 0.45), which the rule of docs/effects.md refuses; with vs floored at twice that band the "
+    "fit sits on the floor (seed 1022 alike)",
+)
+@SLOW
+def test_stribeck_beside_an_asymmetric_coulomb_level_is_named():
+    """The Panda's joint 2, a Coulomb level of 1.0 / 3.6 N m by direction and a Stribeck excess of 0.45 N m at
+    0.05 rad/s, on the `mixed` reference: the pair of the arm confusion tables (named on tuning seed 0 since the
+    screen reads the fit's own residuals and the naming floor is the arm's), on a seed they do not use."""
+    effects = ["asymmetric_coulomb:joint=2,positive=1.0,negative=3.6", "stribeck:joint=2,static=2.75,velocity=0.05"]
+    d, truth = _diagnosed("panda", effects, 1021, "mixed")
+    _named_within(d, truth, {"asymmetric_coulomb", "stribeck"})
+
+
 def test_an_offset_beside_a_delay_is_named_once_the_delay_is_in_the_model():
     """An encoder offset on the TX40's joint 2 beside a 20 ms delay: the first round's offset search runs against
     a model without the delay and lands on the delay's residual; held there in the next round it explains
@@ -133,17 +149,9 @@ def test_an_offset_beside_a_delay_is_named_once_the_delay_is_in_the_model():
         ("arm4", 1013, "tud01", None),
         ("tx40", 1014, "tud01", None),
         ("tx40", 1016, "fourier", None),
-        pytest.param(
-            "tx40",
-            1018,
-            "fourier",
-            500.0,
-            marks=_missed(
-                "a spurious Stribeck friction on joints 1 and 3 (static 11.9 and 8.4 N m at vs 0.012 and 0.007 rad/s "
-                "for Coulomb levels 3.0 and 2.0), a hump at the bottom of vs's range; it stays with every friction "
-                "column through the torque's low-pass, so it is not that filter mismatch (issue 27, open)"
-            ),
-        ),
+        # a spurious Stribeck friction on joints 1 and 3 (11.9 and 8.4 N m at vs 0.012 and 0.007 rad/s) until humps
+        # narrower than twice the speed read as rest were refused (`stribeck._beyond_rest`)
+        pytest.param("tx40", 1018, "fourier", 500.0, marks=SLOW),
     ],
 )
 def test_a_clean_trial_names_none(arm, seed, trajectory, rate):

@@ -136,6 +136,8 @@ def diagnose(
     t_nominal = time.perf_counter()
     var = np.var(test.tau, axis=0)
 
+    engine = arm_fit.Engine(ctx)
+
     def version(cand, baseline: str, pred: np.ndarray, causes: tuple, family, theta: dict) -> Fitted:
         after = scoring.mse(test.tau, pred, rest_test)
         k_added = (cand.n_added if cand is not None else 0) + (ctx.rank if baseline == "rigid_fit" else 0)
@@ -143,9 +145,8 @@ def diagnose(
         return Fitted(causes, baseline, cand, after, pred, common, family, theta)
 
     def row(v: Fitted, score: float, current: dict, gap=None) -> dict:
-        return loop._row(v, score, current, raw_test.tau, test, rest_test, var, dt, gap)
+        return loop._row(v, score, current, raw_test.tau, test, rest_test, var, dt, gap, engine.MARGIN_VARIANCE)
 
-    engine = arm_fit.Engine(ctx)
     current = {b: version(None, b, nominal_pred[b], (), None, {}) for b in nominal_pred}
     rounds = loop._rounds(robot, ctx, current, version, row, var, progress, engine)
     t_fit = time.perf_counter()
@@ -170,6 +171,7 @@ def diagnose(
         robot.joint_names,
         evidence.pose_r2_any,
     )
+    result.margin_variance = engine.MARGIN_VARIANCE
     result.evidence["screening"] = {
         "elastic_joints": [robot.joint_names[j] for j in ctx.evidence.get("elastic_joints", [])],
         "decimation": k,

@@ -29,7 +29,7 @@ import numpy as np
 from ident_opt.arm.datasheet import PlanarRobot
 from ident_opt.arm.planar import PHYSICAL, PlanarArm
 from ident_opt.data import Dataset
-from ident_opt.diagnosis import linear, signals
+from ident_opt.diagnosis import linear, scoring, signals
 from ident_opt.effects import CATALOGUE
 from ident_opt.identify.estimators import INSTRUMENTED, fit_for
 from ident_opt.identify.iv import InstrumentStats, instrument_kinematics
@@ -45,6 +45,8 @@ POLISH_ROWS = 6000
 #: Later rounds search again only the causes the first round found promising (`loop._fit_round`): the planar
 #: searches and IPOPT polishes are the diagnosis's main cost.
 SEARCH_AGAIN = False
+#: The least share of a joint's torque variance a named cause removes (`scoring.shortfall`): the planar floor.
+MARGIN_VARIANCE = scoring.MARGIN_VARIANCE
 #: Most re-solves of a family whose columns depend on its coefficients (`Family.coupled`).
 COUPLING_STEPS = 5
 #: Relative step of the central differences in θ (`joint_errors`).
@@ -346,9 +348,10 @@ def joint_errors(
     β and a central difference for each θ, compared about each rest stretch's mean as the fit is. The
     residuals are not independent (the torque is low-passed, and what the model misses is slow), so the
     covariance is the Newey–West sandwich H⁻¹ S H⁻¹, H = Jᵀ W J, S the long-run covariance of the per-sample
-    scores g_t = Σ_j w_j J_tj r_tj with Bartlett weights out to `hac_lag` samples. A θ such as an encoder
-    offset thus gets the uncertainty the noise leaves it, and β's errors include what the uncertain θ adds.
-    Columns held at 0 (a sign constraint, a negligible column) keep their conditional error, take no part.
+    scores g_t = Σ_j w_j J_tj r_tj with Bartlett weights out to `linear.hac_lag` samples (`linear.sandwich`). A
+    θ such as an encoder offset thus gets the uncertainty the noise leaves it, and β's errors include what the
+    uncertain θ adds. Columns held at 0 (a sign constraint, a negligible column) keep their conditional error, take
+    no part.
     Bias from what the model lacks is not noise: no standard error covers it."""
     o, X, names = columns
     free = [i for i, e in enumerate(se_linear) if np.isfinite(e) and e > 0]
@@ -362,37 +365,11 @@ def joint_errors(
         cols.append(((side[0] - side[1]) / (2 * h))[:, :, None])
     J = signals.demean_runs(np.concatenate(cols, axis=2), ctx.rest)
     r = signals.demean_runs(ctx.train.tau - o - np.einsum("njk,k->nj", X, beta), ctx.rest)
-    w = np.asarray(ctx.weights, dtype=float)
-    scale = np.sqrt(np.einsum("njk,njk,j->k", J, J, w))
-    scale[scale == 0] = 1.0
-    J = J / scale
-    H = np.einsum("njk,njl,j->kl", J, J, w)
-    g = np.einsum("njk,nj,j->nk", J, r, w)  # (N, m) per-sample scores
-    # Bartlett weights out to L lags = the products of sums over windows of L + 1 samples (in O(N m)).
-    width = min(hac_lag(r), len(g) - 1) + 1
-    sums = np.cumsum(np.vstack([np.zeros((1, g.shape[1])), g]), axis=0)
-    B = sums[width:] - sums[:-width]
-    S = B.T @ B / width
-    Hi = np.linalg.pinv(H)
-    cov = Hi @ S @ Hi / np.outer(scale, scale)
-    err = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    err = linear.sandwich(J, r, ctx.weights)
     out = dict(zip(names, map(float, se_linear)))
     out.update({names[i]: float(e) for i, e in zip(free, err)})
     out.update({k: float(e) for k, e in zip(keys, err[len(free) :])})
     return out
-
-
-def hac_lag(r: np.ndarray) -> int:
-    """Bartlett lag [samples] for `joint_errors`: 3 × the lag at which the residuals' autocorrelation (both
-    joints, averaged) first falls below 1/e, at least 1, at most a tenth of the samples."""
-    x = r - r.mean(axis=0)
-    n = len(x)
-    spectrum = np.fft.rfft(x, 2 * n, axis=0)
-    acf = np.fft.irfft(np.abs(spectrum) ** 2, axis=0)[:n].sum(axis=1)
-    acf = acf / acf[0] if acf[0] > 0 else acf
-    below = np.nonzero(acf < np.exp(-1.0))[0]
-    first = int(below[0]) if below.size else n
-    return int(np.clip(3 * first, 1, max(1, n // 10)))
 
 
 def physical_units(

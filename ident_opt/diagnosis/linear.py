@@ -91,6 +91,39 @@ def solve_nonnegative(
     return LinearSolve(beta, se, ls.cost, ls.rss)
 
 
+def sandwich(J: np.ndarray, r: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Standard errors (k,) of a weighted least-squares fit whose residuals are correlated in time and whose joints'
+    variances need not be those the weights assume: the Newey–West sandwich H⁻¹ S H⁻¹, H = Jᵀ W J, S the long-run
+    covariance of the per-sample scores g_t = Σ_j w_j J_tj r_tj with Bartlett weights out to `hac_lag` samples.
+    J (N, n, k) the columns (or the prediction's Jacobian), r (N, n) the residuals, weights (n,)."""
+    w = np.asarray(weights, dtype=float)
+    scale = np.sqrt(np.einsum("njk,njk,j->k", J, J, w))
+    scale[scale == 0] = 1.0
+    J = J / scale
+    H = np.einsum("njk,njl,j->kl", J, J, w)
+    g = np.einsum("njk,nj,j->nk", J, r, w)  # (N, k) per-sample scores
+    # Bartlett weights out to L lags = the products of sums over windows of L + 1 samples (in O(N k)).
+    width = min(hac_lag(r), len(g) - 1) + 1
+    sums = np.cumsum(np.vstack([np.zeros((1, g.shape[1])), g]), axis=0)
+    B = sums[width:] - sums[:-width]
+    S = B.T @ B / width
+    Hi = np.linalg.pinv(H)
+    return np.sqrt(np.clip(np.diag(Hi @ S @ Hi), 0.0, None)) / scale
+
+
+def hac_lag(r: np.ndarray) -> int:
+    """Bartlett lag [samples] for `sandwich`: 3 × the lag at which the residuals' autocorrelation (joints averaged)
+    first falls below 1/e, at least 1, at most a tenth of the samples."""
+    x = r - r.mean(axis=0)
+    n = len(x)
+    spectrum = np.fft.rfft(x, 2 * n, axis=0)
+    acf = np.fft.irfft(np.abs(spectrum) ** 2, axis=0)[:n].sum(axis=1)
+    acf = acf / acf[0] if acf[0] > 0 else acf
+    below = np.nonzero(acf < np.exp(-1.0))[0]
+    first = int(below[0]) if below.size else n
+    return int(np.clip(3 * first, 1, max(1, n // 10)))
+
+
 @dataclass
 class Axis:
     """One nonlinear parameter: its name, search bounds and grid, searched on a log scale if `log`."""

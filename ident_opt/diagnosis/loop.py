@@ -85,6 +85,7 @@ class Diagnosis:
     joints: list[str] = field(default_factory=list)  # the joints' names, in the order of every per-joint list
     #: what is doubtful about the result (`ident_opt.warnings.ResultWarning`: the trials', the rigid fit's evidence)
     warnings: list = field(default_factory=list)
+    margin_variance: float = scoring.MARGIN_VARIANCE  # the least share of the torque variance a cause removes
 
     def detail_of(self, cause: str) -> dict:
         """What the extended model's joint fit says of `cause` beyond its estimate (e.g. an elastic joint's
@@ -124,7 +125,7 @@ class Diagnosis:
             "with Δk the difference in fitted parameters (a refitted π counts 10); every candidate of a round "
             f"against the same reference. A cause is named when its score > 0 and, on some joint, it removes "
             f">= {scoring.MARGIN:.0%} of the held-out MSE of the same kind of fit without it and "
-            f">= {scoring.MARGIN_VARIANCE:.2%} of the torque variance " + scoring.rules_note(),
+            f">= {100 * self.margin_variance:g}% of the torque variance " + scoring.rules_note(),
             "nmse_definition": "MSE ÷ variance of the measured torque (unfiltered, as compare and identify use "
             "it), per joint, on the held-out part; nmse_filtered_*: the scored variant (torque low-passed like "
             "the derivatives, each rest stretch's residual mean removed); nmse_raw_*: filtered, no rest removal",
@@ -145,7 +146,16 @@ class Diagnosis:
 
 
 def _row(
-    v: Fitted, score: float, current: dict, raw_tau: np.ndarray, test: Dataset, rest, var, dt: float, gap=None
+    v: Fitted,
+    score: float,
+    current: dict,
+    raw_tau: np.ndarray,
+    test: Dataset,
+    rest,
+    var,
+    dt: float,
+    gap=None,
+    floor: float = scoring.MARGIN_VARIANCE,
 ) -> dict:
     """A candidate's JSON row: its score against the round's reference, held-out nMSE, estimate, and whether
     it may be named: resolved, clearing the margin against the same kind of fit without it
@@ -164,8 +174,8 @@ def _row(
         share = scoring.recovered(gap[0].mse, v.mse, gap[1].mse)
     elif _refit_better(v, current):
         share = scoring.recovered(without.mse, v.mse, current["rigid_fit"].mse)
-    margin = ok and scoring.clears_margin(without.mse, v.mse, score, var)
-    why = scoring.shortfall(without.mse, v.mse, score, var, ok, share)
+    margin = ok and scoring.clears_margin(without.mse, v.mse, score, var, floor)
+    why = scoring.shortfall(without.mse, v.mse, score, var, ok, share, floor)
     return {
         "cause": c.cause,
         "score": score,
@@ -209,7 +219,7 @@ def _prune(named: list, chain: list, current: dict, ctx, version, var, engine=ca
         cand = engine.fit(family, full.baseline, ctx)
         without = version(cand, full.baseline, cand.predict(ctx.test), tuple(f.cause for f, _ in rest), *rest[-1])
         gain = full.common - without.common
-        if gain <= 0 or not scoring.clears_margin(without.mse, full.mse, gain, var):
+        if gain <= 0 or not scoring.clears_margin(without.mse, full.mse, gain, var, engine.MARGIN_VARIANCE):
             gone.append({"cause": named[i][0].cause, "dropped_in_round": len(chain) + len(gone), "score": gain})
             named, chain = rest, [c for c in chain if c["cause"] != named[i][0].cause]
             current, full = {full.baseline: without}, without

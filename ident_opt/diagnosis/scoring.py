@@ -27,7 +27,8 @@ from ident_opt.effects import CATALOGUE
 
 #: Least fraction of the baseline's held-out MSE (on some joint) the named extension must remove.
 MARGIN = 0.05
-#: Least fraction of the measured torque's variance (on the same joint) it must remove.
+#: Least fraction of the measured torque's variance (on the same joint) it must remove: the planar engine's;
+#: the n-joint engine's is its own (`arm_fit.Engine.MARGIN_VARIANCE`).
 MARGIN_VARIANCE = 1e-4
 #: Least share of a refitted π's log-gain a cause fitted with the datasheet's π must explain.
 RECOVER = 0.8
@@ -80,14 +81,26 @@ def rules_note() -> str:
     return f"({'; '.join(found)})" if found else ""
 
 
-def clears_margin(mse_before: np.ndarray, mse_after: np.ndarray, score_value: float, variance: np.ndarray) -> bool:
+def clears_margin(
+    mse_before: np.ndarray,
+    mse_after: np.ndarray,
+    score_value: float,
+    variance: np.ndarray,
+    floor: float = MARGIN_VARIANCE,
+) -> bool:
     """Whether a candidate beats its baseline clearly enough to be named (`variance`: of the measured
-    held-out torque per joint [N² m²])."""
-    return shortfall(mse_before, mse_after, score_value, variance, True, None) is None
+    held-out torque per joint [N² m²]; `floor`: the least share of it removed, the engine's)."""
+    return shortfall(mse_before, mse_after, score_value, variance, True, None, floor) is None
 
 
 def shortfall(
-    mse_before: np.ndarray, mse_after: np.ndarray, score_value: float, variance: np.ndarray, resolved_: bool, share
+    mse_before: np.ndarray,
+    mse_after: np.ndarray,
+    score_value: float,
+    variance: np.ndarray,
+    resolved_: bool,
+    share,
+    floor: float = MARGIN_VARIANCE,
 ) -> str | None:
     """Why a candidate is not named, in words (None when it passes every rule): the first rule it fails of
     `resolved`, score > 0, `clears_margin`'s two floors, and `RECOVER` (`share`: the part of a refitted π's
@@ -101,8 +114,8 @@ def shortfall(
     if not np.any(enough):
         most = max(float(np.max((before - after) / np.maximum(before, 1e-300))), 0.0)
         return f"it removes at most {most:.1%} of the held-out MSE on any joint (margin {MARGIN:.0%})"
-    if not np.any(enough & (before - after >= MARGIN_VARIANCE * np.asarray(variance))):
-        return f"what it removes is below {MARGIN_VARIANCE:.2%} of the torque variance"
+    if not np.any(enough & (before - after >= floor * np.asarray(variance))):
+        return f"what it removes is below {100 * floor:g}% of the torque variance"
     if share is not None and share < RECOVER:
         return f"it explains {share:.0%} of what refitting π gains (at least {RECOVER:.0%} asked)"
     return None

@@ -93,9 +93,9 @@ class AsymmetricCoulomb(Effect):
 
     def arm_families(self, robot, ctx) -> list:
         """A Coulomb level per direction on the joints where they differ: against the datasheet, the levels
-        fc+ [dq_j > 0] − fc− [dq_j < 0] replace the datasheet's; against the rigid fit, a_j [dq_j ≠ 0] beside the
-        refitted symmetric level (fc± = fc ± a; beside torque offsets a constant while moving is theirs, and the
-        rigid fit cannot tell the asymmetry)."""
+        fc+ [dq_j > 0] − fc− [dq_j < 0] ≥ 0 (friction opposes motion) replace the datasheet's; against the rigid
+        fit, a_j [dq_j ≠ 0] beside the refitted symmetric level (fc± = fc ± a; beside torque offsets a constant
+        while moving is theirs, and the rigid fit cannot tell the asymmetry)."""
         return [
             afit.ArmFamily(
                 self.name,
@@ -103,6 +103,7 @@ class AsymmetricCoulomb(Effect):
                 removed=_arm_removed,
                 estimate=_arm_estimate,
                 screen=_arm_screen,
+                nonnegative=("fp", "fn"),
             )
         ]
 
