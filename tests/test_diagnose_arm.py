@@ -83,13 +83,8 @@ def _named_within(d, truth: dict, causes: set[str]) -> None:
 @pytest.mark.parametrize(
     "arm, effect, seed, trajectory",
     [
-        pytest.param(  # distal
-            "arm4",
-            "armature:joint=4,scale=1.5",
-            1001,
-            "tud01",
-            marks=_missed("named, but a spurious inertia on joint 1 puts the estimate out of tolerance (error 1.17)"),
-        ),
+        # distal; a spurious inertia on joint 1 (error 1.17) until the screens read each fit's own residuals
+        pytest.param("arm4", "armature:joint=4,scale=1.5", 1001, "tud01", marks=SLOW),
         pytest.param("panda", "armature:joint=2", 1002, "tud01"),  # proximal
         # proximal; joint 6's untouched level was read as 0 (the coupled wrist drive's Coulomb level unrecognised)
         pytest.param("tx40", "asymmetric_coulomb:joint=2", 1003, "tud01", marks=SLOW),
