@@ -154,8 +154,8 @@ def _row(
     rest,
     var,
     dt: float,
-    gap=None,
-    floor: float = scoring.MARGIN_VARIANCE,
+    gap,
+    floor: float,
 ) -> dict:
     """A candidate's JSON row: its score against the round's reference, held-out nMSE, estimate, and whether
     it may be named: resolved, clearing the margin against the same kind of fit without it
@@ -558,7 +558,7 @@ def diagnose(
         return Fitted(causes, baseline, cand, after, pred, common, family, theta)
 
     def row(v: Fitted, score: float, current: dict, gap=None) -> dict:
-        return _row(v, score, current, raw_test.tau, test, rest_test, var, dt, gap)
+        return _row(v, score, current, raw_test.tau, test, rest_test, var, dt, gap, cands.MARGIN_VARIANCE)
 
     current = {b: version(None, b, nominal_pred[b], (), None, {}) for b in nominal_pred}
     rounds = _rounds(robot, ctx, current, version, row, var, progress)

@@ -154,14 +154,19 @@ REST_FRACTION = 0.01
 REST_WINDOW_S = 0.01
 
 
+def rest_speed(v: np.ndarray) -> np.ndarray:
+    """(m,) [rad/s]: the speed below which each velocity column of v (N, m) reads as at rest (`resting`),
+    `REST_FRACTION` of its speed scale (95th percentile of |v|)."""
+    return REST_FRACTION * np.quantile(np.abs(v), 0.95, axis=0)
+
+
 def resting(v: np.ndarray, dt: float) -> np.ndarray:
     """(N, m) bool: the samples where each velocity column of v (N, m) [rad/s] at step `dt` [s] is at rest: below
     `REST_FRACTION` of its speed scale (95th percentile of |v|) there, and staying below it for `REST_WINDOW_S`
     before or after (the filter ringing just before a start or after a stop counts as rest, a smooth reversal,
     slow only for an instant, does not). The rule of `loop.at_rest` (joints) and `arm_fit.ArmContext` (drives)."""
-    v_ref = np.quantile(np.abs(v), 0.95, axis=0)
     w = max(1, round(REST_WINDOW_S / dt))
-    slow = np.abs(v) < REST_FRACTION * v_ref
+    slow = np.abs(v) < rest_speed(v)
     padded = np.pad(slow, ((w, w), (0, 0)), mode="edge").astype(float)
     windows = np.lib.stride_tricks.sliding_window_view(padded, w + 1, axis=0)  # (N + w, m, w + 1)
     quiet = windows.min(axis=-1) > 0  # slow throughout the w + 1 samples starting at each index

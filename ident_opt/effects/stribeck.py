@@ -315,12 +315,12 @@ def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
 
 def _beyond_rest(predict, theta: dict, ctx) -> tuple[dict, str | None]:
     """Unresolved when a joint's Stribeck velocity vs lies below `REST_SPEEDS` × the speed it is read as at rest
-    below (v_rest = `signals.REST_FRACTION` × the 95th percentile of its |dq|). Inside that band dq is 0 and so is
+    below (v_rest, `signals.rest_speed` of the training part's dq). Inside that band dq is 0 and so is
     the Stribeck shape, while the plant's friction still switches sign at a slow reversal: a hump narrower than the
     band fits only the friction's switch-on at the band's edges, with an excess of any height (on a clean TX40 at
     vs = 0.012–0.014 rad/s, v_rest 0.009–0.013)."""
     joints = afit.selected(theta, "stribeck", ctx.n)
-    v_rest = signals.REST_FRACTION * np.quantile(np.abs(ctx.train.dq), 0.95, axis=0)
+    v_rest = signals.rest_speed(ctx.train.dq)
     narrow = [j for j in joints if theta.get(f"vs{j + 1}", np.inf) < REST_SPEEDS * v_rest[j]]
     found = {"rest_speed": v_rest.tolist()}
     if not narrow:
