@@ -61,6 +61,19 @@ def test_rest_stretches_are_compared_about_their_mean():
     assert y[:, 1].tolist() == [5.0, 6.0, -1.0, 0.0, 1.0]
 
 
+def test_samples_slower_than_the_stick_speed_leave_every_comparison():
+    # the n-joint engine's labels: each slow sample (rests and the band above them) is a stretch of its own, so
+    # demeaning zeroes it in data and prediction alike, whatever the torque stiction held there
+    dq = np.array([[0.0, 1.0], [0.005, -0.02], [-0.05, 0.5], [0.02, 0.0], [0.3, -0.3]])
+    labels = signals.rest_runs(dq, below=np.array([0.03, 0.03]))
+    assert labels[:, 0].tolist() == [0, 1, -1, 2, -1]
+    assert labels[:, 1].tolist() == [-1, 0, -1, 1, -1]
+    x = np.arange(10.0).reshape(5, 2) + 1.0
+    y = signals.demean_runs(x, labels)
+    assert np.array_equal(y == 0, labels >= 0)
+    assert np.array_equal(y[labels < 0], x[labels < 0])
+
+
 def test_near_stops_marks_long_rests_and_their_surroundings_only():
     dt = 0.01
     dq = np.ones((100, 2))
@@ -70,6 +83,17 @@ def test_near_stops_marks_long_rests_and_their_surroundings_only():
     np.testing.assert_array_equal(np.flatnonzero(near[:, 0]), np.arange(15, 55))
     assert not near[:, 1].any()
     assert not signals.near_stops(dq, dt, stop_s=0.35, within_s=0.05).any()  # shorter than a stop
+
+
+def test_a_joint_with_nothing_compared_adds_nothing_to_the_score():
+    # a joint whose held-out samples were all left out (never faster than its stick speed) has MSE 0 before and
+    # after: it must neither lift nor sink the score, nor make it NaN
+    with np.errstate(all="raise"):
+        alone = scoring.score(np.array([2.0]), np.array([1.0]), 500, 3)
+        assert scoring.score(np.array([2.0, 0.0]), np.array([1.0, 0.0]), 500, 3) == alone
+        assert scoring.recovered(np.array([2.0, 0.0]), np.array([1.5, 0.0]), np.array([1.0, 0.0])) == pytest.approx(
+            np.log(2.0 / 1.5) / np.log(2.0)
+        )
 
 
 def test_a_column_below_double_precision_gets_no_coefficient():

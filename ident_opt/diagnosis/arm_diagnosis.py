@@ -170,6 +170,7 @@ def diagnose(
         {"nominal": t_nominal - t0, "candidates": t_fit - t_nominal, "t0": t0},
         robot.joint_names,
         evidence.pose_r2_any,
+        rest_test,
     )
     result.margin_variance = engine.MARGIN_VARIANCE
     result.evidence["screening"] = {

@@ -21,8 +21,9 @@ three standard errors); an elastic joint is a candidate on the joints whose resi
 Stribeck velocities, a payload's centre of mass) are searched by variable projection (`linear.search`), encoder
 offsets by Gauss–Newton on the angle Jacobian of the torque.
 
-All arrays are per sample and joint: o, τ (N, n), X (N, n, k), Y (N, n, P); rest stretches are compared about their
-means (`signals.demean_runs`) as in the planar engine.
+All arrays are per sample and joint: o, τ (N, n), X (N, n, k), Y (N, n, P); a joint's samples slower than
+`signals.STICK_SPEEDS` rest speeds, where stiction may hold it, are left out of every fit and score
+(`ArmContext.labels`; the planar engine compares its rest stretches about their means instead).
 """
 
 from __future__ import annotations
@@ -104,11 +105,18 @@ class ArmContext:
             self._cache["independent"] = np.sort(base_parameters(self.arm).independent)
         return self._cache["independent"]
 
+    @property
+    def stick_speed(self) -> np.ndarray:
+        """(n,) [rad/s]: below this speed a joint's samples are left out of every fit and score (`labels`):
+        `signals.STICK_SPEEDS` × its rest speed on the training part."""
+        return signals.STICK_SPEEDS * signals.rest_speed(self.train.dq)
+
     def labels(self, ds: Dataset) -> np.ndarray:
-        """Rest-stretch labels of `ds` (`signals.rest_runs`), remembered."""
+        """Labels of `ds` (`signals.rest_runs`) that leave each joint's samples slower than `stick_speed` out of
+        every comparison (stiction may hold them), remembered."""
         key = ("labels", *_identity(ds))
         if key not in self._cache:
-            self._cache[key] = signals.rest_runs(ds.dq)
+            self._cache[key] = signals.rest_runs(ds.dq, self.stick_speed)
         return self._cache[key]
 
     def regressor(self, ds: Dataset, delta: np.ndarray | None = None) -> np.ndarray:

@@ -578,16 +578,19 @@ def diagnose(
     )
 
 
-def conclude(rounds, nominals, data, model, forward_after, timings: dict, joints, pose=evidence.pose_r2) -> Diagnosis:
+def conclude(
+    rounds, nominals, data, model, forward_after, timings: dict, joints, pose=evidence.pose_r2, rest_test=None
+) -> Diagnosis:
     """The `Diagnosis` from the loop's `rounds` (`_rounds`' result), the nominal models (their JSON entries, π and
     held-out predictions by baseline), the data (training, held-out and measured held-out parts, the split, the
     unseen trial's source trial or None), the nominal `model`, `forward_after(final, baseline)` (question 4's motion
-    error), the stages' timings so far and the joints' names: the named chain, its gain and the evidence."""
+    error), the stages' timings so far and the joints' names: the named chain, its gain and the evidence.
+    `rest_test`: the held-out part's labels the engine scored with (None: its rest stretches, `signals.rest_runs`)."""
     chain, current, candidates, dropped, history = rounds
     nominal, nominal_pi, nominal_pred = nominals
     train, test, raw_test, how, trial = data
     dt = float(np.median(np.diff(train.t)))
-    rest_test = signals.rest_runs(test.dq)
+    rest_test = signals.rest_runs(test.dq) if rest_test is None else rest_test
     final = max(current.values(), key=lambda v: v.common)
     if chain:
         baseline = chain[0]["fitted"].baseline

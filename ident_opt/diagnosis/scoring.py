@@ -51,17 +51,25 @@ def nmse(tau: np.ndarray, tau_hat: np.ndarray, rest: np.ndarray | None = None) -
     return (mse(tau, tau_hat, rest) / np.var(tau, axis=0)).tolist()
 
 
+def _log_ratios(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """ln(before_j / after_j) per joint, 0 on a joint with nothing compared (both 0: the n-joint engine leaves out
+    every held-out sample of a joint that never moves faster than its stick speed there, `ArmContext.labels`)."""
+    before, after = np.asarray(before, dtype=float), np.asarray(after, dtype=float)
+    empty = (before == 0) & (after == 0)
+    return np.where(empty, 0.0, np.log(np.where(empty, 1.0, before) / np.where(empty, 1.0, after)))
+
+
 def score(mse_before: np.ndarray, mse_after: np.ndarray, n: int, k: int) -> float:
     """Penalised held-out log-likelihood gain (see the module docstring)."""
-    gain = 0.5 * n * float(np.sum(np.log(np.asarray(mse_before) / np.asarray(mse_after))))
+    gain = 0.5 * n * float(np.sum(_log_ratios(mse_before, mse_after)))
     return gain - 0.5 * k * float(np.log(n))
 
 
 def recovered(mse_base: np.ndarray, mse_cand: np.ndarray, mse_refit: np.ndarray) -> float:
     """Share of the refit's held-out log-gain over `mse_base` that the candidate achieves:
     Σ_j ln(MSE_base,j / MSE_cand,j) ÷ Σ_j ln(MSE_base,j / MSE_refit,j)."""
-    whole = float(np.sum(np.log(np.asarray(mse_base) / np.asarray(mse_refit))))
-    part = float(np.sum(np.log(np.asarray(mse_base) / np.asarray(mse_cand))))
+    whole = float(np.sum(_log_ratios(mse_base, mse_refit)))
+    part = float(np.sum(_log_ratios(mse_base, mse_cand)))
     return part / whole if whole > 0 else float("inf")
 
 

@@ -60,10 +60,9 @@ def plant_coulomb(pi: dict, j: int) -> float:
 #: vs at its edge is the search stopped by its bound (`resolved`). A hump as wide as 0.5 rad/s, the joints' whole
 #: speed range in a typical trial, no longer falls off within the motion: it is a reshaped Coulomb level.
 VS_RANGE = (0.005, 0.5)
-#: The least Stribeck velocity, in multiples of the speed below which the diagnosis reads a joint as at rest
-#: (`signals.resting`), that an n-joint candidate may name (`_beyond_rest`): at vs = 2 v_rest the band's edge still
-#: holds 78 % of the excess, so the data show the hump falling off, not only its tail.
-REST_SPEEDS = 2.0
+#: The least Stribeck velocity an n-joint candidate names, in multiples of the lowest speed compared on its joint
+#: (`_arm_estimate`).
+FALL = 2.0
 #: A rest this long [s] is a stop (or a start), not the slow instant of a velocity reversal.
 STOP_S = 0.25
 
@@ -132,12 +131,12 @@ class Stribeck(Effect):
                 self.name,
                 extra=_arm_columns,
                 axes=lambda rate, theta: [
-                    linear.Axis(f"vs{j + 1}", *VS_RANGE, 11, True) for j in afit.selected(theta, self.name, ctx.n)
+                    linear.Axis(f"vs{j + 1}", max(VS_RANGE[0], ctx.stick_speed[j]), VS_RANGE[1], 11, True)
+                    for j in afit.selected(theta, self.name, ctx.n)
                 ],
                 nonnegative=("fs", "fsstop"),
                 estimate=_arm_estimate,
                 screen=lambda p, se, ctx: afit.resolved_joints(p, se, ("fs",), ctx.n),
-                check=_beyond_rest,
             )
         ]
 
@@ -310,23 +309,19 @@ def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
             fc = sum(float(p.get(ctx.arm.names[i], ctx.datasheet[i])) for i in ctx.coulomb_terms()[j])
         static.append(fc + fs)
         velocity.append(float(p["vs" + k]))
-    return {"static": static, "velocity": velocity}, {"excess": afit.per_joint(p, "fs", ctx.n)}
-
-
-def _beyond_rest(predict, theta: dict, ctx) -> tuple[dict, str | None]:
-    """Unresolved when a joint's Stribeck velocity vs lies below `REST_SPEEDS` × the speed it is read as at rest
-    below (v_rest, `signals.rest_speed` of the training part's dq). Inside that band dq is 0 and so is
-    the Stribeck shape, while the plant's friction still switches sign at a slow reversal: a hump narrower than the
-    band fits only the friction's switch-on at the band's edges, with an excess of any height (on a clean TX40 at
-    vs = 0.012–0.014 rad/s, v_rest 0.009–0.013)."""
-    joints = afit.selected(theta, "stribeck", ctx.n)
-    v_rest = signals.rest_speed(ctx.train.dq)
-    narrow = [j for j in joints if theta.get(f"vs{j + 1}", np.inf) < REST_SPEEDS * v_rest[j]]
-    found = {"rest_speed": v_rest.tolist()}
-    if not narrow:
-        return found, None
-    names = ", ".join(ctx.robot.joint_names[j] for j in narrow)
-    return found, f"its Stribeck velocity on {names} is below {REST_SPEEDS:g} x the speed read as rest there"
+    detail = {"excess": afit.per_joint(p, "fs", ctx.n)}
+    # A hump is read from its fall: at vs = FALL x the lowest speed compared on its joint (`ArmContext.stick_speed`)
+    # 78 % of the excess is still there at that speed, so the data hold the fall, not only a tail above the samples
+    # left out, where a joint breaking away from stiction leaves torque that a narrower hump fits.
+    floor = FALL * ctx.stick_speed
+    low = [j for j in range(ctx.n) if static[j] > 0 and velocity[j] < floor[j]]
+    if low:
+        names = ", ".join(ctx.robot.joint_names[j] for j in low)
+        detail["unresolved"] = (
+            f"its Stribeck velocity on {names} is below {FALL:g} x the lowest speed compared there "
+            f"({signals.STICK_SPEEDS:g} rest speeds): the hump's fall is not in the data"
+        )
+    return {"static": static, "velocity": velocity}, detail
 
 
 def polish(
