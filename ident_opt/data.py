@@ -86,7 +86,8 @@ class Dataset:
             tau=self.tau[index],
             tau_filtered=None if self.tau_filtered is None else self.tau_filtered[index],
             instruments=None if self.instruments is None else tuple(x[index] for x in self.instruments),
-            extra=self.extra.iloc[np.arange(self.n)[index]].reset_index(drop=True),
+            # a trial built in code may have no extra columns at all (an empty frame with no rows)
+            extra=self.extra.iloc[np.arange(self.n)[index]].reset_index(drop=True) if len(self.extra) else self.extra,
         )
 
     def to_frame(self) -> pd.DataFrame:

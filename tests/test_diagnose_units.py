@@ -7,7 +7,7 @@ import pytest
 
 from ident_opt.data import Dataset
 from ident_opt.diagnosis import linear, scoring, signals
-from ident_opt.diagnosis.loop import at_rest
+from ident_opt.diagnosis.loop import at_rest, compared_warnings, split
 from ident_opt.effects.elasticity import ELASTIC_BAND_HZ
 
 
@@ -72,6 +72,33 @@ def test_samples_slower_than_the_stick_speed_leave_every_comparison():
     y = signals.demean_runs(x, labels)
     assert np.array_equal(y == 0, labels >= 0)
     assert np.array_equal(y[labels < 0], x[labels < 0])
+
+
+def _moves(active: list[tuple[float, float]], n: int = 4000, dt: float = 0.01) -> Dataset:
+    """A 2-joint trial: joint 1 swings throughout, joint 2 only within the `active` spans (fractions of the trial)."""
+    t = np.arange(n) * dt
+    dq = np.column_stack([np.sin(2 * np.pi * 0.5 * t), np.zeros(n)])
+    for a, b in active:
+        span = slice(int(a * n), int(b * n))
+        dq[span, 1] = np.sin(2 * np.pi * 0.7 * t[span])
+    q = np.cumsum(dq, axis=0) * dt
+    return Dataset("x", t, q, dq, np.gradient(dq, dt, axis=0), np.random.default_rng(0).normal(size=(n, 2)))
+
+
+def test_the_held_out_part_moves_every_joint_when_the_trial_allows():
+    # joint 2 rests through the last 30 %: the first 30 % is held out instead, and no warning remains
+    train, test, how = split(_moves([(0.0, 0.6)]), None, 0.7)
+    assert "held out first" in how
+    assert test.t[0] == 0.0 and train.n == 2800
+    assert compared_warnings(train, test, ("a", "b")) == []
+    # joint 2 moves in the last 30 %: the usual chronological split
+    train, test, how = split(_moves([(0.5, 1.0)]), None, 0.7)
+    assert how.startswith("chronological: first 70%") and test.t[0] > train.t[-1]
+    # joint 2 moves only in the middle: neither end holds it; the last part stays held out, with a warning naming it
+    train, test, how = split(_moves([(0.35, 0.65)]), None, 0.7)
+    assert how.startswith("chronological: first 70%")
+    (w,) = compared_warnings(train, test, ("a", "b"))
+    assert w.code == "joint_not_compared" and "b (q2: 0%)" in w.message and "a (q1" not in w.message
 
 
 def test_near_stops_marks_long_rests_and_their_surroundings_only():

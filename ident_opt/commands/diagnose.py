@@ -63,7 +63,9 @@ def run(args: argparse.Namespace) -> int:
         torque_filter_hz=loaded.problem.data.derivative_cutoff_hz,
         rigid_fit=choice,
     )
-    result.warnings = warnings
+    for w in result.warnings:  # the diagnosis's own (a joint the held-out part barely moves)
+        print(w, file=sys.stderr)
+    result.warnings = [*warnings, *result.warnings]
     out = output_dir(args, loaded.problem)
     files = report.write(result, out)
     print(report.summary(result))

@@ -97,7 +97,7 @@ def diagnose(
     k = decimation(rate, cutoff, train.n + test.n)
     train, test, raw_test = (_every(d, k) for d in (train, test, raw_test))
     if k > 1:
-        how += f"; read every {k}th sample ({rate / k:g} Hz) after the {cutoff:g} Hz low-pass"
+        how += f"; one sample in {k} kept ({rate / k:g} Hz) after the {cutoff:g} Hz low-pass"
     arm, pi_ds = robot.datasheets()[robot.datasheet]
     dt = float(np.median(np.diff(train.t)))
     ctx = arm_fit.ArmContext(

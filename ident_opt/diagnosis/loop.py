@@ -2,10 +2,11 @@
 
 Split: with a second (unseen) trial, the first trial trains and the second is held out; with one trial,
 the first `train_fraction` of it in time trains and the rest is held out (contiguous, so delays and modes
-survive the split). Both nominal models are examined: the datasheet (no fitting) and the best rigid fit of
-the nominal structure (`candidates.NOMINAL`, by the recommended fit — the robot's default estimator unless the
-caller gives one, `diagnose`'s `rigid_fit` — with joint weights 1/σ_j² from a least-squares pass (`weights_of`),
-`nominal_fit`).
+survive the split) — or, when a joint barely moves in that last part and less so in the first, the first part is
+held out (`held_out`); a joint the held-out part still barely moves is a warning (`compared_warnings`). Both nominal
+models are examined: the datasheet (no fitting) and the best rigid fit of the nominal structure
+(`candidates.NOMINAL`, by the recommended fit — the robot's default estimator unless the caller gives one,
+`diagnose`'s `rigid_fit` — with joint weights 1/σ_j² from a least-squares pass (`weights_of`), `nominal_fit`).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from ident_opt.diagnosis import evidence, linear, scoring, signals
 from ident_opt.errors import InputError
 from ident_opt.metrics import nmse
 from ident_opt.outputs import shown
+from ident_opt.warnings import ResultWarning
 
 #: Fewest held-out / training samples that make a diagnosis meaningful.
 MIN_SAMPLES = 200
@@ -360,18 +362,66 @@ def _finite(value):
     return value
 
 
+#: A joint is under-compared when the share of its held-out samples in motion is below this fraction of the share of
+#: its training samples in motion: what a cause does on it can hardly show in the held-out score.
+UNDER_COMPARED = 0.25
+
+
+def compared(train_dq: np.ndarray, test_dq: np.ndarray) -> np.ndarray:
+    """(n,): for each joint, the share of held-out samples in motion over the share of training samples in motion
+    (1: the held-out part exercises it as much as the training part). In motion: faster than `signals.STICK_SPEEDS`
+    × its rest speed on the training part (`signals.rest_speed`), the samples an arm's diagnosis compares."""
+    fast = signals.STICK_SPEEDS * signals.rest_speed(train_dq)
+    trained = np.mean(np.abs(train_dq) >= fast, axis=0)
+    held = np.mean(np.abs(test_dq) >= fast, axis=0)
+    return held / np.maximum(trained, np.finfo(float).tiny)
+
+
 def split(train: Dataset, test: Dataset | None, train_fraction: float) -> tuple[Dataset, Dataset, str]:
-    """(training part, held-out part, description); see the module docstring. The description names the trials as
-    every output does (`outputs.shown`: relative to the working folder when inside it), never the absolute paths
-    the problem file resolved them to."""
+    """(training part, held-out part, description); see the module docstring and `held_out`. The description names
+    the trials as every output does (`outputs.shown`: relative to the working folder when inside it), never the
+    absolute paths the problem file resolved them to."""
     if test is not None:
         return train, test, f"train on {shown(train.source)}, held out: {shown(test.source)}"
-    tr, te = chronological_split(train.n, train_fraction)
-    return (
-        train.subset(tr),
-        train.subset(te),
-        f"chronological: first {train_fraction:.0%} of {shown(train.source)} trains, the rest is held out",
-    )
+    tr, te, how = held_out(train, train_fraction)
+    return train.subset(tr), train.subset(te), how
+
+
+def held_out(trial: Dataset, train_fraction: float) -> tuple[np.ndarray, np.ndarray, str]:
+    """(training indices, held-out indices, description) of one trial: the last `1 − train_fraction` in time is held
+    out, unless a joint is under-compared there (`UNDER_COMPARED`: a point-to-point trial whose last moves leave one
+    joint at rest) and less so when the first part is held out instead. Both parts stay contiguous."""
+    tr, te = chronological_split(trial.n, train_fraction)
+    worst = compared(trial.dq[tr], trial.dq[te]).min()
+    if worst < UNDER_COMPARED:
+        te_first, tr_last = chronological_split(trial.n, 1.0 - train_fraction)
+        if compared(trial.dq[tr_last], trial.dq[te_first]).min() > worst:
+            held = f"{1.0 - train_fraction:.0%}"
+            return (
+                tr_last,
+                te_first,
+                f"chronological, held out first: the last {train_fraction:.0%} of {shown(trial.source)} trains, "
+                f"the first {held} is held out (a joint moves too little in its last {held})",
+            )
+    return tr, te, f"chronological: first {train_fraction:.0%} of {shown(trial.source)} trains, the rest is held out"
+
+
+def compared_warnings(train: Dataset, test: Dataset, names: tuple[str, ...]) -> list[ResultWarning]:
+    """A warning per joint the held-out part under-compares (`compared`): the diagnosis cannot judge a cause on it."""
+    share = compared(train.dq, test.dq)
+    low = [j for j in range(len(share)) if share[j] < UNDER_COMPARED]
+    if not low:
+        return []
+    joints = ", ".join(f"{names[j]} (q{j + 1}: {share[j]:.0%})" for j in low)
+    return [
+        ResultWarning(
+            "joint_not_compared",
+            f"the held-out part moves {joints} far less than the training part does (share of samples in motion, "
+            "held out over training): a cause on such a joint can hardly show in the held-out score, so `none` "
+            "there is not evidence of its absence; record a trial that moves every joint throughout, or hold out "
+            "another trial",
+        )
+    ]
 
 
 def at_rest(trial: Dataset) -> Dataset:
@@ -464,10 +514,13 @@ def parts(
     """(training part, held-out part, the held-out part's measured torque as logged, the split in words): `prepare`d
     and `split`; an InputError when there is too little data, a torque channel is constant, or a joint never
     moves in the training part (named: nothing about it can be fitted, and its rows would be one rest stretch)."""
-    _, raw_test, _ = split(trial, unseen, train_fraction)  # the measured torque, as compare and identify see it
-    trial = prepare(trial, torque_filter_hz)
-    unseen = prepare(unseen, torque_filter_hz) if unseen is not None else None
-    train, test, how = split(trial, unseen, train_fraction)
+    prepared = prepare(trial, torque_filter_hz)
+    if unseen is not None:
+        train, test, how = split(prepared, prepare(unseen, torque_filter_hz), train_fraction)
+        raw_test = unseen  # the measured torque, as compare and identify see it
+    else:  # one choice of samples (from the trial as logged, as `studies.recommend.for_diagnosis` makes it)
+        tr, te, how = held_out(trial, train_fraction)
+        train, test, raw_test = prepared.subset(tr), prepared.subset(te), trial.subset(te)
     if train.n < MIN_SAMPLES or test.n < MIN_SAMPLES:
         raise InputError(
             f"{trial.source}: too little data to diagnose ({train.n} training and {test.n} held-out "
@@ -647,4 +700,5 @@ def conclude(
         predictions={"before": before_pred, "after": after_pred},
         timings={**timings, "evidence": t_end - t0 - t_fit, "total": t_end - t0},
         joints=list(joints),
+        warnings=compared_warnings(train, test, joints),
     )

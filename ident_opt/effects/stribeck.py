@@ -317,6 +317,7 @@ def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
     low = [j for j in range(ctx.n) if static[j] > 0 and velocity[j] < floor[j]]
     if low:
         names = ", ".join(ctx.robot.joint_names[j] for j in low)
+        detail["failed_joints"] = low  # `arm_fit.fit` fits the others again without them
         detail["unresolved"] = (
             f"its Stribeck velocity on {names} is below {FALL:g} x the lowest speed compared there "
             f"({signals.STICK_SPEEDS:g} rest speeds): the hump's fall is not in the data"
