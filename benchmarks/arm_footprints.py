@@ -29,6 +29,7 @@ from ident_opt.diagnosis.arm_fit import link_side
 from ident_opt.diagnosis.loop import at_rest
 from ident_opt.effects import stribeck
 from ident_opt.problem import load_problem
+from ident_opt.report import record
 from ident_opt.simulate import simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -123,6 +124,13 @@ def main(argv: list[str] | None = None) -> int:
     ]
     text = "\n".join(lines) + "\n"
     args.out.write_text(text)
+    record(
+        args.out.parent,
+        args.out.stem,
+        "each linear hidden cause's torque on its joint against the clean trial's residual (the arm tables' seeds "
+        f"{' and '.join(map(str, args.seeds))})",
+        [args.out.name],
+    )
     print(text)
     return 0
 
