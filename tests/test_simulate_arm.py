@@ -157,10 +157,16 @@ def _simulate(args: list[str], tmp_path: Path, capsys) -> tuple[int, str]:
         ("elasticity:kind=link", ["kind=link", "planar"]),
         ("stiction", ["background terms", "planar"]),
         ("elasticity:frequency_hz=1e9", ["frequency_hz", "at most 500"]),
+        # the default static level is the datasheet's mean + an excess, below this joint's asymmetric levels
+        (
+            ["asymmetric_coulomb:joint=2,positive=4.0,negative=2.0", "stribeck:joint=2"],
+            ["stribeck", "on shoulder", "below that joint's Coulomb level 3 N m", "give static above 3"],
+        ),
     ],
 )
 def test_bad_effects_on_an_n_joint_arm_exit_2_naming_them(tmp_path, capsys, effect, words):
-    code, err = _simulate(["--effect", effect], tmp_path, capsys)
+    effects = [effect] if isinstance(effect, str) else effect
+    code, err = _simulate([a for e in effects for a in ("--effect", e)], tmp_path, capsys)
     assert code == 2
     for w in words:
         assert w in err, (w, err)
@@ -279,3 +285,12 @@ def test_stribeck_drawn_beside_asymmetric_coulomb_rises_above_its_levels(arm4):
         assert keys["stribeck"]["static"][1] > levels
     trial = simulate_trial(arm4.robot, duration=1.0, effects=keys, limits=arm4.limits, progress=False)
     assert trial.truth["effects"]["stribeck"]["static_excess"][1] > 0
+
+
+def test_a_joint_stribeck_leaves_alone_has_no_excess_beside_asymmetric_coulomb(arm4):
+    """Asymmetric Coulomb friction on joint 2, Stribeck friction on joint 3 (`--effect` style, levels from the
+    datasheet): joint 2 keeps its per-direction levels and gets no Stribeck excess (it got minus their mean)."""
+    effects = ["asymmetric_coulomb:joint=2,positive=4.0,negative=2.0", "stribeck:joint=3"]
+    trial = simulate_trial(arm4.robot, duration=1.0, effects=effects, limits=arm4.limits, progress=False)
+    excess = trial.truth["effects"]["stribeck"]["static_excess"]
+    assert excess[1] == 0.0 and excess[2] > 0 and excess[0] == excess[3] == 0.0

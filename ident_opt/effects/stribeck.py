@@ -35,6 +35,7 @@ from ident_opt.effects.base import (
     report,
     signals,
 )
+from ident_opt.errors import InputError
 from ident_opt.parameters import Parameter
 
 #: The default excess of the static level over the datasheet's mean Coulomb level [N m], per joint.
@@ -115,8 +116,21 @@ class Stribeck(Effect):
 
     # ------------------------------------------------------------------ any arm: the excess on the joint's velocity
     def arm_plant(self, plant, p: dict) -> None:
-        mean = 0.5 * (plant.positive + plant.negative)  # the plant's own Coulomb level (asymmetric_coulomb first)
-        plant.excess = np.array(p["static"]) - mean
+        """The excess over the plant's own Coulomb level (asymmetric_coulomb's, when hidden too) on the joints the
+        effect touches: those whose static level is neither the datasheet's nor the plant's mean (a joint left at
+        the datasheet's level beside an asymmetric Coulomb friction has no excess, not a negative one)."""
+        static = np.array(p["static"], dtype=float)
+        mean = 0.5 * (plant.positive + plant.negative)
+        touched = (static != plant.mean_coulomb) & (static != mean)
+        plant.excess = np.where(touched, static - mean, 0.0)
+        below = [j for j in range(plant.n) if touched[j] and static[j] < mean[j]]
+        if below:
+            j = below[0]
+            raise InputError(
+                f"effect stribeck: its static level {static[j]:.4g} N m on {plant.joints.names[j]} is below that "
+                f"joint's Coulomb level {mean[j]:.4g} N m (the mean of its per-direction levels): a Stribeck excess "
+                f"is a rise above it; give static above {mean[j]:.4g} on that joint"
+            )
         plant.velocity = np.array(p["velocity"])
 
     def arm_truth(self, plant, p: dict) -> dict:
