@@ -13,6 +13,7 @@ whole matrix (every cause on every arm, proximal and distal, and the confusion t
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import re
@@ -125,14 +126,33 @@ def test_stribeck_beside_an_asymmetric_coulomb_level_is_named():
     _named_within(d, truth, {"asymmetric_coulomb", "stribeck"})
 
 
+@functools.cache
+def _narrow_hump_trial():
+    return _diagnosed("tx40", ["stribeck:joint=2,static=4.25,velocity=0.085"], 1031, "fourier")
+
+
 @SLOW
 def test_a_narrow_hump_on_one_joint_does_not_refuse_stribeck_on_another():
     """A Stribeck excess of 0.75 N m at 0.085 rad/s on the TX40's joint 2 (`fourier`): the search also finds a hump
-    on another joint narrower than twice the lowest speed compared there (`stribeck.FALL`), which used to refuse the
-    whole candidate (the TX40's Stribeck trials of the arm confusion tables, named none on seeds 700 and 800); that
-    joint now leaves and the others are fitted again (`arm_fit.fit`)."""
-    d, truth = _diagnosed("tx40", ["stribeck:joint=2,static=4.25,velocity=0.085"], 1031, "fourier")
-    _named_within(d, truth, {"stribeck"})
+    on joint 3 narrower than twice the lowest speed compared there (`stribeck.FALL`), which used to refuse the whole
+    candidate (the TX40's Stribeck trials of the arm confusion tables, named none on seeds 700 and 800); that joint
+    now leaves and the others are fitted again (`arm_fit.fit`): Stribeck alone is named, within tolerance."""
+    d, truth = _narrow_hump_trial()
+    assert [c["cause"] for c in d.causes] == ["stribeck"]
+    assert d.named.detail["dropped_joints"] == ["joint_3"]
+    ok, worst = hidden.arm_errors("stribeck", d.causes[0]["estimate"], truth["effects"]["stribeck"])
+    assert ok, worst
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 27, open: a spurious 0.05 N m hump kept on joint 5 beside joint 2's raises joint 5's raw held-out "
+    "nMSE by 0.1 % (0.008730 -> 0.008739)",
+)
+@SLOW
+def test_the_stribeck_of_the_narrow_hump_trial_worsens_no_joint():
+    d, _ = _narrow_hump_trial()
+    assert all(a <= b * 1.001 for a, b in zip(d.nmse_after, d.nmse_before))
 
 
 def test_an_offset_beside_a_delay_is_named_once_the_delay_is_in_the_model():
@@ -345,3 +365,33 @@ def test_an_elastic_joint_named_before_another_cause_reports_its_spring_not_nan(
             assert cell == "—"
         else:
             assert "—" not in cell or None in steps.values()
+
+
+def test_samples_where_a_coupled_drive_may_stick_leave_the_comparison_on_every_row_it_reaches():
+    """The TX40's wrist motor (drive 6, v6 = dq5 + dq6) slower than twice its rest speed while joints 5 and 6 move:
+    its friction is set-valued there, so those samples leave the comparison on rows 5 and 6 (each its own stretch,
+    `ArmContext.labels`) as a slow joint's do; joints the drive does not reach keep theirs. On a clean simulated TX40
+    joint 5's datasheet residual was 0.39 N m RMS there and 0.03 elsewhere, and a payload trial got a spurious
+    torque scale of 1.03 on joint 5 (seed 800 of the arm confusion tables)."""
+    import pandas as pd
+
+    from ident_opt.data import Dataset
+    from ident_opt.diagnosis import signals
+    from ident_opt.diagnosis.arm_fit import ArmContext
+
+    robot = load_problem(PROBLEMS["tx40"]).robot
+    arm, pi = robot.datasheets()[robot.datasheet]
+    t = np.arange(0.0, 4.0, 0.005)
+    dq = np.zeros((len(t), 6))
+    dq[:, :5] = 1.0 + 0.2 * np.sin(3 * t)[:, None]
+    dq[:, 5] = np.where(t < 2.0, -dq[:, 4] + 0.001, 0.5)  # drive 6 nearly still, then moving
+    q = np.cumsum(dq, axis=0) * 0.005
+    ds = Dataset("synthetic", t, q, dq, np.gradient(dq, t, axis=0), np.zeros((len(t), 6)), pd.DataFrame())
+    ctx = ArmContext(robot, arm, ds, ds, np.ones(6), np.asarray(pi), 0.005, None, "ols")
+    labels = ctx.labels(ds)
+    held, free = t < 1.9, t > 2.1
+    assert np.all(labels[held][:, [4, 5]] >= 0) and np.all(labels[free][:, [4, 5]] == -1)
+    assert np.all(labels[:, :4] == -1)
+    assert len(np.unique(labels[held][:, 4])) == held.sum()  # each sample a stretch of its own: left out
+    demeaned = signals.demean_runs(np.ones((len(t), 6)), labels)
+    assert np.all(demeaned[held][:, [4, 5]] == 0.0) and np.all(demeaned[free] == 1.0)
