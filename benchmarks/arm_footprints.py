@@ -6,8 +6,9 @@ For the single-cause trials of `benchmarks/confusion_arms.py` (the same arms, dr
 whose torque is linear in the cause's size: the cause's own torque on its joint, evaluated on the clean trial's
 measured motion with the datasheet model, through the diagnosis's torque low-pass (`signals.TORQUE_FILTER_HZ`),
 as an RMS over the trial (its footprint) — against the RMS of the datasheet model's residual on that joint of the
-clean trial (sensor noise, quantisation and the controller's ripple after the same low-pass), each joint's rest
-stretches compared about their means as the diagnosis compares them (`signals.demean_runs`). A footprint well
+clean trial (sensor noise, quantisation and the controller's ripple after the same low-pass), on the samples the
+diagnosis compares (`ArmContext.labels`: a joint's samples slower than twice its rest speed, and a coupled drive's,
+left out; `signals.demean_runs`). A footprint well
 below that residual is a cause no held-out score can credit. Elasticity, delay and payload are not linear in their
 size and are left out.
 """
@@ -25,7 +26,7 @@ from confusion_arms import ARMS, draws, places, reference
 
 from ident_opt.derivatives import lowpass
 from ident_opt.diagnosis import hidden, signals
-from ident_opt.diagnosis.arm_fit import link_side
+from ident_opt.diagnosis.arm_fit import ArmContext, link_side
 from ident_opt.diagnosis.loop import at_rest
 from ident_opt.effects import stribeck
 from ident_opt.problem import load_problem
@@ -70,7 +71,9 @@ def rows_for(arm_name: str, seed: int) -> list[dict]:
             robot, trajectory=trajectory, duration=40.0, rate_hz=500.0, seed=seed, limits=problem.limits, progress=False
         ).dataset()
         ds = at_rest(ds)  # a resting joint's velocity read as exactly 0, as the diagnosis reads it
-        labels = signals.rest_runs(ds.dq)
+        # the samples the diagnosis compares: slow joints and slow coupled drives left out (`ArmContext.labels`)
+        dt = float(np.median(np.diff(ds.t)))
+        labels = ArmContext(robot, arm, ds, ds, np.ones(n), np.asarray(pi), dt, None, "ols").labels(ds)
         residual = lowpass(ds.t, ds.tau - arm.predict(pi, ds.q, ds.dq, ds.ddq), signals.TORQUE_FILTER_HZ)
         clean[trajectory] = (ds, signals.demean_runs(residual, labels), labels)
     out = []
@@ -85,8 +88,9 @@ def rows_for(arm_name: str, seed: int) -> list[dict]:
             f[:, j] = footprint(cause, keys, j, ds, arm, pi)
             f = signals.demean_runs(lowpass(ds.t, f, signals.TORQUE_FILTER_HZ), labels)[:, j]
             edge = int(0.5 / float(np.median(np.diff(ds.t))))  # the filter's run-in at both ends
-            rms_f = float(np.sqrt(np.mean(f[edge:-edge] ** 2)))
-            rms_r = float(np.sqrt(np.mean(residual[edge:-edge, j] ** 2)))
+            seen = labels[edge:-edge, j] < 0  # the samples compared on joint j (the others are 0 once demeaned)
+            rms_f = float(np.sqrt(np.mean(f[edge:-edge][seen] ** 2)))
+            rms_r = float(np.sqrt(np.mean(residual[edge:-edge, j][seen] ** 2)))
             out.append(
                 {
                     "arm": arm_name,
