@@ -110,7 +110,7 @@ class ArmContext:
         """(n,) [rad/s]: below this speed a joint's samples are left out of every fit and score (`labels`):
         `signals.STICK_SPEEDS` × its rest speed on the training part."""
         if ("stick_speed",) not in self._cache:
-            self._cache[("stick_speed",)] = signals.STICK_SPEEDS * signals.rest_speed(self.train.dq)
+            self._cache[("stick_speed",)] = signals.stick_speed(self.train.dq)
         return self._cache[("stick_speed",)]
 
     def labels(self, ds: Dataset) -> np.ndarray:
@@ -122,10 +122,9 @@ class ArmContext:
         key = ("labels", *_identity(ds))
         if key not in self._cache:
             labels = signals.rest_runs(ds.dq, self.stick_speed)
-            C = self.arm.drive_matrix
             if self.coupled:
-                v = ds.dq @ C.T
-                below = signals.STICK_SPEEDS * signals.rest_speed(self.train.dq @ C.T)
+                C = self.arm.drive_matrix
+                v, below = ds.dq @ C.T, signals.stick_speed(self.train.dq @ C.T)
                 for m in self.coupled:
                     slow = np.abs(v[:, m]) < below[m]
                     for j in np.flatnonzero(C[m]):

@@ -369,9 +369,9 @@ UNDER_COMPARED = 0.25
 
 def compared(train_dq: np.ndarray, test_dq: np.ndarray) -> np.ndarray:
     """(n,): for each joint, the share of held-out samples in motion over the share of training samples in motion
-    (1: the held-out part exercises it as much as the training part). In motion: faster than `signals.STICK_SPEEDS`
-    × its rest speed on the training part (`signals.rest_speed`), the samples an arm's diagnosis compares."""
-    fast = signals.STICK_SPEEDS * signals.rest_speed(train_dq)
+    (1: the held-out part exercises it as much as the training part). In motion: faster than its stick speed on the
+    training part (`signals.stick_speed`), the samples an arm's diagnosis compares."""
+    fast = signals.stick_speed(train_dq)
     trained = np.mean(np.abs(train_dq) >= fast, axis=0)
     held = np.mean(np.abs(test_dq) >= fast, axis=0)
     return held / np.maximum(trained, np.finfo(float).tiny)

@@ -166,6 +166,12 @@ def rest_speed(v: np.ndarray) -> np.ndarray:
     return REST_FRACTION * np.quantile(np.abs(v), 0.95, axis=0)
 
 
+def stick_speed(v: np.ndarray) -> np.ndarray:
+    """(m,) [rad/s]: the speed below which each velocity column of v (N, m) may be held by stiction, `STICK_SPEEDS` ×
+    its rest speed (`rest_speed`): the n-joint diagnosis compares only faster samples."""
+    return STICK_SPEEDS * rest_speed(v)
+
+
 def resting(v: np.ndarray, dt: float) -> np.ndarray:
     """(N, m) bool: the samples where each velocity column of v (N, m) [rad/s] at step `dt` [s] is at rest: below
     `REST_FRACTION` of its speed scale (95th percentile of |v|) there, and staying below it for `REST_WINDOW_S`
