@@ -361,3 +361,20 @@ def test_physical_units_undo_a_torque_scale_exactly_on_one_row_columns():
     assert p["m"] == pytest.approx(0.3 * (s @ share), rel=0.02)
     assert p["c1"] == fitted["c1"] and p["c2"] == fitted["c2"]  # the scale's own coefficients are left alone
     assert fitted["a"] == pytest.approx(0.4 / s[0])  # the input is not modified
+
+
+def test_a_torque_scale_within_its_tolerance_of_one_is_not_named():
+    """The resolution floor: a factor the diagnosis cannot tell from 1 (within SCALE_TOL on every joint) is not
+    named, on either engine; on an arm the joints within it leave the candidate (`failed_joints`), the others stay."""
+    from types import SimpleNamespace
+
+    from ident_opt.effects.torque_scale import EFFECT, SCALE_TOL, _arm_estimate
+
+    assert not EFFECT.resolved({"scale": [1.0 + 0.9 * SCALE_TOL, 1.0 - 0.9 * SCALE_TOL]}, 0.01)
+    assert EFFECT.resolved({"scale": [1.0, 1.0 - 1.5 * SCALE_TOL]}, 0.01)
+    ctx = SimpleNamespace(n=4)
+    p = {"c2": 1.0 / 1.12, "c3": 1.0 / 1.006, "c4": 1.0 / 0.99}  # joint 1 not fitted (screened out)
+    estimate, detail = _arm_estimate(p, {}, ctx)
+    np.testing.assert_allclose(estimate["scale"], [1.0, 1.12, 1.006, 0.99])
+    assert detail["failed_joints"] == [2, 3]  # 0-based: joints 3 and 4 are within the floor, joint 1 untouched
+    assert _arm_estimate({"c2": 1.0 / 1.12}, {}, ctx)[1] == {}
