@@ -378,3 +378,24 @@ def test_a_torque_scale_within_its_tolerance_of_one_is_not_named():
     np.testing.assert_allclose(estimate["scale"], [1.0, 1.12, 1.006, 0.99])
     assert detail["failed_joints"] == [2, 3]  # 0-based: joints 3 and 4 are within the floor, joint 1 untouched
     assert _arm_estimate({"c2": 1.0 / 1.12}, {}, ctx)[1] == {}
+
+
+def test_a_static_friction_beyond_the_logged_torque_is_not_an_estimate():
+    """A joint that moved was driven past its static friction: a Stribeck static level above the largest torque
+    logged on it is a hump extrapolated where there are no samples, and the candidate fails its own rule."""
+    from types import SimpleNamespace
+
+    from ident_opt.effects.stribeck import _estimate, beyond_logged
+
+    tau = np.column_stack([np.linspace(-3.0, 3.0, 50), np.linspace(-0.5, 0.8, 50)])
+    ctx = SimpleNamespace(
+        train=SimpleNamespace(tau=tau),
+        robot=SimpleNamespace(joint_names=("shoulder", "elbow")),
+        datasheet={"fc1": 0.3, "fc2": 0.2},
+    )
+    assert beyond_logged([2.9, 0.7], ctx) == []
+    assert beyond_logged([0.0, 9e8], ctx) == [1]
+    p = {"fs1": 0.2, "fs2": 9e8, "vs1": 0.05, "vs2": 0.04}
+    estimate, detail = _estimate(p, {"fs1": 0.01, "fs2": 1e7}, ctx)
+    assert estimate["static"][1] > 1e8 and "elbow" in detail["unresolved"]
+    assert "unresolved" not in _estimate({**p, "fs2": 0.3}, {"fs1": 0.01, "fs2": 0.01}, ctx)[1]

@@ -178,6 +178,8 @@ def _row(
         share = scoring.recovered(without.mse, v.mse, current["rigid_fit"].mse)
     margin = ok and scoring.clears_margin(without.mse, v.mse, score, var, floor)
     why = scoring.shortfall(without.mse, v.mse, score, var, ok, share, floor)
+    if why is not None and not ok and isinstance(c.detail.get("unresolved"), str):
+        why = f"{why}: {c.detail['unresolved']}"  # the rule's own words (a static level, a delay read like with like)
     return {
         "cause": c.cause,
         "score": score,

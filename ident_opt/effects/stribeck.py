@@ -68,6 +68,14 @@ FALL = 2.0
 STOP_S = 0.25
 
 
+def beyond_logged(static: list[float], ctx) -> list[int]:
+    """The joints (0-based) whose static level exceeds the largest torque logged on them in the training part: a
+    joint that moved was driven past its static friction, so such a level is a hump extrapolated where the data
+    have no samples (a column of a few 1e-11 at the speeds compared once gave 9e8 N m), not an estimate."""
+    peak = np.max(np.abs(ctx.train.tau), axis=0)
+    return [j for j, fs in enumerate(static) if fs > peak[j]]
+
+
 def shape(dq: np.ndarray, vs: float) -> np.ndarray:
     """sgn(dq) exp(−(dq/vs)²): the Stribeck excess per N m of fs − fc (dq [rad/s], vs [rad/s])."""
     return np.sign(dq) * np.exp(-((dq / vs) ** 2))
@@ -284,10 +292,17 @@ def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
         )
         static.append(fc + fs if resolved else 0.0)
         velocity.append(p["vs" + k] if resolved else 0.0)
-    return {"static": static, "velocity": velocity}, {
-        "se_static": [se["fs1"], se["fs2"]],
-        "excess": [p["fs1"], p["fs2"]],
-    }
+    detail = {"se_static": [se["fs1"], se["fs2"]], "excess": [p["fs1"], p["fs2"]]}
+    high = beyond_logged(static, ctx)
+    if high:
+        detail["unresolved"] = _beyond_reason(high, ctx)
+    return {"static": static, "velocity": velocity}, detail
+
+
+def _beyond_reason(joints: list[int], ctx) -> str:
+    """Why a candidate with a static level beyond the logged torque (`beyond_logged`) is not named."""
+    names = ", ".join(ctx.robot.joint_names[j] for j in joints)
+    return f"its static level on {names} exceeds the largest torque logged there: no joint that moved has such friction"
 
 
 def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
@@ -329,13 +344,19 @@ def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
     # left out, where a joint breaking away from stiction leaves torque that a narrower hump fits.
     floor = FALL * ctx.stick_speed
     low = [j for j in range(ctx.n) if static[j] > 0 and velocity[j] < floor[j]]
-    if low:
-        names = ", ".join(ctx.robot.joint_names[j] for j in low)
-        detail["failed_joints"] = low  # `arm_fit.fit` fits the others again without them
-        detail["unresolved"] = (
-            f"its Stribeck velocity on {names} is below {FALL:g} x the lowest speed compared there "
-            f"({signals.STICK_SPEEDS:g} rest speeds): the hump's fall is not in the data"
-        )
+    high = [j for j in beyond_logged(static, ctx) if j not in low]
+    if low or high:
+        detail["failed_joints"] = sorted(low + high)  # `arm_fit.fit` fits the others again without them
+        reasons = []
+        if low:
+            names = ", ".join(ctx.robot.joint_names[j] for j in low)
+            reasons.append(
+                f"its Stribeck velocity on {names} is below {FALL:g} x the lowest speed compared there "
+                f"({signals.STICK_SPEEDS:g} rest speeds): the hump's fall is not in the data"
+            )
+        if high:
+            reasons.append(_beyond_reason(high, ctx))
+        detail["unresolved"] = "; ".join(reasons)
     return {"static": static, "velocity": velocity}, detail
 
 
