@@ -43,6 +43,9 @@ ARMS = {
     "panda": ROOT / "problems" / "franka_panda.toml",
     "tx40": ROOT / "tests" / "arms" / "tx40_drives.toml",
 }
+#: Truth keys kept in the table beside the judged ones: a payload's centre of mass, and an elastic joint's frequency
+#: over the trial's motion, which it is judged against (`Elasticity.arm_judge`).
+JUDGED_TOO = ("com", "frequency_trial_hz")
 #: Causes with one instance per trial rather than one per joint.
 WHOLE = ("delay", "payload")
 
@@ -113,7 +116,9 @@ def one(job: tuple) -> dict:
         "within": bool(exact and all(ok for ok, _ in checks.values())),
         "errors": {c: float(e) for c, (_, e) in checks.items()},
         "estimates": {c["cause"]: c["estimate"] for c in d.causes},
-        "truth": {c: {k: v for k, v in truth[c].items() if k in CATALOGUE[c].judged or k == "com"} for c in causes},
+        "truth": {
+            c: {k: v for k, v in truth[c].items() if k in CATALOGUE[c].judged or k in JUDGED_TOO} for c in causes
+        },
         "seconds": seconds,
         "cpu": cpu,
         "trajectory": trajectory,

@@ -136,6 +136,32 @@ def test_an_elastic_joint_and_a_payload_on_the_last_link(arm4):
     json.dumps(truth, allow_nan=False)
 
 
+def test_an_elastic_joint_has_the_frequency_of_the_motion_it_ran(arm4):
+    """The spring k is set at the centre pose; over a trial the other joints move and the link inertia behind it
+    with them. The truth gives the trial's frequency √(k / mean M_link) / 2π and its range, checked here against
+    Pinocchio's CRBA on the logged angles (encoder offset added back) with the link-side inertials (no armature)."""
+    trial = simulate_trial(
+        arm4.robot,
+        duration=4.0,
+        rate_hz=250.0,
+        effects=["elasticity:joint=2,frequency_hz=5", "joint_offset:joint=3,offset=0.05"],
+        limits=arm4.limits,
+        progress=False,
+    )
+    el = trial.truth["effects"]["elasticity"]
+    arm, pi = arm4.robot.datasheets()[arm4.robot.datasheet]
+    model = arm._pinocchio_with(pi)  # inertials only: the rotors' armature is on the motor side of the spring
+    data = model.createData()
+    q = trial.frame[[f"q{j + 1}" for j in range(4)]].to_numpy() + np.array([0.0, 0.0, 0.05, 0.0])
+    M = np.array([pin.crba(model, data, qk)[1, 1] for qk in q[::5]])
+    k = el["stiffness"]
+    assert el["frequency_trial_hz"] == pytest.approx(np.sqrt(k / M.mean()) / (2 * np.pi), rel=2e-3)
+    low, high = el["frequency_range_hz"]
+    assert low == pytest.approx(np.sqrt(k / M.max()) / (2 * np.pi), rel=5e-3)
+    assert high == pytest.approx(np.sqrt(k / M.min()) / (2 * np.pi), rel=5e-3)
+    assert el["frequency_hz"] == 5.0 and low < high
+
+
 def _simulate(args: list[str], tmp_path: Path, capsys) -> tuple[int, str]:
     out = tmp_path / "t.csv"
     code = main(["simulate", "--problem", str(ARM4), "--out", str(out), "--duration", "1", *args])

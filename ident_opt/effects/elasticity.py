@@ -78,6 +78,11 @@ class Mode:
         return f"deflection{self.index + 1}"
 
 
+def natural_hz(k: float, J: float) -> float:
+    """The natural frequency [Hz] of a spring k [N m/rad] on an inertia J [kg m²]: √(k/J) / 2π."""
+    return math.sqrt(k / J) / (2 * math.pi)
+
+
 def spring_for(J_link: float, frequency_hz: float, damping: float) -> tuple[float, float]:
     """(k [N m/rad], d [N m s/rad]) of a mode of `frequency_hz` [Hz] and damping ratio `damping` on the inertia
     J_link [kg m²]: k = J_link (2π f)², d = 2 ζ √(k J_link)."""
@@ -252,12 +257,24 @@ class Elasticity(Effect):
         return p["joint"] - 1, p["frequency_hz"], p["damping"]
 
     def arm_truth(self, plant, p: dict) -> dict:
+        """`frequency_hz` is the spring's at the centre pose (the `--effect` key); the link inertia behind it moves
+        with the other joints, so the trial has its own: `frequency_trial_hz` at the motion's mean link inertia (what
+        the diagnosis estimates: its column carries the mean over the samples), `frequency_range_hz` over it."""
         e = plant.elastic
+        trial = {}
+        if e.trial_inertia is not None:
+            mean, least, largest = e.trial_inertia
+            trial = {
+                "frequency_trial_hz": natural_hz(e.k, mean),
+                "frequency_range_hz": [natural_hz(e.k, largest), natural_hz(e.k, least)],
+                "link_inertia_trial": [mean, least, largest],
+            }
         return {
             "joint": e.index + 1,
             "joint_name": plant.robot.joint_names[e.index],
             "kind": "joint",
             "frequency_hz": e.frequency_hz,
+            **trial,
             "damping": e.damping,
             "stiffness": e.k,
             "damper": e.d,
@@ -289,7 +306,8 @@ class Elasticity(Effect):
         return {"joint": chosen[0] + 1, "frequency_hz": rng.uniform(3.0, 8.0), "damping": rng.uniform(0.01, 0.05)}
 
     def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
-        return self.judge(estimate, truth)
+        """Against the trial's own frequency where the truth has it (`arm_truth`)."""
+        return self.judge(estimate, {**truth, "frequency_hz": truth.get("frequency_trial_hz", truth["frequency_hz"])})
 
     def truth_entry(self, truth, p: dict) -> dict:
         e = truth.elastic

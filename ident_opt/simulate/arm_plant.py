@@ -49,6 +49,9 @@ class ElasticJoint(Mode):
     (`MOTOR_SHARE`)."""
 
     motor_added: bool = field(kw_only=True)
+    #: The link-side inertia over the trial's motion (mean, least, largest) [kg m²] (`link_inertia`), once run: the
+    #: spring's frequency moves with the other joints' angles (the Panda's shoulder: 5.9–12 Hz over one trial).
+    trial_inertia: tuple[float, float, float] | None = field(default=None, kw_only=True)
 
 
 @dataclass
@@ -275,15 +278,20 @@ def build_plant(robot: Robot, effects: dict[str, dict], scale: ArmScale, joints:
     return plant
 
 
+def link_inertia(plant: ArmPlant, joint: int, q: np.ndarray) -> np.ndarray:
+    """The link-side inertia M_link[j, j] [kg m²] behind joint `joint` (0-based) at each pose of q (N, n) [rad]: the
+    mass matrix of π without the joint terms (the rotors' armature sits on the motor side of the spring)."""
+    link = plant.pi * (1 - joint_terms_of(plant.arm, joint))
+    return mass_matrix(plant.arm, link, q)[:, joint, joint]
+
+
 def elastic_joint(plant: ArmPlant, joint: int, frequency_hz: float, damping: float, limits) -> ElasticJoint:
     """Joint `joint` (0-based) elastic at `frequency_hz` [Hz] with the other joints held, damping ratio `damping`:
     k = J_link (2π f)², d = 2 ζ √(k J_link), J_link the link-side inertia at the centre pose; the motor is the
     joint's reflected rotor inertia (π's armature on that joint plus any extra), or `MOTOR_SHARE` × J_link."""
     arm = plant.arm
-    motor_terms = joint_terms_of(arm, joint)
-    link = plant.pi * (1 - motor_terms)
     poses = np.vstack([centre(limits), np.random.default_rng(1).uniform(limits.q_min, limits.q_max, (16, plant.n))])
-    M_link = mass_matrix(arm, link, poses)[:, joint, joint]
+    M_link = link_inertia(plant, joint, poses)
     M_full = mass_matrix(arm, plant.pi, centre(limits)[None, :])[0, joint, joint]
     J_link = float(M_link[0])
     B = float(M_full - J_link + plant.inertia[joint])

@@ -281,6 +281,11 @@ def _arm_trial(robot: Robot, effects, settings: dict, scale: np.ndarray, progres
     out, g, steps = arm_loop.run(
         plant, ref, box, progress=progress, control=control, bandwidth_hz=settings["bandwidth_hz"]
     )
+    if plant.elastic is not None:  # the spring's link inertia over the motion run (the other joints move)
+        n, j = robot.n_joints, plant.elastic.index
+        q_true = out[:: max(1, len(out) // 2000), n : 2 * n] + plant.offset  # at most ~2000 poses
+        M = arm_plant.link_inertia(plant, j, q_true)
+        plant.elastic = replace(plant.elastic, trial_inertia=(float(M.mean()), float(M.min()), float(M.max())))
     sigma = NOISE_SHARE * np.asarray(arm_scale.torque)
     frame = logged(
         out,
