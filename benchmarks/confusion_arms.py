@@ -17,8 +17,9 @@ reported once, not tuned on (seed 600's table: git history, bc1ddb8); seed 700 i
 (`--first-seed 700 --out results/diagnosis/confusion_arms_unseen.md`), but its misses have been read since its first
 table (issue 27's closing notes), and so have seed 800's (`--out results/diagnosis/confusion_arms_seed800.md`: its
 KUKA trials that never moved joint 2 in the held-out part gave the split rule of `diagnosis.loop.held_out`); seed
-900 (`--out results/diagnosis/confusion_arms_seed900.md`) was first run for the table it shows, after the changes it
-measures; no table has been run from seed 1000 on.
+900 (`--out results/diagnosis/confusion_arms_seed900.md`) was first run after the changes it then measured, and its
+misses have been read since (they gave the torque scale's resolution floor); no table has been run from seed 1000 on
+before the 2026-11-28 stop's.
 """
 
 from __future__ import annotations
