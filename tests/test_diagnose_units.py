@@ -399,3 +399,15 @@ def test_a_static_friction_beyond_the_logged_torque_is_not_an_estimate():
     estimate, detail = _estimate(p, {"fs1": 0.01, "fs2": 1e7}, ctx)
     assert estimate["static"][1] > 1e8 and "elbow" in detail["unresolved"]
     assert "unresolved" not in _estimate({**p, "fs2": 0.3}, {"fs1": 0.01, "fs2": 0.01}, ctx)[1]
+
+
+def test_an_arm_elastic_joint_is_judged_against_the_frequency_of_its_trial():
+    """The spring is set at the centre pose; the trial runs elsewhere (`Elasticity.arm_truth`): the n-joint judge
+    takes `frequency_trial_hz` where the truth has it, `frequency_hz` otherwise; the planar judge is unchanged."""
+    from ident_opt.effects.elasticity import EFFECT
+
+    truth = {"joint": 2, "frequency_hz": 5.88, "frequency_trial_hz": 8.47}
+    assert all(ok for ok, _ in EFFECT.arm_judge({"joint": 2, "frequency_hz": 8.25}, truth))
+    assert not all(ok for ok, _ in EFFECT.arm_judge({"joint": 2, "frequency_hz": 5.9}, truth))
+    assert all(ok for ok, _ in EFFECT.arm_judge({"joint": 2, "frequency_hz": 5.9}, {"joint": 2, "frequency_hz": 5.88}))
+    assert not all(ok for ok, _ in EFFECT.judge({"joint": 2, "frequency_hz": 8.25}, truth))

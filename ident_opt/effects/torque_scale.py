@@ -91,9 +91,8 @@ class TorqueScale(Effect):
     judged = ("scale",)
     resolution = (
         f"torque scales within {SCALE_TOL:g} of 1 on every joint are not named",
-        "the diagnosis claims a scale only to that tolerance; a factor closer to 1 is a correct torque constant "
-        "as far as it can tell, and on simulated trials such factors came from another cause's mismatch "
-        "(a payload beside a delay or an elastic joint)",
+        "the diagnosis claims a scale only to that tolerance: closer to 1, a factor cannot be told from a correct "
+        "torque constant, and on simulated trials such factors were another cause's mismatch, beside a payload",
     )
 
     def resolved(self, estimate: dict, dt: float) -> bool:
