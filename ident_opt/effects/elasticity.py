@@ -198,7 +198,7 @@ def elastic_joint(plant, j: int, f: float, zeta: float) -> Elastic:
         inertias = [pi["a1"] - B + 2 * pi["a2"] * math.cos(q2) for q2 in Q2_RANGE]
     else:
         inertias = [J_link, J_link]
-    band = tuple(math.sqrt(k / J) / (2 * math.pi) for J in inertias)
+    band = tuple(natural_hz(k, J) for J in inertias)
     w_free = math.sqrt(k * (1 / B + 1 / min(inertias)))
     rate = w_free + d * (1 / B + 1 / min(inertias))
     return Elastic(j, k, d, B, J_link, f, zeta, rate, frequency_range_hz=band, kind="joint")
@@ -210,7 +210,7 @@ def flexible(plant, j: int, f: float, zeta: float) -> Elastic:
     J = flexible_link.mode_inertia(robot, j, armature, 0.0)
     k, d = spring_for(J, f, zeta)
     inertias = [flexible_link.mode_inertia(robot, j, armature, q2) for q2 in Q2_RANGE]
-    band = tuple(math.sqrt(k / Jq) / (2 * math.pi) for Jq in inertias)
+    band = tuple(natural_hz(k, Jq) for Jq in inertias)
     w_free = flexible_link.free_rate(robot, j, armature, k)
     rate = w_free + d * w_free**2 / k  # d (M⁻¹)_φφ, with (M⁻¹)_φφ = ω²/k
     return Elastic(j, k, d, armature[j], J, f, zeta, rate, frequency_range_hz=band, kind="link")
