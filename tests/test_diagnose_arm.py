@@ -126,6 +126,17 @@ def test_stribeck_beside_an_asymmetric_coulomb_level_is_named():
     _named_within(d, truth, {"asymmetric_coulomb", "stribeck"})
 
 
+def test_an_armature_and_an_asymmetric_coulomb_level_on_one_joint_are_named_together():
+    """The Panda's shoulder with extra rotor inertia and a Coulomb level split by direction: a refitted π takes the
+    asymmetry whole as a torque offset, so only the datasheet's side can tell it, and there each cause alone explains
+    less than a fifth of what the refit gains. Named `none` on seeds 800, 900 and 1000 of the arm tables before the
+    asymmetry's screen freed the inertial parameters and the arm engine tried every datasheet-side cause with a
+    partner (`arm_fit.Engine.PARTNER`); a seed those tables do not use."""
+    effects = ["armature:joint=2", "asymmetric_coulomb:joint=2,positive=2.8,negative=1.2"]
+    d, truth = _diagnosed("panda", effects, 1023)
+    _named_within(d, truth, {"armature", "asymmetric_coulomb"})
+
+
 @functools.cache
 def _narrow_hump_trial():
     return _diagnosed("tx40", ["stribeck:joint=2,static=4.25,velocity=0.085"], 1031, "fourier")

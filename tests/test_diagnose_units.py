@@ -411,3 +411,35 @@ def test_an_arm_elastic_joint_is_judged_against_the_frequency_of_its_trial():
     assert not all(ok for ok, _ in EFFECT.arm_judge({"joint": 2, "frequency_hz": 5.9}, truth))
     assert all(ok for ok, _ in EFFECT.arm_judge({"joint": 2, "frequency_hz": 5.9}, {"joint": 2, "frequency_hz": 5.88}))
     assert not all(ok for ok, _ in EFFECT.judge({"joint": 2, "frequency_hz": 8.25}, truth))
+
+
+def test_a_family_that_contains_another_cause_must_clear_the_margin_against_it_too():
+    """An elastic joint's columns include an armature's (its motor inertia): named over the armature only if it
+    also removes the margin of the armature fit's MSE; a cause it does not contain is not compared."""
+    from types import SimpleNamespace
+
+    from ident_opt.diagnosis.loop import Fitted, _nested
+
+    def fitted(cause: str, mse, common: float, nests=(), baseline="datasheet") -> Fitted:
+        family = SimpleNamespace(cause=cause, nests=nests)
+        return Fitted((cause,), baseline, SimpleNamespace(cause=cause), np.asarray(mse), None, common, family, {})
+
+    var = np.array([100.0, 100.0])
+
+    def rows_after(ranked):
+        rows = [{"clears_margin": True, "needs_partner": False, "shortfall": None} for _ in ranked]
+        _nested(ranked, rows, var, scoring.MARGIN_VARIANCE)
+        return rows
+
+    armature = fitted("armature", [1.0, 0.5], 40.0)
+    # The same MSE as the armature's fit, a higher score: the mode rides on the motor column.
+    rows = rows_after([fitted("elasticity", [0.99, 0.5], 41.0, ("armature",)), armature])
+    assert not rows[0]["clears_margin"] and "`armature`" in rows[0]["shortfall"] and rows[1]["clears_margin"]
+    # A mode that removes a tenth of the armature fit's MSE on a joint earns its place.
+    rows = rows_after([fitted("elasticity", [0.9, 0.5], 60.0, ("armature",)), armature])
+    assert rows[0]["clears_margin"] and rows[0]["shortfall"] is None
+    # Against another baseline (no motor column there) or another cause, nothing is compared.
+    rows = rows_after([fitted("elasticity", [0.99, 0.5], 41.0, ("armature",), "rigid_fit"), armature])
+    assert rows[0]["clears_margin"]
+    rows = rows_after([fitted("elasticity", [0.99, 0.5], 41.0), armature])
+    assert rows[0]["clears_margin"]

@@ -145,7 +145,8 @@ def diagnose(
         return Fitted(causes, baseline, cand, after, pred, common, family, theta)
 
     def row(v: Fitted, score: float, current: dict, gap=None) -> dict:
-        return loop._row(v, score, current, raw_test.tau, test, rest_test, var, dt, gap, engine.MARGIN_VARIANCE)
+        floor, partner = engine.MARGIN_VARIANCE, engine.PARTNER
+        return loop._row(v, score, current, raw_test.tau, test, rest_test, var, dt, gap, floor, partner)
 
     current = {b: version(None, b, nominal_pred[b], (), None, {}) for b in nominal_pred}
     rounds = loop._rounds(robot, ctx, current, version, row, var, progress, engine)
@@ -173,6 +174,7 @@ def diagnose(
         rest_test,
     )
     result.margin_variance = engine.MARGIN_VARIANCE
+    result.partner = engine.PARTNER
     result.evidence["screening"] = {
         "elastic_joints": [robot.joint_names[j] for j in ctx.evidence.get("elastic_joints", [])],
         "decimation": k,

@@ -145,6 +145,9 @@ class Family:
     #: payload adds to the load torque that load-dependent friction scales with); `fit` iterates the solve
     #: to a fixed point. None: the columns do not depend on the coefficients.
     coupled: Callable[[dict], dict] | None = None
+    #: Causes whose columns this family's contain (an elastic joint's motor inertia is an armature): it is
+    #: named over such a cause only if it also clears the margin against that cause's own fit (`loop._nested`).
+    nests: tuple[str, ...] = ()
 
 
 def nominal(theta: dict) -> PlanarArm:

@@ -88,6 +88,7 @@ class Diagnosis:
     #: what is doubtful about the result (`ident_opt.warnings.ResultWarning`: the trials', the rigid fit's evidence)
     warnings: list = field(default_factory=list)
     margin_variance: float = scoring.MARGIN_VARIANCE  # the least share of the torque variance a cause removes
+    partner: float = scoring.PARTNER  # the least share of the refit's gain a cause taken on trial explains
 
     def detail_of(self, cause: str) -> dict:
         """What the extended model's joint fit says of `cause` beyond its estimate (e.g. an elastic joint's
@@ -127,7 +128,8 @@ class Diagnosis:
             "with Δk the difference in fitted parameters (a refitted π counts 10); every candidate of a round "
             f"against the same reference. A cause is named when its score > 0 and, on some joint, it removes "
             f">= {scoring.MARGIN:.0%} of the held-out MSE of the same kind of fit without it and "
-            f">= {100 * self.margin_variance:g}% of the torque variance " + scoring.rules_note(),
+            f">= {100 * self.margin_variance:g}% of the torque variance, and against the fit of any cause whose "
+            "columns it contains (an elastic joint's motor inertia is an armature) too " + scoring.rules_note(),
             "nmse_definition": "MSE ÷ variance of the measured torque (unfiltered, as compare and identify use "
             "it), per joint, on the held-out part; nmse_filtered_*: the scored variant (torque low-passed like "
             "the derivatives, each rest stretch's residual mean removed); nmse_raw_*: filtered, no rest removal",
@@ -158,13 +160,15 @@ def _row(
     dt: float,
     gap,
     floor: float,
+    partner: float = scoring.PARTNER,
 ) -> dict:
     """A candidate's JSON row: its score against the round's reference, held-out nMSE, estimate, and whether
     it may be named: resolved, clearing the margin against the same kind of fit without it
     (`current[baseline]`), and, when it holds the datasheet's π while a refitted π does better, explaining
     at least `scoring.RECOVER` of the refit's log-gain (`recovers`). `gap`: (datasheet, rigid_fit) versions
     the share is measured between (default: the current model's), for a cause that completes a partner's.
-    `needs_partner`: clears the margin but explains less than `RECOVER` alone (`_rounds`)."""
+    `needs_partner`: clears the margin but explains less than `RECOVER` alone, and at least `partner` (the
+    engine's floor, `_rounds`)."""
     c = v.cand
     without = current.get(v.baseline) or max(current.values(), key=lambda w: w.common)
     # a per-joint cause the n-joint screen found on no joint (`arm_fit`) adds nothing: a round's chain refitted
@@ -193,7 +197,7 @@ def _row(
         "recovers": share,
         "clears_margin": why is None,
         "shortfall": why,
-        "needs_partner": bool(margin and share is not None and scoring.PARTNER <= share < scoring.RECOVER),
+        "needs_partner": bool(margin and share is not None and partner <= share < scoring.RECOVER),
         **({"polish": c.detail["polish"]} if "polish" in c.detail else {}),
     }
 
@@ -261,6 +265,7 @@ def _rounds(robot, ctx, current: dict, version, row, var, progress: bool, engine
             }
         ranked = sorted(best.values(), key=lambda v: v.common, reverse=True)
         rows = [row(v, v.common - ref.common, current, gap) for v in ranked]
+        _nested(ranked, rows, var, engine.MARGIN_VARIANCE)
         if round_ == 0:
             candidates = rows
         history.append([{k: r[k] for k in ROUND_KEYS} for r in rows])
@@ -281,6 +286,24 @@ def _rounds(robot, ctx, current: dict, version, row, var, progress: bool, engine
         named, chain, current, dropped = tentative
     bar.close()
     return chain, current, candidates, dropped, history
+
+
+def _nested(ranked: list[Fitted], rows: list[dict], var, floor: float) -> None:
+    """A candidate whose columns contain another cause's (`Family.nests`) is named over that cause only if it
+    also clears the margin against that cause's own fit on the same baseline, in place on `rows`: its extra
+    columns must earn their place, not ride on the gain of the columns it shares (an elastic joint's motor
+    inertia reads an armature; the mode beside it may only follow the noise)."""
+    fits = {v.cand.cause: v for v in ranked}
+    for v, r in zip(ranked, rows):
+        for cause in v.family.nests if r["clears_margin"] else ():
+            inner = fits.get(cause)
+            if inner is None or inner.baseline != v.baseline:
+                continue
+            why = scoring.shortfall(inner.mse, v.mse, v.common - inner.common, var, True, None, floor)
+            if why is not None:
+                r["clears_margin"] = r["needs_partner"] = False
+                r["shortfall"] = f"against `{cause}`'s fit, whose columns it contains, {why}"
+                break
 
 
 def _pick(ranked: list[Fitted], rows: list[dict], on_trial: bool) -> tuple[Fitted | None, bool]:

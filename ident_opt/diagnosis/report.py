@@ -325,11 +325,13 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "(first round: the datasheet) and Δk the parameters fitted beyond it (a refitted π counts all "
         f"{d.nominal['rigid_fit'].get('rank', 10)}). A "
         "cause is named when its score is positive and, on some joint, it removes at least 5 % of the held-out "
-        "MSE of the same kind of fit without it and at least 0.01 % of the torque's variance; a cause holding "
-        f"the datasheet's π must also explain {scoring.RECOVER:.0%} of what a refitted π gains over it"
+        f"MSE of the same kind of fit without it and at least {100 * d.margin_variance:g} % of the torque's "
+        "variance, and against the fit of any cause whose columns it contains (an elastic joint's motor inertia is "
+        f"an armature) too; a cause holding the datasheet's π must also explain {scoring.RECOVER:.0%} of what a "
+        "refitted π gains over it"
         + "".join(f"; {rule} ({reason})" for rule, reason in scoring.rules())
         + ". The best such cause is added to the model and the question is asked again (a datasheet-side cause that"
-        f" explains {scoring.PARTNER:.0%} to {scoring.RECOVER:.0%} of the refit's gain is tried with a partner, kept"
+        f" explains {d.partner:.0%} to {scoring.RECOVER:.0%} of the refit's gain is tried with a partner, kept"
         f" only if the pair explains {scoring.RECOVER:.0%}).",
         "",
         "| cause | score | baseline | added parameters | held-out nMSE after | estimate |",

@@ -103,6 +103,7 @@ class AsymmetricCoulomb(Effect):
                 removed=_arm_removed,
                 estimate=_arm_estimate,
                 screen=_arm_screen,
+                screen_inertia_free=True,  # beside a refitted π the asymmetry is a torque offset: datasheet side only
                 nonnegative=("fp", "fn"),
             )
         ]

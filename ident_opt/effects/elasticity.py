@@ -298,6 +298,7 @@ class Elasticity(Effect):
                 ],
                 nonnegative=("scale", "motor"),
                 estimate=_arm_estimate(joint),
+                nests=("armature",),  # its motor column, against the datasheet, is joint j's armature column
             )
             for joint in afit.elastic_joints(ctx, _arm_columns)
         ]
