@@ -331,7 +331,8 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "refitted π gains over it"
         + "".join(f"; {rule} ({reason})" for rule, reason in scoring.rules())
         + ". The best such cause is added to the model and the question is asked again (a datasheet-side cause that"
-        f" explains {d.partner:.0%} to {scoring.RECOVER:.0%} of the refit's gain is tried with a partner, kept"
+        + (f" explains {d.partner:.0%} to" if d.partner > 0 else " explains less than")
+        + f" {scoring.RECOVER:.0%} of the refit's gain is tried with a partner, kept"
         f" only if the pair explains {scoring.RECOVER:.0%}).",
         "",
         "| cause | score | baseline | added parameters | held-out nMSE after | estimate |",
