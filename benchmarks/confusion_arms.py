@@ -19,8 +19,11 @@ table (issue 27's closing notes), and so have seed 800's (`--out results/diagnos
 KUKA trials that never moved joint 2 in the held-out part gave the split rule of `diagnosis.loop.held_out`); seed
 900 (`--out results/diagnosis/confusion_arms_seed900.md`) was first run after the changes it then measured, and its
 misses have been read since (they gave the torque scale's resolution floor); seed 1000
-(`--out results/diagnosis/confusion_arms_seed1000.md`) was first run at the final code of the 2026-11-28 stop, after
-every change it measures; no table has been run from seed 1100 on.
+(`--out results/diagnosis/confusion_arms_seed1000.md`) was first run at the final code of the first 2026-11-28 stop,
+and its misses have been read since (they gave the nested-columns rule, the asymmetric Coulomb screen with the
+inertial parameters free, and the arm's partner share); seed 1100 (`--out results/diagnosis/confusion_arms_seed1100.md`)
+was first run at the final code of the second 2026-11-28 stop, after every change it measures; no table has been run
+from seed 1200 on.
 """
 
 from __future__ import annotations
