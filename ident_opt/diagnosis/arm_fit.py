@@ -190,20 +190,26 @@ class ArmContext:
         return X, names
 
     def basis(self, ds: Dataset, delta: np.ndarray | None = None) -> np.ndarray:
-        """Q (N n, r): an orthonormal basis of the weighted, rest-demeaned rigid columns (`rows`), remembered (the
-        one at the logged angles kept for good). From the Gram matrix AᵀA = V Λ Vᵀ: Q = A V Λ^(−1/2) on the
-        eigenvalues above `RANK_TOL` × the largest (a hundred times cheaper than an SVD of A, and as exact for
-        the directions it keeps)."""
+        """Q (N n, r): an orthonormal basis (`orthonormal`) of the weighted, rest-demeaned rigid columns (`rows`),
+        remembered (the one at the logged angles kept for good)."""
         kind = "Q" if delta is not None else "Q0"
         key = (kind, *_identity(ds), None if delta is None else np.asarray(delta).tobytes())
         if key not in self._cache:
             # the base parameters' columns span the same space as all of Y's (`identify.base`), at a third of the cost
             A = self.rows(self.regressor(ds, delta)[:, :, self.independent], ds)
-            lam, V = np.linalg.eigh(A.T @ A)
-            keep = lam > RANK_TOL * max(lam[-1], np.finfo(float).tiny)
             if kind == "Q":
                 self._trim("Q")
-            self._cache[key] = (A @ V[:, keep]) / np.sqrt(lam[keep])
+            self._cache[key] = orthonormal(A)
+        return self._cache[key]
+
+    def inertial_basis(self, ds: Dataset) -> np.ndarray:
+        """Q (N n, r): `basis` of the rigid body's inertial columns alone (the base parameters that are neither
+        friction nor offsets), at the logged angles, remembered."""
+        key = ("Qinertial", *_identity(ds))
+        if key not in self._cache:
+            kinds = [p.kind for p in self.arm.parameters]
+            inertial = [i for i in self.independent if kinds[i] not in ("friction", "other")]
+            self._cache[key] = orthonormal(self.rows(self.regressor(ds)[:, :, inertial], ds))
         return self._cache[key]
 
     def demean(self, X: np.ndarray, ds: Dataset) -> np.ndarray:
@@ -513,6 +519,15 @@ def target(family: ArmFamily, ds: Dataset, theta: dict, ctx: ArmContext) -> np.n
     return advanced(ds.tau, family.delay(theta), step(ds))
 
 
+def orthonormal(A: np.ndarray) -> np.ndarray:
+    """Q (rows, r): an orthonormal basis of A's columns. From the Gram matrix AᵀA = V Λ Vᵀ: Q = A V Λ^(−1/2) on the
+    eigenvalues above `RANK_TOL` × the largest (a hundred times cheaper than an SVD of A, and as exact for the
+    directions it keeps)."""
+    lam, V = np.linalg.eigh(A.T @ A)
+    keep = lam > RANK_TOL * max(lam[-1], np.finfo(float).tiny)
+    return (A @ V[:, keep]) / np.sqrt(lam[keep])
+
+
 def projection(
     Q: np.ndarray, X: np.ndarray, t: np.ndarray, ds: Dataset, ctx: ArmContext
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -615,13 +630,7 @@ def _screen(family: ArmFamily, baseline: str, start: dict, ctx: ArmContext) -> t
     tr = ctx.train
     A, y, w, nonneg, o, X, names, _, _ = problem(family, tr, start, baseline, ctx)
     if family.screen_inertia_free and baseline == "datasheet":
-        kinds = [p.kind for p in ctx.arm.parameters]
-        inertial = [i for i in ctx.independent if kinds[i] not in ("friction", "other")]
-        B = ctx.rows(ctx.regressor(tr)[:, :, inertial], tr)
-        lam, V = np.linalg.eigh(B.T @ B)
-        keep = lam > RANK_TOL * max(lam[-1], np.finfo(float).tiny)
-        Q = (B @ V[:, keep]) / np.sqrt(lam[keep])
-        A, y = projection(Q, X, target(family, tr, start, ctx) - o, tr, ctx)
+        A, y = projection(ctx.inertial_basis(tr), X, target(family, tr, start, ctx) - o, tr, ctx)
         w = np.ones(ctx.n)
     ls = linear.solve_nonnegative(np.zeros_like(y), A, y, w, nonneg, True)
     se, free = ls.se.copy(), np.isfinite(ls.se) & (ls.se > 0)
