@@ -99,7 +99,8 @@ calibration: $(STAMP)
 	    --channel col10 --channel col11 --channel col12 --channel col13 --out results
 
 ## Where the derivative cut-off rule and the recommended fit stand in simulation, against the best cut-off in
-## hindsight (results/cutoff_study_<seeds>.md; about 15 min per seed set on 2 cores). SEEDS=tuning|unseen.
+## hindsight and a cross-validated yardstick (results/cutoff_study_<seeds>.md; about 3 min per set of three seeds on
+## 2 cores, 10 min for the ten fresh ones). SEEDS=tuning|unseen|fresh.
 SEEDS ?= tuning
 cutoff-study: $(STAMP)
 	$(BIN)/python benchmarks/cutoff_study.py --seeds $(SEEDS) --out results

@@ -5,32 +5,58 @@
 
 Each split trains on some of a design's shipped trials with the problem's default settings (the derivative cut-off
 "auto", the recommended fit) and tests on the others. The makers' parameters are the problem's [reference]
-(model_2.0 of each design, from the makers' repository). Also prints the share of the makers' squared error that
-lies above the test trials' derivative cut-off (the torque's white noise there: no model of the motion predicts it,
-so it bounds the ratio from below), the ratio in the motion band below the cut-off, and the recommended fit's
-parameters against theirs. Writes nothing; the issue-29 closing note quotes its output.
+(C.0's model_3.0, A.0's model_2.0, from the makers' repository). The makers fitted them on their recordings 00-13
+of one day (C.0: 2022-09-14, A.0: 2022-08-15), so on every split drawn from those days their parameters have seen
+the test trial and ours have not. The last two splits test on A.0's open-loop sines of 2022-08-12, which neither
+fit saw; their torque is the commanded one (the older log format has no measured torque), which in open loop is
+what the driver was asked to apply, free of the measured torque's white noise. Also prints the share of the makers'
+squared error that lies above the test trials' derivative cut-off (on measured torque mostly white noise, which no
+model of the motion predicts, so it bounds the ratio from below), the ratio in the motion band below the cut-off, and
+the recommended fit's parameters against theirs. Writes nothing; the issue-29 closing note quotes its output.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 import ident_opt as io
-from ident_opt.data import Dataset
+from ident_opt.data import Dataset, load_dataset
 from ident_opt.derivatives import lowpass
 from ident_opt.studies.recommend import recommended_fit
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# (problem, folder, training trials, test trials): the shipped splits, and the other way round where it makes sense.
+
+def trajectories(*ids: str) -> tuple[str, ...]:
+    """The shipped trials trajectory_<id>.csv.gz."""
+    return tuple(f"trajectory_{i}.csv.gz" for i in ids)
+
+
+#: A.0's 2022-08-12 open-loop sines (data/dfki_a0/NOTICE.md): the older log format, commanded torque.
+SINES = ("sines_20220812_055032.csv.gz", "sines_20220812_055640.csv.gz", "sines_20220812_055903.csv.gz")
+#: How the older format's columns map (angles 0 hanging, as in the newer one).
+OLD_FORMAT = {"t": "time", "q1": "pos1", "q2": "pos2", "tau1": "tau1", "tau2": "tau2"}
+
+# (problem, folder, training files, test files, test columns): the shipped splits, the other way round where it
+# makes sense, and the split that neither side has seen.
 SPLITS = (
-    ("dfki_c0.toml", "dfki", ("00", "01", "02", "03", "04", "05", "06", "13"), ("12",)),
-    ("dfki_c0.toml", "dfki", ("03", "04", "05", "06", "12", "13"), ("00", "01", "02")),
-    ("dfki_a0.toml", "dfki_a0", ("11",), ("00",)),
-    ("dfki_a0.toml", "dfki_a0", ("00",), ("11",)),
+    ("dfki_c0.toml", "dfki", trajectories("00", "01", "02", "03", "04", "05", "06", "13"), trajectories("12"), None),
+    ("dfki_c0.toml", "dfki", trajectories("03", "04", "05", "06", "12", "13"), trajectories("00", "01", "02"), None),
+    ("dfki_a0.toml", "dfki_a0", trajectories("11"), trajectories("00"), None),
+    ("dfki_a0.toml", "dfki_a0", trajectories("00"), trajectories("11"), None),
+    ("dfki_a0.toml", "dfki_a0", trajectories("11"), SINES, OLD_FORMAT),
+    ("dfki_a0.toml", "dfki_a0", trajectories("00", "11"), SINES, OLD_FORMAT),
 )
+
+
+def load(problem, paths: list[Path], columns: dict[str, str] | None) -> list[Dataset]:
+    """The trials at `paths`, read with the problem's [data] or, given `columns`, with that column map (the
+    problem's conversions kept: q1's zero moved to the horizontal)."""
+    spec = problem.data if columns is None else replace(problem.data, columns=columns)
+    return [load_dataset(p, spec, problem.robot) for p in paths]
 
 
 def rmse(arm, pi: np.ndarray, trials: list[Dataset], band: bool = False) -> np.ndarray:
@@ -45,12 +71,10 @@ def rmse(arm, pi: np.ndarray, trials: list[Dataset], band: bool = False) -> np.n
 
 def main() -> None:
     """Print, per split, the recommended fit's held-out RMSE over the makers' and its parameters over theirs."""
-    for name, folder, train_ids, test_ids in SPLITS:
+    for name, folder, train_files, test_files, columns in SPLITS:
         problem = io.load_problem(ROOT / "problems" / name)
-        path = ROOT / "data" / folder / "trajectory_{}.csv.gz"
-        train, test = io.load_trials(
-            problem, data=[str(path).format(i) for i in train_ids], test=[str(path).format(i) for i in test_ids]
-        )
+        train = load(problem, [ROOT / "data" / folder / f for f in train_files], None)
+        test = load(problem, [ROOT / "data" / folder / f for f in test_files], columns)
         arm = problem.robot.model()
         fit, found = recommended_fit(problem.robot, arm, train, problem)
         makers = np.array([problem.reference.parameters[n] for n in arm.names])
@@ -59,7 +83,8 @@ def main() -> None:
         # The share of their error above the cut-off: white torque noise there, which no model of the motion predicts.
         floor = 1.0 - (rmse(arm, makers, test, band=True) / theirs) ** 2
         band = rmse(arm, fit.pi, test, band=True) / rmse(arm, makers, test, band=True)
-        print(f"{name}: train {'+'.join(train_ids)} -> test {'+'.join(test_ids)}")
+        shown = lambda files: " + ".join(f.removesuffix(".csv.gz").removeprefix("trajectory_") for f in files)  # noqa: E731
+        print(f"{name}: train {shown(train_files)} -> test {shown(test_files)}")
         print(f"  recommended: {found.recommendation.estimator} ({found.recommendation.why})")
         print(f"  cut-offs [Hz]: {', '.join(f'{d.cutoff_hz:.1f}' for d in found.trials)}")
         print(f"  held-out RMSE / makers': {'  '.join(f'joint {j + 1} {r:.3f}' for j, r in enumerate(ratio))}")

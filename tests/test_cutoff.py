@@ -140,3 +140,17 @@ def test_auto_is_the_default_and_reads_each_real_trial(tmp_path):
     for path in problem.data.training[:3]:
         d = load_dataset(path, problem.data, problem.robot)
         assert 2.0 < d.cutoff_hz < 20.0
+
+
+def test_the_cross_validated_yardstick_picks_each_trials_cutoff_from_the_other_trials():
+    """The study's cross-validated hindsight (`studies.cutoff_study.cross_validated_best`): seed i is scored at the
+    grid point best over the other seeds, never where its own draw was lucky. Grid point A is best by the median
+    over all three seeds (0.3 against B's 0.4) only because seeds 0 and 1 were lucky there."""
+    from ident_opt.studies.cutoff_study import cross_validated_best
+
+    errors = np.array([[0.2, 0.4], [0.3, 0.4], [0.9, 0.4]])  # seeds x (A, B)
+    assert np.min(np.median(errors, axis=0)) == pytest.approx(0.3)  # the per-condition best: A
+    # seed 0: the others' medians are A 0.6, B 0.4 -> B (0.4); seed 1: A 0.55, B 0.4 -> B (0.4); seed 2: A 0.25 -> A
+    # (0.9). The median of 0.4, 0.4, 0.9:
+    assert cross_validated_best(errors) == pytest.approx(0.4)
+    assert np.isnan(cross_validated_best(errors[:1]))
