@@ -1,7 +1,7 @@
 """Where the derivative cut-off rule and the recommended fit stand, in simulation (`ident_opt.studies.cutoff_study`):
 every kind of motion × sampling rate × noise factor, against the best cut-off in hindsight.
 
-    .venv/bin/python benchmarks/cutoff_study.py [--seeds tuning|unseen] [--out results]
+    .venv/bin/python benchmarks/cutoff_study.py [--seeds tuning|unseen|fresh] [--out results]
 
 `tuning` seeds are the ones the rule was developed on; `unseen` ones were looked at for final tables (from stop
 33 on); `fresh`, ten seeds, run once with the rule unchanged. Each writes results/cutoff_study_<seeds>.md (.csv,

@@ -52,6 +52,11 @@ SPLITS = (
 )
 
 
+def named(files: tuple[str, ...]) -> str:
+    """The trials as the output names them: 00 + 11, sines_20220812_055032 + …"""
+    return " + ".join(f.removesuffix(".csv.gz").removeprefix("trajectory_") for f in files)
+
+
 def load(problem, paths: list[Path], columns: dict[str, str] | None) -> list[Dataset]:
     """The trials at `paths`, read with the problem's [data] or, given `columns`, with that column map (the
     problem's conversions kept: q1's zero moved to the horizontal)."""
@@ -83,8 +88,7 @@ def main() -> None:
         # The share of their error above the cut-off: white torque noise there, which no model of the motion predicts.
         floor = 1.0 - (rmse(arm, makers, test, band=True) / theirs) ** 2
         band = rmse(arm, fit.pi, test, band=True) / rmse(arm, makers, test, band=True)
-        shown = lambda files: " + ".join(f.removesuffix(".csv.gz").removeprefix("trajectory_") for f in files)  # noqa: E731
-        print(f"{name}: train {shown(train_files)} -> test {shown(test_files)}")
+        print(f"{name}: train {named(train_files)} -> test {named(test_files)}")
         print(f"  recommended: {found.recommendation.estimator} ({found.recommendation.why})")
         print(f"  cut-offs [Hz]: {', '.join(f'{d.cutoff_hz:.1f}' for d in found.trials)}")
         print(f"  held-out RMSE / makers': {'  '.join(f'joint {j + 1} {r:.3f}' for j, r in enumerate(ratio))}")
