@@ -100,7 +100,7 @@ calibration: $(STAMP)
 
 ## Where the derivative cut-off rule and the recommended fit stand in simulation, against the best cut-off in
 ## hindsight and a cross-validated yardstick (results/cutoff_study_<seeds>.md; about 3 min per set of three seeds on
-## 2 cores, 10 min for the ten fresh ones). SEEDS=tuning|unseen|fresh.
+## 2 cores, 15 min for the ten fresh ones). SEEDS=tuning|unseen|fresh.
 SEEDS ?= tuning
 cutoff-study: $(STAMP)
 	$(BIN)/python benchmarks/cutoff_study.py --seeds $(SEEDS) --out results

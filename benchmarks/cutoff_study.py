@@ -5,7 +5,7 @@ every kind of motion × sampling rate × noise factor, against the best cut-off 
 
 `tuning` seeds are the ones the rule was developed on; `unseen` ones were looked at for final tables (from stop
 33 on); `fresh`, ten seeds, run once with the rule unchanged. Each writes results/cutoff_study_<seeds>.md (.csv,
-.json, .png). About 3 min on 2 cores for a set of three seeds, 10 min for `fresh`.
+.json, .png). About 3-4 min on 2 cores for a set of three seeds, 15 min for `fresh` (893 s measured).
 """
 
 from __future__ import annotations
