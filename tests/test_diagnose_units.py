@@ -443,3 +443,69 @@ def test_a_family_that_contains_another_cause_must_clear_the_margin_against_it_t
     assert rows[0]["clears_margin"]
     rows = rows_after([fitted("elasticity", [0.99, 0.5], 41.0), armature])
     assert rows[0]["clears_margin"]
+
+
+def _elastic_trial(joint: int):
+    """A short noise-free trial of tudor_sim with an elastic joint `joint` at 4 Hz, its dataset and a context."""
+    from ident_opt.arm.datasheet import datasheet_pi, rigid_body
+    from ident_opt.diagnosis import candidates as cands
+    from ident_opt.problem import load_problem
+    from ident_opt.simulate import simulate_trial
+
+    robot = load_problem("problems/tudor_sim.toml").robot
+    sim = simulate_trial(
+        robot,
+        duration=4.0,
+        seed=4,
+        noise=False,
+        exact_derivatives=True,
+        progress=False,
+        effects={"elasticity": {"joint": joint, "frequency_hz": 4.0, "damping": 0.03}},
+    )
+    ds = sim.dataset()
+    dt = float(np.median(np.diff(ds.t)))
+    pi = datasheet_pi(robot, "physical")
+    armature = rigid_body(robot, "physical").armature
+    return sim, ds, cands.Context(robot, ds, ds, np.ones(2), pi, dt, signals.rest_runs(ds.dq), armature)
+
+
+def test_the_elastic_columns_stiffness_is_gravitys_slope_at_rest():
+    """K = ∂τ_link/∂q_j of the planar elastic column against the closed form at rest: the link-side torque is
+    gravity alone, G = (b1 cos q1 + b2 cos(q1 + q2), b2 cos(q1 + q2)), so K_j = ∂G/∂q_j."""
+    from ident_opt.effects.elasticity import elastic_drive
+
+    _, ds, ctx = _elastic_trial(2)
+    rest = replace_motion(ds)
+    b1, b2 = ctx.datasheet["b1"], ctx.datasheet["b2"]
+    q1, q12 = rest.q[:, 0], rest.q[:, 0] + rest.q[:, 1]
+    slope = {
+        1: np.column_stack([-b1 * np.sin(q1) - b2 * np.sin(q12), -b2 * np.sin(q12)]),
+        2: np.column_stack([-b2 * np.sin(q12), -b2 * np.sin(q12)]),
+    }
+    for joint in (1, 2):
+        _, _, K = elastic_drive(joint, rest, ctx)
+        np.testing.assert_allclose(K, slope[joint], rtol=1e-6, atol=1e-8 * abs(b1))
+
+
+def replace_motion(ds: Dataset) -> Dataset:
+    """`ds` at its poses with the joints held (dq = ddq = 0)."""
+    from dataclasses import replace
+
+    return replace(ds, dq=np.zeros_like(ds.dq), ddq=np.zeros_like(ds.ddq))
+
+
+def test_the_elastic_columns_deflection_starts_at_the_simulated_spring_sag():
+    """Independent reference: the simulator's elastic joint starts at rest with its spring holding the link against
+    gravity (its own fixed point, k e = G_j). The column's deflection starts from the static sag of its drive,
+    e = −τ_link,j / (M_jj ω²): the same number for joint 2 (whose link inertia is the spring's k / ω²), where an
+    inertia-only drive would start at 0."""
+    from ident_opt.effects.elasticity import elastic_drive
+
+    sim, ds, ctx = _elastic_trial(2)
+    u, _, K = elastic_drive(2, ds, ctx)
+    e, _ = signals.deflection(u, 4.0, 0.03, ctx.dt)
+    logged = -sim.frame["deflection2"].to_numpy()  # the log's θ − q; the column's e is q − θ
+    k = sim.truth["effects"]["elasticity"]["stiffness"]
+    assert abs(logged[0]) > 1e-2  # a sag worth checking [rad]
+    assert abs(K[0, 1]) / k < 0.05  # where first order is first order
+    assert abs(e[0] / logged[0] - 1) <= 0.1

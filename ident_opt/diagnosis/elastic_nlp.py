@@ -1,15 +1,16 @@
 """IPOPT polish of the elastic candidate: the mode (f, ζ) jointly with every linear coefficient, by multiple
 shooting of the elastic-joint model driven by the measured motor-side motion.
 
-The model (`effects/elasticity.py`, `signals.deflection_acceleration`): the link behind elastic joint j
-deflects by e from its motor, driven by the measured motor-side acceleration u [rad/s²],
+The model (`effects/elasticity.py`, `signals.deflection`): the link behind elastic joint j deflects by e from
+its motor, driven by u [rad/s²], the link-side torque the measured motion demands at joint j over its inertia,
 
-    ë + 2ζω ė + ω² e = −u,        τ̂ = o + X_rigid β + s · P ë,        ω = 2π f,
+    ë + 2ζω ė + ω² e = −u,        τ̂ = o + X_rigid β + s · (P ë + K e),        ω = 2π f,
 
-with P (N, 2) the datasheet inertia pattern (link inertia on row j, the coupling on the other row) and s the
-scale of that inertia, so the spring is k = s·m_link·ω² [N m/rad] and the damper c = 2ζω·s·m_link
-[N m s/rad]. (f, ζ, s) ↔ (k, c, s) is one-to-one: fitting the frequency and damping ratio jointly with s is
-fitting the stiffness and damping jointly with the inertia.
+with P (N, 2) the datasheet inertia pattern (link inertia on row j, the coupling on the other row), K (N, 2)
+gravity's slope ∂τ_link/∂q_j (the sag's torque), and s the scale of both, so the spring is k = s·m_link·ω²
+[N m/rad] and the damper c = 2ζω·s·m_link [N m s/rad]. (f, ζ, s) ↔ (k, c, s) is one-to-one: fitting the
+frequency and damping ratio jointly with s is fitting the stiffness and damping jointly with the inertia. The
+first segment starts from the static sag of the first drive (e = −u₀/ω², as `signals.deflection`).
 
 Discretisation: the trapezoidal rule on the state x = (e, ė) with ω pre-warped, ω_w = (2/h) tan(π f h). For a
 linear system that *is* the bilinear (Tustin) transform, i.e. exactly the filter `deflection_acceleration`
@@ -22,8 +23,7 @@ state is a decision variable, tied to the previous segment's end by an equality 
 mode rings for 1/(ζω) ≈ 10 s, so in a single-shooting objective over a minute the late samples' phase moves
 by ω·t per unit of ω — the cost in f is a comb of local minima a few mHz apart. Lifted into segments, each
 segment only sees a second of phase, and the constraints carry the state across: the classical remedy.
-The first segment starts from the filter's own initial state (zero history), so at convergence the
-continuity constraints make the lifted problem the same as the original one.
+At convergence the continuity constraints make the lifted problem the same as the original one.
 
 The rest stretches' projection (`signals.demean_runs`: within each rest stretch only variations count) is a
 linear operator; it is applied to the symbolic ë as sparse "subtract the stretch mean" products. Joint
@@ -97,31 +97,37 @@ def _basis(A: np.ndarray) -> np.ndarray:
     return U[:, sv > sv[0] * max(A.shape) * np.finfo(float).eps]
 
 
+def static_state(u0, h: float, f, tan=ca.tan):
+    """The mode's state at rest under a constant drive u0 [rad/s²]: (e, ė) = (−u0 / ω², 0), ω pre-warped at the
+    step h [s] (`signals.deflection`'s start: a load present from the start, gravity, is a sag, not a step)."""
+    w = 2.0 / h * tan(math.pi * f * h)
+    return -u0 / (w * w), 0.0 * u0
+
+
 def _simulate(u_ext: np.ndarray, h: float, f: float, zeta: float, steps: int) -> np.ndarray:
     """States (steps + 1, 2) of the mode at f [Hz], ζ driven by u_ext [rad/s²] on a grid of step h [s], from
-    the filter's zero-history initial state (single shooting, the start of the NLP)."""
+    the static state of the first drive (single shooting, the start of the NLP)."""
     step = trapezoid_step(h, math.tan)
     states = np.zeros((steps + 1, 2))
-    w0 = 2.0 / h * math.tan(math.pi * f * h)
-    a0, b0 = h / 2.0, w0 * w0 * h / 2.0
-    det0 = 1.0 + zeta * w0 * h + a0 * b0
-    states[0] = [a0 * (-a0 * u_ext[0]) / det0, (-a0 * u_ext[0]) / det0]  # lfilter's zero-history state
+    states[0] = static_state(float(u_ext[0]), h, f, math.tan)
     for k in range(steps):
         e, ed, _ = step(states[k, 0], states[k, 1], u_ext[k], u_ext[k + 1], f, zeta)
         states[k + 1] = [float(e), float(ed)]
     return states
 
 
-def _shooting(u_ext, h: float, S: int, L: int, f, zeta, first: np.ndarray, xs, x_scale: np.ndarray) -> tuple:
-    """(continuity gaps (2(S − 1),) scaled by x_scale, ë (S·L,) in time order) of S segments of L steps run in
-    parallel (one SX step over S-vectors, accumulated L times): the first from the state `first`, the others
-    from the decision variables xs (2, S − 1) × x_scale; f, ζ symbolic."""
+def _shooting(u_ext, h: float, S: int, L: int, f, zeta, xs, x_scale: np.ndarray) -> tuple:
+    """(continuity gaps (2(S − 1),) scaled by x_scale, e (S·L,), ë (S·L,) in time order) of S segments of L steps
+    run in parallel (one SX step over S-vectors, accumulated L times): the first from the static state of the
+    first drive (`static_state`), the others from the decision variables xs (2, S − 1) × x_scale; f, ζ
+    symbolic."""
     e_s, ed_s, uk_s, uk1_s = (ca.SX.sym(nm, S) for nm in ("e", "ed", "uk", "uk1"))
     par = ca.SX.sym("par", 2)
     e_n, ed_n, y = trapezoid_step(h)(e_s, ed_s, uk_s, uk1_s, par[0], par[1])
     one = ca.Function("one", [ca.vertcat(e_s, ed_s), ca.vertcat(uk_s, uk1_s, par)], [ca.vertcat(e_n, ed_n), y])
     run = one.mapaccum(L)
-    x_start = ca.horzcat(ca.DM(first), xs * ca.DM(x_scale))  # (2, S)
+    first = ca.vertcat(*static_state(float(u_ext[0]), h, f))
+    x_start = ca.horzcat(first, xs * ca.DM(x_scale))  # (2, S)
     x0 = ca.vertcat(x_start[0, :].T, x_start[1, :].T)
     U = u_ext[: S * L].reshape(S, L)
     U1 = u_ext[1 : S * L + 1].reshape(S, L)
@@ -129,7 +135,9 @@ def _shooting(u_ext, h: float, S: int, L: int, f, zeta, first: np.ndarray, xs, x
     X_all, Y = run(x0, inputs)  # (2S, L), (S, L)
     ends = X_all[:, -1]
     gap = ca.vertcat(ends[: S - 1] - x_start[0, 1:].T, ends[S : 2 * S - 1] - x_start[1, 1:].T)
-    return gap / ca.DM(np.repeat(x_scale, S - 1)), ca.reshape(Y.T, S * L, 1)
+    # e at each step's start: the segment's first state, then the states the steps reach (all but the last)
+    E = ca.horzcat(x_start[0, :].T, X_all[:S, :-1])  # (S, L)
+    return gap / ca.DM(np.repeat(x_scale, S - 1)), ca.reshape(E.T, S * L, 1), ca.reshape(Y.T, S * L, 1)
 
 
 def polish(
@@ -143,15 +151,18 @@ def polish(
     theta: dict,
     beta: np.ndarray,
     bounds: dict[str, tuple[float, float]],
+    stiffness: np.ndarray | None = None,
 ) -> tuple[dict | None, dict]:
     """IPOPT on (f, ζ, s, segment states), the rigid β projected out; returns (polished θ or None, info).
 
     u (N,) the drive [rad/s²]; pattern (N, 2) P [kg m²]; target (N, 2) τ − o [N m]; X_rigid (N, 2, k−1) the
     other columns; labels (N, 2) rest stretches; weights (2,) 1/σ_j²; θ = {"frequency_hz", "damping"} and
-    β (k,) (scale last) the search's answer; `bounds` the search box of f [Hz] and ζ."""
+    β (k,) (scale last) the search's answer; `bounds` the search box of f [Hz] and ζ; `stiffness` (N, 2) K
+    [N m/rad], the deflection's own column (τ̂ gains s·K e; None: 0)."""
     t0 = time.perf_counter()
     every = max(1, -(-len(u) // MAX_ROWS))
-    u, pattern, target, X_rigid, labels = (a[::every] for a in (u, pattern, target, X_rigid, labels))
+    K = np.zeros_like(pattern) if stiffness is None else stiffness
+    u, pattern, K, target, X_rigid, labels = (a[::every] for a in (u, pattern, K, target, X_rigid, labels))
     if every > 1:  # stretch labels on the decimated grid: relabel consecutive runs
         labels = signals.rest_runs(np.where(labels >= 0, 0.0, 1.0))
     h = dt * every
@@ -172,13 +183,13 @@ def polish(
     sw = np.sqrt(np.asarray(weights, dtype=float))
     Xd = signals.demean_runs(X_rigid, labels) * sw[None, :, None]
     Q = _basis(Xd.transpose(1, 0, 2).reshape(2 * n, k - 1))
-    ref = signals.deflection_acceleration(u, f0, z0, h)
-    s_scale = max(float(np.linalg.norm(pattern * ref[:, None] * sw[None, :])), 1e-300)
+    e_ref, edd_ref = signals.deflection(u, f0, z0, h)
+    s_scale = max(float(np.linalg.norm((pattern * edd_ref[:, None] + K * e_ref[:, None]) * sw[None, :])), 1e-300)
     lf, lz = ca.MX.sym("lf"), ca.MX.sym("lz")
     ss = ca.MX.sym("s")
     xs = ca.MX.sym("x", 2, S - 1)
-    gap, edd = _shooting(u_ext, h, S, L, ca.exp(lf), ca.exp(lz), states[0], xs, x_scale)
-    edd = edd[:n]  # time order
+    gap, e, edd = _shooting(u_ext, h, S, L, ca.exp(lf), ca.exp(lz), xs, x_scale)
+    e, edd = e[:n], edd[:n]  # time order
 
     # Weighted, rest-projected residual of both joints stacked: ρ = √w (t − s·v(f, ζ)). The rigid columns
     # enter linearly, so their best coefficients for any (f, ζ, s) are a least-squares solve; minimising
@@ -186,7 +197,8 @@ def polish(
     # (variable projection, Golub–Pereyra: the same minimiser as the joint problem in (f, ζ, s, β), without
     # the ill-conditioned quadratic in β that slows a quasi-Newton method down).
     td = signals.demean_runs(target, labels) * sw[None, :]
-    v = ca.vertcat(*[sw[j] * demean_mx(ca.DM(pattern[:, j]) * edd, labels[:, j]) for j in range(2)])
+    column = [ca.DM(pattern[:, j]) * edd + ca.DM(K[:, j]) * e for j in range(2)]
+    v = ca.vertcat(*[sw[j] * demean_mx(column[j], labels[:, j]) for j in range(2)])
     rho = ca.DM(td.T.reshape(-1)) - (ss / s_scale) * v
     if Q.shape[1]:
         rho = rho - ca.mtimes(ca.DM(Q), ca.mtimes(ca.DM(Q.T), rho))

@@ -12,11 +12,12 @@ In the simulator (values in SI units):
 
 Either way the plant gains two states and logs the spring's deflection as ``deflection<j>``.
 
-Diagnosis, once per joint j: the column s·(m_link,j ë_j on row j + M_oj(q2) ë_j on the other), datasheet
-inertias (`elastic_drive`), with ë_j the deflection acceleration of an elastic joint j driven by the
-measured motor-side acceleration (`signals.deflection_acceleration`): an elastic-joint model driven by the
-logged motor-side angle. The mode's f and ζ are searched by variable projection, then polished by IPOPT
-jointly with every β by multiple shooting (`diagnose/elastic_nlp.py`), against both nominal models.
+Diagnosis, once per joint j, the same model on the planar arm (`elastic_drive`) and on an n-joint arm
+(`_arm_columns`): the link behind joint j deflects by e, driven by the link-side torque the measured motion
+demands at joint j, ë + 2ζω ė + ω² e = −τ_link,j / M_jj (datasheet inertias, `signals.deflection`); the torque
+gains s·(M_link[:, j] ë + ∂τ_link/∂q_j e), the mode's inertia and gravity's sag. The mode's f and ζ are searched
+by variable projection; on the planar arm IPOPT then polishes them jointly with every β by multiple shooting
+(`diagnosis/elastic_nlp.py`), against both nominal models.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from ident_opt.effects.base import (
     Key,
     afit,
     ca,
+    cands,
     edge_rule,
     elastic_nlp,
     flexible_link,
@@ -394,23 +396,33 @@ class Elasticity(Effect):
         return [(same, 0.0 if same else 1.0), (rel <= FREQUENCY_TOL, rel)]
 
 
-def elastic_drive(joint: int, ds, ctx) -> tuple[np.ndarray, np.ndarray]:
-    """(u (N,) [rad/s²], P (N, 2) [kg m²]): the drive of elastic joint j's link and its inertia pattern.
+def elastic_drive(joint: int, ds, ctx) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(u (N,) [rad/s²], P (N, 2) [kg m²], K (N, 2) [N m/rad]): the drive of elastic joint j's link, its inertia
+    pattern and its stiffness pattern, from the datasheet's link side (friction and the rotors' inertia removed).
 
-    The link behind an elastic joint j is driven by its motor's acceleration and, through the off-diagonal
-    inertia, by the other joint's: u = θ̈_j + (M_jo(q2) / M_jj,link(q2)) q̈_o, with the inertias from the
-    datasheet (link side: without joint j's armature). The spring carries link j's inertia on its own row,
-    m_link·ë; the other row feels the coupling M_oj·ë. One free scale s on that physical pattern: the pattern
-    (which row rings how much) is what tells an elastic joint 1 from an elastic joint 2, so it is not free."""
-    p, arm = ctx.datasheet, ctx.armature
-    c2 = np.cos(ds.q[:, 1])
-    m_cross = p["a3"] + p["a2"] * c2
-    m_link = (p["a1"] - arm[0] + 2 * p["a2"] * c2) if joint == 1 else np.full(ds.n, p["a3"])
-    other = 2 - joint
-    u = ds.ddq[:, joint - 1] + m_cross / m_link * ds.ddq[:, other]
-    P = np.zeros((ds.n, 2))
-    P[:, joint - 1], P[:, other] = m_link, m_cross
-    return u, P
+    The link behind an elastic joint j sits at q_j = θ_j + e. Its spring carries the link-side torque the measured
+    motion demands at joint j, τ_link,j (inertial, Coriolis and gravity), so the deflection is driven by
+    u = τ_link,j / M_jj,link (the same model as the n-joint engine's, `_arm_columns`): at rest it is gravity's
+    static sag, in motion the mode. The torques then differ from the rigid model's at θ by P ë + K e, with
+    P = M_link[:, j] (link j's inertia on its own row, the coupling on the other) and K = ∂τ_link/∂q_j (what
+    the sag does to gravity's torque on both rows). One free scale s on that physical pattern: the pattern (which
+    row rings how much) is what tells an elastic joint 1 from an elastic joint 2, so it is not free."""
+    key = ("elastic_drive", joint, id(ds), ds.n, ds.q[0].tobytes(), ds.q[-1].tobytes())
+    cache = ctx.__dict__.setdefault("_elastic_cache", {})
+    if key not in cache:
+        model = cands.NOMINAL
+        pi = sim.link_pi(model, model.vector(ctx.datasheet), ctx.armature)
+        unit, zero = np.zeros_like(ds.ddq), np.zeros_like(ds.ddq)
+        unit[:, joint - 1] = 1.0
+        P = model.predict(pi, ds.q, zero, unit) - model.predict(pi, ds.q, zero, zero)
+        tau_link = model.predict(pi, ds.q, ds.dq, ds.ddq)
+        h = 1e-6  # central differences: the planar model is smooth in q, and this is exact to ~1e-9 relative
+        dq_j = np.zeros_like(ds.q)
+        dq_j[:, joint - 1] = h
+        K = (model.predict(pi, ds.q + dq_j, ds.dq, ds.ddq) - model.predict(pi, ds.q - dq_j, ds.dq, ds.ddq)) / (2 * h)
+        cache.clear()  # one view at a time: a candidate family asks for the same view many times in a row
+        cache[key] = (tau_link[:, joint - 1] / P[:, joint - 1], P, K)
+    return cache[key]
 
 
 def _arm_columns(joint: int):
@@ -460,18 +472,16 @@ def _arm_estimate(joint: int):
 
 def _columns(joint: int):
     def columns(ds, theta: dict, dt: float, ctx) -> tuple[np.ndarray, list[str]]:
-        u, P = elastic_drive(joint, ds, ctx)
-        e = signals.deflection_acceleration(u, theta["frequency_hz"], theta["damping"], dt)
-        return (P * e[:, None])[:, :, None], ["scale"]
+        u, P, K = elastic_drive(joint, ds, ctx)
+        e, acceleration = signals.deflection(u, theta["frequency_hz"], theta["damping"], dt)
+        return (P * acceleration[:, None] + K * e[:, None])[:, :, None], ["scale"]
 
     return columns
 
 
 def _estimate(joint: int):
     def estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
-        c2 = np.cos(ctx.train.q[:, 1])
-        p0, arm = ctx.datasheet, ctx.armature
-        m_link = float(np.mean(p0["a1"] - arm[0] + 2 * p0["a2"] * c2)) if joint == 1 else p0["a3"]
+        m_link = float(np.mean(elastic_drive(joint, ctx.train, ctx)[1][:, joint - 1]))
         m_eff = p["scale"] * m_link  # the link inertia the spring carries [kg m²]
         w = 2 * math.pi * p["frequency_hz"]
         return (
@@ -490,9 +500,9 @@ def _estimate(joint: int):
 def _polish(joint: int):
     def polish(baseline: str, ctx, o, X, beta, theta: dict, bounds: dict) -> tuple[dict | None, dict]:
         # (f, ζ) with every β by IPOPT, multiple shooting; the scale s is the last column of X.
-        u, P = elastic_drive(joint, ctx.train, ctx)
+        u, P, K = elastic_drive(joint, ctx.train, ctx)
         tau = ctx.train.tau - o
-        return elastic_nlp.polish(u, P, tau, X[:, :, :-1], ctx.rest, ctx.weights, ctx.dt, theta, beta, bounds)
+        return elastic_nlp.polish(u, P, tau, X[:, :, :-1], ctx.rest, ctx.weights, ctx.dt, theta, beta, bounds, K)
 
     return polish
 
