@@ -102,12 +102,6 @@ def test_a_hardening_joints_mode_is_named_at_its_effective_frequency(robot):
     assert d.estimate["joint"] == 2 and d.estimate["frequency_hz"] == pytest.approx(f, rel=0.2)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 30, open: the first mode is found (3.73 Hz for 3.5) but a spurious armature of 0.0196 kg m² on "
-    "joint 1 (4 % of its rotor inertia; score 35.6) is named after it: inertia of the distributed link that the "
-    "single-mode elastic-joint model places elsewhere",
-)
 def test_a_distributed_links_first_mode_is_named(robot):
     """Link 1 as a beam (two modes, first at 3.5 Hz, 1 % damping on each), logged without derivatives: the first
     mode is `elasticity` on joint 1 within 20 %, and nothing else is named."""
