@@ -70,7 +70,7 @@ def test_confusion_matrix_counts_each_cause_named_per_hidden_case():
     assert first[2:] == ["| none | 1 | 0 | 1 |", "| payload | 1 | 0 | 0 |", "| delay | 0 | 1 | 1 |"]
 
 
-@pytest.mark.parametrize("seeds", ["tuning", "unseen"])
+@pytest.mark.parametrize("seeds", ["tuning", "unseen", "fresh"])
 def test_unseen_plants_saved_trials_render_to_its_committed_report(seeds):
     """`benchmarks/unseen_plants.py --tables` from the saved trial log gives the committed report, to the byte."""
     spec = importlib.util.spec_from_file_location("unseen_plants", ROOT / "benchmarks" / "unseen_plants.py")
