@@ -68,6 +68,9 @@ class Context:
     #: How a refitted π is estimated (`identify.estimators`: the recommended fit; `rigid`); None: jointly with the
     #: effect's coefficients by weighted least squares (the studies that compare causes' families use that).
     estimator: str | None = None
+    #: What the candidates compute once per data view and ask for again at every grid point (e.g. an elastic
+    #: joint's drive, `effects.elasticity.elastic_drive`), by key.
+    cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def rigid(self, model: PlanarArm, Y: np.ndarray, target: np.ndarray, Z: np.ndarray | None = None) -> np.ndarray:
         """π (P,) of `model` by the context's estimator on τ = `target` (N, 2) [N m] with regressor Y (N, 2, P) along

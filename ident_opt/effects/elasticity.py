@@ -407,9 +407,13 @@ def elastic_drive(joint: int, ds, ctx) -> tuple[np.ndarray, np.ndarray, np.ndarr
     P = M_link[:, j] (link j's inertia on its own row, the coupling on the other) and K = ∂τ_link/∂q_j (what
     the sag does to gravity's torque on both rows). One free scale s on that physical pattern: the pattern (which
     row rings how much) is what tells an elastic joint 1 from an elastic joint 2, so it is not free."""
-    key = ("elastic_drive", joint, id(ds), ds.n, ds.q[0].tobytes(), ds.q[-1].tobytes())
-    cache = ctx.__dict__.setdefault("_elastic_cache", {})
+    # Remembered for the last few views (an object's id alone may be reused once it is gone: its ends are in the
+    # key too). Few: an offset's search builds a new view at every trial angle.
+    key = (joint, id(ds), ds.n, ds.q[0].tobytes(), ds.q[-1].tobytes())
+    cache = ctx.cache.setdefault("elastic_drive", {})
     if key not in cache:
+        if len(cache) >= 4:
+            cache.pop(next(iter(cache)))  # the oldest
         model = cands.NOMINAL
         pi = sim.link_pi(model, model.vector(ctx.datasheet), ctx.armature)
         unit, zero = np.zeros_like(ds.ddq), np.zeros_like(ds.ddq)
@@ -420,7 +424,6 @@ def elastic_drive(joint: int, ds, ctx) -> tuple[np.ndarray, np.ndarray, np.ndarr
         dq_j = np.zeros_like(ds.q)
         dq_j[:, joint - 1] = h
         K = (model.predict(pi, ds.q + dq_j, ds.dq, ds.ddq) - model.predict(pi, ds.q - dq_j, ds.dq, ds.ddq)) / (2 * h)
-        cache.clear()  # one view at a time: a candidate family asks for the same view many times in a row
         cache[key] = (tau_link[:, joint - 1] / P[:, joint - 1], P, K)
     return cache[key]
 
