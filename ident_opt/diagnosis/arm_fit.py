@@ -119,7 +119,7 @@ class ArmContext:
         joints) is slower than its own stick speed on every row it reaches: its friction is set-valued there whatever
         its joints do (on a clean simulated TX40, joint 5's residual is 0.39 N m RMS there, 0.03 elsewhere).
         Remembered."""
-        key = ("labels", *_identity(ds))
+        key = ("labels", *view_key(ds))
         if key not in self._cache:
             labels = signals.rest_runs(ds.dq, self.stick_speed)
             if self.coupled:
@@ -136,7 +136,7 @@ class ArmContext:
     def regressor(self, ds: Dataset, delta: np.ndarray | None = None) -> np.ndarray:
         """Y (N, n, P) of `ds` at the angles q + δ (δ None: as logged), a coupled drive's Coulomb column 0 where the
         drive rests (`drive_rest`), remembered for the last few."""
-        key = ("Y", *_identity(ds), None if delta is None else np.asarray(delta).tobytes())
+        key = ("Y", *view_key(ds), None if delta is None else np.asarray(delta).tobytes())
         if key not in self._cache:
             q = ds.q if delta is None else ds.q + delta
             self._trim("Y")
@@ -168,7 +168,7 @@ class ArmContext:
     def drive_velocity(self, ds: Dataset) -> np.ndarray:
         """v = dq Cᵀ (N, n) [rad/s]: each drive's joint-side velocity along `ds`, a coupled drive's exactly 0 where it
         rests (`signals.resting`; a drive of its own joint rests with it, `loop.at_rest`), remembered per view."""
-        key = ("v", *_identity(ds))
+        key = ("v", *view_key(ds))
         if key not in self._cache:
             v = ds.dq @ self.arm.drive_matrix.T
             coupled = self.coupled
@@ -193,7 +193,7 @@ class ArmContext:
         """Q (N n, r): an orthonormal basis (`orthonormal`) of the weighted, rest-demeaned rigid columns (`rows`),
         remembered (the one at the logged angles kept for good)."""
         kind = "Q" if delta is not None else "Q0"
-        key = (kind, *_identity(ds), None if delta is None else np.asarray(delta).tobytes())
+        key = (kind, *view_key(ds), None if delta is None else np.asarray(delta).tobytes())
         if key not in self._cache:
             # the base parameters' columns span the same space as all of Y's (`identify.base`), at a third of the cost
             A = self.rows(self.regressor(ds, delta)[:, :, self.independent], ds)
@@ -205,7 +205,7 @@ class ArmContext:
     def inertial_basis(self, ds: Dataset) -> np.ndarray:
         """Q (N n, r): `basis` of the rigid body's inertial columns alone (the base parameters that are neither
         friction nor offsets), at the logged angles, remembered."""
-        key = ("Qinertial", *_identity(ds))
+        key = ("Qinertial", *view_key(ds))
         if key not in self._cache:
             kinds = [p.kind for p in self.arm.parameters]
             inertial = [i for i in self.independent if kinds[i] not in ("friction", "other")]
@@ -215,7 +215,7 @@ class ArmContext:
     def demean(self, X: np.ndarray, ds: Dataset) -> np.ndarray:
         """X (N, n, ...) with each joint's rest-stretch means removed (`signals.demean_runs` on `ds`'s stretches),
         by two sparse products per joint (stretch means, back to the samples), remembered per view."""
-        key = ("demean", *_identity(ds))
+        key = ("demean", *view_key(ds))
         if key not in self._cache:
             labels = self.labels(ds)
             operators = []
@@ -309,14 +309,14 @@ class ArmContext:
     def link_torque(self, ds: Dataset) -> np.ndarray:
         """τ_load (N, n) [N m]: the datasheet's link-side rigid torque at the measured motion (the joint terms —
         friction, armature, offsets — removed), remembered."""
-        key = ("load", *_identity(ds))
+        key = ("load", *view_key(ds))
         if key not in self._cache:
             self._cache[key] = self.regressor(ds) @ link_side(self.arm, self.datasheet)
         return self._cache[key]
 
     def inertia_column(self, ds: Dataset, joint: int) -> np.ndarray:
         """M_link(q)[:, j] (N, n) [kg m²]: joint j's column of the datasheet's link-side mass matrix along `ds`."""
-        key = ("M", *_identity(ds), joint)
+        key = ("M", *view_key(ds), joint)
         if key not in self._cache:
             pi = link_side(self.arm, self.datasheet)
             unit = np.zeros_like(ds.ddq)
@@ -336,11 +336,11 @@ class ArmContext:
     def stiffness_column(self, ds: Dataset, joint: int) -> np.ndarray:
         """∂τ_link/∂q_j (N, n) [N m/rad]: how the datasheet's link-side torque along `ds` changes with joint j's
         angle (gravity's stiffness and the motion's), remembered."""
-        key = ("K", *_identity(ds), joint)
+        key = ("K", *view_key(ds), joint)
         if key not in self._cache:
             J = self.torque_jacobian(ds, np.zeros(self.n), link_side(self.arm, self.datasheet))
             for j in range(self.n):
-                self._cache[("K", *_identity(ds), j)] = np.ascontiguousarray(J[:, :, j])
+                self._cache[("K", *view_key(ds), j)] = np.ascontiguousarray(J[:, :, j])
         return self._cache[key]
 
     def coulomb_terms(self) -> list[list[int]]:
@@ -386,7 +386,7 @@ def step(ds: Dataset) -> float:
     return float(np.median(np.diff(ds.t)))
 
 
-def _identity(ds: Dataset) -> tuple:
+def view_key(ds: Dataset) -> tuple:
     """What tells one data view from another in the caches: the object, its length, its first and last states
     (a view at shifted angles differs there; an object's id alone may be reused once it is gone)."""
     return id(ds), ds.n, ds.q[0].tobytes(), ds.q[-1].tobytes(), ds.dq[-1].tobytes()

@@ -407,9 +407,9 @@ def elastic_drive(joint: int, ds, ctx) -> tuple[np.ndarray, np.ndarray, np.ndarr
     P = M_link[:, j] (link j's inertia on its own row, the coupling on the other) and K = ∂τ_link/∂q_j (what
     the sag does to gravity's torque on both rows). One free scale s on that physical pattern: the pattern (which
     row rings how much) is what tells an elastic joint 1 from an elastic joint 2, so it is not free."""
-    # Remembered for the last few views (an object's id alone may be reused once it is gone: its ends are in the
-    # key too). Few: an offset's search builds a new view at every trial angle.
-    key = (joint, id(ds), ds.n, ds.q[0].tobytes(), ds.q[-1].tobytes())
+    # Remembered for the last few views (`arm_fit.view_key`). Few: an offset's search builds a new view at every
+    # trial angle.
+    key = (joint, *afit.view_key(ds))
     cache = ctx.cache.setdefault("elastic_drive", {})
     if key not in cache:
         if len(cache) >= 4:
