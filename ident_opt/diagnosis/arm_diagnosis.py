@@ -23,9 +23,8 @@ import numpy as np
 
 from ident_opt.arm.base import Robot
 from ident_opt.data import Dataset
-from ident_opt.diagnosis import arm_fit, evidence, loop, scoring, signals
+from ident_opt.diagnosis import arm_fit, evidence, loop, signals
 from ident_opt.diagnosis.loop import Diagnosis, Fitted
-from ident_opt.metrics import nmse
 
 #: Filter periods (1/cut-off) dropped at each end of a trial (`inner`).
 EDGE_PERIODS = 3.0
@@ -121,28 +120,16 @@ def diagnose(
     Y_test = ctx.regressor(test)
     nominal_pi = {"datasheet": ctx.datasheet, "rigid_fit": pi_rigid}
     nominal_pred = {b: Y_test @ pi for b, pi in nominal_pi.items()}
-    nominal_mse = {b: scoring.mse(test.tau, p, rest_test) for b, p in nominal_pred.items()}
-    nominal = {
-        b: {
-            "pi": arm.as_dict(nominal_pi[b]),
-            "nmse": scoring.nmse(test.tau, nominal_pred[b], rest_test),
-            "nmse_raw": nmse(test.tau, nominal_pred[b]).tolist(),
-        }
-        for b in nominal_pi
-    }
-    nominal["rigid_fit"]["estimator"] = estimator
-    nominal["rigid_fit"]["why"] = "the robot's default estimator" if rigid_fit is None else rigid_fit.why
+    nominal, nominal_mse = loop.nominal_entries(
+        nominal_pi, nominal_pred, test, rest_test, arm.as_dict, estimator, rigid_fit
+    )
     nominal["rigid_fit"]["rank"] = ctx.rank
     t_nominal = time.perf_counter()
     var = np.var(test.tau, axis=0)
 
     engine = arm_fit.Engine(ctx)
 
-    def version(cand, baseline: str, pred: np.ndarray, causes: tuple, family, theta: dict) -> Fitted:
-        after = scoring.mse(test.tau, pred, rest_test)
-        k_added = (cand.n_added if cand is not None else 0) + (ctx.rank if baseline == "rigid_fit" else 0)
-        common = scoring.score(nominal_mse["datasheet"], after, test.n, k_added)
-        return Fitted(causes, baseline, cand, after, pred, common, family, theta)
+    version = loop.versions(test, rest_test, nominal_mse["datasheet"], ctx.rank)
 
     def row(v: Fitted, score: float, current: dict, gap=None) -> dict:
         floor, partner = engine.MARGIN_VARIANCE, engine.PARTNER

@@ -573,6 +573,40 @@ def parts(
 REFITS = ("ols", "constrained", "robust")
 
 
+def nominal_entries(
+    nominal_pi: dict, nominal_pred: dict, test: Dataset, rest_test, as_dict, estimator: str, rigid_fit
+) -> tuple[dict, dict]:
+    """The nominal models' JSON entries (π by name, held-out nMSE filtered and raw; the rigid fit's estimator and
+    why) and their held-out MSE [N² m²] (`scoring.mse`), from their π and held-out predictions by baseline
+    ("datasheet", "rigid_fit"). `as_dict`: π (P,) -> {name: value} of the nominal model."""
+    mse = {b: scoring.mse(test.tau, p, rest_test) for b, p in nominal_pred.items()}
+    entries = {
+        b: {
+            "pi": as_dict(nominal_pi[b]),
+            "nmse": scoring.nmse(test.tau, nominal_pred[b], rest_test),
+            "nmse_raw": nmse(test.tau, nominal_pred[b]).tolist(),
+        }
+        for b in nominal_pi
+    }
+    entries["rigid_fit"]["estimator"] = estimator
+    entries["rigid_fit"]["why"] = "the robot's default estimator" if rigid_fit is None else rigid_fit.why
+    return entries, mse
+
+
+def versions(test: Dataset, rest_test, datasheet_mse: np.ndarray, rigid_parameters: int):
+    """`version(cand, baseline, pred, causes, family, theta) -> Fitted`: a model's held-out MSE and its penalised
+    gain over the datasheet (`scoring.score`), counting the candidate's added parameters and, on the rigid fit's
+    baseline, the `rigid_parameters` its refitted π has."""
+
+    def version(cand, baseline: str, pred: np.ndarray, causes: tuple, family, theta: dict) -> Fitted:
+        after = scoring.mse(test.tau, pred, rest_test)
+        k = (cand.n_added if cand is not None else 0) + (rigid_parameters if baseline == "rigid_fit" else 0)
+        common = scoring.score(datasheet_mse, after, test.n, k)
+        return Fitted(causes, baseline, cand, after, pred, common, family, theta)
+
+    return version
+
+
 def diagnose(
     robot: PlanarRobot,
     trial: Dataset,
@@ -614,26 +648,13 @@ def diagnose(
     model = cands.NOMINAL
     nominal_pi = {"datasheet": model.vector(ds_pi), "rigid_fit": pi_rigid}
     nominal_pred = {b: model.predict(pi, test.q, test.dq, test.ddq) for b, pi in nominal_pi.items()}
-    nominal_mse = {b: scoring.mse(test.tau, p, rest_test) for b, p in nominal_pred.items()}
-    nominal = {
-        b: {
-            "pi": model.as_dict(nominal_pi[b]),
-            "nmse": scoring.nmse(test.tau, nominal_pred[b], rest_test),
-            "nmse_raw": nmse(test.tau, nominal_pred[b]).tolist(),
-        }
-        for b in nominal_pi
-    }
-    nominal["rigid_fit"]["estimator"] = estimator
-    nominal["rigid_fit"]["why"] = "the robot's default estimator" if rigid_fit is None else rigid_fit.why
+    nominal, nominal_mse = nominal_entries(
+        nominal_pi, nominal_pred, test, rest_test, model.as_dict, estimator, rigid_fit
+    )
     t_nominal = time.perf_counter()
 
     var = np.var(test.tau, axis=0)
-
-    def version(cand, baseline: str, pred: np.ndarray, causes: tuple, family, theta: dict) -> Fitted:
-        after = scoring.mse(test.tau, pred, rest_test)
-        k = (cand.n_added if cand is not None else 0) + (len(cands.NOMINAL.names) if baseline == "rigid_fit" else 0)
-        common = scoring.score(nominal_mse["datasheet"], after, test.n, k)
-        return Fitted(causes, baseline, cand, after, pred, common, family, theta)
+    version = versions(test, rest_test, nominal_mse["datasheet"], len(cands.NOMINAL.names))
 
     def row(v: Fitted, score: float, current: dict, gap=None) -> dict:
         return _row(v, score, current, raw_test.tau, test, rest_test, var, dt, gap, cands.MARGIN_VARIANCE)
