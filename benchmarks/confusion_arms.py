@@ -22,8 +22,10 @@ misses have been read since (they gave the torque scale's resolution floor); see
 (`--out results/diagnosis/confusion_arms_seed1000.md`) was first run at the final code of the first 2026-11-28 stop,
 and its misses have been read since (they gave the nested-columns rule, the asymmetric Coulomb screen with the
 inertial parameters free, and the arm's partner share); seed 1100 (`--out results/diagnosis/confusion_arms_seed1100.md`)
-was first run at the final code of the second 2026-11-28 stop, after every change it measures; no table has been run
-from seed 1200 on.
+was first run at the final code of the second 2026-11-28 stop, after every change it measures; seed 1200
+(`--out results/diagnosis/confusion_arms_seed1200.md`) was first run on 2026-12-02, the n-joint engine unchanged since
+seed 1100's run (its misses have been read since, for the closing note only); no table has been run from seed 1300
+on.
 """
 
 from __future__ import annotations
