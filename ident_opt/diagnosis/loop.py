@@ -12,6 +12,7 @@ models are examined: the datasheet (no fitting) and the best rigid fit of the no
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -574,7 +575,13 @@ REFITS = ("ols", "constrained", "robust")
 
 
 def nominal_entries(
-    nominal_pi: dict, nominal_pred: dict, test: Dataset, rest_test, as_dict, estimator: str, rigid_fit
+    nominal_pi: dict,
+    nominal_pred: dict,
+    test: Dataset,
+    rest_test: np.ndarray,
+    as_dict: Callable[[np.ndarray], dict],
+    estimator: str,
+    rigid_fit,
 ) -> tuple[dict, dict]:
     """The nominal models' JSON entries (π by name, held-out nMSE filtered and raw; the rigid fit's estimator and
     why) and their held-out MSE [N² m²] (`scoring.mse`), from their π and held-out predictions by baseline
@@ -593,7 +600,9 @@ def nominal_entries(
     return entries, mse
 
 
-def versions(test: Dataset, rest_test, datasheet_mse: np.ndarray, rigid_parameters: int):
+def versions(
+    test: Dataset, rest_test: np.ndarray, datasheet_mse: np.ndarray, rigid_parameters: int
+) -> Callable[..., Fitted]:
     """`version(cand, baseline, pred, causes, family, theta) -> Fitted`: a model's held-out MSE and its penalised
     gain over the datasheet (`scoring.score`), counting the candidate's added parameters and, on the rigid fit's
     baseline, the `rigid_parameters` its refitted π has."""
