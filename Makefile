@@ -82,14 +82,14 @@ arms: $(STAMP)
 ## Online identification on the real n-joint arms (results/online_arms.md: KUKA, Panda, TX40): the replay against
 ## from-scratch re-solves, the generated update against Python and its time, the stream on t, q and currents only.
 online-arms: $(STAMP)
-	$(BIN)/python -m ident_opt.studies.online_arms --out results
+	$(BIN)/python benchmarks/online_arms.py --out results
 
 ## The D-optimal excitation against random Fourier motions within the same limits and duration, on the 7-joint KUKA
 ## (rigid inverse dynamics + noise) and the planar arm (the closed-loop simulator), 20 unseen noise seeds each
 ## (results/excitation_arms.md; about 15 min on 2 cores). The base frequencies were chosen on the development seeds
 ## (0-4); seeds 1000-1019 were looked at once after that (results in git history, abc5cb1), 3000-3019 decide.
 excitation-arms: $(STAMP)
-	$(BIN)/python -m ident_opt.studies.excitation_benefit --problem problems/kuka_lwr4.toml --base-hz 0.2 \
+	$(BIN)/python benchmarks/excitation_benefit.py --problem problems/kuka_lwr4.toml --base-hz 0.2 \
 	    --problem $(PROBLEM) --base-hz 0.1 --seeds 20 --unseen-from 3000 --no-progress --out results
 
 ## The simulator's default trial against the real exp1 (results/simulator_calibration.md); col10-col13 are

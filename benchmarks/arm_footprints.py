@@ -24,14 +24,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from confusion_arms import ARMS, draws, places, reference
 
-from ident_opt.derivatives import lowpass
+from ident_opt.data.derivatives import lowpass
 from ident_opt.diagnosis import hidden, signals
 from ident_opt.diagnosis.arm_fit import ArmContext, link_side
 from ident_opt.diagnosis.loop import at_rest
 from ident_opt.effects import stribeck
 from ident_opt.problem import load_problem
 from ident_opt.report import record
-from ident_opt.simulate import simulate_trial
+from ident_opt.simulator import simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 LINEAR = ("armature", "asymmetric_coulomb", "stribeck", "joint_offset", "torque_scale", "load_friction")

@@ -24,14 +24,14 @@ sys.path.insert(0, str(ROOT))
 
 from timing import best_time  # noqa: E402
 
-from ident_opt import codegen  # noqa: E402
 from ident_opt.arm.planar import RIGID  # noqa: E402
 from ident_opt.commands.common import write_json  # noqa: E402
-from ident_opt.data import load_dataset  # noqa: E402
-from ident_opt.gmr import GMR  # noqa: E402
-from ident_opt.identify.constrained import fit_constrained  # noqa: E402
-from ident_opt.identify.stats import Stats  # noqa: E402
+from ident_opt.data.dataset import load_dataset  # noqa: E402
+from ident_opt.fitting.constrained import fit_constrained  # noqa: E402
+from ident_opt.fitting.stats import Stats  # noqa: E402
+from ident_opt.models.gmr import GMR  # noqa: E402
 from ident_opt.problem import load_problem  # noqa: E402
+from ident_opt.shipping import codegen  # noqa: E402
 
 TIMING_LOOP = ROOT / "benchmarks" / "c" / "bench_codegen.c"
 TARGET_NS = {"tau_hat": 100.0, "tau_hat_gmr@10": 2000.0}

@@ -29,7 +29,7 @@ from confusion_matrix import chain
 
 from ident_opt.diagnosis import diagnose
 from ident_opt.problem import load_problem
-from ident_opt.simulate import simulate_trial
+from ident_opt.simulator import simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -19,9 +19,9 @@ import os
 import time
 from pathlib import Path
 
-from ident_opt.data import load_dataset
+from ident_opt.data.dataset import load_dataset
+from ident_opt.excitation import design as excitation
 from ident_opt.problem import load_problem
-from ident_opt.studies import excitation
 
 ROOT = Path(__file__).resolve().parents[1]
 #: (problem, base frequency [Hz] (None: excite's default), criteria timed, target [s]).

@@ -34,8 +34,8 @@ from pathlib import Path
 from distributed import Client
 
 from ident_opt.fleet import layout, tasks
+from ident_opt.fleet.run import run_fleet
 from ident_opt.fleet.simulated import FleetSpec, read_truth, simulate_fleet
-from ident_opt.studies.fleet import run_fleet
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANAR = ROOT / "problems" / "tudor_2dof.toml"

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from timing import best_time
 
-from ident_opt.gmr import GMR
+from ident_opt.models.gmr import GMR
 
 
 def _problem(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

@@ -34,12 +34,12 @@ from scipy.optimize import lsq_linear  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ident_opt.adaptation.identifier import ArmDesign, Estimator, OnlineIdentifier  # noqa: E402
+from ident_opt.adaptation.kernel import attach  # noqa: E402
 from ident_opt.arm.planar import RIGID  # noqa: E402
-from ident_opt.gmr import GMR, Support  # noqa: E402
-from ident_opt.identify.bounded import WarmConsistentLS, default_bounds  # noqa: E402
-from ident_opt.identify.stats import Stats  # noqa: E402
-from ident_opt.online import ArmDesign, Estimator, OnlineIdentifier  # noqa: E402
-from ident_opt.online_kernel import attach  # noqa: E402
+from ident_opt.fitting.bounded import WarmConsistentLS, default_bounds  # noqa: E402
+from ident_opt.fitting.stats import Stats  # noqa: E402
+from ident_opt.models.gmr import GMR, Support  # noqa: E402
 from ident_opt.report import record  # noqa: E402
 
 #: exp1's plain OLS (a3 < 0: not physically consistent), as the data's truth.
@@ -130,7 +130,7 @@ def full_step(q, dq, ddq, tau, N: int, steps: int, repeats: int, compiled: bool)
 
 def clarabel_step(Y, tau, N: int, steps: int, bounds) -> tuple[float, list[np.ndarray]]:
     """Seconds per CPBR step with the conic solver on the statistics (no warm start possible)."""
-    from ident_opt.identify.constrained import fit_constrained
+    from ident_opt.fitting.constrained import fit_constrained
 
     stats = Stats.from_regressor(Y[:N], tau[:N])
     xs, times = [], []

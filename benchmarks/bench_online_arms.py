@@ -32,16 +32,16 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ident_opt import codegen  # noqa: E402
-from ident_opt.data import load_dataset  # noqa: E402
-from ident_opt.identify.bounded import KKT_TOL, FactorBoundedLS, solve_bounded  # noqa: E402
-from ident_opt.identify.stats import Stats  # noqa: E402
-from ident_opt.online import base_bounds, offline_start  # noqa: E402
+from ident_opt.adaptation.identifier import base_bounds, offline_start  # noqa: E402
+from ident_opt.adaptation.replay import _standard_errors  # noqa: E402
+from ident_opt.data.dataset import load_dataset  # noqa: E402
+from ident_opt.excitation import design as excitation  # noqa: E402
+from ident_opt.fitting.bounded import KKT_TOL, FactorBoundedLS, solve_bounded  # noqa: E402
+from ident_opt.fitting.stats import Stats  # noqa: E402
 from ident_opt.problem import load_problem  # noqa: E402
 from ident_opt.report import record  # noqa: E402
-from ident_opt.studies import excitation  # noqa: E402
-from ident_opt.studies.online_codegen import _run_example  # noqa: E402
-from ident_opt.studies.online_replay import _standard_errors  # noqa: E402
+from ident_opt.shipping import codegen  # noqa: E402
+from ident_opt.shipping.pi_update import _run_example  # noqa: E402
 
 PROBLEM = ROOT / "problems" / "kuka_lwr4.toml"
 SIZES = (1_000, 10_000, 100_000)

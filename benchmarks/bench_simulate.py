@@ -18,7 +18,7 @@ from timing import best_time
 
 from ident_opt.effects import BACKGROUND
 from ident_opt.problem import load_problem
-from ident_opt.simulate import CATALOGUE, simulate_trial
+from ident_opt.simulator import CATALOGUE, simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -32,14 +32,14 @@ sys.path.insert(0, str(ROOT))
 
 from timing import best_time  # noqa: E402
 
-from ident_opt import codegen  # noqa: E402
 from ident_opt.commands.common import write_json  # noqa: E402
-from ident_opt.data import load_dataset  # noqa: E402
-from ident_opt.identify.base import fit_base_ols  # noqa: E402
-from ident_opt.identify.constrained import fit_constrained  # noqa: E402
-from ident_opt.identify.physical import fit_physical  # noqa: E402
+from ident_opt.data.dataset import load_dataset  # noqa: E402
+from ident_opt.fitting.base import fit_base_ols  # noqa: E402
+from ident_opt.fitting.constrained import fit_constrained  # noqa: E402
+from ident_opt.fitting.physical import fit_physical  # noqa: E402
+from ident_opt.fitting.trust import stats_of  # noqa: E402
 from ident_opt.problem import load_problem  # noqa: E402
-from ident_opt.studies.trust import stats_of  # noqa: E402
+from ident_opt.shipping import codegen  # noqa: E402
 
 TIMING_LOOP = ROOT / "benchmarks" / "c" / "bench_urdf.c"
 TARGETS = {"regressor_samples_per_s": 1e5, "consistent_fit_s": 1.0, "tau_hat_ns": 2000.0}

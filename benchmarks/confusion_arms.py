@@ -81,9 +81,9 @@ def places(cause: str, n: int) -> list[tuple[int, ...]]:
 def one(job: tuple) -> dict:
     """Simulate one trial of `arm` hiding `causes` (on the 0-based `joints`) and diagnose it."""
     from ident_opt.diagnosis import diagnose, hidden
+    from ident_opt.fitting.recommend import for_diagnosis
     from ident_opt.problem import load_problem
-    from ident_opt.simulate import simulate_trial
-    from ident_opt.studies.recommend import for_diagnosis
+    from ident_opt.simulator import simulate_trial
 
     arm, causes, joints, seed, duration, rate = job
     problem = load_problem(ARMS[arm])

@@ -38,9 +38,9 @@ ROOT = Path(__file__).resolve().parents[1]
 def pair(job: tuple[tuple[str, str], int, float, str]) -> dict:
     """Simulate one trial hiding two effects and diagnose it: was exactly that set named, within tolerance?"""
     from ident_opt.diagnosis import diagnose, hidden
+    from ident_opt.fitting.recommend import for_diagnosis
     from ident_opt.problem import load_problem
-    from ident_opt.simulate import simulate_trial
-    from ident_opt.studies.recommend import for_diagnosis
+    from ident_opt.simulator import simulate_trial
 
     causes, seed, duration, trajectory = job
     if trajectory == "auto":
@@ -80,9 +80,9 @@ def one(job: tuple) -> dict:
     optionally a condition: {"simulate": extra `simulate_trial` keywords (rate, controller bandwidth, noise
     scale), "magnitude": a factor on the drawn magnitude, "background": background terms to switch on}."""
     from ident_opt.diagnosis import diagnose, hidden
+    from ident_opt.fitting.recommend import for_diagnosis
     from ident_opt.problem import load_problem
-    from ident_opt.simulate import simulate_trial
-    from ident_opt.studies.recommend import for_diagnosis
+    from ident_opt.simulator import simulate_trial
 
     cause, seed, duration, trajectory, *rest = job
     condition = rest[0] if rest else {}

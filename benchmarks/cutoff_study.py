@@ -1,4 +1,4 @@
-"""Where the derivative cut-off rule and the recommended fit stand, in simulation (`ident_opt.studies.cutoff_study`):
+"""Where the derivative cut-off rule and the recommended fit stand, in simulation (`ident_opt.evaluation.cutoff_study`):
 every kind of motion × sampling rate × noise factor, against the best cut-off in hindsight.
 
     .venv/bin/python benchmarks/cutoff_study.py [--seeds tuning|unseen|fresh] [--out results]
@@ -14,9 +14,9 @@ import argparse
 import time
 from pathlib import Path
 
+from ident_opt.evaluation import cutoff_study
 from ident_opt.problem import load_problem
 from ident_opt.report import cutoff_study as report
-from ident_opt.studies import cutoff_study
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -28,9 +28,9 @@ FREQUENCIES_HZ = (2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 15.0)
 def one(job: tuple[str, int, float, int]) -> dict:
     """Simulate one hidden mode and diagnose it."""
     from ident_opt.diagnosis import diagnose
+    from ident_opt.fitting.recommend import for_diagnosis
     from ident_opt.problem import load_problem
-    from ident_opt.simulate import simulate_trial
-    from ident_opt.studies.recommend import for_diagnosis
+    from ident_opt.simulator import simulate_trial
 
     kind, joint, f, seed = job
     robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot

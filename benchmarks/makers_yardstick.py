@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 import ident_opt as io
-from ident_opt.data import Dataset, load_dataset
-from ident_opt.derivatives import lowpass
-from ident_opt.studies.recommend import recommended_fit
+from ident_opt.data.dataset import Dataset, load_dataset
+from ident_opt.data.derivatives import lowpass
+from ident_opt.fitting.recommend import recommended_fit
 
 ROOT = Path(__file__).resolve().parents[1]
 

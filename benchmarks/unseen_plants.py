@@ -5,14 +5,14 @@
 
 The test matrix (issue 30), written before any rule was changed. Every trial is 80 s at 100 Hz from the built-in
 closed loop (the tudor_2dof robot), with one or two hidden causes, and is handed to `diagnose` the way another
-logger would (`simulate.unseen.PIPELINES`, one per trial in turn): derivatives from a cubic Savitzky–Golay filter
+logger would (`simulator.unseen.PIPELINES`, one per trial in turn): derivatives from a cubic Savitzky–Golay filter
 of 11, 15 or 21 samples, or no derivatives (the loader estimates them at its "auto" cut-off), or currents and no
 derivatives. `diagnose` reads the torque filter from the trial as the CLI does with the default
 `derivative_cutoff_hz = "auto"`. The plants:
 
 - `catalogue`: every catalogue cause alone (and a clean trial) in the project's own plant, each under another
   logger; two pairs the issue names (a payload with a delay; a catalogue elastic joint with an offset);
-- `beam`: a flexible link with distributed mass and three modes (`simulate.unseen.Beam`, assumed modes, first
+- `beam`: a flexible link with distributed mass and three modes (`simulator.unseen.Beam`, assumed modes, first
   mode 2.5–7 Hz, damping 0.5–1.5 % on every mode), alone and beside asymmetric Coulomb friction;
 - `nonlinear joint`: an elastic joint whose spring hardens (tangent 1.5–3 × k at the largest gravity deflection)
   or has a play (0.1–0.3 × that deflection), judged against the frequency of the mean tangent stiffness.
@@ -80,13 +80,13 @@ def hidden_effects(causes, special, rng, robot) -> tuple[dict, object]:
 
 
 def _beam(truth, j, f, zeta):
-    from ident_opt.simulate import unseen
+    from ident_opt.simulator import unseen
 
     return unseen.beam(truth, j, f, zeta, 3)
 
 
 def _nonlinear(truth, shape, size):
-    from ident_opt.simulate import unseen
+    from ident_opt.simulator import unseen
 
     return unseen.nonlinear_joint(truth, shape, size)
 
@@ -95,9 +95,9 @@ def trial(job: tuple[int, int]) -> dict:
     """Simulate case `job[0]` on seed `job[1]`, hand it over through its logger, diagnose it, judge it."""
     from ident_opt.diagnosis import diagnose, hidden
     from ident_opt.effects import CATALOGUE
+    from ident_opt.fitting.recommend import for_diagnosis
     from ident_opt.problem import load_problem
-    from ident_opt.simulate import simulate_trial, unseen
-    from ident_opt.studies.recommend import for_diagnosis
+    from ident_opt.simulator import simulate_trial, unseen
 
     index, seed = job
     label, plant, causes, special = CASES[index]
@@ -151,8 +151,8 @@ def trial(job: tuple[int, int]) -> dict:
 def _effective(sim, robot, effects, mechanism) -> float:
     """The effective frequency [Hz] of a non-linear joint's mode over the trial's logged deflections."""
     from ident_opt.effects import is_active, normalise
-    from ident_opt.simulate import unseen
-    from ident_opt.simulate.truth import build_truth, coulomb_levels
+    from ident_opt.simulator import unseen
+    from ident_opt.simulator.truth import build_truth, coulomb_levels
 
     coulomb = coulomb_levels(robot)
     wanted = normalise(effects, coulomb)

@@ -22,8 +22,8 @@ _EXPORTS = {
     "load_problem": "ident_opt.problem",
     "Problem": "ident_opt.problem",
     "load_trials": "ident_opt.api",
-    "load_dataset": "ident_opt.data",
-    "Dataset": "ident_opt.data",
+    "load_dataset": "ident_opt.data.dataset",
+    "Dataset": "ident_opt.data.dataset",
     # the arm: its interface and its two implementations
     "Arm": "ident_opt.arm.base",
     "Robot": "ident_opt.arm.base",
@@ -32,19 +32,19 @@ _EXPORTS = {
     "ChainArm": "ident_opt.arm.chain",
     "ChainRobot": "ident_opt.arm.chain",
     # identification
-    "Stats": "ident_opt.identify.stats",
-    "LinearFit": "ident_opt.identify.fit",
+    "Stats": "ident_opt.fitting.stats",
+    "LinearFit": "ident_opt.fitting.fit",
     "fit": "ident_opt.api",
     "compare": "ident_opt.api",
-    "Comparison": "ident_opt.studies.compare",
+    "Comparison": "ident_opt.evaluation.compare",
     # diagnosis, simulation, export
     "diagnose": "ident_opt.diagnosis",
     "Diagnosis": "ident_opt.diagnosis",
-    "simulate_trial": "ident_opt.simulate",
+    "simulate_trial": "ident_opt.simulator",
     "export": "ident_opt.api",
     # a fleet: every robot every day, and what changed (Dask)
-    "run_fleet": "ident_opt.studies.fleet",
-    "FleetResult": "ident_opt.studies.fleet",
+    "run_fleet": "ident_opt.fleet.run",
+    "FleetResult": "ident_opt.fleet.run",
     "simulate_fleet": "ident_opt.fleet.simulated",
     # bad input
     "InputError": "ident_opt.errors",

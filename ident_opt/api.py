@@ -19,14 +19,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from ident_opt.data import Dataset, load_dataset
-from ident_opt.descriptions import identified, write_mjcf, write_urdf
+from ident_opt.data.dataset import Dataset, load_dataset
 from ident_opt.errors import InputError
-from ident_opt.identify import estimators
-from ident_opt.identify.fit import LinearFit
+from ident_opt.evaluation.compare import Comparison, compare_estimators
+from ident_opt.fitting import estimators
+from ident_opt.fitting.fit import LinearFit
+from ident_opt.fitting.recommend import recommended_fit
 from ident_opt.problem import Problem
-from ident_opt.studies.compare import Comparison, compare_estimators
-from ident_opt.studies.recommend import recommended_fit
+from ident_opt.shipping import identified, write_mjcf, write_urdf
 
 
 def load_trials(
@@ -36,7 +36,7 @@ def load_trials(
     **options,
 ) -> tuple[list[Dataset], list[Dataset]]:
     """(training, held-out) trials: `data` and `test` when given, else the problem's `[data]` (`train`/`test`, or
-    `trials`: the first trains, the second is held out). `options` go to `ident_opt.data.load_dataset`
+    `trials`: the first trains, the second is held out). `options` go to `ident_opt.data.dataset.load_dataset`
     (`allow_implausible`, `drop_invalid`); bad input raises `InputError` naming the file, column and row."""
     train_paths = list(data) if data else list(problem.data.training)
     test_paths = list(test) if test is not None else ([] if data else list(problem.data.testing))
@@ -51,7 +51,7 @@ def load_trials(
 
 def fit(problem: Problem, trials: Sequence[Dataset], estimator: str | None = None, **options) -> LinearFit:
     """π of the problem's arm (`problem.robot.model()`) fitted by `estimator` (default: the recommended fit, chosen
-    from the trials' own evidence, `ident_opt.studies.recommend`) on all `trials` (their statistics add up), with
+    from the trials' own evidence, `ident_opt.fitting.recommend`) on all `trials` (their statistics add up), with
     standard errors; `options` go to the estimator (e.g. `weights="wls"`, `margin=1e-6`)."""
     robot = problem.robot
     model = robot.model()
@@ -66,7 +66,7 @@ def fit(problem: Problem, trials: Sequence[Dataset], estimator: str | None = Non
 
 def compare(problem: Problem, training: Sequence[Dataset], testing: Sequence[Dataset] = (), **options) -> Comparison:
     """Every fit of the arm beside its nominal model, scored on held-out data (`ident-opt compare`'s study,
-    `ident_opt.studies.compare.compare_estimators`); `options` as there (`margin`, `weights`, `progress`)."""
+    `ident_opt.evaluation.compare.compare_estimators`); `options` as there (`margin`, `weights`, `progress`)."""
     options.setdefault("progress", False)
     return compare_estimators(
         list(training),

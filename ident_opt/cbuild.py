@@ -4,7 +4,7 @@
 machine's compiler (`find_compiler`: $CC, else cc, gcc or clang; an `InputError` when there is none), and
 `load_external` loads a function of it back as a `casadi.Function`. `CompiledRows` maps one such function over
 many samples at once (the n-joint regressor). Code generation proper (what is generated, READMEs, checks) is
-`ident_opt.codegen`.
+`ident_opt.shipping.codegen`.
 """
 
 from __future__ import annotations

@@ -22,12 +22,12 @@ objects, each of which gives what every consumer needs, so the statement is writ
 
 | consumer                                   | uses                                                        |
 |--------------------------------------------|-------------------------------------------------------------|
-| `identify.fit`: `LinearFit.consistent`     | `sign_violations`, `Arm.min_mass_eigenvalue`                |
-| `identify.constrained`, Clarabel path      | `Consistency.blocks` (A π + s = b, s ∈ cone), `.feasible`   |
-| `identify.constrained`, cvxpy (test oracle) | `Consistency.cvxpy`                                        |
+| `fitting.fit`: `LinearFit.consistent`     | `sign_violations`, `Arm.min_mass_eigenvalue`                |
+| `fitting.constrained`, Clarabel path      | `Consistency.blocks` (A π + s = b, s ∈ cone), `.feasible`   |
+| `fitting.constrained`, cvxpy (test oracle) | `Consistency.cvxpy`                                        |
 | active sets in reports                     | `Consistency.slacks`                                        |
-| `identify.bounded` (online CPBR)           | `MatrixInequality.rotated_cone` (2×2), `physical_bounds`    |
-| `identify.nlp`                             | `sign_constraints` (bounds of friction parameters)          |
+| `fitting.bounded` (online CPBR)           | `MatrixInequality.rotated_cone` (2×2), `physical_bounds`    |
+| `fitting.nlp`                             | `sign_constraints` (bounds of friction parameters)          |
 """
 
 from __future__ import annotations

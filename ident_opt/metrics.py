@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
+#: The held-out metrics every study reports, per joint (the keys of `all_metrics`).
+METRICS = ("rmse", "nmse", "nmse_range")
+
 
 def rmse(tau: np.ndarray, tau_hat: np.ndarray) -> np.ndarray:
     """Root-mean-square error per joint [N m]; inputs (N, n), output (n,)."""

@@ -13,18 +13,18 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from ident_opt.adaptation.identifier import offline_start, start_identifier
+from ident_opt.adaptation.kernel import attach
+from ident_opt.adaptation.replay import _standard_errors
+from ident_opt.adaptation.stream import BadLine, LineParser, Mapping, StreamOptions, currents_to_torques, serve
 from ident_opt.cli import main
 from ident_opt.consistency import necessarily_nonnegative
-from ident_opt.data import chronological_split, load_dataset
+from ident_opt.data.dataset import chronological_split, load_dataset
 from ident_opt.errors import InputError
-from ident_opt.identify import estimators
-from ident_opt.identify.iv import InstrumentStats
-from ident_opt.online import offline_start, start_identifier
-from ident_opt.online_kernel import attach
+from ident_opt.fitting import estimators
+from ident_opt.fitting.iv import InstrumentStats
+from ident_opt.fitting.recommend import chosen
 from ident_opt.problem import load_problem
-from ident_opt.stream import BadLine, LineParser, Mapping, StreamOptions, currents_to_torques, serve
-from ident_opt.studies.online_replay import _standard_errors
-from ident_opt.studies.recommend import chosen
 from tests.test_n_joint_inputs import arm3, workspace  # noqa: F401  (the fixtures)
 
 

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from ident_opt.cli import main
-from ident_opt.studies import audit
+from ident_opt.paper import audit
 
 from .conftest import PROBLEMS
 

@@ -7,8 +7,8 @@ import pytest
 from scipy.optimize import lsq_linear
 
 from ident_opt.arm.planar import RIGID, PlanarArm
-from ident_opt.identify.bounded import Bounds, default_bounds, kkt_residual, solve_bounded
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.bounded import Bounds, default_bounds, kkt_residual, solve_bounded
+from ident_opt.fitting.stats import Stats
 
 
 def _data(n: int, seed: int, pi: np.ndarray, noise: float = 0.3):

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from ident_opt.arm.planar import RIGID
-from ident_opt.identify.bounded import WarmConsistentLS, default_bounds
-from ident_opt.identify.constrained import fit_constrained
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.bounded import WarmConsistentLS, default_bounds
+from ident_opt.fitting.constrained import fit_constrained
+from ident_opt.fitting.stats import Stats
 
 #: An inconsistent truth (a3 < 0, like plain OLS on exp1): the mass-matrix cone is active in the fit.
 PI_BAD = np.array([0.8, 0.05, -0.02, 3.7, 0.3, 1.5, 0.2, 0.6, 0.4])

@@ -1,4 +1,4 @@
-"""Generated C (ident_opt.codegen): compiled once per module with gcc, called through ctypes, compared
+"""Generated C (ident_opt.shipping.codegen): compiled once per module with gcc, called through ctypes, compared
 with the Python model (NumPy regressor + GMR) on thousands of random states."""
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ import pytest
 from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 
-from ident_opt import codegen
 from ident_opt.arm.planar import PlanarArm
 from ident_opt.errors import InputError
-from ident_opt.gmr import GMR
+from ident_opt.models.gmr import GMR
 from ident_opt.problem import load_problem
+from ident_opt.shipping import codegen
 
 ROOT = Path(__file__).resolve().parents[1]
 

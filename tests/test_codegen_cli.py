@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident_opt import codegen
 from ident_opt.arm.planar import PlanarArm
 from ident_opt.cli import main
-from ident_opt.gmr import GMR
+from ident_opt.models.gmr import GMR
+from ident_opt.shipping import codegen
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = str(ROOT / "problems" / "tudor_2dof.toml")

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident_opt.codegen import find_compiler
-from ident_opt.studies.online_codegen import CUpdate, verify
+from ident_opt.shipping.codegen import find_compiler
+from ident_opt.shipping.pi_update import CUpdate, verify
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from ident_opt.cli import main
+from ident_opt.evaluation.constraints import constraints_study
 from ident_opt.report.constraints import study_markdown
-from ident_opt.studies.constraints import constraints_study
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 PI = ["a1", "a2", "a3", "b1", "b2", "fv1", "fv2", "fc1", "fc2"]
@@ -129,16 +129,16 @@ def test_constraints_study_cli(tmp_path):
 
 def test_identify_reports_the_standard_errors_compare_does_on_trials_with_different_cut_offs(tmp_path):
     """Two trials whose spectra give different derivative cut-offs (200 and 500 Hz logs of angles only): identify's
-    whole-trial fits (`studies.identify.whole_trial_parameters`) carry the same standard errors as compare's for
+    whole-trial fits (`evaluation.identify.whole_trial_parameters`) carry the same standard errors as compare's for
     every estimator both run. identify used to fit a pool of the trials, which has no single cut-off, so it counted
     every sample as independent and its errors came out √(f_s / 2 f_c) too narrow."""
     from dataclasses import replace
 
-    from ident_opt.data import load_dataset
+    from ident_opt.data.dataset import load_dataset
+    from ident_opt.evaluation.compare import compare_estimators
+    from ident_opt.evaluation.identify import whole_trial_parameters
     from ident_opt.problem import load_problem
-    from ident_opt.simulate import simulate_trial
-    from ident_opt.studies.compare import compare_estimators
-    from ident_opt.studies.identify import whole_trial_parameters
+    from ident_opt.simulator import simulate_trial
 
     from .conftest import PROBLEMS
 

@@ -12,7 +12,6 @@ import cvxpy as cp
 import numpy as np
 import pytest
 
-from ident_opt import codegen
 from ident_opt.arm.base import Arm
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import EXTENSIONS, RIGID, PlanarArm
@@ -24,13 +23,14 @@ from ident_opt.consistency import (
     sign_constraints,
     sign_violations,
 )
-from ident_opt.identify import constrained
-from ident_opt.identify.bounded import WarmConsistentLS, default_bounds
-from ident_opt.identify.constrained import ACTIVE_TOL, fit_constrained, solve_constrained
-from ident_opt.identify.fit import fit_ols
-from ident_opt.identify.stats import Stats
+from ident_opt.evaluation.constraints import multisine_trial
+from ident_opt.fitting import constrained
+from ident_opt.fitting.bounded import WarmConsistentLS, default_bounds
+from ident_opt.fitting.constrained import ACTIVE_TOL, fit_constrained, solve_constrained
+from ident_opt.fitting.fit import fit_ols
+from ident_opt.fitting.stats import Stats
 from ident_opt.parameters import Parameter
-from ident_opt.studies.constraints import multisine_trial
+from ident_opt.shipping import codegen
 
 ARM = PlanarArm(("armature",))
 #: A parameter no name rule could know: a made-up quadratic drag k·dq1·|dq1| on joint 1, of kind friction.

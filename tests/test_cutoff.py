@@ -2,7 +2,7 @@
 outweigh motion in the accelerations, on trials of the kinds people record (both joints driven, one swinging
 passively or at rest, noise only), at rates from 100 Hz to 1 kHz, with white or quantisation noise; and on a noisy
 trial it removes most of the errors-in-variables bias a fixed 15 Hz leaves. These were written before the rule was
-tuned, on signals the rule's study (`studies.cutoff_study`) does not use."""
+tuned, on signals the rule's study (`evaluation.cutoff_study`) does not use."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ import pytest
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PHYSICAL
-from ident_opt.data import load_dataset
-from ident_opt.derivatives import CUTOFF_MAX_FRACTION, CUTOFF_MIN_HZ, cutoff_choice
-from ident_opt.identify.fit import fit_ols
-from ident_opt.identify.stats import Stats
+from ident_opt.data.dataset import load_dataset
+from ident_opt.data.derivatives import CUTOFF_MAX_FRACTION, CUTOFF_MIN_HZ, cutoff_choice
+from ident_opt.fitting.fit import fit_ols
+from ident_opt.fitting.stats import Stats
 from ident_opt.problem import DataSpec, load_problem
 
 from .conftest import PROBLEMS
@@ -83,8 +83,8 @@ def test_noise_only_gets_the_lowest_cutoff():
 def test_a_passively_swinging_joint_counts(tmp_path):
     """Joint 2 has no torque and swings with joint 1 (the study's plant, another seed than the study's): it moves,
     so it has a say."""
-    from ident_opt.studies.cutoff_plant import Condition, simulate
-    from ident_opt.studies.cutoff_study import truth
+    from ident_opt.evaluation.cutoff_plant import Condition, simulate
+    from ident_opt.evaluation.cutoff_study import truth
 
     problem = load_problem(PROBLEMS / "dfki_c0.toml")
     arm, pi = truth(problem.robot)
@@ -118,7 +118,7 @@ def trial(tmp_path, rate: float, noise: float, seed: int):
 def test_the_default_pipeline_beats_a_fixed_15_hz(tmp_path):
     """The default settings ("auto" and the recommended fit) on noisy trials of the TUDOR model: the inertial and
     gravity parameters at least twice as close to the truth as OLS at a fixed 15 Hz."""
-    from ident_opt.studies.recommend import recommended_fit
+    from ident_opt.fitting.recommend import recommended_fit
 
     inertial = [PHYSICAL.names.index(n) for n in ("a1", "a2", "a3", "b1", "b2")]
     errors = {"default": [], "15 Hz": []}
@@ -143,10 +143,10 @@ def test_auto_is_the_default_and_reads_each_real_trial(tmp_path):
 
 
 def test_the_cross_validated_yardstick_picks_each_trials_cutoff_from_the_other_trials():
-    """The study's cross-validated hindsight (`studies.cutoff_study.cross_validated_best`): seed i is scored at the
+    """The study's cross-validated hindsight (`evaluation.cutoff_study.cross_validated_best`): seed i is scored at the
     grid point best over the other seeds, never where its own draw was lucky. Grid point A is best by the median
     over all three seeds (0.3 against B's 0.4) only because seeds 0 and 1 were lucky there."""
-    from ident_opt.studies.cutoff_study import cross_validated_best
+    from ident_opt.evaluation.cutoff_study import cross_validated_best
 
     errors = np.array([[0.2, 0.4], [0.3, 0.4], [0.9, 0.4]])  # seeds x (A, B)
     assert np.min(np.median(errors, axis=0)) == pytest.approx(0.3)  # the per-condition best: A

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from ident_opt import paper
 from ident_opt.arm.datasheet import datasheet_pi, rigid_body
+from ident_opt.paper import published as paper
 
 
 def rel(a: float, b: float) -> float:

@@ -23,7 +23,7 @@ TRAJECTORY = {"stribeck": "fourier"}
 
 
 def _trial(robot, cause: str, seed: int, **kwargs):
-    from ident_opt.simulate import simulate_trial
+    from ident_opt.simulator import simulate_trial
 
     rng = np.random.default_rng([seed, CAUSES.index(cause)])
     effects = {} if cause == "none" else {cause: hidden.draw(cause, rng, robot)}
@@ -69,8 +69,8 @@ def test_robust_to_how_the_data_arrive(physical_problem, tmp_path, how):
     """A hidden delay (it depends on timing, derivatives and units all at once) is still found."""
     from dataclasses import replace
 
-    from ident_opt.data import load_dataset
-    from ident_opt.studies.recommend import for_diagnosis
+    from ident_opt.data.dataset import load_dataset
+    from ident_opt.fitting.recommend import for_diagnosis
 
     robot = physical_problem.robot
     spec = replace(physical_problem.data, header=True, columns={})

@@ -24,7 +24,7 @@ import pytest
 
 from ident_opt.diagnosis import diagnose, hidden
 from ident_opt.problem import load_problem
-from ident_opt.simulate import simulate_trial
+from ident_opt.simulator import simulate_trial
 
 from .conftest import rigid_fit_runs
 
@@ -210,12 +210,12 @@ def test_friction_steps_smoothed_by_the_torque_filter_are_not_a_delay():
 
 def test_the_rigid_fit_is_the_recommended_fit_unless_an_estimator_is_asked(tmp_path, capsys):
     """Issue 29's contract on the n-joint diagnosis: with the derivatives estimated from the angles, the rigid
-    fit's estimator is the one `studies.recommend` picks on the training part (computed here independently), named
+    fit's estimator is the one `fitting.recommend` picks on the training part (computed here independently), named
     with its reason on the terminal and in the report and JSON; --estimator robust is honoured (instrumented
     statistics through every candidate) and an estimator the arm lacks exits 2 naming its fits."""
     from ident_opt.cli import main
-    from ident_opt.data import load_dataset
-    from ident_opt.studies.recommend import evidence
+    from ident_opt.data.dataset import load_dataset
+    from ident_opt.fitting.recommend import evidence
 
     problem = load_problem(PROBLEMS["arm4"])
     trial = simulate_trial(problem.robot, duration=16.0, rate_hz=250.0, seed=1015, limits=problem.limits)
@@ -241,7 +241,7 @@ def test_forward_evidence_on_a_joint_without_inertia_is_null_not_a_crash():
     That joint's error is now not reported (NaN, null in the JSON) and the others' are finite."""
     import pandas as pd
 
-    from ident_opt.data import Dataset
+    from ident_opt.data.dataset import Dataset
     from ident_opt.diagnosis.evidence import forward_error
 
     robot = load_problem(ROOT / "problems" / "staubli_tx40.toml").robot
@@ -265,7 +265,7 @@ def test_a_coupled_drive_at_rest_has_no_coulomb_sign_and_its_friction_reaches_bo
     builds per-drive friction columns on every row that drive reaches."""
     import pandas as pd
 
-    from ident_opt.data import Dataset
+    from ident_opt.data.dataset import Dataset
     from ident_opt.diagnosis.arm_fit import ArmContext
 
     robot = load_problem(PROBLEMS["tx40"]).robot
@@ -386,7 +386,7 @@ def test_samples_where_a_coupled_drive_may_stick_leave_the_comparison_on_every_r
     torque scale of 1.03 on joint 5 (seed 800 of the arm confusion tables)."""
     import pandas as pd
 
-    from ident_opt.data import Dataset
+    from ident_opt.data.dataset import Dataset
     from ident_opt.diagnosis import signals
     from ident_opt.diagnosis.arm_fit import ArmContext
 

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import pytest
 
-from ident_opt.diagnosis import diagnose, hidden, report
+from ident_opt.diagnosis import diagnose, hidden
+from ident_opt.report import diagnosis as report
 
 
 def _run(robot, effects: list[str], **kwargs):
-    from ident_opt.simulate import simulate_trial
+    from ident_opt.simulator import simulate_trial
 
     kwargs.setdefault("trajectory", "tud01")
     kwargs.setdefault("duration", 60.0)

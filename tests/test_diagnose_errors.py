@@ -47,7 +47,7 @@ def test_offset_standard_errors_cover_the_noise(physical_problem):
     """Encoder offsets are limited by the torque noise (noise-free trials find them within 1 mrad), so their
     standard errors must cover the errors: RMS z near 1. Independent-residual errors, about half as large,
     gave RMS z ≈ 1.6 here."""
-    from ident_opt.simulate import simulate_trial
+    from ident_opt.simulator import simulate_trial
 
     robot = physical_problem.robot
     z = []

@@ -3,7 +3,7 @@ tool stands behind"), like the n-joint one: the nominal rigid fit and every cand
 estimator, and a candidate with no column of its own is that rigid fit exactly.
 
 References are independent of the diagnosis's plumbing: the estimator registry's own statistics of the same samples
-(`identify.estimators.statistics`), and `studies.recommend.evidence` on the training part for the recommendation.
+(`fitting.estimators.statistics`), and `fitting.recommend.evidence` on the training part for the recommendation.
 """
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ident_opt.data import load_dataset
+from ident_opt.data.dataset import load_dataset
 from ident_opt.diagnosis import candidates as cands
 from ident_opt.diagnosis import loop, signals
-from ident_opt.identify import estimators
-from ident_opt.simulate import simulate_trial
+from ident_opt.fitting import estimators
+from ident_opt.simulator import simulate_trial
 
 from .conftest import rigid_fit_runs
 
@@ -64,11 +64,11 @@ def test_the_rigid_fit_is_the_estimators_own_fit_and_a_candidate_without_columns
 
 
 def test_the_command_uses_the_recommended_fit_on_a_planar_arm(physical_problem, tmp_path, capsys):
-    """`diagnose` on a two-link problem: the rigid fit's estimator is `studies.recommend`'s pick on the training part
+    """`diagnose` on a two-link problem: the rigid fit's estimator is `fitting.recommend`'s pick on the training part
     (computed here independently), named with its reason on the terminal and in the report and JSON; --estimator is
     honoured; the physical-parameter NLP, which cannot carry a cause's columns, exits 2 and writes nothing."""
     from ident_opt.cli import main
-    from ident_opt.studies.recommend import evidence
+    from ident_opt.fitting.recommend import evidence
 
     robot = physical_problem.robot
     text = physical_problem.path.read_text()
@@ -92,7 +92,7 @@ def test_the_command_uses_the_recommended_fit_on_a_planar_arm(physical_problem, 
 def test_report_lists_show_a_level_held_at_its_bound_as_zero():
     """A Coulomb level the consistent fit holds at 0 comes out of the conic solver at ~1e-11 N m: the report's
     per-joint lists show it as 0 beside levels of 1 N m, and keep small numbers that are all of a list."""
-    from ident_opt.diagnosis.report import pair
+    from ident_opt.report.diagnosis import pair
 
     assert pair([1.0301, 6.12e-11], "N m") == "[1.03, 0] N m"
     assert pair([2e-5, 3e-5]) == "[2e-05, 3e-05]"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident_opt.data import Dataset
+from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import linear, scoring, signals
 from ident_opt.diagnosis.loop import at_rest, compared_warnings, split
 from ident_opt.effects.elasticity import ELASTIC_BAND_HZ
@@ -233,7 +233,7 @@ def test_forward_simulation_error_separates_right_from_wrong_parameters(physical
     from ident_opt.arm.datasheet import datasheet_pi
     from ident_opt.diagnosis.candidates import NOMINAL
     from ident_opt.diagnosis.evidence import forward_error
-    from ident_opt.simulate import simulate_trial
+    from ident_opt.simulator import simulate_trial
 
     robot = physical_problem.robot
     trial = simulate_trial(
@@ -450,7 +450,7 @@ def _elastic_trial(joint: int):
     from ident_opt.arm.datasheet import datasheet_pi, rigid_body
     from ident_opt.diagnosis import candidates as cands
     from ident_opt.problem import load_problem
-    from ident_opt.simulate import simulate_trial
+    from ident_opt.simulator import simulate_trial
 
     robot = load_problem("problems/tudor_sim.toml").robot
     sim = simulate_trial(

@@ -12,9 +12,9 @@ import pytest
 
 from ident_opt.cli import main
 from ident_opt.errors import InputError
+from ident_opt.excitation import design as excitation
 from ident_opt.problem import load_problem
-from ident_opt.studies import excitation
-from ident_opt.trajectory import Fourier
+from ident_opt.simulator.fourier import Fourier
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The robot of the real trials with limits and no data (σ = 1 N m), written to a temporary problem file.
@@ -164,7 +164,7 @@ def test_between_is_checked(tmp_path, capsys):
 
 
 def test_discrimination_design_beats_its_start_within_limits(physical_problem, exp1):
-    from ident_opt.studies import discrimination
+    from ident_opt.excitation import discrimination
 
     s = excitation.make_setup(physical_problem.robot, physical_problem.limits, 8.0, harmonics=8, base_hz=0.5)
     d = discrimination.design(
@@ -181,8 +181,8 @@ def test_discrimination_design_beats_its_start_within_limits(physical_problem, e
 
 
 def test_proof_report_and_index(setup, tmp_path):
+    from ident_opt.excitation import proof as proof
     from ident_opt.report import excitation as report
-    from ident_opt.studies import excitation_proof as proof
 
     d = excitation.design(setup, "d", starts=1, seed=1, rate=100.0, progress=False, max_iter=20)
     ident = pd.DataFrame(

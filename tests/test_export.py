@@ -1,5 +1,5 @@
 """`ident-opt export`'s layer below the command: π realised as rigid bodies (`ident_opt.arm.realise`) and written as a
-URDF with its JSON sidecar and as a MuJoCo MJCF (`ident_opt.descriptions`). Pinocchio loads the URDF and MuJoCo the
+URDF with its JSON sidecar and as a MuJoCo MJCF (`ident_opt.shipping`). Pinocchio loads the URDF and MuJoCo the
 MJCF, and their inverse dynamics reproduce the model's predicted torques `arm.predict(π, q, dq, ddq)` to 1e-9
 relative, at random states with |dq| away from 0 (Coulomb friction's sign is the model's there), for the three
 shipped n-joint arms and the planar two-link arms."""
@@ -21,9 +21,9 @@ from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PAPER, RIGID, PlanarArm
 from ident_opt.arm.realise import IMPOSSIBLE, chain_bodies, planar_bodies
 from ident_opt.arm.rnea import N_LINK
-from ident_opt.descriptions import identified, write_mjcf, write_urdf
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
+from ident_opt.shipping import identified, write_mjcf, write_urdf
 from tests.conftest import PROBLEMS
 
 #: Worst per-sample error allowed, relative to the sample's largest |τ|.

@@ -25,16 +25,15 @@ import pytest
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.cli import main
-from ident_opt.data import load_dataset
+from ident_opt.data.dataset import load_dataset
 from ident_opt.errors import InputError
+from ident_opt.fitting import estimators, recommend
+from ident_opt.fitting.stats import Stats
 from ident_opt.fleet import changes, layout, tasks
+from ident_opt.fleet.run import run_fleet
 from ident_opt.fleet.simulated import FleetSpec, simulate_fleet
-from ident_opt.identify import estimators
-from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
 from ident_opt.report import fleet as report
-from ident_opt.studies import recommend
-from ident_opt.studies.fleet import run_fleet
 from tests.conftest import PROBLEMS, ROOT
 
 PLANAR = PROBLEMS / "tudor_2dof.toml"

@@ -7,7 +7,7 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from ident_opt.errors import InputError
-from ident_opt.gmr import GMR
+from ident_opt.models.gmr import GMR
 
 
 def _random_spd(rng: np.random.Generator, D: int) -> np.ndarray:

@@ -14,7 +14,7 @@ import pytest
 
 from ident_opt import outputs
 from ident_opt.cli import main
-from ident_opt.data import chronological_split, shuffled_split
+from ident_opt.data.dataset import chronological_split, shuffled_split
 from ident_opt.errors import InputError
 from ident_opt.report import write_json
 

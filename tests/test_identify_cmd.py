@@ -11,7 +11,7 @@ import pytest
 
 from ident_opt.cli import main
 from ident_opt.problem import load_problem
-from ident_opt.simulate.trial import simulate_trial
+from ident_opt.simulator.trial import simulate_trial
 
 REPO = Path(__file__).resolve().parents[1]
 MODELS = {"rr", "dm", "dm_physical", "pbr", "cpbr"}

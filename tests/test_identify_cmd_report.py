@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from ident_opt.paper import NMSE_RANGE as PAPER_NMSE_RANGE
-from ident_opt.paper import RMSE as PAPER_RMSE
+from ident_opt.evaluation.identify import IdentifyResult
+from ident_opt.paper.protocols import ProtocolResult
+from ident_opt.paper.published import NMSE_RANGE as PAPER_NMSE_RANGE
+from ident_opt.paper.published import RMSE as PAPER_RMSE
 from ident_opt.report.identify_tables import reproduction_frame
-from ident_opt.studies.identify import IdentifyResult
-from ident_opt.studies.protocols import ProtocolResult
 
 
 def _result(scale_rmse: float, scale_nmse: float) -> IdentifyResult:

@@ -7,11 +7,11 @@ import pytest
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PlanarArm
-from ident_opt.identify import constrained
-from ident_opt.identify.constrained import constraint_slacks, fit_bounded, fit_constrained, solve_constrained
-from ident_opt.identify.fit import fit_ols
-from ident_opt.identify.stats import Stats
-from ident_opt.studies.constraints import multisine_trial
+from ident_opt.evaluation.constraints import multisine_trial
+from ident_opt.fitting import constrained
+from ident_opt.fitting.constrained import constraint_slacks, fit_bounded, fit_constrained, solve_constrained
+from ident_opt.fitting.fit import fit_ols
+from ident_opt.fitting.stats import Stats
 
 RIGID = PlanarArm()
 ARM = PlanarArm(("armature",))

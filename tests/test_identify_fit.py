@@ -7,12 +7,12 @@ import pytest
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PlanarArm
-from ident_opt.identify.constrained import fit_constrained
-from ident_opt.identify.fit import base_combinations, fit_ols
-from ident_opt.identify.ols import solve_ols
-from ident_opt.identify.stats import Stats
+from ident_opt.evaluation.constraints import multisine_trial
+from ident_opt.fitting.constrained import fit_constrained
+from ident_opt.fitting.fit import base_combinations, fit_ols
+from ident_opt.fitting.ols import solve_ols
+from ident_opt.fitting.stats import Stats
 from ident_opt.parameters import Parameter
-from ident_opt.studies.constraints import multisine_trial
 
 RIGID = PlanarArm()
 

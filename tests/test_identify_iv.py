@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from ident_opt.arm.planar import PHYSICAL
-from ident_opt.data import load_dataset
-from ident_opt.identify.fit import fit_ols
-from ident_opt.identify.iv import InstrumentStats, fit_iv
+from ident_opt.data.dataset import load_dataset
+from ident_opt.fitting.fit import fit_ols
+from ident_opt.fitting.iv import InstrumentStats, fit_iv
 from ident_opt.problem import DataSpec
 
 from .test_cutoff import trial

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from ident_opt.arm.planar import RIGID
-from ident_opt.data import shuffled_split
-from ident_opt.identify.fit import fit_ols
-from ident_opt.identify.stats import Stats
+from ident_opt.data.dataset import shuffled_split
+from ident_opt.fitting.fit import fit_ols
+from ident_opt.fitting.stats import Stats
 from ident_opt.metrics import rmse
+from ident_opt.paper.seeds import deviation_from_mean, rmse_table, seed_study
 from ident_opt.problem import SplitSpec
 from ident_opt.report.figures import seed_heatmap
-from ident_opt.studies.seeds import deviation_from_mean, rmse_table, seed_study
 
 
 def test_seed_study_matches_direct_fits(exp1, tmp_path):

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from ident_opt.arm.planar import RIGID
-from ident_opt.data import shuffled_split
-from ident_opt.models import HybridModel, RidgeModel, RigidModel, datasheet_model, features, make_gmr
+from ident_opt.data.dataset import shuffled_split
+from ident_opt.models.hybrid import HybridModel, RidgeModel, RigidModel, datasheet_model, features, make_gmr
+from ident_opt.paper.protocols import chronological_protocol, evaluate_split, paper_protocol
 from ident_opt.problem import ResidualSpec, SplitSpec, load_problem
-from ident_opt.simulate.trial import simulate_trial
-from ident_opt.studies.protocols import chronological_protocol, evaluate_split, paper_protocol
+from ident_opt.simulator.trial import simulate_trial
 
 PROBLEM = "problems/tudor_2dof.toml"
 

@@ -15,11 +15,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from ident_opt.adaptation.stream import LineParser, Mapping
 from ident_opt.cli import main
-from ident_opt.data import load_dataset
+from ident_opt.data.dataset import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
-from ident_opt.stream import LineParser, Mapping
 from tests.test_urdf_arm import TWISTED
 
 ROOT = Path(__file__).resolve().parents[1]

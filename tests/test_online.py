@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
+from ident_opt.adaptation.identifier import Estimator, OnlineIdentifier, batch_theta
 from ident_opt.arm.planar import RIGID
-from ident_opt.gmr import GMR
-from ident_opt.identify.bounded import Bounds, default_bounds, solve_bounded
-from ident_opt.identify.stats import Stats
-from ident_opt.online import Estimator, OnlineIdentifier, batch_theta
+from ident_opt.fitting.bounded import Bounds, default_bounds, solve_bounded
+from ident_opt.fitting.stats import Stats
+from ident_opt.models.gmr import GMR
 
 
 def _trial(n: int, seed: int, pi: np.ndarray, noise: float = 0.3):
@@ -151,7 +151,7 @@ def test_consistency_transform_keeps_prediction_at_component_means(cross):
 
 
 def _arm_jacobian():
-    from ident_opt.online import arm_design_jacobian
+    from ident_opt.adaptation.identifier import arm_design_jacobian
 
     return arm_design_jacobian(RIGID)
 

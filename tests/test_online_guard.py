@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident_opt.data import load_dataset
-from ident_opt.gmr import GMR, Support, input_log_density
-from ident_opt.online import serving_identifier
+from ident_opt.adaptation.identifier import serving_identifier
+from ident_opt.data.dataset import load_dataset
+from ident_opt.models.gmr import GMR, Support, input_log_density
 from ident_opt.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[1]

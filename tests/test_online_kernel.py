@@ -8,11 +8,11 @@ import copy
 import numpy as np
 import pytest
 
+from ident_opt.adaptation.identifier import ArmDesign, Estimator, OnlineIdentifier
+from ident_opt.adaptation.kernel import attach
 from ident_opt.arm.planar import RIGID
-from ident_opt.identify.bounded import default_bounds
-from ident_opt.identify.stats import Stats
-from ident_opt.online import ArmDesign, Estimator, OnlineIdentifier
-from ident_opt.online_kernel import attach
+from ident_opt.fitting.bounded import default_bounds
+from ident_opt.fitting.stats import Stats
 
 PI = np.array([0.7527, 0.05218, -0.03602, 3.752, 0.3125, 1.568, 0.02847, 0.5806, 0.3739])  # a3 < 0: bound active
 
@@ -70,7 +70,7 @@ def test_attach_declines_other_estimators():
 
 
 def test_compiled_step_predicts_as_python_with_the_guard():
-    from ident_opt.gmr import GMR, Support
+    from ident_opt.models.gmr import GMR, Support
 
     rng = np.random.default_rng(2)
     n = 3000

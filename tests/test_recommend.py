@@ -1,4 +1,4 @@
-"""The fit the tool stands behind (`studies.recommend`) and the instrumental-variable machinery under it: the
+"""The fit the tool stands behind (`fitting.recommend`) and the instrumental-variable machinery under it: the
 two-stage statistics against 2SLS computed from the samples, the robust fit against them where no constraint binds,
 the recommendation on trials whose truth is known (the cut-off study's plant, seeds the study does not use), and
 advice that never asks for what the run already did."""
@@ -10,14 +10,14 @@ import json
 import numpy as np
 import pytest
 
-from ident_opt.data import load_dataset
-from ident_opt.identify import estimators
-from ident_opt.identify.fit import fit_ols
-from ident_opt.identify.iv import InstrumentStats
+from ident_opt.data.dataset import load_dataset
+from ident_opt.evaluation.cutoff_plant import Condition, simulate
+from ident_opt.evaluation.cutoff_study import _error, truth
+from ident_opt.fitting import estimators
+from ident_opt.fitting.fit import fit_ols
+from ident_opt.fitting.iv import InstrumentStats
+from ident_opt.fitting.recommend import recommended_fit
 from ident_opt.problem import DataSpec, load_problem
-from ident_opt.studies.cutoff_plant import Condition, simulate
-from ident_opt.studies.cutoff_study import _error, truth
-from ident_opt.studies.recommend import recommended_fit
 
 from .conftest import PROBLEMS
 
@@ -133,8 +133,8 @@ def test_the_robust_fits_errors_cover_what_its_probes_move_it_by(tmp_path, dfki)
     from the two reads built by hand; without probes they are the 2SLS errors alone."""
     from dataclasses import replace
 
-    from ident_opt.data import refiltered
-    from ident_opt.derivatives import instrument_derivatives
+    from ident_opt.data.dataset import refiltered
+    from ident_opt.data.derivatives import instrument_derivatives
 
     d, arm, _ = simulated(tmp_path, dfki, "passive", 250.0, 0.5, seed=61)
     robot = dfki.robot
@@ -161,7 +161,7 @@ def test_the_recommended_robust_fit_covers_the_truth_where_2sls_errors_do_not(tm
     the 2SLS errors, and in at least 85 % of cases."""
     from dataclasses import replace
 
-    from ident_opt.studies.trust import JUDGED_KINDS
+    from ident_opt.fitting.trust import JUDGED_KINDS
 
     problem = replace(dfki, data=DataSpec(derivative_cutoff_hz="auto"))
     covered = {"2sls": [], "recommended": []}

@@ -8,7 +8,7 @@ import itertools
 import pytest
 
 from ident_opt.cli import build_parser, main
-from ident_opt.identify import estimators
+from ident_opt.fitting import estimators
 from ident_opt.report import MANIFESTS, record
 
 from .conftest import PROBLEMS

@@ -14,13 +14,13 @@ from hypothesis import strategies as st
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PlanarArm
 from ident_opt.cli import main
-from ident_opt.data import load_dataset
+from ident_opt.data.dataset import load_dataset
 from ident_opt.effects import BACKGROUND
 from ident_opt.errors import InputError
-from ident_opt.identify.ols import solve_ols
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.ols import solve_ols
+from ident_opt.fitting.stats import Stats
 from ident_opt.problem import DataSpec, load_problem
-from ident_opt.simulate import CATALOGUE, measurement, parse_effect, simulate_trial
+from ident_opt.simulator import CATALOGUE, measurement, parse_effect, simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "tudor_2dof.toml"
@@ -215,7 +215,7 @@ def test_cli_bandwidth_and_noise_scale_reach_the_truth(tmp_path):
 
 def test_command_line_ranges_match_the_simulator():
     from ident_opt.arguments import RANGES
-    from ident_opt.simulate import trial
+    from ident_opt.simulator import trial
 
     assert RANGES[("simulate", "bandwidth")] == (trial.MIN_BANDWIDTH, trial.MAX_BANDWIDTH)
     assert RANGES[("simulate", "noise_scale")] == (0.0, trial.MAX_NOISE_SCALE)
@@ -229,7 +229,7 @@ def short_sim_problem(tmp_path, duration=3.0):
 
 
 def test_problem_trials_are_two_seeds_generated_once_and_cached(tmp_path, monkeypatch):
-    from ident_opt.simulate import problem_trials
+    from ident_opt.simulator import problem_trials
 
     monkeypatch.setenv("IDENT_OPT_CACHE", str(tmp_path / "cache"))
     problem = short_sim_problem(tmp_path)
@@ -259,7 +259,7 @@ def test_common_load_reads_the_simulated_trials_of_a_sim_problem(tmp_path, monke
 
 
 def test_bad_simulate_settings_in_a_problem_file_name_the_file(tmp_path, monkeypatch):
-    from ident_opt.simulate import problem_trials
+    from ident_opt.simulator import problem_trials
 
     monkeypatch.setenv("IDENT_OPT_CACHE", str(tmp_path / "cache"))
     text = (ROOT / "problems" / "tudor_sim.toml").read_text().replace('"asymmetric_coulomb",', '"friction:x=1",')

@@ -17,9 +17,9 @@ import pytest
 from ident_opt.cli import main
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
-from ident_opt.simulate import arm_plant, simulate_trial
-from ident_opt.simulate.arm_plant import forward
-from ident_opt.simulate.trial import box_of
+from ident_opt.simulator import arm_plant, simulate_trial
+from ident_opt.simulator.arm_plant import forward
+from ident_opt.simulator.trial import box_of
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM4 = ROOT / "tests" / "arms" / "arm4.toml"

@@ -11,12 +11,12 @@ import pytest
 from scipy import signal
 
 from ident_opt.arm.planar import RIGID, PlanarArm
-from ident_opt.data import load_dataset
+from ident_opt.data.dataset import load_dataset
 from ident_opt.effects import BACKGROUND, describe
-from ident_opt.identify.ols import solve_ols
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.ols import solve_ols
+from ident_opt.fitting.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.simulate import CATALOGUE, parse_effect, simulate_trial
+from ident_opt.simulator import CATALOGUE, parse_effect, simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = PlanarArm(("armature",))

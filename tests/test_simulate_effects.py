@@ -10,10 +10,10 @@ import pytest
 from scipy import signal
 
 from ident_opt.arm.planar import PlanarArm
-from ident_opt.identify.ols import solve_ols
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.ols import solve_ols
+from ident_opt.fitting.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.simulate import simulate_trial
+from ident_opt.simulator import simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = PlanarArm(("armature",))
@@ -167,7 +167,7 @@ def test_load_friction_adds_mu_times_the_link_torque_to_the_coulomb_level(robot)
     """Exact data: τ − Y π_true = μ_j sgn(dq_j) |τ_load,j| with τ_load the link-side rigid torque (inertial
     without the rotor inertia, Coriolis, gravity), so regressing the residual on that column gives back μ."""
     from ident_opt.arm.datasheet import datasheet_pi, rigid_body
-    from ident_opt.simulate.truth import link_pi
+    from ident_opt.simulator.truth import link_pi
 
     trial = simulate_trial(robot, effects=["load_friction:coefficient=[0.15,0.05]"], **EXACT)
     d = trial.dataset()
@@ -191,8 +191,8 @@ def test_load_friction_acts_in_the_elastic_plants_too(robot, kind):
     import casadi as ca
 
     from ident_opt.effects import is_active, normalise
-    from ident_opt.simulate import flexible_link
-    from ident_opt.simulate.truth import build_truth, coulomb_levels, friction_only, link_pi, plant
+    from ident_opt.simulator import flexible_link
+    from ident_opt.simulator.truth import build_truth, coulomb_levels, friction_only, link_pi, plant
 
     mu = (0.2, 0.15)
     elastic = {"elasticity": {"joint": 1, "frequency_hz": 5.0, "kind": kind}}

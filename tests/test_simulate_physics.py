@@ -14,14 +14,14 @@ from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.joints import Friction
 from ident_opt.arm.planar import PlanarArm
 from ident_opt.effects import normalise
-from ident_opt.identify.ols import solve_ols
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.ols import solve_ols
+from ident_opt.fitting.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.simulate import simulate_trial
-from ident_opt.simulate.closed_loop import MAX_TRACKING_ERROR
-from ident_opt.simulate.flexible_link import datasheet_armature, lagrangian_terms
-from ident_opt.simulate.trajectories import TAU_MAX
-from ident_opt.simulate.truth import build_truth, coulomb_levels, plant
+from ident_opt.simulator import simulate_trial
+from ident_opt.simulator.closed_loop import MAX_TRACKING_ERROR
+from ident_opt.simulator.flexible_link import datasheet_armature, lagrangian_terms
+from ident_opt.simulator.trajectories import TAU_MAX
+from ident_opt.simulator.truth import build_truth, coulomb_levels, plant
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = PlanarArm(("armature",))

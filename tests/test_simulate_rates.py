@@ -9,11 +9,11 @@ import pytest
 
 from ident_opt.arm.planar import PlanarArm
 from ident_opt.errors import InputError
-from ident_opt.identify.ols import solve_ols
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.ols import solve_ols
+from ident_opt.fitting.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.simulate import simulate_trial
-from ident_opt.simulate.closed_loop import MAX_TRACKING_ERROR
+from ident_opt.simulator import simulate_trial
+from ident_opt.simulator.closed_loop import MAX_TRACKING_ERROR
 
 PROBLEM = Path(__file__).resolve().parents[1] / "problems" / "tudor_2dof.toml"
 MODEL = PlanarArm(("armature",))

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident_opt.data import chronological_split
+from ident_opt.adaptation.identifier import offline_start, start_identifier
+from ident_opt.adaptation.stream import BadLine, LineParser, serve
+from ident_opt.data.dataset import chronological_split
 from ident_opt.errors import InputError
-from ident_opt.online import offline_start, start_identifier
-from ident_opt.stream import BadLine, LineParser, serve
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "tudor_2dof.toml"
@@ -77,7 +77,7 @@ def test_parser_formats_and_bad_lines():
 
 
 def test_serve_equals_replay_and_skips_bad_lines(physical_problem, small):
-    from ident_opt.models import make_gmr
+    from ident_opt.models.hybrid import make_gmr
 
     _, train, test = small
     start = offline_start("pbr", physical_problem, train)
@@ -154,7 +154,7 @@ def _start_stream(small, *extra):
 
 def test_cli_stream_equals_cli_replay(physical_problem, small, tmp_path):
     """The service's JSON-lines output equals the replay's predictions for the same samples."""
-    from ident_opt.studies.online_replay import replay
+    from ident_opt.adaptation.replay import replay
 
     _, train, test = small
     n = 120

@@ -12,14 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ident_opt.adaptation.identifier import batch_theta, offline_start
+from ident_opt.adaptation.stream import LineParser, Mapping
 from ident_opt.arm.planar import RIGID
-from ident_opt.data import chronological_split, load_dataset
-from ident_opt.derivatives import REST, CausalDerivatives, derivative_kernels
+from ident_opt.data.dataset import chronological_split, load_dataset
+from ident_opt.data.derivatives import REST, CausalDerivatives, derivative_kernels
 from ident_opt.errors import InputError
-from ident_opt.identify.fit import finish
-from ident_opt.identify.stats import Stats
-from ident_opt.online import batch_theta, offline_start
-from ident_opt.stream import LineParser, Mapping
+from ident_opt.fitting.fit import finish
+from ident_opt.fitting.stats import Stats
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "tudor_2dof.toml"

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident_opt.data import chronological_split
-from ident_opt.online import offline_start, start_identifier
-from ident_opt.stream import StreamOptions, serve
+from ident_opt.adaptation.identifier import offline_start, start_identifier
+from ident_opt.adaptation.stream import StreamOptions, serve
+from ident_opt.data.dataset import chronological_split
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "tudor_2dof.toml"

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ident_opt.simulate import trajectories as tr
+from ident_opt.simulator import trajectories as tr
 
 DT = 0.001
 CENTRE = 0.5 * (tr.Q_MIN + tr.Q_MAX)

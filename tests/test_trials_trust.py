@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from ident_opt.cli import main
-from ident_opt.data import concat, load_dataset
-from ident_opt.identify.stats import Stats
+from ident_opt.data.dataset import concat, load_dataset
+from ident_opt.evaluation.compare import compare_estimators
+from ident_opt.fitting.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.studies.compare import compare_estimators
 
 from .conftest import PROBLEMS
 

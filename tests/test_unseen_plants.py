@@ -13,8 +13,8 @@ import pytest
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.effects import normalise
 from ident_opt.problem import load_problem
-from ident_opt.simulate import unseen
-from ident_opt.simulate.truth import TRUTH_MODEL, build_truth, coulomb_levels
+from ident_opt.simulator import unseen
+from ident_opt.simulator.truth import TRUTH_MODEL, build_truth, coulomb_levels
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -84,7 +84,7 @@ def test_savitzky_golay_derivatives_are_exact_on_a_cubic():
 # ------------------------------------------------------------------------------------- diagnosis (lean subset)
 def _diagnosed(robot, effects, mechanism, pipeline, duration=40.0, seed=3):
     from ident_opt.diagnosis import diagnose
-    from ident_opt.simulate import simulate_trial
+    from ident_opt.simulator import simulate_trial
 
     sim = simulate_trial(robot, duration=duration, seed=seed, effects=effects, progress=False, mechanism=mechanism)
     return sim, diagnose(robot, unseen.derived(sim, pipeline, robot), progress=False, torque_filter_hz="auto")

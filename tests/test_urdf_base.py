@@ -9,8 +9,8 @@ import pytest
 
 from ident_opt.arm.chain import ChainArm
 from ident_opt.consistency import necessarily_nonnegative
-from ident_opt.identify.base import base_parameters, fit_base_ols, random_regressor
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.base import base_parameters, fit_base_ols, random_regressor
+from ident_opt.fitting.stats import Stats
 from ident_opt.problem import load_problem
 
 KUKA = Path(__file__).resolve().parents[1] / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from ident_opt.arm.chain import ChainArm
-from ident_opt.identify.base import fit_base_ols
-from ident_opt.identify.constrained import fit_constrained
-from ident_opt.identify.physical import fit_physical, log_det_divergence
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.base import fit_base_ols
+from ident_opt.fitting.constrained import fit_constrained
+from ident_opt.fitting.physical import fit_physical, log_det_divergence
+from ident_opt.fitting.stats import Stats
 
 KUKA = Path(__file__).resolve().parents[1] / "data" / "kuka_lwr4" / "kuka_lwr4.urdf"
 

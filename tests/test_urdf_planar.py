@@ -23,7 +23,7 @@ from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PHYSICAL
 from ident_opt.arm.planar_urdf import UrdfPlanarRobot
 from ident_opt.cli import main
-from ident_opt.data import load_dataset
+from ident_opt.data.dataset import load_dataset
 from ident_opt.problem import DataSpec, load_problem
 
 from .conftest import PROBLEMS
@@ -363,7 +363,7 @@ def test_compare_on_urdf_data_recovers_the_urdf_and_states_the_offsets(planar, t
 def test_a_simulated_trial_is_written_in_the_urdf_convention(planar, tmp_path):
     """The simulator's CSV of a URDF arm is logged as the URDF would (read back, it is the simulated trial)."""
     from ident_opt.problem import SimulateSpec
-    from ident_opt.simulate.cache import spec_trial
+    from ident_opt.simulator.cache import spec_trial
 
     robot, _, _ = planar
     trial = spec_trial(robot, SimulateSpec(duration=5.0), 0)
@@ -408,7 +408,7 @@ def test_link_lengths_are_axis_to_axis_and_axis_to_tip():
 
 def test_a_stream_in_the_urdf_convention_is_mapped(planar):
     """`online --stream` reads a URDF arm's samples as the batch loader does: q_t = s q_u + θ, the rest × s."""
-    from ident_opt.stream import LineParser, Mapping
+    from ident_opt.adaptation.stream import LineParser, Mapping
 
     robot, _, _ = planar
     parser = LineParser(mapping=Mapping.from_spec(DataSpec(), robot))

@@ -6,7 +6,7 @@ An arm is a rigid-body torque model that is linear in its parameters π (P,):
 
 `Arm` is that contract. The two-link closed form (`ident_opt.arm.planar.PlanarArm`, alias `TwoLinkArm`) is one
 implementation; the rest of the package depends on this interface only, so another arm plugs in without
-touching the estimators (`ident_opt.identify`), GMR, online identification, code generation or reports.
+touching the estimators (`ident_opt.fitting`), GMR, online identification, code generation or reports.
 
 How an n-joint arm from a URDF would implement it (a sketch for whoever adds it, e.g. with Pinocchio):
 
@@ -209,7 +209,7 @@ class Robot(Protocol):
 
     #: The `ident-opt` commands that serve this arm (a subset of `ALL_COMMANDS`).
     serves: frozenset[str]
-    #: The fits `compare` runs for it, in report order (names of `ident_opt.identify.estimators`).
+    #: The fits `compare` runs for it, in report order (names of `ident_opt.fitting.estimators`).
     estimators: tuple[str, ...]
     #: The fit used downstream (`identify`'s consistent model, `codegen`, `export`) unless told otherwise.
     default_estimator: str
@@ -221,7 +221,7 @@ class Robot(Protocol):
     paper_views: bool
     #: Which simulator and diagnosis serve it: "planar" (the two-link closed form's own, tuned on the MERIt trials:
     #: grouped π, flexible links, the paper's trajectories) or "arm" (any n joints, through `Arm` and `Robot` alone:
-    #: `simulate.arm_plant`, `diagnosis.arm_fit`).
+    #: `simulator.arm_plant`, `diagnosis.arm_fit`).
     engine: str
 
     @property

@@ -436,7 +436,7 @@ class ChainRobot:
         ("identify", "compare", "codegen", "check", "export", "fleet", "online", "excite", "simulate", "diagnose")
     )
     #: The fits `compare` runs, in report order: OLS on the base parameters, consistent without and with the
-    #: URDF as a prior (`ident_opt.identify.estimators`).
+    #: URDF as a prior (`ident_opt.fitting.estimators`).
     estimators = ("ols", "constrained", "consistent", "robust")
     #: The fit used downstream unless told otherwise: consistent and plausible.
     default_estimator = "consistent"

@@ -121,7 +121,7 @@ class PlanarRobot:
     # ------------------------------------------------------------------ the `Robot` interface
     #: Every command serves the planar two-link arm (the paper's own views included).
     serves = frozenset(ALL_COMMANDS)
-    #: The fits `compare` runs, in report order (`ident_opt.identify.estimators`).
+    #: The fits `compare` runs, in report order (`ident_opt.fitting.estimators`).
     estimators = ("ols", "constrained", "nlp_physical", "robust")
     #: The fit used downstream unless told otherwise.
     default_estimator = "constrained"

@@ -13,8 +13,8 @@ import sys
 from pathlib import Path
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir
+from ident_opt.paper.audit import audit
 from ident_opt.report import audit as report
-from ident_opt.studies.audit import audit
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

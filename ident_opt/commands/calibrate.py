@@ -13,9 +13,9 @@ import argparse
 
 from ident_opt.commands.common import output_dir, require
 from ident_opt.errors import InputError
+from ident_opt.paper.calibration import calibrate
 from ident_opt.problem import load_problem
 from ident_opt.report import calibration as report
-from ident_opt.studies.calibration import calibrate
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

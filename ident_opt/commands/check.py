@@ -10,7 +10,7 @@ import argparse
 import sys
 
 from ident_opt.commands.common import add_problem_arguments, load, write_json
-from ident_opt.identify.base import base_parameters
+from ident_opt.fitting.base import base_parameters
 from ident_opt.outputs import shown
 
 #: Units of the ranges printed per signal.

@@ -15,15 +15,16 @@ import sys
 
 import numpy as np
 
-from ident_opt import codegen, outputs
+from ident_opt import outputs
 from ident_opt.commands.common import add_components, add_problem_arguments, add_switches, load, output_dir, require
-from ident_opt.data import concat
+from ident_opt.data.dataset import concat
 from ident_opt.errors import InputError
-from ident_opt.identify.estimators import ESTIMATORS
+from ident_opt.fitting.estimators import ESTIMATORS
+from ident_opt.fitting.recommend import chosen
 from ident_opt.problem import load_problem
 from ident_opt.report import codegen as report
-from ident_opt.studies import online_codegen, ship
-from ident_opt.studies.recommend import chosen
+from ident_opt.shipping import codegen, ship
+from ident_opt.shipping import pi_update as online_codegen
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -136,7 +137,7 @@ def _with_update(args: argparse.Namespace, robot, trials: list) -> bool:
     return not args.no_update and bool(trials) and "online" in robot.serves
 
 
-#: What the online update adds to DIR (`ident_opt.codegen.generate_pi_update`, `compile_pi_update`, the check).
+#: What the online update adds to DIR (`ident_opt.shipping.codegen.generate_pi_update`, `compile_pi_update`, the check).
 UPDATE_FILES = [
     "pi_update.c",
     "pi_update.h",

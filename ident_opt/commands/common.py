@@ -9,9 +9,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ident_opt import outputs, report, simulate
+from ident_opt import outputs, report
+from ident_opt import simulator as simulate
 from ident_opt.arm.base import ALL_COMMANDS
-from ident_opt.data import fittable, load_dataset
+from ident_opt.data.dataset import fittable, load_dataset
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from ident_opt.report import write_json  # noqa: F401  (every command's --json goes through it)

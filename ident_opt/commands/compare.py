@@ -20,10 +20,10 @@ import sys
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir, require
 from ident_opt.errors import InputError
+from ident_opt.evaluation import compare, constraints
 from ident_opt.problem import load_problem
 from ident_opt.report import compare as report
 from ident_opt.report import constraints as constraints_report
-from ident_opt.studies import compare, constraints
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -4,7 +4,7 @@ model and its held-out gain (`docs/cli.md`, `docs/effects.md`).
 With two --data files the first trains and the second is held out; with one, its first part (the problem's
 train_fraction, in time) trains and the rest is held out. Writes diagnosis.md and two figures to --out
 (default: the problem's output folder) and, with --json, the machine-readable result. The rigid fit is the
-recommended fit (`studies.recommend`, judged on the training part) unless --estimator says otherwise, on every
+recommended fit (`fitting.recommend`, judged on the training part) unless --estimator says otherwise, on every
 arm; its name and reason go to the terminal, the report and the JSON.
 """
 
@@ -14,9 +14,10 @@ import argparse
 import sys
 
 from ident_opt.commands.common import add_problem_arguments, load, output_dir, write_json
-from ident_opt.diagnosis import diagnose, report
-from ident_opt.identify.estimators import ESTIMATORS
-from ident_opt.studies.recommend import Recommendation, chosen, for_diagnosis
+from ident_opt.diagnosis import diagnose
+from ident_opt.fitting.estimators import ESTIMATORS
+from ident_opt.fitting.recommend import Recommendation, chosen, for_diagnosis
+from ident_opt.report import diagnosis as report
 from ident_opt.warnings import ResultWarning
 
 
@@ -35,7 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def rigid_fit(loaded, asked: str | None) -> tuple[Recommendation, list[ResultWarning]]:
     """The estimator of the rigid fit and why, with the warnings of the evidence behind it: `asked` (--estimator),
-    else the recommended fit on the training part (`studies.recommend`)."""
+    else the recommended fit on the training part (`fitting.recommend`)."""
     problem = loaded.problem
     robot = problem.robot
     if asked is not None:

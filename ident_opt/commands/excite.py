@@ -23,12 +23,14 @@ from pathlib import Path
 
 from ident_opt import outputs
 from ident_opt.commands.common import add_problem_arguments, require
-from ident_opt.data import load_dataset
+from ident_opt.data.dataset import load_dataset
 from ident_opt.errors import InputError
+from ident_opt.excitation import design as excitation
+from ident_opt.excitation import discrimination
+from ident_opt.excitation import proof as excitation_proof
 from ident_opt.problem import load_problem
 from ident_opt.report import excitation as report
-from ident_opt.studies import discrimination, excitation, excitation_proof
-from ident_opt.trajectory import default_base_hz
+from ident_opt.simulator.fourier import default_base_hz
 
 #: Accepted ranges of the numeric flags.
 DURATION = (2.0, 3600.0)  # s
@@ -126,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             f"{what} tells two causes of the diagnosis apart, which only an arm with model extensions has; "
             f"{problem.robot.described_as} has none: design with --criterion d or cond (and see "
-            "`python -m ident_opt.studies.excitation_benefit` for the proof against random motions)"
+            "`python benchmarks/excitation_benefit.py` for the proof against random motions)"
         )
     if problem.limits is None:
         raise InputError(
@@ -185,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _proof(args: argparse.Namespace, problem, trial) -> int:
-    """The simulator proof (`studies.excitation_proof`): the report --out (*.md) and its files beside it."""
+    """The simulator proof (`excitation.proof`): the report --out (*.md) and its files beside it."""
     if trial is None:
         raise InputError(
             f"{problem.path}: --proof needs data (the problem's [data] trials or --data): the noise "

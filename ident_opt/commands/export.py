@@ -20,10 +20,10 @@ from pathlib import Path
 
 from ident_opt import outputs
 from ident_opt.commands.common import add_problem_arguments, load, require, write_json
-from ident_opt.descriptions import identified, write_mjcf, write_urdf
+from ident_opt.fitting.recommend import chosen
 from ident_opt.problem import load_problem
-from ident_opt.studies.export import identified_arm
-from ident_opt.studies.recommend import chosen
+from ident_opt.shipping import identified, write_mjcf, write_urdf
+from ident_opt.shipping.description import identified_arm
 
 #: The formats of --format, and the file ending each expects.
 FORMATS = {"urdf": ".urdf", "mjcf": ".xml"}

@@ -33,9 +33,9 @@ from tqdm import tqdm
 from ident_opt.commands.common import add_problem_arguments, output_dir, require
 from ident_opt.errors import InputError
 from ident_opt.fleet.engine import CONNECT_TIMEOUT_S
+from ident_opt.fleet.run import run_fleet
 from ident_opt.problem import load_problem
 from ident_opt.report import fleet as report
-from ident_opt.studies.fleet import run_fleet
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

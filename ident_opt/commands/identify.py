@@ -16,8 +16,8 @@ import time
 from tqdm import tqdm
 
 from ident_opt.commands.common import add_problem_arguments, add_switches, load, output_dir
+from ident_opt.evaluation.identify import identify, steps
 from ident_opt.report import identify as report
-from ident_opt.studies.identify import identify, steps
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,16 +1,16 @@
 """`ident-opt online`: offline fit on the first part of the trial, then exact sequential updates on the rest.
 
 Replay (default): every model (rr, the nominal ones dm, dm_…, pbr, cpbr, each with and without its GMR residual;
-`online.model_keys`) is fitted on the first `[split] train_fraction` of the trial in time; the rest is replayed
-sample by sample in time order, each sample first predicted (one step ahead) and then folded in (RR and PBR
+`adaptation.identifier.model_keys`) is fitted on the first `[split] train_fraction` of the trial in time; the rest is
+replayed sample by sample in time order, each sample first predicted (one step ahead) and then folded in (RR and PBR
 re-solve exactly on all data seen, CPBR too where its estimator has an exact online form, else from scratch every
 --consistent-every samples; DM stays fixed; GMRs follow by the mean-only consistency transform). Writes the
-online-vs-frozen error table, the parameter trajectories (figure), the initial and final parameters, checks the
-online parameters against from-scratch batch solves at random steps and, on an n-joint arm, measures how far PBR's
-exact sign-bounded parameters are from the consistent re-solves.
+online-vs-frozen error table, the parameter trajectories (figure), the initial and final parameters, checks the online
+parameters against from-scratch batch solves at random steps and, on an n-joint arm, measures how far PBR's exact
+sign-bounded parameters are from the consistent re-solves.
 
 Streaming (`--stream`): the same offline fit, then samples from standard input (CSV with a header, or JSON
-lines), one JSON line out per sample; see `ident_opt.stream`.
+lines), one JSON line out per sample; see `ident_opt.adaptation.stream`.
 """
 
 from __future__ import annotations
@@ -20,6 +20,9 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from ident_opt.adaptation.identifier import CONSISTENT_EVERY, serving_identifier
+from ident_opt.adaptation.replay import replay
+from ident_opt.adaptation.stream import Mapping, StreamOptions, currents_to_torques, serve
 from ident_opt.commands.common import (
     add_components,
     add_problem_arguments,
@@ -28,15 +31,12 @@ from ident_opt.commands.common import (
     output_dir,
     write_json,
 )
-from ident_opt.data import chronological_split
-from ident_opt.derivatives import resolve_cutoff
+from ident_opt.data.dataset import chronological_split
+from ident_opt.data.derivatives import resolve_cutoff
 from ident_opt.errors import InputError
-from ident_opt.online import CONSISTENT_EVERY, serving_identifier
+from ident_opt.fitting.recommend import chosen
 from ident_opt.outputs import shown
 from ident_opt.report import online as report
-from ident_opt.stream import Mapping, StreamOptions, currents_to_torques, serve
-from ident_opt.studies.online_replay import replay
-from ident_opt.studies.recommend import chosen
 from ident_opt.warnings import ResultWarning
 
 #: Largest accepted --consistent-every.

@@ -29,8 +29,8 @@ from ident_opt.effects import describe
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from ident_opt.problem.spec import SimulateSpec
-from ident_opt.simulate import simulate_trial, truth_path
-from ident_opt.simulate.trajectories import TRAJECTORIES
+from ident_opt.simulator import simulate_trial, truth_path
+from ident_opt.simulator.trajectories import TRAJECTORIES
 
 #: The flags that override a key of the problem's [simulate] section: flag -> (key, type, metavar, help).
 OVERRIDES = {

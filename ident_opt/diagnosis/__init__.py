@@ -27,7 +27,7 @@ def diagnose(
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data) of `robot`'s arm: the planar two-link arm's
     diagnosis (`loop.diagnose`) or any arm's (`arm_diagnosis.diagnose`), as the robot says (`Robot.engine`).
-    `rigid_fit`: the estimator π is fitted with and why (a `studies.recommend.Recommendation`: the recommended fit,
+    `rigid_fit`: the estimator π is fitted with and why (a `fitting.recommend.Recommendation`: the recommended fit,
     which the command passes; None: the robot's default estimator)."""
     if robot.engine == "planar":
         return loop.diagnose(robot, trial, unseen, train_fraction, progress, torque_filter_hz, rigid_fit)

@@ -3,8 +3,8 @@ rounds, scoring and JSON (`loop`), with the candidates of `arm_fit` and the arm'
 
 - The two nominal models: the **datasheet** (the problem's nominal arm, `Robot.datasheets()[Robot.datasheet]`:
   the URDF's inertials with the problem's joint values) and the **rigid fit** (π by the recommended fit unless
-  --estimator says otherwise, `studies.recommend.chosen`, given as `rigid_fit`; the robot's default estimator when
-  none is given; through `identify.estimators.fit_for`, on the training part; joints weighted by 1/σ_j² from a
+  --estimator says otherwise, `fitting.recommend.chosen`, given as `rigid_fit`; the robot's default estimator when
+  none is given; through `fitting.estimators.fit_for`, on the training part; joints weighted by 1/σ_j² from a
   first least-squares pass). Every candidate refits π with the same estimator (`arm_fit.ArmContext.rigid`).
 - The split, the torque filter and the rest stretches are the planar diagnosis's (`loop.parts`). After the
   zero-phase filter the data hold nothing above its cut-off, so the diagnosis reads them every `decimation`-th
@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from ident_opt.arm.base import Robot
-from ident_opt.data import Dataset
+from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import arm_fit, evidence, loop, signals
 from ident_opt.diagnosis.loop import Diagnosis, Fitted
 
@@ -85,7 +85,7 @@ def diagnose(
     rigid_fit=None,
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data) of an n-joint arm; see the module docstring
-    and `loop.diagnose`. `rigid_fit`: a `studies.recommend.Recommendation` (estimator, why), None: the robot's
+    and `loop.diagnose`. `rigid_fit`: a `fitting.recommend.Recommendation` (estimator, why), None: the robot's
     default estimator."""
     estimator = robot.default_estimator if rigid_fit is None else rigid_fit.estimator
     t0 = time.perf_counter()

@@ -7,7 +7,7 @@ Every candidate is τ̂ = o(θ) + Y(q + δ) π + X(θ) β, delayed by d(θ) wher
   parameters the cause replaces (a Coulomb level by direction replaces the symmetric one); β by weighted least
   squares (nonnegative where the cause says so).
 - ``rigid_fit``: π refitted with the cause, by the diagnosis's estimator (the recommended fit unless --estimator
-  says otherwise; `identify.estimators.fit_for`, in `ArmContext.rigid`, the one place the diagnosis fits π): β
+  says otherwise; `fitting.estimators.fit_for`, in `ArmContext.rigid`, the one place the diagnosis fits π): β
   first by variable projection against the rigid columns (|P⊥(τ − X β)|² with P⊥ the projection off the
   weighted regressor's column space: the least-squares π for any β, whatever the base parameters), then π by the
   estimator on τ − X β and β again on τ − Y π. With no column, this is the nominal rigid fit exactly, so every
@@ -41,15 +41,15 @@ from scipy.signal import butter, filtfilt
 from ident_opt.arm.base import Arm, Robot
 from ident_opt.cache import cache_root
 from ident_opt.cbuild import CompiledRows
-from ident_opt.data import Dataset
+from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import linear, signals
 from ident_opt.diagnosis.candidates import Candidate, joint_estimate, physical_units
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
-from ident_opt.identify.base import base_parameters
-from ident_opt.identify.estimators import INSTRUMENTED, fit_for
-from ident_opt.identify.iv import InstrumentStats, instrument_kinematics
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.base import base_parameters
+from ident_opt.fitting.estimators import INSTRUMENTED, fit_for
+from ident_opt.fitting.iv import InstrumentStats, instrument_kinematics
+from ident_opt.fitting.stats import Stats
 
 #: A coefficient more than this many standard errors from its untouched value marks its joint as touched.
 RESOLVED = 3.0
@@ -100,7 +100,7 @@ class ArmContext:
 
     @property
     def independent(self) -> np.ndarray:
-        """The columns of Y that span its column space on any motion: the base parameters' (`identify.base`)."""
+        """The columns of Y that span its column space on any motion: the base parameters' (`fitting.base`)."""
         if "independent" not in self._cache:
             self._cache["independent"] = np.sort(base_parameters(self.arm).independent)
         return self._cache["independent"]
@@ -195,7 +195,7 @@ class ArmContext:
         kind = "Q" if delta is not None else "Q0"
         key = (kind, *view_key(ds), None if delta is None else np.asarray(delta).tobytes())
         if key not in self._cache:
-            # the base parameters' columns span the same space as all of Y's (`identify.base`), at a third of the cost
+            # the base parameters' columns span the same space as all of Y's (`fitting.base`), at a third of the cost
             A = self.rows(self.regressor(ds, delta)[:, :, self.independent], ds)
             if kind == "Q":
                 self._trim("Q")

@@ -28,12 +28,12 @@ import numpy as np
 
 from ident_opt.arm.datasheet import PlanarRobot
 from ident_opt.arm.planar import PHYSICAL, PlanarArm
-from ident_opt.data import Dataset
+from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import linear, scoring, signals
 from ident_opt.effects import CATALOGUE
-from ident_opt.identify.estimators import INSTRUMENTED, fit_for
-from ident_opt.identify.iv import InstrumentStats, instrument_kinematics
-from ident_opt.identify.stats import Stats
+from ident_opt.fitting.estimators import INSTRUMENTED, fit_for
+from ident_opt.fitting.iv import InstrumentStats, instrument_kinematics
+from ident_opt.fitting.stats import Stats
 
 #: The nominal structure under the physical convention (the datasheet has the joint-2 armature ia2).
 NOMINAL = PHYSICAL
@@ -65,7 +65,7 @@ class Context:
     dt: float
     rest: np.ndarray  # rest-stretch labels of the training part (`signals.rest_runs`)
     armature: tuple[float, float] = (0.0, 0.0)  # the datasheet's reflected rotor inertia per joint [kg m²]
-    #: How a refitted π is estimated (`identify.estimators`: the recommended fit; `rigid`); None: jointly with the
+    #: How a refitted π is estimated (`fitting.estimators`: the recommended fit; `rigid`); None: jointly with the
     #: effect's coefficients by weighted least squares (the studies that compare causes' families use that).
     estimator: str | None = None
     #: What the candidates compute once per data view and ask for again at every grid point (e.g. an elastic

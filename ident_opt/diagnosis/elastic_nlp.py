@@ -43,7 +43,7 @@ import casadi as ca
 import numpy as np
 
 from ident_opt.diagnosis import signals
-from ident_opt.identify.nlp import IPOPT_QUIET
+from ident_opt.fitting.nlp import IPOPT_QUIET
 
 #: Length of one shooting segment [s].
 SEGMENT_S = 1.0

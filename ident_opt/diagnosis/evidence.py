@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ident_opt.arm.base import Arm
-from ident_opt.data import Dataset
+from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import signals
 
 #: Below this frequency [Hz] lies the motion band of point-to-point trials (the real trials' residual

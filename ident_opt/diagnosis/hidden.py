@@ -24,7 +24,7 @@ def draw(cause: str, rng: np.random.Generator, robot: PlanarRobot) -> dict:
 def scaled(cause: str, keys: dict, factor: float, robot: PlanarRobot) -> dict:
     """`keys` of a hidden `cause` with its magnitude multiplied by `factor` (`Effect.scaled`: e.g. a payload's
     mass, a mode's compliance 1/k, a torque scale's deviation from 1)."""
-    from ident_opt.simulate.truth import coulomb_levels
+    from ident_opt.simulator.truth import coulomb_levels
 
     return CATALOGUE[cause].scaled(dict(keys), factor, coulomb_levels(robot))
 
@@ -45,8 +45,8 @@ def arm_errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
 def arm_joints(robot, limits=None):
     """The effect syntax's view of an n-joint arm's joints (`effects.base.Joints`: the datasheet's Coulomb levels,
     the names, the reference magnitudes the draws are relative to), as the simulator builds it for `limits`."""
-    from ident_opt.simulate.arm_plant import arm_scale, joints_of
-    from ident_opt.simulate.trial import box_of
+    from ident_opt.simulator.arm_plant import arm_scale, joints_of
+    from ident_opt.simulator.trial import box_of
 
     box = box_of(robot, limits)
     return joints_of(robot, arm_scale(robot, box, box.v_max))

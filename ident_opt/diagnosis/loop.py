@@ -20,8 +20,8 @@ from scipy import signal
 from tqdm import tqdm
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
-from ident_opt.data import Dataset, chronological_split, refiltered
-from ident_opt.derivatives import choose_cutoff
+from ident_opt.data.dataset import Dataset, chronological_split, refiltered
+from ident_opt.data.derivatives import choose_cutoff
 from ident_opt.diagnosis import candidates as cands
 from ident_opt.diagnosis import evidence, linear, scoring, signals
 from ident_opt.errors import InputError
@@ -544,7 +544,7 @@ def parts(
     if unseen is not None:
         train, test, how = split(prepared, prepare(unseen, torque_filter_hz), train_fraction)
         raw_test = unseen  # the measured torque, as compare and identify see it
-    else:  # one choice of samples (from the trial as logged, as `studies.recommend.for_diagnosis` makes it)
+    else:  # one choice of samples (from the trial as logged, as `fitting.recommend.for_diagnosis` makes it)
         tr, te, how = held_out(trial, train_fraction)
         train, test, raw_test = prepared.subset(tr), prepared.subset(te), trial.subset(te)
     if train.n < MIN_SAMPLES or test.n < MIN_SAMPLES:
@@ -627,7 +627,7 @@ def diagnose(
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data); see the module docstring.
     `torque_filter_hz`: see `prepare` (the problem's derivative cut-off is the natural choice). `rigid_fit`: how the
-    rigid fit's π is identified and why (a `studies.recommend.Recommendation`: the recommended fit, which the command
+    rigid fit's π is identified and why (a `fitting.recommend.Recommendation`: the recommended fit, which the command
     gives; None: the robot's default estimator), for the nominal rigid fit and every candidate that refits π."""
     estimator = robot.default_estimator if rigid_fit is None else rigid_fit.estimator
     if estimator not in REFITS:  # e.g. nlp_physical: π from the rigid arm's physical parameters alone

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, signal
 
-from ident_opt.derivatives import lowpass
+from ident_opt.data.derivatives import lowpass
 
 #: The diagnosis's default torque filter cut-off [Hz] (`diagnosis.prepare`): the data loader's and the
 #: simulator's derivative cut-off, so both sides of τ = Y π share one bandwidth.

@@ -62,13 +62,13 @@ DEFERRED = {
     "datasheet": "ident_opt.arm.datasheet",
     "afit": "ident_opt.diagnosis.arm_fit",
     "elastic_nlp": "ident_opt.diagnosis.elastic_nlp",
-    "flexible_link": "ident_opt.simulate.flexible_link",
+    "flexible_link": "ident_opt.simulator.flexible_link",
     "linear": "ident_opt.diagnosis.linear",
-    "nlp": "ident_opt.identify.nlp",
-    "report": "ident_opt.diagnosis.report",
+    "nlp": "ident_opt.fitting.nlp",
+    "report": "ident_opt.report.diagnosis",
     "robot_model": "ident_opt.arm.planar",
     "signals": "ident_opt.diagnosis.signals",
-    "sim": "ident_opt.simulate.truth",
+    "sim": "ident_opt.simulator.truth",
 }
 
 
@@ -125,7 +125,7 @@ SELECT = Key("joints", None, "the joint(s) it touches: 1-based index or name, or
 @dataclass(frozen=True)
 class ArmScale:
     """Reference magnitudes of an n-joint arm (tuples: one per joint): what its effects' defaults and hidden draws
-    are relative to, so one rule serves a 1 kg and a 30 kg arm (`simulate.arm_plant.arm_scale`)."""
+    are relative to, so one rule serves a 1 kg and a 30 kg arm (`simulator.arm_plant.arm_scale`)."""
 
     torque: tuple[float, ...]  # N m: each joint's effort limit, else its nominal torque's 95th percentile in motion
     inertia: tuple[float, ...]  # kg m²: the nominal diagonal inertia at the centre of the joint ranges
@@ -412,7 +412,7 @@ class Effect:
         return robot
 
     def true_plant(self, plant, p: dict) -> None:
-        """Change the true plant (`simulate.truth.PlantSpec`: π, model structure, sensors), in place."""
+        """Change the true plant (`simulator.truth.PlantSpec`: π, model structure, sensors), in place."""
 
     def mechanism(self, plant, p: dict):
         """A mechanism that replaces the rigid arm (an elastic joint or link), or None."""
@@ -425,9 +425,9 @@ class Effect:
     def true_physical(self, physical: dict, p: dict) -> None:
         """Change the truth file's rigid-body description of the true plant, in place."""
 
-    # ------------------------------------------------------------------ simulator truth, any arm (`simulate.arm_plant`)
+    # ------------------------------------------------------------- simulator truth, any arm (`simulator.arm_plant`)
     def arm_plant(self, plant, p: dict) -> None:
-        """Change the true plant of an n-joint arm (`simulate.arm_plant.ArmPlant`: π, extra inertia, friction
+        """Change the true plant of an n-joint arm (`simulator.arm_plant.ArmPlant`: π, extra inertia, friction
         terms, encoder offsets, the logged torque channel), in place."""
 
     def arm_mechanism(self, plant, p: dict) -> tuple[int, float, float] | None:
@@ -516,7 +516,7 @@ class Effect:
 
 class Background(Effect):
     """A background realism term of the simulator: it acts on the joint (motor-side) torques of the closed
-    loop, whatever the plant, through the hooks below (used by `simulate.background`)."""
+    loop, whatever the plant, through the hooks below (used by `simulator.background`)."""
 
     def states(self, p: dict) -> int:
         """How many states the term adds to the plant."""

@@ -63,7 +63,7 @@ class Mode:
     a driven motor inertia B [kg m²] and a link inertia J_link [kg m²], which set its natural frequency
     `frequency_hz` [Hz] and damping ratio `damping` (`spring_for`); `fastest_rate` [1/s] bounds the mode's rate with
     the joints free (it sizes the RK4 step). The planar arm's `Elastic` and the n-joint plant's
-    `simulate.arm_plant.ElasticJoint` are modes."""
+    `simulator.arm_plant.ElasticJoint` are modes."""
 
     index: int
     k: float
@@ -109,7 +109,7 @@ class Elastic(Mode):
 
     def spring(self, e, de):
         """The joint's spring and damper torque [N m] at deflection e = θ − q_j [rad] and its rate [rad/s] (linear
-        here; `simulate.unseen.NonlinearJoint` shapes it)."""
+        here; `simulator.unseen.NonlinearJoint` shapes it)."""
         return self.k * e + self.d * de
 
     def static_deflection(self, torque: float) -> float:
@@ -117,7 +117,7 @@ class Elastic(Mode):
         return torque / self.k
 
     def plant(self, truth) -> ca.Function:
-        """(x, τ) -> (ẋ, y) as `simulate.truth.plant`, y's deflection θ − q_j (joint) or φ (link)."""
+        """(x, τ) -> (ẋ, y) as `simulator.truth.plant`, y's deflection θ − q_j (joint) or φ (link)."""
         x, tau = ca.SX.sym("x", self.state_size), ca.SX.sym("tau", 2)
         delta = ca.DM(truth.offset)
         if self.kind == "link":

@@ -3,7 +3,7 @@
 τ_load is the link-side rigid-body torque of the joint: inertial (without the rotor's reflected inertia),
 Coriolis/centrifugal and gravity, friction excluded. μ is dimensionless, one per joint (0: untouched).
 Simulator: the plant's friction gains μ_j sgn(dq_j) |τ_load,j(q, dq, ddq)|, solved with the acceleration
-it depends on (`simulate.truth`). Diagnosis: the columns sgn(dq_j)|τ_load,j| with τ_load from the
+it depends on (`simulator.truth`). Diagnosis: the columns sgn(dq_j)|τ_load,j| with τ_load from the
 datasheet's link-side π at the measured motion, μ ≥ 0 linear, against both nominal models; beside a payload
 the diagnosis has found, τ_load includes the payload's torque (the mass re-read until it settles).
 """

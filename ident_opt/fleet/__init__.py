@@ -1,6 +1,6 @@
 """`ident-opt fleet`: every robot of a fleet identified every day, and what changed, on Dask.
 
-Sufficient statistics make identification a map-reduce: a trial becomes YᵀY, Yᵀτ, τᵀτ and n (`identify.stats`),
+Sufficient statistics make identification a map-reduce: a trial becomes YᵀY, Yᵀτ, τᵀτ and n (`fitting.stats`),
 and those add up. The modules, in the order a run uses them:
 
 | module      | what it holds                                                                                   |
@@ -12,5 +12,5 @@ and those add up. The modules, in the order a run uses them:
 | `changes`   | per robot: the baseline, the test that separates a change from day-to-day scatter, its cause    |
 | `simulated` | a simulated fleet with hidden changes, for tests and the benchmark (`python -m ...simulated`)   |
 
-`ident_opt.studies.fleet` runs them in that order; `ident_opt.report.fleet` writes what they found.
+`ident_opt.fleet.run` runs them in that order; `ident_opt.report.fleet` writes what they found.
 """

@@ -13,7 +13,7 @@ and the torques with noise, so the reader estimates dq and ddq as it does on rea
   (a consistent arm stays consistent), each friction term × 1 + N(0, 3 `spread`), offsets N(0, 2 %) of the
   joint's torque;
 - **scatter**: friction × 1 + N(0, `temperature`) (one factor for the day plus a half as large per joint), a new
-  excitation each day (a random Fourier series, `ident_opt.trajectory`) of a random length (±30 %), torque
+  excitation each day (a random Fourier series, `ident_opt.simulator.fourier`) of a random length (±30 %), torque
   noise of `noise` × each joint's RMS torque in the file;
 - **hidden changes** (`Hidden`, written to ROOT/_truth.json, a name the fleet's reader skips), on a fraction
   `changed` of the robots, starting on a day after the baseline: `wear` (a joint's friction terms grow linearly,
@@ -37,10 +37,10 @@ import numpy as np
 import pandas as pd
 
 from ident_opt.columns import columns_of
-from ident_opt.data import in_source_convention
+from ident_opt.data.dataset import in_source_convention
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
-from ident_opt.trajectory import Fourier
+from ident_opt.simulator.fourier import Fourier
 
 #: The causes a simulated fleet can hide, one per changed robot, in turn (`FleetSpec.causes`): the three the fleet
 #: names, and `other`, a constant torque offset on one joint from one day (a torque sensor's zero that moved).

@@ -1,7 +1,7 @@
 """What runs on a Dask worker: each function takes and returns small picklable objects; samples never leave it.
 
 - `choose`: a robot's first days' files → `Choice`, the fit its days get: the recommended fit
-  (`studies.recommend.evidence` on the first day that has a readable trial, its trials read together on the worker),
+  (`fitting.recommend.evidence` on the first day that has a readable trial, its trials read together on the worker),
   or the one `--estimator` names;
 - `file_stats`: a `FleetFile` and its robot's `Choice` → `FileStats`, the trial's `Stats` (a few kB whatever its
   length; with its `InstrumentStats` when the chosen fit is the robust one; derivatives at the choice's cut-off
@@ -45,17 +45,16 @@ import numpy as np
 from fsspec.implementations.local import LocalFileSystem
 
 from ident_opt.arm.base import Arm, Robot
-from ident_opt.data import Dataset, fittable, load_dataset
+from ident_opt.data.dataset import Dataset, fittable, load_dataset
 from ident_opt.errors import InputError
+from ident_opt.fitting import estimators, recommend
+from ident_opt.fitting.base import BaseParameters, base_parameters, fit_base_ols, fit_least_squares
+from ident_opt.fitting.fit import solve_normal
+from ident_opt.fitting.iv import InstrumentStats
+from ident_opt.fitting.recommend import Recommendation
+from ident_opt.fitting.stats import Stats
 from ident_opt.fleet.layout import FleetFile
-from ident_opt.identify import estimators
-from ident_opt.identify.base import BaseParameters, base_parameters, fit_base_ols, fit_least_squares
-from ident_opt.identify.fit import solve_normal
-from ident_opt.identify.iv import InstrumentStats
-from ident_opt.identify.stats import Stats
 from ident_opt.problem import load_problem
-from ident_opt.studies import recommend
-from ident_opt.studies.recommend import Recommendation
 from ident_opt.warnings import ResultWarning
 
 #: A robot-day is fitted when its samples × joints reach this many times the base parameters.
@@ -126,7 +125,7 @@ def ready(problem_path: str) -> int:
 @dataclass
 class Choice:
     """The fit a robot's days get (`Recommendation`: estimator, why, the cut-off factor its files' derivatives take),
-    the warnings of the evidence behind it (`studies.trust`), the day it was judged on (None: `--estimator`, or no
+    the warnings of the evidence behind it (`fitting.trust`), the day it was judged on (None: `--estimator`, or no
     readable day: the arm's consistent fit) and the task's CPU time [s]."""
 
     robot: str
@@ -152,7 +151,7 @@ def _read(job: Job, s: Setup, file: FleetFile) -> Dataset:
 
 def choose(job: Job, robot: str, *days: list[FleetFile]) -> Choice:
     """The fit of `robot`'s days: `job.estimator` if asked (checked as every command checks it), else the
-    recommended fit (`studies.recommend.evidence`) from the first of `days` (each a day's files) with a readable
+    recommended fit (`fitting.recommend.evidence`) from the first of `days` (each a day's files) with a readable
     trial, its trials read together; the arm's consistent fit, said so, when no day has one. One choice for all the
     robot's days, so that its series compare like with like."""
     start = time.thread_time()
@@ -282,7 +281,7 @@ class DayFit:
 def fit_day(job: Job, day: DayStats, choice: Choice) -> DayFit:
     """The robot-day's fit by its robot's `choice` (the recommended fit) with standard errors (OLS's where the fit
     gives none at all), and the tested parameters: the base parameters by least squares
-    (`identify.base.fit_base_ols`), what the data determine with no prior or bound in them, with their standard
+    (`fitting.base.fit_base_ols`), what the data determine with no prior or bound in them, with their standard
     errors (a change test compares like with like: the same estimator, free of any prior, on every day)."""
     start = time.thread_time()
     out = _fit_day(job, day, choice.recommendation.estimator)

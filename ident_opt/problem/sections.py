@@ -25,7 +25,7 @@ from ident_opt.problem.spec import (
     SplitSpec,
 )
 from ident_opt.problem.table import LIMITS, Table, excerpt
-from ident_opt.simulate.trajectories import TRAJECTORIES
+from ident_opt.simulator.trajectories import TRAJECTORIES
 
 
 def relative(base: Path, value: str) -> Path:

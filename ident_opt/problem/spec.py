@@ -40,7 +40,7 @@ class DataSpec:
     train: tuple[Path, ...] = ()  # training trials (`train = [...]`): their statistics add up
     test: tuple[Path, ...] = ()  # held-out trials (`test = [...]`), each scored and pooled
     ros_topic: str = "/joint_states"  # a ROS 2 bag's topic of sensor_msgs/msg/JointState messages
-    ros_joints: tuple[str, ...] = ()  # a bag's joint names, base to tip: joint k is the k-th (`ident_opt.rosbag`)
+    ros_joints: tuple[str, ...] = ()  # a bag's joint names, base to tip: joint k is the k-th (`ident_opt.data.rosbag`)
     ignored: tuple[str, ...] = ()  # standard names not to read (`[data.columns]` name = false)
 
     @property
@@ -114,7 +114,7 @@ class Problem:
     output_dir: Path | None = None
     limits: Limits | None = None
     reference: Reference | None = None
-    #: The fit a run stands behind, set by the command from the run's own evidence (`studies.recommend`); None:
+    #: The fit a run stands behind, set by the command from the run's own evidence (`fitting.recommend`); None:
     #: the robot's physically consistent fit (`Robot.default_estimator`). Not read from the file.
     estimator: str | None = None
 

@@ -1,7 +1,7 @@
 """Reports: what the studies found, as Markdown, CSV, PNG and JSON, and the index of a results folder.
 
 One writer per study (`identify`, `compare`, `constraints`, `audit`, `online`, `calibration`; the diagnosis
-writes its own in `ident_opt.diagnosis.report`); `tables` and `figures` are their helpers. Every writer ends
+writes its own in `ident_opt.report.diagnosis`); `tables` and `figures` are their helpers. Every writer ends
 with `record(out_dir, study, title, files)`: a small manifest (`.manifest/<study>.json` in the output folder)
 says what the study wrote, and the folder's `README.md` is rebuilt from every manifest present — so the
 index lists what is there whatever order the commands ran in.

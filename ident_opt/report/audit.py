@@ -7,11 +7,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ident_opt import outputs, paper
+from ident_opt import outputs
+from ident_opt.paper import published as paper
+from ident_opt.paper.audit import SHUFFLED, Audit
 from ident_opt.report import record, write_json
 from ident_opt.report.figures import audit_torque_figure
 from ident_opt.report.tables import markdown_table, write_table
-from ident_opt.studies.audit import SHUFFLED, Audit
 from ident_opt.warnings import markdown_lines
 
 #: The causes, in plain words, each with the parameters it moves.

@@ -9,9 +9,7 @@ import numpy as np
 
 from ident_opt import outputs
 from ident_opt.effects import BACKGROUND, parse_effect
-from ident_opt.report import record, shown
-from ident_opt.report.figures import calibration_figure
-from ident_opt.studies.calibration import (
+from ident_opt.paper.calibration import (
     BANDS,
     FIRST_REST_S,
     LOW_HZ,
@@ -24,6 +22,8 @@ from ident_opt.studies.calibration import (
     peak,
     rms,
 )
+from ident_opt.report import record, shown
+from ident_opt.report.figures import calibration_figure
 
 FIGURE = "figures/simulator_calibration.png"
 
@@ -59,7 +59,7 @@ The default effects of `{shown(c.sim_problem)}`, from the diagnosis catalogue (`
 
 {catalogue}
 
-and background realism terms that no diagnosis is asked to name (`ident_opt/simulate/background.py`; their
+and background realism terms that no diagnosis is asked to name (`ident_opt/simulator/background.py`; their
 values go to the truth's `background`, not its `effects`):
 
 {background}

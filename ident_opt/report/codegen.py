@@ -1,5 +1,5 @@
 """What `ident-opt codegen` writes: the generated C sources and header, the compiled shared library, the
-example `main.c`, a README for embedding (all from `ident_opt.codegen`), and parameters.json (the parameters
+example `main.c`, a README for embedding (all from `ident_opt.shipping.codegen`), and parameters.json (the parameters
 baked in, the estimator, the GMR, the check against Python); with the terminal lines."""
 
 from __future__ import annotations
@@ -7,9 +7,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from ident_opt import codegen, outputs
+from ident_opt import outputs
 from ident_opt.report import write_json
-from ident_opt.studies.ship import MEASURE, TOLERANCE, Shipped
+from ident_opt.shipping import codegen
+from ident_opt.shipping.ship import MEASURE, TOLERANCE, Shipped
 
 
 @dataclass

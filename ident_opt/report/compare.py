@@ -10,12 +10,12 @@ import numpy as np
 import pandas as pd
 
 from ident_opt import outputs
+from ident_opt.evaluation.compare import PROTOCOLS, Comparison
+from ident_opt.metrics import METRICS
+from ident_opt.paper.seeds import deviation_from_mean, rmse_table
 from ident_opt.report import record, shown, write_json
 from ident_opt.report.figures import seed_heatmap
 from ident_opt.report.tables import fmt, markdown_table, write_table
-from ident_opt.studies import METRICS
-from ident_opt.studies.compare import PROTOCOLS, Comparison
-from ident_opt.studies.seeds import deviation_from_mean, rmse_table
 from ident_opt.warnings import markdown_lines
 
 #: The files `write` puts in the output folder, the report first.
@@ -423,7 +423,7 @@ def to_terminal(c: Comparison) -> str:
 
 
 def recommended_line(recommendation) -> str:
-    """The terminal's line on the recommended fit (`studies.recommend.Recommendation`)."""
+    """The terminal's line on the recommended fit (`fitting.recommend.Recommendation`)."""
     return f"Recommended fit: {recommendation.estimator} — {recommendation.why}."
 
 

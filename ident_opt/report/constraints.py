@@ -8,9 +8,9 @@ from pathlib import Path
 import pandas as pd
 
 from ident_opt import outputs
+from ident_opt.evaluation.constraints import STUDY_SOURCES, StudyResult
 from ident_opt.report import record, write_json
 from ident_opt.report.tables import markdown_table, write_table
-from ident_opt.studies.constraints import STUDY_SOURCES, StudyResult
 
 FILES = ("constraints_study.md", "constraints_study.csv")
 

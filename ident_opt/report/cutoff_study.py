@@ -1,4 +1,4 @@
-"""The cut-off study's report (`studies.cutoff_study`): a table per condition with the recommended fit's error
+"""The cut-off study's report (`evaluation.cutoff_study`): a table per condition with the recommended fit's error
 against the best cut-off in hindsight (per trial and per condition), the rows as CSV and JSON, and a figure of
 the ratios."""
 
@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ident_opt.evaluation.cutoff_study import Row, summary
 from ident_opt.report import write_json
 from ident_opt.report.figures import plt
 from ident_opt.report.tables import markdown_table
-from ident_opt.studies.cutoff_study import Row, summary
 
 #: The study's target: the recommended fit's median error at most this factor of the hindsight best, per condition.
 TARGET = 1.3
@@ -76,9 +76,9 @@ def _markdown(table: pd.DataFrame, label: str, seeds: tuple[int, ...], seconds: 
         [
             f"# Where the derivative cut-off rule stands ({label} seeds)",
             "",
-            "Made by `make cutoff-study` (`benchmarks/cutoff_study.py`, `ident_opt/studies/cutoff_study.py`) in "
+            "Made by `make cutoff-study` (`benchmarks/cutoff_study.py`, `ident_opt/evaluation/cutoff_study.py`) in "
             f"{seconds:.0f} s; seeds {', '.join(map(str, seeds))}. Each row: 20 s trials of the DFKI C.0 arm's "
-            "nominal model (friction made larger) in the study's own plant (`studies/cutoff_plant.py`: RK4 on the "
+            "nominal model (friction made larger) in the study's own plant (`evaluate/cutoff_plant.py`: RK4 on the "
             "arm's M, C, G, F, a PD with feed-forward, encoder quantisation, white angle and torque noise), read "
             "back from CSV by the loader with the default settings. Errors are the median over the inertial, "
             "coupling and gravity parameters of |π̂ − π| / |π| (friction depends on how a plant models stiction, "

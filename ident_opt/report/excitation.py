@@ -1,7 +1,7 @@
 """What `ident-opt excite` writes: the trajectory CSV (t, q, dq, ddq at the controller rate and the datasheet
 model's feed-forward torque), a figure beside it (`<stem>.png`) and the JSON of its criteria and limits' margins
 (`<stem>.json`, `docs/cli.md`); and the terminal summary. With `--proof`, the simulator study
-(`studies.excitation_proof`): results/excitation.md, its CSVs and the designs under results/excitation/."""
+(`excitation.proof`): results/excitation.md, its CSVs and the designs under results/excitation/."""
 
 from __future__ import annotations
 
@@ -18,10 +18,10 @@ import matplotlib.pyplot as plt
 from ident_opt import outputs
 from ident_opt.columns import joint_columns, kinematic_columns
 from ident_opt.errors import InputError
+from ident_opt.excitation.design import Design, Setup
+from ident_opt.excitation.proof import Proof
 from ident_opt.report import record, write_json
 from ident_opt.report.tables import markdown_table
-from ident_opt.studies.excitation import Design, Setup
-from ident_opt.studies.excitation_proof import Proof
 
 
 def paths(out: str | Path) -> tuple[Path, Path, Path]:

@@ -20,8 +20,8 @@ matplotlib.use("Agg")  # files only, never a window
 import matplotlib.pyplot as plt
 
 from ident_opt import outputs
-from ident_opt.studies.protocols import SplitResult
-from ident_opt.studies.seeds import SplitResults, deviation_from_mean
+from ident_opt.paper.protocols import SplitResult
+from ident_opt.paper.seeds import SplitResults, deviation_from_mean
 
 MEASURED, PARAMETRIC, CORRECTED = "black", "tab:red", "tab:green"
 #: The paper's three models, in its order, with its names.
@@ -223,7 +223,7 @@ def online_trajectories_figure(
 
 def calibration_figure(summaries: list, path: Path) -> Path:
     """The simulator calibration: residual spectra per joint, strain spectra, and a residual trace, real vs
-    simulated (`studies.calibration.Summary` each: [exp1, exp2, sim, sim, before])."""
+    simulated (`paper.calibration.Summary` each: [exp1, exp2, sim, sim, before])."""
     fig, ax = plt.subplots(2, 2, figsize=(11, 7.5))
     styles = ["-", "--", "-", "--", ":"]
     colours = ["C0", "C0", "C3", "C3", "0.5"]

@@ -14,10 +14,10 @@ import pandas as pd
 
 from ident_opt import outputs
 from ident_opt.fleet.changes import BAND_Z, DAY_Z, RUN_DAYS, WINDOW_Z
+from ident_opt.fleet.run import FleetResult, RobotResult
 from ident_opt.report import record, write_json
 from ident_opt.report.figures import daily_figure
 from ident_opt.report.tables import markdown_table, write_table
-from ident_opt.studies.fleet import FleetResult, RobotResult
 
 #: The files every run writes (figures besides, one per robot).
 FILES = ("fleet.md", "fleet_changes.csv", "fleet_series.csv", "fleet_series.parquet")

@@ -7,12 +7,12 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ident_opt.evaluation.identify import IdentifyResult
+from ident_opt.paper.protocols import ProtocolResult
 from ident_opt.report import figures, record, shown, write_json
 from ident_opt.report.identify_readme import readme_parts
 from ident_opt.report.identify_tables import figure_models, reproduction_frame, write_tables
 from ident_opt.report.tables import fmt
-from ident_opt.studies.identify import IdentifyResult
-from ident_opt.studies.protocols import ProtocolResult
 
 
 # ---------------------------------------------------------------------------------------------- writer

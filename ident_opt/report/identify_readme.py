@@ -9,13 +9,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ident_opt.codegen import gmr_inputs
-from ident_opt.paper import NMSE_RANGE, NMSE_RANGE_TOLERANCE, RMSE_TOLERANCE
+from ident_opt.evaluation.identify import IdentifyResult
+from ident_opt.paper.protocols import ProtocolResult
+from ident_opt.paper.published import NMSE_RANGE, NMSE_RANGE_TOLERANCE, RMSE_TOLERANCE
 from ident_opt.report import shown
 from ident_opt.report.identify_tables import PROTOCOL_TITLES, dm_key, model_name, reproduction_frame
 from ident_opt.report.tables import fmt, markdown_table
-from ident_opt.studies.identify import IdentifyResult
-from ident_opt.studies.protocols import ProtocolResult
+from ident_opt.shipping.codegen import gmr_inputs
 from ident_opt.warnings import markdown_lines
 
 

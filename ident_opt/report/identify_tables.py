@@ -1,7 +1,7 @@
 """The tables `ident-opt identify` writes (Markdown and CSV): metrics per model, protocol and joint, the paper's
 reproduction (its robot only) and seed study (its protocol only), the parameters, Model 1's weights, coverage; and
 the names the identify report gives models and protocols. Every table names its protocol; the paper's published
-numbers (`ident_opt.paper`) appear only as reference columns, nothing is fitted or tuned to them.
+numbers (`ident_opt.paper.published`) appear only as reference columns, nothing is fitted or tuned to them.
 """
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ import numpy as np
 import pandas as pd
 
 from ident_opt import outputs
-from ident_opt.paper import NMSE_RANGE, NMSE_RANGE_TOLERANCE, PI_HAT, PI_TRUE, RMSE, RMSE_TOLERANCE
+from ident_opt.evaluation.identify import IdentifyResult
+from ident_opt.metrics import METRICS
+from ident_opt.paper.protocols import ProtocolResult
+from ident_opt.paper.published import NMSE_RANGE, NMSE_RANGE_TOLERANCE, PI_HAT, PI_TRUE, RMSE, RMSE_TOLERANCE
 from ident_opt.report import figures
 from ident_opt.report.tables import markdown_table, write_table
-from ident_opt.studies import METRICS
-from ident_opt.studies.identify import IdentifyResult
-from ident_opt.studies.protocols import ProtocolResult
 
 PARAMETER_NOTE = (
     "Units: a [kg·m²], b [N·m], fv [N·m·s/rad], fc [N·m]; `se` = standard errors (assuming independent residuals: "

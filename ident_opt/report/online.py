@@ -11,10 +11,10 @@ import numpy as np
 import pandas as pd
 
 from ident_opt import outputs
+from ident_opt.adaptation.replay import Replay
 from ident_opt.report import record, shown, write_json
 from ident_opt.report.figures import online_trajectories_figure
 from ident_opt.report.tables import markdown_table, write_table
-from ident_opt.studies.online_replay import Replay
 from ident_opt.warnings import ResultWarning, markdown_lines
 
 #: The adapted gray-box model the JSON's `parameters` describe (the paper's Model 3).

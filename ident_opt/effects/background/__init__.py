@@ -2,7 +2,7 @@
 
 One module per term (presliding stiction, a slow torque drift, a motor-angle-locked current ripple), each
 defining ``EFFECT``, a `base.Background`: its keys (the same ``NAME:key=value`` syntax as the catalogue) and
-its part in the closed loop (`simulate.background` iterates them). They make the default simulated trial
+its part in the closed loop (`simulator.background` iterates them). They make the default simulated trial
 resemble the real one; their values go to the truth's ``background``, not its ``effects``. The modules are
 found by listing the package.
 """

@@ -1,0 +1,577 @@
+"""Streaming mode: the online identifier as a service for a controller process (docs/online.md).
+
+Input on standard input, one sample per line: CSV with a header line (any order, extra columns ignored), CSV
+without a header when the problem's `[data] header = false` maps column indices, or JSON lines. The first
+non-empty line decides. The problem's `[data.columns]` mapping and its `{column, scale, offset}` conversions
+apply by the batch loader's rules (`columns.locate`). Each sample needs q1 … qn [rad] (n the arm's joints);
+dq1 … dqn, ddq1 … ddqn [rad/s, rad/s²] when given, else estimated causally from q and t
+(`derivatives.CausalDerivatives`: a linear-phase FIR whose delay is stated, the torque delayed to match);
+tau1 … taun [N m] or motor currents i1 … in [A] make the sample an update.
+
+Guards (nothing on the input kills the stream): lines that are not UTF-8, not parseable, with numbers that
+overflow, missing fields or values outside the batch loader's plausibility limits (`data.PLAUSIBLE`) are
+reported on the error stream as {"error", "kind", "line"} and skipped; a sample whose one-step residual is
+beyond `outlier_k` robust standard deviations is answered but updates nothing (counted); a failed update
+changes nothing. Output is strict JSON (no NaN or Infinity). A header or mapping error is an `InputError`
+(exit status 2, one message), raised before any output.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TextIO
+
+import numpy as np
+
+from ident_opt.adaptation.identifier import OnlineIdentifier, Prediction
+from ident_opt.columns import channel_names, data_columns, locate
+from ident_opt.data.dataset import PLAUSIBLE
+from ident_opt.data.dataset import _current_to_torque as current_to_torque  # the batch loader's rule and message
+from ident_opt.data.derivatives import CausalDerivatives, NonIncreasingTime, RateError
+from ident_opt.errors import InputError
+
+#: The UTF-8 byte-order mark some writers put before a file's first line.
+BOM = "\ufeff"
+#: Default robust outlier threshold: residuals beyond this many robust standard deviations update nothing.
+OUTLIER_K = 10.0
+#: Memory (samples) of the robust residual scale; an outlier moves it by 1/`OUTLIER_MEMORY` of its clipped square.
+OUTLIER_MEMORY = 500.0
+
+
+#: Where a sample keeps its input line number (for errors found later, in the causal derivatives' window).
+LINE = "_line"
+
+
+class BadLine(ValueError):
+    """A line that is not a valid sample (reported on the error stream, then skipped); `kind` says why."""
+
+    def __init__(self, message: str, kind: str = "parse"):
+        super().__init__(message)
+        self.kind = kind
+
+
+@dataclass
+class Mapping:
+    """How stream columns become standard names, by the batch loader's rules (`columns.locate`): `columns`
+    {standard name: column name or 0-based index}, `conversions` {standard name: (scale, offset)} (value = scale ×
+    raw + offset), `header`: whether a CSV stream is expected to start with a header line (the problem's `[data]
+    header`), `to_tool`: after the conversions, name → (scale, offset) to ident-opt's angle convention (a URDF
+    arm's samples come in the URDF's: `Robot.column_map`), `ignored`: standard names never read (`[data.columns]`
+    name = false), `standard_by_name`: a header with the standard names is read by name, `n_joints`: the arm's."""
+
+    columns: dict[str, str | int] = field(default_factory=dict)
+    conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
+    header: bool = True
+    to_tool: dict[str, tuple[float, float]] = field(default_factory=dict)
+    ignored: frozenset[str] = frozenset()
+    standard_by_name: bool = True
+    n_joints: int = 2
+
+    @classmethod
+    def from_spec(cls, spec, robot=None) -> Mapping:
+        """From a problem's `DataSpec` and its robot (its number of joints, its map from the data's angle
+        convention to the tool's)."""
+        n = robot.n_joints if robot is not None else 2
+        to_tool = dict(robot.column_map) if robot is not None else {}
+        return cls(
+            dict(spec.columns),
+            dict(spec.conversions),
+            bool(spec.header),
+            to_tool,
+            frozenset(spec.ignored),
+            bool(spec.standard_by_name),
+            n,
+        )
+
+    @property
+    def names(self) -> dict[str, tuple[str, ...]]:
+        """The standard names per signal for this arm (`columns.channel_names`)."""
+        return channel_names(self.n_joints)
+
+    def resolve_header(self, header: list[str]) -> tuple[dict[str, int], dict[str, tuple[float, float]]]:
+        """{standard name: position} for a CSV header, and the conversions that apply (`columns.locate`);
+        `InputError` when a name repeats or the header lacks an angle."""
+        names = [c.strip() for c in header]
+        if len(set(names)) != len(names):
+            twice = next(n for n in names if names.count(n) > 1)
+            raise InputError(f"stream: column '{twice}' appears twice in the CSV header")
+        found, conversions = locate(names, len(names), self, self.n_joints, "stream")
+        missing = self._missing_angles(found)
+        if missing:
+            raise InputError(
+                f"stream: the CSV header ({', '.join(names[:20])}) lacks {missing}; name them so, or map them with "
+                "[data.columns] in the problem file"
+            )
+        return found, conversions
+
+    def by_index(self, width: int) -> tuple[dict[str, int], dict[str, tuple[float, float]]]:
+        """{standard name: position} for a header-less CSV stream from the mapping's column indices."""
+        found, conversions = locate(None, width, self, self.n_joints, "stream")
+        missing = self._missing_angles(found)
+        if missing:
+            raise InputError(
+                "stream: the first line is data, not a header, and [data.columns] maps no column index for "
+                f"{missing}; start the stream with a header line"
+            )
+        return found, conversions
+
+    def _missing_angles(self, found: dict[str, int]) -> str:
+        """The joint angles `found` lacks, comma-separated ("" when none)."""
+        return ", ".join(n for n in self.names["q"] if n not in found)
+
+
+def _number(text: str) -> float:
+    """A JSON number token as a float: huge integers become ±inf (caught as not finite), never OverflowError."""
+    try:
+        return float(text)
+    except (OverflowError, ValueError):
+        return math.inf
+
+
+def _no_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+@dataclass
+class LineParser:
+    """Turns lines into {standard name: float} (SI, conversions applied, currents as torques); learns the
+    format, and the CSV header, from the first non-empty line."""
+
+    format: str | None = None  # "csv" or "json", decided by the first non-empty line
+    header: list[str] = field(default_factory=list)
+    current_to_torque: tuple[float, ...] | None = None  # N m / A per joint, for samples of currents
+    mapping: Mapping = field(default_factory=Mapping)
+    currents_refused: str = ""  # why samples of currents cannot be read (no torque constant), for their error
+    positions: dict[str, int] = field(default_factory=dict)
+    conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
+    width: int = 0
+
+    def parse(self, line: str) -> dict[str, float] | None:
+        """The sample on `line`, or None for a blank line or the CSV header; raises BadLine (a bad sample) or
+        InputError (a header or mapping the stream cannot be read with)."""
+        text = line.strip()
+        if self.format is None:
+            text = text.removeprefix(BOM).strip()  # a byte-order mark before the first line, as the batch loader reads
+        if not text:
+            return None
+        if self.format is None:
+            self.format = "json" if text.startswith("{") else "csv"
+            if self.format == "csv":
+                cells = [c.strip() for c in text.split(",")]
+                if not self.mapping.header and all(_is_number(c) for c in cells):
+                    self.positions, self.conversions = self.mapping.by_index(len(cells))
+                    self.width = len(cells)
+                    self._check_time_column()
+                else:
+                    self.header = cells
+                    self.positions, self.conversions = self.mapping.resolve_header(cells)
+                    self.width = len(cells)
+                    self._check_time_column()
+                    return None
+        if self.format == "json":
+            raw = self._json(text)
+        else:
+            cells = [c.strip() for c in text.split(",")]
+            if len(cells) != self.width:
+                raise BadLine(f"{len(cells)} fields, the {'header' if self.header else 'first line'} has {self.width}")
+            raw = {name: cells[i] for name, i in self.positions.items()}
+        sample = _sample(raw, self.mapping.names, self.current_to_torque, self.conversions, self.currents_refused)
+        for name, (scale, offset) in self.mapping.to_tool.items():  # currents are torques by now: tau's sign
+            if name in sample:
+                sample[name] = scale * sample[name] + offset
+        return sample
+
+    def _check_time_column(self) -> None:
+        """Without dq and ddq columns the derivatives are estimated, which needs t: else an `InputError`."""
+        names = self.mapping.names
+        derivatives = all(n in self.positions for n in (*names["dq"], *names["ddq"]))
+        if not derivatives and "t" not in self.positions:
+            raise InputError(
+                f"stream: the CSV columns give neither {' '.join((*names['dq'], *names['ddq']))} nor t; the "
+                "derivatives are estimated from q and t, so t [s] is needed"
+            )
+
+    def _json(self, text: str) -> dict:
+        try:
+            raw = json.loads(text, parse_int=_number, parse_float=_number, parse_constant=_no_constant)
+        except json.JSONDecodeError as exc:
+            raise BadLine(f"not JSON ({exc.msg})") from None
+        except (ValueError, RecursionError) as exc:
+            raise BadLine(f"not a valid JSON sample ({type(exc).__name__})") from None
+        if not isinstance(raw, dict):
+            raise BadLine("a JSON line must be an object")
+        out = {}
+        for name in data_columns(self.mapping.n_joints):  # a mapped key first (with its conversion), else the name
+            if name in self.mapping.ignored:
+                continue
+            source = self.mapping.columns.get(name)
+            if isinstance(source, str) and source in raw:
+                out[name] = raw[source]
+                if name in self.mapping.conversions:
+                    self.conversions[name] = self.mapping.conversions[name]
+            elif name in raw:
+                out[name] = raw[name]
+                self.conversions.pop(name, None)
+        return out
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+def _sample(
+    raw: dict,
+    names: dict[str, tuple[str, ...]],
+    current_to_torque: tuple[float, ...] | None = None,
+    conversions: dict | None = None,
+    currents_refused: str = "",
+) -> dict[str, float]:
+    """The numeric fields of a sample, checked: every angle present, each other signal for every joint or none,
+    torques or currents, every used value a finite number within `data.PLAUSIBLE`; conversions applied; currents
+    become torques [N m]. `names`: the standard names per signal (`columns.channel_names`); `currents_refused`: why
+    the problem cannot turn currents into torques (the joints' tables that lack a torque constant)."""
+
+    def present(name):
+        return name in raw and raw[name] not in ("", None)
+
+    missing = [c for c in names["q"] if not present(c)]
+    if missing:
+        raise BadLine(f"missing field(s) {', '.join(missing)}")
+    groups = {g: [c for c in names[g] if present(c)] for g in ("dq", "ddq", "tau", "i")}
+    if any(0 < len(v) < len(names["q"]) for v in groups.values()):
+        raise BadLine("a joint signal comes for every joint or none (tau1 … taun, dq1 … dqn, …)")
+    if groups["tau"] and groups["i"]:
+        raise BadLine(f"give torques {' '.join(names['tau'])} or currents {' '.join(names['i'])}, not both")
+    if groups["i"] and current_to_torque is None:
+        why = currents_refused or "the problem gives no torque constants and gear ratios"
+        raise BadLine(f"currents {' '.join(names['i'])} cannot become torques: {why}")
+    used = [*names["q"], *(c for g in ("dq", "ddq", "tau", "i") for c in groups[g]), *(["t"] if present("t") else [])]
+    out = {name: _value(name, raw[name], conversions) for name in used}
+    for current, torque, k in zip(groups["i"], names["tau"], current_to_torque or ()):
+        out[torque] = out.pop(current) * k
+    return out
+
+
+def _value(name: str, value, conversions: dict | None) -> float:
+    """One field as a finite, plausible float in SI units (its conversion applied); raises BadLine."""
+    if isinstance(value, bool):
+        raise BadLine(f"{name} is not a number")
+    try:
+        number = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise BadLine(f"{name} is not a number: {str(value)[:40]!r}") from None
+    if conversions and name in conversions:
+        scale, offset = conversions[name]
+        number = scale * number + offset
+    if not math.isfinite(number):
+        raise BadLine(f"{name} is not finite: {str(value)[:40]!r}")
+    kind = name.rstrip("0123456789")
+    if kind in PLAUSIBLE and abs(number) > PLAUSIBLE[kind]:
+        limit = PLAUSIBLE[kind]
+        raise BadLine(f"{name} = {number:.6g} is implausible: |{kind}| > {limit:g} in SI units", "implausible")
+    return number
+
+
+# ---------------------------------------------------------------------------------------------- the service
+def prediction_record(n: int, sample: dict[str, float], p: Prediction) -> dict:
+    """The output line for one sample (n = updates so far, t echoed when given)."""
+    record: dict = {"n": n}
+    if "t" in sample:
+        record["t"] = sample["t"]
+    record.update(
+        tau=p.tau.tolist(),
+        lower=p.lower.tolist(),
+        upper=p.upper.tolist(),
+        std=p.std.tolist(),
+        parametric=p.parametric.tolist(),
+        extrapolating=bool(p.extrapolating),
+    )
+    return record
+
+
+@dataclass
+class Counts:
+    """What the stream did, for the final line."""
+
+    lines: int = 0
+    samples: int = 0
+    updates: int = 0
+    predictions: int = 0
+    outliers: int = 0
+    extrapolating: int = 0
+    skipped: dict[str, int] = field(default_factory=dict)
+
+    def skip(self, kind: str) -> None:
+        self.skipped[kind] = self.skipped.get(kind, 0) + 1
+
+
+def currents_to_torques(robot) -> tuple[tuple[float, ...] | None, str]:
+    """(joint-side torque per ampere [N m/A] per joint, or None when a joint lacks its torque constant or gear ratio;
+    and then why, naming the joints' tables), the batch loader's rule and message."""
+    try:
+        return tuple(float(k) for k in current_to_torque(robot, "stream")), ""
+    except InputError as exc:
+        return None, str(exc).removeprefix("stream: the file logs motor currents, but ")
+
+
+@dataclass
+class StreamOptions:
+    """How `serve` reads and guards: the column `mapping`, `current_to_torque` [N m/A per joint] (None: currents
+    are refused, `currents_refused` says why), `cutoff_hz` of the causal derivative filter (used when dq/ddq are
+    not given), `outlier_k` (0: no residual test), `snapshot_every` updates."""
+
+    mapping: Mapping = field(default_factory=Mapping)
+    current_to_torque: tuple[float, ...] | None = None
+    currents_refused: str = ""
+    cutoff_hz: float = 15.0
+    outlier_k: float = OUTLIER_K
+    snapshot_every: int = 1000
+
+
+class _Stop(Exception):
+    """SIGTERM or SIGINT while waiting for input."""
+
+
+class Service:
+    """One stream's state: parser, causal derivatives, robust residual scale, counts."""
+
+    def __init__(self, identifier: OnlineIdentifier, names: tuple[str, ...], options: StreamOptions):
+        self.ident, self.names, self.options = identifier, names, options
+        self.parser = LineParser(
+            current_to_torque=options.current_to_torque,
+            mapping=options.mapping,
+            currents_refused=options.currents_refused,
+        )
+        self.derivatives = CausalDerivatives(options.cutoff_hz)
+        self.counts = Counts()
+        self.scale2: np.ndarray | None = None  # robust residual variance per joint [N² m²]
+        self.errors: list[dict] = []  # error records about earlier lines (times found stray later), to report
+
+    def line(self, raw: str | bytes, lineno: int) -> list[dict]:
+        """The output records for one input line; raises BadLine or InputError."""
+        if isinstance(raw, bytes):
+            try:
+                raw = raw.decode("utf-8")
+            except UnicodeDecodeError:
+                raise BadLine("not valid UTF-8", "encoding") from None
+        sample = self.parser.parse(raw)
+        if sample is None:
+            return []
+        self.counts.samples += 1
+        names = self.parser.mapping.names
+        if names["dq"][0] not in sample or names["ddq"][0] not in sample:
+            if "t" not in sample:
+                raise BadLine("t is needed to estimate dq and ddq (the sample gives neither both)")
+            sample[LINE] = lineno
+            try:
+                sample = self.derivatives.push(sample)
+            except NonIncreasingTime as exc:
+                raise BadLine(str(exc), "time") from None
+            except RateError as exc:
+                raise InputError(f"stream: {exc}") from None
+            finally:
+                self._stray_times()
+            if sample is None:
+                return []
+            for name in (*names["dq"], *names["ddq"]):
+                kind = name.rstrip("0123456789")
+                if not abs(sample[name]) <= PLAUSIBLE[kind]:
+                    raise BadLine(f"estimated {name} = {sample[name]:.6g} is implausible", "implausible")
+        return self.step(sample)
+
+    def _stray_times(self) -> None:
+        """Samples the causal derivatives left out after seeing later ones (a time that jumps ahead): their errors."""
+        for sample, why in self.derivatives.rejected:
+            self.counts.skip("time")
+            self.errors.append({"error": why, "kind": "time", "line": sample.get(LINE)})
+        self.derivatives.rejected.clear()
+
+    def step(self, sample: dict[str, float]) -> list[dict]:
+        """Predict one complete sample and, when it has a torque that passes the residual test, fold it in."""
+        names = self.parser.mapping.names
+        q, dq, ddq = (np.array([sample[n] for n in names[s]]) for s in ("q", "dq", "ddq"))
+        p, D = self.ident.step(q, dq, ddq)
+        if not (np.isfinite(p.tau).all() and np.isfinite(p.std).all()):
+            raise BadLine("the prediction is not finite for this sample", "numeric")
+        self.counts.extrapolating += bool(p.extrapolating)
+        out = []
+        if names["tau"][0] in sample:
+            tau = np.array([sample[n] for n in names["tau"]])
+            if self._outlier(tau - p.parametric):
+                self.counts.outliers += 1
+                record = prediction_record(self.ident.n_updates, sample, p)
+                record["outlier"] = True
+                return [record]
+            try:
+                self.ident.add(D, tau)
+            except (FloatingPointError, RuntimeError, np.linalg.LinAlgError, ValueError) as exc:
+                raise BadLine(f"update failed, sample not used ({type(exc).__name__}: {exc})", "numeric") from None
+            self.counts.updates += 1
+            out.append(prediction_record(self.ident.n_updates, sample, p))
+            every = self.options.snapshot_every
+            if every and self.ident.n_updates % every == 0:
+                out.append({"snapshot": self.parameters()})
+        else:
+            self.counts.predictions += 1
+            out.append(prediction_record(self.ident.n_updates, sample, p))
+        return out
+
+    def _outlier(self, r: np.ndarray) -> bool:
+        """Robust residual test on the parametric model's one-step residual r = τ − Dθ [N m]: |r_j| > k·s_j for a
+        joint j, with s² a winsorised running mean square of past residuals (each clipped at (k s)², so one
+        spike barely moves it and a lasting change is accepted after a few samples), started at the offline
+        fit's residual mean square. The GMR is left out: where it extrapolates, its error is not the sample's."""
+        k = self.options.outlier_k
+        if not k:
+            return False
+        if self.scale2 is None:
+            self.scale2 = np.maximum(self.ident.parametric_var.copy(), 1e-12)
+        r2 = r * r
+        outlier = bool(np.any(r2 > k * k * self.scale2))
+        self.scale2 += (np.minimum(r2, k * k * self.scale2) - self.scale2) / OUTLIER_MEMORY
+        return outlier
+
+    def parameters(self) -> dict:
+        """{"n", "parameters"} of the current θ."""
+        return {"n": self.ident.n_updates, "parameters": dict(zip(self.names, map(float, self.ident.theta)))}
+
+    def final(self) -> dict:
+        """The final record."""
+        c = self.counts
+        estimated = self.derivatives.dt is not None
+        return {
+            "final": {
+                **self.parameters(),
+                "lines": c.lines,
+                "samples": c.samples,
+                "updates": c.updates,
+                "predictions": c.predictions,
+                "outliers": c.outliers,
+                "extrapolating": c.extrapolating,
+                "skipped": dict(c.skipped),
+                "derivatives": {
+                    "estimated": estimated,
+                    "delay_samples": self.derivatives.delay if estimated else 0,
+                    "delay_s": self.derivatives.delay_seconds() if estimated else 0.0,
+                    "cutoff_hz": self.derivatives.cutoff_hz if estimated else None,
+                    "lost": self.derivatives.lost,
+                    "restarts": self.derivatives.restarts,
+                },
+            }
+        }
+
+
+def serve(
+    identifier: OnlineIdentifier,
+    names: tuple[str, ...],
+    instream: TextIO,
+    outstream: TextIO,
+    errstream: TextIO,
+    snapshot_every: int = 1000,
+    on_final: Callable[[dict], None] | None = None,
+    current_to_torque: tuple[float, ...] | None = None,
+    options: StreamOptions | None = None,
+) -> dict:
+    """Run the stream until end of input, SIGINT or SIGTERM; returns (and writes) the final record.
+
+    names: the parameter names of `identifier` (for the snapshots); instream: text or binary (bytes are
+    decoded as strict UTF-8 per line); on_final: called with the final record (e.g. to write it to a file)
+    after it has been printed; current_to_torque: N m / A per joint for samples that give motor currents
+    (overrides `options`). A header or mapping error raises `InputError` before any output.
+    """
+    options = options or StreamOptions()
+    options.snapshot_every = snapshot_every
+    if current_to_torque is not None:
+        options.current_to_torque = current_to_torque
+    service = Service(identifier, names, options)
+    state = {"reading": False, "stop": False}
+
+    def on_term(signum, frame):
+        # SIGTERM/SIGINT: interrupt a blocking read at once; during an update, finish it and stop after it
+        # (never half a step: the statistics and θ always describe the same samples).
+        state["stop"] = True
+        if state["reading"]:
+            raise _Stop
+
+    previous = {sig: _install(sig, on_term) for sig in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        _loop(service, instream, outstream, errstream, state)
+    except (KeyboardInterrupt, _Stop):
+        pass
+    finally:
+        for sig, handler in previous.items():
+            _install(sig, signal.SIG_DFL if handler is None else handler)
+    final = service.final()
+    _emit(outstream, final)
+    if on_final is not None:
+        on_final(final)
+    return final
+
+
+def _loop(service: Service, instream, outstream: TextIO, errstream: TextIO, state: dict) -> None:
+    lineno = 0
+    while not state["stop"]:
+        state["reading"] = True
+        try:
+            line = instream.readline()
+        except UnicodeDecodeError:  # a text stream with strict decoding: report and go on
+            line = b"\xff"
+        finally:
+            state["reading"] = False
+        if not line:
+            break
+        lineno += 1
+        service.counts.lines += 1
+        try:
+            records = service.line(line, lineno)
+        except InputError:
+            raise
+        except BadLine as exc:
+            service.counts.skip(exc.kind)
+            records, errors = [], [{"error": str(exc), "kind": exc.kind, "line": lineno}]
+        except Exception as exc:  # the stream never dies on input: report, skip, go on
+            service.counts.skip("internal")
+            records, errors = [], [{"error": f"{type(exc).__name__}: {exc}", "kind": "internal", "line": lineno}]
+        else:
+            errors = []
+        for error in [*service.errors, *errors]:
+            _emit(errstream, error)
+        service.errors.clear()
+        for record in records:
+            _emit(outstream, record)
+
+
+def _emit(stream: TextIO, record: dict) -> None:
+    """One strict-JSON line (no NaN or Infinity: a non-finite value becomes null), flushed."""
+    try:
+        text = json.dumps(record, allow_nan=False)
+    except ValueError:
+        text = json.dumps(_finite(record), allow_nan=False)
+    stream.write(text + "\n")
+    stream.flush()
+
+
+def _finite(value):
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _install(signum, handler):
+    """signal.signal where allowed (only the main thread may); returns the previous handler."""
+    try:
+        return signal.signal(signum, handler)
+    except (ValueError, TypeError):  # not the main thread, or no previous Python-level handler
+        return None

@@ -1,0 +1,395 @@
+"""What `ident-opt fleet` computes: every robot of a fleet identified every day on Dask, and what changed, named.
+
+1. The layout under `--logs` is found and checked (`fleet.layout`), before any work.
+2. Phase 1, on the cluster (`fleet.engine`): per robot the fit its days get (`tasks.choose`: the recommended fit,
+   judged on its first readable day as `identify` judges its training trials; or `--estimator`), per file its
+   statistics, per robot-day their sum and that fit, per robot a baseline model from its first days and against it
+   each day's torque scale per joint (`fleet.tasks`); the client gathers the choices, fits, baselines and scales
+   only.
+3. On the client (`fleet.changes`): the fleet's scatter of each tested parameter, each robot's test against its
+   first `baseline_days` fitted days, and for a robot with a moved parameter the day its change began.
+4. Phase 2, on the cluster, for the robots with a change only: the change's files read again and pooled, and the
+   evidence against the robot's baseline model that names the cause (`tasks.evidence`, `changes.name_cause`).
+
+A robot with fewer fitted days than the baseline plus `changes.RUN_DAYS` gets its series but no test (a warning).
+"""
+
+from __future__ import annotations
+
+import datetime
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ident_opt.fitting.recommend import chosen
+from ident_opt.fleet import changes, layout, tasks
+from ident_opt.fleet.engine import CONNECT_TIMEOUT_S, Engine
+from ident_opt.warnings import ResultWarning
+
+#: The engine every run names in its JSON.
+ENGINE = "dask.distributed"
+#: The baseline model may look this many days past the baseline for days with statistics (unreadable days).
+SPARE_DAYS = 3
+
+
+@dataclass
+class RobotResult:
+    """One robot's series: its fitted days, their files and samples, the fit's π and standard errors (D, P), the
+    tested parameters (`changes.Tested`) and their test (None with too few days), and the fit its days got with why
+    (`tasks.Choice`)."""
+
+    robot: str
+    days: list[str]
+    files: list[int]
+    samples: list[int]
+    pi: np.ndarray
+    se: np.ndarray
+    tested: changes.Tested
+    test: changes.Test | None = None
+    choice: tasks.Choice | None = None
+
+
+@dataclass
+class FleetResult:
+    """A fleet run: the problem and logs, the arm in a line, the fit the robot-days got (`estimator`, `why`: the
+    robots' one choice; "per robot" when they differ, each robot's in its `choice`), the model's parameter names
+    and the tested ones (with their definitions where they are base parameters), the robots' series, the changes,
+    the skipped files, the run's numbers (`fleet`, the contract's keys and more) and the warnings."""
+
+    problem: str
+    logs: str
+    arm: str
+    estimator: str
+    why: str
+    baseline_days: int
+    names: tuple[str, ...]
+    tested_names: tuple[str, ...]
+    definitions: dict[str, str]
+    robots: dict[str, RobotResult]
+    changes: list[changes.Change]
+    skipped: list[dict]
+    fleet: dict
+    warnings: list[ResultWarning] = field(default_factory=list)
+
+
+def run_fleet(
+    problem_path: str | Path,
+    logs: str,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    baseline_days: int = 5,
+    allow_implausible: bool = False,
+    drop_invalid: bool = False,
+    progress: bool = True,
+    processes: bool = True,
+    connect_timeout: float = CONNECT_TIMEOUT_S,
+    estimator: str | None = None,
+) -> FleetResult:
+    """Identify every robot-day under `logs` for the problem at `problem_path`, test each robot against its first
+    `baseline_days` days and name what changed (module doc). `scheduler`: an existing Dask scheduler's address
+    (None: a local cluster of `workers` processes, or threads with `processes` False), which must answer within
+    `connect_timeout` [s]. `estimator`: the fit every robot-day gets (None: each robot's recommended fit)."""
+    start = time.perf_counter()
+    problem_path = str(Path(problem_path).resolve())
+    setup = tasks.setup(problem_path)
+    problem = setup.problem
+    if estimator is not None:  # an unknown fit is refused here, before any work
+        chosen("fleet", setup.robot, setup.model, [], problem, estimator)
+    found = layout.discover(logs)
+    job = tasks.Job(problem_path, allow_implausible, drop_invalid, estimator)
+    with Engine(scheduler, workers, processes, connect_timeout) as engine:
+        engine.check(tasks.ready, problem_path)
+        phase1 = time.perf_counter()
+        submit = _phase1(job, found, baseline_days)
+        gathered = engine.run(found.robots, submit, _count1(found), progress, "fleet: statistics and fits")
+        engine_seconds = time.perf_counter() - phase1
+        baselines = {b.robot: b for b in gathered if isinstance(b, tasks.Baseline)}
+        choices = {c.robot: c for c in gathered if isinstance(c, tasks.Choice)}
+        robots, skipped, warnings = _series(gathered, setup, found)
+        warnings += _choice_warnings(choices)
+        onsets = _test(robots, baseline_days, warnings)
+        units = [
+            (r, _change_files(found, robots[r], max(t for t, _ in onsets[r].values())), baselines[r], choices[r])
+            for r in onsets
+            if r in baselines
+        ]
+        total = sum(len(unit[1]) + 2 for unit in units)
+        evidence = engine.run(units, _phase2(job), total, progress, "fleet: naming the changes")
+        n_workers, address = engine.workers, engine.address
+    named = {e.robot: e for e in evidence if e is not None}
+    unnamed = tasks.Evidence("", "change", 0.0, {}, {}, np.ones(setup.model.n_joints), {})  # no evidence: other
+    found_changes = [_change(robots[r], onsets[r], named.get(r, unnamed), setup, baseline_days) for r in sorted(onsets)]
+    samples = sum(sum(r.samples) for r in robots.values())
+    seconds = time.perf_counter() - start
+    cpu = sum(
+        item.cpu for item in [*gathered, *evidence] if isinstance(item, tasks.DayFit | tasks.Evidence | tasks.Choice)
+    )
+    for name, r in robots.items():
+        r.choice = choices.get(name)
+    fit_name, why = _one_choice(choices)
+    fleet = {
+        "robots": len(robots),
+        "robot_days": sum(len(r.days) for r in robots.values()),
+        "files": len(found.files),
+        "samples": samples,
+        "seconds": seconds,
+        "workers": n_workers,
+        "engine": ENGINE,
+        "scheduler": address,
+        "engine_seconds": engine_seconds,
+        "samples_per_second": samples / engine_seconds if engine_seconds > 0 else None,
+        "files_read_again": sum(len(unit[1]) for unit in units),
+        "cpu_seconds": cpu,
+        "cpu_seconds_per_file": cpu / max(len(found.files), 1),
+        "baseline_days": baseline_days,
+        "estimator": fit_name,
+    }
+    base = setup.base
+    definitions = base.definitions() if base.rank < setup.model.n_params else {}
+    return FleetResult(
+        problem=str(problem.path),
+        logs=str(logs),
+        arm=problem.robot.headline,
+        estimator=fit_name,
+        why=why,
+        baseline_days=baseline_days,
+        names=setup.model.names,
+        tested_names=tested_names(setup),
+        definitions=definitions,
+        robots=robots,
+        changes=found_changes,
+        skipped=found.skipped + skipped,
+        fleet=fleet,
+        warnings=found.warnings + warnings,
+    )
+
+
+# ---------------------------------------------------------------------------------------------- phase 1
+def _count1(found: layout.Layout) -> int:
+    """Phase 1's tasks: a choice of fit per robot, one per file, a sum, a fit and the scales per robot-day, a
+    baseline per robot."""
+    return len(found.files) + sum(3 * len(found.days(r)) + 2 for r in found.robots)
+
+
+def _phase1(job: tasks.Job, found: layout.Layout, baseline_days: int):
+    """A robot's phase-1 tasks: the fit its days get (`tasks.choose`, from its first days); each file's statistics
+    for it; each day's sum, fit and torque scales against the baseline model, fitted on the first `baseline_days`
+    days with statistics (of the first `baseline_days` + `SPARE_DAYS`). The choice, the fits, the baseline and the
+    scales are gathered."""
+
+    def submit(client, robot: str) -> tuple[list, list]:
+        first = [found.files_of(robot, day) for day in found.days(robot)[: baseline_days + SPARE_DAYS]]
+        choice = client.submit(tasks.choose, job, robot, *first)
+        gathered, others, days = [choice], [], []
+        for day in found.days(robot):
+            files = [client.submit(tasks.file_stats, job, f, choice) for f in found.files_of(robot, day)]
+            days.append(client.submit(tasks.day_stats, *files))
+            gathered.append(client.submit(tasks.fit_day, job, days[-1], choice))
+            others += files
+        base = client.submit(tasks.baseline, job, *days[: baseline_days + SPARE_DAYS], count=baseline_days)
+        gathered += [base, *(client.submit(tasks.scales, job, day, base) for day in days)]
+        return gathered, others + days
+
+    return submit
+
+
+def _day_number(day: str) -> int:
+    return datetime.date.fromisoformat(day).toordinal()
+
+
+def _series(
+    gathered: list, setup: tasks.Setup, found: layout.Layout
+) -> tuple[dict[str, RobotResult], list[dict], list[ResultWarning]]:
+    """Phase 1's results gathered into each robot's series (fitted days only): the fit, and the tested parameters
+    (the base parameters, then each joint's torque scale); the files skipped; a warning per robot with days that
+    have no fit."""
+    fits: dict[str, list[tasks.DayFit]] = {}
+    scales: dict[tuple[str, str], tasks.Scales] = {}
+    for item in gathered:
+        if isinstance(item, tasks.DayFit):
+            fits.setdefault(item.robot, []).append(item)
+        elif isinstance(item, tasks.Scales):
+            scales[item.robot, item.day] = item
+    robots, skipped, warnings = {}, [], []
+    P, n = setup.model.n_params, setup.model.n_joints
+    missing = (np.full(n, np.nan), np.full(n, np.nan))
+    for robot in found.robots:
+        days = sorted(fits.get(robot, []), key=lambda f: f.day)
+        for fit in days:
+            skipped += fit.skipped
+        good = [f for f in days if f.pi is not None]
+        bad = [f for f in days if f.pi is None]
+        if bad:
+            listed = "; ".join(f"{f.day}: {', '.join(f.notes)}" for f in bad[:5]) + (" …" if len(bad) > 5 else "")
+            sentence = f"robot {robot}: {len(bad)} day(s) without a fit ({listed})"
+            warnings.append(ResultWarning("unfitted_days", sentence))
+        k = [(s.scale, s.se) if (s := scales.get((robot, f.day))) else missing for f in good]
+        tested = changes.Tested(
+            robot,
+            [f.day for f in good],
+            np.array([_day_number(f.day) for f in good], dtype=float),
+            np.hstack([np.array([f.tested for f in good]), np.array([a for a, _ in k])]).reshape(len(good), -1),
+            np.hstack([np.array([f.tested_se for f in good]), np.array([b for _, b in k])]).reshape(len(good), -1),
+        )
+        robots[robot] = RobotResult(
+            robot,
+            tested.days,
+            [len(f.files) for f in good],
+            [f.samples for f in good],
+            np.array([f.pi for f in good]).reshape(len(good), P),
+            np.array([f.se for f in good]).reshape(len(good), P),
+            tested,
+        )
+    return robots, skipped, warnings
+
+
+def _choice_warnings(choices: dict[str, tasks.Choice]) -> list[ResultWarning]:
+    """The warnings of the evidence behind the robots' fits (`fitting.trust`), one per code with the robots it
+    concerns (the first robot's message as the example)."""
+    by_code: dict[str, list[tuple[str, ResultWarning]]] = {}
+    for name in sorted(choices):
+        for w in choices[name].warnings:
+            by_code.setdefault(w.code, []).append((name, w))
+    out = []
+    for code, found in by_code.items():
+        names = ", ".join(n for n, _ in found[:10]) + (" …" if len(found) > 10 else "")
+        first_robot, first = found[0]
+        day = choices[first_robot].day
+        out.append(
+            ResultWarning(
+                code,
+                f"{len(found)} robot(s) ({names}), judged on their first readable day; "
+                f"{first_robot} on {day}: {first.message}",
+            )
+        )
+    return out
+
+
+def _one_choice(choices: dict[str, tasks.Choice]) -> tuple[str, str]:
+    """(estimator, why) of the robots' fits: the name when every robot got the same fit ("per robot" otherwise), the
+    reason when they share one, else how many robots got each fit (each robot's reason is in its entry)."""
+    recs = [c.recommendation for c in choices.values()]
+    if not recs:
+        return "none", "no robot to fit"
+    names = sorted({r.estimator for r in recs})
+    whys = {r.why for r in recs}
+    name = names[0] if len(names) == 1 else "per robot"
+    if len(whys) == 1:
+        return name, whys.pop()
+    counts = ", ".join(f"{n} on {sum(r.estimator == n for r in recs)} robot(s)" for n in names)
+    return (
+        name,
+        f"each robot's recommended fit, judged on its own first readable day ({counts}; each robot's reason in its "
+        "entry)",
+    )
+
+
+def tested_names(setup: tasks.Setup) -> tuple[str, ...]:
+    """The tested parameters' names: the base parameters, then `scale_<joint>` per joint (its torque's factor
+    against the baseline model)."""
+    return (*setup.tested, *(f"scale_{name}" for name in setup.robot.joint_names))
+
+
+# ---------------------------------------------------------------------------------------------- the test
+def _test(
+    robots: dict[str, RobotResult], baseline_days: int, warnings: list[ResultWarning]
+) -> dict[str, dict[str, tuple[int, float]]]:
+    """Test each robot with enough days (stored on it); for those with a change, the onset of each pattern
+    (`changes.onsets`)."""
+    K = baseline_days
+    testable = [r for r in robots.values() if len(r.days) >= K + changes.RUN_DAYS]
+    short = [r.robot for r in robots.values() if len(r.days) < K + changes.RUN_DAYS]
+    if short:
+        warnings.append(
+            ResultWarning(
+                "too_few_days",
+                f"{len(short)} robot(s) with fewer than {K + changes.RUN_DAYS} fitted days ({K} baseline + "
+                f"{changes.RUN_DAYS} to test) are reported but not tested: {', '.join(short[:10])}"
+                + (" …" if len(short) > 10 else ""),
+            )
+        )
+    onsets = {}
+    if not testable:
+        return onsets
+    fleet = changes.scatter([r.tested for r in testable], K)
+    for r in testable:
+        r.test = changes.test(r.tested, fleet, K)
+        if r.test.moved:
+            onsets[r.robot] = changes.onsets(r.test, r.tested.day_numbers, K, sorted(r.test.moved))
+    return onsets
+
+
+# ---------------------------------------------------------------------------------------------- phase 2
+def _change_files(found: layout.Layout, robot: RobotResult, tau: int) -> list:
+    """The files of a robot's fitted days from its change (day index `tau`) on."""
+    return [f for day in robot.days[tau:] for f in found.files_of(robot.robot, day)]
+
+
+def _phase2(job: tasks.Job):
+    """A changed robot's phase-2 tasks: its change's files read again (as in phase 1: its choice's derivatives) and
+    pooled, the evidence against its baseline model (gathered)."""
+
+    def submit(client, unit) -> tuple[list, list]:
+        _, files, base, choice = unit
+        stats = [client.submit(tasks.file_stats, job, f, choice) for f in files]
+        after = client.submit(tasks.day_stats, *stats, day="change")
+        return [client.submit(tasks.evidence, job, after, base)], [*stats, after]
+
+    return submit
+
+
+def _roles(setup: tasks.Setup) -> tuple[dict[int, list[int]], list[int], dict[int, int]]:
+    """Which tested parameters are each joint's friction ({joint: indices}), which a body on the last link moves,
+    and each joint's torque scale ({joint: index})."""
+    names = tested_names(setup)
+    friction: dict[int, list[int]] = {}
+    for p in setup.model.parameters:
+        if p.kind == "friction" and p.joint and p.name in setup.tested:
+            friction.setdefault(p.joint, []).append(names.index(p.name))
+    moved_by_tool = np.abs(setup.base.K @ setup.robot.tool_directions(setup.model)).max(axis=1) > 0
+    B = len(setup.tested)
+    return friction, [int(i) for i in np.flatnonzero(moved_by_tool)], {j + 1: B + j for j in range(len(names) - B)}
+
+
+def _change(
+    robot: RobotResult, onsets: dict[str, tuple[int, float]], found: tasks.Evidence, setup: tasks.Setup, K: int
+) -> changes.Change:
+    """The contract's change entry of a robot from its test, its onset and the pooled evidence: the parameters it
+    concerns are the moved ones of its cause (a joint's friction for wear, what a body on the last link moves for a
+    payload, the joint's torque scale and the rest for a drive, every moved one for other)."""
+    test, tested = robot.test, robot.tested
+    cause, joint, explained = changes.name_cause(found.gains, found.null, found.growth)
+    moved = sorted(test.moved)
+    friction, tool, scale_of = _roles(setup)
+    own = {"wear": friction.get(joint, []), "payload": tool, "drive": moved}.get(cause, moved)
+    concerned = [q for q in moved if q in own] or moved
+    if cause == "drive":
+        concerned = [scale_of[joint]] + [q for q in concerned if q != scale_of[joint]]
+    last = len(robot.days) - 1
+    lead = scale_of[joint] if cause == "drive" else max(concerned, key=lambda q: abs(test.z[last, q]))
+    names = tested_names(setup)
+    baseline = {names[q]: float(test.mean[q]) for q in concerned}
+    latest = {names[q]: float(tested.values[last, q]) for q in concerned}
+    scale = float(found.scale[joint - 1]) if cause == "drive" else None
+    size = scale - 1.0 if scale is not None else latest[names[lead]] / baseline[names[lead]] - 1.0
+    pattern = changes.pattern_of(cause, onsets)
+    tau = onsets[pattern][0]
+    return changes.Change(
+        robot=robot.robot,
+        cause=cause,
+        joint=joint,
+        parameters=[names[q] for q in concerned],
+        first_day=robot.days[tau],
+        pattern=pattern,
+        baseline=baseline,
+        latest=latest,
+        z=float(test.z[last, lead]),
+        detected=robot.days[min(test.moved[q][0] for q in moved)],
+        explained=explained,
+        scale=scale,
+        size=float(size),
+        lead=names[lead],
+    )

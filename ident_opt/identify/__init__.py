@@ -1,1 +1,0 @@
-"""Estimators of the parameters π: all linear-in-π ones work from sufficient statistics (`stats.Stats`)."""

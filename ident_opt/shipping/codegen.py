@@ -1,0 +1,470 @@
+"""Generated C for embedded torque prediction: CasADi expressions → C sources → a shared library.
+
+Three functions, each in CasADi's calling convention (`f(arg, res, iw, w, mem)` plus `f_work`,
+`f_incref`, `f_checkout`, ...), all with the identified π baked in as literal constants (q, dq, ddq, τ
+have one entry per joint, `Arm.n_joints`):
+
+    tau_hat(q, dq, ddq)     -> tau       τ = M(q) ddq + C(q, dq) dq + G(q) + F(dq)        [N m]
+    tau_hat_gmr(q, dq, ddq) -> tau       the same + E[r | x], x = [q; dq; ddq]            [N m]
+    ddq_hat(q, dq, tau)     -> ddq       M(q)⁻¹ (τ − C(q, dq) dq − G(q) − F(dq))          [rad/s²]
+
+The rigid part is `Arm.tau_expression` (and `Arm.function` for M), never re-typed here, so the arm
+and the extensions the user chose flow through unchanged. The GMR term is a fixed sum of K Gaussians, written
+with precomputed constants per component k (Σxx_k = L_k L_kᵀ):
+
+    l_k(x) = log w_k − Σ log diag L_k − ½ ‖L_k⁻¹ (x − μx_k)‖²        (log weight × density, up to a constant)
+    m_k(x) = μr_k + A_k (x − μx_k),   A_k = Σrx_k Σxx_k⁻¹            (component conditional mean)
+    E[r|x] = Σ_k exp(l_k − l_max) m_k / Σ_k exp(l_k − l_max)         (log-sum-exp: never 0/0 far from data)
+
+Constants are printed by CasADi with 17 significant digits, so they round-trip exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from string import Template
+
+import casadi as ca
+import numpy as np
+
+from ident_opt.arm.base import Arm
+from ident_opt.cbuild import (  # noqa: F401  (the toolchain, re-exported for codegen's callers)
+    CFLAGS,
+    NAME,
+    compile_library,
+    compile_shared,
+    find_compiler,
+    generate_sources,
+    library_name,
+    load_external,
+    run_compiler,
+)
+from ident_opt.columns import kinematic_columns
+from ident_opt.errors import InputError
+
+
+def gmr_inputs(n_joints: int) -> tuple[str, ...]:
+    """The GMR inputs x = [q; dq; ddq] by name, in order: q1 … qn, dq1 … dqn, ddq1 … ddqn."""
+    return kinematic_columns(n_joints)[1:]
+
+
+#: Smallest accepted GMR input standard deviation, relative to max(1, |mean|) of that input (rad, rad/s,
+#: rad/s²). Below it the component is a near-delta in that input (a column that was constant up to rounding in
+#: the training data): its log-density then changes by ~|x|·eps/σ² per ulp of x, so no two implementations
+#: (C or Python) agree on it, and a micro-radian is below any encoder's resolution anyway.
+MIN_INPUT_STD = 1e-6
+#: Non-Python files shipped with the package (README template, example program).
+FILES = Path(__file__).with_name("templates")
+
+
+# ---------------------------------------------------------------------------------------------- GMR term
+@dataclass(frozen=True)
+class GmrConstants:
+    """What the generated GMR mean needs, per component k (d inputs, o outputs).
+
+    mu_x (K, d), mu_r (K, o), L_inv (K, d, d) lower-triangular, A (K, o, d), log_c (K,) = log w_k − ½ log det Σxx_k.
+    Units: those of x (rad, rad/s, rad/s²) and r (N m).
+    """
+
+    mu_x: np.ndarray
+    mu_r: np.ndarray
+    L_inv: np.ndarray
+    A: np.ndarray
+    log_c: np.ndarray
+
+    @property
+    def n_components(self) -> int:
+        """K, the number of Gaussians."""
+        return len(self.log_c)
+
+
+def gmr_constants(gmr) -> GmrConstants:
+    """Precompute the per-component constants from a fitted GMR (`weights_`, `means_`, `covariances_`,
+    `n_inputs`, in original units). Raises `InputError` when it cannot be generated (non-finite values,
+    a zero weight, an input that barely varies (`MIN_INPUT_STD`), an input covariance that is not
+    positive definite)."""
+    w = np.asarray(gmr.weights_, dtype=float)
+    means = np.asarray(gmr.means_, dtype=float)
+    covs = np.asarray(gmr.covariances_, dtype=float)
+    d = int(gmr.n_inputs)
+    if not (np.isfinite(w).all() and np.isfinite(means).all() and np.isfinite(covs).all()):
+        raise InputError("the GMR residual model has non-finite parameters: it cannot be generated")
+    if np.any(w <= 0):
+        raise InputError("the GMR residual model has a component with zero weight: it cannot be generated")
+    std = np.sqrt(np.maximum(np.einsum("kii->ki", covs[:, :d, :d]), 0.0))
+    tiny = std < MIN_INPUT_STD * np.maximum(1.0, np.abs(means[:, :d]))
+    if tiny.any():
+        k, i = np.argwhere(tiny)[0]
+        label = gmr_inputs(d // 3)[i] if d % 3 == 0 else f"x{i}"
+        raise InputError(
+            f"GMR component {k}: input {label} has a standard deviation of {std[k, i]:.3g} "
+            f"(mean {means[k, i]:.6g}): the training data barely vary there (a joint at rest?), "
+            "so the mixture cannot be evaluated reproducibly; train it on data with motion"
+        )
+    L_inv, A, log_c = [], [], []
+    for k in range(len(w)):
+        Sxx, Srx = covs[k, :d, :d], covs[k, d:, :d]
+        try:
+            L = np.linalg.cholesky(Sxx)
+        except np.linalg.LinAlgError:
+            raise InputError(
+                f"GMR component {k}: input covariance is not positive definite; it cannot be generated"
+            ) from None
+        Li = np.linalg.solve(L, np.eye(d))
+        L_inv.append(np.tril(Li))  # exactly lower-triangular: the zeros are dropped from the C code
+        A.append(Srx @ Li.T @ Li)  # Σrx Σxx⁻¹ with Σxx⁻¹ = L⁻ᵀ L⁻¹
+        log_c.append(np.log(w[k]) - np.log(np.diag(L)).sum())
+    return GmrConstants(means[:, :d], means[:, d:], np.array(L_inv), np.array(A), np.array(log_c))
+
+
+def gmr_mean_expression(x: ca.SX, c: GmrConstants) -> ca.SX:
+    """E[r | x] (o×1) as a CasADi expression of the inputs x (d×1): the module doc's formula."""
+    logs, means = [], []
+    for k in range(c.n_components):
+        dx = x - ca.DM(c.mu_x[k])
+        z = ca.mtimes(ca.sparsify(ca.DM(c.L_inv[k])), dx)
+        logs.append(c.log_c[k] - 0.5 * ca.sumsqr(z))
+        means.append(ca.DM(c.mu_r[k]) + ca.mtimes(ca.DM(c.A[k]), dx))
+    top = logs[0]
+    for lk in logs[1:]:
+        top = ca.fmax(top, lk)
+    weights = [ca.exp(lk - top) for lk in logs]  # the largest is exactly 1: the sum is never 0
+    total = weights[0]
+    for wk in weights[1:]:
+        total = total + wk
+    mean = weights[0] * means[0]
+    for wk, mk in zip(weights[1:], means[1:]):
+        mean = mean + wk * mk
+    return mean / total
+
+
+# ---------------------------------------------------------------------------------------------- functions
+def build_functions(model: Arm, pi: np.ndarray, gmr=None, forward: bool = True) -> list[ca.Function]:
+    """The CasADi Functions to generate: tau_hat, tau_hat_gmr (when `gmr` is given), ddq_hat (when
+    `forward`). π (model.n_params,) is baked in as constants."""
+    pi = np.asarray(pi, dtype=float).ravel()
+    if pi.shape != (model.n_params,):
+        raise InputError(f"{pi.size} parameters given, the model {list(model.names)} needs {model.n_params}")
+    if not np.isfinite(pi).all():
+        raise InputError("the parameters are not all finite: the model cannot be generated")
+    n = model.n_joints
+    q, dq, ddq, tau = (ca.SX.sym(name, n) for name in ("q", "dq", "ddq", "tau"))
+    pi_dm = ca.DM(pi)
+    tau_rigid = model.tau_expression(q, dq, ddq, pi_dm)
+    out = [ca.Function("tau_hat", [q, dq, ddq], [tau_rigid], ["q", "dq", "ddq"], ["tau"])]
+    if gmr is not None:
+        c = gmr_constants(gmr)
+        if c.mu_x.shape[1] != 3 * n or c.mu_r.shape[1] != n:
+            raise InputError(
+                f"the GMR must map {3 * n} inputs [q dq ddq] to {n} outputs, got {c.mu_x.shape[1]} → {c.mu_r.shape[1]}"
+            )
+        r = gmr_mean_expression(ca.vertcat(q, dq, ddq), c)
+        out.append(ca.Function("tau_hat_gmr", [q, dq, ddq], [tau_rigid + r], ["q", "dq", "ddq"], ["tau"]))
+    if forward:
+        # τ − M ddq = C dq + G + F: the bias is τ̂ at ddq = 0, so M⁻¹ (τ − bias) reuses the one model.
+        M = model.function("M")(q, dq, ddq, pi_dm)
+        bias = model.tau_expression(q, dq, ca.DM.zeros(n), pi_dm)
+        out.append(ca.Function("ddq_hat", [q, dq, tau], [solve_ldl(M, tau - bias)], ["q", "dq", "tau"], ["ddq"]))
+    return out
+
+
+def solve_ldl(M: ca.SX, b: ca.SX) -> ca.SX:
+    """M⁻¹ b for a symmetric n×n M by LDLᵀ without pivoting, unrolled into scalar expressions: branch-free,
+    no work arrays, and backward stable for M ≻ 0 even when it is ill-conditioned (Cramer's rule is not).
+    An arm's mass matrix is positive definite, so every pivot d_j > 0. For n = 2: l = M21/M11,
+    d2 = M22 − l M21, x2 = (b2 − l b1)/d2, x1 = b1/M11 − l x2.
+
+    u_ij = M_ij − Σ_{k<j} l_jk u_ik (i > j) is L_ij d_j, l_ij = u_ij / d_j, d_j = M_jj − Σ_{k<j} l_jk u_jk;
+    then L y = b, and Lᵀ x = D⁻¹ y.
+    """
+    n = M.shape[0]
+    u = [[M[i, j] for j in range(n)] for i in range(n)]
+    l = [[None] * n for _ in range(n)]
+    d = [None] * n
+    for j in range(n):
+        d[j] = u[j][j]
+        for k in range(j):
+            d[j] = d[j] - l[j][k] * u[j][k]
+        for i in range(j + 1, n):
+            for k in range(j):
+                u[i][j] = u[i][j] - l[j][k] * u[i][k]
+            l[i][j] = u[i][j] / d[j]
+    y = [b[i] for i in range(n)]
+    for i in range(n):
+        for k in range(i):
+            y[i] = y[i] - l[i][k] * y[k]
+    x = [None] * n
+    for i in reversed(range(n)):
+        x[i] = y[i] / d[i]
+        for k in range(i + 1, n):
+            x[i] = x[i] - l[k][i] * x[k]
+    return ca.vertcat(*x)
+
+
+# ---------------------------------------------------------------------------------------------- C files
+
+
+#: What each generated function does, for the README.
+DESCRIPTIONS = {
+    "tau_hat": "τ = M(q) ddq + C(q, dq) dq + G(q) + F(dq), the identified rigid-body model with its joint terms "
+    "and extensions.",
+    "tau_hat_gmr": "`tau_hat` plus the conditional mean E[r | x] of the Gaussian-mixture residual model, "
+    "x = [q; dq; ddq] (a fixed sum of Gaussians, evaluated with a log-sum-exp, so it stays finite far from the "
+    "training data).",
+    "ddq_hat": "forward dynamics ddq = M(q)⁻¹ (τ − C dq − G − F), for on-board simulation (an LDLᵀ solve).",
+}
+#: The example's state (q [rad], dq [rad/s], ddq [rad/s²]) for joint j, cycled over the joints.
+EXAMPLE_STATE = {"q": (0.3, -0.5, 0.2, -0.1), "dq": (0.8, -0.2, 0.4, -0.6), "ddq": (1.5, 2.0, -1.0, 0.5)}
+#: The example's call of tau_hat_gmr, when the library has it.
+EXAMPLE_GMR = """  {
+    casadi_real tau_gmr[N_JOINTS] = {0.0};
+    EVALUATE(tau_hat_gmr, q, dq, ddq, tau_gmr, status);
+    if (status != 0) {
+      fprintf(stderr, "tau_hat_gmr failed (%d)\\n", status);
+      return 1;
+    }
+    finite = report("tau_hat_gmr", tau_gmr) && finite;
+  }"""
+
+
+def write_readme(out_dir: Path, functions: list[ca.Function], robot, name: str = NAME) -> Path:
+    """The embedding README (template in `templates/README.md`) for this arm (`robot`: its joints and their
+    angle convention, `ident_opt.arm.base.Robot`) and this build's functions."""
+    rows = "\n".join(f"| `{f.name()}` | {_signature(f)} |" for f in functions)
+    described = "\n".join(f"- `{f.name()}`: {DESCRIPTIONS[f.name()]}" for f in functions if f.name() in DESCRIPTIONS)
+    calls = [f"`{f.name()}`" for f in functions if f.name() in ("tau_hat", "tau_hat_gmr")]
+    text = Template((FILES / "README.md").read_text(encoding="utf-8")).substitute(
+        name=name,
+        library=library_name(name),
+        cflags=" ".join(CFLAGS),
+        functions=rows,
+        descriptions=described,
+        robot=robot.headline,
+        n=robot.n_joints,
+        joints=", ".join(robot.joint_names),
+        convention=robot.angle_convention,
+        example=" and ".join(calls),
+    )
+    path = Path(out_dir) / "README.md"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _signature(f: ca.Function) -> str:
+    ins = ", ".join(f"{f.name_in(i)}[{f.numel_in(i)}]" for i in range(f.n_in()))
+    outs = ", ".join(f"{f.name_out(i)}[{f.numel_out(i)}]" for i in range(f.n_out()))
+    return f"`({ins}) -> ({outs})`"
+
+
+def copy_example(out_dir: Path, n_joints: int, gmr: bool = True) -> Path:
+    """The minimal example program `main.c` for an arm of `n_joints` joints (calling tau_hat_gmr too when the
+    library has it), next to the generated code."""
+    state = {
+        key: ", ".join(f"{values[j % len(values)]:g}" for j in range(n_joints)) for key, values in EXAMPLE_STATE.items()
+    }
+    text = Template((FILES / "main.c").read_text(encoding="utf-8")).substitute(
+        n=n_joints, gmr_call=EXAMPLE_GMR if gmr else "", **state
+    )
+    path = Path(out_dir) / "main.c"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+# ---------------------------------------------------------------------------------------------- check
+
+
+def evaluate(f: ca.Function, *inputs: np.ndarray) -> np.ndarray:
+    """Evaluate an (n×1, n×1, n×1) -> n×1 Function on N states at once: inputs (N, n), output (N, n)."""
+    n = len(inputs[0])
+    return np.asarray(f.map(n)(*(np.asarray(a, dtype=float).T for a in inputs))).T
+
+
+def relative_error(got: np.ndarray, ref: np.ndarray) -> float:
+    """max over samples of ‖got − ref‖∞ / ‖ref‖∞ (per sample, so a small τ is judged on its own scale)."""
+    got, ref = np.atleast_2d(got), np.atleast_2d(ref)
+    scale = np.max(np.abs(ref), axis=1)
+    scale[scale == 0] = 1.0
+    return float(np.max(np.max(np.abs(got - ref), axis=1) / scale))
+
+
+def forward_backward_error(
+    model: Arm, pi: np.ndarray, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, ddq: np.ndarray
+) -> float:
+    """How well `ddq` (N, n) solves M(q) ddq = τ − b, b = C dq + G + F, as a normwise backward error:
+    max over samples of ‖M ddq − (τ − b)‖∞ / (‖M‖∞ ‖ddq‖∞ + ‖τ‖∞ + ‖b‖∞). It is small for a correct solve
+    however ill-conditioned M is (a forward error would be amplified by cond M), and τ − b is judged on the
+    scale of τ and b, since it cancels at rest. M and b come from NumPy."""
+    M = model.mass_matrices(pi, q)
+    bias = model.predict(pi, q, dq, np.zeros_like(q))
+    residual = np.einsum("nij,nj->ni", M, ddq) - (tau - bias)
+    scale = (
+        np.abs(M).sum(axis=2).max(axis=1) * np.abs(ddq).max(axis=1) + np.abs(tau).max(axis=1) + np.abs(bias).max(axis=1)
+    )
+    scale[scale == 0] = 1.0
+    return float(np.max(np.abs(residual).max(axis=1) / scale))
+
+
+# ---------------------------------------------------------------------------------------------- pi_update
+#: Base names of the generated online update: pi_update.c/.h (statistics + active-set solver, from the template
+#: in `templates/`), pi_update_casadi.c/.h (the CasADi-generated regressor), libpi_update.so, the example.
+UPDATE = "pi_update"
+UPDATE_EXAMPLE = "pi_update_main.c"
+#: Flags of the update's library and example: `CFLAGS` with -O3, whose vectorised inner loops (the Givens sweeps)
+#: halve the update's time on a 7-joint arm; still ISO C99, so no contraction into FMA changes a result.
+UPDATE_CFLAGS = ("-O3", "-std=c99", "-fPIC")
+
+
+@dataclass(frozen=True)
+class UpdateState:
+    """What the generated update starts from: the combined normal equations H (P, P), h (P,) of the offline data,
+    θ (P,), its active set (P,) (−1 lower, +1 upper, 0 free), the sample count, and the box bounds (P,) each; or,
+    instead of H, their square-root factor R (P, P, upper: H = RᵀR), z (P,) = R⁻ᵀh and diag H (`hdiag`), as
+    `fitting.bounded.FactorBoundedLS` keeps them (more accurate than a Cholesky factor of H)."""
+
+    H: np.ndarray | None
+    h: np.ndarray
+    theta: np.ndarray
+    state: np.ndarray
+    n: int
+    lower: np.ndarray
+    upper: np.ndarray
+    R: np.ndarray | None = None
+    z: np.ndarray | None = None
+    hdiag: np.ndarray | None = None
+
+    def factor(self, order: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(R, z, diag H) in the column order `order`: R upper with a positive diagonal, RᵀR = H[order, order]."""
+        if self.R is None:
+            H = np.asarray(self.H, dtype=float)[np.ix_(order, order)]
+            try:
+                R = np.linalg.cholesky(H).T  # upper: H = RᵀR
+            except np.linalg.LinAlgError:
+                raise InputError(
+                    "pi_update: the offline statistics do not determine every parameter (H is not positive "
+                    "definite); train on data that excite every parameter"
+                ) from None
+            return R, np.linalg.solve(R.T, np.asarray(self.h, dtype=float)[order]), np.diag(H).copy()
+        Q, R = np.linalg.qr(np.asarray(self.R, dtype=float)[:, order])  # columns permuted: triangular again
+        sign = np.where(np.diag(R) < 0, -1.0, 1.0)
+        if not np.all(np.abs(np.diag(R)) > 0):
+            raise InputError("pi_update: the offline data do not determine every parameter; excite them all")
+        return np.triu(R * sign[:, None]), sign * (Q.T @ np.asarray(self.z, dtype=float)), self.hdiag[order]
+
+
+def _c_numbers(values) -> str:
+    out = []
+    for v in np.asarray(values, dtype=float).ravel():
+        out.append("INFINITY" if v == np.inf else "-INFINITY" if v == -np.inf else f"{v:.17g}")
+    return ", ".join(out)
+
+
+def update_design(model: Arm, columns: tuple[int, ...] | None = None) -> ca.SX:
+    """The design the update is about: the columns `columns` of the arm's regressor Y (all when None), J×P dense in
+    that order, as a CasADi expression of the arm's symbols."""
+    Y = model.symbols["Y"]
+    return Y if columns is None else Y[:, list(columns)]
+
+
+def solver_order(Y: ca.SX) -> list[int]:
+    """The update's column order: by the last row (joint) where each column can be non-zero, then by index. A row
+    of Y is non-zero only in columns whose last row is at or after its own, so each row's Givens sweep starts after
+    every column that ends before it (the last joints' rows, the sparsest, start last)."""
+    rows, cols = Y.sparsity().get_triplet()
+    last = np.full(Y.shape[1], -1)
+    np.maximum.at(last, np.asarray(cols, dtype=int), np.asarray(rows, dtype=int))
+    return sorted(range(Y.shape[1]), key=lambda c: (last[c], c))
+
+
+def _reflect_kernels(n_rows: int) -> str:
+    """C of the update's Householder kernels (pi_update.c.in: one per number a of regressor rows taking part, each a
+    single pass over the columns with the a rows unrolled) and of `reflect`, which picks one."""
+    out = []
+    for a in range(1, n_rows + 1):
+        rows = ", ".join(f"double *restrict y{j}" for j in range(a))
+        w = " + ".join(["v0 * s"] + [f"c[{j}] * y{j}[i]" for j in range(a)])
+        updates = " ".join(f"y{j}[i] -= d[{j}] * w;" for j in range(a))
+        out.append(
+            f"static void reflect{a}(double *restrict dst, const double *restrict src, {rows}, const double *c,\n"
+            f"                     const double *d, double v0, double bv, int n) {{\n"
+            f"  for (int i = 0; i < n; ++i) {{\n"
+            f"    double s = src[i], w = {w};\n"
+            f"    dst[i] = s - bv * w;\n"
+            f"    {updates}\n"
+            f"  }}\n"
+            f"}}\n"
+        )
+    cases = "\n".join(
+        f"    case {a}: reflect{a}(dst, src, {', '.join(f'rows[{j}]' for j in range(a))}, c, d, v0, bv, n); break;"
+        for a in range(1, n_rows + 1)
+    )
+    out.append(
+        "static void reflect(int a, double *dst, const double *src, double **rows, const double *c, const double *d,\n"
+        "                    double v0, double bv, int n) {\n"
+        f"  switch (a) {{\n{cases}\n    default: break;\n  }}\n}}\n"
+    )
+    return "\n".join(out)
+
+
+def generate_pi_update(
+    model: Arm, start: UpdateState, out_dir: Path, kkt_tol: float, columns: tuple[int, ...] | None = None
+) -> list[Path]:
+    """Write pi_update.c/.h (the template with `start` baked in: the square-root information factor R of H in the
+    solver's column order — `solver_order`, the parameters held at a bound last — z = R⁻ᵀ h, diag H) and
+    pi_update_casadi.c/.h (the regressor's columns `columns`, all when
+    None: Y(q, dq, ddq) (J×P, dense) by CasADi's code generator) into `out_dir`; returns the paths."""
+    out_dir = Path(out_dir)
+    s = model.symbols
+    Y = update_design(model, columns)
+    names = model.names if columns is None else tuple(model.names[i] for i in columns)
+    f = ca.Function("pi_regressor", [s["q"], s["dq"], s["ddq"]], [ca.densify(Y)], ["q", "dq", "ddq"], ["Y"])
+    casadi_c, casadi_h = generate_sources([f], out_dir, name=f"{UPDATE}_casadi")
+    held = np.asarray(start.state) != 0
+    order = [k for k in solver_order(Y) if not held[k]] + [k for k in solver_order(Y) if held[k]]
+    R, z, hdiag = start.factor(order)
+    h = np.asarray(start.h, dtype=float)[order]
+    values = {
+        "n_params": len(names),
+        "n_joints": model.n_joints,
+        "kkt_tol": f"{kkt_tol:.17g}",
+        "lower": _c_numbers(start.lower),
+        "upper": _c_numbers(start.upper),
+        "R0": _c_numbers(np.triu(R)),
+        "z0": _c_numbers(z),
+        "h0": _c_numbers(h),
+        "hdiag0": _c_numbers(hdiag),
+        "order": ", ".join(str(int(k)) for k in order),
+        "m0": str(int(held.sum())),
+        "theta0": _c_numbers(start.theta),
+        "state0": ", ".join(str(int(v)) for v in start.state),
+        "n0": str(int(start.n)),
+        "names": ", ".join(f'"{n}"' for n in names),
+        "kernels": _reflect_kernels(model.n_joints),
+    }
+    paths = [casadi_c, casadi_h]
+    for suffix in ("c", "h"):
+        text = Template((FILES / f"{UPDATE}.{suffix}.in").read_text(encoding="utf-8")).substitute(values)
+        path = out_dir / f"{UPDATE}.{suffix}"
+        path.write_text(text, encoding="utf-8")
+        paths.append(path)
+    columns_text = ",".join(f"{k}{j + 1}" for k in ("q", "dq", "ddq", "tau") for j in range(model.n_joints))
+    example = Template((FILES / UPDATE_EXAMPLE).read_text(encoding="utf-8")).substitute(columns=columns_text)
+    path = out_dir / UPDATE_EXAMPLE
+    path.write_text(example, encoding="utf-8")
+    paths.append(path)
+    return paths
+
+
+def compile_pi_update(out_dir: Path, compiler: list[str] | None = None) -> tuple[Path, Path]:
+    """The shared library libpi_update.so and the example program `pi_update_example`, built with `UPDATE_CFLAGS`."""
+    compiler = list(compiler or find_compiler())
+    out_dir = Path(out_dir)
+    sources = [str(out_dir / f"{UPDATE}.c"), str(out_dir / f"{UPDATE}_casadi.c")]
+    lib = compile_shared(sources, out_dir / library_name(UPDATE), compiler, UPDATE_CFLAGS)
+    exe = out_dir / f"{UPDATE}_example"
+    example = str(out_dir / UPDATE_EXAMPLE)
+    run_compiler(
+        [*compiler, *UPDATE_CFLAGS, "-D_POSIX_C_SOURCE=199309L", example, *sources, "-o", str(exe), "-lm"],
+        compiler[0],
+    )
+    return lib, exe

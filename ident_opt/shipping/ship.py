@@ -1,0 +1,172 @@
+"""What `ident-opt codegen` ships, and the check that the compiled code computes it: π identified by the chosen
+estimator (`ident_opt.fitting.estimators`) or loaded from an earlier run's parameters.json, the GMR residual
+model fitted on x = [q dq ddq] (`models.features`) or loaded, and the compiled functions compared with the
+Python model on the training states and on random states spanning them.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ident_opt.arm.base import Arm
+from ident_opt.data.dataset import Dataset
+from ident_opt.errors import InputError
+from ident_opt.fitting import estimators
+from ident_opt.models.gmr import GMR
+from ident_opt.models.hybrid import features, make_gmr
+from ident_opt.problem.spec import ResidualSpec
+from ident_opt.shipping import codegen
+
+#: The solver status written for estimators that have none to report.
+STATUS = {"ols": "least squares (no constraints)"}
+#: Largest accepted relative difference between the compiled library and the Python model.
+TOLERANCE = {"tau_hat": 1e-12, "tau_hat_gmr": 1e-10, "ddq_hat": 1e-12, "pi_update": 1e-9}
+#: What is compared: τ with the NumPy model (+ GMR), ddq by how well it solves M ddq = τ − C dq − G − F.
+MEASURE = {"tau_hat": "max_relative_error", "tau_hat_gmr": "max_relative_error", "ddq_hat": "max_backward_error"}
+#: Random states for the check, in addition to the training states.
+N_RANDOM = 4000
+
+
+@dataclass
+class Shipped:
+    """The model baked into the C code: the arm, π in its order, how π was obtained, the GMR residual model."""
+
+    model: Arm
+    pi: np.ndarray
+    estimator: str
+    status: str
+    gmr: GMR
+
+
+def prepare(
+    robot,
+    model: Arm,
+    train: Dataset | None,
+    residual: ResidualSpec,
+    estimator: str,
+    components: int | None = None,
+    saved: dict | None = None,
+) -> Shipped:
+    """π and the GMR: taken from `saved` (`read_parameters`) where it has them, else identified by `estimator`
+    (with the options `robot`'s description gives it) / fitted with the problem's `residual` settings
+    (`components`: a fixed K) on `train`."""
+    if saved is not None:
+        pi, label = saved_vector(saved, model), f"{saved['estimator']} (loaded from {saved['path']})"
+        status = saved.get("estimator_status", "")
+    else:
+        pi, label, status = identify(robot, model, train, estimator)
+    if saved and saved.get("gmr"):
+        gmr = gmr_from_saved(saved["gmr"], model.n_joints)
+    else:
+        gmr = fit_residual(model, pi, train, residual, components)
+    return Shipped(model, pi, label, status, gmr)
+
+
+def identify(robot, model: Arm, train: Dataset, estimator: str) -> tuple[np.ndarray, str, str]:
+    """(π, estimator name, solver status) from the training samples, by the chosen estimator."""
+    stats = estimators.statistics(model, [train], estimator)
+    try:
+        fit = estimators.fit_for(robot, estimator, stats, model)
+    except RuntimeError as exc:  # the solver failed: nothing consistent to generate
+        raise InputError(f"codegen: the physically consistent fit failed ({exc}); try --estimator ols") from None
+    return fit.pi, estimator, STATUS.get(fit.method, fit.status)
+
+
+def fit_residual(model: Arm, pi: np.ndarray, train: Dataset, spec: ResidualSpec, components: int | None) -> GMR:
+    """The GMR residual model on x = [q dq ddq], r = τ − τ̂(π), with the problem's [residual] settings."""
+    residual = train.tau - model.predict(pi, train.q, train.dq, train.ddq)
+    return make_gmr(spec, components).fit(features(train), residual)
+
+
+def read_parameters(path: str) -> dict:
+    """A parameters.json written by an earlier `codegen` run: {estimator, parameters, extensions, gmr}."""
+    try:
+        raw = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the parameters file ({exc})") from None
+    if not isinstance(raw, dict) or not isinstance(raw.get("parameters"), dict):
+        raise InputError(f"{path}: not a parameters file (expected an object with a 'parameters' object)")
+    model = raw.get("model") or {}
+    extensions = model.get("extensions", []) if isinstance(model, dict) else None
+    if not isinstance(extensions, list) or not all(isinstance(e, str) for e in extensions):
+        raise InputError(f"{path}: key 'model' must be an object whose 'extensions' is a list of names")
+    if raw.get("gmr") is not None and not isinstance(raw["gmr"], dict):
+        raise InputError(f"{path}: key 'gmr' must be an object (weights, means, covariances) or absent")
+    return {
+        "parameters": raw["parameters"],
+        "estimator": str(raw.get("estimator", "unknown")),
+        "estimator_status": str(raw.get("estimator_status", "")),
+        "extensions": extensions,
+        "gmr": raw.get("gmr"),
+        "path": path,
+    }
+
+
+def saved_vector(saved: dict, model: Arm) -> np.ndarray:
+    """π in the model's order; every model parameter must be in the file, as a finite number."""
+    params = saved["parameters"]
+    missing = [n for n in model.names if n not in params]
+    if missing:
+        raise InputError(f"{saved['path']}: parameters {missing} of the model are missing")
+    try:
+        pi = np.array([float(params[n]) for n in model.names])
+    except (TypeError, ValueError):
+        raise InputError(f"{saved['path']}: every parameter must be a number") from None
+    return pi
+
+
+def gmr_from_saved(raw: dict, n_joints: int) -> GMR:
+    """The 'gmr' object of a parameters.json (3n inputs, n outputs for an arm of n joints) back as a fitted `GMR`."""
+    try:
+        w, m, c = (np.asarray(raw[key], dtype=float) for key in ("weights", "means", "covariances"))
+    except (KeyError, TypeError, ValueError):
+        raise InputError("parameters file: 'gmr' needs numeric weights, means and covariances") from None
+    K, d = (w.shape[0] if w.ndim == 1 else 0), 4 * n_joints
+    if K == 0 or w.ndim != 1 or m.shape != (K, d) or c.shape != (K, d, d):
+        raise InputError(
+            f"parameters file: GMR shapes {w.shape}, {m.shape}, {c.shape}; expected (K,), (K, {d}), (K, {d}, {d}) "
+            f"for {n_joints} joints"
+        )
+    gmr = GMR(n_components=K)
+    gmr.weights_, gmr.means_, gmr.covariances_, gmr.n_inputs = w, m, c, 3 * n_joints
+    return gmr
+
+
+def check(library: Path, shipped: Shipped, train: Dataset | None, names: list[str], rng) -> dict[str, float]:
+    """Each compiled function's error against the Python model (`MEASURE`), on the training states (if any)
+    and random states spanning them."""
+    model, pi = shipped.model, shipped.pi
+    states = _states(model, pi, train, rng)
+    errors = {}
+    for name in names:
+        f = codegen.load_external(library, name)
+        if name == "tau_hat":
+            errors[name] = codegen.relative_error(codegen.evaluate(f, states.q, states.dq, states.ddq), states.tau)
+        elif name == "tau_hat_gmr":
+            ref = states.tau + shipped.gmr.predict_mean(features(states))
+            errors[name] = codegen.relative_error(codegen.evaluate(f, states.q, states.dq, states.ddq), ref)
+        elif name == "ddq_hat":  # backward error of the solve: meaningful however ill-conditioned M(q) is
+            ddq = codegen.evaluate(f, states.q, states.dq, states.tau)
+            errors[name] = codegen.forward_backward_error(model, pi, states.q, states.dq, states.tau, ddq)
+    return errors
+
+
+def _states(model: Arm, pi: np.ndarray, train: Dataset | None, rng) -> Dataset:
+    """`N_RANDOM` random states spanning the training states (at least ±π, ±1, ±1) followed by the training
+    states themselves (without a trial: ±π rad, ±3 rad/s, ±10 rad/s²), with the model's torques τ(π)."""
+    n = model.n_joints
+    if train is not None:
+        lo = np.minimum(train.q.min(0), -np.pi), np.minimum(train.dq.min(0), -1), np.minimum(train.ddq.min(0), -1)
+        hi = np.maximum(train.q.max(0), np.pi), np.maximum(train.dq.max(0), 1), np.maximum(train.ddq.max(0), 1)
+    else:
+        lo = (-np.pi * np.ones(n), -3 * np.ones(n), -10 * np.ones(n))
+        hi = (np.pi * np.ones(n), 3 * np.ones(n), 10 * np.ones(n))
+    q, dq, ddq = (rng.uniform(a, b, (N_RANDOM, n)) for a, b in zip(lo, hi))
+    if train is not None:
+        q, dq, ddq = np.vstack([q, train.q]), np.vstack([dq, train.dq]), np.vstack([ddq, train.ddq])
+    tau = model.predict(pi, q, dq, ddq)
+    return Dataset("check states", np.arange(len(q), dtype=float), q, dq, ddq, tau)
