@@ -27,7 +27,7 @@ from pathlib import Path
 
 from confusion_matrix import chain
 
-from ident_opt.diagnosis import diagnose
+from ident_opt.diagnosis import diagnose_trial
 from ident_opt.problem import load_problem
 from ident_opt.simulator import simulate_trial
 
@@ -48,7 +48,7 @@ def run(robot, effects: list[str], duration: float, rate: float, seed: int) -> t
     trial = simulate_trial(robot, duration=duration, rate_hz=rate, effects=effects, seed=seed, progress=False)
     data = trial.dataset()
     t0 = time.perf_counter()
-    d = diagnose(robot, data, progress=False)
+    d = diagnose_trial(robot, data, progress=False)
     return time.perf_counter() - t0, d
 
 

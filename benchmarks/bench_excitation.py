@@ -19,7 +19,7 @@ import os
 import time
 from pathlib import Path
 
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.excitation import design as excitation
 from ident_opt.problem import load_problem
 

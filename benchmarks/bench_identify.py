@@ -30,7 +30,7 @@ import numpy as np
 
 from ident_opt.arm.base import Arm
 from ident_opt.arm.planar import PlanarArm
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.fitting.constrained import fit_constrained, solve_constrained
 from ident_opt.fitting.fit import fit_ols
 from ident_opt.fitting.ols import solve_ols

@@ -80,8 +80,7 @@ def places(cause: str, n: int) -> list[tuple[int, ...]]:
 
 def one(job: tuple) -> dict:
     """Simulate one trial of `arm` hiding `causes` (on the 0-based `joints`) and diagnose it."""
-    from ident_opt.diagnosis import diagnose, hidden
-    from ident_opt.fitting.recommend import for_diagnosis
+    from ident_opt.diagnosis import diagnose_trial, hidden, rigid_choice
     from ident_opt.problem import load_problem
     from ident_opt.simulator import simulate_trial
 
@@ -102,7 +101,7 @@ def one(job: tuple) -> dict:
     )
     t0, c0 = time.perf_counter(), time.process_time()
     ds = trial.dataset()  # π by the recommended fit, as the command takes it
-    d = diagnose(robot, ds, progress=False, rigid_fit=for_diagnosis(robot, ds).recommendation)
+    d = diagnose_trial(robot, ds, progress=False, rigid_fit=rigid_choice(problem, ds))
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     named = [c["cause"] for c in d.causes]
     truth = trial.truth["effects"]

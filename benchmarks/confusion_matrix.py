@@ -37,8 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def pair(job: tuple[tuple[str, str], int, float, str]) -> dict:
     """Simulate one trial hiding two effects and diagnose it: was exactly that set named, within tolerance?"""
-    from ident_opt.diagnosis import diagnose, hidden
-    from ident_opt.fitting.recommend import for_diagnosis
+    from ident_opt.diagnosis import diagnose_trial, hidden, rigid_choice
     from ident_opt.problem import load_problem
     from ident_opt.simulator import simulate_trial
 
@@ -48,13 +47,14 @@ def pair(job: tuple[tuple[str, str], int, float, str]) -> dict:
         # starts) share the `mixed` reference, which alternates the two.
         refs = {CATALOGUE[c].reference for c in causes}
         trajectory = refs.pop() if len(refs) == 1 else "mixed"
-    robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
+    problem = load_problem(ROOT / "problems" / "tudor_2dof.toml")
+    robot = problem.robot
     rng = np.random.default_rng([seed, *(CAUSES.index(c) for c in causes), 99])
     effects = {c: hidden.draw(c, rng, robot) for c in causes}
     trial = simulate_trial(robot, trajectory=trajectory, duration=duration, seed=seed, effects=effects, progress=False)
     t0 = time.perf_counter()
     ds = trial.dataset()  # π by the recommended fit, as the command takes it
-    d = diagnose(robot, ds, progress=False, rigid_fit=for_diagnosis(robot, ds).recommendation)
+    d = diagnose_trial(robot, ds, progress=False, rigid_fit=rigid_choice(problem, ds))
     seconds = time.perf_counter() - t0
     named = [c["cause"] for c in d.causes]
     truth = trial.truth["effects"]
@@ -79,8 +79,7 @@ def one(job: tuple) -> dict:
     """Simulate one hidden-effect trial and diagnose it. `job`: (cause, seed, duration, trajectory), and
     optionally a condition: {"simulate": extra `simulate_trial` keywords (rate, controller bandwidth, noise
     scale), "magnitude": a factor on the drawn magnitude, "background": background terms to switch on}."""
-    from ident_opt.diagnosis import diagnose, hidden
-    from ident_opt.fitting.recommend import for_diagnosis
+    from ident_opt.diagnosis import diagnose_trial, hidden, rigid_choice
     from ident_opt.problem import load_problem
     from ident_opt.simulator import simulate_trial
 
@@ -88,7 +87,8 @@ def one(job: tuple) -> dict:
     condition = rest[0] if rest else {}
     if trajectory == "auto":  # as the tests: Stribeck friction shows only on a smooth reference
         trajectory = CATALOGUE[cause].reference if cause in CATALOGUE else "tud01"
-    robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
+    problem = load_problem(ROOT / "problems" / "tudor_2dof.toml")
+    robot = problem.robot
     rng = np.random.default_rng([seed, CAUSES.index(cause)])
     effects = {} if cause == "none" else {cause: hidden.draw(cause, rng, robot)}
     if cause != "none" and condition.get("magnitude", 1.0) != 1.0:
@@ -105,7 +105,7 @@ def one(job: tuple) -> dict:
     )
     t0 = time.perf_counter()
     ds = trial.dataset()  # π by the recommended fit, as the command takes it
-    d = diagnose(robot, ds, progress=False, rigid_fit=for_diagnosis(robot, ds).recommendation)
+    d = diagnose_trial(robot, ds, progress=False, rigid_fit=rigid_choice(problem, ds))
     seconds = time.perf_counter() - t0
     out = {
         "cause": cause,

@@ -27,17 +27,17 @@ FREQUENCIES_HZ = (2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 15.0)
 
 def one(job: tuple[str, int, float, int]) -> dict:
     """Simulate one hidden mode and diagnose it."""
-    from ident_opt.diagnosis import diagnose
-    from ident_opt.fitting.recommend import for_diagnosis
+    from ident_opt.diagnosis import diagnose_trial, rigid_choice
     from ident_opt.problem import load_problem
     from ident_opt.simulator import simulate_trial
 
     kind, joint, f, seed = job
-    robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
+    problem = load_problem(ROOT / "problems" / "tudor_2dof.toml")
+    robot = problem.robot
     effect = f"elasticity:joint={joint},frequency_hz={f},damping=0.02,kind={kind}"
     trial = simulate_trial(robot, trajectory="tud01", duration=80.0, seed=seed, effects=[effect], progress=False)
     ds = trial.dataset()  # π by the recommended fit, as the command takes it
-    d = diagnose(robot, ds, progress=False, rigid_fit=for_diagnosis(robot, ds).recommendation)
+    d = diagnose_trial(robot, ds, progress=False, rigid_fit=rigid_choice(problem, ds))
     found = next((c["estimate"] for c in d.causes if c["cause"] == "elasticity"), None)
     ok = found is not None and found["joint"] == joint and abs(found["frequency_hz"] / f - 1) <= FREQUENCY_TOL
     return {"kind": kind, "joint": joint, "f": f, "named": [c["cause"] for c in d.causes], "found": found, "ok": ok}

@@ -36,7 +36,8 @@ import pandas as pd
 from tqdm import tqdm
 
 from ident_opt.columns import channel_names
-from ident_opt.data.dataset import Dataset, load_dataset
+from ident_opt.data.dataset import Dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.diagnosis.loop import at_rest
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation

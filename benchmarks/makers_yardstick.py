@@ -23,9 +23,10 @@ from pathlib import Path
 import numpy as np
 
 import ident_opt as io
-from ident_opt.data.dataset import Dataset, load_dataset
+from ident_opt.data.dataset import Dataset
 from ident_opt.data.derivatives import lowpass
-from ident_opt.fitting.recommend import recommended_fit
+from ident_opt.data.loader import load_dataset
+from ident_opt.fitting.recommend import choose
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -81,7 +82,8 @@ def main() -> None:
         train = load(problem, [ROOT / "data" / folder / f for f in train_files], None)
         test = load(problem, [ROOT / "data" / folder / f for f in test_files], columns)
         arm = problem.robot.model()
-        fit, found = recommended_fit(problem.robot, arm, train, problem)
+        found = choose(problem, train, model=arm)
+        fit = found.fit(problem.robot, arm, train)
         makers = np.array([problem.reference.parameters[n] for n in arm.names])
         theirs = rmse(arm, makers, test)
         ratio = rmse(arm, fit.pi, test) / theirs
@@ -89,8 +91,8 @@ def main() -> None:
         floor = 1.0 - (rmse(arm, makers, test, band=True) / theirs) ** 2
         band = rmse(arm, fit.pi, test, band=True) / rmse(arm, makers, test, band=True)
         print(f"{name}: train {named(train_files)} -> test {named(test_files)}")
-        print(f"  recommended: {found.recommendation.estimator} ({found.recommendation.why})")
-        print(f"  cut-offs [Hz]: {', '.join(f'{d.cutoff_hz:.1f}' for d in found.trials)}")
+        print(f"  recommended: {found.estimator} ({found.why})")
+        print(f"  cut-offs [Hz]: {', '.join(f'{d.cutoff_hz:.1f}' for d in found.at_cutoff(train))}")
         print(f"  held-out RMSE / makers': {'  '.join(f'joint {j + 1} {r:.3f}' for j, r in enumerate(ratio))}")
         print(
             "  share of the makers' squared error above the test trials' cut-off: "

@@ -31,11 +31,12 @@ import pandas as pd
 
 from ident_opt.adaptation.identifier import serving_identifier
 from ident_opt.adaptation.replay import _standard_errors, replay
-from ident_opt.adaptation.stream import Mapping, StreamOptions, currents_to_torques, serve
-from ident_opt.data.dataset import chronological_split, load_dataset
-from ident_opt.data.derivatives import REST, resolve_cutoff
+from ident_opt.adaptation.stream import StreamOptions, serve
+from ident_opt.data.dataset import chronological_split
+from ident_opt.data.derivatives import REST
+from ident_opt.data.loader import load_dataset
 from ident_opt.fitting.bounded import FactorBoundedLS
-from ident_opt.fitting.recommend import chosen
+from ident_opt.fitting.recommend import choose
 from ident_opt.problem import load_problem
 from ident_opt.report import record
 from ident_opt.shipping.pi_update import verify
@@ -83,9 +84,7 @@ def stream_figures(problem_path: Path, folder: Path) -> dict:
     t0 = time.perf_counter()
     start, ident = serving_identifier("pbr", problem, train)
     ready = time.perf_counter()
-    cutoff = train.cutoff_hz or resolve_cutoff(problem.data.derivative_cutoff_hz, train.t, train.q)[0]
-    scale, refused = currents_to_torques(problem.robot)
-    options = StreamOptions(Mapping.from_spec(problem.data, problem.robot), scale, refused, float(cutoff))
+    options = StreamOptions.for_problem(problem, train)
     out, err = io.StringIO(), io.StringIO()
     text = frame.to_csv(index=False, float_format="%.17g")
     served = time.perf_counter()
@@ -99,7 +98,7 @@ def stream_figures(problem_path: Path, folder: Path) -> dict:
             **{f"tau{j}": raw[f"tau{j}"] for j in range(1, n + 1)},
         }
     ).to_csv(path, index=False, float_format="%.17g")
-    spec = dataclasses.replace(problem.data, derivative_cutoff_hz=float(cutoff))
+    spec = dataclasses.replace(problem.data, derivative_cutoff_hz=options.cutoff_hz)
     streamed = load_dataset(path, spec, problem.robot)
     dq = np.where(np.abs(streamed.dq) < REST, 0.0, streamed.dq)
     D = np.concatenate([start.design(train.q, train.dq, train.ddq), start.design(streamed.q, dq, streamed.ddq)])
@@ -132,8 +131,7 @@ def arm_figures(name: str, folder: Path) -> dict:
     problem = load_problem(path)
     trial = load_dataset(problem.data.trials[0], problem.data, problem.robot)
     tr, te = chronological_split(trial.n, problem.split.train_fraction)
-    choice = chosen("online", problem.robot, problem.robot.model(()), [trial.subset(tr)], problem, None)
-    problem = dataclasses.replace(problem, estimator=choice.estimator)  # as `ident-opt online` starts cpbr
+    choice = choose(problem, [trial.subset(tr)], model=problem.robot.model(()))  # as `ident-opt online` starts cpbr
     r = replay(
         problem,
         trial.subset(tr),
@@ -143,6 +141,7 @@ def arm_figures(name: str, folder: Path) -> dict:
         progress=False,
         every=EVERY,
         keys=("pbr", "cpbr"),
+        choice=choice,
     )
     rate = r.n / r.solve_seconds["pbr"]
     with tempfile.TemporaryDirectory(prefix="ident_opt_arms_") as tmp:

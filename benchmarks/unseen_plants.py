@@ -30,6 +30,7 @@ import json
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 
@@ -93,15 +94,16 @@ def _nonlinear(truth, shape, size):
 
 def trial(job: tuple[int, int]) -> dict:
     """Simulate case `job[0]` on seed `job[1]`, hand it over through its logger, diagnose it, judge it."""
-    from ident_opt.diagnosis import diagnose, hidden
+    from ident_opt.diagnosis import diagnose_trial, hidden, rigid_choice
     from ident_opt.effects import CATALOGUE
-    from ident_opt.fitting.recommend import for_diagnosis
     from ident_opt.problem import load_problem
     from ident_opt.simulator import simulate_trial, unseen
 
     index, seed = job
     label, plant, causes, special = CASES[index]
-    robot = load_problem(ROOT / "problems" / "tudor_2dof.toml").robot
+    problem = load_problem(ROOT / "problems" / "tudor_2dof.toml")
+    problem = replace(problem, data=replace(problem.data, derivative_cutoff_hz="auto"))  # as a logger's file
+    robot = problem.robot
     rng = np.random.default_rng([seed, index, 30])
     effects, mechanism = hidden_effects(causes, special, rng, robot)
     refs = {CATALOGUE[c].reference for c in causes} or {"tud01"}
@@ -119,8 +121,8 @@ def trial(job: tuple[int, int]) -> dict:
         el["frequency_hz"] = _effective(sim, robot, effects, mechanism)
     ds = unseen.derived(sim, pipeline, robot)
     t0 = time.perf_counter()
-    fit = for_diagnosis(robot, ds, setting="auto").recommendation  # π by the recommended fit, as the command
-    d = diagnose(robot, ds, progress=False, torque_filter_hz="auto", rigid_fit=fit)
+    fit = rigid_choice(problem, ds)  # π by the recommended fit, as the command
+    d = diagnose_trial(robot, ds, progress=False, torque_filter_hz="auto", rigid_fit=fit)
     seconds = time.perf_counter() - t0
     named = [c["cause"] for c in d.causes]
     judged = {

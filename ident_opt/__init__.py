@@ -1,13 +1,16 @@
 """ident-opt: identify, diagnose and ship the dynamics of robot arms with any number of joints.
 
 The stable names of the Python API (`docs/api.md`) are importable from here; each is loaded on first use, so
-`import ident_opt` stays light (NumPy, CasADi, Pinocchio load when a name that needs them is used)::
+`import ident_opt` stays light (NumPy, CasADi, Pinocchio load when a name that needs them is used). Every stage
+function takes the parsed problem first and gives what its command gives, with the command's defaults::
 
-    import ident_opt as io
+    import ident_opt as iopt
 
-    problem = io.load_problem("problems/kuka_lwr4.toml")
-    training, testing = io.load_trials(problem)
-    fit = io.fit(problem, training)
+    problem = iopt.load_problem("problems/kuka_lwr4.toml")
+    training, testing = iopt.load_trials(problem)
+    fit = iopt.fit(problem, training)              # the recommended fit
+    comparison = iopt.compare(problem, training, testing)
+    diagnosis = iopt.diagnose(problem, training, testing)
 """
 
 from __future__ import annotations
@@ -16,38 +19,48 @@ import importlib
 
 __version__ = "0.1.0"
 
-#: Each public name → the module that defines it.
+#: Each public name → (the module that defines it, its name there).
 _EXPORTS = {
     # problem files and trials
-    "load_problem": "ident_opt.problem",
-    "Problem": "ident_opt.problem",
-    "load_trials": "ident_opt.api",
-    "load_dataset": "ident_opt.data.dataset",
-    "Dataset": "ident_opt.data.dataset",
+    "load_problem": ("ident_opt.problem", "load_problem"),
+    "Problem": ("ident_opt.problem", "Problem"),
+    "load_trials": ("ident_opt.api", "load_trials"),
+    "trial": ("ident_opt.api", "trial"),
+    "check": ("ident_opt.api", "check"),
+    "Dataset": ("ident_opt.data.dataset", "Dataset"),
     # the arm: its interface and its two implementations
-    "Arm": "ident_opt.arm.base",
-    "Robot": "ident_opt.arm.base",
-    "PlanarArm": "ident_opt.arm.planar",
-    "PlanarRobot": "ident_opt.arm.datasheet",
-    "ChainArm": "ident_opt.arm.chain",
-    "ChainRobot": "ident_opt.arm.chain",
-    # identification
-    "Stats": "ident_opt.fitting.stats",
-    "LinearFit": "ident_opt.fitting.fit",
-    "fit": "ident_opt.api",
-    "compare": "ident_opt.api",
-    "Comparison": "ident_opt.evaluation.compare",
-    # diagnosis, simulation, export
-    "diagnose": "ident_opt.diagnosis",
-    "Diagnosis": "ident_opt.diagnosis",
-    "simulate_trial": "ident_opt.simulator",
-    "export": "ident_opt.api",
+    "Arm": ("ident_opt.arm.base", "Arm"),
+    "Robot": ("ident_opt.arm.base", "Robot"),
+    "PlanarArm": ("ident_opt.arm.planar", "PlanarArm"),
+    "PlanarRobot": ("ident_opt.arm.datasheet", "PlanarRobot"),
+    "ChainArm": ("ident_opt.arm.chain", "ChainArm"),
+    "ChainRobot": ("ident_opt.arm.chain", "ChainRobot"),
+    # identification: one fit, every fit side by side, every model under every protocol
+    "fit": ("ident_opt.api", "fit"),
+    "ArmFit": ("ident_opt.fitting.recommend", "ArmFit"),
+    "Choice": ("ident_opt.fitting.recommend", "Choice"),
+    "Stats": ("ident_opt.fitting.stats", "Stats"),
+    "LinearFit": ("ident_opt.fitting.fit", "LinearFit"),
+    "compare": ("ident_opt.evaluation.compare", "compare"),
+    "Comparison": ("ident_opt.evaluation.compare", "Comparison"),
+    "identify": ("ident_opt.evaluation.identify", "identify"),
+    "IdentifyResult": ("ident_opt.evaluation.identify", "IdentifyResult"),
+    # what the model gets wrong, a simulated trial, the motion to record next
+    "diagnose": ("ident_opt.diagnosis", "diagnose"),
+    "Diagnosis": ("ident_opt.diagnosis", "Diagnosis"),
+    "simulate": ("ident_opt.simulator.simulate", "simulate"),
+    "simulate_trial": ("ident_opt.simulator.trial", "simulate_trial"),
+    # shipping: a robot description, C for the controller
+    "export": ("ident_opt.shipping.description", "export"),
+    "codegen": ("ident_opt.shipping.generate", "generate"),
     # a fleet: every robot every day, and what changed (Dask)
-    "run_fleet": "ident_opt.fleet.run",
-    "FleetResult": "ident_opt.fleet.run",
-    "simulate_fleet": "ident_opt.fleet.simulated",
+    "run_fleet": ("ident_opt.fleet.run", "run_fleet"),
+    "FleetResult": ("ident_opt.fleet.run", "FleetResult"),
+    "simulate_fleet": ("ident_opt.fleet.simulated", "simulate_fleet"),
+    # the paper's own view of its robot
+    "audit": ("ident_opt.paper.audit", "audit"),
     # bad input
-    "InputError": "ident_opt.errors",
+    "InputError": ("ident_opt.errors", "InputError"),
 }
 
 __all__ = ["__version__", *sorted(_EXPORTS)]
@@ -57,10 +70,12 @@ def __getattr__(name: str):
     """A public name, imported from its module on first use (module doc)."""
     if name not in _EXPORTS:
         raise AttributeError(f"module 'ident_opt' has no attribute {name!r}")
-    value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    module, attribute = _EXPORTS[name]
+    value = getattr(importlib.import_module(module), attribute)
     globals()[name] = value  # later uses skip this function
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *_EXPORTS})
+    """The public names only (`__all__`): the subpackages are the implementation, reached through these."""
+    return list(__all__)

@@ -1,96 +1,161 @@
-"""The Python API: what the commands do, as functions a notebook calls (`docs/api.md`).
+"""The Python API's own pieces: trials from a problem's files or from arrays, and the recommended fit
+(`docs/api.md`). Every other stage function lives in the package of its feature and is re-exported by
+`ident_opt` (`ident_opt.compare`, `ident_opt.diagnose`, …); the commands call the same functions.
 
-    import ident_opt as io
+    import ident_opt as iopt
 
-    problem = io.load_problem("problems/kuka_lwr4.toml")
-    training, testing = io.load_trials(problem)            # the problem's [data] (or paths)
-    fit = io.fit(problem, training)                         # the recommended fit (or estimator="ols", …)
-    tau = problem.robot.model().predict(fit.pi, q, dq, ddq)  # τ (N, n) [N m]
-    comparison = io.compare(problem, training, testing)     # every fit side by side, held-out errors, warnings
-    io.export(problem, fit, "arm.urdf")                     # or "arm.xml": MuJoCo MJCF
+    problem = iopt.load_problem("problems/kuka_lwr4.toml")
+    training, testing = iopt.load_trials(problem)          # the problem's [data] (or paths)
+    fit = iopt.fit(problem, training)                       # the recommended fit (or estimator="ols", …)
+    tau = fit.predict(testing[0])                           # τ̂ (N, n) [N m]
 
-Each function takes the parsed problem (`load_problem`) and trials (`load_trials`, `ident_opt.data.Dataset`: t, q,
-dq, ddq, tau as arrays (N, n) in SI units) and returns the data object the matching command reports: nothing here
-prints or writes, except `export`, whose job is the file.
+Every stage function takes the parsed problem first, then trials (`ident_opt.data.Dataset`: t, q, dq, ddq, tau as
+arrays (N, n) in SI units), and returns the data object the matching command reports: nothing here prints.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from ident_opt.data.dataset import Dataset, load_dataset
+import numpy as np
+
+from ident_opt import outputs
+from ident_opt.data.dataset import Dataset, fittable
+from ident_opt.data.loader import from_arrays, held_out_overlap, load_dataset
 from ident_opt.errors import InputError
-from ident_opt.evaluation.compare import Comparison, compare_estimators
-from ident_opt.fitting import estimators
-from ident_opt.fitting.fit import LinearFit
-from ident_opt.fitting.recommend import recommended_fit
+from ident_opt.fitting.base import base_parameters
+from ident_opt.fitting.recommend import ArmFit, choose
+from ident_opt.outputs import shown
 from ident_opt.problem import Problem
-from ident_opt.shipping import identified, write_mjcf, write_urdf
+from ident_opt.warnings import ResultWarning
 
 
 def load_trials(
     problem: Problem,
     data: Sequence[str | Path] | None = None,
     test: Sequence[str | Path] | None = None,
-    **options,
+    *,
+    allow_implausible: bool = False,
+    drop_invalid: bool = False,
+    min_samples: int | None = None,
+    fit: bool = True,
 ) -> tuple[list[Dataset], list[Dataset]]:
-    """(training, held-out) trials: `data` and `test` when given, else the problem's `[data]` (`train`/`test`, or
-    `trials`: the first trains, the second is held out). `options` go to `ident_opt.data.dataset.load_dataset`
-    (`allow_implausible`, `drop_invalid`); bad input raises `InputError` naming the file, column and row."""
-    train_paths = list(data) if data else list(problem.data.training)
-    test_paths = list(test) if test is not None else ([] if data else list(problem.data.testing))
-    if not train_paths:
-        raise InputError(f"{problem.path}: no data: give data=[...] or list trials under [data] in the problem file")
+    """(training, held-out) trials: every file of `data` trains and every file of `test` is held out; without `data`
+    the problem's `[data]` decides (`train`/`test`, or `trials`: the first trains, the second is held out), and a
+    problem with only a `[simulate]` section gets its simulated trials (generated on first use, cached). `fit`: the
+    trials will be fitted, so a joint whose torque never varies is an error. Bad input raises `InputError` naming the
+    file, column and row."""
+    train = [Path(p) for p in data or []]
+    held = [Path(p) for p in test or []]
+    if not train:
+        train, held = list(problem.data.training), held or list(problem.data.testing)
+    paths, n_train = train + held, len(train) or 1
+    if not paths and problem.simulate is not None:
+        from ident_opt.simulator import problem_trials  # deferred: the simulator's integrator side
 
-    def read(paths):
-        return [load_dataset(path, problem.data, problem.robot, **options) for path in paths]
-
-    return read(train_paths), read(test_paths)
-
-
-def fit(problem: Problem, trials: Sequence[Dataset], estimator: str | None = None, **options) -> LinearFit:
-    """π of the problem's arm (`problem.robot.model()`) fitted by `estimator` (default: the recommended fit, chosen
-    from the trials' own evidence, `ident_opt.fitting.recommend`) on all `trials` (their statistics add up), with
-    standard errors; `options` go to the estimator (e.g. `weights="wls"`, `margin=1e-6`)."""
-    robot = problem.robot
-    model = robot.model()
-    if estimator is None and not options:
-        return recommended_fit(robot, model, list(trials), problem)[0]
-    name = estimator or recommended_fit(robot, model, list(trials), problem)[1].recommendation.estimator
-    if name not in robot.estimators:
-        raise InputError(f"estimator {name!r} is not a fit of this arm; its fits: {', '.join(robot.estimators)}")
-    stats = estimators.statistics(model, list(trials), name, probes=True)
-    return estimators.fit_for(robot, name, stats, model, **options)
+        paths = problem_trials(problem)
+    if not paths:
+        raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
+    options = {"allow_implausible": allow_implausible, "drop_invalid": drop_invalid}
+    if min_samples is not None:
+        options["min_samples"] = min_samples
+    outputs.declare_inputs(paths)
+    trials = [load_dataset(p, problem.data, problem.robot, **options) for p in paths]
+    for trial in trials:
+        fittable(trial, fit)
+    return trials[:n_train], trials[n_train:]
 
 
-def compare(problem: Problem, training: Sequence[Dataset], testing: Sequence[Dataset] = (), **options) -> Comparison:
-    """Every fit of the arm beside its nominal model, scored on held-out data (`ident-opt compare`'s study,
-    `ident_opt.evaluation.compare.compare_estimators`); `options` as there (`margin`, `weights`, `progress`)."""
-    options.setdefault("progress", False)
-    return compare_estimators(
-        list(training),
+def trial(
+    problem: Problem,
+    t: np.ndarray,
+    q: np.ndarray,
+    tau: np.ndarray | None = None,
+    *,
+    current: np.ndarray | None = None,
+    dq: np.ndarray | None = None,
+    ddq: np.ndarray | None = None,
+    source: str = "arrays",
+    allow_implausible: bool = False,
+) -> Dataset:
+    """A trial of the problem's arm from arrays: `t` (N,) [s], `q` (N, n) [rad], the torques `tau` (N, n) [N m] or
+    the motor currents `current` (N, n) [A], optionally `dq` and `ddq`; missing derivatives are estimated by the
+    same pipeline as a file's, at the problem's `derivative_cutoff_hz` (`ident_opt.data.loader.from_arrays`)."""
+    return from_arrays(
+        t,
+        q,
+        tau,
+        problem.data,
         problem.robot,
-        problem.split,
-        list(testing) or None,
-        reference=problem.reference,
-        conversions=problem.data.conversions,
-        cutoff_setting=problem.data.derivative_cutoff_hz,
-        **options,
+        current=current,
+        dq=dq,
+        ddq=ddq,
+        source=source,
+        allow_implausible=allow_implausible,
     )
 
 
-def export(problem: Problem, fitted: LinearFit, path: str | Path) -> list[Path]:
-    """Write the arm with the parameters of `fitted` (a fit of `problem.robot.model()`) as a robot description:
-    a URDF with its JSON sidecar (path ending in .urdf) or a MuJoCo MJCF (.xml, .mjcf); returns the files written.
-    A π no physical robot has (e.g. an OLS fit's) raises `InputError` naming the link."""
-    model = problem.robot.model()
-    undetermined = fitted.details.get("not_determined", [])
-    description = problem.robot.bodies(model, fitted.pi, undetermined=undetermined)
-    path = Path(path)
-    if path.suffix.lower() == ".urdf":
-        record = {**identified(model.names, fitted.pi, fitted.se, fitted.method), "not_determined": undetermined}
-        return list(write_urdf(description, path, record))
-    if path.suffix.lower() in (".xml", ".mjcf"):
-        return [write_mjcf(description, path)]
-    raise InputError(f"{path}: name it *.urdf (URDF) or *.xml / *.mjcf (MuJoCo MJCF)")
+def fit(problem: Problem, trials: Sequence[Dataset], estimator: str | None = None, **options) -> ArmFit:
+    """π of the problem's arm (`problem.robot.model()`) on all `trials` (their statistics add up), by `estimator`
+    (default: the recommended fit, chosen from the trials' own evidence, `ident_opt.fitting.recommend.choose`), with
+    standard errors: the fit `compare` reports as recommended, `export` and `codegen` write. `fit.predict(trial)` is
+    τ̂; `options` go to the estimator (e.g. `weights="wls"`)."""
+    choice = choose(problem, trials, estimator=estimator, command="fit")
+    try:
+        return choice.fit(problem.robot, problem.robot.model(), trials, **options)
+    except RuntimeError as exc:  # the solver failed: nothing to stand behind
+        raise InputError(f"the {choice.estimator} fit failed ({exc}); try another estimator") from None
+
+
+@dataclass
+class Checked:
+    """What `check` found: the robot's summary (`Robot.summary` with its identifiable base parameters) and the lines
+    that describe it, each trial's summary (samples, rate, derivatives, ranges), and the warnings."""
+
+    problem: str
+    robot: dict
+    lines: list[str]
+    trials: list[dict]
+    warnings: list[ResultWarning] = field(default_factory=list)
+
+    def as_json(self) -> dict:
+        """The `check --json` payload."""
+        return {
+            "problem": self.problem,
+            "robot": self.robot,
+            "trials": self.trials,
+            "warnings": [w.as_dict() for w in self.warnings],
+        }
+
+
+def check(problem: Problem, training: Sequence[Dataset], testing: Sequence[Dataset] = ()) -> Checked:
+    """`ident-opt check`: the problem's robot and every trial summarised, nothing fitted; a held-out trial that is a
+    training trial is a warning."""
+    robot = problem.robot
+    arm = robot.model()
+    info = {**robot.summary(), "base_parameters": base_parameters(arm).rank}
+    if "urdf" in info:  # as people read it: relative to the working folder when inside it
+        info["urdf"] = shown(info["urdf"])
+    lines = [f"problem {problem.name!r} ({problem.path}): {robot.headline}", *robot.describe()]
+    lines.append(f"  identifiable: {info['base_parameters']} base parameters of the {arm.n_params} of its model")
+    trials = [_summary(d) for d in [*training, *testing]]
+    return Checked(problem.name, info, lines, trials, held_out_overlap(list(training), list(testing)))
+
+
+def _summary(trial: Dataset) -> dict:
+    """A JSON-able description of one loaded trial."""
+    return {
+        "source": shown(trial.source),
+        "samples": trial.n,
+        "duration_s": float(trial.t[-1] - trial.t[0]),
+        "rate_hz": trial.rate_hz,
+        "derivatives": trial.derivatives,
+        "dropped_rows": trial.dropped_rows,
+        "extra_columns": list(trial.extra.columns),
+        "ranges": {
+            name: [[float(arr[:, j].min()), float(arr[:, j].max())] for j in range(arr.shape[1])]
+            for name, arr in (("q", trial.q), ("dq", trial.dq), ("ddq", trial.ddq), ("tau", trial.tau))
+        },
+    }

@@ -26,7 +26,7 @@ def paper_problem():
 
 @pytest.fixture(scope="session")
 def exp1(physical_problem):
-    from ident_opt.data.dataset import load_dataset
+    from ident_opt.data.loader import load_dataset
 
     return load_dataset(physical_problem.data.trials[0], physical_problem.data, physical_problem.robot)
 

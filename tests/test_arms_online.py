@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import io
 import json
-from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -19,11 +18,12 @@ from ident_opt.adaptation.replay import _standard_errors
 from ident_opt.adaptation.stream import BadLine, LineParser, Mapping, StreamOptions, currents_to_torques, serve
 from ident_opt.cli import main
 from ident_opt.consistency import necessarily_nonnegative
-from ident_opt.data.dataset import chronological_split, load_dataset
+from ident_opt.data.dataset import chronological_split
+from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.fitting import estimators
 from ident_opt.fitting.iv import InstrumentStats
-from ident_opt.fitting.recommend import chosen
+from ident_opt.fitting.recommend import choose
 from ident_opt.problem import load_problem
 from tests.test_n_joint_inputs import arm3, workspace  # noqa: F401  (the fixtures)
 
@@ -79,18 +79,17 @@ def split(workspace):  # noqa: F811
 def test_the_start_is_the_recommended_fit_named_with_its_reason(replayed, split):
     _, js, out = replayed
     problem, train, _ = split
-    choice = chosen("online", problem.robot, problem.robot.model(()), [train], problem, None)
+    choice = choose(problem, [train], model=problem.robot.model(()))
     assert (js["estimator"], js["estimator_why"]) == (choice.estimator, choice.why)
     assert f"**{choice.estimator}**" in (out / "online.md").read_text()
     cpbr = js["parameters_by_model"]["cpbr"]
-    start = offline_start("cpbr", replace(problem, estimator=choice.estimator), train)
+    start = offline_start("cpbr", problem, train, choice=choice)
     assert np.allclose(cpbr["initial"], start.theta0, rtol=1e-9, atol=1e-12)
 
 
 def test_a_robust_start_keeps_its_instruments_at_the_cadence(split):
     problem, train, test = split
-    robust = replace(problem, estimator="robust")
-    start = offline_start("cpbr", robust, train, every=40)
+    start = offline_start("cpbr", problem, train, every=40, choice=choose(problem, [train], estimator="robust"))
     fit = estimators.fit_for(
         problem.robot, "robust", estimators.statistics(problem.robot.arm, [train], "robust"), problem.robot.arm
     )

@@ -134,8 +134,8 @@ def test_identify_reports_the_standard_errors_compare_does_on_trials_with_differ
     every sample as independent and its errors came out √(f_s / 2 f_c) too narrow."""
     from dataclasses import replace
 
-    from ident_opt.data.dataset import load_dataset
-    from ident_opt.evaluation.compare import compare_estimators
+    from ident_opt.data.loader import load_dataset
+    from ident_opt.evaluation.compare import compare
     from ident_opt.evaluation.identify import whole_trial_parameters
     from ident_opt.problem import load_problem
     from ident_opt.simulator import simulate_trial
@@ -153,9 +153,9 @@ def test_identify_reports_the_standard_errors_compare_does_on_trials_with_differ
         sim.frame.drop(columns=["dq1", "dq2", "ddq1", "ddq2"]).to_csv(path, index=False)
         trials.append(load_dataset(path, spec, problem.robot))
     assert abs(trials[0].cutoff_hz - trials[1].cutoff_hz) > 1.0, "the two trials' cut-offs differ"
-    compared = compare_estimators(trials, problem.robot, problem.split, progress=False, cutoff_setting="auto")
-    assert compared.recommendation.factor == 1.0  # both studies then fit the trials as read
-    _, errors, _ = whole_trial_parameters(replace(problem, data=spec, estimator=compared.default), trials)
+    compared = compare(replace(problem, data=spec), trials)
+    assert compared.choice.factor == 1.0  # both studies then fit the trials as read
+    _, errors, _ = whole_trial_parameters(replace(problem, data=spec), trials, compared.choice)
     for name, se in errors.items():
         theirs = compared.fits[name].se_dict()
         np.testing.assert_allclose([se[k] for k in se], [theirs[k] for k in se], rtol=1e-9, err_msg=name)

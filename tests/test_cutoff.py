@@ -12,8 +12,8 @@ import pytest
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PHYSICAL
-from ident_opt.data.dataset import load_dataset
 from ident_opt.data.derivatives import CUTOFF_MAX_FRACTION, CUTOFF_MIN_HZ, cutoff_choice
+from ident_opt.data.loader import load_dataset
 from ident_opt.fitting.fit import fit_ols
 from ident_opt.fitting.stats import Stats
 from ident_opt.problem import DataSpec, load_problem
@@ -118,7 +118,7 @@ def trial(tmp_path, rate: float, noise: float, seed: int):
 def test_the_default_pipeline_beats_a_fixed_15_hz(tmp_path):
     """The default settings ("auto" and the recommended fit) on noisy trials of the TUDOR model: the inertial and
     gravity parameters at least twice as close to the truth as OLS at a fixed 15 Hz."""
-    from ident_opt.fitting.recommend import recommended_fit
+    from ident_opt.fitting.recommend import judge
 
     inertial = [PHYSICAL.names.index(n) for n in ("a1", "a2", "a3", "b1", "b2")]
     errors = {"default": [], "15 Hz": []}
@@ -126,7 +126,7 @@ def test_the_default_pipeline_beats_a_fixed_15_hz(tmp_path):
         path, robot, pi = trial(tmp_path, rate=500.0, noise=5e-4, seed=seed)
         d = load_dataset(path, DataSpec(), robot)
         assert "where noise starts to outweigh motion" in d.derivatives
-        fit, _ = recommended_fit(robot, PHYSICAL, [d])
+        fit = judge(robot, PHYSICAL, [d]).fit(robot, PHYSICAL, [d])
         errors["default"].append(np.median(np.abs(fit.pi[inertial] / pi[inertial] - 1)))
         fixed = load_dataset(path, DataSpec(derivative_cutoff_hz=15.0), robot)
         ols = fit_ols(Stats.from_data(PHYSICAL, fixed.q, fixed.dq, fixed.ddq, fixed.tau), PHYSICAL)

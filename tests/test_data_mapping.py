@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ident_opt.cli import main
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.problem import DataSpec, load_problem
 

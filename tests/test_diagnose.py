@@ -14,7 +14,7 @@ import json
 import numpy as np
 import pytest
 
-from ident_opt.diagnosis import CAUSES, diagnose, hidden
+from ident_opt.diagnosis import CAUSES, diagnose_trial, hidden, rigid_choice
 
 DURATION = 60.0
 FAST_DURATION = 30.0  # fast-sampled trials: 5-20x the samples per second, so half the length keeps the signal
@@ -46,14 +46,14 @@ def _check_found(d, cause: str, truth: dict) -> None:
 def test_hidden_effect_is_named_and_estimated(physical_problem, cause, seed):
     robot = physical_problem.robot
     trial = _trial(robot, cause, seed)
-    d = diagnose(robot, trial.dataset(), progress=False)
+    d = diagnose_trial(robot, trial.dataset(), progress=False)
     _check_found(d, cause, trial.truth["effects"][cause])
 
 
 @pytest.mark.parametrize("seed", range(5))
 def test_clean_trials_name_nothing(physical_problem, seed):
     robot = physical_problem.robot
-    d = diagnose(robot, _trial(robot, "none", seed).dataset(), progress=False)
+    d = diagnose_trial(robot, _trial(robot, "none", seed).dataset(), progress=False)
     assert d.cause == "none", [(c["cause"], round(c["score"], 1), c["nmse_after"]) for c in d.candidates[:3]]
     assert d.estimate == {} and d.nmse_after == d.nmse_before
 
@@ -69,8 +69,7 @@ def test_robust_to_how_the_data_arrive(physical_problem, tmp_path, how):
     """A hidden delay (it depends on timing, derivatives and units all at once) is still found."""
     from dataclasses import replace
 
-    from ident_opt.data.dataset import load_dataset
-    from ident_opt.fitting.recommend import for_diagnosis
+    from ident_opt.data.loader import load_dataset
 
     robot = physical_problem.robot
     spec = replace(physical_problem.data, header=True, columns={})
@@ -93,8 +92,8 @@ def test_robust_to_how_the_data_arrive(physical_problem, tmp_path, how):
         ds = load_dataset(_write_without_derivatives(trial, tmp_path / "t.csv"), spec, robot)
         assert abs(ds.rate_hz - 2000.0) < 1e-6 and ds.derivatives.startswith("estimated")
     # π by the recommended fit, as the command takes it: `robust` where the derivatives are estimated here
-    rigid = for_diagnosis(robot, ds, setting=spec.derivative_cutoff_hz).recommendation
-    d = diagnose(robot, ds, progress=False, torque_filter_hz=spec.derivative_cutoff_hz, rigid_fit=rigid)
+    rigid = rigid_choice(replace(physical_problem, data=spec), ds)
+    d = diagnose_trial(robot, ds, progress=False, torque_filter_hz=spec.derivative_cutoff_hz, rigid_fit=rigid)
     _check_found(d, "delay", trial.truth["effects"]["delay"])
 
 
@@ -170,5 +169,5 @@ def test_stribeck_read_away_from_stops_on_motion_that_stops(physical_problem, se
     reading the excess there put the static level 5-15 % low; read away from stops it is within tolerance."""
     robot = physical_problem.robot
     trial = _trial(robot, "stribeck", seed, trajectory="mixed")
-    d = diagnose(robot, trial.dataset(), progress=False)
+    d = diagnose_trial(robot, trial.dataset(), progress=False)
     _check_found(d, "stribeck", trial.truth["effects"]["stribeck"])

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident_opt.diagnosis import diagnose, hidden
+from ident_opt.diagnosis import diagnose_trial, hidden
 from ident_opt.problem import load_problem
 from ident_opt.simulator import simulate_trial
 
@@ -64,7 +64,7 @@ def _diagnosed(arm: str, effects: list[str], seed: int, trajectory: str = "tud01
         limits=problem.limits,
         progress=False,
     )
-    return diagnose(problem.robot, trial.dataset(), progress=False), trial.truth
+    return diagnose_trial(problem.robot, trial.dataset(), progress=False), trial.truth
 
 
 def _named_within(d, truth: dict, causes: set[str]) -> None:
@@ -214,8 +214,8 @@ def test_the_rigid_fit_is_the_recommended_fit_unless_an_estimator_is_asked(tmp_p
     with its reason on the terminal and in the report and JSON; --estimator robust is honoured (instrumented
     statistics through every candidate) and an estimator the arm lacks exits 2 naming its fits."""
     from ident_opt.cli import main
-    from ident_opt.data.dataset import load_dataset
-    from ident_opt.fitting.recommend import evidence
+    from ident_opt.data.loader import load_dataset
+    from ident_opt.fitting.recommend import judge
 
     problem = load_problem(PROBLEMS["arm4"])
     trial = simulate_trial(problem.robot, duration=16.0, rate_hz=250.0, seed=1015, limits=problem.limits)
@@ -223,12 +223,12 @@ def test_the_rigid_fit_is_the_recommended_fit_unless_an_estimator_is_asked(tmp_p
     trial.frame.drop(columns=[c for c in trial.frame if c.startswith(("dq", "ddq"))]).to_csv(path, index=False)
     ds = load_dataset(path, problem.data, problem.robot)
     head = ds.subset(np.nonzero(ds.t <= ds.t[0] + 0.7 * (ds.t[-1] - ds.t[0]))[0])
-    expected = evidence(
+    expected = judge(
         problem.robot, problem.robot.model(), [head], problem.data.conversions, problem.data.derivative_cutoff_hz
     )
     base = ["diagnose", "--problem", str(PROBLEMS["arm4"]), "--data", str(path), "--no-progress"]
-    runs = rigid_fit_runs(capsys, base, tmp_path, expected.recommendation.estimator, "robust")
-    if expected.recommendation.estimator != "robust":
+    runs = rigid_fit_runs(capsys, base, tmp_path, expected.estimator, "robust")
+    if expected.estimator != "robust":
         assert runs[None] != runs["robust"], "the asked estimator changes the rigid fit"
     assert main([*base, "--out", str(tmp_path / "x"), "--estimator", "nlp_physical"]) == 2
     err = capsys.readouterr().err

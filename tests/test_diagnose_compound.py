@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from ident_opt.diagnosis import diagnose, hidden
+from ident_opt.diagnosis import diagnose_trial, hidden
 from ident_opt.report import diagnosis as report
 
 
@@ -19,7 +19,7 @@ def _run(robot, effects: list[str], **kwargs):
     kwargs.setdefault("trajectory", "tud01")
     kwargs.setdefault("duration", 60.0)
     trial = simulate_trial(robot, effects=effects, progress=False, **kwargs)
-    return trial, diagnose(robot, trial.dataset(), progress=False)
+    return trial, diagnose_trial(robot, trial.dataset(), progress=False)
 
 
 def _names(d) -> set[str]:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident_opt.diagnosis import diagnose, hidden
+from ident_opt.diagnosis import diagnose_trial, hidden
 from ident_opt.diagnosis.linear import hac_lag, sandwich
 
 
@@ -54,7 +54,7 @@ def test_offset_standard_errors_cover_the_noise(physical_problem):
     for seed in range(500, 506):
         effects = {"joint_offset": hidden.draw("joint_offset", np.random.default_rng([seed, 7]), robot)}
         trial = simulate_trial(robot, trajectory="tud01", duration=80.0, seed=seed, effects=effects, progress=False)
-        d = diagnose(robot, trial.dataset(), progress=False)
+        d = diagnose_trial(robot, trial.dataset(), progress=False)
         assert d.cause == "joint_offset", [(c["cause"], c["score"]) for c in d.candidates[:3]]
         se = d.as_json()["extended_model"]["standard_errors"]
         assert all(isinstance(se[k], float) and se[k] > 0 for k in ("delta1", "delta2"))

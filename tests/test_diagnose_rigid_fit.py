@@ -3,7 +3,7 @@ tool stands behind"), like the n-joint one: the nominal rigid fit and every cand
 estimator, and a candidate with no column of its own is that rigid fit exactly.
 
 References are independent of the diagnosis's plumbing: the estimator registry's own statistics of the same samples
-(`fitting.estimators.statistics`), and `fitting.recommend.evidence` on the training part for the recommendation.
+(`fitting.estimators.statistics`), and `fitting.recommend.judge` on the training part for the recommendation.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.diagnosis import candidates as cands
 from ident_opt.diagnosis import loop, signals
 from ident_opt.fitting import estimators
@@ -68,7 +68,7 @@ def test_the_command_uses_the_recommended_fit_on_a_planar_arm(physical_problem, 
     (computed here independently), named with its reason on the terminal and in the report and JSON; --estimator is
     honoured; the physical-parameter NLP, which cannot carry a cause's columns, exits 2 and writes nothing."""
     from ident_opt.cli import main
-    from ident_opt.fitting.recommend import evidence
+    from ident_opt.fitting.recommend import judge
 
     robot = physical_problem.robot
     text = physical_problem.path.read_text()
@@ -78,7 +78,7 @@ def test_the_command_uses_the_recommended_fit_on_a_planar_arm(physical_problem, 
     spec = replace(physical_problem.data, header=True, columns={})
     ds = load_dataset(path, spec, robot)
     head = ds.subset(np.nonzero(ds.t <= ds.t[0] + 0.7 * (ds.t[-1] - ds.t[0]))[0])
-    expected = evidence(robot, robot.model(), [head], spec.conversions, spec.derivative_cutoff_hz).recommendation
+    expected = judge(robot, robot.model(), [head], spec.conversions, spec.derivative_cutoff_hz)
 
     base = ["diagnose", "--problem", str(problem), "--data", str(path), "--no-progress"]
     fits = rigid_fit_runs(capsys, base, tmp_path, expected.estimator, "ols")

@@ -25,7 +25,7 @@ import pytest
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.cli import main
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.fitting import estimators, recommend
 from ident_opt.fitting.stats import Stats
@@ -292,9 +292,7 @@ def test_each_robot_day_gets_the_recommended_fit(planar_fleet, planar_run):
     for name in ("R01", "R04"):
         entry = data["robots"][name]
         first = load_dataset(root / f"robot={name}" / f"day={entry['days'][0]}" / "log0.parquet", problem.data, robot)
-        expected = recommend.evidence(
-            robot, arm, [first], problem.data.conversions, problem.data.derivative_cutoff_hz
-        ).recommendation
+        expected = recommend.choose(problem, [first], model=arm)
         assert (entry["estimator"], entry["recommended_why"], entry["cutoff_factor"]) == (
             expected.estimator,
             expected.why,

@@ -26,7 +26,7 @@ import pytest
 
 from ident_opt import outputs
 from ident_opt.cli import main
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError, excerpt
 from ident_opt.models.gmr import GMR
 from ident_opt.problem import load_problem

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ident_opt.arm.planar import PHYSICAL
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.fitting.fit import fit_ols
 from ident_opt.fitting.iv import InstrumentStats, fit_iv
 from ident_opt.problem import DataSpec

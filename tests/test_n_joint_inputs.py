@@ -17,7 +17,7 @@ import pytest
 
 from ident_opt.adaptation.stream import LineParser, Mapping
 from ident_opt.cli import main
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from tests.test_urdf_arm import TWISTED

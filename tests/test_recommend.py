@@ -10,13 +10,13 @@ import json
 import numpy as np
 import pytest
 
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.evaluation.cutoff_plant import Condition, simulate
 from ident_opt.evaluation.cutoff_study import _error, truth
 from ident_opt.fitting import estimators
 from ident_opt.fitting.fit import fit_ols
 from ident_opt.fitting.iv import InstrumentStats
-from ident_opt.fitting.recommend import recommended_fit
+from ident_opt.fitting.recommend import choose
 from ident_opt.problem import DataSpec, load_problem
 
 from .conftest import PROBLEMS
@@ -80,17 +80,19 @@ def test_noise_in_the_regressor_makes_the_robust_fit_the_recommended_one(tmp_pat
     """A passively swinging joint at three times the noise: the cut-off its spectrum supports still lets noise bias
     least squares; the run sees it (OLS against IV) and recommends the robust fit, which is closer to the truth."""
     d, arm, pi = simulated(tmp_path, dfki, "passive", 500.0, 3.0, seed=54)
-    fit, found = recommended_fit(dfki.robot, arm, [d], dfki)
-    assert found.recommendation.estimator == "robust"
+    found = choose(dfki, [d], model=arm)
+    fit = found.fit(dfki.robot, arm, [d])
+    assert found.estimator == "robust"
     consistent = estimators.fit_for(dfki.robot, "constrained", estimators.statistics(arm, [d], "constrained"), arm)
     assert _error(arm, fit.pi, pi) < 0.7 * _error(arm, consistent.pi, pi)
 
 
 def test_a_clean_trial_keeps_the_consistent_fit_and_raises_the_cutoff(tmp_path, dfki):
     d, arm, pi = simulated(tmp_path, dfki, "swing_up", 500.0, 0.5, seed=55)
-    fit, found = recommended_fit(dfki.robot, arm, [d], dfki)
-    assert found.recommendation.estimator == dfki.robot.default_estimator
-    assert found.recommendation.factor > 1 and found.trials[0].cutoff_hz > d.cutoff_hz
+    found = choose(dfki, [d], model=arm)
+    fit = found.fit(dfki.robot, arm, [d])
+    assert found.estimator == dfki.robot.default_estimator
+    assert found.factor > 1 and found.at_cutoff([d])[0].cutoff_hz > d.cutoff_hz
     assert _error(arm, fit.pi, pi) < 0.01
 
 
@@ -168,8 +170,9 @@ def test_the_recommended_robust_fit_covers_the_truth_where_2sls_errors_do_not(tm
     for kind, rate, noise in (("passive", 100.0, 0.5), ("passive", 250.0, 0.5), ("steps", 250.0, 1.0)):
         for seed in (71, 72, 73, 74):
             d, arm, pi = simulated(tmp_path, dfki, kind, rate, noise, seed)
-            fit, found = recommended_fit(dfki.robot, arm, [d], problem)
-            if found.recommendation.estimator != "robust":
+            found = choose(problem, [d], model=arm)
+            fit = found.fit(dfki.robot, arm, [d])
+            if found.estimator != "robust":
                 continue
             judged = [i for i, p in enumerate(arm.parameters) if p.kind in JUDGED_KINDS]
             err = np.abs(fit.pi[judged] - pi[judged])

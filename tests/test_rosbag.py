@@ -13,7 +13,7 @@ from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 
 from ident_opt.cli import main
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.problem import load_problem
 
 from .conftest import PROBLEMS

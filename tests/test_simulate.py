@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PlanarArm
 from ident_opt.cli import main
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.effects import BACKGROUND
 from ident_opt.errors import InputError
 from ident_opt.fitting.ols import solve_ols

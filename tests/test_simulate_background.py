@@ -11,7 +11,7 @@ import pytest
 from scipy import signal
 
 from ident_opt.arm.planar import RIGID, PlanarArm
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.effects import BACKGROUND, describe
 from ident_opt.fitting.ols import solve_ols
 from ident_opt.fitting.stats import Stats

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from ident_opt.cli import main
-from ident_opt.data.dataset import concat, load_dataset
-from ident_opt.evaluation.compare import compare_estimators
+from ident_opt.data.dataset import concat
+from ident_opt.data.loader import load_dataset
+from ident_opt.evaluation.compare import compare
 from ident_opt.fitting.stats import Stats
 from ident_opt.problem import load_problem
 
@@ -162,7 +163,7 @@ def test_the_robots_own_zero_warns_with_the_offset_that_fixes_it(tmp_path, capsy
 def test_each_held_out_trial_is_scored_and_pooled(tmp_path):
     problem = load_problem(DFKI)
     load = [load_dataset(trial(k), problem.data, problem.robot) for k in (0, 1, 12, 13)]
-    c = compare_estimators(load[:2], problem.robot, problem.split, load[2:], progress=False)
+    c = compare(problem, load[:2], load[2:])
     assert set(c.by_test_trial) == {load[2].source, load[3].source}
     pooled = c.metrics["cross_trial"]["rmse"]["ols"]
     each = [c.by_test_trial[d.source]["rmse"]["ols"] for d in load[2:]]

@@ -83,11 +83,11 @@ def test_savitzky_golay_derivatives_are_exact_on_a_cubic():
 
 # ------------------------------------------------------------------------------------- diagnosis (lean subset)
 def _diagnosed(robot, effects, mechanism, pipeline, duration=40.0, seed=3):
-    from ident_opt.diagnosis import diagnose
+    from ident_opt.diagnosis import diagnose_trial
     from ident_opt.simulator import simulate_trial
 
     sim = simulate_trial(robot, duration=duration, seed=seed, effects=effects, progress=False, mechanism=mechanism)
-    return sim, diagnose(robot, unseen.derived(sim, pipeline, robot), progress=False, torque_filter_hz="auto")
+    return sim, diagnose_trial(robot, unseen.derived(sim, pipeline, robot), progress=False, torque_filter_hz="auto")
 
 
 def test_a_hardening_joints_mode_is_named_at_its_effective_frequency(robot):

@@ -23,7 +23,7 @@ from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PHYSICAL
 from ident_opt.arm.planar_urdf import UrdfPlanarRobot
 from ident_opt.cli import main
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.problem import DataSpec, load_problem
 
 from .conftest import PROBLEMS

@@ -11,7 +11,7 @@ import pytest
 
 from ident_opt.arm.chain import ChainRobot
 from ident_opt.cli import main
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 

@@ -22,9 +22,9 @@ ill-conditioned (κ(Y)² of 1e7 to 1e12 on real trials), so their statistics are
 rows (`fitting.bounded.FactorBoundedLS`: a QR of (P + n) × P per sample, never YᵀY), as the generated update keeps
 them too.
 
-CPBR follows the fit the problem names (`Problem.estimator`: `ident-opt online` sets the recommended one,
-`fitting.recommend`, or --estimator's; else the arm's default estimator, `Robot.default_estimator`; through
-`models.fitted`, the one place that names it). Where that estimator has an exact online counterpart
+CPBR follows the fit the run chose (a `fitting.recommend.Choice`: `ident-opt online` passes the recommended one,
+or --estimator's; None: the arm's default estimator, `Robot.default_estimator`; through `models.fitted`, the one
+place that names it). Where that estimator has an exact online counterpart
 (`estimators.ONLINE`: the planar arm's constrained fit → M(q) ≻ 0 ∀q + friction ≥ 0,
 `fitting.bounded.WarmConsistentLS`) it is re-solved after every sample. An
 n-joint arm's consistent fit (per-link pseudo-inertia LMIs, with its log-det prior) is a conic program of tens to
@@ -73,6 +73,7 @@ from ident_opt.fitting.base import BaseParameters, base_parameters
 from ident_opt.fitting.bounded import Bounds, FactorBoundedLS, WarmBoundedLS, WarmConsistentLS, default_bounds
 from ident_opt.fitting.fit import LinearFit
 from ident_opt.fitting.iv import InstrumentStats
+from ident_opt.fitting.recommend import Choice
 from ident_opt.fitting.stats import Stats
 from ident_opt.models.gmr import Support, conditioning, input_log_density
 from ident_opt.models.hybrid import RidgeModel, datasheet_keys, datasheet_model, features, fitted, make_gmr
@@ -623,14 +624,20 @@ class Start:
 
 
 def offline_start(
-    key: str, problem, train, bounds: Bounds | None = None, margin: float = 1e-6, every: int = CONSISTENT_EVERY
+    key: str,
+    problem,
+    train,
+    bounds: Bounds | None = None,
+    margin: float = 1e-6,
+    every: int = CONSISTENT_EVERY,
+    choice: Choice | None = None,
 ) -> Start:
     """The offline fit of one model on the training trial (`ident_opt.models.hybrid` for RR's penalty and the
     datasheet π): rr — ridge with the per-joint penalty RidgeCV picks; dm, dm_… — the datasheet (fixed);
     pbr, cpbr — their estimator (`models.fitted`) followed online as `estimators.ONLINE` says (module doc): box-
     bounded LS (`fitting.bounded.default_bounds`, or `base_bounds` on the base parameters, unless `bounds`), or
     M(q) ⪰ margin·I for all q [kg m²] with the same box; an estimator without an online counterpart is re-solved
-    from scratch every `every` samples (`Cadence`)."""
+    from scratch every `every` samples (`Cadence`). `choice`: the fit cpbr is (None: the arm's consistent fit)."""
     robot = problem.robot
     if key == "rr":
         return _ridge_start(train)
@@ -639,7 +646,7 @@ def offline_start(
         dm = datasheet_model(robot, datasheets[key])
         design = ArmDesign(dm.arm)
         return Start(key, design, Estimator("fixed"), dm.pi, design.names, design.jacobian)
-    estimators_of = fitted(robot, problem.estimator)
+    estimators_of = fitted(robot, choice.estimator if choice is not None else None)
     if key not in estimators_of:
         raise ValueError(f"unknown online model {key!r}; known: {', '.join(model_keys(robot))}")
     arm = robot.model(())
@@ -732,17 +739,18 @@ def serving_identifier(
     guard: bool = True,
     compiled: bool = True,
     every: int = CONSISTENT_EVERY,
+    choice: Choice | None = None,
 ) -> tuple[Start, OnlineIdentifier]:
     """The identifier `ident-opt online --stream` serves, fitted offline on `train`: `model` is a key of
     `model_keys`, with ``+gmr`` for its GMR residual (K = `components`, else the problem's; chosen on blocked
     validation: the model will predict later motions); `guard`: the GMR's extrapolation guard; `compiled`: the
     bounded update in generated C (`online_kernel.attach`) when a C compiler is available; `every`: a cadence
-    estimator's samples between re-solves."""
+    estimator's samples between re-solves; `choice`: the fit cpbr is."""
     key, _, extra = model.partition("+")
     keys = model_keys(problem.robot)
     if key not in keys or extra not in ("", "gmr"):
         raise InputError(f"--model must be one of {', '.join(keys)}, optionally with +gmr; got {model!r}")
-    start = offline_start(key, problem, train, every=every)
+    start = offline_start(key, problem, train, every=every, choice=choice)
     gmr = make_gmr(problem.residual, components=components, validation="blocked") if extra else None
     ident = start_identifier(start, train, gmr, cross_covariance=cross_covariance, guard=guard)
     if compiled and isinstance(start.design, ArmDesign):

@@ -26,6 +26,7 @@ from ident_opt.adaptation.identifier import (
     start_identifier,
 )
 from ident_opt.data.dataset import Dataset
+from ident_opt.fitting.recommend import Choice
 from ident_opt.fitting.stats import Stats
 from ident_opt.metrics import METRICS, all_metrics, coverage
 from ident_opt.models.hybrid import features, make_gmr
@@ -92,14 +93,15 @@ def replay(
     seed: int = 0,
     progress: bool = True,
     every: int = CONSISTENT_EVERY,
+    choice: Choice | None = None,
 ) -> Replay:
     """Offline fits on `train`, then the sample-by-sample replay of `test` (module doc); `checks` random steps
     (and the last) are checked against a batch re-solve. `components`: the GMRs' K (else the problem's); `every`:
-    samples between a cadence estimator's re-solves."""
+    samples between a cadence estimator's re-solves; `choice`: the fit cpbr is (`fitting.recommend.Choice`)."""
     keys = tuple(keys or model_keys(problem.robot))
     starts, online = {}, {}
     for key in tqdm(keys, desc="offline fits (+GMR)", disable=not progress):
-        starts[key] = offline_start(key, problem, train, every=every)
+        starts[key] = offline_start(key, problem, train, every=every, choice=choice)
         # Blocked validation for the number of components: the model will predict later motions.
         gmr = make_gmr(problem.residual, components=components, validation="blocked")
         online[key] = start_identifier(starts[key], train, gmr, cross_covariance=cross_covariance)

@@ -29,9 +29,10 @@ import numpy as np
 
 from ident_opt.adaptation.identifier import OnlineIdentifier, Prediction
 from ident_opt.columns import channel_names, data_columns, locate
-from ident_opt.data.dataset import PLAUSIBLE
-from ident_opt.data.dataset import _current_to_torque as current_to_torque  # the batch loader's rule and message
-from ident_opt.data.derivatives import CausalDerivatives, NonIncreasingTime, RateError
+from ident_opt.data.dataset import Dataset
+from ident_opt.data.derivatives import CausalDerivatives, NonIncreasingTime, RateError, resolve_cutoff
+from ident_opt.data.loader import PLAUSIBLE
+from ident_opt.data.loader import _current_to_torque as current_to_torque  # the batch loader's rule and message
 from ident_opt.errors import InputError
 
 #: The UTF-8 byte-order mark some writers put before a file's first line.
@@ -334,6 +335,16 @@ class StreamOptions:
     cutoff_hz: float = 15.0
     outlier_k: float = OUTLIER_K
     snapshot_every: int = 1000
+
+    @classmethod
+    def for_problem(cls, problem, train: Dataset, outlier_k: float = OUTLIER_K) -> StreamOptions:
+        """How a stream of `problem`'s data is read: its `[data]` columns and the robot's angle convention, its
+        drives' currents, and the causal filter's cut-off, decided here once: the training trial's own (the one its
+        derivatives were estimated at), or for logged derivatives the problem's setting (a number, or "auto": read
+        from the training trial's angles, `derivatives.resolve_cutoff`)."""
+        cutoff = train.cutoff_hz or resolve_cutoff(problem.data.derivative_cutoff_hz, train.t, train.q)[0]
+        scale, refused = currents_to_torques(problem.robot)
+        return cls(Mapping.from_spec(problem.data, problem.robot), scale, refused, float(cutoff), outlier_k)
 
 
 class _Stop(Exception):

@@ -35,7 +35,7 @@ centre of mass relative to link 1 (`ident_opt.arm.planar`), so
     q2 = s2 q2_urdf + φ2
 
 and dq, ddq, τ (and currents) of joint j are multiplied by s_j. The data are read in the URDF's convention
-and mapped by the tool (`column_map`, applied by `ident_opt.data.dataset.load_dataset`); `statement` says which
+and mapped by the tool (`column_map`, applied by `ident_opt.data.loader.load_dataset`); `statement` says which
 offsets and signs it applied. Joint friction comes from <dynamics damping=".." friction=".."/> (joint side,
 N m s/rad and N m), unless [robot.jointN] gives it.
 

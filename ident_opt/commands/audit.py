@@ -26,8 +26,7 @@ def run(args: argparse.Namespace) -> int:
     """Load, audit, write the report, print the summary."""
     loaded = load(args, "audit")
     out = output_dir(args, loaded.problem, Path("results"))
-    result = audit(loaded.problem, loaded.train, loaded.unseen)
-    result.warnings = list(loaded.warnings)  # the trials' own: an unseen trial that is the identification trial
+    result = audit(loaded.problem, loaded.training, loaded.testing)
     report.write(result, out, args.json)
     print(report.terminal(result, out))
     for warning in result.warnings:

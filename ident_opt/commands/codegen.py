@@ -13,18 +13,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
 from ident_opt import outputs
 from ident_opt.commands.common import add_components, add_problem_arguments, add_switches, load, output_dir, require
-from ident_opt.data.dataset import concat
-from ident_opt.errors import InputError
 from ident_opt.fitting.estimators import ESTIMATORS
-from ident_opt.fitting.recommend import chosen
+from ident_opt.fitting.recommend import choose
 from ident_opt.problem import load_problem
 from ident_opt.report import codegen as report
-from ident_opt.shipping import codegen, ship
-from ident_opt.shipping import pi_update as online_codegen
+from ident_opt.shipping import codegen, generate, ship
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -67,95 +62,36 @@ def run(args: argparse.Namespace) -> int:
     """Identify (or load), generate, compile, check; 0 when the library agrees with Python, 1 when not."""
     problem = load_problem(args.problem)
     require("codegen", problem)
-    robot = problem.robot
-    if args.estimator is not None:
-        chosen("codegen", robot, robot.model(), [], problem, args.estimator)  # an unknown one fails before any work
-    compiler = codegen.find_compiler()  # fail before any fitting when there is none
+    if args.estimator is not None:  # an unknown one fails before any work
+        choose(problem, [], estimator=args.estimator, command="codegen")
+    codegen.find_compiler()  # fail before any fitting when there is none
     saved = ship.read_parameters(args.parameters) if args.parameters else None
-    model = _model(robot, args.extension, saved)
+    generate.shipped_model(problem.robot, args.extension, saved)  # a bad extension or file fails before reading data
     trials = load(args, "codegen", problem=problem).training if saved is None or saved.get("gmr") is None else []
-    train = concat(trials) if trials else None
-    if saved is None:
-        choice = chosen("codegen", robot, model, trials, problem, args.estimator)
-        args.estimator = choice.estimator
-        print(f"ident-opt codegen: the {choice.estimator} fit ({choice.why})", file=sys.stderr)
-    if not (saved and saved.get("gmr")):
-        _announce_gmr(problem.residual, args.components, train)
     out = output_dir(args, problem, indexed=False)  # only once every input is read and checked
-    written = _written(args, robot, trials)
-    outputs.guard_owned(out, written, force=args.force)
-    shipped = ship.prepare(robot, model, train, problem.residual, args.estimator, args.components, saved)
-    print(
-        f"ident-opt codegen: {robot.headline}; {len(model.names)} parameters ({shipped.estimator}), GMR with "
-        f"{len(shipped.gmr.weights_)} components; generating C in {out}",
-        flush=True,
+    made = generate.generate(
+        problem,
+        trials,
+        out,
+        estimator=args.estimator,
+        extensions=args.extension,
+        saved=saved,
+        components=args.components,
+        forward=not args.no_forward,
+        update=not args.no_update,
+        force=args.force,
+        say=lambda line: print(f"ident-opt codegen: {line}", file=sys.stderr, flush=True),
     )
-    built = report.build(shipped, robot, out, compiler, forward=not args.no_forward)
-    errors = ship.check(built.library, shipped, train, built.names, np.random.default_rng(0))
-    data = report.payload(shipped, built, errors, problem, [t.source for t in trials])
-    update = _pi_update(args, problem, trials, out, compiler)
-    if update is not None:
-        data["pi_update"] = update
-        errors["pi_update"] = update["max_difference_vs_size_or_se"] if not update["failures"] else float("inf")
-    print(report.write(data, built, out, getattr(args, "json", None)))
-    if update is not None:
-        print(_update_line(update, ship.TOLERANCE["pi_update"]))
-    outputs.remember_owned(out, written)
-    bad = {name: err for name, err in errors.items() if not err <= ship.TOLERANCE[name]}
-    if bad:
-        print(f"ident-opt codegen: the compiled code disagrees with the Python model: {bad}", file=sys.stderr)
+    print(report.write(made.payload, made.built, out, getattr(args, "json", None)))
+    if "pi_update" in made.payload:
+        print(_update_line(made.payload["pi_update"], ship.TOLERANCE["pi_update"]))
+    outputs.remember_owned(out, made.written)
+    if made.disagreeing:
+        print(
+            f"ident-opt codegen: the compiled code disagrees with the Python model: {made.disagreeing}", file=sys.stderr
+        )
         return 1
     return 0
-
-
-def _model(robot, extension: list[str] | None, saved: dict | None):
-    """The model to ship: the arm with the --extension ones, else the saved parameters' (with their parameters
-    checked: every one present and numeric, before --out is touched)."""
-    extensions = extension if extension is not None else (saved or {}).get("extensions", [])
-    try:
-        model = robot.model(tuple(dict.fromkeys(extensions)))
-    except ValueError as exc:
-        raise InputError(f"codegen: {exc}") from None
-    if saved is not None:
-        ship.saved_vector(saved, model)
-    return model
-
-
-def _written(args: argparse.Namespace, robot, trials: list) -> list[str]:
-    """The files this run writes to DIR (the online update's only with a trial to check it on, for an arm the
-    online identifier serves)."""
-    written = [f"{codegen.NAME}.c", f"{codegen.NAME}.h", codegen.library_name(), "main.c", "README.md"]
-    written.append("parameters.json")
-    if _with_update(args, robot, trials):
-        written += UPDATE_FILES
-    return written
-
-
-def _with_update(args: argparse.Namespace, robot, trials: list) -> bool:
-    """Whether pi_update (the online update in C) is generated: not --no-update, a trial to check it on, and an arm
-    the online identifier serves."""
-    return not args.no_update and bool(trials) and "online" in robot.serves
-
-
-#: What the online update adds to DIR (`ident_opt.shipping.codegen.generate_pi_update`, `compile_pi_update`, the check).
-UPDATE_FILES = [
-    "pi_update.c",
-    "pi_update.h",
-    "pi_update_casadi.c",
-    "pi_update_casadi.h",
-    "pi_update_main.c",
-    "libpi_update.so",
-    "pi_update_example",
-    "pi_update_samples.csv",
-]
-
-
-def _pi_update(args: argparse.Namespace, problem, trials: list, out, compiler) -> dict | None:
-    """pi_update generated, compiled and checked on the first trial's online part (`_with_update`)."""
-    if not _with_update(args, problem.robot, trials):
-        return None
-    print("ident-opt codegen: generating pi_update (the online update) and checking it against Python", flush=True)
-    return online_codegen.verify(problem, trials[0], out, compiler)
 
 
 def _update_line(update: dict, limit: float) -> str:
@@ -165,16 +101,4 @@ def _update_line(update: dict, limit: float) -> str:
         f"{update['max_difference_vs_size_or_se']:.2e} of a parameter's size (or of its standard error, nearer 0; "
         f"limit {limit:.0e}; relative to the size alone {update['max_relative_difference']:.1e}), of the torques "
         f"{update['max_torque_relative_difference']:.1e}; {update['c_ns_per_update']:.0f} ns per update from a C loop"
-    )
-
-
-def _announce_gmr(spec, components: int | None, train) -> None:
-    """Check --components and say what is about to be fitted (the GMR is the slow part)."""
-    if components is not None and components < 1:
-        raise InputError(f"codegen: --components must be >= 1, got {components}")
-    k = components if components is not None else spec.components
-    print(
-        f"ident-opt codegen: fitting the GMR residual ({k or 'K chosen among ' + str(list(spec.candidates))}"
-        f" components) on {train.n} samples",
-        flush=True,
     )

@@ -9,14 +9,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ident_opt import outputs, report
-from ident_opt import simulator as simulate
-from ident_opt.arm.base import ALL_COMMANDS
-from ident_opt.data.dataset import fittable, load_dataset
+from ident_opt import api, outputs, report
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from ident_opt.report import write_json  # noqa: F401  (every command's --json goes through it)
-from ident_opt.warnings import ResultWarning
 
 
 def add_problem_arguments(parser: argparse.ArgumentParser, data: bool = True, json_out: bool = True) -> None:
@@ -61,22 +57,18 @@ def add_components(parser: argparse.ArgumentParser) -> None:
 
 @dataclass
 class Loaded:
-    """A problem with its trials: `training` (every --data, or the problem's) and `testing` (every --test-data,
-    or the problem's); `trials` is both, in that order. `train`/`unseen` are the first of each (for a command
-    that takes one trial of each); with no held-out trial, `unseen` is the second training trial (the legacy
-    reading of a repeated --data). `warnings`: what is doubtful about the trials themselves (a held-out trial that
-    is a training trial, `held_out_overlap`): a command that scores held-out trials makes them part of its result
-    (terminal, report, JSON `warnings`)."""
+    """A problem with its trials: `training` (every --data, or the problem's) and `testing` (every --test-data, or
+    the problem's). `train`/`unseen` are the first of each (for a command that takes one trial of each); with no
+    held-out trial, `unseen` is the second training trial (the legacy reading of a repeated --data)."""
 
     problem: Any
-    trials: list
     training: list = field(default_factory=list)
     testing: list = field(default_factory=list)
-    warnings: list[ResultWarning] = field(default_factory=list)
 
-    def __post_init__(self):
-        if not self.training and not self.testing:  # built from one list: the first trains, the second is unseen
-            self.training, self.testing = self.trials[:1], self.trials[1:2]
+    @property
+    def trials(self) -> list:
+        """Every trial, training first."""
+        return [*self.training, *self.testing]
 
     @property
     def train(self):
@@ -90,81 +82,31 @@ class Loaded:
 
 
 def require(command: str, problem) -> None:
-    """InputError (exit 2) when `command` does not serve the problem's arm (`Robot.serves`), before any work."""
-    robot = problem.robot
-    if command not in robot.serves:
-        serving = ", ".join(c for c in ALL_COMMANDS if c in robot.serves)
-        raise InputError(
-            f"{command} supports two-joint problems only; {problem.path} describes {robot.described_as} "
-            f"(the commands for this arm: {serving})"
-        )
+    """InputError (exit 2) when `command` does not serve the problem's arm (`Problem.require`), before any work."""
+    problem.require(command)
 
 
 def load(
     args: argparse.Namespace, command: str, min_samples: int | None = None, fit: bool = True, problem=None
 ) -> Loaded:
-    """The problem file (`problem` when the command read it already) and its data (from --data, the problem's
-    [data] trials, or its [simulate] section), once `command` is known to serve its arm. `fit`: the trials will be
-    fitted, so a joint whose torque never varies is an error (else a warning). The trials' own warnings are in
-    `Loaded.warnings`, not printed: the command prints them with its result (and writes them in its report and
-    JSON)."""
+    """The problem file (`problem` when the command read it already) and its trials (`api.load_trials`: --data and
+    --test-data, else the problem's [data] trials or its [simulate] section), once `command` is known to serve its
+    arm. `fit`: the trials will be fitted, so a joint whose torque never varies is an error (else a warning)."""
     problem = problem or load_problem(args.problem)
     require(command, problem)
-    train, test = _trial_paths(args, problem)
-    paths, n_train = train + test, len(train) or 1
-    if not paths and problem.simulate is not None:
-        paths = simulate.problem_trials(problem)  # generated on first use, cached
-    if not paths:
-        raise InputError(f"{problem.path}: no data: give --data D or list trials under [data] in the problem file")
-    kwargs = {"allow_implausible": args.allow_implausible, "drop_invalid": args.drop_invalid}
-    if min_samples is not None:
-        kwargs["min_samples"] = min_samples
-    outputs.declare_inputs(paths)
-    trials = [load_dataset(p, problem.data, problem.robot, **kwargs) for p in paths]
-    for trial in trials:
+    training, testing = api.load_trials(
+        problem,
+        getattr(args, "data", None),
+        getattr(args, "test_data", None),
+        allow_implausible=args.allow_implausible,
+        drop_invalid=args.drop_invalid,
+        min_samples=min_samples,
+        fit=fit,
+    )
+    for trial in [*training, *testing]:
         if trial.dropped_rows:
             print(f"note: {trial.source}: dropped {trial.dropped_rows} invalid row(s)", file=sys.stderr)
-        fittable(trial, fit)
-    return Loaded(problem, trials, trials[:n_train], trials[n_train:], held_out_overlap(train, test))
-
-
-def _trial_paths(args: argparse.Namespace, problem) -> tuple[list[Path], list[Path]]:
-    """(training, held-out) files: every --data trains and every --test-data is held out; without --data the
-    problem's [data] decides (`train`/`test`, or `trials`: the first trains, the second is held out)."""
-    data = [Path(p) for p in (getattr(args, "data", None) or [])]
-    test = [Path(p) for p in (getattr(args, "test_data", None) or [])]
-    if data:
-        return data, test
-    return list(problem.data.training), test or list(problem.data.testing)
-
-
-def held_out_overlap(train: list[Path], test: list[Path]) -> list[ResultWarning]:
-    """A warning per held-out trial that is also a training trial (the same file, or a copy of the same bytes):
-    its scores are then not held out."""
-    found = []
-    for held in test:
-        same = next((t for t in train if _same_trial(t, held)), None)
-        if same is not None:
-            found.append(
-                ResultWarning(
-                    "held_out_is_training",
-                    f"{held} (held out) is the training trial {same}: its scores measure the fit on its own data, "
-                    "not on unseen data; hold out another trial",
-                )
-            )
-    return found
-
-
-def _same_trial(a: Path, b: Path) -> bool:
-    """Whether two trial paths are one file (also through links) or two files with the same bytes."""
-    try:
-        if os.path.samefile(a, b):
-            return True
-        if a.is_file() and b.is_file() and a.stat().st_size == b.stat().st_size:
-            return a.read_bytes() == b.read_bytes()
-    except OSError:
-        pass
-    return False
+    return Loaded(problem, training, testing)
 
 
 def output_dir(args: argparse.Namespace, problem, default: Path | None = None, indexed: bool = True) -> Path:

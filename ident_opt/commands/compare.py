@@ -69,11 +69,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the comparison (or the constraints study), write the files, print a summary."""
-    if args.margin < 0:
-        raise InputError(f"--margin must be ≥ 0 (got {args.margin})")
     problem = load_problem(args.problem)
     require("compare", problem)
     robot = problem.robot
+    if args.margin < 0:
+        raise InputError(f"--margin must be ≥ 0 (got {args.margin})")
     try:
         model = robot.model(tuple(args.extension) if args.extension else None)
     except ValueError as exc:
@@ -84,20 +84,15 @@ def run(args: argparse.Namespace) -> int:
         return _constraints_study(args, problem)
     loaded = load(args, "compare", min_samples=2 * model.n_params, problem=problem)
     out = output_dir(args, loaded.problem)
-    result = compare.compare_estimators(
+    result = compare.compare(
+        problem,
         loaded.training,
-        robot,
-        loaded.problem.split,
-        loaded.testing or None,
-        model=model,
+        loaded.testing,
+        extensions=args.extension,
         margin=args.margin,
         weights=None if args.weights == "ols" else "wls",
         progress=not args.no_progress,
-        reference=loaded.problem.reference,
-        conversions=loaded.problem.data.conversions,
-        cutoff_setting=loaded.problem.data.derivative_cutoff_hz,
     )
-    result.trust.warnings[:0] = loaded.warnings  # the trials' own (a held-out trial that trains) come first
     files = report.write(result, out, args.json)
     print(report.to_terminal(result))
     for warning in result.trust.warnings:

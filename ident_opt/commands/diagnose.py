@@ -16,9 +16,7 @@ import sys
 from ident_opt.commands.common import add_problem_arguments, load, output_dir, write_json
 from ident_opt.diagnosis import diagnose
 from ident_opt.fitting.estimators import ESTIMATORS
-from ident_opt.fitting.recommend import Recommendation, chosen, for_diagnosis
 from ident_opt.report import diagnosis as report
-from ident_opt.warnings import ResultWarning
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,39 +32,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def rigid_fit(loaded, asked: str | None) -> tuple[Recommendation, list[ResultWarning]]:
-    """The estimator of the rigid fit and why, with the warnings of the evidence behind it: `asked` (--estimator),
-    else the recommended fit on the training part (`fitting.recommend`)."""
-    problem = loaded.problem
-    robot = problem.robot
-    if asked is not None:
-        return chosen("diagnose", robot, robot.model(), [], problem, asked), []
-    data = problem.data
-    found = for_diagnosis(
-        robot, loaded.train, loaded.unseen, problem.split.train_fraction, data.conversions, data.derivative_cutoff_hz
-    )
-    return found.recommendation, list(found.trust.warnings)
-
-
 def run(args: argparse.Namespace) -> int:
     loaded = load(args, "diagnose")
-    choice, warnings = rigid_fit(loaded, args.estimator)
-    warnings = [*loaded.warnings, *warnings]  # the trials' own (a held-out trial that trains) come first
-    print(f"ident-opt diagnose: rigid fit: the {choice.estimator} fit ({choice.why})", file=sys.stderr)
-    for w in warnings:
-        print(w, file=sys.stderr)
     result = diagnose(
-        loaded.problem.robot,
-        loaded.train,
-        loaded.unseen,
-        train_fraction=loaded.problem.split.train_fraction,
-        progress=not args.no_progress,
-        torque_filter_hz=loaded.problem.data.derivative_cutoff_hz,
-        rigid_fit=choice,
+        loaded.problem, loaded.training, loaded.testing, estimator=args.estimator, progress=not args.no_progress
     )
-    for w in result.warnings:  # the diagnosis's own (a joint the held-out part barely moves)
+    rigid = result.nominal["rigid_fit"]
+    print(f"ident-opt diagnose: rigid fit: the {rigid['estimator']} fit ({rigid['why']})", file=sys.stderr)
+    for w in result.warnings:
         print(w, file=sys.stderr)
-    result.warnings = [*warnings, *result.warnings]
     out = output_dir(args, loaded.problem)
     files = report.write(result, out)
     print(report.summary(result))

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from ident_opt import outputs
 from ident_opt.commands.common import add_problem_arguments, require
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
 from ident_opt.excitation import discrimination

@@ -18,15 +18,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from ident_opt import outputs
+from ident_opt import api, outputs
 from ident_opt.commands.common import add_problem_arguments, load, require, write_json
-from ident_opt.fitting.recommend import chosen
+from ident_opt.fitting.recommend import choose
 from ident_opt.problem import load_problem
-from ident_opt.shipping import identified, write_mjcf, write_urdf
-from ident_opt.shipping.description import identified_arm
-
-#: The formats of --format, and the file ending each expects.
-FORMATS = {"urdf": ".urdf", "mjcf": ".xml"}
+from ident_opt.shipping.description import FORMATS, export
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -47,30 +43,16 @@ def run(args: argparse.Namespace) -> int:
     problem = load_problem(args.problem)
     require("export", problem)
     robot = problem.robot
-    sidecar = Path(f"{args.out}.json")
     if args.format == "urdf":
-        outputs.check_file_output(sidecar, "--out's sidecar")
-    if args.estimator is not None and args.estimator not in robot.estimators:
-        chosen("export", robot, robot.model(), [], problem, args.estimator)  # the InputError naming the arm's fits
+        outputs.check_file_output(Path(f"{args.out}.json"), "--out's sidecar")
+    if args.estimator is not None:  # an unknown fit is refused before any trial is read
+        choose(problem, [], estimator=args.estimator, command="export")
     loaded = load(args, "export", min_samples=2 * robot.model().n_params, problem=problem)
-    choice = chosen("export", robot, robot.model(), loaded.training, problem, args.estimator)
-    print(f"ident-opt export: the {choice.estimator} fit ({choice.why})", file=sys.stderr)
-    estimator = choice.estimator
-    exported = identified_arm(robot, loaded.training, estimator)
-    record = {
-        **identified(exported.model.names, exported.fit.pi, exported.fit.se, estimator),
-        "problem": problem.name,
-        "trials": exported.trials,
-        "model": {"extensions": list(exported.model.extensions), **exported.model.settings()},
-        "not_determined": exported.fit.details.get("not_determined", []),
-    }
-    if args.format == "urdf":
-        written = list(write_urdf(exported.description, args.out, record))
-    else:
-        written = [write_mjcf(exported.description, args.out)]
-    notes = list(exported.description.notes)
-    print(f"ident-opt export: {robot.headline}; the {estimator} fit on {len(exported.trials)} trial(s)")
-    print("\n".join(f"  note: {line}" for line in notes))
-    print("wrote " + ", ".join(str(p) for p in written))
-    write_json(args.json, {**record, "format": args.format, "files": [str(p) for p in written], "notes": notes})
+    fit = api.fit(problem, loaded.training, args.estimator)
+    print(f"ident-opt export: the {fit.choice.estimator} fit ({fit.choice.why})", file=sys.stderr)
+    exported = export(problem, fit, args.out, args.format)
+    print(f"ident-opt export: {robot.headline}; the {fit.choice.estimator} fit on {len(fit.trials)} trial(s)")
+    print("\n".join(f"  note: {line}" for line in exported.notes))
+    print("wrote " + ", ".join(str(p) for p in exported.files))
+    write_json(args.json, exported.as_json())
     return 0

@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     out = output_dir(args, problem)
     _outside(out, args.logs)
     result = run_fleet(
-        problem.path,
+        problem,
         args.logs,
         scheduler=args.scheduler,
         workers=args.workers,

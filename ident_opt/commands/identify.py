@@ -39,7 +39,6 @@ def run(args: argparse.Namespace) -> int:
     total = steps(problem, unseen, not args.no_variants) + report.figure_count(n, paper, unseen)
     with tqdm(total=total, desc="identify", unit="step", file=sys.stderr, leave=False) as bar:
         result = identify(problem, loaded.training, loaded.testing, variants=not args.no_variants, progress=bar)
-        result.warnings = [*loaded.warnings, *result.warnings]  # the trials' own (a held-out trial that trains)
         bar.set_postfix_str("figures")
         seconds = report.write(result, out, args.json, _command(args), start, bar.update)
     print(report.terminal(result, out, args.json, seconds))

@@ -17,12 +17,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 from ident_opt.adaptation.identifier import CONSISTENT_EVERY, serving_identifier
 from ident_opt.adaptation.replay import replay
-from ident_opt.adaptation.stream import Mapping, StreamOptions, currents_to_torques, serve
+from ident_opt.adaptation.stream import StreamOptions, serve
 from ident_opt.commands.common import (
     add_components,
     add_problem_arguments,
@@ -32,9 +31,8 @@ from ident_opt.commands.common import (
     write_json,
 )
 from ident_opt.data.dataset import chronological_split
-from ident_opt.data.derivatives import resolve_cutoff
 from ident_opt.errors import InputError
-from ident_opt.fitting.recommend import chosen
+from ident_opt.fitting.recommend import choose
 from ident_opt.outputs import shown
 from ident_opt.report import online as report
 from ident_opt.warnings import ResultWarning
@@ -117,16 +115,15 @@ def run(args: argparse.Namespace) -> int:
     loaded = load(args, "online")
     problem, trial = loaded.problem, loaded.train
     if args.estimator is not None:  # an unknown one fails before any work
-        chosen("online", problem.robot, problem.robot.model(()), [], problem, args.estimator)
+        choose(problem, [], model=problem.robot.model(()), estimator=args.estimator, command="online")
     train_idx, test_idx = chronological_split(trial.n, problem.split.train_fraction)
     train, test = trial.subset(train_idx), trial.subset(test_idx)
     if train.n < 20 or test.n < 1:
         raise InputError(f"{trial.source}: too few samples for an offline part and an online part ({trial.n})")
-    choice = chosen("online", problem.robot, problem.robot.model(()), [train], problem, args.estimator)
-    problem = replace(problem, estimator=choice.estimator)
+    choice = choose(problem, [train], model=problem.robot.model(()), estimator=args.estimator, command="online")
     print(f"ident-opt online: cpbr starts from the {choice.estimator} fit ({choice.why})", file=sys.stderr)
     if args.stream:
-        return _stream(args, problem, train)
+        return _stream(args, problem, train, choice)
     out = output_dir(args, problem)
     result = replay(
         problem,
@@ -138,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
         seed=int(problem.split.seeds[0]),
         progress=not args.no_progress,
         every=args.consistent_every,
+        choice=choice,
     )
     data = report.payload(result, problem, trial.source, args.cross_covariance)
     data["estimator"], data["estimator_why"] = choice.estimator, choice.why
@@ -147,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _stream(args: argparse.Namespace, problem, train) -> int:
+def _stream(args: argparse.Namespace, problem, train, choice) -> int:
     """The offline fit of --model, then samples from standard input until its end or a signal."""
     start, ident = serving_identifier(
         args.model,
@@ -157,16 +155,9 @@ def _stream(args: argparse.Namespace, problem, train) -> int:
         args.cross_covariance,
         guard=not args.no_guard,
         every=args.consistent_every,
+        choice=choice,
     )
-    cutoff = train.cutoff_hz or resolve_cutoff(problem.data.derivative_cutoff_hz, train.t, train.q)[0]
-    scale, refused = currents_to_torques(problem.robot)
-    options = StreamOptions(
-        mapping=Mapping.from_spec(problem.data, problem.robot),
-        current_to_torque=scale,
-        currents_refused=refused,
-        cutoff_hz=float(cutoff),
-        outlier_k=args.outlier_k,
-    )
+    options = StreamOptions.for_problem(problem, train, args.outlier_k)
     print(
         f"ident-opt online --stream: {args.model} ready (offline fit on {train.n} samples); reading samples",
         file=sys.stderr,

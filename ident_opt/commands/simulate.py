@@ -22,14 +22,13 @@ The catalogue, with default magnitudes:
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 from ident_opt.commands.common import add_problem_arguments, add_switches, require, write_json
 from ident_opt.effects import describe
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
-from ident_opt.problem.spec import SimulateSpec
-from ident_opt.simulator import simulate_trial, truth_path
+from ident_opt.simulator import truth_path
+from ident_opt.simulator.simulate import simulate
 from ident_opt.simulator.trajectories import TRAJECTORIES
 
 #: The flags that override a key of the problem's [simulate] section: flag -> (key, type, metavar, help).
@@ -102,23 +101,19 @@ def run(args: argparse.Namespace) -> int:
     require("simulate", problem)
     if args.trajectory and args.trajectory_file:
         raise InputError("give --trajectory or --trajectory-file, not both")
-    spec = problem.simulate or SimulateSpec()
-    given = {key: getattr(args, flag[2:]) for flag, (key, *_) in OVERRIDES.items()}
-    spec = replace(spec, **{key: value for key, value in given.items() if value is not None})
-    effects = args.effect if args.effect is not None else list(spec.effects)
-    output = "current" if args.current else spec.output
-    trial = simulate_trial(
-        problem.robot,
-        trajectory=args.trajectory_file or args.trajectory or spec.trajectory,
-        duration=spec.duration,
-        rate_hz=spec.rate_hz,
-        seed=spec.seed,
-        effects=effects,
-        output=output,
+    trial = simulate(
+        problem,
+        effects=args.effect,
+        trajectory=args.trajectory_file or args.trajectory,
+        duration=args.duration,
+        rate_hz=args.rate,
+        seed=args.seed,
+        output="current" if args.current else None,
         noise=not args.no_noise,
         exact_derivatives=args.exact_derivatives,
-        limits=problem.limits,
-        **{k: v for k, v in (("bandwidth_hz", args.bandwidth), ("noise_scale", args.noise_scale)) if v is not None},
+        bandwidth_hz=args.bandwidth,
+        noise_scale=args.noise_scale,
+        progress=True,
     )
     path = trial.write(args.out)
     hidden = ", ".join(f"{name} {values}" for name, values in trial.truth["effects"].items()) or "none"

@@ -2,8 +2,8 @@
 
 | module        | what it holds                                                                                   |
 |---------------|-------------------------------------------------------------------------------------------------|
-| `dataset`     | `Dataset` (t, q, dq, ddq, τ: (N, n)), the loader (`load_dataset`: CSV, Excel, Parquet, ROS 2 bags), |
-|               | splits, unit and plausibility checks                                                            |
+| `dataset`     | `Dataset` (t, q, dq, ddq, τ: (N, n)), pools, splits, derivatives again at another cut-off        |
+| `loader`      | a file (CSV, Excel, Parquet, ROS 2 bag) or arrays to a `Dataset`: columns, units, plausibility   |
 | `derivatives` | velocities and accelerations from sampled angles: the zero-phase pipeline and its cut-off rule,  |
 |               | the causal one the online stream uses                                                           |
 | `rosbag`      | ROS 2 bags as trials                                                                            |

@@ -1,34 +1,82 @@
 """Diagnosis: what the nominal model gets wrong, which catalogue cause explains it, the extended model and its
 held-out gain (`docs/effects.md`). Modules: `evidence` (residual features), `candidates` (fitting each cause's
 model families, declared by the cause's own module in `ident_opt.effects`), `scoring` (held-out score and the
-naming rule), `diagnosis` (the four questions in order), `report` (Markdown, figures, terminal summary),
-`hidden` (hidden-effect trials for tests and benchmarks); `linear`, `signals` and `elastic_nlp` (the IPOPT
-polish of a lightly damped mode) are shared tools."""
+naming rule), `loop` (the four questions in order), `hidden` (hidden-effect trials for tests and benchmarks);
+`linear`, `signals` and `elastic_nlp` (the IPOPT polish of a lightly damped mode) are shared tools. The report is
+`ident_opt.report.diagnosis`."""
 
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from ident_opt.arm.base import Robot
+from ident_opt.data.dataset import Dataset
+from ident_opt.data.loader import held_out_overlap
 from ident_opt.diagnosis import arm_diagnosis, loop
 from ident_opt.diagnosis.loop import Diagnosis
 from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
 from ident_opt.effects import CATALOGUE
+from ident_opt.fitting.recommend import Choice, choose
+from ident_opt.problem.spec import Problem
 
 #: The catalogue's cause names, `none` first.
 CAUSES = ("none", *CATALOGUE)
 
-__all__ = ["CAUSES", "Diagnosis", "diagnose"]
+__all__ = ["CAUSES", "Diagnosis", "diagnose", "diagnose_trial", "rigid_choice"]
 
 
 def diagnose(
-    robot,
-    trial,
-    unseen=None,
+    problem: Problem,
+    training: Sequence[Dataset],
+    testing: Sequence[Dataset] = (),
+    *,
+    estimator: str | None = None,
+    progress: bool = False,
+) -> Diagnosis:
+    """`ident-opt diagnose`: the first of `training` trains; the first of `testing` (else the second of `training`)
+    is held out, or without one the last part of the training trial in time (the problem's `[split]
+    train_fraction`). The rigid fit is the recommended fit on the training part (`rigid_choice`) unless `estimator`
+    says otherwise; the torque is low-passed like the derivatives (the problem's `derivative_cutoff_hz`). Warnings:
+    the trials' own (a held-out trial that trains), the evidence behind the rigid fit's, the diagnosis's."""
+    problem.require("diagnose")
+    train = training[0]
+    unseen = testing[0] if testing else (training[1] if len(training) > 1 else None)
+    choice = rigid_choice(problem, train, unseen, estimator)
+    result = diagnose_trial(
+        problem.robot,
+        train,
+        unseen,
+        train_fraction=problem.split.train_fraction,
+        progress=progress,
+        torque_filter_hz=problem.data.derivative_cutoff_hz,
+        rigid_fit=choice,
+    )
+    result.warnings = [*held_out_overlap(training, testing), *choice.warnings, *result.warnings]
+    return result
+
+
+def rigid_choice(
+    problem: Problem, trial: Dataset, unseen: Dataset | None = None, estimator: str | None = None
+) -> Choice:
+    """The rigid fit's choice (`fitting.recommend.choose`) on the part of the data the diagnosis trains on: all of
+    `trial` when a held-out `unseen` trial is given, else its first `train_fraction` in time (`loop.split`)."""
+    train = loop.split(trial, unseen, problem.split.train_fraction)[0]
+    return choose(problem, [train], estimator=estimator, command="diagnose")
+
+
+def diagnose_trial(
+    robot: Robot,
+    trial: Dataset,
+    unseen: Dataset | None = None,
     train_fraction: float = 0.7,
     progress: bool = True,
     torque_filter_hz: float | str | None = TORQUE_FILTER_HZ,
-    rigid_fit=None,
+    rigid_fit: Choice | None = None,
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data) of `robot`'s arm: the planar two-link arm's
     diagnosis (`loop.diagnose`) or any arm's (`arm_diagnosis.diagnose`), as the robot says (`Robot.engine`).
-    `rigid_fit`: the estimator π is fitted with and why (a `fitting.recommend.Recommendation`: the recommended fit,
-    which the command passes; None: the robot's default estimator)."""
+    `rigid_fit`: the estimator π is fitted with and why (a `fitting.recommend.Choice`: the recommended fit, which
+    `diagnose` passes; None: the robot's default estimator)."""
     if robot.engine == "planar":
         return loop.diagnose(robot, trial, unseen, train_fraction, progress, torque_filter_hz, rigid_fit)
     return arm_diagnosis.diagnose(robot, trial, unseen, train_fraction, progress, torque_filter_hz, rigid_fit)

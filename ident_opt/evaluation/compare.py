@@ -1,6 +1,6 @@
 """Side by side, for any arm: the nominal model (datasheet or URDF), OLS, the consistent fits the arm offers, IV.
 
-`compare_estimators` fits every estimator of the arm (`Robot.estimators`: OLS, the constrained fit, and the planar
+`compare` fits every estimator of the arm (`Robot.estimators`: OLS, the constrained fit, and the planar
 arm's NLP on physical parameters or an n-joint arm's plausible consistent fit) on all training trials from their
 sufficient statistics, and scores each, the nominal models and a published `[reference]` on the same held-out
 samples: the paper's shuffled protocol (the planar arm only, `Robot.paper_views`), the chronological split of the
@@ -11,6 +11,7 @@ the OLS base parameters no consistent arm can have negative. `ident_opt.report.c
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -19,13 +20,17 @@ import numpy as np
 from ident_opt.arm.base import Arm
 from ident_opt.consistency import lmi_eigenvalues, necessarily_nonnegative, sign_violations
 from ident_opt.data.dataset import Dataset, chronological_split, concat, shuffled_split
+from ident_opt.data.loader import held_out_overlap
+from ident_opt.errors import InputError
 from ident_opt.fitting import estimators
 from ident_opt.fitting.base import base_parameters
 from ident_opt.fitting.fit import LinearFit
-from ident_opt.fitting.recommend import Recommendation, evidence
+from ident_opt.fitting.recommend import Choice, choose
 from ident_opt.fitting.trust import Trust, check_masses
 from ident_opt.metrics import METRICS, all_metrics
-from ident_opt.paper.seeds import FitFn, SplitResults, seed_study, split_fits
+from ident_opt.outputs import shown
+from ident_opt.paper.seeds import FitFn, SplitResults, deviation_from_mean, seed_study, split_fits
+from ident_opt.problem.spec import Problem
 
 PROTOCOLS = {
     "paper": "shuffled 70/30, mean over the paper's seeds (flattering: test samples have near-copies in training)",
@@ -78,7 +83,62 @@ class Comparison:
     robot_statement: tuple[str, ...] = ()
     default: str = "constrained"  # the fit the tool uses downstream: the recommended one
     #: the recommended fit and why (`fitting.recommend`)
-    recommendation: Recommendation | None = None
+    choice: Choice | None = None
+
+    def as_json(self) -> dict:
+        """The `compare --json` payload (`docs/cli.md`): parameters, standard errors, consistency, metrics, warnings,
+        the same keys for every arm (the seed study where the paper's protocol ran, masses where π holds them)."""
+        ols = self.fits["ols"]
+        out = {
+            "parameters": self.parameters(),
+            "standard_errors": {key: fit.se_dict() for key, fit in self.fits.items()},
+            "consistency": self.consistency(),
+            "metrics": self.metrics,
+            "protocols": {p: PROTOCOLS[p] for p in self.metrics},
+            "fits": {key: fit.summary() for key, fit in self.fits.items()},
+            "physical_parameters": (
+                self.fits["nlp_physical"].details.get("physical", {}) if "nlp_physical" in self.fits else {}
+            ),
+            "model": list(self.model.names),
+            "joints": list(self.joints),
+            "recommended": self.choice.estimator,
+            "recommended_why": self.choice.why,
+            "sources": {key: shown(path) for key, path in self.sources.items()},
+            "trials": {key: [shown(p) for p in paths] for key, paths in self.trials.items()},
+            "metrics_by_test_trial": {shown(k): v for k, v in self.by_test_trial.items()},
+            "warnings": [w.as_dict() for w in self.trust.warnings],
+            "cutoff_hz": self.trust.cutoffs,
+            "cutoff_factor": self.choice.factor,
+            "sensitivity": {f"ols_{f:g}x_cutoff": fit.as_dict() for f, fit in self.trust.sensitivity.items()},
+            "gravity_direction": self.trust.gravity_direction,
+            "reference": self.reference_label,
+            "within_10_percent_of_ols": self.within_ols(),
+            "masses": self.masses(),
+            "base_parameters": {"ols": ols.details["base_parameters"]} if "base_parameters" in ols.details else {},
+            "not_determined": {"ols": ols.details.get("not_determined", [])},
+            "ols_impossible_base_values": self.impossible_base_values(),
+            "standard_error_parts": {
+                key: {
+                    part: {n: float(v) if np.isfinite(v) else None for n, v in zip(fit.names, fit.details[part])}
+                    for part in ("se_noise", "bias_bound")
+                }
+                for key, fit in self.fits.items()
+                if "bias_bound" in fit.details
+            },
+        }
+        if self.seeds is not None:
+            out["seed_study"] = {
+                "seeds": self.seeds.labels,
+                "parameters": {key: v.tolist() for key, v in self.seeds.pi.items()},
+                "deviation_from_mean_percent": {
+                    key: deviation_from_mean(self.seeds, key).to_numpy().tolist() for key in self.seeds.pi
+                },
+                "rmse_mean": self.seeds.mean("rmse"),
+                "rmse_std": self.seeds.std("rmse"),
+            }
+        if self.robot_statement:  # what the tool applied to read the robot (a URDF's angle offsets, notes)
+            out["robot"] = list(self.robot_statement)
+        return out
 
     def parameters(self) -> dict[str, dict[str, float]]:
         """π by estimator: "datasheet" (the problem's own), each nominal model, and every fit."""
@@ -170,7 +230,7 @@ def _held_out(d: Dataset, scored: dict[str, tuple[Arm, np.ndarray]]) -> dict[str
     return out
 
 
-def _as_list(trials: Dataset | list[Dataset] | None) -> list[Dataset]:
+def _as_list(trials: Dataset | Sequence[Dataset] | None) -> list[Dataset]:
     if trials is None:
         return []
     return [trials] if isinstance(trials, Dataset) else list(trials)
@@ -193,30 +253,36 @@ def _within_trial(pool: Dataset, model: Arm, split, fitters: dict[str, FitFn], p
     return seeds, metrics, test_sets
 
 
-def compare_estimators(
-    train: Dataset | list[Dataset],
-    robot,
-    split,
-    unseen: Dataset | list[Dataset] | None = None,
+def compare(
+    problem: Problem,
+    training: Dataset | Sequence[Dataset],
+    testing: Dataset | Sequence[Dataset] | None = None,
     *,
-    model: Arm | None = None,
+    extensions: Sequence[str] | None = None,
     margin: float = 1e-6,
     weights: str | None = None,
-    progress: bool = True,
-    reference=None,
-    conversions: dict[str, tuple[float, float]] | None = None,
-    cutoff_setting: float | str | None = None,
+    progress: bool = False,
 ) -> Comparison:
-    """Fit every estimator of the arm on all training trials (statistics add up; IV beside them), score it on the
-    protocols of the module doc, score the nominal models (and the problem's `[reference]`) on the same test
-    samples, run the trust checks (`fitting.trust`) and recommend a fit (`fitting.recommend`; `cutoff_setting`: the
-    problem's `derivative_cutoff_hz`, which the advice takes into account). `weights`: None (plain least squares)
-    or "wls" (joints weighted by 1/σ_j², estimated per fit). Fits use the torque filtered like the regressor's inputs
-    (`Dataset.tau_fit`); every score is against the measured torque."""
-    model = model or robot.model()
-    trains, tests = _as_list(train), _as_list(unseen)
-    found = evidence(robot, model, trains, conversions, cutoff_setting)
-    trains = found.trials  # at the recommendation's cut-off: every fit is compared on the same derivatives
+    """`ident-opt compare`: fit every estimator of the problem's arm on all `training` trials (statistics add up; IV
+    beside them), score it on the protocols of the module doc, score the nominal models (and the problem's
+    `[reference]`) on the same test samples, run the trust checks (`fitting.trust`) and choose the fit to stand behind
+    (`fitting.recommend`). `extensions`: the model's (`ident_opt.effects`; default the robot's own, `Robot.model`);
+    `margin` [kg m²]: of M(q) ⪰ margin·I in the constrained fit; `weights`: None (plain least squares) or "wls" (joints
+    weighted by 1/σ_j², estimated per fit). Fits use the torque filtered like the regressor's inputs
+    (`Dataset.tau_fit`); every score is against the measured torque. A held-out trial that is a training trial is a
+    warning."""
+    problem.require("compare")
+    if margin < 0:
+        raise InputError(f"compare: the constrained fit's margin must be ≥ 0 (got {margin})")
+    robot, split, reference = problem.robot, problem.split, problem.reference
+    try:
+        model = robot.model(tuple(extensions) if extensions else None)
+    except ValueError as exc:
+        raise InputError(f"extension: {exc}") from None
+    trains, tests = _as_list(training), _as_list(testing)
+    overlap = held_out_overlap(trains, tests)
+    choice = choose(problem, trains, model=model, command="compare")
+    trains = choice.at_cutoff(trains)  # every fit is compared on the same derivatives
     pool, test_pool = concat(trains), (concat(tests) if tests else None)
     fitters = fitted_estimators(robot, margin, weights)
     whole = estimators.statistics(model, trains, probes=True)  # the robust fit's errors cover its bias
@@ -234,7 +300,8 @@ def compare_estimators(
             for m, v in _scores(pairs, sheet_model, pi).items():
                 metrics[protocol][m][key] = v
     sources = {"train": pool.source, **({"unseen": test_pool.source} if test_pool is not None else {})}
-    trust, recommendation = found.trust, found.recommendation
+    trust = choice.evidence.trust
+    trust.warnings[:0] = overlap  # the trials' own (a held-out trial that trains) come first
     nominal_arm, nominal_pi = sheets[f"datasheet_{robot.datasheet}"]
     estimates = {k: f.pi for k, f in fits.items() if "base_parameters" not in f.details}  # not a lifted base fit
     trust.warnings += check_masses(model, estimates, nominal_arm.link_masses(nominal_pi))
@@ -252,6 +319,6 @@ def compare_estimators(
         {"train": [d.source for d in trains], "test": [d.source for d in tests]},
         reference.label if reference is not None else None,
         tuple(robot.statement),
-        recommendation.estimator,
-        recommendation,
+        choice.estimator,
+        choice,
     )

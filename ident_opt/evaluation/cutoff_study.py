@@ -30,10 +30,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ident_opt.data.dataset import load_dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.evaluation.cutoff_plant import KINDS, Condition, simulate
 from ident_opt.fitting import estimators
-from ident_opt.fitting.recommend import recommended_fit
+from ident_opt.fitting.recommend import choose
 from ident_opt.fitting.trust import JUDGED_KINDS
 from ident_opt.problem.spec import DataSpec
 
@@ -113,7 +113,8 @@ def run_trial(problem, condition: Condition, seed: int, folder: Path) -> Row:
     # 2003) is motion, not the unit mistake the loader's plausibility check is there to catch.
     trial = load_dataset(path, spec, robot, allow_implausible=True)
     auto_problem = replace(problem, data=spec)
-    fit, found = recommended_fit(robot, arm, [trial], auto_problem)
+    found = choose(auto_problem, [trial], model=arm)
+    fit = found.fit(robot, arm, [trial])
     consistent = robot.default_estimator
     auto = estimators.fit_for(robot, consistent, estimators.statistics(arm, [trial], consistent), arm)
     grid = np.geomspace(0.5, condition.rate_hz / 4, GRID)
@@ -128,7 +129,7 @@ def run_trial(problem, condition: Condition, seed: int, folder: Path) -> Row:
         condition.noise,
         seed,
         float(trial.cutoff_hz),
-        found.recommendation.estimator,
+        found.estimator,
         _error(arm, fit.pi, pi),
         _error(arm, auto.pi, pi),
         _error(arm, fit.pi, pi, judged=False),

@@ -6,14 +6,15 @@ paper's seed study. `ident_opt.report.identify` writes it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ident_opt.columns import kinematic_columns
 from ident_opt.data.dataset import Dataset, concat
+from ident_opt.data.loader import held_out_overlap
 from ident_opt.fitting import estimators
-from ident_opt.fitting.recommend import Evidence, Recommendation, evidence
+from ident_opt.fitting.recommend import Choice, choose
 from ident_opt.fitting.trust import Trust, check_masses
 from ident_opt.metrics import METRICS, all_metrics
 from ident_opt.models.hybrid import RidgeModel, fitted
@@ -52,7 +53,7 @@ class IdentifyResult:
     #: what `consistency` measures, for the report (`Arm.consistency_measure` without its unit)
     consistency_note: str = "min eig M(q)"
     warnings: list = field(default_factory=list)  # `ident_opt.warnings.ResultWarning`s of the trust checks
-    recommendation: Recommendation | None = None  # the fit cpbr is, and why (`fitting.recommend`)
+    choice: Choice | None = None  # the fit cpbr is, and why (`fitting.recommend`)
     #: per held-out trial (when there are several): {file: {metric: {model: [one value per joint]}}}
     by_test_trial: dict = field(default_factory=dict)
 
@@ -93,25 +94,26 @@ def identify(
     paper's views apply (`Robot.paper_views`). The trust checks of `fitting.trust` run on the training trials."""
     bar = progress or _Silent()
     robot = problem.robot
-    found = evidence(robot, robot.model(()), training, problem.data.conversions, problem.data.derivative_cutoff_hz)
-    problem = replace(problem, estimator=found.recommendation.estimator)
-    training = found.trials  # at the recommendation's cut-off
+    problem.require("identify")
+    overlap = held_out_overlap(training, testing or [])
+    choice = choose(problem, training, model=robot.model(()), command="identify")
+    training = choice.at_cutoff(training)
     trial = concat(training)
     unseen = concat(testing) if testing else None
     protocols, others, seeds = {}, {}, None
     if robot.paper_views:
         bar.set_postfix_str("paper's protocol")
-        protocols["paper"] = paper_protocol(trial, problem, progress=bar.update)
-        others = _variants(trial, problem, protocols["paper"], bar) if variants else {}
+        protocols["paper"] = paper_protocol(trial, problem, progress=bar.update, choice=choice)
+        others = _variants(trial, problem, protocols["paper"], bar, choice) if variants else {}
         seeds = seed_study(trial, robot.model(()), problem.split)
     bar.set_postfix_str("chronological")
-    protocols["chronological"] = chronological_protocol(trial, problem, progress=bar.update)
+    protocols["chronological"] = chronological_protocol(trial, problem, progress=bar.update, choice=choice)
     if unseen is not None:
         bar.set_postfix_str("cross-trial")
-        protocols["cross_trial"] = cross_trial_protocol(trial, unseen, problem, progress=bar.update)
+        protocols["cross_trial"] = cross_trial_protocol(trial, unseen, problem, progress=bar.update, choice=choice)
     bar.set_postfix_str("parameters")
-    params, ses, eig = whole_trial_parameters(problem, training)
-    trust = _trust(problem, found, params)
+    params, ses, eig = whole_trial_parameters(problem, training, choice)
+    trust = _trust(problem, choice, params)
     result = IdentifyResult(
         problem.name,
         trial.source,
@@ -130,22 +132,24 @@ def identify(
         joints=tuple(robot.joint_names),
         paper_views=robot.paper_views,
         consistency_note=robot.model(()).consistency_measure.removesuffix(" [kg m²]"),
-        warnings=list(trust.warnings),
-        recommendation=found.recommendation,
+        warnings=[*overlap, *trust.warnings],  # the trials' own (a held-out trial that trains) first
+        choice=choice,
         by_test_trial=_by_test_trial(protocols.get("cross_trial"), testing or []),
     )
     bar.update()
     return result
 
 
-def _variants(trial: Dataset, problem: Problem, paper: ProtocolResult, bar) -> dict[str, tuple[str, ProtocolResult]]:
+def _variants(
+    trial: Dataset, problem: Problem, paper: ProtocolResult, bar, choice: Choice
+) -> dict[str, tuple[str, ProtocolResult]]:
     """The paper's protocol with diagonal-covariance GMMs, and with one full-covariance component."""
     bar.set_postfix_str("paper's protocol, diagonal GMM")
-    diag = paper_protocol(trial, problem, covariance="diag", progress=bar.update)
+    diag = paper_protocol(trial, problem, covariance="diag", progress=bar.update, choice=choice)
     diag.description += ", diagonal-covariance GMMs"
     bar.set_postfix_str("paper's protocol, one component")
     ones = dict.fromkeys(paper.components, 1)
-    one = paper_protocol(trial, problem, components=ones, progress=bar.update)
+    one = paper_protocol(trial, problem, components=ones, progress=bar.update, choice=choice)
     one.description += ", one full-covariance component"
     return {
         "diagonal_covariance": (VARIANTS["diagonal_covariance"], diag),
@@ -153,13 +157,13 @@ def _variants(trial: Dataset, problem: Problem, paper: ProtocolResult, bar) -> d
     }
 
 
-def _trust(problem: Problem, found: Evidence, params: dict) -> Trust:
+def _trust(problem: Problem, choice: Choice, params: dict) -> Trust:
     """The trust checks (`fitting.trust`: the angle convention, the cut-off, OLS against IV) behind the
     recommendation, and the fits' masses against the nominal ones: what the JSON's `warnings` say."""
     robot, model = problem.robot, problem.robot.model(())
-    trust = found.trust
+    trust = choice.evidence.trust
     nominal_arm, nominal_pi = robot.datasheets()[robot.datasheet]
-    fits = fitted(robot, problem.estimator).values()
+    fits = fitted(robot, choice.estimator).values()
     estimates = {name: model.vector(params[name]) for name in fits if name != "ols"}
     trust.warnings += check_masses(model, estimates, nominal_arm.link_masses(nominal_pi))
     return trust
@@ -183,7 +187,7 @@ def _by_test_trial(cross: ProtocolResult | None, testing: list[Dataset]) -> dict
     return out
 
 
-def whole_trial_parameters(problem: Problem, training: list[Dataset]):
+def whole_trial_parameters(problem: Problem, training: list[Dataset], choice: Choice):
     """π on all the training trials: the robot's nominal models ("datasheet" its own, "datasheet_<name>" the
     others), every fitted estimator (`models.fitted`) with SEs; and each one's consistency margin
     (`Arm.min_mass_eigenvalue`, for the planar arm the smallest eigenvalue of M(q) over q) [kg m²] (rounded to
@@ -199,7 +203,7 @@ def whole_trial_parameters(problem: Problem, training: list[Dataset]):
     ses, eig = {}, {}
     arm = robot.model(())
     # OLS, the arm's consistent fit (the JSON contract's "constrained" for the planar arm) and the recommended one
-    for name in dict.fromkeys([*fitted(robot).values(), *fitted(robot, problem.estimator).values()]):
+    for name in dict.fromkeys([*fitted(robot).values(), *fitted(robot, choice.estimator).values()]):
         fit = estimators.fit_for(robot, name, estimators.statistics(arm, training, name, probes=True), arm)
         params[name] = fit.as_dict()
         ses[name] = fit.se_dict()

@@ -23,7 +23,8 @@ parameters moving at half the cut-off too), a warning says so and what to record
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -34,6 +35,7 @@ from ident_opt.errors import InputError
 from ident_opt.fitting import estimators
 from ident_opt.fitting.fit import LinearFit
 from ident_opt.fitting.trust import JUDGED_KINDS, SENSITIVITY_TOLERANCE, Trust, checks
+from ident_opt.problem.spec import Problem
 from ident_opt.warnings import ResultWarning
 
 #: The trust checks whose warnings show the least-squares fits biased by noise in the regressor.
@@ -49,16 +51,6 @@ FACTORS_UP = (1.5, 2.0, 3.0, 4.0)
 AGREE_TOLERANCE = 0.002
 
 
-@dataclass(frozen=True)
-class Recommendation:
-    """The estimator the tool stands behind (a name of `ident_opt.fitting.estimators`), why, in a sentence, and
-    the factor applied to each training trial's derivative cut-off (1: the spectra's)."""
-
-    estimator: str
-    why: str
-    factor: float = 1.0
-
-
 def agree(model: Arm, ols: LinearFit, iv: LinearFit) -> bool:
     """Whether OLS and IV agree on every judged parameter the data determine (`AGREE_TOLERANCE`)."""
     for i, p in enumerate(model.parameters):
@@ -69,12 +61,79 @@ def agree(model: Arm, ols: LinearFit, iv: LinearFit) -> bool:
     return True
 
 
-def recommend(robot: Robot, trust: Trust, agreed: bool = True, factor: float = 1.0) -> Recommendation:
+@dataclass
+class Evidence:
+    """What a choice rests on: OLS and IV on the training trials at the spectra's cut-offs, the trust checks (with
+    `undecided`), and the training trials at the chosen cut-off (`trials`; `given`: the trials as they came)."""
+
+    ols: LinearFit
+    iv: LinearFit
+    trust: Trust
+    trials: list[Dataset]
+    given: list[Dataset] = field(default_factory=list, repr=False)
+
+
+@dataclass(frozen=True)
+class Choice:
+    """The fit a run stands behind, decided once (`choose`) and passed on whole: the estimator (a name of
+    `ident_opt.fitting.estimators`), why (a sentence for the terminal, the reports and the JSON), the factor applied
+    to each training trial's derivative cut-off (1: the trials' own), and the evidence behind it (None when the
+    estimator was asked for). Every downstream use (models, `codegen`, `export`, the `online` start, `diagnose`'s
+    rigid fit) takes this object: nothing re-reads the problem's setting or re-decides."""
+
+    estimator: str
+    why: str
+    factor: float = 1.0
+    evidence: Evidence | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def warnings(self) -> list[ResultWarning]:
+        """What is doubtful about the evidence (the trust checks' warnings; none when the estimator was asked)."""
+        return list(self.evidence.trust.warnings) if self.evidence is not None else []
+
+    def at_cutoff(self, trials: Sequence[Dataset]) -> list[Dataset]:
+        """`trials` with their derivatives at the chosen cut-off (the evidence's own copies when it made them)."""
+        trials = list(trials)
+        ev = self.evidence
+        if ev is not None and len(ev.given) == len(trials) and all(a is b for a, b in zip(ev.given, trials)):
+            return list(ev.trials)
+        return trials if self.factor == 1 else raised(trials, self.factor)
+
+    def fit(self, robot: Robot, model: Arm, trials: Sequence[Dataset], **options) -> ArmFit:
+        """The chosen fit of `model` on all `trials` (statistics add up) at the chosen cut-off: the one place every
+        command's fit is made, so `compare`'s recommended π is the one `export` and `codegen` write. `options` go
+        to the estimator (e.g. `weights="wls"`)."""
+        stats = estimators.statistics(model, self.at_cutoff(trials), probes=True)
+        fitted = estimators.fit_for(robot, self.estimator, stats, model, **options)
+        linear = {f.name: getattr(fitted, f.name) for f in fields(LinearFit)}
+        return ArmFit(**linear, model=model, choice=self, trials=tuple(d.source for d in trials))
+
+
+@dataclass
+class ArmFit(LinearFit):
+    """A fit that knows its arm: the `LinearFit` (π, standard errors, active constraints, …), the model π belongs
+    to, the choice it was made by and the trials it was made on (their files). `predict(trial)` is τ̂ [N m]."""
+
+    model: Arm | None = None
+    choice: Choice | None = None
+    trials: tuple[str, ...] = ()
+
+    def predict(self, trial: Dataset) -> np.ndarray:
+        """τ̂ (N, n) [N m] of the fitted model along `trial`'s q, dq, ddq."""
+        return self.model.predict(self.pi, trial.q, trial.dq, trial.ddq)
+
+    def summary(self) -> dict:
+        """`LinearFit.summary` (the model, the choice and the trials are not part of it)."""
+        linear = LinearFit(**{f.name: getattr(self, f.name) for f in fields(LinearFit)})
+        return linear.summary()
+
+
+def _recommend(robot: Robot, trust: Trust, agreed: bool = True, factor: float = 1.0) -> Choice:
     """The recommended estimator from the trust checks' warnings and whether OLS and IV agree at the spectra's
     cut-offs (`agreed`); `factor`: the highest cut-off factor where they still agreed (module doc)."""
     consistent = robot.default_estimator
     if not trust.cutoffs:
-        return Recommendation(
+        return Choice(
             consistent,
             "the derivatives were logged, not estimated here: no cut-off to judge, so the physically consistent fit "
             f"({consistent})",
@@ -83,7 +142,7 @@ def recommend(robot: Robot, trust: Trust, agreed: bool = True, factor: float = 1
     if (evidence or not agreed) and "robust" in robot.estimators:
         shown = {"ols_iv_disagree": "OLS and IV disagree", "cutoff_sensitivity": "the parameters move with the cut-off"}
         said = " and ".join(shown[c] for c in evidence) or "OLS and IV differ beyond their standard errors"
-        return Recommendation(
+        return Choice(
             "robust",
             f"{said}: noise in the estimated accelerations biases least squares, so the consistent fit on "
             "instrumental variables (robust), which that noise does not bias",
@@ -94,7 +153,7 @@ def recommend(robot: Robot, trust: Trust, agreed: bool = True, factor: float = 1
         if factor > 1
         else "at the derivative cut-offs the spectra gave (OLS and IV part above them)"
     )
-    return Recommendation(consistent, f"OLS and IV agree: the physically consistent fit ({consistent}) {where}", factor)
+    return Choice(consistent, f"OLS and IV agree: the physically consistent fit ({consistent}) {where}", factor)
 
 
 def undecided(model: Arm, trust: Trust, ols: LinearFit, iv: LinearFit) -> list[ResultWarning]:
@@ -119,18 +178,6 @@ def undecided(model: Arm, trust: Trust, ols: LinearFit, iv: LinearFit) -> list[R
     ]
 
 
-@dataclass
-class Evidence:
-    """What the recommendation rests on: OLS and IV on the training trials at the spectra's cut-offs, the trust
-    checks (with `undecided`), the recommendation, and the training trials at its cut-off (`trials`)."""
-
-    ols: LinearFit
-    iv: LinearFit
-    trust: Trust
-    recommendation: Recommendation
-    trials: list[Dataset]
-
-
 def raised(trials: list[Dataset], factor: float) -> list[Dataset]:
     """The trials with their derivatives at `factor` × their cut-off (at most a quarter of their rate)."""
     return [refiltered(d, min(factor * d.cutoff_hz, CUTOFF_MAX_FRACTION * d.rate_hz)) for d in trials]
@@ -148,74 +195,50 @@ def _highest_agreeing(model: Arm, trials: list[Dataset]) -> tuple[float, list[Da
     return factor, chosen_trials
 
 
-def evidence(
+def judge(
     robot: Robot,
     model: Arm,
     trials: list[Dataset],
     conversions: dict[str, tuple[float, float]] | None = None,
     setting: float | str | None = None,
-    ols: LinearFit | None = None,
-    iv: LinearFit | None = None,
-) -> Evidence:
-    """OLS and IV on the training `trials` (given, or fitted here), the trust checks (`fitting.trust.checks`;
-    `setting`: the problem's `derivative_cutoff_hz`), and the recommendation they lead to with the trials at its
-    cut-off (module doc)."""
-    stats = estimators.statistics(model, trials) if ols is None or iv is None else None
-    ols = ols or estimators.fit_for(robot, "ols", stats, model)
-    iv = iv or estimators.iv(stats, model)
+) -> Choice:
+    """The recommended fit from the training `trials`' own evidence (module doc): OLS and IV, the trust checks
+    (`fitting.trust.checks`; `setting`: the problem's `derivative_cutoff_hz`, so that advice never asks for what the
+    run already did) and the highest cut-off where OLS and IV agree."""
+    stats = estimators.statistics(model, trials)
+    ols = estimators.fit_for(robot, "ols", stats, model)
+    iv = estimators.iv(stats, model)
     trust = checks(model, trials, ols, iv, conversions, robot, setting)
     agreed = agree(model, ols, iv)
     factor, at = 1.0, trials
     if trust.cutoffs and agreed and not any(w.code in BIASED for w in trust.warnings):
         factor, at = _highest_agreeing(model, trials)
-    choice = recommend(robot, trust, agreed, factor)
-    if choice.estimator == "robust":
+    found = _recommend(robot, trust, agreed, factor)
+    if found.estimator == "robust":
         trust.warnings += undecided(model, trust, ols, iv)
-    return Evidence(ols, iv, trust, choice, at)
+    return replace(found, evidence=Evidence(ols, iv, trust, at, list(trials)))
 
 
-def recommended_fit(robot: Robot, model: Arm, trials: list[Dataset], problem=None) -> tuple[LinearFit, Evidence]:
-    """The recommended fit of `model` on `trials` (at the recommendation's cut-off), with the evidence behind it;
-    `problem` gives the conversions and the cut-off setting the advice takes into account."""
-    data = problem.data if problem is not None else None
-    found = evidence(
-        robot,
-        model,
-        trials,
-        data.conversions if data is not None else None,
-        data.derivative_cutoff_hz if data is not None else None,
-    )
-    name = found.recommendation.estimator
-    fit = estimators.fit_for(robot, name, estimators.statistics(model, found.trials, name, probes=True), model)
-    return fit, found
-
-
-def chosen(command: str, robot: Robot, model: Arm, trials: list[Dataset], problem, asked: str | None) -> Recommendation:
-    """The estimator `command` uses: `asked` (`--estimator`, checked against the arm's fits: an InputError naming
-    them otherwise), else the recommended one from the training `trials`' evidence."""
-    if asked is not None:
-        if asked not in robot.estimators:
+def choose(
+    problem: Problem,
+    trials: Sequence[Dataset],
+    *,
+    model: Arm | None = None,
+    estimator: str | None = None,
+    command: str = "ident-opt",
+) -> Choice:
+    """The fit `command` stands behind on the training `trials` of `problem` (its robot, conversions and derivative
+    cut-off setting): `estimator` when one is asked for (checked against the arm's fits: an InputError naming them
+    otherwise), else the recommended one from the trials' own evidence (`judge`). `model`: the arm's model the fit
+    is for (default `problem.robot.model()`). The one entry point of the recommended fit."""
+    robot = problem.robot
+    if estimator is not None:
+        if estimator not in robot.estimators:
             raise InputError(
-                f"{command}: --estimator {asked} is not a fit of this arm ({robot.described_as}); its fits: "
+                f"{command}: --estimator {estimator} is not a fit of this arm ({robot.described_as}); its fits: "
                 f"{', '.join(robot.estimators)}"
             )
-        return Recommendation(asked, "chosen with --estimator")
+        return Choice(estimator, "chosen with --estimator")
+    model = model if model is not None else robot.model()
     data = problem.data
-    return evidence(robot, model, trials, data.conversions, data.derivative_cutoff_hz).recommendation
-
-
-def for_diagnosis(
-    robot: Robot,
-    trial: Dataset,
-    unseen: Dataset | None = None,
-    train_fraction: float = 0.7,
-    conversions: dict[str, tuple[float, float]] | None = None,
-    setting: float | str | None = None,
-) -> Evidence:
-    """The evidence (and the recommendation) on the part of the data `diagnose` trains on: all of `trial` when a
-    held-out `unseen` trial is given, else its first `train_fraction` in time (`diagnosis.loop.split`, the
-    diagnosis's own split). The command and the benchmarks that stand for it both ask here."""
-    from ident_opt.diagnosis.loop import split  # the diagnosis sits on the estimators, not on the studies
-
-    train = split(trial, unseen, train_fraction)[0]
-    return evidence(robot, robot.model(), [train], conversions, setting)
+    return judge(robot, model, list(trials), data.conversions, data.derivative_cutoff_hz)

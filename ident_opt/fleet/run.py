@@ -23,9 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ident_opt.fitting.recommend import chosen
+from ident_opt.fitting.recommend import choose
 from ident_opt.fleet import changes, layout, tasks
 from ident_opt.fleet.engine import CONNECT_TIMEOUT_S, Engine
+from ident_opt.problem.spec import Problem
 from ident_opt.warnings import ResultWarning
 
 #: The engine every run names in its JSON.
@@ -38,7 +39,7 @@ SPARE_DAYS = 3
 class RobotResult:
     """One robot's series: its fitted days, their files and samples, the fit's π and standard errors (D, P), the
     tested parameters (`changes.Tested`) and their test (None with too few days), and the fit its days got with why
-    (`tasks.Choice`)."""
+    (`tasks.RobotChoice`)."""
 
     robot: str
     days: list[str]
@@ -48,7 +49,7 @@ class RobotResult:
     se: np.ndarray
     tested: changes.Tested
     test: changes.Test | None = None
-    choice: tasks.Choice | None = None
+    choice: tasks.RobotChoice | None = None
 
 
 @dataclass
@@ -75,7 +76,7 @@ class FleetResult:
 
 
 def run_fleet(
-    problem_path: str | Path,
+    problem: Problem | str | Path,
     logs: str,
     *,
     scheduler: str | None = None,
@@ -88,16 +89,18 @@ def run_fleet(
     connect_timeout: float = CONNECT_TIMEOUT_S,
     estimator: str | None = None,
 ) -> FleetResult:
-    """Identify every robot-day under `logs` for the problem at `problem_path`, test each robot against its first
+    """`ident-opt fleet`: identify every robot-day under `logs` for `problem` (a parsed problem, or its file: the
+    workers read it again from its file), test each robot against its first
     `baseline_days` days and name what changed (module doc). `scheduler`: an existing Dask scheduler's address
     (None: a local cluster of `workers` processes, or threads with `processes` False), which must answer within
     `connect_timeout` [s]. `estimator`: the fit every robot-day gets (None: each robot's recommended fit)."""
     start = time.perf_counter()
-    problem_path = str(Path(problem_path).resolve())
+    problem_path = str(Path(problem.path if isinstance(problem, Problem) else problem).resolve())
     setup = tasks.setup(problem_path)
     problem = setup.problem
+    problem.require("fleet")
     if estimator is not None:  # an unknown fit is refused here, before any work
-        chosen("fleet", setup.robot, setup.model, [], problem, estimator)
+        choose(problem, [], model=setup.model, estimator=estimator, command="fleet")
     found = layout.discover(logs)
     job = tasks.Job(problem_path, allow_implausible, drop_invalid, estimator)
     with Engine(scheduler, workers, processes, connect_timeout) as engine:
@@ -107,7 +110,7 @@ def run_fleet(
         gathered = engine.run(found.robots, submit, _count1(found), progress, "fleet: statistics and fits")
         engine_seconds = time.perf_counter() - phase1
         baselines = {b.robot: b for b in gathered if isinstance(b, tasks.Baseline)}
-        choices = {c.robot: c for c in gathered if isinstance(c, tasks.Choice)}
+        choices = {c.robot: c for c in gathered if isinstance(c, tasks.RobotChoice)}
         robots, skipped, warnings = _series(gathered, setup, found)
         warnings += _choice_warnings(choices)
         onsets = _test(robots, baseline_days, warnings)
@@ -125,7 +128,9 @@ def run_fleet(
     samples = sum(sum(r.samples) for r in robots.values())
     seconds = time.perf_counter() - start
     cpu = sum(
-        item.cpu for item in [*gathered, *evidence] if isinstance(item, tasks.DayFit | tasks.Evidence | tasks.Choice)
+        item.cpu
+        for item in [*gathered, *evidence]
+        if isinstance(item, tasks.DayFit | tasks.Evidence | tasks.RobotChoice)
     )
     for name, r in robots.items():
         r.choice = choices.get(name)
@@ -246,7 +251,7 @@ def _series(
     return robots, skipped, warnings
 
 
-def _choice_warnings(choices: dict[str, tasks.Choice]) -> list[ResultWarning]:
+def _choice_warnings(choices: dict[str, tasks.RobotChoice]) -> list[ResultWarning]:
     """The warnings of the evidence behind the robots' fits (`fitting.trust`), one per code with the robots it
     concerns (the first robot's message as the example)."""
     by_code: dict[str, list[tuple[str, ResultWarning]]] = {}
@@ -268,10 +273,10 @@ def _choice_warnings(choices: dict[str, tasks.Choice]) -> list[ResultWarning]:
     return out
 
 
-def _one_choice(choices: dict[str, tasks.Choice]) -> tuple[str, str]:
+def _one_choice(choices: dict[str, tasks.RobotChoice]) -> tuple[str, str]:
     """(estimator, why) of the robots' fits: the name when every robot got the same fit ("per robot" otherwise), the
     reason when they share one, else how many robots got each fit (each robot's reason is in its entry)."""
-    recs = [c.recommendation for c in choices.values()]
+    recs = [c.choice for c in choices.values()]
     if not recs:
         return "none", "no robot to fit"
     names = sorted({r.estimator for r in recs})

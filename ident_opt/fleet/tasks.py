@@ -1,14 +1,14 @@
 """What runs on a Dask worker: each function takes and returns small picklable objects; samples never leave it.
 
-- `choose`: a robot's first days' files → `Choice`, the fit its days get: the recommended fit
+- `choose`: a robot's first days' files → `RobotChoice`, the fit its days get: the recommended fit
   (`fitting.recommend.evidence` on the first day that has a readable trial, its trials read together on the worker),
   or the one `--estimator` names;
-- `file_stats`: a `FleetFile` and its robot's `Choice` → `FileStats`, the trial's `Stats` (a few kB whatever its
+- `file_stats`: a `FleetFile` and its robot's `RobotChoice` → `FileStats`, the trial's `Stats` (a few kB whatever its
   length; with its `InstrumentStats` when the chosen fit is the robust one; derivatives at the choice's cut-off
   factor) or why it was skipped;
 - `day_stats`: files' `FileStats` → `DayStats`, their sum with the files read and skipped (a robot-day, or the days
   of a baseline or of a change pooled);
-- `fit_day`: a robot-day's `DayStats` and `Choice` → `DayFit`, its fit (π with standard errors) and the tested
+- `fit_day`: a robot-day's `DayStats` and `RobotChoice` → `DayFit`, its fit (π with standard errors) and the tested
   parameters;
 - `baseline`: a robot's first days → `Baseline`, π0 (OLS on the first K with statistics, pooled) and each joint's
   weight 1/σ²;
@@ -37,7 +37,7 @@ import functools
 import tempfile
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePosixPath
 
 import fsspec
@@ -45,13 +45,13 @@ import numpy as np
 from fsspec.implementations.local import LocalFileSystem
 
 from ident_opt.arm.base import Arm, Robot
-from ident_opt.data.dataset import Dataset, fittable, load_dataset
+from ident_opt.data.dataset import Dataset, fittable
+from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.fitting import estimators, recommend
 from ident_opt.fitting.base import BaseParameters, base_parameters, fit_base_ols, fit_least_squares
 from ident_opt.fitting.fit import solve_normal
 from ident_opt.fitting.iv import InstrumentStats
-from ident_opt.fitting.recommend import Recommendation
 from ident_opt.fitting.stats import Stats
 from ident_opt.fleet.layout import FleetFile
 from ident_opt.problem import load_problem
@@ -123,13 +123,14 @@ def ready(problem_path: str) -> int:
 
 
 @dataclass
-class Choice:
-    """The fit a robot's days get (`Recommendation`: estimator, why, the cut-off factor its files' derivatives take),
-    the warnings of the evidence behind it (`fitting.trust`), the day it was judged on (None: `--estimator`, or no
-    readable day: the arm's consistent fit) and the task's CPU time [s]."""
+class RobotChoice:
+    """The fit a robot's days get (`fitting.recommend.Choice`: estimator, why, the cut-off factor its files'
+    derivatives take; without its evidence, which stays on the worker), the warnings of that evidence
+    (`fitting.trust`), the day it was judged on (None: `--estimator`, or no readable day: the arm's consistent fit)
+    and the task's CPU time [s]."""
 
     robot: str
-    recommendation: Recommendation
+    choice: recommend.Choice
     warnings: list[ResultWarning] = field(default_factory=list)
     day: str | None = None
     cpu: float = 0.0
@@ -149,28 +150,28 @@ def _read(job: Job, s: Setup, file: FleetFile) -> Dataset:
     return trial
 
 
-def choose(job: Job, robot: str, *days: list[FleetFile]) -> Choice:
+def choose(job: Job, robot: str, *days: list[FleetFile]) -> RobotChoice:
     """The fit of `robot`'s days: `job.estimator` if asked (checked as every command checks it), else the
-    recommended fit (`fitting.recommend.evidence`) from the first of `days` (each a day's files) with a readable
+    recommended fit (`fitting.recommend.choose`) from the first of `days` (each a day's files) with a readable
     trial, its trials read together; the arm's consistent fit, said so, when no day has one. One choice for all the
     robot's days, so that its series compare like with like."""
     start = time.thread_time()
     s = setup(job.problem)
     if job.estimator is not None:
-        asked = recommend.chosen("fleet", s.robot, s.model, [], s.problem, job.estimator)
-        return Choice(robot, asked, cpu=time.thread_time() - start)
+        asked = recommend.choose(s.problem, [], model=s.model, estimator=job.estimator, command="fleet")
+        return RobotChoice(robot, asked, cpu=time.thread_time() - start)
     for files in days:
         trials = []
         for file in files:
             with contextlib.suppress(InputError):  # the file's own task says why it is skipped
                 trials.append(_read(job, s, file))
         if trials:
-            data = s.problem.data
-            found = recommend.evidence(s.robot, s.model, trials, data.conversions, data.derivative_cutoff_hz)
-            return Choice(robot, found.recommendation, found.trust.warnings, files[0].day, time.thread_time() - start)
+            found = recommend.choose(s.problem, trials, model=s.model, command="fleet")
+            chosen = replace(found, evidence=None)  # the evidence (fits, trials) stays on the worker
+            return RobotChoice(robot, chosen, found.warnings, files[0].day, time.thread_time() - start)
     consistent = s.robot.default_estimator
     why = f"no readable trial in its first days to judge the data by: the physically consistent fit ({consistent})"
-    return Choice(robot, Recommendation(consistent, why), cpu=time.thread_time() - start)
+    return RobotChoice(robot, recommend.Choice(consistent, why), cpu=time.thread_time() - start)
 
 
 @dataclass
@@ -204,7 +205,7 @@ def local_copy(url: str) -> Iterator[Path]:
         yield local
 
 
-def file_stats(job: Job, file: FleetFile, choice: Choice) -> FileStats:
+def file_stats(job: Job, file: FleetFile, choice: RobotChoice) -> FileStats:
     """Read, check, differentiate (at the robot's `choice` of cut-off factor) and reduce one trial to the statistics
     its robot's fit takes, with the torque the fits use (`Dataset.tau_fit`, `estimators.statistics`); a file the
     loader refuses is returned as skipped, with the loader's reason (the file named as in the layout)."""
@@ -214,9 +215,8 @@ def file_stats(job: Job, file: FleetFile, choice: Choice) -> FileStats:
         trial = _read(job, s, file)
     except InputError as exc:
         return FileStats(file, None, 0, str(exc), time.thread_time() - start)
-    rec = choice.recommendation
-    if rec.factor != 1.0:
-        (trial,) = recommend.raised([trial], rec.factor)
+    rec = choice.choice
+    (trial,) = rec.at_cutoff([trial])
     stats = estimators.statistics(s.model, [trial], rec.estimator)
     if isinstance(stats, InstrumentStats):
         return FileStats(file, stats.stats, trial.n, cpu=time.thread_time() - start, instruments=stats)
@@ -278,13 +278,13 @@ class DayFit:
     cpu: float = 0.0
 
 
-def fit_day(job: Job, day: DayStats, choice: Choice) -> DayFit:
+def fit_day(job: Job, day: DayStats, choice: RobotChoice) -> DayFit:
     """The robot-day's fit by its robot's `choice` (the recommended fit) with standard errors (OLS's where the fit
     gives none at all), and the tested parameters: the base parameters by least squares
     (`fitting.base.fit_base_ols`), what the data determine with no prior or bound in them, with their standard
     errors (a change test compares like with like: the same estimator, free of any prior, on every day)."""
     start = time.thread_time()
-    out = _fit_day(job, day, choice.recommendation.estimator)
+    out = _fit_day(job, day, choice.choice.estimator)
     out.cpu = day.cpu + time.thread_time() - start
     return out
 

@@ -17,6 +17,7 @@ import pandas as pd
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.arm.planar import PI_NAMES, RIGID, PlanarArm
 from ident_opt.data.dataset import Dataset, shuffled_split
+from ident_opt.data.loader import held_out_overlap
 from ident_opt.fitting.ols import solve_ols
 from ident_opt.fitting.stats import Stats
 from ident_opt.metrics import all_metrics
@@ -157,11 +158,16 @@ class Audit:
     warnings: list = field(default_factory=list)
 
 
-def audit(problem, train: Dataset, unseen: Dataset | None = None) -> Audit:
-    """The paper audit of `problem`'s robot on its identification trial (and unseen trial, if any)."""
+def audit(problem, training: list[Dataset], testing: list[Dataset] = ()) -> Audit:
+    """`ident-opt audit`: the paper audit of `problem`'s robot on its identification trial (the first of `training`)
+    and its unseen trial (the first of `testing`, else the second of `training`), if any. A held-out trial that is a
+    training trial is a warning."""
+    problem.require("audit")
     robot = problem.robot
+    train = training[0]
+    unseen = testing[0] if testing else (training[1] if len(training) > 1 else None)
     parameters = parameter_table(robot)
-    return Audit(
+    found = Audit(
         parameters,
         rigid_body_table(robot),
         audit_data(robot, train, unseen, problem.split),
@@ -170,3 +176,5 @@ def audit(problem, train: Dataset, unseen: Dataset | None = None) -> Audit:
         train,
         unseen,
     )
+    found.warnings = held_out_overlap(training, testing)  # an unseen trial that is the identification trial
+    return found

@@ -15,7 +15,8 @@ from scipy import signal
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import RIGID
-from ident_opt.data.dataset import Dataset, load_dataset
+from ident_opt.data.dataset import Dataset
+from ident_opt.data.loader import load_dataset
 from ident_opt.effects import BACKGROUND, parse_effect
 from ident_opt.errors import InputError
 from ident_opt.fitting.ols import solve_ols

@@ -27,6 +27,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ident_opt.data.dataset import Dataset, chronological_split, shuffled_split
+from ident_opt.fitting.recommend import Choice
 from ident_opt.metrics import METRICS, all_metrics, coverage
 from ident_opt.models.hybrid import HybridModel, make_gmr, parametric_models
 from ident_opt.problem.spec import Problem
@@ -78,23 +79,25 @@ def evaluate_split(
     random_state: int = 0,
     level: float = 0.95,
     validation: str = "random",
+    choice: Choice | None = None,
 ) -> SplitResult:
     """Fit every parametric model and its `+gmr` hybrid on `train`; score all on `test`.
 
     components: `+gmr` key -> a fixed K (else the problem's `[residual]` setting, "auto" = chosen on
-    validation data inside the training part: `validation` "random" or "blocked", the latest samples).
+    validation data inside the training part: `validation` "random" or "blocked", the latest samples). `choice`: the
+    fit cpbr is (`fitting.recommend.Choice`; None: the arm's physically consistent fit).
     """
     # The matrices here are small (N × 8, K ≤ 20): BLAS threads only add overhead, and on a busy machine
     # they oversubscribe the cores (measured: a 10-component fit 0.14 s single-threaded, 1–5 s threaded).
     with threadpool_limits(limits=1):
         return _evaluate_split(
-            train, test, problem, constrained, components, covariance, random_state, level, validation
+            train, test, problem, constrained, components, covariance, random_state, level, validation, choice
         )
 
 
-def _evaluate_split(train, test, problem, constrained, components, covariance, random_state, level, validation):
+def _evaluate_split(train, test, problem, constrained, components, covariance, random_state, level, validation, choice):
     models: dict[str, object] = {}
-    for base in parametric_models(problem.robot, constrained, problem.estimator):
+    for base in parametric_models(problem.robot, constrained, choice.estimator if choice is not None else None):
         base.fit(train)
         models[base.key] = base
         k = (components or {}).get(base.key + "+gmr")
@@ -135,6 +138,7 @@ def paper_protocol(
     covariance: str | None = None,
     components: dict[str, int] | None = None,
     progress: Callable[[], None] | None = None,
+    choice: Choice | None = None,
 ) -> ProtocolResult:
     """Shuffled 70/30 splits over the problem's seeds; the GMR components (`+gmr` key -> K, or chosen on the
     first seed when the problem says "auto") are kept for the other seeds, so every seed fits the same model."""
@@ -149,6 +153,7 @@ def paper_protocol(
             components=components,
             covariance=covariance,
             random_state=seed,
+            choice=choice,
         )
         components = components or r.components
         results.append(r)
@@ -165,11 +170,18 @@ def paper_protocol(
 
 
 def chronological_protocol(
-    trial: Dataset, problem: Problem, *, constrained: bool = True, progress: Callable[[], None] | None = None
+    trial: Dataset,
+    problem: Problem,
+    *,
+    constrained: bool = True,
+    progress: Callable[[], None] | None = None,
+    choice: Choice | None = None,
 ) -> ProtocolResult:
     """The first `train_fraction` of the trial in time trains, the rest tests."""
     train, test = chronological_split(trial.n, problem.split.train_fraction)
-    r = evaluate_split(trial.subset(train), trial.subset(test), problem, constrained=constrained, validation="blocked")
+    r = evaluate_split(
+        trial.subset(train), trial.subset(test), problem, constrained=constrained, validation="blocked", choice=choice
+    )
     if progress:
         progress()
     desc = (
@@ -195,9 +207,10 @@ def cross_trial_protocol(
     *,
     constrained: bool = True,
     progress: Callable[[], None] | None = None,
+    choice: Choice | None = None,
 ) -> ProtocolResult:
     """Identify on all of `trial`, evaluate on all of `unseen`."""
-    r = evaluate_split(trial, unseen, problem, constrained=constrained, validation="blocked")
+    r = evaluate_split(trial, unseen, problem, constrained=constrained, validation="blocked", choice=choice)
     if progress:
         progress()
     desc = f"identified on all of {_name(trial)}, evaluated on all of {_name(unseen)} (unseen trial)"

@@ -9,7 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ident_opt.arm.base import Robot
+from ident_opt.arm.base import ALL_COMMANDS, Robot
+from ident_opt.errors import InputError
 
 #: At most this many seeds (each is a full refit of every model) and mixture components.
 MAX_SEEDS = 100
@@ -114,9 +115,16 @@ class Problem:
     output_dir: Path | None = None
     limits: Limits | None = None
     reference: Reference | None = None
-    #: The fit a run stands behind, set by the command from the run's own evidence (`fitting.recommend`); None:
-    #: the robot's physically consistent fit (`Robot.default_estimator`). Not read from the file.
-    estimator: str | None = None
+
+    def require(self, command: str) -> None:
+        """InputError (exit 2) when `command` does not serve this problem's arm (`Robot.serves`), before any work."""
+        robot = self.robot
+        if command not in robot.serves:
+            serving = ", ".join(c for c in ALL_COMMANDS if c in robot.serves)
+            raise InputError(
+                f"{command} supports two-joint problems only; {self.path} describes {robot.described_as} "
+                f"(the commands for this arm: {serving})"
+            )
 
 
 @dataclass(frozen=True)

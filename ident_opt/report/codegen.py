@@ -4,68 +4,12 @@ baked in, the estimator, the GMR, the check against Python); with the terminal l
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 from ident_opt import outputs
 from ident_opt.report import write_json
-from ident_opt.shipping import codegen
-from ident_opt.shipping.ship import MEASURE, TOLERANCE, Shipped
-
-
-@dataclass
-class Built:
-    """The generated CasADi functions and the files written for them."""
-
-    functions: list
-    files: list[Path]  # sources, header, library, example, README
-    library: Path
-
-    @property
-    def names(self) -> list[str]:
-        return [f.name() for f in self.functions]
-
-
-def build(shipped: Shipped, robot, out: Path, compiler: str, forward: bool = True) -> Built:
-    """Generate the C code of `shipped` into `out` and compile it (`forward`: also ddq_hat), with the example and
-    the README written for `robot` (its joints and angle convention)."""
-    functions = codegen.build_functions(shipped.model, shipped.pi, shipped.gmr, forward=forward)
-    source, header = codegen.generate_sources(functions, out)
-    library = codegen.compile_library(source, out, compiler)
-    example = codegen.copy_example(out, shipped.model.n_joints, gmr=shipped.gmr is not None)
-    readme = codegen.write_readme(out, functions, robot)
-    return Built(functions, [source, header, library, example, readme], library)
-
-
-def payload(shipped: Shipped, built: Built, errors: dict[str, float], problem, sources: list[str]) -> dict:
-    """parameters.json (and the --json payload): the parameters baked in, the model, the GMR, the checks."""
-    model, gmr, robot = shipped.model, shipped.gmr, problem.robot
-    n = model.n_joints
-    out = {
-        "estimator": shipped.estimator,
-        "estimator_status": shipped.status,
-        "model": {"extensions": list(model.extensions), **model.settings()},
-        "arm": robot.summary(),
-        "joints": list(robot.joint_names),
-        "parameters": model.as_dict(shipped.pi),
-        "units": {p.name: p.unit for p in model.parameters},
-        "gmr": {
-            "inputs": list(codegen.gmr_inputs(n)),
-            "outputs": [f"r{j + 1}" for j in range(n)],
-            "n_components": len(gmr.weights_),
-            "weights": gmr.weights_,
-            "means": gmr.means_,
-            "covariances": gmr.covariances_,
-        },
-        "problem": problem.name,
-        "data": sources,
-        "functions": built.names,
-        "library": built.library.name,
-        "check": {name: {MEASURE[name]: err, "limit": TOLERANCE[name]} for name, err in errors.items()},
-    }
-    if robot.statement:  # e.g. a two-joint URDF arm: the offsets and signs from its angles to the C code's
-        out["robot"] = list(robot.statement)
-    return out
+from ident_opt.shipping.generate import Built
+from ident_opt.shipping.ship import MEASURE, TOLERANCE
 
 
 def _urdf_angles(statement: list[str]) -> str:

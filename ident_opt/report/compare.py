@@ -12,7 +12,7 @@ import pandas as pd
 from ident_opt import outputs
 from ident_opt.evaluation.compare import PROTOCOLS, Comparison
 from ident_opt.metrics import METRICS
-from ident_opt.paper.seeds import deviation_from_mean, rmse_table
+from ident_opt.paper.seeds import rmse_table
 from ident_opt.report import record, shown, write_json
 from ident_opt.report.figures import seed_heatmap
 from ident_opt.report.tables import fmt, markdown_table, write_table
@@ -225,7 +225,7 @@ def warnings_json(c: Comparison) -> list[dict[str, str]]:
 
 def _trust_section(c: Comparison) -> list[str]:
     """Warnings, the cut-off sensitivity and the fitted direction of gravity, as Markdown lines."""
-    parts = ["## The recommended fit", "", f"**{c.recommendation.estimator}**: {c.recommendation.why}.", ""]
+    parts = ["## The recommended fit", "", f"**{c.choice.estimator}**: {c.choice.why}.", ""]
     parts += ["## Warnings", ""]
     parts += markdown_lines(c.trust.warnings)
     parts.append("")
@@ -236,8 +236,8 @@ def _trust_section(c: Comparison) -> list[str]:
             "",
             f"Cut-off per training trial from its spectrum [Hz]: {cut}"
             + (
-                f"; the fits use {c.recommendation.factor:g}× these (OLS and IV agree up to there)"
-                if c.recommendation.factor != 1
+                f"; the fits use {c.choice.factor:g}× these (OLS and IV agree up to there)"
+                if c.choice.factor != 1
                 else ""
             )
             + ". The torque of each fit went through the same zero-phase filter as the angles (parallel filtering); "
@@ -417,65 +417,16 @@ def to_terminal(c: Comparison) -> str:
                 "Consistency:\n" + consistency_table(c, brief=True).to_string(),
                 "Held-out nmse per joint:\n" + metrics_table(c, "nmse").to_string(float_format=lambda v: f"{v:.4g}"),
                 "\n".join(f"- {line}" for line in findings(c)),
-                recommended_line(c.recommendation),
+                recommended_line(c.choice),
             ]
         )
 
 
-def recommended_line(recommendation) -> str:
-    """The terminal's line on the recommended fit (`fitting.recommend.Recommendation`)."""
-    return f"Recommended fit: {recommendation.estimator} — {recommendation.why}."
+def recommended_line(choice) -> str:
+    """The terminal's line on the recommended fit (`fitting.recommend.Choice`)."""
+    return f"Recommended fit: {choice.estimator} — {choice.why}."
 
 
 def to_json(c: Comparison) -> dict:
-    """The `compare --json` payload (`docs/cli.md`): parameters, standard errors, consistency, metrics, warnings,
-    the same keys for every arm (the seed study where the paper's protocol ran, masses where π holds them)."""
-    ols = c.fits["ols"]
-    out = {
-        "parameters": c.parameters(),
-        "standard_errors": {key: fit.se_dict() for key, fit in c.fits.items()},
-        "consistency": c.consistency(),
-        "metrics": c.metrics,
-        "protocols": {p: PROTOCOLS[p] for p in c.metrics},
-        "fits": {key: fit.summary() for key, fit in c.fits.items()},
-        "physical_parameters": c.fits["nlp_physical"].details.get("physical", {}) if "nlp_physical" in c.fits else {},
-        "model": list(c.model.names),
-        "joints": list(c.joints),
-        "recommended": c.recommendation.estimator,
-        "recommended_why": c.recommendation.why,
-        "sources": {key: shown(path) for key, path in c.sources.items()},
-        "trials": {key: [shown(p) for p in paths] for key, paths in c.trials.items()},
-        "metrics_by_test_trial": {shown(k): v for k, v in c.by_test_trial.items()},
-        "warnings": warnings_json(c),
-        "cutoff_hz": c.trust.cutoffs,
-        "cutoff_factor": c.recommendation.factor,
-        "sensitivity": {f"ols_{f:g}x_cutoff": fit.as_dict() for f, fit in c.trust.sensitivity.items()},
-        "gravity_direction": c.trust.gravity_direction,
-        "reference": c.reference_label,
-        "within_10_percent_of_ols": c.within_ols(),
-        "masses": c.masses(),
-        "base_parameters": {"ols": ols.details["base_parameters"]} if "base_parameters" in ols.details else {},
-        "not_determined": {"ols": ols.details.get("not_determined", [])},
-        "ols_impossible_base_values": c.impossible_base_values(),
-        "standard_error_parts": {
-            key: {
-                part: {n: float(v) if np.isfinite(v) else None for n, v in zip(fit.names, fit.details[part])}
-                for part in ("se_noise", "bias_bound")
-            }
-            for key, fit in c.fits.items()
-            if "bias_bound" in fit.details
-        },
-    }
-    if c.seeds is not None:
-        out["seed_study"] = {
-            "seeds": c.seeds.labels,
-            "parameters": {key: v.tolist() for key, v in c.seeds.pi.items()},
-            "deviation_from_mean_percent": {
-                key: deviation_from_mean(c.seeds, key).to_numpy().tolist() for key in c.seeds.pi
-            },
-            "rmse_mean": c.seeds.mean("rmse"),
-            "rmse_std": c.seeds.std("rmse"),
-        }
-    if c.robot_statement:  # what the tool applied to read the robot (a URDF's angle offsets, notes)
-        out["robot"] = list(c.robot_statement)
-    return out
+    """The `compare --json` payload (`Comparison.as_json`)."""
+    return c.as_json()

@@ -56,7 +56,7 @@ def _robot(result: FleetResult, r: RobotResult) -> dict:
         "se": {name: _series(r.se[:, i]) for i, name in enumerate(result.names)},
     }
     if r.choice is not None:
-        rec = r.choice.recommendation
+        rec = r.choice.choice
         out.update(estimator=rec.estimator, recommended_why=rec.why, cutoff_factor=rec.factor, judged_on=r.choice.day)
     tested = {}
     for q, name in enumerate(result.tested_names):

@@ -113,8 +113,8 @@ def json_payload(result: IdentifyResult, seconds: float = float("nan")) -> dict:
     }
     payload["joints"] = list(result.joints)
     payload["warnings"] = [w.as_dict() for w in result.warnings]
-    payload["recommended"] = result.recommendation.estimator
-    payload["recommended_why"] = result.recommendation.why
+    payload["recommended"] = result.choice.estimator
+    payload["recommended_why"] = result.choice.why
     payload["metrics_by_test_trial"] = {shown(k): v for k, v in result.by_test_trial.items()}
     if result.robot_statement:  # what the tool applied to read the robot (a URDF's angle offsets, notes)
         payload["robot"] = list(result.robot_statement)
@@ -160,7 +160,7 @@ def terminal(result: IdentifyResult, out: Path, json_path: str | Path | None, se
         "95 % coverage of PBR + GMR: "
         + ", ".join(f"{name} {' / '.join(f'{c:.1%}' for c in v)}" for name, v in cov.items() if v),
     ]
-    rec = result.recommendation
+    rec = result.choice
     lines += [
         "",
         f"Recommended fit (cpbr): {rec.estimator} — {rec.why}.",

@@ -33,7 +33,7 @@ def readme_parts(
     paper, chrono, cross = P.get("paper"), P.get("chronological"), P.get("cross_trial")
     lines = _readme_intro(result, command, seconds)
     lines += _reproduction(result) if result.paper_robot else []
-    rec = result.recommendation
+    rec = result.choice
     lines += ["", "## The recommended fit", "", f"cpbr is **{rec.estimator}**: {rec.why}."]
     lines += ["", "## Warnings", ""]
     lines += markdown_lines(result.warnings)

@@ -1,41 +1,77 @@
-"""What `ident-opt export` writes, computed: the arm identified on the problem's training trials by the fit the
-tool stands behind (its consistent fit, or `--estimator`), realised exactly as rigid bodies
-(`ident_opt.arm.realise`), with what the data did not determine named. `ident_opt.shipping` writes it."""
+"""`ident-opt export`: the identified arm written as a robot description other tools load, from a fit that knows its
+arm (`fitting.recommend.ArmFit`, what `ident_opt.fit` returns: by default the recommended fit, the one `compare`
+reports), realised exactly as rigid bodies (`ident_opt.arm.realise`), with what the data did not determine named."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 
-from ident_opt.arm.base import Arm
 from ident_opt.arm.bodies import RobotDescription
-from ident_opt.data.dataset import Dataset
 from ident_opt.errors import InputError
-from ident_opt.fitting import estimators
-from ident_opt.fitting.fit import LinearFit
+from ident_opt.fitting.recommend import ArmFit
+from ident_opt.problem.spec import Problem
+from ident_opt.shipping.mjcf import write_mjcf
+from ident_opt.shipping.urdf import identified, write_urdf
+
+#: The formats, and the file ending each expects.
+FORMATS = {"urdf": ".urdf", "mjcf": ".xml"}
 
 
 @dataclass
 class Exported:
-    """The identified arm: its model, the fit (π with standard errors), the estimator's name, the rigid bodies
-    that realise π, and the training trials' files."""
+    """The identified arm as written: the fit, the rigid bodies that realise π, the sidecar record (every identified
+    value with its standard error, the problem, the trials, the model), the format, the files written and the notes
+    (what the data did not determine, how a grouped π was realised)."""
 
-    model: Arm
-    fit: LinearFit
-    estimator: str
+    fit: ArmFit
     description: RobotDescription
-    trials: list[str]
+    record: dict
+    format: str
+    files: list[Path] = field(default_factory=list)
+
+    @property
+    def notes(self) -> list[str]:
+        return list(self.description.notes)
+
+    def as_json(self) -> dict:
+        """The `export --json` payload: the sidecar record, the format, the files and the notes."""
+        return {**self.record, "format": self.format, "files": [str(p) for p in self.files], "notes": self.notes}
 
 
-def identified_arm(robot, trials: list[Dataset], estimator: str) -> Exported:
-    """The robot's model fitted by `estimator` on all `trials` (statistics add up; the torque filtered like the
-    regressor's inputs), realised as rigid bodies; an InputError when the fit fails or no physical robot has its
-    parameters (an OLS fit can have a negative mass: the message names the link)."""
-    model = robot.model()
-    try:
-        stats = estimators.statistics(model, trials, estimator, probes=True)
-        fit = estimators.fit_for(robot, estimator, stats, model)
-    except RuntimeError as exc:  # the solver failed: nothing to export
-        raise InputError(f"export: the {estimator} fit failed ({exc}); try another --estimator") from None
+def export_format(path: str | Path, format: str | None = None) -> str:
+    """The format of a description written to `path`: `format` when given, else read from the file's ending
+    (*.urdf: URDF; *.xml, *.mjcf: MuJoCo MJCF); an InputError otherwise."""
+    if format is not None:
+        if format not in FORMATS:
+            raise InputError(f"export: the format must be one of {', '.join(FORMATS)}, got {format!r}")
+        return format
+    suffix = Path(path).suffix.lower()
+    if suffix == ".urdf":
+        return "urdf"
+    if suffix in (".xml", ".mjcf"):
+        return "mjcf"
+    raise InputError(f"{path}: name it *.urdf (URDF) or *.xml / *.mjcf (MuJoCo MJCF)")
+
+
+def export(problem: Problem, fit: ArmFit, path: str | Path, format: str | None = None) -> Exported:
+    """`ident-opt export`: write the arm of `problem` with the parameters of `fit` (`ident_opt.fit`) to `path` as a
+    URDF with its JSON sidecar `path.json` (`format` "urdf", or a path ending in .urdf) or a MuJoCo MJCF ("mjcf",
+    .xml, .mjcf). A π no physical robot has (e.g. an OLS fit's negative mass) raises `InputError` naming the link."""
+    problem.require("export")
+    fmt = export_format(path, format)
+    model = fit.model
     undetermined = fit.details.get("not_determined", [])
-    description = robot.bodies(model, fit.pi, undetermined=undetermined)
-    return Exported(model, fit, estimator, description, [t.source for t in trials])
+    description = problem.robot.bodies(model, fit.pi, undetermined=undetermined)
+    record = {
+        **identified(model.names, fit.pi, fit.se, fit.choice.estimator if fit.choice is not None else fit.method),
+        "problem": problem.name,
+        "trials": list(fit.trials),
+        "model": {"extensions": list(model.extensions), **model.settings()},
+        "not_determined": undetermined,
+    }
+    if fmt == "urdf":
+        files = list(write_urdf(description, path, record))
+    else:
+        files = [write_mjcf(description, path)]
+    return Exported(fit, description, record, fmt, files)

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt.arm.base import Arm
-from ident_opt.data.dataset import Dataset
+from ident_opt.data.dataset import Dataset, concat
 from ident_opt.errors import InputError
-from ident_opt.fitting import estimators
+from ident_opt.fitting.recommend import Choice
 from ident_opt.models.gmr import GMR
 from ident_opt.models.hybrid import features, make_gmr
 from ident_opt.problem.spec import ResidualSpec
@@ -45,35 +45,34 @@ class Shipped:
 def prepare(
     robot,
     model: Arm,
-    train: Dataset | None,
+    trials: list[Dataset],
     residual: ResidualSpec,
-    estimator: str,
+    choice: Choice | None,
     components: int | None = None,
     saved: dict | None = None,
 ) -> Shipped:
-    """π and the GMR: taken from `saved` (`read_parameters`) where it has them, else identified by `estimator`
-    (with the options `robot`'s description gives it) / fitted with the problem's `residual` settings
-    (`components`: a fixed K) on `train`."""
+    """π and the GMR: taken from `saved` (`read_parameters`) where it has them, else π the chosen fit on all
+    `trials` (`Choice.fit`: the recommended one is the π `compare` reports) / the GMR fitted with the problem's
+    `residual` settings (`components`: a fixed K) on the trials pooled."""
     if saved is not None:
         pi, label = saved_vector(saved, model), f"{saved['estimator']} (loaded from {saved['path']})"
         status = saved.get("estimator_status", "")
     else:
-        pi, label, status = identify(robot, model, train, estimator)
+        pi, label, status = identify(robot, model, trials, choice)
     if saved and saved.get("gmr"):
         gmr = gmr_from_saved(saved["gmr"], model.n_joints)
     else:
-        gmr = fit_residual(model, pi, train, residual, components)
+        gmr = fit_residual(model, pi, concat(trials), residual, components)
     return Shipped(model, pi, label, status, gmr)
 
 
-def identify(robot, model: Arm, train: Dataset, estimator: str) -> tuple[np.ndarray, str, str]:
-    """(π, estimator name, solver status) from the training samples, by the chosen estimator."""
-    stats = estimators.statistics(model, [train], estimator)
+def identify(robot, model: Arm, trials: list[Dataset], choice: Choice) -> tuple[np.ndarray, str, str]:
+    """(π, estimator name, solver status) on the training trials, by the chosen fit (`Choice.fit`)."""
     try:
-        fit = estimators.fit_for(robot, estimator, stats, model)
+        fit = choice.fit(robot, model, trials)
     except RuntimeError as exc:  # the solver failed: nothing consistent to generate
         raise InputError(f"codegen: the physically consistent fit failed ({exc}); try --estimator ols") from None
-    return fit.pi, estimator, STATUS.get(fit.method, fit.status)
+    return fit.pi, choice.estimator, STATUS.get(fit.method, fit.status)
 
 
 def fit_residual(model: Arm, pi: np.ndarray, train: Dataset, spec: ResidualSpec, components: int | None) -> GMR:

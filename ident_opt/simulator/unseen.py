@@ -318,7 +318,7 @@ def savgol(t: np.ndarray, q: np.ndarray, window: int) -> tuple[np.ndarray, np.nd
 def derived(trial, pipeline: str, robot):
     """`trial` (a `SimTrial`) as the `pipeline` logger hands it over, as a `Dataset` read the way the CLI reads
     it (derivatives missing: the loader estimates them at the "auto" cut-off and leaves out the edges)."""
-    from ident_opt.data.dataset import load_dataset
+    from ident_opt.data.loader import load_dataset
     from ident_opt.problem.spec import DataSpec
 
     ds = trial.dataset()

@@ -1,0 +1,485 @@
+"""Reading a trial: a file (CSV, Excel, Parquet, a ROS 2 bag) or arrays, validated and with its missing derivatives
+estimated, into a `Dataset`.
+
+The file format is `docs/data-format.md`: one row per sample, SI units, columns t, q1 … qn, optional dq/ddq, and
+either joint torques tau1 … taun or motor currents i1 … in. Every fault is reported as an `InputError` naming the
+file (or the array), the column and the first offending row; input files are only read. Arrays (`from_arrays`) go
+through the same checks and the same derivative pipeline as a file's columns.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ident_opt import outputs
+from ident_opt.arm.base import Robot
+from ident_opt.arm.planar import PI_NAMES
+from ident_opt.columns import channel_names, locate
+from ident_opt.data import rosbag
+from ident_opt.data.dataset import Dataset, convert
+from ident_opt.data.derivatives import (
+    choose_cutoff,
+    estimate_derivatives,
+    instrument_derivatives,
+    lowpass,
+    resolve_cutoff,
+    settled,
+)
+from ident_opt.errors import InputError, excerpt
+from ident_opt.problem.spec import DataSpec
+from ident_opt.warnings import ResultWarning
+
+#: A standard joint column's name: its signal and its joint number (1-based).
+JOINT_COLUMN = re.compile(r"(q|dq|ddq|tau|i)(\d+)")
+#: Limits beyond which a value is almost surely in the wrong unit (degrees, encoder counts, mA ...).
+PLAUSIBLE = {"q": 100.0, "dq": 1e3, "ddq": 1e5, "tau": 1e5, "i": 1e3}
+#: Sampling rates [Hz] a robot log can have: outside, t is almost surely not in seconds.
+PLAUSIBLE_RATE_HZ = (0.1, 1e5)
+
+
+def _read(path: Path, spec: DataSpec) -> pd.DataFrame:
+    """The raw table of a data file, or of a ROS 2 bag (`ident_opt.data.rosbag`: already in the data format's names)."""
+    outputs.declare_inputs([path])
+    if path.exists() and rosbag.is_bag(path):
+        return rosbag.read_bag(path, spec.ros_topic, spec.ros_joints)
+    return _read_table(path, spec)
+
+
+def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
+    """The raw table of a CSV / Parquet / Excel file, every cell as read (no conversion yet)."""
+    if not path.exists():
+        raise InputError(f"{path}: data file not found")
+    if not path.is_file():
+        raise InputError(f"{path}: not a file")
+    name = path.name.lower()
+    header = 0 if spec.header else None
+    try:
+        if name.endswith(".csv") or name.endswith(".csv.gz"):
+            frame = pd.read_csv(path, header=header, sep=",", dtype=str, keep_default_na=False, skipinitialspace=True)
+        elif name.endswith(".parquet"):
+            frame = pd.read_parquet(path)
+            if not spec.header and not _standard_names(frame.columns, spec):
+                frame.columns = range(frame.shape[1])
+        elif name.endswith(".xlsx"):
+            frame = pd.read_excel(path, sheet_name=spec.sheet or 0, header=header)
+        else:
+            raise InputError(
+                f"{path}: unsupported file type; ident-opt reads .csv, .csv.gz, .parquet, .xlsx and ROS 2 bags"
+            )
+    except InputError:
+        raise
+    except pd.errors.EmptyDataError:
+        raise InputError(f"{path}: the file is empty") from None
+    except (ValueError, OSError, EOFError, UnicodeDecodeError, KeyError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{path}: cannot read the file ({first})") from None
+    except Exception as exc:  # pyarrow and openpyxl raise their own types for corrupt files
+        raise InputError(f"{path}: cannot read the file ({type(exc).__name__}: {exc})") from None
+    if frame.shape[0] == 0:
+        raise InputError(f"{path}: the file has no data rows")
+    return frame
+
+
+def _standard_names(labels, spec: DataSpec) -> bool:
+    """Whether a table's own column names are the data format's (t and q1 among them) and may be read so
+    (`[data] standard_by_name`, the default)."""
+    return spec.standard_by_name and {"t", "q1"} <= {str(c).strip() for c in labels}
+
+
+def _header_row(frame: pd.DataFrame, spec: DataSpec) -> tuple[pd.DataFrame, DataSpec]:
+    """A file read without a header row (`[data] header = false`) whose first row has the standard names (t, q1) is
+    a file with a header after all (unless `[data] standard_by_name = false`): that row becomes the header. A
+    Parquet file always names its columns: standard names there are read as such too."""
+    if spec.header or not spec.standard_by_name:
+        return frame, spec
+    if _standard_names(frame.columns, spec):
+        return frame, replace(spec, header=True)
+    first = [str(v).strip() for v in frame.iloc[0]]
+    if not _standard_names(first, spec):
+        return frame, spec
+    body = frame.iloc[1:].reset_index(drop=True)
+    body.columns = first
+    return body, replace(spec, header=True)
+
+
+def _check_unique_header(frame: pd.DataFrame, path: Path, spec: DataSpec) -> None:
+    """A column name twice in the header is ambiguous (pandas would silently rename the second 'q1.1')."""
+    if not spec.header or not path.name.lower().endswith((".csv", ".csv.gz")):
+        return
+    try:
+        names = [str(c).strip() for c in pd.read_csv(path, header=None, nrows=1, dtype=str).iloc[0]]
+    except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError):
+        return  # the full read succeeded; a header this odd is judged by the columns found
+    seen: dict[str, int] = {}
+    for index, name in enumerate(names):
+        if name in seen:
+            raise InputError(
+                f"{path}: column '{name}' appears twice in the header (columns {seen[name]} and {index}, "
+                "0-based); rename one of them"
+            )
+        seen[name] = index
+
+
+def _locate(
+    frame: pd.DataFrame, spec: DataSpec, path: Path, n_joints: int
+) -> tuple[dict[str, object], dict[str, tuple[float, float]]]:
+    """({data-format name: its column label in `frame`}, the conversions that apply) by the rules every reader of
+    the problem's data shares (`columns.locate`)."""
+    header = [str(c) for c in frame.columns] if spec.header else None
+    found, conversions = locate(header, frame.shape[1], spec, n_joints, str(path))
+    return {name: frame.columns[i] for name, i in found.items()}, conversions
+
+
+def _row_label(path: Path, row: int, spec: DataSpec) -> str:
+    """Where 0-based data row `row` is, as the user finds it: a CSV's line, a ROS 2 bag's message index."""
+    if path.name.lower().endswith((".csv", ".csv.gz")):
+        return f"data row {row + 1} (line {row + 1 + int(spec.header)} of the file)"
+    if path.exists() and rosbag.is_bag(path):
+        return rosbag.message_label(row, spec.ros_topic)
+    return f"data row {row + 1}"
+
+
+def _numeric(
+    frame: pd.DataFrame, label: object, name: str, path: Path, spec: DataSpec, drop_invalid: bool, bad: np.ndarray
+) -> np.ndarray:
+    """Column `label` as floats; non-numeric or non-finite cells are an error or (drop_invalid) marked."""
+    raw = frame[label]
+    values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
+    invalid = ~np.isfinite(values)
+    if invalid.any():
+        if drop_invalid:
+            bad |= invalid
+        else:
+            row = int(np.argmax(invalid))
+            cell = raw.iloc[row]
+            empty = cell is None or (isinstance(cell, str) and not cell.strip())  # a NaN read as a number is a value
+            what = "an empty cell" if empty else f"the value {excerpt(cell)}"
+            raise InputError(
+                f"{path}: column '{name}' has {what} at {_row_label(path, row, spec)}; "
+                "every used cell must be a finite number (use --drop-invalid to skip such rows)"
+            )
+    return values
+
+
+def _beyond(name: str, n_joints: int) -> bool:
+    """Whether `name` is a standard joint column (q7, tau8, …) of a joint beyond the arm's `n_joints`."""
+    match = JOINT_COLUMN.fullmatch(name)
+    return match is not None and int(match.group(2)) > n_joints
+
+
+def _unread(name: str, spec: DataSpec) -> str:
+    """Why column `name` is missing when the problem leaves it unread on purpose ("" otherwise), for messages."""
+    return f" (the problem leaves it unread: [data.columns] {name} = false)" if name in spec.ignored else ""
+
+
+def _check_columns(cols: dict[str, object], frame: pd.DataFrame, path: Path, n_joints: int, spec: DataSpec) -> str:
+    """Required columns present, signals complete per joint, exactly one of torques/currents: its kind."""
+    have = ", ".join(map(str, frame.columns[:30]))
+    names = channel_names(n_joints)
+    used = {str(label) for label in cols.values()}
+    extra = [str(c) for c in frame.columns if str(c) not in used and _beyond(str(c), n_joints)]
+    if extra:
+        raise InputError(
+            f"{path}: the file has columns of joints the arm does not have ({', '.join(extra[:8])}): the problem's "
+            f"arm has {n_joints} joints; check the problem file's [robot] joints, or drop those columns"
+        )
+    missing = [c for c in ("t", *names["q"]) if c not in cols]
+    if missing:
+        which = f"column '{missing[0]}' is" if len(missing) == 1 else f"columns {', '.join(map(repr, missing))} are"
+        raise InputError(
+            f"{path}: required {which} missing; the file has: {have}. "
+            "Map foreign names with [data.columns] in the problem file."
+        )
+    together = "come in pairs" if n_joints == 2 else f"come for all {n_joints} joints or none"
+    present = {kind: [c for c in names[kind] if c in cols] for kind in ("tau", "i")}
+    for kind, group in present.items():
+        if 0 < len(group) < n_joints:
+            missing = next(c for c in names[kind] if c not in group)
+            raise InputError(
+                f"{path}: column '{missing}' is missing{_unread(missing, spec)}; torques ({', '.join(names['tau'])}) "
+                f"or currents ({', '.join(names['i'])}) {together}; the file has: {have}"
+            )
+    if present["tau"] and present["i"]:
+        raise InputError(
+            f"{path}: the file has both torques ({', '.join(names['tau'])}) and currents ({', '.join(names['i'])}); "
+            "keep one set, or leave the other unread in [data.columns] (e.g. "
+            f"{', '.join(f'{c} = false' for c in names['i'])} to read the torques)"
+        )
+    if not present["tau"] and not present["i"]:
+        raise InputError(
+            f"{path}: neither torques ({', '.join(names['tau'])}) nor currents ({', '.join(names['i'])}) found; "
+            f"the file has: {have}. Map foreign names with [data.columns] in the problem file."
+        )
+    for kind in ("dq", "ddq"):
+        group = [c for c in names[kind] if c in cols]
+        if 0 < len(group) < n_joints:
+            missing = next(c for c in names[kind] if c not in group)
+            raise InputError(
+                f"{path}: column '{missing}' is missing{_unread(missing, spec)}; {' and '.join(names[kind])} {together}"
+            )
+    return "tau" if present["tau"] else "i"
+
+
+def _non_increasing(t: np.ndarray, bad: np.ndarray) -> np.ndarray:
+    """Rows (not already `bad`) that break the strict increase of t: every sample not after the last kept."""
+    breaks = np.zeros(len(t), dtype=bool)
+    last = -np.inf
+    for k, tk in enumerate(t):
+        if bad[k]:
+            continue
+        if tk > last:
+            last = tk
+        else:
+            breaks[k] = True
+    return breaks
+
+
+def _check_time(t: np.ndarray, path: Path, spec: DataSpec) -> None:
+    """t strictly increasing, else an error naming the first row where it repeats or goes back."""
+    steps = np.diff(t)
+    if (steps <= 0).any():
+        row = int(np.argmax(steps <= 0)) + 1
+        kind = "repeats" if steps[row - 1] == 0 else "goes back"
+        raise InputError(
+            f"{path}: column 't' is not strictly increasing: it {kind} at "
+            f"{_row_label(path, row, spec)} ({excerpt(float(t[row - 1]))} then {excerpt(float(t[row]))})"
+        )
+
+
+def _check_rate(t: np.ndarray, path: Path) -> None:
+    """A sampling rate outside `PLAUSIBLE_RATE_HZ` means t is not in seconds (ms, µs, sample counts)."""
+    rate = 1.0 / float(np.median(np.diff(t)))
+    low, high = PLAUSIBLE_RATE_HZ
+    if not low <= rate <= high:
+        raise InputError(
+            f"{path}: column 't' gives a sampling rate of {rate:.3g} Hz, outside [{low:g}, {high:g}] Hz: "
+            "is t in seconds? Use --allow-implausible to proceed anyway."
+        )
+
+
+def _check_plausible(
+    signals: dict[str, np.ndarray], keep: np.ndarray, path: Path, spec: DataSpec, estimated: bool = False
+) -> None:
+    """Every signal within `PLAUSIBLE` for its unit, else an error naming column and row."""
+    for kind, arr in signals.items():
+        over = np.abs(arr) > PLAUSIBLE[kind]
+        if over.any():
+            row, joint = np.unravel_index(int(np.argmax(over)), over.shape)
+            original_row = int(np.flatnonzero(keep)[row])
+            hint = " (degrees or encoder counts?)" if kind == "q" else " (wrong unit?)"
+            if estimated:
+                hint = " (estimated from q and t: is t in seconds, q in radians?)"
+            raise InputError(
+                f"{path}: column '{kind}{joint + 1}' has the implausible value {excerpt(float(arr[row, joint]))} at "
+                f"{_row_label(path, original_row, spec)}: |{kind}| > {PLAUSIBLE[kind]:g} in SI units"
+                f"{hint}. Use --allow-implausible to proceed anyway."
+            )
+
+
+def _current_to_torque(robot: Robot, path: Path) -> np.ndarray:
+    """Joint-side torque per ampere per joint [N m/A] (torque constant × gear ratio); an error naming every
+    joint's table that lacks one of the two."""
+    k = [j.current_to_torque for j in robot.joints]
+    lacking = [
+        f"[robot.{table}] gives no "
+        + " and no ".join(key for key in ("torque_constant", "gear_ratio") if getattr(joint, key, None) is None)
+        for table, joint, v in zip(robot.joint_tables, robot.joints, k)
+        if v is None
+    ]
+    if lacking:
+        torques = ", ".join(channel_names(robot.n_joints)["tau"])
+        raise InputError(
+            f"{path}: the file logs motor currents, but {'; '.join(lacking)}: a current becomes a joint torque as "
+            f"current × torque_constant × gear_ratio, so every joint needs both; add them, or log joint torques "
+            f"({torques})"
+        )
+    return np.array(k, dtype=float)
+
+
+def _extra_columns(frame: pd.DataFrame, cols: dict[str, object], keep: np.ndarray) -> pd.DataFrame:
+    """The columns the models do not use (strain, temperature, ...), numeric, on the kept rows."""
+    used = set(cols.values())
+    extra = frame[[c for c in frame.columns if c not in used]][keep].reset_index(drop=True)
+    extra.columns = [f"col{c}" if isinstance(c, int) else str(c) for c in extra.columns]
+    return extra.apply(pd.to_numeric, errors="coerce") if len(extra.columns) else extra
+
+
+def load_dataset(
+    path: str | Path,
+    spec: DataSpec,
+    robot: Robot,
+    *,
+    allow_implausible: bool = False,
+    drop_invalid: bool = False,
+    min_samples: int = len(PI_NAMES),
+) -> Dataset:
+    """Read, validate and complete one trial (see the module docstring); never modifies the file.
+
+    Joint signals are (N, n) arrays with n = the robot's number of joints; torque [N m] is the logged
+    torque, or current [A] × torque constant × gear ratio per joint.
+    """
+    path = Path(path)
+    return _complete(_read(path, spec), path, spec, robot, allow_implausible, drop_invalid, min_samples)
+
+
+def from_arrays(
+    t: np.ndarray,
+    q: np.ndarray,
+    tau: np.ndarray | None = None,
+    spec: DataSpec | None = None,
+    robot: Robot | None = None,
+    *,
+    current: np.ndarray | None = None,
+    dq: np.ndarray | None = None,
+    ddq: np.ndarray | None = None,
+    source: str = "arrays",
+    allow_implausible: bool = False,
+    min_samples: int = len(PI_NAMES),
+) -> Dataset:
+    """A trial from arrays: `t` (N,) [s], `q` (N, n) [rad] and either `tau` (N, n) [N m] or `current` (N, n) [A],
+    optionally `dq` [rad/s] and `ddq` [rad/s²], in SI units and in the convention of the problem's data files
+    (`Robot.column_map` applies; `[data.columns]` does not: arrays come by role, not by column). They go through
+    the loader's own checks and derivative pipeline (`spec.derivative_cutoff_hz`: the same cut-off rule, filters and
+    edge trimming as a file); `source` names them in messages and reports."""
+    n = robot.n_joints
+    columns = {"t": np.asarray(t, dtype=float).reshape(-1)}
+    given = {"q": q, "dq": dq, "ddq": ddq, "tau": tau, "i": current}
+    for kind, values in given.items():
+        if values is None:
+            continue
+        a = np.asarray(values, dtype=float)
+        a = a.reshape(-1, 1) if a.ndim == 1 and n == 1 else a
+        if a.ndim != 2 or a.shape != (len(columns["t"]), n):
+            raise InputError(
+                f"{source}: {kind} must be an array of shape ({len(columns['t'])}, {n}) (one column per joint of "
+                f"{robot.described_as}), got {a.shape}"
+            )
+        columns.update({f"{kind}{j + 1}": a[:, j] for j in range(n)})
+    if (tau is None) == (current is None):
+        raise InputError(f"{source}: give the joint torques (tau) or the motor currents (current), one of the two")
+    frame = pd.DataFrame(columns)
+    by_role = DataSpec(derivative_cutoff_hz=(spec or DataSpec()).derivative_cutoff_hz)
+    return _complete(frame, Path(source), by_role, robot, allow_implausible, False, min_samples)
+
+
+def _complete(
+    frame: pd.DataFrame,
+    path: Path,
+    spec: DataSpec,
+    robot: Robot,
+    allow_implausible: bool,
+    drop_invalid: bool,
+    min_samples: int,
+) -> Dataset:
+    """The columns of `frame` (read from `path`) located, validated, converted, with derivatives estimated where
+    missing: the one pipeline of files and arrays."""
+    n_joints = len(robot.joints)
+    names = channel_names(n_joints)
+    frame, spec = _header_row(frame, spec)
+    _check_unique_header(frame, path, spec)
+    cols, conversions = _locate(frame, spec, path, n_joints)
+    load_kind = _check_columns(cols, frame, path, n_joints, spec)
+
+    bad = np.zeros(len(frame), dtype=bool)
+    values = {name: _numeric(frame, label, name, path, spec, drop_invalid, bad) for name, label in cols.items()}
+    # Converted first (a mapped t may be scaled by -1): every check below sees what the models will see.
+    # A URDF's angle zero and axis sign are the file's, not ident-opt's: the robot maps them (urdf_planar).
+    to_tool = robot.column_map
+    for name, v in values.items():
+        values[name] = convert(convert(v, *conversions.get(name, (1.0, 0.0))), *to_tool.get(name, (1.0, 0.0)))
+    if drop_invalid:  # rows that break strict increase of t are dropped too (the first of a run is kept)
+        bad |= _non_increasing(values["t"], bad)
+    keep = ~bad
+    values = {name: v[keep] for name, v in values.items()}
+    t = values["t"]
+    _check_time(t, path, spec)
+    n = len(t)
+    if n < max(min_samples, 2):
+        raise InputError(f"{path}: only {n} valid samples, fewer than the {max(min_samples, 2)} this command needs")
+
+    signals = {kind: np.column_stack([values[c] for c in group]) for kind, group in names.items() if group[0] in values}
+    if not allow_implausible:
+        _check_rate(t, path)
+        _check_plausible(signals, keep, path, spec)
+    q = signals["q"]
+    tau = signals["tau"] if load_kind == "tau" else signals["i"] * _current_to_torque(robot, path)
+
+    notes: list[str] = []
+    if "dq" in signals and "ddq" in signals:
+        dq, ddq, how = signals["dq"], signals["ddq"], "given"
+    else:
+        cutoff, rule = resolve_cutoff(spec.derivative_cutoff_hz, t, q)
+        dq, ddq, how = estimate_derivatives(t, q, cutoff, signals.get("dq"))
+        how += rule
+        if "ddq" in signals:  # logged accelerations are kept: only the velocities were missing
+            ddq, how = signals["ddq"], how + " (accelerations as logged)"
+        notes.append(f"derivatives {how}")
+        if not allow_implausible:  # estimated from q and t: a wrong time unit shows here first
+            _check_plausible({"dq": dq, "ddq": ddq}, keep, path, spec, estimated=True)
+    dropped = int(bad.sum())
+    if dropped:
+        notes.append(f"dropped {dropped} invalid row(s)")
+    extra = _extra_columns(frame, cols, keep)
+    cutoff_hz = None if how == "given" else cutoff
+    tau_filtered = None if cutoff_hz is None else lowpass(t, tau, cutoff_hz)
+    # Logged derivatives carry the logger's own filters; the instruments come from q at the cut-off the data support.
+    instruments = instrument_derivatives(t, q, cutoff_hz if cutoff_hz is not None else choose_cutoff(t, q))
+    trial = Dataset(str(path), t, q, dq, ddq, tau, extra, how, dropped, notes, cutoff_hz, tau_filtered, instruments)
+    return trial if cutoff_hz is None else _settled(trial, path, min_samples)
+
+
+def _settled(trial: Dataset, path: Path, min_samples: int) -> Dataset:
+    """The trial without the samples near its ends (and near gaps) whose estimated derivatives still carry the
+    zero-phase filter's edge error (`derivatives.settled`), with a note saying how many went."""
+    keep = settled(trial.t, trial.cutoff_hz)
+    if keep.sum() < max(min_samples, 2):
+        raise InputError(
+            f"{path}: only {int(keep.sum())} samples lie a filter period (1/{trial.cutoff_hz:.3g} Hz) away from the "
+            "trial's ends and gaps, where derivatives can be estimated; this command needs "
+            f"{max(min_samples, 2)}: record a longer trial, or log dq and ddq"
+        )
+    if keep.all():
+        return trial
+    cut = trial.subset(keep)
+    cut.notes.append(
+        f"{int((~keep).sum())} sample(s) within {1 / trial.cutoff_hz:.3g} s of the trial's ends or gaps left out: "
+        "the zero-phase filter's edge error is still in their derivatives there"
+    )
+    return cut
+
+
+def held_out_overlap(training: Sequence[Dataset], testing: Sequence[Dataset]) -> list[ResultWarning]:
+    """A warning per held-out trial that is also a training trial (the same file, or a copy of the same bytes): its
+    scores then measure the fit on its own data. Every command that scores held-out trials makes them part of its
+    result (terminal, report, JSON `warnings`)."""
+    found = []
+    for held in testing:
+        same = next((t for t in training if _same_trial(Path(t.source), Path(held.source))), None)
+        if same is not None:
+            found.append(
+                ResultWarning(
+                    "held_out_is_training",
+                    f"{held.source} (held out) is the training trial {same.source}: its scores measure the fit on "
+                    "its own data, not on unseen data; hold out another trial",
+                )
+            )
+    return found
+
+
+def _same_trial(a: Path, b: Path) -> bool:
+    """Whether two trial paths are one file (also through links) or two files with the same bytes."""
+    try:
+        if os.path.samefile(a, b):
+            return True
+        if a.is_file() and b.is_file() and a.stat().st_size == b.stat().st_size:
+            return a.read_bytes() == b.read_bytes()
+    except OSError:
+        pass
+    return False
