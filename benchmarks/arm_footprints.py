@@ -27,7 +27,7 @@ from confusion_arms import ARMS, draws, places, reference
 from ident_opt.data.derivatives import lowpass
 from ident_opt.diagnosis import hidden, signals
 from ident_opt.diagnosis.arm_fit import ArmContext, link_side
-from ident_opt.diagnosis.loop import at_rest
+from ident_opt.diagnosis.split import at_rest
 from ident_opt.effects import stribeck
 from ident_opt.problem import load_problem
 from ident_opt.report import record

@@ -16,7 +16,7 @@ of all three arms were looked at once, for a rule not kept); seed 500's first 27
 reported once, not tuned on (seed 600's table: git history, bc1ddb8); seed 700 is not tuned on
 (`--first-seed 700 --out results/diagnosis/confusion_arms_unseen.md`), but its misses have been read since its first
 table (issue 27's closing notes), and so have seed 800's (`--out results/diagnosis/confusion_arms_seed800.md`: its
-KUKA trials that never moved joint 2 in the held-out part gave the split rule of `diagnosis.loop.held_out`); seed
+KUKA trials that never moved joint 2 in the held-out part gave the split rule of `diagnosis.split.held_out`); seed
 900 (`--out results/diagnosis/confusion_arms_seed900.md`) was first run after the changes it then measured, and its
 misses have been read since (they gave the torque scale's resolution floor); seed 1000
 (`--out results/diagnosis/confusion_arms_seed1000.md`) was first run at the final code of the first 2026-11-28 stop,

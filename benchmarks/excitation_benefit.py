@@ -38,7 +38,7 @@ from tqdm import tqdm
 from ident_opt.columns import channel_names
 from ident_opt.data.dataset import Dataset
 from ident_opt.data.loader import load_dataset
-from ident_opt.diagnosis.loop import at_rest
+from ident_opt.diagnosis.split import at_rest
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
 from ident_opt.excitation.design import Setup
@@ -214,7 +214,7 @@ def run(
             for label, x in (("design", design.x), ("random", x_random)):
                 data, pi_true = make(problem, setup, x, seed, Path(tmp))
                 row[f"error_{label}"] = trial_error(setup, data, pi_true)
-                # The reading of the last proof's "rests 0" columns: slow speeds as rest (`diagnosis.loop.at_rest`).
+                # The reading of the last proof's "rests 0" columns: slow speeds as rest (`diagnosis.split.at_rest`).
                 row[f"error_{label}_rests0"] = trial_error(setup, at_rest(data), pi_true)
                 crit = excitation.criteria(setup, data.q, data.dq, data.ddq)
                 row[f"log_det_{label}"], row[f"cond_{label}"] = crit["log_det"], crit["cond"]
@@ -284,7 +284,7 @@ def markdown(data: dict) -> str:
             f"{label} seeds ({len(v['seeds'])}): median error {v['median_error_design']:.4g} (design) vs "
             f"{v['median_error_random']:.4g} (random): **{v['ratio']:.2f}×** lower with the design; the design is "
             f"better on {v['design_better_on']} of {len(v['seeds'])} seeds (with slow speeds read as rest, "
-            f'`diagnosis.loop.at_rest`, as the last proof\'s "rests 0" columns: {v["ratio_rests0"]:.2f}×).'
+            f'`diagnosis.split.at_rest`, as the last proof\'s "rests 0" columns: {v["ratio_rests0"]:.2f}×).'
             for label, v in (("Unseen", u), ("Development", d))
             if v["seeds"]
         ),

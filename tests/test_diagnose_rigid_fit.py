@@ -15,7 +15,9 @@ import pytest
 
 from ident_opt.data.loader import load_dataset
 from ident_opt.diagnosis import candidates as cands
-from ident_opt.diagnosis import loop, signals
+from ident_opt.diagnosis import signals
+from ident_opt.diagnosis.planar_engine import nominal_fit, weights_of
+from ident_opt.diagnosis.split import prepare
 from ident_opt.fitting import estimators
 from ident_opt.simulator import simulate_trial
 
@@ -35,21 +37,21 @@ def angles(physical_problem, tmp_path_factory):
     left are compared as they are: no mean to take out, no velocity held at 0)."""
     spec = replace(physical_problem.data, header=True, columns={})
     path = _angles_only(physical_problem.robot, tmp_path_factory.mktemp("rigid") / "t.csv", seed=31)
-    ds = loop.prepare(load_dataset(path, spec, physical_problem.robot), "auto")
+    ds = prepare(load_dataset(path, spec, physical_problem.robot), "auto")
     return ds.subset(np.nonzero(np.all(signals.rest_runs(ds.dq) < 0, axis=1))[0])
 
 
 @pytest.mark.parametrize("name", ["ols", "constrained", "robust"])
 def test_the_rigid_fit_is_the_estimators_own_fit_and_a_candidate_without_columns_is_it(physical_problem, angles, name):
-    """`loop.nominal_fit` equals the registry's fit on statistics built by the registry itself from the same samples
-    (instruments included), and a family with no column refitted against it returns the same π to round-off."""
+    """`planar_engine.nominal_fit` equals the registry's fit on statistics built by the registry itself from the same
+    samples (instruments included), and a family with no column refitted against it returns the same π to round-off."""
     robot = physical_problem.robot
     train = angles
     rest = signals.rest_runs(train.dq)
     assert np.all(rest < 0) and train.n > 1000, "no rest stretch left"
-    weights = loop.weights_of(train)
+    weights = weights_of(train)
     ctx = cands.Context(robot, train, train, weights, {}, 1.0 / train.rate_hz, rest, (0.0, 0.0), name)
-    pi = loop.nominal_fit(ctx)
+    pi = nominal_fit(ctx)
 
     model = cands.NOMINAL
     same = replace(train, tau_filtered=None)  # the registry fits `tau_fit`: here the diagnosis's low-passed τ

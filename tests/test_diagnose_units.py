@@ -7,7 +7,7 @@ import pytest
 
 from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import linear, scoring, signals
-from ident_opt.diagnosis.loop import at_rest, compared_warnings, split
+from ident_opt.diagnosis.split import at_rest, compared_warnings, split
 from ident_opt.effects.elasticity import ELASTIC_BAND_HZ
 
 
@@ -328,7 +328,7 @@ def test_an_auto_cutoff_filters_the_torque_at_the_cutoff_the_trial_was_read_with
     cut-off is used, as if it had been given as a number (this raised a TypeError before)."""
     from dataclasses import replace
 
-    from ident_opt.diagnosis.loop import prepare
+    from ident_opt.diagnosis.split import prepare
 
     rng = np.random.default_rng(0)
     t = np.arange(2000) * 0.002
@@ -418,7 +418,8 @@ def test_a_family_that_contains_another_cause_must_clear_the_margin_against_it_t
     also removes the margin of the armature fit's MSE; a cause it does not contain is not compared."""
     from types import SimpleNamespace
 
-    from ident_opt.diagnosis.loop import Fitted, _nested
+    from ident_opt.diagnosis.result import Fitted
+    from ident_opt.diagnosis.rounds import _nested
 
     def fitted(cause: str, mse, common: float, nests=(), baseline="datasheet") -> Fitted:
         family = SimpleNamespace(cause=cause, nests=nests)

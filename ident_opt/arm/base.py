@@ -219,10 +219,11 @@ class Robot(Protocol):
     described_as: str
     #: Whether the paper's own views apply (its shuffled protocol, its tables): the planar two-link arm's.
     paper_views: bool
-    #: Which simulator and diagnosis serve it: "planar" (the two-link closed form's own, tuned on the MERIt trials:
-    #: grouped π, flexible links, the paper's trajectories) or "arm" (any n joints, through `Arm` and `Robot` alone:
-    #: `simulator.arm_plant`, `diagnosis.arm_fit`).
-    engine: str
+    #: Which kind of arm it is, for the features with one implementation per kind (the simulator's plant, the
+    #: diagnosis's engine): "planar" (the two-link closed form, tuned on the MERIt trials: grouped π, flexible
+    #: links, the paper's trajectories) or "chain" (n joints from a URDF, through `Arm` and `Robot` alone). Read by
+    #: `arm.kinds.ByKind.of` only: nothing else asks.
+    kind: str
 
     @property
     def column_map(self) -> Mapping[str, tuple[float, float]]:

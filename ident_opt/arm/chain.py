@@ -441,7 +441,7 @@ class ChainRobot:
     #: The fit used downstream unless told otherwise: consistent and plausible.
     default_estimator = "consistent"
     #: The simulator and the diagnosis that serve it: those of any arm, through the `Arm` interface alone.
-    engine = "arm"
+    kind = "chain"
     model_note = None
     paper_views = False
     #: The nominal model's key in `datasheets()`.

@@ -127,7 +127,7 @@ class PlanarRobot:
     default_estimator = "constrained"
     #: The simulator and the diagnosis that serve it: the planar two-link arm's own, tuned on the MERIt trials
     #: (its datasheet conventions, flexible links, trajectories and candidate models in grouped parameters).
-    engine = "planar"
+    kind = "planar"
     angle_convention = ANGLE_CONVENTION
     described_as = "a planar two-link arm"
     paper_views = True

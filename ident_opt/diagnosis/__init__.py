@@ -9,12 +9,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ident_opt.arm.base import Robot
 from ident_opt.data.dataset import Dataset
 from ident_opt.data.loader import held_out_overlap
-from ident_opt.diagnosis import arm_diagnosis, loop
-from ident_opt.diagnosis.loop import Diagnosis
-from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
+from ident_opt.diagnosis.result import Diagnosis
+from ident_opt.diagnosis.rounds import diagnose_trial
+from ident_opt.diagnosis.split import split
 from ident_opt.effects import CATALOGUE
 from ident_opt.fitting.recommend import Choice, choose
 from ident_opt.problem.spec import Problem
@@ -59,24 +58,6 @@ def rigid_choice(
     problem: Problem, trial: Dataset, unseen: Dataset | None = None, estimator: str | None = None
 ) -> Choice:
     """The rigid fit's choice (`fitting.recommend.choose`) on the part of the data the diagnosis trains on: all of
-    `trial` when a held-out `unseen` trial is given, else its first `train_fraction` in time (`loop.split`)."""
-    train = loop.split(trial, unseen, problem.split.train_fraction)[0]
+    `trial` when a held-out `unseen` trial is given, else its first `train_fraction` in time (`split.split`)."""
+    train = split(trial, unseen, problem.split.train_fraction)[0]
     return choose(problem, [train], estimator=estimator, command="diagnose")
-
-
-def diagnose_trial(
-    robot: Robot,
-    trial: Dataset,
-    unseen: Dataset | None = None,
-    train_fraction: float = 0.7,
-    progress: bool = True,
-    torque_filter_hz: float | str | None = TORQUE_FILTER_HZ,
-    rigid_fit: Choice | None = None,
-) -> Diagnosis:
-    """Diagnose `trial` (and `unseen`, if given, as the held-out data) of `robot`'s arm: the planar two-link arm's
-    diagnosis (`loop.diagnose`) or any arm's (`arm_diagnosis.diagnose`), as the robot says (`Robot.engine`).
-    `rigid_fit`: the estimator π is fitted with and why (a `fitting.recommend.Choice`: the recommended fit, which
-    `diagnose` passes; None: the robot's default estimator)."""
-    if robot.engine == "planar":
-        return loop.diagnose(robot, trial, unseen, train_fraction, progress, torque_filter_hz, rigid_fit)
-    return arm_diagnosis.diagnose(robot, trial, unseen, train_fraction, progress, torque_filter_hz, rigid_fit)

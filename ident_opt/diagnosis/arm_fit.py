@@ -87,7 +87,7 @@ class ArmContext:
     dt: float
     rest: np.ndarray
     estimator: str
-    filter_hz: float | None = None  # the torque's zero-phase low-pass [Hz] (`loop.prepare`), None: none
+    filter_hz: float | None = None  # the torque's zero-phase low-pass [Hz] (`split.prepare`), None: none
     rank: int = 0
     evidence: dict = field(default_factory=dict)
     pi_rigid: np.ndarray | None = None
@@ -146,7 +146,7 @@ class ArmContext:
     def drive_rest(self, Y: np.ndarray, ds: Dataset) -> np.ndarray:
         """Y (N, n, P) with the Coulomb column of each coupled drive (a row of `Arm.drive_matrix` other than its own
         joint's, a coupled wrist's motor) set to 0 where that drive rests (`signals.resting` on its velocity
-        v_m = C[m] · dq): the joints' rule (`loop.at_rest`) for a drive whose joints move while it stands still,
+        v_m = C[m] · dq): the joints' rule (`split.at_rest`) for a drive whose joints move while it stands still,
         as a wrist's motor does when its joints counter-rotate. Its friction is set-valued there, and
         sgn(v_m) of a velocity of a few 1e-4 rad/s (the encoders' noise) a random ±fc on every row it reaches."""
         v = self.drive_velocity(ds)
@@ -167,7 +167,7 @@ class ArmContext:
 
     def drive_velocity(self, ds: Dataset) -> np.ndarray:
         """v = dq Cᵀ (N, n) [rad/s]: each drive's joint-side velocity along `ds`, a coupled drive's exactly 0 where it
-        rests (`signals.resting`; a drive of its own joint rests with it, `loop.at_rest`), remembered per view."""
+        rests (`signals.resting`; a drive of its own joint rests with it, `split.at_rest`), remembered per view."""
         key = ("v", *view_key(ds))
         if key not in self._cache:
             v = ds.dq @ self.arm.drive_matrix.T
@@ -326,7 +326,7 @@ class ArmContext:
         return self._cache[key]
 
     def lowpass(self, x: np.ndarray, ds: Dataset) -> np.ndarray:
-        """x (N, ...) along `ds` through the zero-phase low-pass the measured torque went through (`loop.prepare`):
+        """x (N, ...) along `ds` through the zero-phase low-pass the measured torque went through (`split.prepare`):
         a column that jumps within a few samples (a friction hump at a reversal) compared like with like."""
         if not self.filter_hz or self.filter_hz >= 0.45 / step(ds) or ds.n <= 30:
             return x
@@ -670,7 +670,7 @@ def _final(family: ArmFamily, baseline: str, ctx: ArmContext, theta: dict) -> Ca
     estimate, detail = family.estimate({**params, **theta}, se, ctx)
     detail["theta"] = dict(theta)
     if theta.get(f"{family.cause}.joints", None) == ():
-        # screened to no joint: the candidate is the model without the cause, whatever it scores (`loop._row`)
+        # screened to no joint: the candidate is the model without the cause, whatever it scores (`result._row`)
         detail["empty"] = True
     params.update({k: v for k, v in theta.items() if isinstance(v, float)})
     searched = [k for k in theta if isinstance(theta[k], float) and k not in family.fixed]
@@ -754,10 +754,10 @@ def theta_of(family: ArmFamily, cand: Candidate, ctx: ArmContext) -> dict:
 
 
 class Engine:
-    """The n-joint engine as `diagnosis.loop` calls it: the families (built once, with the evidence), `fit`,
-    `compose`, `frozen` and `theta`."""
+    """The n-joint engine as `diagnosis.arm_engine.ChainEngine` calls it: the families (built once, with the evidence),
+    `fit`, `compose`, `frozen` and `theta`."""
 
-    #: Every cause's θ searched again in every round (`loop._fit_round`), not only the first round's promising
+    #: Every cause's θ searched again in every round (`rounds._fit_round`), not only the first round's promising
     #: ones: a θ searched against a model without a cause that shifts time or angles holds the wrong answer — an
     #: encoder offset beside a 23 ms delay on the TX40 was fitted to the delay's residual in round 1 and, held
     #: there, removed 0.0 % of the held-out MSE in round 2; searched again it is named. The n-joint searches

@@ -42,7 +42,7 @@ NOMINAL = PHYSICAL
 SEARCH_ROWS = 12000
 #: Most samples an IPOPT polish is set up on (per joint for Stribeck).
 POLISH_ROWS = 6000
-#: Later rounds search again only the causes the first round found promising (`loop._fit_round`): the planar
+#: Later rounds search again only the causes the first round found promising (`rounds._fit_round`): the planar
 #: searches and IPOPT polishes are the diagnosis's main cost.
 SEARCH_AGAIN = False
 #: The least share of a joint's torque variance a named cause removes (`scoring.shortfall`): the planar floor.
@@ -84,7 +84,7 @@ class Context:
 
     @cached_property
     def instrumented(self) -> Dataset | None:
-        """The training part at its instruments' kinematics (velocities at rest held at 0, as `loop.at_rest` holds
+        """The training part at its instruments' kinematics (velocities at rest held at 0, as `split.at_rest` holds
         the measured ones), or None when the estimator takes no instruments; built once per context."""
         if self.estimator not in INSTRUMENTED:
             return None
@@ -149,7 +149,7 @@ class Family:
     #: to a fixed point. None: the columns do not depend on the coefficients.
     coupled: Callable[[dict], dict] | None = None
     #: Causes whose columns this family's contain (an elastic joint's motor inertia is an armature): it is
-    #: named over such a cause only if it also clears the margin against that cause's own fit (`loop._nested`).
+    #: named over such a cause only if it also clears the margin against that cause's own fit (`rounds._nested`).
     nests: tuple[str, ...] = ()
 
 

@@ -34,8 +34,9 @@ from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import candidates as cands
 from ident_opt.diagnosis import linear, signals
-from ident_opt.diagnosis.loop import prepare, weights_of
+from ident_opt.diagnosis.planar_engine import weights_of
 from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
+from ident_opt.diagnosis.split import prepare
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
@@ -95,7 +96,7 @@ def fit_rivals(
     robot: PlanarRobot, trial: Dataset, causes: tuple[str, str], torque_filter_hz: float = TORQUE_FILTER_HZ
 ) -> Rivals:
     """Each cause's best family (least weighted training cost) fitted on the whole `trial` against the refitted
-    nominal model, in the diagnosis's context (`diagnosis.loop.prepare`, `weights_of` weights)."""
+    nominal model, in the diagnosis's context (`diagnosis.split.prepare`, `weights_of` weights)."""
     data = prepare(trial, torque_filter_hz)
     dt = float(np.median(np.diff(data.t)))
     weights = weights_of(data)

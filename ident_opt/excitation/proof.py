@@ -37,8 +37,10 @@ from tqdm import tqdm
 
 from ident_opt.arm.planar import PHYSICAL
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis.loop import at_rest, diagnose, prepare, weights_of
+from ident_opt.diagnosis.planar_engine import weights_of
+from ident_opt.diagnosis.rounds import diagnose_trial
 from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
+from ident_opt.diagnosis.split import at_rest, prepare
 from ident_opt.effects import CATALOGUE
 from ident_opt.excitation import design as excitation
 from ident_opt.excitation import discrimination
@@ -129,7 +131,7 @@ def median_relative_error(pi_hat: np.ndarray, pi_true: np.ndarray) -> float:
 
 def identification_row(setup: Setup, ds: Dataset, pi_true: np.ndarray) -> dict:
     """cond, log det and both estimators' median relative error on one simulated trial, as logged and with the
-    velocities of resting joints read as 0 (`diagnosis.loop.at_rest`: at rest the sign of an estimated
+    velocities of resting joints read as 0 (`diagnosis.split.at_rest`: at rest the sign of an estimated
     velocity is noise, and the Coulomb columns would carry it)."""
     row = {k: v for k, v in excitation.criteria(setup, ds.q, ds.dq, ds.ddq).items() if k != "rank"}
     for suffix, d in (("", ds), (" (rests 0)", at_rest(ds))):
@@ -289,7 +291,7 @@ def _discrimination(
             ).dataset()
             for s in (seed, seed + HELD_OUT)
         )
-        d = diagnose(problem.robot, train, test, progress=False)
+        d = diagnose_trial(problem.robot, train, test, progress=False)
         scores = {c["cause"]: c["score"] for c in d.candidates}
         if (cause, label, seed) not in criterion:  # the same motion at every noise level
             motion = discrimination.trajectory_dataset(train.t, train.q, train.dq, train.ddq)

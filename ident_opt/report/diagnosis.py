@@ -11,7 +11,7 @@ import numpy as np
 
 from ident_opt import outputs
 from ident_opt.diagnosis import scoring, signals
-from ident_opt.diagnosis.loop import Diagnosis
+from ident_opt.diagnosis.result import Diagnosis
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
 from ident_opt.warnings import markdown_lines

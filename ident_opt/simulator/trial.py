@@ -13,6 +13,7 @@ import pandas as pd
 from ident_opt import outputs
 from ident_opt.arm.base import Robot
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
+from ident_opt.arm.kinds import ByKind
 from ident_opt.columns import channel_names, data_columns
 from ident_opt.data.dataset import Dataset, in_source_convention
 from ident_opt.effects import BACKGROUND, CATALOGUE, is_active, normalise
@@ -179,15 +180,11 @@ def simulate_trial(
         "exact_derivatives": bool(exact_derivatives),
     }
     scale = np.broadcast_to(scale, (n,))
-    if robot.engine == "planar":
-        return _planar_trial(robot, effects, settings, scale, progress, mechanism)
-    if mechanism is not None:
-        raise InputError("a replacement mechanism (simulate.unseen) is built for the planar two-link arm only")
-    return _arm_trial(robot, effects, settings, scale, progress, limits)
+    return TRIALS.of(robot)(robot, effects, settings, scale, progress, limits, mechanism)
 
 
 def _planar_trial(
-    robot: PlanarRobot, effects, settings: dict, scale: np.ndarray, progress: bool, mechanism
+    robot: PlanarRobot, effects, settings: dict, scale: np.ndarray, progress: bool, limits, mechanism
 ) -> SimTrial:
     """The planar two-link arm's trial (`simulate_trial`): the MERIt-tuned simulator (`truth`, `closed_loop`)."""
     coulomb = coulomb_levels(robot)
@@ -258,9 +255,11 @@ def box_of(robot: Robot, limits: Limits | None) -> Box:
     )
 
 
-def _arm_trial(robot: Robot, effects, settings: dict, scale: np.ndarray, progress: bool, limits) -> SimTrial:
+def _arm_trial(robot: Robot, effects, settings: dict, scale: np.ndarray, progress: bool, limits, mechanism) -> SimTrial:
     """An n-joint arm's trial (`simulate_trial`): its nominal model as the true plant (`arm_plant`), the hidden
     effects on any joint, the closed loop `arm_loop`, logged like the planar arm's."""
+    if mechanism is not None:
+        raise InputError("a replacement mechanism (simulator.unseen) is built for the planar two-link arm only")
     box = box_of(robot, limits)
     arm_scale = arm_plant.arm_scale(robot, box, box.v_max)
     joints = arm_plant.joints_of(robot, arm_scale)
@@ -438,3 +437,7 @@ def _truth_dict(robot: PlanarRobot, truth: Truth, out: np.ndarray, q_ref: np.nda
             },
         }
     )
+
+
+#: Each kind of arm's trial (`arm.kinds.ByKind`): the one place the simulator asks which kind it has.
+TRIALS = ByKind(planar=_planar_trial, chain=_arm_trial)
