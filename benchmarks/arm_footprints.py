@@ -24,11 +24,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from confusion_arms import ARMS, draws, places, reference
 
-from ident_opt.data.derivatives import lowpass
-from ident_opt.diagnosis import hidden, signals
-from ident_opt.diagnosis.arm_fit import ArmContext, link_side
+from ident_opt.diagnosis import hidden
+from ident_opt.diagnosis.chain.families import ArmContext, link_side
 from ident_opt.diagnosis.split import at_rest
 from ident_opt.effects import stribeck
+from ident_opt.numerics import signals
+from ident_opt.numerics.derivatives import lowpass
 from ident_opt.problem import load_problem
 from ident_opt.report import record
 from ident_opt.simulator import simulate_trial

@@ -24,9 +24,9 @@ import numpy as np
 
 import ident_opt as io
 from ident_opt.data.dataset import Dataset
-from ident_opt.data.derivatives import lowpass
 from ident_opt.data.loader import load_dataset
 from ident_opt.fitting.recommend import choose
+from ident_opt.numerics.derivatives import lowpass
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -29,8 +29,8 @@ import numpy as np
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import RIGID
-from ident_opt.data.derivatives import lowpass
 from ident_opt.data.loader import load_dataset
+from ident_opt.numerics.derivatives import lowpass
 from ident_opt.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -33,10 +33,10 @@ from ident_opt.adaptation.identifier import serving_identifier
 from ident_opt.adaptation.replay import _standard_errors, replay
 from ident_opt.adaptation.stream import StreamOptions, serve
 from ident_opt.data.dataset import chronological_split
-from ident_opt.data.derivatives import REST
 from ident_opt.data.loader import load_dataset
 from ident_opt.fitting.bounded import FactorBoundedLS
 from ident_opt.fitting.recommend import choose
+from ident_opt.numerics.derivatives import REST
 from ident_opt.problem import load_problem
 from ident_opt.report import record
 from ident_opt.shipping.pi_update import verify

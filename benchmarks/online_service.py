@@ -25,10 +25,10 @@ from ident_opt.adaptation.identifier import batch_theta, serving_identifier
 from ident_opt.adaptation.stream import Mapping, StreamOptions, serve
 from ident_opt.arm.planar import RIGID
 from ident_opt.data.dataset import chronological_split
-from ident_opt.data.derivatives import REST
 from ident_opt.data.loader import load_dataset
 from ident_opt.fitting.fit import finish
 from ident_opt.fitting.stats import Stats
+from ident_opt.numerics.derivatives import REST
 from ident_opt.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -12,10 +12,10 @@ import pytest
 
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PHYSICAL
-from ident_opt.data.derivatives import CUTOFF_MAX_FRACTION, CUTOFF_MIN_HZ, cutoff_choice
 from ident_opt.data.loader import load_dataset
 from ident_opt.fitting.fit import fit_ols
 from ident_opt.fitting.stats import Stats
+from ident_opt.numerics.derivatives import CUTOFF_MAX_FRACTION, CUTOFF_MIN_HZ, cutoff_choice
 from ident_opt.problem import DataSpec, load_problem
 
 from .conftest import PROBLEMS

@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 
 from ident_opt.cli import main
 from ident_opt.data.dataset import chronological_split, shuffled_split
-from ident_opt.data.derivatives import estimate_derivatives
 from ident_opt.data.loader import load_dataset
+from ident_opt.numerics.derivatives import estimate_derivatives
 from ident_opt.problem import DataSpec
 
 from .conftest import PROBLEMS, kept

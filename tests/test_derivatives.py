@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ident_opt.data.derivatives import estimate_derivatives, segments, settled
 from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
+from ident_opt.numerics.derivatives import estimate_derivatives, segments, settled
 from ident_opt.problem import DataSpec
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ident_opt.diagnosis import diagnose_trial, hidden
-from ident_opt.diagnosis.linear import hac_lag, sandwich
+from ident_opt.numerics.least_squares import hac_lag, sandwich
 
 
 def test_hac_lag_grows_with_the_residuals_correlation():

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from ident_opt.data.loader import load_dataset
-from ident_opt.diagnosis import candidates as cands
-from ident_opt.diagnosis import signals
-from ident_opt.diagnosis.planar_engine import nominal_fit, weights_of
+from ident_opt.diagnosis.planar import families as cands
+from ident_opt.diagnosis.planar.engine import nominal_fit, weights_of
 from ident_opt.diagnosis.split import prepare
 from ident_opt.fitting import estimators
+from ident_opt.numerics import signals
 from ident_opt.simulator import simulate_trial
 
 from .conftest import rigid_fit_runs

@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis import linear, scoring, signals
+from ident_opt.diagnosis import scoring
 from ident_opt.diagnosis.split import at_rest, compared_warnings, split
 from ident_opt.effects.elasticity import ELASTIC_BAND_HZ
+from ident_opt.numerics import least_squares as linear
+from ident_opt.numerics import signals
 
 
 def test_delayed_shifts_a_ramp_by_a_fraction_of_a_sample():
@@ -231,8 +233,8 @@ def test_residual_evidence_reads_direction_and_pose(physical_problem):
 def test_forward_simulation_error_separates_right_from_wrong_parameters(physical_problem):
     """Driven by the measured torque, the true model tracks short windows; a 50 % inertia error does not."""
     from ident_opt.arm.datasheet import datasheet_pi
-    from ident_opt.diagnosis.candidates import NOMINAL
     from ident_opt.diagnosis.evidence import forward_error
+    from ident_opt.diagnosis.planar.families import NOMINAL
     from ident_opt.simulator import simulate_trial
 
     robot = physical_problem.robot
@@ -260,7 +262,7 @@ def test_trapezoid_step_is_the_deflection_filter_exactly():
     for sample, from the filter's zero-history initial state."""
     import math
 
-    from ident_opt.diagnosis.elastic_nlp import trapezoid_step
+    from ident_opt.numerics.damped_mode import trapezoid_step
 
     dt, f, zeta = 0.01, 4.3, 0.03
     u = np.random.default_rng(1).normal(size=600)
@@ -292,7 +294,7 @@ def _elastic_problem(n=3000, dt=0.01, f=5.0, zeta=0.04, seed=2):
 
 
 def test_elastic_polish_recovers_the_mode_from_a_wrong_start():
-    from ident_opt.diagnosis.elastic_nlp import polish
+    from ident_opt.numerics.damped_mode import polish
 
     u, P, target, X_rigid, labels, beta, dt = _elastic_problem()
     start = {"frequency_hz": 5.3, "damping": 0.07}  # 6 % and 75 % off: where a coarse grid could leave it
@@ -306,7 +308,7 @@ def test_elastic_polish_recovers_the_mode_from_a_wrong_start():
 
 def test_offset_polish_recovers_both_offsets_jointly_with_pi(physical_problem):
     from ident_opt.arm.datasheet import datasheet_pi
-    from ident_opt.diagnosis.candidates import NOMINAL
+    from ident_opt.diagnosis.planar.families import NOMINAL
     from ident_opt.effects.joint_offset import offsets
 
     rng = np.random.default_rng(3)
@@ -344,7 +346,7 @@ def test_an_auto_cutoff_filters_the_torque_at_the_cutoff_the_trial_was_read_with
 def test_physical_units_undo_a_torque_scale_exactly_on_one_row_columns():
     """τ_logged = τ / s: a coefficient on joint j's row alone is fitted as β / s_j and read back as β; a
     column on both rows gets s averaged by its energy on each row."""
-    from ident_opt.diagnosis.candidates import physical_units
+    from ident_opt.diagnosis.planar.families import physical_units
 
     rng = np.random.default_rng(0)
     n, s = 500, np.array([0.8, 1.25])
@@ -449,7 +451,7 @@ def test_a_family_that_contains_another_cause_must_clear_the_margin_against_it_t
 def _elastic_trial(joint: int):
     """A short noise-free trial of tudor_sim with an elastic joint `joint` at 4 Hz, its dataset and a context."""
     from ident_opt.arm.datasheet import datasheet_pi, rigid_body
-    from ident_opt.diagnosis import candidates as cands
+    from ident_opt.diagnosis.planar import families as cands
     from ident_opt.problem import load_problem
     from ident_opt.simulator import simulate_trial
 

@@ -528,7 +528,7 @@ def test_strict_json_of_a_check_on_a_bag(bag, capsys):
 def test_the_zero_phase_filter_is_exact_far_below_nyquist(ratio):
     """A cut-off at `ratio` of Nyquist over 4 of its periods: a sine at a tenth of it passes unchanged (as
     (b, a) the filter gave 1e37 at 2e-5, then a traceback; found by make fuzz)."""
-    from ident_opt.data.derivatives import lowpass
+    from ident_opt.numerics.derivatives import lowpass
 
     fs, n = 1000.0, round(8 / ratio)
     cutoff = ratio * fs / 2

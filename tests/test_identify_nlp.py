@@ -9,8 +9,9 @@ import pytest
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PlanarArm
 from ident_opt.evaluation.constraints import multisine_trial
-from ident_opt.fitting.nlp import fit_expression, fit_physical
+from ident_opt.fitting.nlp import fit_physical
 from ident_opt.fitting.stats import Stats
+from ident_opt.numerics.nlp import fit_expression
 
 ARM = PlanarArm(("armature",))
 

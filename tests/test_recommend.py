@@ -136,7 +136,7 @@ def test_the_robust_fits_errors_cover_what_its_probes_move_it_by(tmp_path, dfki)
     from dataclasses import replace
 
     from ident_opt.data.dataset import refiltered
-    from ident_opt.data.derivatives import instrument_derivatives
+    from ident_opt.numerics.derivatives import instrument_derivatives
 
     d, arm, _ = simulated(tmp_path, dfki, "passive", 250.0, 0.5, seed=61)
     robot = dfki.robot

@@ -16,11 +16,11 @@ from ident_opt.adaptation.identifier import batch_theta, offline_start
 from ident_opt.adaptation.stream import LineParser, Mapping
 from ident_opt.arm.planar import RIGID
 from ident_opt.data.dataset import chronological_split
-from ident_opt.data.derivatives import REST, CausalDerivatives, derivative_kernels
 from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.fitting.fit import finish
 from ident_opt.fitting.stats import Stats
+from ident_opt.numerics.derivatives import REST, CausalDerivatives, derivative_kernels
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "tudor_2dof.toml"

@@ -121,7 +121,7 @@ def test_a_clean_trial_logged_with_savitzky_golay_derivatives_names_nothing(robo
 def test_a_loggers_bandwidth_is_read_from_its_accelerations():
     """`matched_cutoff`: a Savitzky–Golay logger's accelerations are imitated by a Butterworth of about its
     bandwidth (narrower for a longer window); exact accelerations by none, or by one far above the motion."""
-    from ident_opt.diagnosis.signals import matched_cutoff
+    from ident_opt.numerics.signals import matched_cutoff
 
     t = np.arange(0, 60, 0.01)
     w = 2 * np.pi * np.array([0.3, 1.1, 2.3, 4.1, 6.7])

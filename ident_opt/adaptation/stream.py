@@ -30,10 +30,10 @@ import numpy as np
 from ident_opt.adaptation.identifier import OnlineIdentifier, Prediction
 from ident_opt.columns import channel_names, data_columns, locate
 from ident_opt.data.dataset import Dataset
-from ident_opt.data.derivatives import CausalDerivatives, NonIncreasingTime, RateError, resolve_cutoff
 from ident_opt.data.loader import PLAUSIBLE
 from ident_opt.data.loader import _current_to_torque as current_to_torque  # the batch loader's rule and message
 from ident_opt.errors import InputError
+from ident_opt.numerics.derivatives import CausalDerivatives, NonIncreasingTime, RateError, resolve_cutoff
 
 #: The UTF-8 byte-order mark some writers put before a file's first line.
 BOM = "\ufeff"

@@ -12,12 +12,8 @@ import numpy as np
 import pandas as pd
 from sklearn.model_selection import train_test_split
 
-from ident_opt.data.derivatives import (
-    estimate_derivatives,
-    instrument_derivatives,
-    lowpass,
-)
 from ident_opt.errors import InputError
+from ident_opt.numerics.derivatives import estimate_derivatives, instrument_derivatives, lowpass
 
 
 @dataclass

@@ -24,7 +24,8 @@ from ident_opt.arm.planar import PI_NAMES
 from ident_opt.columns import channel_names, locate
 from ident_opt.data import rosbag
 from ident_opt.data.dataset import Dataset, convert
-from ident_opt.data.derivatives import (
+from ident_opt.errors import InputError, excerpt
+from ident_opt.numerics.derivatives import (
     choose_cutoff,
     estimate_derivatives,
     instrument_derivatives,
@@ -32,7 +33,6 @@ from ident_opt.data.derivatives import (
     resolve_cutoff,
     settled,
 )
-from ident_opt.errors import InputError, excerpt
 from ident_opt.problem.spec import DataSpec
 from ident_opt.warnings import ResultWarning
 

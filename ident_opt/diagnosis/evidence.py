@@ -11,7 +11,7 @@ import numpy as np
 
 from ident_opt.arm.base import Arm
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis import signals
+from ident_opt.numerics import signals
 
 #: Below this frequency [Hz] lies the motion band of point-to-point trials (the real trials' residual
 #: power sits mostly there).

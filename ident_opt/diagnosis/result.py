@@ -145,9 +145,9 @@ def _row(
     engine's floor, `_rounds`)."""
     c = v.cand
     without = current.get(v.baseline) or max(current.values(), key=lambda w: w.common)
-    # a per-joint cause the n-joint screen found on no joint (`arm_fit`) adds nothing: a round's chain refitted
+    # a per-joint cause the n-joint screen found on no joint (`chain.families`) adds nothing: a round's chain refitted
     # against another baseline can still score, and without this the cause would take that score as its own
-    # (`unresolved`: the candidate failed its family's own check on the fitted model, `arm_fit.ArmFamily.check`)
+    # (`unresolved`: the candidate failed its family's own check on the fitted model, `chain.families.ArmFamily.check`)
     ok = scoring.resolved(c.cause, c.estimate, dt) and not c.detail.get("empty") and not c.detail.get("unresolved")
     share = None
     if gap is not None and v.baseline == "datasheet":

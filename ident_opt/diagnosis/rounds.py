@@ -18,11 +18,12 @@ from tqdm import tqdm
 from ident_opt.arm.base import Robot
 from ident_opt.arm.kinds import ByKind
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis import scoring, signals
-from ident_opt.diagnosis.arm_engine import ChainEngine
+from ident_opt.diagnosis import scoring
+from ident_opt.diagnosis.chain.engine import ChainEngine
 from ident_opt.diagnosis.engine import Engine
-from ident_opt.diagnosis.planar_engine import PlanarEngine
+from ident_opt.diagnosis.planar.engine import PlanarEngine
 from ident_opt.diagnosis.result import Diagnosis, Fitted, conclude, nominal_entries, row_of, versions
+from ident_opt.numerics import signals
 
 #: Each kind of arm's engine (`arm.kinds.ByKind`): the one place the diagnosis asks which kind it has.
 ENGINES = ByKind(planar=PlanarEngine, chain=ChainEngine)
@@ -86,7 +87,7 @@ def _rounds(engine: Engine, current: dict, version, row, var, progress: bool) ->
         best: dict[str, Fitted] = {}
         for v in fits:
             if v.baseline == "rigid_fit" and v.cand.detail.get("empty", False):
-                continue  # screened to no joint (`arm_fit`): the refitted π alone, hiding the cause's other version
+                continue  # screened to no joint (`chain.families`): the refitted π alone, hiding the other version
             if v.cand.cause not in best or v.common > best[v.cand.cause].common:
                 best[v.cand.cause] = v
         if searched is None:

@@ -15,9 +15,9 @@ import numpy as np
 from scipy import signal
 
 from ident_opt.data.dataset import Dataset, chronological_split, refiltered
-from ident_opt.data.derivatives import choose_cutoff
-from ident_opt.diagnosis import signals
 from ident_opt.errors import InputError
+from ident_opt.numerics import signals
+from ident_opt.numerics.derivatives import choose_cutoff
 from ident_opt.outputs import shown
 from ident_opt.warnings import ResultWarning
 

@@ -58,16 +58,16 @@ class deferred:  # lower case: used like the module it stands for
 DEFERRED = {
     "np": "numpy",
     "ca": "casadi",
-    "cands": "ident_opt.diagnosis.candidates",
+    "cands": "ident_opt.diagnosis.planar.families",
     "datasheet": "ident_opt.arm.datasheet",
-    "afit": "ident_opt.diagnosis.arm_fit",
-    "elastic_nlp": "ident_opt.diagnosis.elastic_nlp",
+    "afit": "ident_opt.diagnosis.chain.families",
+    "elastic_nlp": "ident_opt.numerics.damped_mode",
     "flexible_link": "ident_opt.simulator.flexible_link",
-    "linear": "ident_opt.diagnosis.linear",
-    "nlp": "ident_opt.fitting.nlp",
+    "linear": "ident_opt.numerics.least_squares",
+    "nlp": "ident_opt.numerics.nlp",
     "report": "ident_opt.report.diagnosis",
     "robot_model": "ident_opt.arm.planar",
-    "signals": "ident_opt.diagnosis.signals",
+    "signals": "ident_opt.numerics.signals",
     "sim": "ident_opt.simulator.truth",
 }
 
@@ -444,7 +444,7 @@ class Effect:
     resolution: tuple[str, str] | None = None
 
     def families(self, robot) -> list:
-        """The candidate model families (`diagnosis.candidates.Family`) that explain this cause."""
+        """The candidate model families (`diagnosis.planar.families.Family`) that explain this cause."""
         return []
 
     def family(self, model=None, free: tuple[str, ...] = (), **options):
@@ -480,7 +480,7 @@ class Effect:
 
     # ------------------------------------------------------------------ any arm: diagnosis and hidden trials
     def arm_families(self, robot, ctx) -> list:
-        """The candidate families (`diagnosis.arm_fit.ArmFamily`) of this cause on an n-joint arm (`ctx`: its
+        """The candidate families (`diagnosis.chain.families.ArmFamily`) of this cause on an n-joint arm (`ctx`: its
         `ArmContext`, with the evidence per joint)."""
         return []
 

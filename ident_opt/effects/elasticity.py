@@ -17,7 +17,7 @@ Diagnosis, once per joint j, the same model on the planar arm (`elastic_drive`) 
 demands at joint j, ë + 2ζω ė + ω² e = −τ_link,j / M_jj (datasheet inertias, `signals.deflection`); the torque
 gains s·(M_link[:, j] ë + ∂τ_link/∂q_j e), the mode's inertia and gravity's sag. The mode's f and ζ are searched
 by variable projection; on the planar arm IPOPT then polishes them jointly with every β by multiple shooting
-(`diagnosis/elastic_nlp.py`), against both nominal models.
+(`numerics/damped_mode.py`), against both nominal models.
 """
 
 from __future__ import annotations
@@ -286,7 +286,7 @@ class Elasticity(Effect):
         }
 
     def arm_families(self, robot, ctx) -> list:
-        """An elastic joint on each of the joints whose residual rings most (`arm_fit.elastic_joints`): the link
+        """An elastic joint on each of the joints whose residual rings most (`chain.families.elastic_joints`): the link
         behind it deflects by e, ë + 2ζω ė + ω² e = −u driven by the measured motion, and adds s M_link[:, j] ë to the
         torque (`_arm_columns`); beside it, against the datasheet, the motor's inertia B ddq_j a datasheet may lack.
         f and ζ searched as on the planar arm, against both nominal models."""
@@ -407,7 +407,7 @@ def elastic_drive(joint: int, ds, ctx) -> tuple[np.ndarray, np.ndarray, np.ndarr
     P = M_link[:, j] (link j's inertia on its own row, the coupling on the other) and K = ∂τ_link/∂q_j (what
     the sag does to gravity's torque on both rows). One free scale s on that physical pattern: the pattern (which
     row rings how much) is what tells an elastic joint 1 from an elastic joint 2, so it is not free."""
-    # Remembered for the last few views (`arm_fit.view_key`). Few: an offset's search builds a new view at every
+    # Remembered for the last few views (`chain.families.view_key`). Few: an offset's search builds a new view at every
     # trial angle.
     key = (joint, *afit.view_key(ds))
     cache = ctx.cache.setdefault("elastic_drive", {})

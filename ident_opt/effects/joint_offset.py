@@ -75,8 +75,8 @@ class JointOffset(Effect):
         plant.offset = plant.offset + np.asarray(p["offset"])
 
     def arm_families(self, robot, ctx) -> list:
-        """The nominal model at q + δ, δ by Gauss–Newton on the torque's angle Jacobian (`arm_fit.offset_search`) on
-        every joint, then on the joints where it is resolved; against both nominal models."""
+        """The nominal model at q + δ, δ by Gauss–Newton on the torque's angle Jacobian (`chain.families.offset_search`)
+        on every joint, then on the joints where it is resolved; against both nominal models."""
         return [
             afit.ArmFamily(
                 self.name,

@@ -346,7 +346,7 @@ def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
     low = [j for j in range(ctx.n) if static[j] > 0 and velocity[j] < floor[j]]
     high = [j for j in beyond_logged(static, ctx) if j not in low]
     if low or high:
-        detail["failed_joints"] = sorted(low + high)  # `arm_fit.fit` fits the others again without them
+        detail["failed_joints"] = sorted(low + high)  # `chain.families.fit` fits the others again without them
         reasons = []
         if low:
             names = ", ".join(ctx.robot.joint_names[j] for j in low)

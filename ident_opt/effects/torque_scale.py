@@ -120,7 +120,7 @@ class TorqueScale(Effect):
 
 def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
     """s_j = 1/c_j on the joints fitted (1 elsewhere); the joints whose s_j lies within `SCALE_TOL` of 1 fail the
-    resolution floor (`detail["failed_joints"]`: `arm_fit.fit` fits the others again without them)."""
+    resolution floor (`detail["failed_joints"]`: `chain.families.fit` fits the others again without them)."""
     scale = [1.0 / p[f"c{j + 1}"] if f"c{j + 1}" in p else 1.0 for j in range(ctx.n)]
     low = [j for j in range(ctx.n) if f"c{j + 1}" in p and abs(scale[j] - 1.0) <= SCALE_TOL]
     return {"scale": scale}, ({"failed_joints": low} if low else {})

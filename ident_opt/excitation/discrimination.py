@@ -1,6 +1,6 @@
 """Discrimination design: the excitation that best tells two suspected causes apart (T-optimal design).
 
-The two causes' candidate models are the diagnosis's own (`diagnosis.candidates`: each cause's families,
+The two causes' candidate models are the diagnosis's own (`diagnosis.planar.families`: each cause's families,
 refitted with every π of the nominal structure, baseline ``rigid_fit``), fitted on the problem's first trial
 (the data the diagnosis could not separate well), each cause's best family kept. On a trajectory, with A
 true: τ_A is A's prediction, and B fitted to it (weighted least squares on B's columns, its nonlinear
@@ -32,15 +32,16 @@ import numpy as np
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis import candidates as cands
-from ident_opt.diagnosis import linear, signals
-from ident_opt.diagnosis.planar_engine import weights_of
-from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
+from ident_opt.diagnosis.planar import families as cands
+from ident_opt.diagnosis.planar.engine import weights_of
 from ident_opt.diagnosis.split import prepare
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
 from ident_opt.excitation.design import Design, Setup
+from ident_opt.numerics import least_squares as linear
+from ident_opt.numerics import signals
+from ident_opt.numerics.signals import TORQUE_FILTER_HZ
 from ident_opt.report import shown
 
 #: The series a discriminating design uses unless told otherwise: harmonics of about 0.25 Hz up to 4 Hz. Causes

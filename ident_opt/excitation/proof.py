@@ -37,9 +37,8 @@ from tqdm import tqdm
 
 from ident_opt.arm.planar import PHYSICAL
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis.planar_engine import weights_of
+from ident_opt.diagnosis.planar.engine import weights_of
 from ident_opt.diagnosis.rounds import diagnose_trial
-from ident_opt.diagnosis.signals import TORQUE_FILTER_HZ
 from ident_opt.diagnosis.split import at_rest, prepare
 from ident_opt.effects import CATALOGUE
 from ident_opt.excitation import design as excitation
@@ -47,6 +46,7 @@ from ident_opt.excitation import discrimination
 from ident_opt.excitation.design import Design, Setup
 from ident_opt.fitting import estimators
 from ident_opt.fitting.stats import Stats
+from ident_opt.numerics.signals import TORQUE_FILTER_HZ
 from ident_opt.problem.spec import Problem
 from ident_opt.simulator import simulate_trial
 from ident_opt.simulator.fourier import default_base_hz

@@ -40,9 +40,9 @@ import numpy as np
 
 from ident_opt.arm.base import Arm
 from ident_opt.data.dataset import Dataset, refiltered
-from ident_opt.data.derivatives import choose_cutoff, instrument_derivatives
 from ident_opt.fitting.fit import LinearFit, check_stats, finish
 from ident_opt.fitting.stats import Stats
+from ident_opt.numerics.derivatives import choose_cutoff, instrument_derivatives
 
 #: Directions of the instruments' Gram matrix below this fraction of its largest eigenvalue are not instruments.
 TWO_STAGE_RCOND = 1e-12

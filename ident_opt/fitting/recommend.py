@@ -30,11 +30,11 @@ import numpy as np
 
 from ident_opt.arm.base import Arm, Robot
 from ident_opt.data.dataset import Dataset, refiltered
-from ident_opt.data.derivatives import CUTOFF_MAX_FRACTION
 from ident_opt.errors import InputError
 from ident_opt.fitting import estimators
 from ident_opt.fitting.fit import LinearFit
 from ident_opt.fitting.trust import JUDGED_KINDS, SENSITIVITY_TOLERANCE, Trust, checks
+from ident_opt.numerics.derivatives import CUTOFF_MAX_FRACTION
 from ident_opt.problem.spec import Problem
 from ident_opt.warnings import ResultWarning
 

@@ -31,10 +31,10 @@ import numpy as np
 
 from ident_opt.arm.base import Arm
 from ident_opt.data.dataset import Dataset, refiltered
-from ident_opt.data.derivatives import choose_cutoff
 from ident_opt.fitting import estimators
 from ident_opt.fitting.fit import LinearFit
 from ident_opt.fitting.stats import Stats
+from ident_opt.numerics.derivatives import choose_cutoff
 from ident_opt.warnings import ResultWarning
 
 #: OLS and IV disagree when a judged parameter differs by more than this fraction of its IV value (and 3 SE).

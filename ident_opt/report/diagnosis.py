@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt import outputs
-from ident_opt.diagnosis import scoring, signals
+from ident_opt.diagnosis import scoring
 from ident_opt.diagnosis.result import Diagnosis
 from ident_opt.effects import CATALOGUE
+from ident_opt.numerics import signals
 from ident_opt.report import record
 from ident_opt.warnings import markdown_lines
 

@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 
 from ident_opt.columns import columns_of, joint_columns
-from ident_opt.data.derivatives import estimate_derivatives
 from ident_opt.errors import InputError
+from ident_opt.numerics.derivatives import estimate_derivatives
 from ident_opt.simulator.closed_loop import CONTROL_HZ, MAX_CONTROL_HZ, control_hz
 
 ENCODER_COUNTS = 4096  # counts per motor revolution (a 1024-line encoder, quadrature)

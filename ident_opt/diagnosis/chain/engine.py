@@ -1,11 +1,12 @@
 """The diagnosis engine of an arm with n joints (`engine.Engine`; `docs/effects.md`, "Arms with n joints"): the
-candidates of `arm_fit` and the arm's own nominal models, under the one loop's rounds, scoring and JSON (`rounds`).
+candidates of `chain.families` and the arm's own nominal models, under the one loop's rounds, scoring and JSON
+(`rounds`).
 
 - The two nominal models: the **datasheet** (the problem's nominal arm, `Robot.datasheets()[Robot.datasheet]`:
   the URDF's inertials with the problem's joint values) and the **rigid fit** (π by the recommended fit unless
   --estimator says otherwise, `fitting.recommend.chosen`, given as `rigid_fit`; the robot's default estimator when
   none is given; through `fitting.estimators.fit_for`, on the training part; joints weighted by 1/σ_j² from a
-  first least-squares pass). Every candidate refits π with the same estimator (`arm_fit.ArmContext.rigid`).
+  first least-squares pass). Every candidate refits π with the same estimator (`chain.families.ArmContext.rigid`).
 - The split, the torque filter and the rest stretches are the planar diagnosis's (`split.parts`). After the
   zero-phase filter the data hold nothing above its cut-off, so the diagnosis reads them every `decimation`-th
   sample (at about `DIAGNOSIS_HZ`, at most `MAX_SAMPLES` in all): a 7-joint minute at 1 kHz is diagnosed on 12 000
@@ -21,7 +22,8 @@ import numpy as np
 
 from ident_opt.arm.base import Robot
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis import arm_fit, evidence
+from ident_opt.diagnosis import evidence
+from ident_opt.diagnosis.chain import families as candidates
 from ident_opt.diagnosis.engine import Nominal, Parts
 from ident_opt.diagnosis.result import Fitted
 from ident_opt.diagnosis.split import parts
@@ -64,7 +66,7 @@ def _every(ds: Dataset, k: int) -> Dataset:
     return ds if k == 1 else ds.subset(np.arange(0, ds.n, k))
 
 
-def weights_of(ctx: arm_fit.ArmContext) -> np.ndarray:
+def weights_of(ctx: candidates.ArmContext) -> np.ndarray:
     """1/σ_j² [1/(N m)²] of the training residual of the least-squares rigid fit (the projection off the rigid
     columns, every joint weighted alike)."""
     tr = ctx.train
@@ -78,9 +80,9 @@ def weights_of(ctx: arm_fit.ArmContext) -> np.ndarray:
 class ChainEngine:
     """The engine of an arm with n joints (module doc); built on the trials to diagnose."""
 
-    margin_variance = arm_fit.Engine.MARGIN_VARIANCE
-    partner = arm_fit.Engine.PARTNER
-    search_again = arm_fit.Engine.SEARCH_AGAIN
+    margin_variance = candidates.Engine.MARGIN_VARIANCE
+    partner = candidates.Engine.PARTNER
+    search_again = candidates.Engine.SEARCH_AGAIN
     pose = staticmethod(evidence.pose_r2_any)
 
     def __init__(
@@ -104,7 +106,7 @@ class ChainEngine:
         self.parts = Parts(train, test, raw_test, how, trial if unseen is not None else None)
         arm, pi_ds = robot.datasheets()[robot.datasheet]
         self.dt = float(np.median(np.diff(train.t)))
-        ctx = arm_fit.ArmContext(
+        ctx = candidates.ArmContext(
             robot,
             arm,
             train,
@@ -125,29 +127,29 @@ class ChainEngine:
         pi = {"datasheet": ctx.datasheet, "rigid_fit": pi_rigid}
         pred = {b: self.Y_test @ p for b, p in pi.items()}
         self.nominal = Nominal(arm, pi, pred, ctx.rank, ctx.labels(test), {"rank": ctx.rank})
-        self._engine: arm_fit.Engine | None = None
+        self._engine: candidates.Engine | None = None
 
     @property
-    def engine(self) -> arm_fit.Engine:
+    def engine(self) -> candidates.Engine:
         """The candidate families, built once (with the evidence per joint) when first asked."""
         if self._engine is None:
-            self._engine = arm_fit.Engine(self.ctx)
+            self._engine = candidates.Engine(self.ctx)
         return self._engine
 
     def families(self) -> list:
         return self.engine.families(self.robot)
 
     def fit(self, family, baseline: str):
-        return arm_fit.fit(family, baseline, self.ctx)
+        return candidates.fit(family, baseline, self.ctx)
 
     def compose(self, earlier: list[tuple], new):
-        return arm_fit.compose(earlier, new)
+        return candidates.compose(earlier, new)
 
     def frozen(self, family, theta: dict):
-        return arm_fit.frozen(family, theta)
+        return candidates.frozen(family, theta)
 
     def theta(self, family, cand) -> dict:
-        return arm_fit.theta_of(family, cand, self.ctx)
+        return candidates.theta_of(family, cand, self.ctx)
 
     def forward_after(self, final: Fitted | None, baseline: str) -> list:
         """The extended model's rigid part (its π: refitted, or the datasheet's) integrated, the rest of its

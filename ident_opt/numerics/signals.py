@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, signal
 
-from ident_opt.data.derivatives import lowpass
+from ident_opt.numerics.derivatives import lowpass
 
 #: The diagnosis's default torque filter cut-off [Hz] (`diagnosis.prepare`): the data loader's and the
 #: simulator's derivative cut-off, so both sides of τ = Y π share one bandwidth.
@@ -174,9 +174,9 @@ def stick_speed(v: np.ndarray) -> np.ndarray:
 
 def resting(v: np.ndarray, dt: float) -> np.ndarray:
     """(N, m) bool: the samples where each velocity column of v (N, m) [rad/s] at step `dt` [s] is at rest: below
-    `REST_FRACTION` of its speed scale (95th percentile of |v|) there, and staying below it for `REST_WINDOW_S`
-    before or after (the filter ringing just before a start or after a stop counts as rest, a smooth reversal,
-    slow only for an instant, does not). The rule of `split.at_rest` (joints) and `arm_fit.ArmContext` (drives)."""
+    `REST_FRACTION` of its speed scale (95th percentile of |v|) there, and staying below it for `REST_WINDOW_S` before
+    or after (the filter ringing just before a start or after a stop counts as rest, a smooth reversal, slow only for an
+    instant, does not). The rule of `split.at_rest` (joints) and `chain.families.ArmContext` (drives)."""
     w = max(1, round(REST_WINDOW_S / dt))
     slow = np.abs(v) < rest_speed(v)
     padded = np.pad(slow, ((w, w), (0, 0)), mode="edge").astype(float)

@@ -42,14 +42,15 @@ from ident_opt.arm.base import Arm, Robot
 from ident_opt.cache import cache_root
 from ident_opt.cbuild import CompiledRows
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis import linear, signals
-from ident_opt.diagnosis.candidates import Candidate, joint_estimate, physical_units
+from ident_opt.diagnosis.planar.families import Candidate, joint_estimate, physical_units
 from ident_opt.effects import CATALOGUE
 from ident_opt.errors import InputError
 from ident_opt.fitting.base import base_parameters
 from ident_opt.fitting.estimators import INSTRUMENTED, fit_for
 from ident_opt.fitting.iv import InstrumentStats, instrument_kinematics
 from ident_opt.fitting.stats import Stats
+from ident_opt.numerics import least_squares as linear
+from ident_opt.numerics import signals
 
 #: A coefficient more than this many standard errors from its untouched value marks its joint as touched.
 RESOLVED = 3.0
@@ -754,8 +755,8 @@ def theta_of(family: ArmFamily, cand: Candidate, ctx: ArmContext) -> dict:
 
 
 class Engine:
-    """The n-joint engine as `diagnosis.arm_engine.ChainEngine` calls it: the families (built once, with the evidence),
-    `fit`, `compose`, `frozen` and `theta`."""
+    """The n-joint engine as `diagnosis.chain.engine.ChainEngine` calls it: the families (built once, with the
+    evidence), `fit`, `compose`, `frozen` and `theta`."""
 
     #: Every cause's θ searched again in every round (`rounds._fit_round`), not only the first round's promising
     #: ones: a θ searched against a model without a cause that shifts time or angles holds the wrong answer — an

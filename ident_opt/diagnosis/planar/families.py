@@ -29,11 +29,13 @@ import numpy as np
 from ident_opt.arm.datasheet import PlanarRobot
 from ident_opt.arm.planar import PHYSICAL, PlanarArm
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis import linear, scoring, signals
+from ident_opt.diagnosis import scoring
 from ident_opt.effects import CATALOGUE
 from ident_opt.fitting.estimators import INSTRUMENTED, fit_for
 from ident_opt.fitting.iv import InstrumentStats, instrument_kinematics
 from ident_opt.fitting.stats import Stats
+from ident_opt.numerics import least_squares as linear
+from ident_opt.numerics import signals
 
 #: The nominal structure under the physical convention (the datasheet has the joint-2 armature ia2).
 NOMINAL = PHYSICAL

@@ -12,12 +12,14 @@ import numpy as np
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis import candidates as cands
-from ident_opt.diagnosis import evidence, linear, scoring, signals
+from ident_opt.diagnosis import evidence, scoring
 from ident_opt.diagnosis.engine import Nominal, Parts
+from ident_opt.diagnosis.planar import families as candidates
 from ident_opt.diagnosis.result import Fitted
 from ident_opt.diagnosis.split import parts
 from ident_opt.errors import InputError
+from ident_opt.numerics import least_squares as linear
+from ident_opt.numerics import signals
 
 #: The estimators that refit the grouped π of any model the candidates build (extensions and columns included).
 REFITS = ("ols", "constrained", "robust")
@@ -27,16 +29,16 @@ def weights_of(ds: Dataset) -> np.ndarray:
     """1/σ_j² [1/(N m)²] per joint, σ_j² the residual variance of the nominal structure's least-squares fit, on the
     same objective as every candidate (rest stretches compared about their mean)."""
     rest = signals.rest_runs(ds.dq)
-    Y = signals.demean_runs(cands.NOMINAL.regressor(ds.q, ds.dq, ds.ddq), rest)
+    Y = signals.demean_runs(candidates.NOMINAL.regressor(ds.q, ds.dq, ds.ddq), rest)
     tau = signals.demean_runs(ds.tau, rest)
     first = linear.solve(np.zeros((ds.n, 2)), Y, tau, np.ones(2), with_se=False)
     return 1.0 / np.maximum(first.rss / ds.n, 1e-12 * np.maximum(np.var(ds.tau, axis=0), 1e-30))
 
 
-def nominal_fit(ctx: cands.Context) -> np.ndarray:
+def nominal_fit(ctx: candidates.Context) -> np.ndarray:
     """π̂ of the nominal structure by the context's estimator on the training part (`Context.rigid`): what every
     candidate that refits π reduces to without a column of its own."""
-    tr, model = ctx.train, cands.NOMINAL
+    tr, model = ctx.train, candidates.NOMINAL
     at = ctx.instrumented
     Z = model.regressor(at.q, at.dq, at.ddq) if at is not None else None
     return ctx.rigid(model, model.regressor(tr.q, tr.dq, tr.ddq), tr.tau, Z)
@@ -45,9 +47,9 @@ def nominal_fit(ctx: cands.Context) -> np.ndarray:
 class PlanarEngine:
     """The planar two-link arm's engine (module doc); built on the trials to diagnose."""
 
-    margin_variance = cands.MARGIN_VARIANCE
+    margin_variance = candidates.MARGIN_VARIANCE
     partner = scoring.PARTNER
-    search_again = cands.SEARCH_AGAIN
+    search_again = candidates.SEARCH_AGAIN
     pose = staticmethod(evidence.pose_r2)
 
     def __init__(
@@ -69,7 +71,7 @@ class PlanarEngine:
         self.parts = Parts(train, test, raw_test, how, trial if unseen is not None else None)
         self.dt = float(np.median(np.diff(train.t)))
         self.datasheet_pi = datasheet_pi(robot, "physical")
-        self.ctx = cands.Context(
+        self.ctx = candidates.Context(
             robot,
             train,
             test,
@@ -80,31 +82,31 @@ class PlanarEngine:
             rigid_body(robot, "physical").armature,
             estimator,
         )
-        model = cands.NOMINAL
+        model = candidates.NOMINAL
         pi = {"datasheet": model.vector(self.datasheet_pi), "rigid_fit": nominal_fit(self.ctx)}
         pred = {b: model.predict(p, test.q, test.dq, test.ddq) for b, p in pi.items()}
         self.nominal = Nominal(model, pi, pred, len(model.names), signals.rest_runs(test.dq))
 
     def families(self) -> list:
-        return cands.families(self.robot)
+        return candidates.families(self.robot)
 
     def fit(self, family, baseline: str):
-        return cands.fit(family, baseline, self.ctx)
+        return candidates.fit(family, baseline, self.ctx)
 
     def compose(self, earlier: list[tuple], new):
-        return cands.compose(earlier, new)
+        return candidates.compose(earlier, new)
 
     def frozen(self, family, theta: dict):
-        return cands.frozen(family, theta)
+        return candidates.frozen(family, theta)
 
     def theta(self, family, cand) -> dict:
-        return cands.theta(family, cand, self.ctx)
+        return candidates.theta(family, cand, self.ctx)
 
     def forward_after(self, final: Fitted | None, baseline: str) -> list:
         """Question 4's motion error of the extended model: its rigid part (π refitted or the datasheet's)
         integrated, the rest of its torque teacher-forced along the measured motion (`evidence.forward_error`).
         Without a cause: the baseline's own error."""
-        model, test = cands.NOMINAL, self.parts.test
+        model, test = candidates.NOMINAL, self.parts.test
         if final is None:
             return evidence.forward_error(model, self.nominal.pi[baseline], test, self.dt)
         pi = model.vector({**self.datasheet_pi, **final.cand.parameters})

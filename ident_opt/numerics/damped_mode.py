@@ -42,8 +42,8 @@ import time
 import casadi as ca
 import numpy as np
 
-from ident_opt.diagnosis import signals
-from ident_opt.fitting.nlp import IPOPT_QUIET
+from ident_opt.numerics import signals
+from ident_opt.numerics.nlp import IPOPT_QUIET
 
 #: Length of one shooting segment [s].
 SEGMENT_S = 1.0
