@@ -31,8 +31,28 @@ ROBOTS = [
     ("staubli_tx40", "problems/staubli_tx40.toml", []),
 ]
 
+# (name, problem, effect strings, extra simulate flags): simulated trials whose CSV and truth must not move.
+TRIALS = [
+    (f"{problem}.{effect.split(':')[0]}{suffix}", f"problems/{problem}.toml", [effect] if effect else [], flags)
+    for problem, duration in (("tudor_2dof", "12"), ("kuka_lwr4", "4"))
+    for effect, suffix in (
+        ("", "clean"),
+        ("armature", ""),
+        ("asymmetric_coulomb", ""),
+        ("stribeck", ""),
+        ("elasticity", ""),
+        ("elasticity:kind=link" if problem == "tudor_2dof" else "elasticity:joint=3", "_2"),
+        ("payload", ""),
+        ("delay", ""),
+        ("joint_offset", ""),
+        ("torque_scale", ""),
+        ("load_friction", ""),
+    )
+    for flags in (["--duration", duration, "--seed", "5"],)
+] + [("tudor_sim.background", "problems/tudor_sim.toml", None, ["--duration", "12"])]
+
 # Keys whose values are wall-clock measurements or machine paths, not results.
-VOLATILE = {"seconds", "timings_s", "updates_per_second", "written", "files"}
+VOLATILE = {"seconds", "timings_s", "updates_per_second", "written", "files", "csv", "truth_json"}
 
 
 def _volatile(key: str) -> bool:
@@ -71,6 +91,26 @@ def record(out: Path, only: list[str]) -> int:
                     str(out / f"{name}.diagnosis"),
                     "--json",
                     str(out / f"{name}.diagnose.json"),
+                ],
+            )
+        )
+    for name, problem, effects, flags in TRIALS:
+        if only and name.split(".")[0] not in only:
+            continue
+        given = [w for e in effects or [] for w in ("--effect", e)]
+        jobs.append(
+            (
+                f"{name}.simulate",
+                [
+                    "simulate",
+                    "--problem",
+                    problem,
+                    *given,
+                    *flags,
+                    "--out",
+                    str(out / f"{name}.sim.csv"),
+                    "--json",
+                    str(out / f"{name}.sim.json"),
                 ],
             )
         )
@@ -120,6 +160,10 @@ def diff(before: Path, after: Path, rtol: float) -> int:
         out: list[str] = []
         _walk(json.loads(f.read_text()), json.loads(g.read_text()), "", rtol, out)
         print(f"{f.name}: {'equal' if not out else f'{len(out)} differences'}")
+        csv = f.with_name(f.name.replace(".sim.json", ".sim.csv"))
+        if csv != f and csv.exists() and csv.read_bytes() != (after / csv.name).read_bytes():
+            print(f"{csv.name}: the simulated trial differs")
+            bad += 1
         for line in out[:30]:
             print("   ", line)
         bad += bool(out)
