@@ -64,7 +64,7 @@ def rows_for(arm_name: str, seed: int) -> list[dict]:
     problem = load_problem(ARMS[arm_name])
     robot = problem.robot
     n = robot.n_joints
-    view = hidden.arm_joints(robot, problem.limits)
+    view = hidden.chain_joints(robot, problem.limits)
     arm, pi = robot.datasheets()[robot.datasheet]
     clean = {}
     for trajectory in ("tud01", "fourier"):

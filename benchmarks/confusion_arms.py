@@ -8,7 +8,7 @@ of docs/effects.md.
 Arms: the KUKA LWR4+ (problems/kuka_lwr4.toml, 7 joints), the Panda (problems/franka_panda.toml, 7) and the TX40
 with its drives (tests/arms/tx40_drives.toml, 6: the shipped URDF's last link has no inertia about its axis, so the
 simulator needs the rotors'). For each arm and seed, each per-joint cause hides on joint 2 (proximal) and on joint
-n − 1 (distal) at a drawn magnitude (`Effect.arm_draw`: relative to the arm's torques, inertias and speeds), a delay
+n − 1 (distal) at a drawn magnitude (`Effect.chain_draw`: relative to the arm's torques, inertias and speeds), a delay
 and a payload once; a clean trial; with `--pairs`, the catalogue's causes two at a time (each with the next). The
 reference is the point-to-point `tud01`, `fourier` for Stribeck friction alone and `mixed` for a pair with it. The
 n-joint diagnosis was developed on the KUKA at seeds 0–99 (1 kHz) and the TX40 at seed 0 (seed 1's Stribeck trials
@@ -58,12 +58,12 @@ WHOLE = ("delay", "payload")
 
 
 def draws(arm: str, problem, causes: tuple[str, ...], joints: tuple[int, ...], seed: int) -> dict:
-    """The hidden effects' keys of one trial of `arm` (`hidden.arm_draws` on the 0-based `joints`), from a generator
+    """The hidden effects' keys of one trial of `arm` (`hidden.chain_draws` on the 0-based `joints`), from a generator
     seeded by the arm, the causes, the joints and `seed`: the same trial draws the same magnitudes in every run."""
     from ident_opt.diagnosis import hidden
 
     rng = np.random.default_rng([seed, list(ARMS).index(arm), *(CAUSES.index(c) for c in causes), *joints, 7])
-    return hidden.arm_draws(causes, rng, hidden.arm_joints(problem.robot, problem.limits), joints)
+    return hidden.chain_draws(causes, rng, hidden.chain_joints(problem.robot, problem.limits), joints)
 
 
 def reference(causes: tuple[str, ...]) -> str:
@@ -106,7 +106,7 @@ def one(job: tuple) -> dict:
     named = [c["cause"] for c in d.causes]
     truth = trial.truth["effects"]
     checks = {
-        c["cause"]: hidden.arm_errors(c["cause"], c["estimate"], truth[c["cause"]])
+        c["cause"]: hidden.chain_errors(c["cause"], c["estimate"], truth[c["cause"]])
         for c in d.causes
         if c["cause"] in truth
     }

@@ -68,7 +68,7 @@ def _diagnosed(arm: str, effects: list[str], seed: int, trajectory: str = "tud01
 
 
 def _named_within(d, truth: dict, causes: set[str]) -> None:
-    """Exactly `causes` named, each estimate within its tolerance (`hidden.arm_errors`), per-joint lists of n."""
+    """Exactly `causes` named, each estimate within its tolerance (`hidden.chain_errors`), per-joint lists of n."""
     named = {c["cause"] for c in d.causes}
     assert named == causes, (named, [c["estimate"] for c in d.causes], d.rounds[0][:3])
     n = len(d.nmse_before)
@@ -76,7 +76,7 @@ def _named_within(d, truth: dict, causes: set[str]) -> None:
         for value in c["estimate"].values():
             if isinstance(value, list) and c["cause"] != "payload":
                 assert len(value) == n
-        ok, worst = hidden.arm_errors(c["cause"], c["estimate"], truth["effects"][c["cause"]])
+        ok, worst = hidden.chain_errors(c["cause"], c["estimate"], truth["effects"][c["cause"]])
         assert ok, (c["cause"], worst, c["estimate"], truth["effects"][c["cause"]])
     assert len(d.nmse_after) == n and all(a <= b * 1.001 for a, b in zip(d.nmse_after, d.nmse_before))
 
@@ -151,7 +151,7 @@ def test_a_narrow_hump_on_one_joint_does_not_refuse_stribeck_on_another():
     d, truth = _narrow_hump_trial()
     assert [c["cause"] for c in d.causes] == ["stribeck"]
     assert d.named.detail["dropped_joints"] == ["joint_3"]
-    ok, worst = hidden.arm_errors("stribeck", d.causes[0]["estimate"], truth["effects"]["stribeck"])
+    ok, worst = hidden.chain_errors("stribeck", d.causes[0]["estimate"], truth["effects"]["stribeck"])
     assert ok, worst
 
 

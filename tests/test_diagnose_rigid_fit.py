@@ -17,6 +17,7 @@ from ident_opt.data.loader import load_dataset
 from ident_opt.diagnosis.planar import families as cands
 from ident_opt.diagnosis.planar.engine import nominal_fit, weights_of
 from ident_opt.diagnosis.split import prepare
+from ident_opt.effects.families import PlanarFamily
 from ident_opt.fitting import estimators
 from ident_opt.numerics import signals
 from ident_opt.simulator import simulate_trial
@@ -58,7 +59,7 @@ def test_the_rigid_fit_is_the_estimators_own_fit_and_a_candidate_without_columns
     reference = estimators.fit_for(robot, name, estimators.statistics(model, [same], name), model, weights=weights).pi
     np.testing.assert_allclose(pi, reference, rtol=1e-7, atol=1e-9 * np.abs(reference).max())
 
-    bare = cands.fit(cands.Family("none", cands.nominal, None), "rigid_fit", ctx)
+    bare = cands.fit(PlanarFamily("none", None, None), "rigid_fit", ctx)
     np.testing.assert_allclose(model.vector(bare.parameters), pi, rtol=1e-10, atol=1e-12)
     if name == "robust":  # the instruments are used: the IV fit is not least squares on the same samples
         ols = estimators.fit_for(robot, "ols", estimators.statistics(model, [same], "ols"), model, weights=weights)

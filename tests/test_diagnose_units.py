@@ -409,9 +409,10 @@ def test_an_arm_elastic_joint_is_judged_against_the_frequency_of_its_trial():
     from ident_opt.effects.elasticity import EFFECT
 
     truth = {"joint": 2, "frequency_hz": 5.88, "frequency_trial_hz": 8.47}
-    assert all(ok for ok, _ in EFFECT.arm_judge({"joint": 2, "frequency_hz": 8.25}, truth))
-    assert not all(ok for ok, _ in EFFECT.arm_judge({"joint": 2, "frequency_hz": 5.9}, truth))
-    assert all(ok for ok, _ in EFFECT.arm_judge({"joint": 2, "frequency_hz": 5.9}, {"joint": 2, "frequency_hz": 5.88}))
+    assert all(ok for ok, _ in EFFECT.chain_judge({"joint": 2, "frequency_hz": 8.25}, truth))
+    assert not all(ok for ok, _ in EFFECT.chain_judge({"joint": 2, "frequency_hz": 5.9}, truth))
+    close = {"joint": 2, "frequency_hz": 5.88}
+    assert all(ok for ok, _ in EFFECT.chain_judge({"joint": 2, "frequency_hz": 5.9}, close))
     assert not all(ok for ok, _ in EFFECT.judge({"joint": 2, "frequency_hz": 8.25}, truth))
 
 

@@ -17,8 +17,9 @@ import pytest
 from ident_opt.cli import main
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
-from ident_opt.simulator import arm_plant, simulate_trial
-from ident_opt.simulator.arm_plant import forward
+from ident_opt.simulator import chain_plant as arm_plant
+from ident_opt.simulator import simulate_trial
+from ident_opt.simulator.chain_plant import forward
 from ident_opt.simulator.trial import box_of
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -304,9 +305,9 @@ def test_stribeck_drawn_beside_asymmetric_coulomb_rises_above_its_levels(arm4):
     plant), not merely above the datasheet's."""
     from ident_opt.diagnosis import hidden
 
-    view = hidden.arm_joints(arm4.robot, arm4.limits)
+    view = hidden.chain_joints(arm4.robot, arm4.limits)
     for seed in range(5):
-        keys = hidden.arm_draws(("asymmetric_coulomb", "stribeck"), np.random.default_rng(seed), view, (1,))
+        keys = hidden.chain_draws(("asymmetric_coulomb", "stribeck"), np.random.default_rng(seed), view, (1,))
         levels = 0.5 * (keys["asymmetric_coulomb"]["positive"][1] + keys["asymmetric_coulomb"]["negative"][1])
         assert keys["stribeck"]["static"][1] > levels
     trial = simulate_trial(arm4.robot, duration=1.0, effects=keys, limits=arm4.limits, progress=False)

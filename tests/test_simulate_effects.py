@@ -167,7 +167,7 @@ def test_load_friction_adds_mu_times_the_link_torque_to_the_coulomb_level(robot)
     """Exact data: τ − Y π_true = μ_j sgn(dq_j) |τ_load,j| with τ_load the link-side rigid torque (inertial
     without the rotor inertia, Coriolis, gravity), so regressing the residual on that column gives back μ."""
     from ident_opt.arm.datasheet import datasheet_pi, rigid_body
-    from ident_opt.simulator.truth import link_pi
+    from ident_opt.simulator.planar_dynamics import link_pi
 
     trial = simulate_trial(robot, effects=["load_friction:coefficient=[0.15,0.05]"], **EXACT)
     d = trial.dataset()
@@ -192,7 +192,8 @@ def test_load_friction_acts_in_the_elastic_plants_too(robot, kind):
 
     from ident_opt.effects import is_active, normalise
     from ident_opt.simulator import flexible_link
-    from ident_opt.simulator.truth import build_truth, coulomb_levels, friction_only, link_pi, plant
+    from ident_opt.simulator.planar_dynamics import friction_only, link_pi
+    from ident_opt.simulator.truth import build_truth, coulomb_levels, plant
 
     mu = (0.2, 0.15)
     elastic = {"elasticity": {"joint": 1, "frequency_hz": 5.0, "kind": kind}}

@@ -14,7 +14,8 @@ from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.effects import normalise
 from ident_opt.problem import load_problem
 from ident_opt.simulator import unseen
-from ident_opt.simulator.truth import TRUTH_MODEL, build_truth, coulomb_levels
+from ident_opt.simulator.planar_dynamics import TRUTH_MODEL
+from ident_opt.simulator.truth import build_truth, coulomb_levels
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -171,6 +171,14 @@ class PlanarRobot:
             return "armature, as the robot states a rotor inertia behind a gear"
         return None
 
+    def rigid_body(self, convention: str | None = None) -> RigidBody:
+        """The rigid body the datasheet describes, read under `convention` ("paper" or "physical"; `rigid_body`)."""
+        return rigid_body(self, convention)
+
+    def grouped(self, convention: str | None = None) -> dict[str, float]:
+        """The datasheet's grouped π by name under `convention` (`datasheet_pi`)."""
+        return datasheet_pi(self, convention)
+
     def datasheets(self) -> dict[str, tuple[PlanarArm, np.ndarray]]:
         """The datasheet read both ways, each with the arm it is evaluated with: "paper" (its printed gravity
         vector, the paper's Model 2) and "physical" (a joint-2 armature, reflected friction)."""

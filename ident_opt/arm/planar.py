@@ -199,6 +199,23 @@ class PlanarArm:
         """Predicted joint torques (N, 2) [N m] for parameters π."""
         return self.regressor(q, dq, ddq) @ np.asarray(pi, dtype=float)
 
+    def link_side(self, pi: np.ndarray, armature) -> np.ndarray:
+        """π of the link side: friction zeroed and the rotors' reflected inertia (`armature` [kg m²] per joint)
+        removed, so that τ = Y π is the link-side rigid-body torque (inertial, Coriolis/centrifugal, gravity)."""
+        out = np.where([p.kind == "friction" for p in self.parameters], 0.0, np.asarray(pi, dtype=float))
+        names = list(self.names)
+        out[names.index("a1")] -= armature[0]
+        if "ia2" in names:
+            out[names.index("ia2")] -= armature[1]
+        return out
+
+    def friction_of(self, pi: np.ndarray, joint: int) -> np.ndarray:
+        """π with everything zeroed except the friction parameters (`Parameter.kind`) of `joint` (0-based): those
+        on which τ_joint depends (a structural non-zero of the symbolic Y's row)."""
+        acts = self.symbols["Y"].sparsity()
+        kept = [p.kind == "friction" and acts.has_nz(joint, i) for i, p in enumerate(self.parameters)]
+        return np.where(kept, pi, 0.0)
+
     @cached_property
     def _columns(self) -> dict[str, Callable]:
         """The paper's printed regressor, one function per column: (q, dq, ddq) -> (row 1, row 2)."""

@@ -36,37 +36,37 @@ def errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
     return all(ok for ok, _ in checks), max(r for _, r in checks)
 
 
-def arm_errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
-    """`errors` on an n-joint arm (`Effect.arm_judge`: an untouched joint judged against the largest true value)."""
-    checks = CATALOGUE[cause].arm_judge(estimate, truth)
+def chain_errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
+    """`errors` on an n-joint arm (`Effect.chain_judge`: an untouched joint judged against the largest true value)."""
+    checks = CATALOGUE[cause].chain_judge(estimate, truth)
     return all(ok for ok, _ in checks), max(r for _, r in checks)
 
 
-def arm_joints(robot, limits=None):
+def chain_joints(robot, limits=None):
     """The effect syntax's view of an n-joint arm's joints (`effects.base.Joints`: the datasheet's Coulomb levels,
     the names, the reference magnitudes the draws are relative to), as the simulator builds it for `limits`."""
-    from ident_opt.simulator.arm_plant import arm_scale, joints_of
+    from ident_opt.simulator.chain_plant import arm_scale, joints_of
     from ident_opt.simulator.trial import box_of
 
     box = box_of(robot, limits)
     return joints_of(robot, arm_scale(robot, box, box.v_max))
 
 
-def arm_draw(cause: str, rng: np.random.Generator, joints, chosen: tuple[int, ...]) -> dict:
-    """Keys of a hidden `cause` on an n-joint arm (`Effect.arm_draw`), on the 0-based joints `chosen`."""
+def chain_draw(cause: str, rng: np.random.Generator, joints, chosen: tuple[int, ...]) -> dict:
+    """Keys of a hidden `cause` on an n-joint arm (`Effect.chain_draw`), on the 0-based joints `chosen`."""
     if cause not in CATALOGUE:
         raise ValueError(f"unknown cause {cause!r}")
-    return CATALOGUE[cause].arm_draw(rng, joints, tuple(chosen))
+    return CATALOGUE[cause].chain_draw(rng, joints, tuple(chosen))
 
 
-def arm_draws(causes, rng: np.random.Generator, joints, chosen: tuple[int, ...]) -> dict:
+def chain_draws(causes, rng: np.random.Generator, joints, chosen: tuple[int, ...]) -> dict:
     """Keys of several hidden `causes` on the same n-joint arm, drawn in order, each seeing the Coulomb levels the
     earlier ones set: Stribeck friction drawn beside asymmetric Coulomb friction rises above those levels, not
     above the datasheet's (drawn alone against the datasheet's level, its static level could sit below the
     per-direction ones: a friction that falls at low speed, which no catalogue cause is)."""
     out = {}
     for cause in causes:
-        keys = arm_draw(cause, rng, joints, chosen)
+        keys = chain_draw(cause, rng, joints, chosen)
         out[cause] = keys
         if "positive" in keys and "negative" in keys:
             joints = type(joints)(keys["positive"], keys["negative"], joints.names, joints.scale)

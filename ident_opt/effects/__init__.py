@@ -21,7 +21,7 @@ from ident_opt.effects.base import Effect, Key, discover
 from ident_opt.errors import InputError
 
 #: The causes the diagnosis can name, name -> `Effect`, in catalogue order.
-CATALOGUE: dict[str, Effect] = discover(__name__, __path__, skip=("base", "background"))
+CATALOGUE: dict[str, Effect] = discover(__name__, __path__, skip=("base", "background", "families", "lazy"))
 #: Every name the syntax accepts: the diagnosis catalogue, then the background terms.
 ALL_EFFECTS: dict[str, Effect] = {**CATALOGUE, **BACKGROUND}
 #: The model extensions: the causes linear in their parameters, name -> `Effect`, in catalogue order.

@@ -7,7 +7,9 @@ J2·ddq2 on joint 2's (the a1 and ia2 directions), J ≥ 0, against the datashee
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, afit, arm_values, np, report
+from ident_opt import wording
+from ident_opt.effects.base import Effect, Key, arm_values, np
+from ident_opt.effects.families import ChainFamily, per_joint, per_joint_columns, resolved_joints, selected
 from ident_opt.parameters import Parameter
 
 #: An n-joint arm's default extra inertia, as a share of each joint's nominal diagonal inertia.
@@ -41,36 +43,36 @@ class Armature(Effect):
         physical["armature"] = [a + J for a, J in zip(physical["armature"], p["inertia"])]
 
     # ------------------------------------------------------------------ any arm: J on the diagonal of M
-    def arm_default(self, key: str, joints) -> object:
+    def chain_default(self, key: str, joints) -> object:
         """An n-joint arm: a third of each joint's nominal diagonal inertia (`ArmScale.inertia`)."""
         return tuple(ARM_SHARE * J for J in joints.scale.inertia)
 
-    def arm_plant(self, plant, p: dict) -> None:
+    def chain_plant(self, plant, p: dict) -> None:
         plant.inertia = plant.inertia + np.asarray(p["inertia"])
 
-    def arm_families(self, robot, ctx) -> list:
+    def chain_families(self, ctx) -> list:
         """J_j ddq_j on joint j's row, J ≥ 0, on the joints where it is resolved, against the datasheet."""
         return [
-            afit.ArmFamily(
+            ChainFamily(
                 self.name,
                 extra=_arm_columns,
                 baselines=("datasheet",),
                 nonnegative=("j",),
                 estimate=lambda p, se, ctx: (
-                    {"inertia": afit.per_joint(p, "j", ctx.n)},
-                    {"se": afit.per_joint(se, "j", ctx.n)},
+                    {"inertia": per_joint(p, "j", ctx.n)},
+                    {"se": per_joint(se, "j", ctx.n)},
                 ),
-                screen=lambda p, se, ctx: afit.resolved_joints(p, se, ("j",), ctx.n),
+                screen=lambda p, se, ctx: resolved_joints(p, se, ("j",), ctx.n),
             )
         ]
 
-    def arm_draw(self, rng, joints, chosen) -> dict:
+    def chain_draw(self, rng, joints, chosen) -> dict:
         return {"inertia": arm_values(joints.n, chosen, 0.0, lambda j: rng.uniform(0.2, 0.5) * joints.scale.inertia[j])}
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("inertia",)
 
-    def families(self, robot) -> list:
+    def families(self, ctx) -> list:
         return [
             self.family(
                 extra=_columns,
@@ -83,7 +85,7 @@ class Armature(Effect):
     def sentence(self, d, base: str, gain: str) -> str:
         return (
             f"The {base} model lacks inertia on the diagonal of M: reflected rotor inertia of "
-            f"J = {report.pair(d.estimate['inertia'], 'kg m²')} (joint side) explains the residual; {gain}"
+            f"J = {wording.pair(d.estimate['inertia'], 'kg m²')} (joint side) explains the residual; {gain}"
         )
 
     def draw(self, rng, robot) -> dict:
@@ -105,7 +107,7 @@ def _estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
 
 def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[str]]:
     """J_j ddq_j on joint j's row, for the joints θ selects (an n-joint arm)."""
-    return afit.per_joint_columns(ds.ddq, afit.selected(theta, "armature", ctx.n), "j")
+    return per_joint_columns(ds.ddq, selected(theta, "armature", ctx.n), "j")
 
 
 EFFECT = Armature()

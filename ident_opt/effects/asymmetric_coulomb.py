@@ -8,7 +8,9 @@ friction. Diagnosis: the extension's four levels fitted, against both nominal mo
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, afit, ca, cands, datasheet, np, report, robot_model
+from ident_opt import wording
+from ident_opt.effects.base import Effect, Key, ca, np
+from ident_opt.effects.families import RESOLVED, ChainFamily, selected
 from ident_opt.parameters import Parameter
 
 #: Least direction difference |fc+ − fc−|, relative to the joint's mean level, that makes friction asymmetric.
@@ -43,7 +45,7 @@ class AsymmetricCoulomb(Effect):
     def untouched(self, key: str, joint: int, joints) -> float:
         return _mean(joints)[joint]
 
-    def arm_default(self, key: str, joints) -> object:
+    def chain_default(self, key: str, joints) -> object:
         """An n-joint arm: ±`ARM_SPLIT` about the datasheet's mean level, or about `ARM_LEVEL` × the joint's
         reference torque where the datasheet has none."""
         sign = 1.0 if key == "positive" else -1.0
@@ -88,16 +90,16 @@ class AsymmetricCoulomb(Effect):
         physical["fc_positive"], physical["fc_negative"] = list(p["positive"]), list(p["negative"])
         physical["fc"] = [0.5 * (a + b) for a, b in zip(p["positive"], p["negative"])]
 
-    def arm_plant(self, plant, p: dict) -> None:
+    def chain_plant(self, plant, p: dict) -> None:
         plant.positive, plant.negative = np.array(p["positive"]), np.array(p["negative"])
 
-    def arm_families(self, robot, ctx) -> list:
+    def chain_families(self, ctx) -> list:
         """A Coulomb level per direction on the joints where they differ: against the datasheet, the levels
         fc+ [dq_j > 0] − fc− [dq_j < 0] ≥ 0 (friction opposes motion) replace the datasheet's; against the rigid
         fit, a_j [dq_j ≠ 0] beside the refitted symmetric level (fc± = fc ± a; beside torque offsets a constant
         while moving is theirs, and the rigid fit cannot tell the asymmetry)."""
         return [
-            afit.ArmFamily(
+            ChainFamily(
                 self.name,
                 extra=_arm_columns,
                 removed=_arm_removed,
@@ -108,7 +110,7 @@ class AsymmetricCoulomb(Effect):
             )
         ]
 
-    def arm_draw(self, rng, joints, chosen) -> dict:
+    def chain_draw(self, rng, joints, chosen) -> dict:
         """On each chosen joint a split of ±30..60 % about its mean level (the datasheet's, or 1.5–3 % of its
         reference torque where the datasheet has none); the datasheet's mean level elsewhere."""
         mean = _mean(joints)
@@ -131,11 +133,11 @@ class AsymmetricCoulomb(Effect):
         pairs = zip(estimate["positive"], estimate["negative"])
         return any(abs(p - n) > ASYMMETRY * 0.5 * (abs(p) + abs(n)) for p, n in pairs)
 
-    def families(self, robot) -> list:
-        extended = (*cands.NOMINAL.extensions, self.name)
+    def families(self, ctx) -> list:
+        extended = (*ctx.nominal.extensions, self.name)
         return [
             self.family(
-                lambda th: robot_model.PlanarArm(extended),
+                lambda th: ctx.model(extended),
                 tuple(p.name for p in self.parameters),
                 estimate=_estimate,
             )
@@ -143,19 +145,20 @@ class AsymmetricCoulomb(Effect):
 
     def sentence(self, d, base: str, gain: str) -> str:
         e, mm = d.estimate, d.evidence[d.baseline]["moving_mean"]
-        num, pair = report.num, report.pair
+        num, pair = wording.num, wording.pair
         return (
             f"The residual of the {base} model differs by direction of motion (mean while moving "
             f"positive / negative: "
             + ", ".join(
-                f"{report.joint(d, j)} {num(m['positive'])} / {num(m['negative'])} N m" for j, m in enumerate(mm)
+                f"{wording.joint(d.joints, j)} {num(m['positive'])} / {num(m['negative'])} N m"
+                for j, m in enumerate(mm)
             )
             + f"): Coulomb friction is asymmetric, fc+ = {pair(e['positive'], 'N m')}, "
             f"fc− = {pair(e['negative'], 'N m')}; {gain}"
         )
 
     def draw(self, rng, robot) -> dict:
-        body = datasheet.rigid_body(robot, "physical")
+        body = robot.rigid_body("physical")
         pos, neg = [], []
         for fc in body.fc:  # a per-direction split of the datasheet's mean level by ±30..60 %
             a = rng.uniform(0.3, 0.6) * rng.choice([-1.0, 1.0])
@@ -169,7 +172,7 @@ def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[
     (a_j), on the drives θ selects: v_j is drive j's velocity and its columns reach every joint its motor turns
     (`ArmContext.drive_velocity`, `drive_columns`; the joint's own dq_j on its row alone where the drive turns
     only its joint), as the Coulomb level they replace (`_arm_removed`) does."""
-    joints = afit.selected(theta, "asymmetric_coulomb", ctx.n)
+    joints = selected(theta, "asymmetric_coulomb", ctx.n)
     v = ctx.drive_velocity(ds)
     if baseline == "datasheet":
         up, _ = ctx.drive_columns((v > 0).astype(float), joints, "fp")
@@ -183,7 +186,7 @@ def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[
 def _arm_removed(theta: dict, ctx) -> list[int]:
     """The datasheet's Coulomb parameters of the joints θ selects (their levels per direction replace them)."""
     terms = ctx.coulomb_terms()
-    return [i for j in afit.selected(theta, "asymmetric_coulomb", ctx.n) for i in terms[j]]
+    return [i for j in selected(theta, "asymmetric_coulomb", ctx.n) for i in terms[j]]
 
 
 def _coulomb(p: dict, ctx, j: int) -> float:
@@ -208,7 +211,7 @@ def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
 
 
 def _arm_screen(p: dict, se: dict, ctx) -> list[int]:
-    """The joints whose levels differ by direction by more than `afit.RESOLVED` standard errors."""
+    """The joints whose levels differ by direction by more than `RESOLVED` standard errors."""
     out = []
     for j in range(ctx.n):
         k = str(j + 1)
@@ -216,7 +219,7 @@ def _arm_screen(p: dict, se: dict, ctx) -> list[int]:
             diff, err = p["fp" + k] - p["fn" + k], np.hypot(se["fp" + k], se["fn" + k])
         else:
             diff, err = p.get("a" + k, 0.0), se.get("a" + k, np.inf)
-        if abs(diff) > afit.RESOLVED * err:
+        if abs(diff) > RESOLVED * err:
             out.append(j)
     return out
 

@@ -9,21 +9,35 @@ An `Effect` is one module of `ident_opt.effects` (a cause the diagnosis can name
 `ident_opt.effects.background` (a realism term of the simulator that no diagnosis names). Its hooks are
 no-ops by default; each effect overrides those it needs:
 
-| who calls                                 | hooks                                                          |
-|-------------------------------------------|----------------------------------------------------------------|
-| the syntax (`--effect`, problem files)    | `keys`, `default`, `scaled`, `is_active`                       |
-| the model (`PlanarArm(extensions=...)`)    | `parameters`, `replaces`, `fallback`, `aliases`,               |
-|                                           | `check_model`, `columns`, `add_terms`                          |
-| the simulator's truth (`simulate/truth`)  | `true_robot`, `true_plant`, `mechanism`, `truth_entry`,        |
-|                                           | `true_physical`                                                |
-| the simulator's loop (background terms)   | see `Background`                                               |
-| the diagnosis (`diagnosis/`)               | `families`, `resolved`, `resolution`, `sentence`,              |
-|                                           | `spectrum_marker`, `channel_lines`                             |
-| hidden-effect trials (tests, benchmarks)  | `reference`, `draw`, `judged`, `judge`                         |
+The hooks, by who calls them; where the two kinds of arm (`Robot.kind`) differ, the planar two-link arm's hook and
+the chain's (`chain_…`) stand side by side, each engine calls its own and passes it its context:
+
+| who calls                                   | planar two-link arm                     | arm of n joints (chain)     |
+|---------------------------------------------|-----------------------------------------|-----------------------------|
+| the syntax (`--effect`, problem files)      | `keys`, `default`, `scaled`,            | `chain_default`             |
+|                                             | `is_active`, `untouched`                |                             |
+| the model (`PlanarArm(extensions=...)`)     | `parameters`, `replaces`, `fallback`,   | — (the chain's own terms)   |
+|                                             | `aliases`, `check_model`, `columns`,    |                             |
+|                                             | `add_terms`                             |                             |
+| the simulator's true plant                  | `true_robot`, `true_plant(spec)`,       | `chain_plant(plant)`,       |
+| (`simulator.truth`, `simulator.chain_plant`) | `mechanism(spec)`, `true_physical`      | `chain_mechanism(plant)`    |
+| the simulator's truth file                  | `truth_entry(truth)`                    | `chain_truth(plant)`        |
+| the simulator's loop (background terms)     | see `Background`                        | —                           |
+| the diagnosis's candidates                  | `families(ctx)`: `PlanarFamily`s        | `chain_families(ctx)`:      |
+| (`diagnosis.planar`, `diagnosis.chain`)     |                                         | `ChainFamily`s              |
+| the diagnosis's naming and report (both)    | `resolved`, `resolution`, `sentence`,   | the same                    |
+|                                             | `spectrum_marker`, `channel_lines`      |                             |
+| hidden-effect trials (tests, benchmarks)    | `reference`, `draw`, `judged`, `judge`  | `chain_draw`, `chain_judge` |
+
+A mechanism is described, not built: `mechanism` and `chain_mechanism` return its kind, joint, frequency and damping,
+and the simulator builds the plant (`simulator.elastic`, `simulator.chain_plant`). The candidates' families are
+declared in `effects.families`; the diagnosis's `ctx` (`diagnosis.planar.families.Context`,
+`diagnosis.chain.families.ArmContext`) gives what else they need of the engine (its nominal model, its screens).
 
 This module and the effect modules import nothing heavy at load time: `ident-opt --help` and problem-file
 parsing read the catalogue, and must not pay for NumPy, CasADi or SciPy. Hooks reach those (and the parts
-of ident-opt that import the catalogue themselves) through `deferred`.
+of ident-opt below every floor, `ident_opt.numerics`) through `deferred` (`effects.lazy`); what they need of an
+engine (the diagnosis's, the simulator's), the engine passes them: its context.
 """
 
 from __future__ import annotations
@@ -35,41 +49,14 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from ident_opt.effects.families import PlanarFamily
+from ident_opt.effects.lazy import DEFERRED, deferred
 from ident_opt.errors import InputError
 from ident_opt.parameters import Parameter
 
-
-class deferred:  # lower case: used like the module it stands for
-    """A module imported on its first attribute access: `np = deferred("numpy")` reads like an import.
-
-    The catalogue loads for `--help` and problem files without NumPy, CasADi or SciPy (0.1 s instead of
-    about 1 s), and the modules that iterate the catalogue (robot, simulate, diagnose) can be reached from
-    an effect's hooks without an import cycle: the hooks only run once those modules are loaded anyway."""
-
-    def __init__(self, module: str) -> None:
-        self._module = module
-
-    def __getattr__(self, attr: str):
-        return getattr(importlib.import_module(self._module), attr)
-
-
-#: What the hooks reach, name -> module, each imported on first use: an effect module's
-#: ``from ident_opt.effects.base import np`` gives a `deferred` (see `__getattr__`).
-DEFERRED = {
-    "np": "numpy",
-    "ca": "casadi",
-    "cands": "ident_opt.diagnosis.planar.families",
-    "datasheet": "ident_opt.arm.datasheet",
-    "afit": "ident_opt.diagnosis.chain.families",
-    "elastic_nlp": "ident_opt.numerics.damped_mode",
-    "flexible_link": "ident_opt.simulator.flexible_link",
-    "linear": "ident_opt.numerics.least_squares",
-    "nlp": "ident_opt.numerics.nlp",
-    "report": "ident_opt.report.diagnosis",
-    "robot_model": "ident_opt.arm.planar",
-    "signals": "ident_opt.numerics.signals",
-    "sim": "ident_opt.simulator.truth",
-}
+#: The numerics an effect's hooks use (and this module's own), imported on first use: an effect module's
+#: ``from ident_opt.effects.base import np`` gives a `deferred` (`effects.lazy`).
+np = deferred(DEFERRED["np"])
 
 
 def __getattr__(name: str) -> deferred:
@@ -78,8 +65,6 @@ def __getattr__(name: str) -> deferred:
         return deferred(DEFERRED[name])
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-
-np, cands = deferred(DEFERRED["np"]), deferred(DEFERRED["cands"])  # the two this module's own hooks use
 
 #: Relative tolerance on a hidden magnitude (the default `Effect.judge`).
 MAGNITUDE_TOL = 0.15
@@ -125,7 +110,7 @@ SELECT = Key("joints", None, "the joint(s) it touches: 1-based index or name, or
 @dataclass(frozen=True)
 class ArmScale:
     """Reference magnitudes of an n-joint arm (tuples: one per joint): what its effects' defaults and hidden draws
-    are relative to, so one rule serves a 1 kg and a 30 kg arm (`simulator.arm_plant.arm_scale`)."""
+    are relative to, so one rule serves a 1 kg and a 30 kg arm (`simulator.chain_plant.arm_scale`)."""
 
     torque: tuple[float, ...]  # N m: each joint's effort limit, else its nominal torque's 95th percentile in motion
     inertia: tuple[float, ...]  # kg m²: the nominal diagonal inertia at the centre of the joint ranges
@@ -319,7 +304,7 @@ class Effect:
         full = {k: self.check(k, self._spread(k, v, selected, joints, where), where, joints) for k, v in params.items()}
         for key in self.keys:
             if key not in full:
-                full[key] = self.default(key, joints) if joints.scale is None else self.arm_default(key, joints)
+                full[key] = self.default(key, joints) if joints.scale is None else self.chain_default(key, joints)
         return full if selected is None else self._untouched(full, selected, joints)
 
     def _spread(self, key: str, value: object, selected: tuple[int, ...] | None, joints: Joints, where: str) -> object:
@@ -355,7 +340,7 @@ class Effect:
         """The value of an omitted key (the planar two-link arm's, in absolute units)."""
         return self.keys[key].default
 
-    def arm_default(self, key: str, joints: Joints) -> object:
+    def chain_default(self, key: str, joints: Joints) -> object:
         """The value of an omitted key on an n-joint arm (`joints.scale` holds its reference magnitudes): by
         default the planar one, a per-joint key's repeated over the joints (its first joint's value)."""
         value = self.default(key, joints)
@@ -425,17 +410,17 @@ class Effect:
     def true_physical(self, physical: dict, p: dict) -> None:
         """Change the truth file's rigid-body description of the true plant, in place."""
 
-    # ------------------------------------------------------------- simulator truth, any arm (`simulator.arm_plant`)
-    def arm_plant(self, plant, p: dict) -> None:
-        """Change the true plant of an n-joint arm (`simulator.arm_plant.ArmPlant`: π, extra inertia, friction
+    # ------------------------------------------------------------- simulator truth, any arm (`simulator.chain_plant`)
+    def chain_plant(self, plant, p: dict) -> None:
+        """Change the true plant of an n-joint arm (`simulator.chain_plant.ArmPlant`: π, extra inertia, friction
         terms, encoder offsets, the logged torque channel), in place."""
 
-    def arm_mechanism(self, plant, p: dict) -> tuple[int, float, float] | None:
+    def chain_mechanism(self, plant, p: dict) -> tuple[int, float, float] | None:
         """An elastic joint that replaces the rigid one: (0-based joint, natural frequency [Hz], damping ratio),
         or None."""
         return None
 
-    def arm_truth(self, plant, p: dict) -> dict:
+    def chain_truth(self, plant, p: dict) -> dict:
         """The effect in an n-joint trial's truth file, in the diagnosis's estimate keys."""
         return dict(p)
 
@@ -450,7 +435,7 @@ class Effect:
     def family(self, model=None, free: tuple[str, ...] = (), **options):
         """One candidate family of this cause: `model(θ)` (default: the nominal model) with the π names
         `free` freed against the datasheet (default: none) and the other `Family` fields in `options`."""
-        return cands.Family(self.name, model or cands.nominal, free, **options)
+        return PlanarFamily(self.name, model, free, **options)
 
     def resolved(self, estimate: dict, dt: float) -> bool:
         """Whether a fitted estimate describes an effect at all (`dt` the sample step [s])."""
@@ -479,17 +464,17 @@ class Effect:
         return {}
 
     # ------------------------------------------------------------------ any arm: diagnosis and hidden trials
-    def arm_families(self, robot, ctx) -> list:
+    def chain_families(self, robot, ctx) -> list:
         """The candidate families (`diagnosis.chain.families.ArmFamily`) of this cause on an n-joint arm (`ctx`: its
         `ArmContext`, with the evidence per joint)."""
         return []
 
-    def arm_draw(self, rng, joints: Joints, chosen: tuple[int, ...]) -> dict:
+    def chain_draw(self, rng, joints: Joints, chosen: tuple[int, ...]) -> dict:
         """Keys of a hidden instance on an n-joint arm (`joints.scale` its reference magnitudes), on the 0-based
         joints `chosen` where the cause is per joint."""
         return {}
 
-    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+    def chain_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         """(within tolerance, relative error) per judged number on an n-joint arm: the planar rule (`judge`), with a
         joint whose true value is 0 (untouched) judged relative to the largest true value of the same key."""
         checks = []

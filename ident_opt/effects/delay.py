@@ -17,7 +17,9 @@ from __future__ import annotations
 
 from functools import partial
 
-from ident_opt.effects.base import Effect, Key, afit, linear, np, relative_error, report, signals
+from ident_opt import wording
+from ident_opt.effects.base import Effect, Key, least_squares, np, relative_error, signals
+from ident_opt.effects.families import ChainFamily, step
 
 #: Shortest delay [s] that counts as a cause (the tolerance on hidden delays is 2 ms, too).
 MIN_DELAY_S = 0.002
@@ -36,26 +38,26 @@ class Delay(Effect):
     def true_plant(self, plant, p: dict) -> None:
         plant.channel.append(partial(delayed, p["seconds"]))
 
-    def arm_plant(self, plant, p: dict) -> None:
+    def chain_plant(self, plant, p: dict) -> None:
         self.true_plant(plant, p)
 
-    def arm_families(self, robot, ctx) -> list:
+    def chain_families(self, ctx) -> list:
         """The whole prediction delayed by d, searched in 0–0.15 s (the measured torque read back by d while fitting,
         so that π refitted is one projection), against both nominal models."""
         return [
-            afit.ArmFamily(
+            ChainFamily(
                 self.name,
                 delay=lambda theta: theta["delay"],
-                axes=lambda rate, theta: [linear.Axis("delay", 0.0, 0.15, 31)],
+                axes=lambda rate, theta: [least_squares.Axis("delay", 0.0, 0.15, 31)],
                 estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {}),
                 check=_like_with_like,
             )
         ]
 
-    def arm_draw(self, rng, joints, chosen) -> dict:
+    def chain_draw(self, rng, joints, chosen) -> dict:
         return self.draw(rng, None)
 
-    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+    def chain_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         return self.judge(estimate, truth)
 
     # ------------------------------------------------------------------ diagnosis
@@ -66,11 +68,11 @@ class Delay(Effect):
         "sample-and-hold timing and filter mismatch produce them",
     )
 
-    def families(self, robot) -> list:
+    def families(self, ctx) -> list:
         return [
             self.family(
                 transform=_delayed_prediction,
-                axes=lambda rate: [linear.Axis("delay", 0.0, 0.15, 31)],
+                axes=lambda rate: [least_squares.Axis("delay", 0.0, 0.15, 31)],
                 estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {}),
             )
         ]
@@ -80,9 +82,10 @@ class Delay(Effect):
 
     def sentence(self, d, base: str, gain: str) -> str:
         lag = np.array(d.evidence[d.baseline]["lag_s"]) * 1e3
+        delay = wording.num(1e3 * d.estimate["seconds"], "ms")
         return (
-            f"The measured torque lags the encoder channel: a delay of {report.num(1e3 * d.estimate['seconds'], 'ms')} "
-            f"(cross-correlation lag of the {base} model: {report.pair(lag, 'ms')}); {gain}"
+            f"The measured torque lags the encoder channel: a delay of {delay} "
+            f"(cross-correlation lag of the {base} model: {wording.pair(lag, 'ms')}); {gain}"
         )
 
     def draw(self, rng, robot) -> dict:
@@ -101,7 +104,7 @@ def _like_with_like(predict, theta: dict, ctx) -> tuple[dict, str | None]:
     step from the fitted d on the rest-demeaned training residual r ≈ −δ ṗ, joints weighted as the fit weighs them;
     the candidate is unresolved when that reading falls below the delay's own floor."""
     tr, d = ctx.train, float(theta["delay"])
-    dt = afit.step(tr)
+    dt = step(tr)
     p = ctx.lowpass(predict(tr), tr)
     r = ctx.demean(tr.tau - p, tr)
     dp = ctx.demean(np.gradient(p, dt, axis=0), tr)

@@ -23,25 +23,21 @@ by variable projection; on the planar arm IPOPT then polishes them jointly with 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
+from ident_opt import wording
 from ident_opt.effects.base import (
     Effect,
     Key,
-    afit,
-    ca,
-    cands,
+    damped_mode,
     edge_rule,
-    elastic_nlp,
-    flexible_link,
     inside,
-    linear,
+    least_squares,
     np,
     relative_error,
-    report,
     signals,
-    sim,
 )
+from ident_opt.effects.families import ChainFamily, step, view_key
 from ident_opt.errors import InputError
 
 #: Joint-2 angles [rad] the trajectories reach: |q2| ≤ 1.4 rad (the band of the mode over the workspace).
@@ -53,7 +49,7 @@ ELASTIC_BAND_HZ = (1.5, 12.0)
 #: Relative tolerance on a hidden mode's frequency.
 FREQUENCY_TOL = 0.20
 #: Highest mode the simulator accepts [Hz]: a stiffer spring is a rigid joint at any control rate it runs at
-#: (and its RK4 steps would grow without bound; `arm_loop.MAX_SUBSTEPS` bounds them too).
+#: (and its RK4 steps would grow without bound; `chain_loop.MAX_SUBSTEPS` bounds them too).
 MAX_FREQUENCY_HZ = 500.0
 
 
@@ -63,7 +59,7 @@ class Mode:
     a driven motor inertia B [kg m²] and a link inertia J_link [kg m²], which set its natural frequency
     `frequency_hz` [Hz] and damping ratio `damping` (`spring_for`); `fastest_rate` [1/s] bounds the mode's rate with
     the joints free (it sizes the RK4 step). The planar arm's `Elastic` and the n-joint plant's
-    `simulator.arm_plant.ElasticJoint` are modes."""
+    `simulator.chain_plant.ElasticJoint` are modes."""
 
     index: int
     k: float
@@ -90,132 +86,6 @@ def spring_for(J_link: float, frequency_hz: float, damping: float) -> tuple[floa
     J_link [kg m²]: k = J_link (2π f)², d = 2 ζ √(k J_link)."""
     k = J_link * (2 * math.pi * frequency_hz) ** 2
     return k, 2 * damping * math.sqrt(k * J_link)
-
-
-@dataclass(frozen=True)
-class Elastic(Mode):
-    """The planar arm's elastic joint (two-mass, `kind` "joint") or flexible link ("link", `flexible_link`), with
-    its frequency's range over the workspace [Hz] (joint 1's link inertia depends on q2)."""
-
-    frequency_range_hz: tuple[float, float] = field(kw_only=True)
-    kind: str = field(default="joint", kw_only=True)
-
-    #: The state: [q (2), θ, dq (2), dθ] (elastic joint) or [q (2), φ, dq (2), dφ] (flexible link).
-    state_size = 6
-
-    def rates(self, kd: tuple[float, float]) -> list[float]:
-        """The fastest closed-loop rate [1/s] the mode adds under PD damping gains kd [N m s/rad]."""
-        return [self.fastest_rate + kd[self.index] / self.B]
-
-    def spring(self, e, de):
-        """The joint's spring and damper torque [N m] at deflection e = θ − q_j [rad] and its rate [rad/s] (linear
-        here; `simulator.unseen.NonlinearJoint` shapes it)."""
-        return self.k * e + self.d * de
-
-    def static_deflection(self, torque: float) -> float:
-        """The deflection [rad] at which the spring holds `torque` [N m] at rest."""
-        return torque / self.k
-
-    def plant(self, truth) -> ca.Function:
-        """(x, τ) -> (ẋ, y) as `simulator.truth.plant`, y's deflection θ − q_j (joint) or φ (link)."""
-        x, tau = ca.SX.sym("x", self.state_size), ca.SX.sym("tau", 2)
-        delta = ca.DM(truth.offset)
-        if self.kind == "link":
-            return self._link_plant(truth, x, tau, delta)
-        model, pi, j = truth.model, truth.pi, self.index
-        q, theta, dq, dtheta = x[:2], x[2], x[3:5], x[5]
-        link = pi - sim.friction_only(model, pi, j)  # the link side: no friction and no motor inertia at j
-        link[model.names.index("a1" if j == 0 else "ia2")] -= self.B
-        spring = self.spring(theta - q[j], dtheta - dq[j])
-        v = ca.vertcat(dtheta, 0) if j == 0 else ca.vertcat(0, dtheta)
-        motor_friction = model.tau_expression(q, v, ca.DM.zeros(2), ca.DM(sim.friction_only(model, pi, j)))[j]
-        other = 1 - j
-        rigid_side = ca.DM(sim.link_pi(model, pi, truth.armature))
-
-        def solve(extra):  # [ddq (2), ddθ]; the gear friction of joint j acts on its motor, before the spring
-            tau_link = ca.vertcat(spring, tau[1] - extra[1]) if j == 0 else ca.vertcat(tau[0] - extra[0], spring)
-            ddq = sim.solve_forward(model, ca.DM(link), q, dq, tau_link)
-            return ca.vertcat(ddq, (tau[j] - spring - motor_friction - extra[j]) / self.B)
-
-        def load(a):  # joint j's gears transmit the spring torque; the other joint's, its link-side torque
-            rows = [None, None]
-            rows[j], rows[other] = spring, model.tau_expression(q, dq, a[:2], rigid_side)[other]
-            return ca.vertcat(*rows)
-
-        rates = ca.vertcat(dtheta, dq[1]) if j == 0 else ca.vertcat(dq[0], dtheta)
-        acc = sim.with_load_friction(truth, rates, solve, load)
-        ddq, ddtheta = acc[:2], acc[2]
-        xdot = ca.vertcat(dq, dtheta, ddq, ddtheta)
-        q_enc = ca.vertcat(theta, q[1]) if j == 0 else ca.vertcat(q[0], theta)
-        dq_enc = ca.vertcat(dtheta, dq[1]) if j == 0 else ca.vertcat(dq[0], dtheta)
-        ddq_enc = ca.vertcat(ddtheta, ddq[1]) if j == 0 else ca.vertcat(ddq[0], ddtheta)
-        y = ca.vertcat(q_enc - delta, dq_enc, ddq_enc, theta - q[j])
-        return ca.Function("plant", [x, tau], [xdot, y], ["x", "tau"], ["xdot", "y"])
-
-    def _link_plant(self, truth, x, tau, delta) -> ca.Function:
-        """The flexible-link plant (see flexible_link.py): x = [q1, q2, φ, dq1, dq2, dφ]."""
-        model, pi = truth.model, truth.pi
-        z, dz, M, h = flexible_link.lagrangian_terms(truth.robot, self.index, truth.armature)
-        friction_pi = sim.friction_only(model, pi, 0) + sim.friction_only(model, pi, 1)
-        F = model.tau_expression(z[:2], dz[:2], ca.DM.zeros(2), ca.DM(friction_pi))
-        B = ca.DM(truth.armature)
-
-        def solve(extra):  # ddz; the gears' load friction reduces the joint torques
-            return ca.solve(M, ca.vertcat(tau - F - extra, -self.k * z[2] - self.d * dz[2]) - h)
-
-        def load(a):  # the link-side torque at the joints: M a + h without the rotors' B ddq
-            return (ca.mtimes(M, a) + h)[:2] - B * a[:2]
-
-        ddz = sim.with_load_friction(truth, dz[:2], solve, load)
-        motion = ca.Function("motion", [z, dz, tau], [ddz])
-        ddz_x = motion(x[:3], x[3:], tau)
-        xdot = ca.vertcat(x[3:], ddz_x)
-        y = ca.vertcat(x[:2] - delta, x[3:5], ddz_x[:2], x[2])
-        return ca.Function("plant", [x, tau], [xdot, y], ["x", "tau"], ["xdot", "y"])
-
-    def initial_state(self, truth, q: np.ndarray) -> np.ndarray:
-        """A state at rest with true joint angles `q` [rad], the spring at its static deflection."""
-        if self.kind == "link":  # the static bend: k φ = −∂V/∂φ
-            z, dz, _, h = flexible_link.lagrangian_terms(truth.robot, self.index, truth.armature)
-            dV = ca.Function("dV", [z], [ca.substitute(h, dz, ca.DM.zeros(3))[2]])
-            phi = 0.0
-            for _ in range(20):
-                phi = -float(dV([q[0], q[1], phi])) / self.k
-            return np.array([q[0], q[1], phi, 0.0, 0.0, 0.0])
-        theta = q[self.index]
-        gravity = sim.TRUTH_MODEL.function("G")
-        link_pi = sim.TRUTH_MODEL.vector(truth.pi_rigid)
-        for _ in range(20):  # fixed point of k (θ − q_j) = G_j(q): the spring holds the link against gravity
-            q[self.index] = theta - self.static_deflection(float(gravity(q, [0, 0], [0, 0], link_pi)[self.index]))
-        return np.concatenate([q, [theta], [0.0, 0.0, 0.0]])
-
-
-def elastic_joint(plant, j: int, f: float, zeta: float) -> Elastic:
-    """Joint j (0-based) elastic at f [Hz] with damping ratio ζ, on the true plant `plant` (a `PlantSpec`)."""
-    pi = plant.pi
-    B = plant.armature[j]  # the motor side: reflected rotor inertia
-    J_link = (pi["a1"] - B + 2 * pi["a2"]) if j == 0 else pi["a3"]
-    k, d = spring_for(J_link, f, zeta)
-    if j == 0:  # J_l(q2) = a1 − B + 2 a2 cos q2 over the trajectories' range of q2
-        inertias = [pi["a1"] - B + 2 * pi["a2"] * math.cos(q2) for q2 in Q2_RANGE]
-    else:
-        inertias = [J_link, J_link]
-    band = tuple(natural_hz(k, J) for J in inertias)
-    w_free = math.sqrt(k * (1 / B + 1 / min(inertias)))
-    rate = w_free + d * (1 / B + 1 / min(inertias))
-    return Elastic(j, k, d, B, J_link, f, zeta, rate, frequency_range_hz=band, kind="joint")
-
-
-def flexible(plant, j: int, f: float, zeta: float) -> Elastic:
-    """Link j (0-based) flexible at f [Hz] with damping ratio ζ, on the true plant `plant` (a `PlantSpec`)."""
-    robot, armature = plant.robot, tuple(plant.armature)
-    J = flexible_link.mode_inertia(robot, j, armature, 0.0)
-    k, d = spring_for(J, f, zeta)
-    inertias = [flexible_link.mode_inertia(robot, j, armature, q2) for q2 in Q2_RANGE]
-    band = tuple(natural_hz(k, Jq) for Jq in inertias)
-    w_free = flexible_link.free_rate(robot, j, armature, k)
-    rate = w_free + d * w_free**2 / k  # d (M⁻¹)_φφ, with (M⁻¹)_φφ = ω²/k
-    return Elastic(j, k, d, armature[j], J, f, zeta, rate, frequency_range_hz=band, kind="link")
 
 
 class Elasticity(Effect):
@@ -245,12 +115,13 @@ class Elasticity(Effect):
         return math.isfinite(p["frequency_hz"])
 
     # ------------------------------------------------------------------ simulator
-    def mechanism(self, plant, p: dict) -> Elastic:
-        make = elastic_joint if p["kind"] == "joint" else flexible
-        return make(plant, p["joint"] - 1, p["frequency_hz"], p["damping"])
+    def mechanism(self, plant, p: dict) -> tuple[str, int, float, float]:
+        """(kind "joint" or "link", 0-based joint, frequency [Hz], damping ratio): the simulator builds it
+        (`simulator.elastic.build`)."""
+        return p["kind"], p["joint"] - 1, p["frequency_hz"], p["damping"]
 
     # ------------------------------------------------------------------ any arm: a two-mass joint
-    def arm_mechanism(self, plant, p: dict) -> tuple[int, float, float]:
+    def chain_mechanism(self, plant, p: dict) -> tuple[int, float, float]:
         if p["kind"] != "joint":
             raise InputError(
                 f"effect elasticity: kind={p['kind']} is the planar two-link arm's flexible link; on "
@@ -258,7 +129,7 @@ class Elasticity(Effect):
             )
         return p["joint"] - 1, p["frequency_hz"], p["damping"]
 
-    def arm_truth(self, plant, p: dict) -> dict:
+    def chain_truth(self, plant, p: dict) -> dict:
         """`frequency_hz` is the spring's at the centre pose (the `--effect` key); the link inertia behind it moves
         with the other joints, so the trial has its own: `frequency_trial_hz` at the motion's mean link inertia (what
         the diagnosis estimates: its column carries the mean over the samples), `frequency_range_hz` over it."""
@@ -285,31 +156,31 @@ class Elasticity(Effect):
             "link_inertia": e.J_link,
         }
 
-    def arm_families(self, robot, ctx) -> list:
+    def chain_families(self, ctx) -> list:
         """An elastic joint on each of the joints whose residual rings most (`chain.families.elastic_joints`): the link
         behind it deflects by e, ë + 2ζω ė + ω² e = −u driven by the measured motion, and adds s M_link[:, j] ë to the
         torque (`_arm_columns`); beside it, against the datasheet, the motor's inertia B ddq_j a datasheet may lack.
         f and ζ searched as on the planar arm, against both nominal models."""
         return [
-            afit.ArmFamily(
+            ChainFamily(
                 self.name,
                 extra=_arm_columns(joint),
                 axes=lambda rate, theta: [
-                    linear.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
-                    linear.Axis("damping", 0.005, 0.3, 6, True),
+                    least_squares.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
+                    least_squares.Axis("damping", 0.005, 0.3, 6, True),
                 ],
                 nonnegative=("scale", "motor"),
                 estimate=_arm_estimate(joint),
                 nests=("armature",),  # its motor column, against the datasheet, is joint j's armature column
             )
-            for joint in afit.elastic_joints(ctx, _arm_columns)
+            for joint in ctx.elastic_joints(_arm_columns)
         ]
 
-    def arm_draw(self, rng, joints, chosen) -> dict:
+    def chain_draw(self, rng, joints, chosen) -> dict:
         return {"joint": chosen[0] + 1, "frequency_hz": rng.uniform(3.0, 8.0), "damping": rng.uniform(0.01, 0.05)}
 
-    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
-        """Against the trial's own frequency where the truth has it (`arm_truth`)."""
+    def chain_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+        """Against the trial's own frequency where the truth has it (`chain_truth`)."""
         return self.judge(estimate, {**truth, "frequency_hz": truth.get("frequency_trial_hz", truth["frequency_hz"])})
 
     def truth_entry(self, truth, p: dict) -> dict:
@@ -335,13 +206,13 @@ class Elasticity(Effect):
     def resolved(self, estimate: dict, dt: float) -> bool:
         return inside(estimate["frequency_hz"], *ELASTIC_BAND_HZ)
 
-    def families(self, robot) -> list:
+    def families(self, ctx) -> list:
         return [
             self.family(
                 extra=_columns(joint),
                 axes=lambda rate: [
-                    linear.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
-                    linear.Axis("damping", 0.005, 0.3, 6, True),
+                    least_squares.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
+                    least_squares.Axis("damping", 0.005, 0.3, 6, True),
                 ],
                 # The spring carries a positive share of the link's inertia: a negative one is no mode (it
                 # is what a filter or timing mismatch, e.g. a delay estimated a millisecond long, leaves).
@@ -353,7 +224,7 @@ class Elasticity(Effect):
         ]
 
     def sentence(self, d, base: str, gain: str) -> str:
-        e, det, num = d.estimate, d.detail_of(self.name), report.num
+        e, det, num = d.estimate, d.detail_of(self.name), wording.num
         # k and the link inertia come from the fitted scale s; without them (no such fit) the mode alone is said.
         spring = (
             f"k = {num(det['stiffness'], 'N m/rad')} (link inertia {num(det['inertia'], 'kg m²')}, damping ratio "
@@ -365,7 +236,7 @@ class Elasticity(Effect):
             f"Joint {e['joint']} shows a lightly damped {num(e['frequency_hz'], 'Hz')} oscillation that the "
             f"rigid model cannot produce; an elastic joint with {spring} driven by the measured motor-side angle "
             "explains it"
-            f"{report.polish_note(d, 'frequency_hz', 'Hz')}; {gain}"
+            f"{wording.polish_note(d.named and d.named.detail, 'frequency_hz', 'Hz')}; {gain}"
         )
 
     def spectrum_marker(self, estimate: dict, joint: int) -> float | None:
@@ -380,7 +251,7 @@ class Elasticity(Effect):
         status = "the named cause" if d.cause == self.name else f"not named; score {el['score']:.1f}"
         return [
             "",
-            f"The elastic-joint candidate ({status}) puts a mode at {report.num(f, 'Hz')} on joint "
+            f"The elastic-joint candidate ({status}) puts a mode at {wording.num(f, 'Hz')} on joint "
             f"{el['estimate']['joint']}; channels whose 1–10 Hz maximum lies within 20 % of it: "
             + (", ".join(f"`{n}`" for n in near) if near else "none")
             + ".",
@@ -409,13 +280,13 @@ def elastic_drive(joint: int, ds, ctx) -> tuple[np.ndarray, np.ndarray, np.ndarr
     row rings how much) is what tells an elastic joint 1 from an elastic joint 2, so it is not free."""
     # Remembered for the last few views (`chain.families.view_key`). Few: an offset's search builds a new view at every
     # trial angle.
-    key = (joint, *afit.view_key(ds))
+    key = (joint, *view_key(ds))
     cache = ctx.cache.setdefault("elastic_drive", {})
     if key not in cache:
         if len(cache) >= 4:
             cache.pop(next(iter(cache)))  # the oldest
-        model = cands.NOMINAL
-        pi = sim.link_pi(model, model.vector(ctx.datasheet), ctx.armature)
+        model = ctx.nominal
+        pi = model.link_side(model.vector(ctx.datasheet), ctx.armature)
         unit, zero = np.zeros_like(ds.ddq), np.zeros_like(ds.ddq)
         unit[:, joint - 1] = 1.0
         P = model.predict(pi, ds.q, zero, unit) - model.predict(pi, ds.q, zero, zero)
@@ -441,7 +312,7 @@ def _arm_columns(joint: int):
             ctx.link_torque(ds)[:, joint] / P[:, joint],
             theta.get("frequency_hz", 5.0),
             theta.get("damping", 0.05),
-            afit.step(ds),
+            step(ds),
         )
         X = (P * acceleration[:, None] + ctx.stiffness_column(ds, joint) * e[:, None])[:, :, None]
         if baseline != "datasheet":
@@ -505,7 +376,7 @@ def _polish(joint: int):
         # (f, ζ) with every β by IPOPT, multiple shooting; the scale s is the last column of X.
         u, P, K = elastic_drive(joint, ctx.train, ctx)
         tau = ctx.train.tau - o
-        return elastic_nlp.polish(u, P, tau, X[:, :, :-1], ctx.rest, ctx.weights, ctx.dt, theta, beta, bounds, K)
+        return damped_mode.polish(u, P, tau, X[:, :, :-1], ctx.rest, ctx.weights, ctx.dt, theta, beta, bounds, K)
 
     return polish
 

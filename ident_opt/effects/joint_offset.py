@@ -11,22 +11,20 @@ from __future__ import annotations
 import math
 import time
 
+from ident_opt import wording
 from ident_opt.effects.base import (
     Effect,
     Key,
-    afit,
     arm_values,
     ca,
-    cands,
-    elastic_nlp,
-    linear,
+    damped_mode,
+    least_squares,
     nlp,
     np,
     relative_error,
-    report,
-    robot_model,
     signals,
 )
+from ident_opt.effects.families import POLISH_ROWS, ChainFamily, per_joint
 from ident_opt.parameters import Parameter
 
 #: A hidden offset is found when the estimate is within this [rad] or this relative error.
@@ -67,41 +65,44 @@ class JointOffset(Effect):
     def true_plant(self, plant, p: dict) -> None:
         plant.offset = [a + b for a, b in zip(plant.offset, p["offset"])]
 
-    def arm_default(self, key: str, joints) -> object:
+    def chain_default(self, key: str, joints) -> object:
         """An n-joint arm: the planar default's two values in turn, 0.02 and −0.03 rad."""
         return tuple(self.keys[key].default[j % 2] for j in range(joints.n))
 
-    def arm_plant(self, plant, p: dict) -> None:
+    def chain_plant(self, plant, p: dict) -> None:
         plant.offset = plant.offset + np.asarray(p["offset"])
 
-    def arm_families(self, robot, ctx) -> list:
+    def chain_families(self, ctx) -> list:
         """The nominal model at q + δ, δ by Gauss–Newton on the torque's angle Jacobian (`chain.families.offset_search`)
         on every joint, then on the joints where it is resolved; against both nominal models."""
         return [
-            afit.ArmFamily(
+            ChainFamily(
                 self.name,
                 angles=lambda theta: np.array([theta.get(f"delta{j + 1}", 0.0) for j in range(ctx.n)]),
-                search=afit.offset_search,
-                estimate=lambda p, se, ctx: ({"offset": afit.per_joint(p, "delta", ctx.n)}, {}),
+                search=lambda family, baseline, ctx: ctx.offset_search(family, baseline),
+                estimate=lambda p, se, ctx: ({"offset": per_joint(p, "delta", ctx.n)}, {}),
             )
         ]
 
-    def arm_draw(self, rng, joints, chosen) -> dict:
+    def chain_draw(self, rng, joints, chosen) -> dict:
         return {
             "offset": arm_values(joints.n, chosen, 0.0, lambda j: rng.uniform(0.02, 0.06) * rng.choice([-1.0, 1.0]))
         }
 
-    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+    def chain_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         return self.judge(estimate, truth)
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("offset",)
 
-    def families(self, robot) -> list:
+    def families(self, ctx) -> list:
         return [
             self.family(
                 angles=lambda th: np.array([th["delta1"], th["delta2"]]),
-                axes=lambda rate: [linear.Axis("delta1", -0.1, 0.1, 21), linear.Axis("delta2", -0.1, 0.1, 21)],
+                axes=lambda rate: [
+                    least_squares.Axis("delta1", -0.1, 0.1, 21),
+                    least_squares.Axis("delta2", -0.1, 0.1, 21),
+                ],
                 center=gravity_rotation,
                 estimate=lambda p, se, ctx: ({"offset": [p["delta1"], p["delta2"]]}, {}),
                 polish=_polish,
@@ -109,11 +110,11 @@ class JointOffset(Effect):
         ]
 
     def sentence(self, d, base: str, gain: str) -> str:
-        pair, ev = report.pair, d.evidence[d.baseline]
+        pair, ev = wording.pair, d.evidence[d.baseline]
         return (
             f"Gravity looks rotated (pose-correlated share of the residual {pair(ev['pose_r2'])}): encoder "
             f"zero offsets δ = {pair(d.estimate['offset'], 'rad')} explain it"
-            f"{report.polish_note(d, 'offset', 'rad')}; {gain}"
+            f"{wording.polish_note(d.named and d.named.detail, 'offset', 'rad')}; {gain}"
         )
 
     def draw(self, rng, robot) -> dict:
@@ -138,12 +139,12 @@ def gravity_rotation(ctx, baseline: str) -> dict:
     asymmetric friction would otherwise leak into the gravity columns. The search then refines ±0.1 rad
     around the centre and IPOPT polishes within ±2π."""
     tr = ctx.train
-    model = robot_model.PlanarArm((*cands.NOMINAL.extensions, "asymmetric_coulomb", "joint_offset"))
+    model = ctx.model((*ctx.nominal.extensions, "asymmetric_coulomb", "joint_offset"))
     tau = signals.demean_runs(tr.tau, ctx.rest)
     delta = np.zeros(2)
     for _ in range(CENTRE_ITERATIONS):
         Y = signals.demean_runs(model.regressor(tr.q + delta, tr.dq, tr.ddq), ctx.rest)
-        p = dict(zip(model.names, linear.solve(np.zeros_like(tau), Y, tau, ctx.weights, False).beta))
+        p = dict(zip(model.names, least_squares.solve(np.zeros_like(tau), Y, tau, ctx.weights, False).beta))
         d1 = math.atan2(-p["b1s"], p["b1"])
         d12 = math.atan2(-p["b2s"], p["b2"])
         step = np.array([d1, math.remainder(d12 - d1, 2 * math.pi)])
@@ -155,7 +156,7 @@ def gravity_rotation(ctx, baseline: str) -> dict:
 
 def _polish(baseline: str, ctx, o, X, beta, theta: dict, bounds: dict) -> tuple[dict | None, dict]:
     """(δ1, δ2) jointly by IPOPT, with π when it is refitted (`offsets`), within a half turn."""
-    tr, model = ctx.train, cands.NOMINAL
+    tr, model = ctx.train, ctx.nominal
     held = model.vector(ctx.datasheet) if baseline == "datasheet" else None
     wide = (-2 * math.pi, 2 * math.pi)
     return offsets(model, tr.q, tr.dq, tr.ddq, tr.tau, ctx.rest, ctx.weights, held, beta, theta, wide)
@@ -182,13 +183,13 @@ def offsets(
     model is smooth in δ (sines and cosines), so IPOPT (exact Hessian) is cheap here. Returns (θ or None,
     info); the caller re-solves π exactly at the new δ and keeps it only if the training objective drops."""
     t0 = time.perf_counter()
-    every = max(1, -(-len(q) // cands.POLISH_ROWS))
+    every = max(1, -(-len(q) // POLISH_ROWS))
     q, dq, ddq, tau, labels = (a[::every] for a in (q, dq, ddq, tau, labels))
     if every > 1:
         labels = signals.rest_runs(np.where(labels >= 0, 0.0, 1.0))
     n, k = len(q), len(beta)
     delta = ca.MX.sym("delta", 2)
-    # π on unit-norm columns (as `linear.solve`): they differ by orders of magnitude (inertias vs gravity).
+    # π on unit-norm columns (as `least_squares.solve`): they differ by orders of magnitude (inertias vs gravity).
     scale = np.ones(0)
     if pi_fixed is None:
         Y = model.regressor(q + np.array([theta["delta1"], theta["delta2"]]), dq, ddq)
@@ -199,7 +200,7 @@ def offsets(
     pred = f(ca.DM(q.T) + ca.repmat(delta, 1, n), ca.DM(dq.T), ca.DM(ddq.T), ca.repmat(pi, 1, n))  # 2 × n
     objective = 0
     for j in range(2):
-        r = elastic_nlp.demean_mx(ca.DM(tau[:, j]) - pred[j, :].T, labels[:, j])
+        r = damped_mode.demean_mx(ca.DM(tau[:, j]) - pred[j, :].T, labels[:, j])
         objective = objective + float(weights[j]) * ca.sumsqr(r)
     z = ca.vertcat(delta, bs)
     x0 = np.concatenate([[theta["delta1"], theta["delta2"]], beta / scale if pi_fixed is None else []])

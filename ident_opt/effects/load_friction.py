@@ -10,7 +10,9 @@ the diagnosis has found, τ_load includes the payload's torque (the mass re-read
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Effect, Key, afit, arm_values, cands, np, per_joint_draw, report, sim
+from ident_opt import wording
+from ident_opt.effects.base import Effect, Key, arm_values, np, per_joint_draw
+from ident_opt.effects.families import ChainFamily, per_joint, per_joint_columns, resolved_joints, selected
 from ident_opt.effects.payload import EFFECT as PAYLOAD
 
 #: A hidden coefficient is found within this relative error (or within `ZERO_TOL` of an untouched 0).
@@ -30,43 +32,43 @@ class LoadFriction(Effect):
     def true_plant(self, plant, p: dict) -> None:
         plant.load_friction = [a + b for a, b in zip(plant.load_friction, p["coefficient"])]
 
-    def arm_plant(self, plant, p: dict) -> None:
+    def chain_plant(self, plant, p: dict) -> None:
         plant.load_friction = plant.load_friction + np.asarray(p["coefficient"])
 
-    def arm_families(self, robot, ctx) -> list:
+    def chain_families(self, ctx) -> list:
         """sgn(dq_j)|τ_load,j| on joint j's row (τ_load the datasheet's link-side torque at the measured motion),
         μ ≥ 0, on the joints where it is resolved; against both nominal models."""
         return [
-            afit.ArmFamily(
+            ChainFamily(
                 self.name,
-                extra=lambda ds, theta, ctx, baseline: afit.per_joint_columns(
-                    np.abs(ctx.link_torque(ds)) * np.sign(ds.dq), afit.selected(theta, self.name, ctx.n), "mu"
+                extra=lambda ds, theta, ctx, baseline: per_joint_columns(
+                    np.abs(ctx.link_torque(ds)) * np.sign(ds.dq), selected(theta, self.name, ctx.n), "mu"
                 ),
                 nonnegative=("mu",),
                 estimate=lambda p, se, ctx: (
-                    {"coefficient": afit.per_joint(p, "mu", ctx.n)},
-                    {"se": afit.per_joint(se, "mu", ctx.n)},
+                    {"coefficient": per_joint(p, "mu", ctx.n)},
+                    {"se": per_joint(se, "mu", ctx.n)},
                 ),
-                screen=lambda p, se, ctx: afit.resolved_joints(p, se, ("mu",), ctx.n),
+                screen=lambda p, se, ctx: resolved_joints(p, se, ("mu",), ctx.n),
             )
         ]
 
-    def arm_draw(self, rng, joints, chosen) -> dict:
+    def chain_draw(self, rng, joints, chosen) -> dict:
         return {"coefficient": arm_values(joints.n, chosen, 0.0, lambda j: rng.uniform(0.08, 0.25))}
 
-    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+    def chain_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         return self.judge(estimate, truth)
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("coefficient",)
 
-    def families(self, robot) -> list:
+    def families(self, ctx) -> list:
         return [self.family(extra=_columns, nonnegative=("mu1", "mu2"), estimate=_estimate)]
 
     def sentence(self, d, base: str, gain: str) -> str:
         return (
             f"Friction grows with the torque the joints transmit: a Coulomb level fc + μ·|τ_load| with "
-            f"μ = {report.pair(d.estimate['coefficient'])} explains the residual; {gain}"
+            f"μ = {wording.pair(d.estimate['coefficient'])} explains the residual; {gain}"
         )
 
     def draw(self, rng, robot) -> dict:
@@ -86,8 +88,8 @@ class LoadFriction(Effect):
 def link_torque(ds, ctx) -> np.ndarray:
     """τ_load (N, 2) [N m]: the datasheet's link-side rigid torque at the measured motion (friction and the
     rotors' reflected inertia removed)."""
-    model = cands.NOMINAL
-    pi = sim.link_pi(model, model.vector(ctx.datasheet), ctx.armature)
+    model = ctx.nominal
+    pi = model.link_side(model.vector(ctx.datasheet), ctx.armature)
     return model.predict(pi, ds.q, ds.dq, ds.ddq)
 
 
@@ -96,7 +98,7 @@ def _columns(ds, theta: dict, dt: float, ctx) -> tuple[np.ndarray, list[str]]:
     (θ's `payload_mass` [kg], `Family.coupled`) is part of the load the gears transmit."""
     tau_load = link_torque(ds, ctx)
     if theta.get("payload_mass", 0.0):
-        tau_load = tau_load + theta["payload_mass"] * PAYLOAD.column(ds, ctx.robot)[:, :, 0]
+        tau_load = tau_load + theta["payload_mass"] * PAYLOAD.column(ds, ctx)[:, :, 0]
     load = np.abs(tau_load) * np.sign(ds.dq)
     X = np.zeros((ds.n, 2, 2))
     X[:, 0, 0], X[:, 1, 1] = load[:, 0], load[:, 1]

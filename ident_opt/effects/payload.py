@@ -9,19 +9,9 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from ident_opt.effects.base import (
-    MAGNITUDE_TOL,
-    Effect,
-    Key,
-    afit,
-    cands,
-    datasheet,
-    linear,
-    np,
-    relative_error,
-    report,
-    signals,
-)
+from ident_opt import wording
+from ident_opt.effects.base import MAGNITUDE_TOL, Effect, Key, least_squares, np, relative_error, signals
+from ident_opt.effects.families import ChainFamily
 from ident_opt.errors import InputError
 
 #: How far [m] the centre-of-mass search reaches on each axis around its centre (`_centre`).
@@ -56,7 +46,7 @@ class Payload(Effect):
             )
         return full
 
-    def arm_default(self, key: str, joints) -> object:
+    def chain_default(self, key: str, joints) -> object:
         """An n-joint arm: `ARM_SHARE` of its moving mass, `ARM_COM` m out along the last link's z."""
         return ARM_SHARE * (joints.scale.mass or 4.0) if key == "mass" else ARM_COM
 
@@ -72,21 +62,21 @@ class Payload(Effect):
     def truth_entry(self, truth, p: dict) -> dict:
         return {"mass": p["mass"]}
 
-    def arm_plant(self, plant, p: dict) -> None:
+    def chain_plant(self, plant, p: dict) -> None:
         plant.pi = plant.pi + plant.robot.payload(plant.arm, p["mass"], p["com"])
 
-    def arm_truth(self, plant, p: dict) -> dict:
+    def chain_truth(self, plant, p: dict) -> dict:
         return {"mass": p["mass"], "com": list(p["com"])}
 
-    def arm_families(self, robot, ctx) -> list:
+    def chain_families(self, ctx) -> list:
         """m · Y Δπ(1 kg at c) (`Robot.payload`: π is linear in the mass for a given centre of mass c), m ≥ 0,
         against the datasheet; c searched ±`COM_SPAN` m per axis around the centre a linear fit of (m, m c) gives
         (`_centre`)."""
         return [
-            afit.ArmFamily(
+            ChainFamily(
                 self.name,
                 extra=_arm_column,
-                axes=lambda rate, theta: [linear.Axis(f"com_{a}", -COM_SPAN, COM_SPAN, 7) for a in "xyz"],
+                axes=lambda rate, theta: [least_squares.Axis(f"com_{a}", -COM_SPAN, COM_SPAN, 7) for a in "xyz"],
                 center=_centre,
                 baselines=("datasheet",),
                 nonnegative=("mass",),
@@ -97,7 +87,7 @@ class Payload(Effect):
             )
         ]
 
-    def arm_draw(self, rng, joints, chosen) -> dict:
+    def chain_draw(self, rng, joints, chosen) -> dict:
         """3–8 % of the arm's moving mass, a few centimetres off the last link's origin (z outward)."""
         u = rng.uniform
         return {
@@ -105,7 +95,7 @@ class Payload(Effect):
             "com": (u(-0.03, 0.03), u(-0.03, 0.03), u(0.02, 0.08)),
         }
 
-    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+    def chain_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         """The mass within `MAGNITUDE_TOL`; the centre of mass within `COM_TOL` m, or that share of its distance."""
         mass = relative_error(estimate["mass"], truth["mass"])
         miss = math.dist(estimate["com"], truth["com"])
@@ -115,10 +105,10 @@ class Payload(Effect):
     # ------------------------------------------------------------------ diagnosis
     judged = ("mass",)
 
-    def families(self, robot) -> list:
+    def families(self, ctx) -> list:
         return [
             self.family(
-                extra=lambda ds, th, dt, ctx: _moving_and_held(self.column(ds, robot), ds.dq),
+                extra=lambda ds, th, dt, ctx: _moving_and_held(self.column(ds, ctx), ds.dq),
                 baselines=("datasheet",),
                 nonnegative=("mass_held", "mass_extra"),
                 estimate=_estimate,
@@ -127,18 +117,19 @@ class Payload(Effect):
             )
         ]
 
-    def column(self, ds, robot):
-        """Y·∂π/∂m (N, 2, 1): π is affine in a tip mass m (the combined link-2 inertia about joint 2 and its
-        first moment are both linear in m), so the difference quotient at m = 1 kg is exact."""
-        model = cands.NOMINAL
+    def column(self, ds, ctx):
+        """Y·∂π/∂m (N, 2, 1) in the planar diagnosis's context `ctx`: π is affine in a tip mass m (the combined
+        link-2 inertia about joint 2 and its first moment are both linear in m), so the difference quotient at
+        m = 1 kg is exact."""
+        model, robot = ctx.nominal, ctx.robot
         heavier = self.true_robot(robot, {"mass": 1.0})
-        d = model.vector(datasheet.datasheet_pi(heavier)) - model.vector(datasheet.datasheet_pi(robot))
+        d = model.vector(heavier.grouped("physical")) - model.vector(robot.grouped("physical"))
         return (model.regressor(ds.q, ds.dq, ds.ddq) @ d)[:, :, None]
 
     def sentence(self, d, base: str, gain: str) -> str:
         return (
             f"Gravity and inertia are both off along the direction of a point mass at the tip of link 2: "
-            f"an unmodelled payload of {report.num(d.estimate['mass'], 'kg')} explains it; {gain}"
+            f"an unmodelled payload of {wording.num(d.estimate['mass'], 'kg')} explains it; {gain}"
         )
 
     def draw(self, rng, robot) -> dict:
@@ -162,7 +153,7 @@ def _centre(family, baseline: str, ctx) -> dict:
     X = np.stack([Y @ b for b in basis], axis=2)
     labels = ctx.labels(tr)
     r = tr.tau - Y @ ctx.datasheet
-    fit = linear.solve(
+    fit = least_squares.solve(
         np.zeros_like(r), signals.demean_runs(X, labels), signals.demean_runs(r, labels), ctx.weights, False
     )
     m, h = fit.beta[0], fit.beta[1:]

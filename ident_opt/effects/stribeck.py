@@ -18,23 +18,21 @@ comes out 5–15 % low and vs too wide (`docs/effects.md`); smooth reversals kee
 
 from __future__ import annotations
 
+from ident_opt import wording
 from ident_opt.effects.base import (
     MAGNITUDE_TOL,
     Effect,
     Key,
-    afit,
     ca,
-    cands,
-    datasheet,
     edge_rule,
     inside,
-    linear,
+    least_squares,
     nlp,
     np,
     relative_error,
-    report,
     signals,
 )
+from ident_opt.effects.families import POLISH_ROWS, RESOLVED, ChainFamily, per_joint, resolved_joints, selected
 from ident_opt.errors import InputError
 from ident_opt.parameters import Parameter
 
@@ -116,14 +114,14 @@ class Stribeck(Effect):
     def untouched(self, key: str, joint: int, joints) -> float:
         return _mean(joints)[joint] if key == "static" else self.keys["velocity"].default[0]
 
-    def arm_default(self, key: str, joints) -> object:
+    def chain_default(self, key: str, joints) -> object:
         """An n-joint arm: a static level `ARM_EXCESS` × the joint's reference torque above the datasheet's mean."""
         if key == "static":
             return tuple(m + ARM_EXCESS * T for m, T in zip(_mean(joints), joints.scale.torque))
-        return super().arm_default(key, joints)
+        return super().chain_default(key, joints)
 
     # ------------------------------------------------------------------ any arm: the excess on the joint's velocity
-    def arm_plant(self, plant, p: dict) -> None:
+    def chain_plant(self, plant, p: dict) -> None:
         """The excess over the plant's own Coulomb level (asymmetric_coulomb's, when hidden too) on the joints the
         effect touches: those whose static level is neither the datasheet's nor the plant's mean (a joint left at
         the datasheet's level beside an asymmetric Coulomb friction has no excess, not a negative one)."""
@@ -141,28 +139,28 @@ class Stribeck(Effect):
             )
         plant.velocity = np.array(p["velocity"])
 
-    def arm_truth(self, plant, p: dict) -> dict:
+    def chain_truth(self, plant, p: dict) -> dict:
         return {**p, "static_excess": plant.excess.tolist()}
 
-    def arm_families(self, robot, ctx) -> list:
+    def chain_families(self, ctx) -> list:
         """fs_j sgn(dq_j) exp(−(dq_j/vs_j)²) on the joints where it is resolved (screened at vs = the middle of its
         range), away from stops and near them with coefficients of their own (`_columns`), vs_j searched per joint;
         against both nominal models."""
         return [
-            afit.ArmFamily(
+            ChainFamily(
                 self.name,
                 extra=_arm_columns,
                 axes=lambda rate, theta: [
-                    linear.Axis(f"vs{j + 1}", max(VS_RANGE[0], ctx.stick_speed[j]), VS_RANGE[1], 11, True)
-                    for j in afit.selected(theta, self.name, ctx.n)
+                    least_squares.Axis(f"vs{j + 1}", max(VS_RANGE[0], ctx.stick_speed[j]), VS_RANGE[1], 11, True)
+                    for j in selected(theta, self.name, ctx.n)
                 ],
                 nonnegative=("fs", "fsstop"),
                 estimate=_arm_estimate,
-                screen=lambda p, se, ctx: afit.resolved_joints(p, se, ("fs",), ctx.n),
+                screen=lambda p, se, ctx: resolved_joints(p, se, ("fs",), ctx.n),
             )
         ]
 
-    def arm_draw(self, rng, joints, chosen) -> dict:
+    def chain_draw(self, rng, joints, chosen) -> dict:
         """On each chosen joint an excess of 0.5–1 % of its reference torque over its mean Coulomb level, falling
         off over 3–8 % of its cruise speed."""
         mean = _mean(joints)
@@ -177,7 +175,7 @@ class Stribeck(Effect):
             ),
         }
 
-    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+    def chain_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         """Per joint: where the truth has an excess, fs and vs within `MAGNITUDE_TOL`; elsewhere the estimate must
         report none (0) or a static level within `MAGNITUDE_TOL` of the largest true excess of the mean level."""
         excess = np.asarray(truth["static_excess"], dtype=float)
@@ -236,15 +234,15 @@ class Stribeck(Effect):
         vs = [v for s, v in zip(estimate["static"], estimate["velocity"]) if s > 0]
         return bool(vs) and all(inside(v, *VS_RANGE) for v in vs)
 
-    def families(self, robot) -> list:
+    def families(self, ctx) -> list:
         names = tuple(p.name for p in self.parameters)
         return [
             self.family(
                 extra=_columns,
                 nonnegative=(*names, "fs1_stop", "fs2_stop"),
                 axes=lambda rate: [
-                    linear.Axis("vs1", *VS_RANGE, 11, True),
-                    linear.Axis("vs2", *VS_RANGE, 11, True),
+                    least_squares.Axis("vs1", *VS_RANGE, 11, True),
+                    least_squares.Axis("vs2", *VS_RANGE, 11, True),
                 ],
                 estimate=_estimate,
                 refine=lambda ctx, o, X, names, beta, theta: polish(
@@ -254,7 +252,7 @@ class Stribeck(Effect):
         ]
 
     def sentence(self, d, base: str, gain: str) -> str:
-        e, ev, pair = d.estimate, d.evidence[d.baseline], report.pair
+        e, ev, pair = d.estimate, d.evidence[d.baseline], wording.pair
         return (
             f"Friction rises at low speed beyond the Coulomb level (low-speed excess of the residual "
             f"{pair(ev['low_speed_excess'], 'N m')}): a static level fs = {pair(e['static'], 'N m')} "
@@ -262,7 +260,7 @@ class Stribeck(Effect):
         )
 
     def draw(self, rng, robot) -> dict:
-        u, fc = rng.uniform, datasheet.rigid_body(robot, "physical").fc
+        u, fc = rng.uniform, robot.rigid_body("physical").fc
         return {"static": (fc[0] + u(0.2, 0.4), fc[1] + u(0.15, 0.3)), "velocity": (u(0.03, 0.1), u(0.03, 0.1))}
 
 
@@ -311,7 +309,7 @@ def _arm_columns(ds, theta: dict, ctx, baseline: str) -> tuple[np.ndarray, list[
     milliseconds at a reversal, and the filtered torque holds it smeared; read unfiltered it came out half as high
     and half as wide again on the KUKA."""
     keep = trusted(ds)
-    joints = afit.selected(theta, "stribeck", ctx.n)
+    joints = selected(theta, "stribeck", ctx.n)
     X = np.zeros((ds.n, ctx.n, 2 * len(joints)))
     names = []
     for k, j in enumerate(joints):
@@ -328,7 +326,7 @@ def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
     for j in range(ctx.n):
         k = str(j + 1)
         fs = p.get("fs" + k, 0.0)
-        if "fs" + k not in p or fs <= afit.RESOLVED * se.get("fs" + k, np.inf):
+        if "fs" + k not in p or fs <= RESOLVED * se.get("fs" + k, np.inf):
             static.append(0.0)
             velocity.append(0.0)
             continue
@@ -338,7 +336,7 @@ def _arm_estimate(p: dict, se: dict, ctx) -> tuple[dict, dict]:
             fc = sum(float(p.get(ctx.arm.names[i], ctx.datasheet[i])) for i in ctx.coulomb_terms()[j])
         static.append(fc + fs)
         velocity.append(float(p["vs" + k]))
-    detail = {"excess": afit.per_joint(p, "fs", ctx.n)}
+    detail = {"excess": per_joint(p, "fs", ctx.n)}
     # A hump is read from its fall: at vs = FALL x the lowest speed compared on its joint (`ArmContext.stick_speed`)
     # 78 % of the excess is still there at that speed, so the data hold the fall, not only a tail above the samples
     # left out, where a joint breaking away from stiction leaves torque that a narrower hump fits.
@@ -394,7 +392,7 @@ def polish(
         target = (tau[:, j] - offset[:, j] - X[:, j, :] @ others)[moving]
         data = [dq[moving, j], seen[moving, j].astype(float)]
         x0 = [beta[k[0]], beta[k[1]], theta[f"vs{j + 1}"]]
-        every = max(1, int(moving.sum()) // cands.POLISH_ROWS)
+        every = max(1, int(moving.sum()) // POLISH_ROWS)
 
         def cost(p, target=target, data=data):
             return float(np.sum((target - np.array(f(data[0][None, :], data[1][None, :], *p)).ravel()) ** 2))

@@ -14,7 +14,9 @@ from __future__ import annotations
 
 from functools import partial
 
-from ident_opt.effects.base import Effect, Key, afit, arm_values, np, per_joint_draw, relative_error, report
+from ident_opt import wording
+from ident_opt.effects.base import Effect, Key, arm_values, np, per_joint_draw, relative_error
+from ident_opt.effects.families import ChainFamily, resolved_joints
 
 #: A hidden factor is found when the estimate is within this of it, per joint. It is also the resolution floor: a
 #: factor within it of 1 is not named (`TorqueScale.resolved`), since the diagnosis claims no better accuracy.
@@ -40,7 +42,7 @@ class TorqueScale(Effect):
     def untouched(self, key: str, joint: int, joints) -> float:
         return 1.0
 
-    def arm_default(self, key: str, joints) -> object:
+    def chain_default(self, key: str, joints) -> object:
         return (1.1,) + (1.0,) * (joints.n - 1)
 
     def is_active(self, p: dict, coulomb: tuple[tuple, tuple]) -> bool:
@@ -55,10 +57,10 @@ class TorqueScale(Effect):
     def true_plant(self, plant, p: dict) -> None:
         plant.channel.append(partial(_logged, p["scale"]))
 
-    def arm_plant(self, plant, p: dict) -> None:
+    def chain_plant(self, plant, p: dict) -> None:
         self.true_plant(plant, p)
 
-    def arm_families(self, robot, ctx) -> list:
+    def chain_families(self, ctx) -> list:
         """Against the datasheet: joint j's logged torque is c_j (Y π_datasheet)_j, c_j = 1/s_j, on the joints where
         c_j is resolved from 1 (the others as the datasheet predicts them)."""
 
@@ -67,24 +69,24 @@ class TorqueScale(Effect):
             return s, tuple(f"c{j + 1}" for j in range(ctx.n))
 
         return [
-            afit.ArmFamily(
+            ChainFamily(
                 self.name,
                 rows=True,
                 baselines=("datasheet",),
                 estimate=_arm_estimate,
-                screen=lambda p, se, ctx: afit.resolved_joints(p, se, ("c",), ctx.n, untouched=1.0),
+                screen=lambda p, se, ctx: resolved_joints(p, se, ("c",), ctx.n, untouched=1.0),
                 units=units,
             )
         ]
 
-    def arm_draw(self, rng, joints, chosen) -> dict:
+    def chain_draw(self, rng, joints, chosen) -> dict:
         def factor(j: int) -> float:  # uniform over [0.8, 0.95] ∪ [1.05, 1.25]
             x = rng.uniform(0.0, 0.35)
             return 0.8 + x if x < 0.15 else 1.05 + (x - 0.15)
 
         return {"scale": arm_values(joints.n, chosen, 1.0, factor)}
 
-    def arm_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
+    def chain_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         return self.judge(estimate, truth)
 
     # ------------------------------------------------------------------ diagnosis
@@ -98,13 +100,13 @@ class TorqueScale(Effect):
     def resolved(self, estimate: dict, dt: float) -> bool:
         return any(abs(s - 1.0) > SCALE_TOL for s in estimate["scale"])
 
-    def families(self, robot) -> list:
+    def families(self, ctx) -> list:
         return [self.family(transform=_per_joint, baselines=("datasheet",), estimate=_absolute, units=_units)]
 
     def sentence(self, d, base: str, gain: str) -> str:
         return (
             f"The logged torque is off by a factor per joint: the true joint torque is "
-            f"s = {report.pair(d.estimate['scale'])} × the logged one; {gain}"
+            f"s = {wording.pair(d.estimate['scale'])} × the logged one; {gain}"
         )
 
     def draw(self, rng, robot) -> dict:

@@ -48,8 +48,8 @@ from ident_opt.data.dataset import Dataset
 from ident_opt.errors import InputError
 from ident_opt.fitting.base import ZERO_COLUMN
 from ident_opt.fitting.fit import base_combinations
+from ident_opt.outputs import shown
 from ident_opt.problem.spec import Limits
-from ident_opt.report import shown
 from ident_opt.simulator.fourier import Fourier, default_base_hz
 
 CRITERIA = ("d", "cond", "discriminate")

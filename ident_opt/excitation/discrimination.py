@@ -36,13 +36,14 @@ from ident_opt.diagnosis.planar import families as cands
 from ident_opt.diagnosis.planar.engine import weights_of
 from ident_opt.diagnosis.split import prepare
 from ident_opt.effects import CATALOGUE
+from ident_opt.effects.families import PlanarFamily
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
 from ident_opt.excitation.design import Design, Setup
 from ident_opt.numerics import least_squares as linear
 from ident_opt.numerics import signals
 from ident_opt.numerics.signals import TORQUE_FILTER_HZ
-from ident_opt.report import shown
+from ident_opt.outputs import shown
 
 #: The series a discriminating design uses unless told otherwise: harmonics of about 0.25 Hz up to 4 Hz. Causes
 #: told apart by their dynamics (a mode searched in 1.5–12 Hz, a delay) show only in fast motion; 5 harmonics of
@@ -63,7 +64,7 @@ class Rival:
     """One cause's fitted candidate: its family, its nonlinear parameters θ, its predictor and added count."""
 
     cause: str
-    family: cands.Family
+    family: PlanarFamily
     theta: dict
     candidate: cands.Candidate
 
@@ -114,7 +115,7 @@ def fit_rivals(
     rivals = []
     for cause in causes:
         best = None
-        for family in CATALOGUE[cause].families(robot):
+        for family in CATALOGUE[cause].families(ctx):
             if "rigid_fit" not in family.baselines:
                 continue
             cand = cands.fit(family, "rigid_fit", ctx)

@@ -1,7 +1,6 @@
 """The diagnosis in words and figures: a terminal summary, a Markdown report, two PNG figures.
 
-What each cause's finding says in words is the cause's own (`Effect.sentence`, built with `num`, `pair` and
-`polish_note` from here)."""
+What each cause's finding says in words is the cause's own (`Effect.sentence`, built with `ident_opt.wording`)."""
 
 from __future__ import annotations
 
@@ -9,45 +8,19 @@ from pathlib import Path
 
 import numpy as np
 
-from ident_opt import outputs
+from ident_opt import outputs, wording
 from ident_opt.diagnosis import scoring
 from ident_opt.diagnosis.result import Diagnosis
 from ident_opt.effects import CATALOGUE
 from ident_opt.numerics import signals
 from ident_opt.report import record
 from ident_opt.warnings import markdown_lines
-
-#: What a report writes for a number the data did not resolve (NaN: e.g. no velocity reversal to measure a jump
-#: at, a joint whose forward simulation is not reported), as the report's other tables do for an empty cell.
-NOT_RESOLVED = "—"
-
-
-def num(x: float, unit: str = "", digits: int = 3) -> str:
-    """A number to `digits` significant digits, with its unit; `NOT_RESOLVED` for NaN (never "nan")."""
-    if not np.isfinite(x):
-        return NOT_RESOLVED
-    return f"{x:.{digits}g}{(' ' + unit) if unit else ''}"
-
-
-#: A per-joint number below this share of the list's largest is shown as 0: solver round-off (a friction level the
-#: consistent fit holds at its bound comes out at ~1e-11 N m beside levels of 1 N m).
-ROUND_OFF = 1e-9
-
-
-def pair(xs, unit: str = "") -> str:
-    """Per-joint numbers as "[a, b] unit" (round-off next to the others as 0, `ROUND_OFF`)."""
-    values = [float(x) for x in xs]
-    scale = max((abs(v) for v in values if np.isfinite(v)), default=0.0)
-    shown = (num(0.0 if abs(v) < ROUND_OFF * scale else v) for v in values)
-    return "[" + ", ".join(shown) + "]" + (f" {unit}" if unit else "")
+from ident_opt.wording import NOT_RESOLVED, num, pair
 
 
 def joint(d: Diagnosis, j: int) -> str:
-    """Joint j (0-based) as the report names it: "joint 1" on the planar arm, its name (the URDF's) otherwise."""
-    names = d.joints or []
-    if j < len(names) and names[j] != f"joint{j + 1}":
-        return names[j]
-    return f"joint {j + 1}"
+    """Joint j (0-based) as the report names it (`wording.joint`)."""
+    return wording.joint(d.joints, j)
 
 
 def _gain(d: Diagnosis) -> str:
@@ -104,17 +77,6 @@ def forward_sentence(d: Diagnosis) -> str:
         f"end): {pair(fe[d.baseline], 'rad')} with the {d.baseline} model → {pair(fe['after'], 'rad')} with the "
         f"{'extended' if d.causes else 'same'} model"
     )
-
-
-def polish_note(d: Diagnosis, key: str, unit: str) -> str:
-    """' (IPOPT polish of the grid search's answer: a → b unit)', or '' when there was no polish."""
-    nlp = d.named.detail.get("polish") if d.named else None
-    if not nlp:
-        return ""
-    show = pair if isinstance(nlp["before"][key], list | tuple) else num
-    verdict = "kept" if nlp["kept"] else "not kept: it did not lower the training objective"
-    before, after = show(nlp["before"][key]), show(nlp["after"][key], unit)
-    return f" (IPOPT polish of the grid search's {key}: {before} → {after}, {verdict})"
 
 
 def rigid_fit_sentence(d: Diagnosis) -> str:

@@ -3,8 +3,8 @@ effects from the catalogue (`ident_opt.effects`) switched on, off and scaled.
 
 Modules: `trajectories` (tud01, fourier, mixed, or a file), `fourier` (a periodic Fourier trajectory), `truth` and
 `flexible_link` (the planar two-link arm's true plant: its datasheet read physically, flexible links),
-`arm_plant` (any arm's true plant: its nominal model with the hidden effects on any joint), `closed_loop` and
-`arm_loop` (1 kHz controller + RK4), `background` (the planar loop's realism terms), `measurement` (what the logger
+`chain_plant` (any arm's true plant: its nominal model with the hidden effects on any joint), `closed_loop` and
+`chain_loop` (1 kHz controller + RK4), `background` (the planar loop's realism terms), `measurement` (what the logger
 records), `trial` (`simulate_trial`, `SimTrial`), `cache` (`problem_trials` for a problem's `[simulate]`
 section), `unseen` (plants the diagnosis was not tuned on).
 """

@@ -32,8 +32,9 @@ from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi
 from ident_opt.errors import InputError
 from ident_opt.simulator import background
 from ident_opt.simulator.integrate import march, rk4_step
+from ident_opt.simulator.planar_dynamics import TRUTH_MODEL
 from ident_opt.simulator.trajectories import Reference
-from ident_opt.simulator.truth import TRUTH_MODEL, Truth, initial_state, plant, state_size
+from ident_opt.simulator.truth import Truth, initial_state, plant, state_size
 
 CONTROL_HZ = 1000.0  # the controller's rate [Hz] for logging rates up to it
 MAX_CONTROL_HZ = 5000.0  # fastest loop [Hz]: memory grows with the tick count (9 floats per tick)

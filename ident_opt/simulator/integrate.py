@@ -1,6 +1,6 @@
 """The simulators' one integrator step: classical fourth-order Runge–Kutta on a CasADi expression.
 
-Every simulated plant (the planar arm's closed loop `closed_loop`, any arm's `arm_loop`, the cut-off study's
+Every simulated plant (the planar arm's closed loop `closed_loop`, any arm's `chain_loop`, the cut-off study's
 `evaluation.cutoff_plant`) holds the torque over a control tick and takes a fixed number of these steps within it.
 """
 

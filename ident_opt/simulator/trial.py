@@ -19,9 +19,10 @@ from ident_opt.data.dataset import Dataset, in_source_convention
 from ident_opt.effects import BACKGROUND, CATALOGUE, is_active, normalise
 from ident_opt.errors import InputError
 from ident_opt.problem.spec import Limits
-from ident_opt.simulator import arm_loop, arm_plant, closed_loop, measurement
+from ident_opt.simulator import chain_loop, chain_plant, closed_loop, measurement
+from ident_opt.simulator.planar_dynamics import TRUTH_MODEL
 from ident_opt.simulator.trajectories import DEFAULT_ACCELERATION, RANGE_MARGIN, Box, Reference, arm_box, reference
-from ident_opt.simulator.truth import TRUTH_MODEL, Truth, build_truth, coulomb_levels
+from ident_opt.simulator.truth import Truth, build_truth, coulomb_levels
 
 MIN_DURATION, MAX_DURATION = 1.0, 3600.0  # s: enough samples for the derivative filter; memory stays bounded
 #: The controller's closed-loop bandwidth [Hz] a trial may ask for: a sluggish loop still tracks the slow
@@ -143,7 +144,7 @@ def simulate_trial(
     from the logged angles. `bandwidth_hz` [Hz]: the controller's closed-loop bandwidth (its PD gains);
     `noise_scale`: the torque noise's σ as a multiple of the arm's reference σ (with `noise`), one factor for
     every joint or one per joint. The planar two-link arm (`Robot.engine` "planar") is its datasheet read
-    physically, on the MERIt trials' motion; any other arm is its nominal model (`arm_plant`) moving within
+    physically, on the MERIt trials' motion; any other arm is its nominal model (`chain_plant`) moving within
     `limits` (the problem's `[limits]`; default: the URDF's <limit> values, `Robot.limits`). `mechanism` (planar
     arm): truth -> a mechanism that replaces the one the hidden effects built (`truth.elastic`), e.g. a plant the
     diagnosis was not tuned on (`simulator.unseen`).
@@ -256,13 +257,13 @@ def box_of(robot: Robot, limits: Limits | None) -> Box:
 
 
 def _arm_trial(robot: Robot, effects, settings: dict, scale: np.ndarray, progress: bool, limits, mechanism) -> SimTrial:
-    """An n-joint arm's trial (`simulate_trial`): its nominal model as the true plant (`arm_plant`), the hidden
-    effects on any joint, the closed loop `arm_loop`, logged like the planar arm's."""
+    """An n-joint arm's trial (`simulate_trial`): its nominal model as the true plant (`chain_plant`), the hidden
+    effects on any joint, the closed loop `chain_loop`, logged like the planar arm's."""
     if mechanism is not None:
         raise InputError("a replacement mechanism (simulator.unseen) is built for the planar two-link arm only")
     box = box_of(robot, limits)
-    arm_scale = arm_plant.arm_scale(robot, box, box.v_max)
-    joints = arm_plant.joints_of(robot, arm_scale)
+    arm_scale = chain_plant.arm_scale(robot, box, box.v_max)
+    joints = chain_plant.joints_of(robot, arm_scale)
     background = [name for name in _names(effects) if name in BACKGROUND]
     if background:
         raise InputError(
@@ -271,19 +272,19 @@ def _arm_trial(robot: Robot, effects, settings: dict, scale: np.ndarray, progres
         )
     wanted = normalise(effects, joints)
     active = {name: p for name, p in wanted.items() if is_active(name, p, joints)}
-    plant = arm_plant.build_plant(robot, active, arm_scale, joints, box)
-    arm_plant.check_finite(plant, "simulate")
+    plant = chain_plant.build_plant(robot, active, arm_scale, joints, box)
+    chain_plant.check_finite(plant, "simulate")
     seed, rate_hz = settings["seed"], settings["rate_hz"]
     control = closed_loop.control_hz(rate_hz)
     ref = reference(settings["trajectory"], settings["duration"], seed, 1.0 / control, box)
     outside(ref, box, robot, settings["trajectory"])
-    out, g, steps = arm_loop.run(
+    out, g, steps = chain_loop.run(
         plant, ref, box, progress=progress, control=control, bandwidth_hz=settings["bandwidth_hz"]
     )
     if plant.elastic is not None:  # the spring's link inertia over the motion run (the other joints move)
         n, j = robot.n_joints, plant.elastic.index
         q_true = out[:: max(1, len(out) // 2000), n : 2 * n] + plant.offset  # at most ~2000 poses
-        M = arm_plant.link_inertia(plant, j, q_true)
+        M = chain_plant.link_inertia(plant, j, q_true)
         plant.elastic = replace(plant.elastic, trial_inertia=(float(M.mean()), float(M.min()), float(M.max())))
     sigma = NOISE_SHARE * np.asarray(arm_scale.torque)
     frame = logged(
@@ -342,9 +343,9 @@ def encoder_steps(robot: Robot) -> np.ndarray:
 
 def _arm_truth(plant, settings: dict, noise_std: np.ndarray) -> dict:
     """The ground truth of an n-joint trial: π by name (true and datasheet), the plant's joint terms, each effect
-    in the diagnosis's estimate keys (`Effect.arm_truth`), the settings and the measurement."""
+    in the diagnosis's estimate keys (`Effect.chain_truth`), the settings and the measurement."""
     arm = plant.arm
-    effects = {name: CATALOGUE[name].arm_truth(plant, p) for name, p in plant.effects.items()}
+    effects = {name: CATALOGUE[name].chain_truth(plant, p) for name, p in plant.effects.items()}
     return {
         "joints": list(plant.robot.joint_names),
         "model": list(arm.names),

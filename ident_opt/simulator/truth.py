@@ -7,8 +7,9 @@ M(q) ddq + C(q, dq) dq + G(q) + F(dq) = τ, and the encoders log q. Each hidden 
 1. `Effect.true_robot`: the robot the datasheet π is computed from (a payload at the tip of link 2);
 2. `Effect.true_plant`: π, the model structure and the sensors (`PlantSpec`: extra inertia, friction
    terms, encoder zero offsets δ so that the true angle is the logged one + δ, the logged torque channel);
-3. `Effect.mechanism`: a mechanism that replaces the rigid arm (an elastic joint or a flexible link, see
-   `effects/elasticity.py`), with its own states, plant, initial state and fastest rate.
+3. `Effect.mechanism`: a mechanism that replaces the rigid arm, as the effect describes it (an elastic joint or a
+   flexible link: its kind, joint, frequency and damping), built here (`simulator.elastic`) with its own states,
+   plant, initial state and fastest rate.
 
 Background terms (`ident_opt.effects.background`: stiction, drift, ripple) are kept apart in
 `Truth.background` and wrapped around this plant by background.py.
@@ -23,11 +24,10 @@ import casadi as ca
 import numpy as np
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
-from ident_opt.arm.planar import PHYSICAL, PlanarArm
+from ident_opt.arm.planar import PlanarArm
 from ident_opt.effects import BACKGROUND, CATALOGUE, EXTENSIONS
-
-#: The structure of `SimTrial.truth["pi"]`: the nominal physical-convention arm.
-TRUTH_MODEL = PHYSICAL
+from ident_opt.simulator import elastic
+from ident_opt.simulator.planar_dynamics import TRUTH_MODEL, link_pi, solve_forward, with_load_friction
 
 
 @dataclass
@@ -51,7 +51,7 @@ class Truth:
     robot: PlanarRobot  # the datasheet robot with any hidden payload
     model: PlanarArm
     pi: np.ndarray
-    elastic: object | None  # the mechanism replacing the rigid arm (`effects.elasticity.Elastic`), if any
+    elastic: object | None  # the mechanism replacing the rigid arm (`simulator.elastic.Elastic`), if any
     offset: tuple[float, float]
     effects: dict
     background: dict = field(default_factory=dict)  # background realism terms (`ident_opt.effects.background`)
@@ -105,7 +105,7 @@ def build_truth(robot: PlanarRobot, effects: dict[str, dict]) -> Truth:
     for effect, p in hidden:
         effect.true_plant(spec, p)
     model = PlanarArm(tuple(spec.extensions), **spec.options)
-    mechanisms = [m for effect, p in hidden if (m := effect.mechanism(spec, p)) is not None]
+    mechanisms = [elastic.build(spec, *m) for effect, p in hidden if (m := effect.mechanism(spec, p)) is not None]
     return Truth(
         true_robot,
         model,
@@ -120,49 +120,6 @@ def build_truth(robot: PlanarRobot, effects: dict[str, dict]) -> Truth:
     )
 
 
-# ---------------------------------------------------------------------------------------------- dynamics
-def solve_forward(model: PlanarArm, pi, q, dq, tau) -> ca.SX:
-    """ddq = M(q)⁻¹ (τ − h(q, dq)) from the model's inverse dynamics τ = M ddq + h (one source of truth)."""
-    a = ca.SX.sym("a", 2)
-    expr = model.tau_expression(q, dq, a, pi)
-    M = ca.jacobian(expr, a)
-    h = ca.substitute(expr, a, ca.DM.zeros(2))
-    return ca.solve(M, tau - h)
-
-
-def link_pi(model: PlanarArm, pi: np.ndarray, armature) -> np.ndarray:
-    """π of the link side: friction zeroed and the rotors' reflected inertia (`armature` [kg m²]) removed, so
-    that τ = Y π is the link-side rigid-body torque (inertial, Coriolis/centrifugal, gravity)."""
-    out = np.where([p.kind == "friction" for p in model.parameters], 0.0, np.asarray(pi, dtype=float))
-    names = list(model.names)
-    out[names.index("a1")] -= armature[0]
-    if "ia2" in names:
-        out[names.index("ia2")] -= armature[1]
-    return out
-
-
-#: Fixed-point passes that solve the load-dependent friction's implicit dependence on the acceleration.
-LOAD_FRICTION_PASSES = 4
-
-
-def with_load_friction(truth: Truth, rates, solve, load) -> ca.SX:
-    """Accelerations of a plant whose gears add load-dependent friction μ_j sgn(v_j) |τ_load,j| (`load_friction`;
-    one home for every plant: rigid, elastic joint, flexible link).
-
-    `solve(extra)`: the plant's accelerations with the joint torques reduced by `extra` (2,) [N m]; `load(a)`:
-    the link-side rigid torque τ_load (2,) [N m] at accelerations `a` (inertial without the rotors, Coriolis,
-    gravity; it depends on a, hence the fixed-point passes from the load-free answer, a contraction for
-    μ·(link inertia ÷ joint inertia) < 1); `rates` (2,) [rad/s]: the gear-side joint rates the friction opposes.
-    """
-    a = solve(ca.DM.zeros(2))
-    if not any(truth.load_friction):
-        return a
-    mu = ca.DM(truth.load_friction)
-    for _ in range(LOAD_FRICTION_PASSES):
-        a = solve(mu * ca.sign(rates) * ca.fabs(load(a)))
-    return a
-
-
 def _forward(truth: Truth, q, dq, tau) -> ca.SX:
     """ddq of the rigid plant, with load-dependent friction if any (`with_load_friction`)."""
     link = ca.DM(link_pi(truth.model, truth.pi, truth.armature))
@@ -172,14 +129,6 @@ def _forward(truth: Truth, q, dq, tau) -> ca.SX:
         lambda extra: solve_forward(truth.model, ca.DM(truth.pi), q, dq, tau - extra),
         lambda ddq: truth.model.tau_expression(q, dq, ddq, link),
     )
-
-
-def friction_only(model: PlanarArm, pi: np.ndarray, joint: int) -> np.ndarray:
-    """π with everything zeroed except the friction parameters (`Parameter.kind`) of `joint` (0-based): those
-    on which τ_joint depends (a structural non-zero of the symbolic Y's row)."""
-    acts = model.symbols["Y"].sparsity()
-    kept = [p.kind == "friction" and acts.has_nz(joint, i) for i, p in enumerate(model.parameters)]
-    return np.where(kept, pi, 0.0)
 
 
 def state_size(truth: Truth) -> int:

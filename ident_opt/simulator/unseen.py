@@ -33,8 +33,9 @@ import numpy as np
 from scipy import signal
 
 from ident_opt.arm.datasheet import bar_inertia, cylinder_inertia
-from ident_opt.effects.elasticity import Q2_RANGE, Elastic
-from ident_opt.simulator import truth as sim
+from ident_opt.effects.elasticity import Q2_RANGE
+from ident_opt.simulator import planar_dynamics as sim
+from ident_opt.simulator.elastic import Elastic
 
 #: Clamped–free beam eigenvalues β_i L of the first modes.
 BETA_L = (1.8751040687, 4.6940911330, 7.8547574382, 10.9955407349)

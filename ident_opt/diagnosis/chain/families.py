@@ -28,7 +28,6 @@ All arrays are per sample and joint: o, τ (N, n), X (N, n, k), Y (N, n, P); a j
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -44,6 +43,14 @@ from ident_opt.cbuild import CompiledRows
 from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis.planar.families import Candidate, joint_estimate, physical_units
 from ident_opt.effects import CATALOGUE
+from ident_opt.effects.families import (
+    RESOLVED,
+    ChainFamily,
+    per_joint_columns,
+    selected,
+    step,
+    view_key,
+)
 from ident_opt.errors import InputError
 from ident_opt.fitting.base import base_parameters
 from ident_opt.fitting.estimators import INSTRUMENTED, fit_for
@@ -52,8 +59,6 @@ from ident_opt.fitting.stats import Stats
 from ident_opt.numerics import least_squares as linear
 from ident_opt.numerics import signals
 
-#: A coefficient more than this many standard errors from its untouched value marks its joint as touched.
-RESOLVED = 3.0
 #: A column whose part outside the rigid model's column space is below this share of its norm lies in that
 #: space: a refitted π explains it whole (e.g. a constant torque while moving beside the torque offsets), so it
 #: is held at 0.
@@ -361,6 +366,14 @@ class ArmContext:
             self._cache["coulomb"] = found
         return self._cache["coulomb"]
 
+    def elastic_joints(self, columns: Callable) -> list[int]:
+        """The joints an elastic joint is tried on (`elastic_joints`), for a cause's columns."""
+        return elastic_joints(self, columns)
+
+    def offset_search(self, family: ChainFamily, baseline: str) -> dict:
+        """θ of an encoder-offset family by Gauss–Newton (`offset_search`)."""
+        return offset_search(family, baseline, self)
+
     def torque_jacobian(self, ds: Dataset, delta: np.ndarray, pi: np.ndarray) -> np.ndarray:
         """∂τ/∂q (N, n, n) [N m/rad] of the model at π along `ds` at the angles q + δ: row i, column j is ∂τ_i/∂q_j."""
         f = self._jacobian_function()
@@ -382,17 +395,6 @@ class ArmContext:
         return self._cache["dtau_dq"]
 
 
-def step(ds: Dataset) -> float:
-    """The sample step [s] of a data view (the search reads every few samples of the training part)."""
-    return float(np.median(np.diff(ds.t)))
-
-
-def view_key(ds: Dataset) -> tuple:
-    """What tells one data view from another in the caches: the object, its length, its first and last states
-    (a view at shifted angles differs there; an object's id alone may be reused once it is gone)."""
-    return id(ds), ds.n, ds.q[0].tobytes(), ds.q[-1].tobytes(), ds.dq[-1].tobytes()
-
-
 def _mapped(fn: ca.Function, X: np.ndarray) -> np.ndarray:
     """`fn` (one sample's x to a dense (r, c) output) on every row of X (N, k) by CasADi's map: (N, c, r)."""
     out = np.asarray(fn.map(len(X))(X.T))
@@ -412,83 +414,15 @@ def advanced(x: np.ndarray, seconds: float, dt: float) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------- families
-@dataclass
-class ArmFamily:
-    """One cause's candidate on an n-joint arm: its columns `extra(ds, θ, ctx, baseline) -> (X (N, n, k), names)`,
-    the datasheet parameters it replaces (`removed(ctx)` -> indices), an angle shift `angles(θ)` (n,) [rad], a delay
-    `delay(θ)` [s], whether each joint's datasheet prediction becomes a column (`rows`: a torque scale), the θ axes
-    and the nonlinear search of its own (`search(family, baseline, ctx) -> θ`), the baselines it allows, the
-    nonnegative coefficients, how to read its estimate, `screen(params, se, ctx) -> joints` (the joints where it is
-    resolved; None: not screened), `center` (θ the axes are centred on), `coupled` (θ read from the coefficients,
-    re-solved to a fixed point) and `check(predict, θ, ctx) -> (detail, reason or None)` (a test of the fitted
-    candidate on evidence its fit did not weigh alone; a reason marks it unresolved). `polish` and `refine` are the
-    planar engine's (unused here)."""
-
-    cause: str
-    extra: Callable | None = None
-    removed: Callable | None = None
-    angles: Callable | None = None
-    delay: Callable | None = None
-    rows: bool = False
-    axes: Callable[[float, dict], list[linear.Axis]] = lambda rate, theta: []
-    search: Callable | None = None
-    baselines: tuple[str, ...] = ("datasheet", "rigid_fit")
-    nonnegative: tuple[str, ...] = ()
-    estimate: Callable = lambda p, se, ctx: ({}, {})
-    screen: Callable | None = None
-    center: Callable | None = None
-    coupled: Callable | None = None
-    check: Callable | None = None
-    polish: Callable | None = None
-    refine: Callable | None = None
-    fixed: dict = field(default_factory=dict)
-    members: tuple = ()
-    units: Callable | None = None
-    nests: tuple[str, ...] = ()  # causes whose columns this family's contain (`candidates.Family.nests`)
-    #: Screen the datasheet version with the rigid body's inertial parameters free beside the columns (`_screen`).
-    screen_inertia_free: bool = False
-
-
-def selected(theta: dict, cause: str, n: int) -> tuple[int, ...]:
-    """The joints (0-based) a per-joint cause is fitted on: θ's `<cause>.joints` (set by the screen), else all."""
-    return tuple(theta.get(f"{cause}.joints", range(n)))
-
-
-def per_joint_columns(values: np.ndarray, joints: tuple[int, ...], prefix: str) -> tuple[np.ndarray, list[str]]:
-    """(X (N, n, k), names): one column per joint j of `joints`, `values[:, j]` on joint j's row, named
-    `<prefix><j + 1>`."""
-    X = np.zeros((values.shape[0], values.shape[1], len(joints)))
-    for k, j in enumerate(joints):
-        X[:, j, k] = values[:, j]
-    return X, [f"{prefix}{j + 1}" for j in joints]
-
-
-def per_joint(p: dict, prefix: str, n: int, untouched: float = 0.0) -> list[float]:
-    """A per-joint estimate of n entries from the coefficients `<prefix><j + 1>`: `untouched` where there is none."""
-    return [float(p.get(f"{prefix}{j + 1}", untouched)) for j in range(n)]
-
-
-def resolved_joints(p: dict, se: dict, prefixes: tuple[str, ...], n: int, untouched: float = 0.0) -> list[int]:
-    """The joints (0-based) where some coefficient `<prefix><j + 1>` lies more than `RESOLVED` standard errors from
-    `untouched`."""
-    out = []
-    for j in range(n):
-        for prefix in prefixes:
-            name = f"{prefix}{j + 1}"
-            if name in p and abs(p[name] - untouched) > RESOLVED * se.get(name, math.inf):
-                out.append(j)
-                break
-    return out
-
-
-def families(robot: Robot, ctx: ArmContext) -> list[ArmFamily]:
-    """Every catalogue cause's candidates on this arm (`Effect.arm_families`), in catalogue order."""
-    return [family for effect in CATALOGUE.values() for family in effect.arm_families(robot, ctx)]
+def families(ctx: ArmContext) -> list[ChainFamily]:
+    """Every catalogue cause's candidates on this arm (`Effect.chain_families`, given the context), in catalogue
+    order."""
+    return [family for effect in CATALOGUE.values() for family in effect.chain_families(ctx)]
 
 
 # ---------------------------------------------------------------------------------------------- design and fit
 def design(
-    family: ArmFamily, ds: Dataset, theta: dict, baseline: str, ctx: ArmContext
+    family: ChainFamily, ds: Dataset, theta: dict, baseline: str, ctx: ArmContext
 ) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray | None, np.ndarray | None]:
     """(o (N, n), X (N, n, k), names, Y or None, δ or None) of `family` at θ on `ds` against `baseline`: o the
     datasheet's prediction (without what the cause replaces), X its columns, Y the rigid columns π is refitted on
@@ -513,7 +447,7 @@ def design(
     return o, X, names, None, delta
 
 
-def target(family: ArmFamily, ds: Dataset, theta: dict, ctx: ArmContext) -> np.ndarray:
+def target(family: ChainFamily, ds: Dataset, theta: dict, ctx: ArmContext) -> np.ndarray:
     """The measured torque as the candidate fits it: read back by the cause's delay (`advanced`), if it has one."""
     if family.delay is None:
         return ds.tau
@@ -553,7 +487,7 @@ def projected(Q: np.ndarray, X: np.ndarray, t: np.ndarray, ds: Dataset, ctx: Arm
     return linear.solve_nonnegative(np.zeros_like(y), A, y, np.ones(ctx.n), nonneg, with_se)
 
 
-def problem(family: ArmFamily, ds: Dataset, theta: dict, baseline: str, ctx: ArmContext):
+def problem(family: ChainFamily, ds: Dataset, theta: dict, baseline: str, ctx: ArmContext):
     """The weighted least-squares problem β solves at θ: (A (N, n, k), y (N, n), joint weights w (n,), the indices of
     the nonnegative coefficients, o, X, names, Y, δ) — datasheet: X and τ − o rest-demeaned with the context's
     weights; rigid_fit: weighted and projected off the rigid columns (`projection`), unit weights."""
@@ -567,14 +501,14 @@ def problem(family: ArmFamily, ds: Dataset, theta: dict, baseline: str, ctx: Arm
     return A, y, w, nonneg, o, X, names, Y, delta
 
 
-def _solve(family: ArmFamily, ds: Dataset, theta: dict, baseline: str, ctx: ArmContext, with_se: bool):
+def _solve(family: ChainFamily, ds: Dataset, theta: dict, baseline: str, ctx: ArmContext, with_se: bool):
     """(fit, o, X, names, Y, δ): β at θ (`problem`)."""
     A, y, w, nonneg, o, X, names, Y, delta = problem(family, ds, theta, baseline, ctx)
     ls = linear.solve_nonnegative(np.zeros_like(y), A, y, w, nonneg, with_se)
     return ls, o, X, names, Y, delta
 
 
-def search_theta(family: ArmFamily, baseline: str, ctx: ArmContext) -> dict:
+def search_theta(family: ChainFamily, baseline: str, ctx: ArmContext) -> dict:
     """θ of the family: its own search, else variable projection over its axes (centred by `center`), else its
     fixed θ."""
     theta = dict(family.fixed)
@@ -597,7 +531,7 @@ def search_theta(family: ArmFamily, baseline: str, ctx: ArmContext) -> dict:
     return {**theta, **linear.search(cost, axes)}
 
 
-def fit(family: ArmFamily, baseline: str, ctx: ArmContext) -> Candidate:
+def fit(family: ChainFamily, baseline: str, ctx: ArmContext) -> Candidate:
     """Fit one family against one baseline on the training part: the joints screened first (`screen`, at the
     middle of its axes), θ searched on those, β (and π, for rigid_fit) solved; the joints whose estimate then fails
     the cause's own rule (`detail["failed_joints"]` of its `estimate`) left out and the rest fitted again, once. A
@@ -621,7 +555,7 @@ def fit(family: ArmFamily, baseline: str, ctx: ArmContext) -> Candidate:
     return cand
 
 
-def _screen(family: ArmFamily, baseline: str, start: dict, ctx: ArmContext) -> tuple[int, ...]:
+def _screen(family: ChainFamily, baseline: str, start: dict, ctx: ArmContext) -> tuple[int, ...]:
     """The joints `family.screen` reads as touched from one fit at `start` over every joint, standard errors by the
     sandwich (the residuals are correlated). With `screen_inertia_free`, against the datasheet, the columns and the
     residual are first projected off the rigid body's inertial columns (offsets and friction held at the
@@ -639,7 +573,7 @@ def _screen(family: ArmFamily, baseline: str, start: dict, ctx: ArmContext) -> t
     return tuple(family.screen(dict(zip(names, ls.beta)), dict(zip(names, se)), ctx))
 
 
-def _final(family: ArmFamily, baseline: str, ctx: ArmContext, theta: dict) -> Candidate:
+def _final(family: ChainFamily, baseline: str, ctx: ArmContext, theta: dict) -> Candidate:
     """The candidate at θ: β (with π refitted by the estimator for rigid_fit), coupled θ settled, its estimate and
     predictor."""
     tr = ctx.train
@@ -693,7 +627,7 @@ def _final(family: ArmFamily, baseline: str, ctx: ArmContext, theta: dict) -> Ca
 
 
 # ---------------------------------------------------------------------------------------------- the loop's engine
-def compose(earlier: list[tuple[ArmFamily, dict]], new: ArmFamily) -> ArmFamily:
+def compose(earlier: list[tuple[ChainFamily, dict]], new: ChainFamily) -> ChainFamily:
     """One family for several causes: the earlier ones (each with its θ held) and `new` (searched): every family's
     columns, the parameters any replaces, the angle shift and the delay of the one that has them, the torque-scale
     rows if any has them; the baselines every member allows; each cause's estimate and detail in
@@ -718,7 +652,7 @@ def compose(earlier: list[tuple[ArmFamily, dict]], new: ArmFamily) -> ArmFamily:
     def coupled(p: dict, theta: dict) -> dict:
         return {k: v for c in coupled_parts for k, v in c(p, theta).items()}
 
-    return ArmFamily(
+    return ChainFamily(
         new.cause,
         extra=extra if extras else None,
         removed=replaced if removed else None,
@@ -742,14 +676,14 @@ def compose(earlier: list[tuple[ArmFamily, dict]], new: ArmFamily) -> ArmFamily:
     )
 
 
-def frozen(family: ArmFamily, theta: dict) -> ArmFamily:
+def frozen(family: ChainFamily, theta: dict) -> ChainFamily:
     """`family` with θ held (its joints included): no search, no screen; only its linear coefficients move."""
     return replace(
         family, axes=lambda rate, theta: [], search=None, center=None, screen=None, check=None, fixed=dict(theta)
     )
 
 
-def theta_of(family: ArmFamily, cand: Candidate, ctx: ArmContext) -> dict:
+def theta_of(family: ChainFamily, cand: Candidate, ctx: ArmContext) -> dict:
     """The θ a later round holds the cause at: the candidate's (`detail["theta"]`)."""
     return dict(cand.detail.get("theta", {}))
 
@@ -780,9 +714,9 @@ class Engine:
 
     def __init__(self, ctx: ArmContext):
         self.ctx = ctx
-        self._families = families(ctx.robot, ctx)
+        self._families = families(ctx)
 
-    def families(self, robot: Robot) -> list[ArmFamily]:
+    def families(self, robot: Robot) -> list[ChainFamily]:
         return self._families
 
     fit = staticmethod(fit)
@@ -821,7 +755,7 @@ def elastic_joints(ctx: ArmContext, columns: Callable) -> list[int]:
     return chosen
 
 
-def offset_search(family: ArmFamily, baseline: str, ctx: ArmContext) -> dict:
+def offset_search(family: ChainFamily, baseline: str, ctx: ArmContext) -> dict:
     """Encoder offsets by Gauss–Newton (`gauss_newton`) on every joint, then again on the joints where the offset
     is resolved (more than `RESOLVED` standard errors from 0): θ = {`delta<j>` of those joints,
     `<cause>.joints`}. With the joints already held (a later round), on those only."""
@@ -836,7 +770,7 @@ def offset_search(family: ArmFamily, baseline: str, ctx: ArmContext) -> dict:
 
 
 def gauss_newton(
-    family: ArmFamily, baseline: str, ctx: ArmContext, joints: tuple[int, ...], exact: bool = True
+    family: ChainFamily, baseline: str, ctx: ArmContext, joints: tuple[int, ...], exact: bool = True
 ) -> tuple[dict, np.ndarray]:
     """Encoder offsets δ on `joints`: τ(q + δ + Δ) ≈ τ(q + δ) + (∂τ/∂q) Δ, Δ fitted by least squares with the
     family's other columns (and π, for rigid_fit, by projection), at most `OFFSET_STEPS` steps. (θ with `delta<j>`

@@ -88,7 +88,7 @@ class PlanarEngine:
         self.nominal = Nominal(model, pi, pred, len(model.names), signals.rest_runs(test.dq))
 
     def families(self) -> list:
-        return candidates.families(self.robot)
+        return candidates.families(self.ctx)
 
     def fit(self, family, baseline: str):
         return candidates.fit(family, baseline, self.ctx)

@@ -11,9 +11,9 @@ against one or both nominal models:
   that no choice of π absorbs: friction shape, elasticity, delay, offsets); π by the diagnosis's estimator
   (`Context.rigid`), the effect's coefficients by variable projection (`_estimated`).
 
-After the search, a family may polish θ with IPOPT (`Family.polish`: a proposal re-solved and kept only
+After the search, a family may polish θ with IPOPT (`PlanarFamily.polish`: a proposal re-solved and kept only
 if it lowers the training objective; its estimates before and after land in the candidate's
-`detail["polish"]`, the JSON's extra keys) or refine θ and β jointly (`Family.refine`). IPOPT sees at most
+`detail["polish"]`, the JSON's extra keys) or refine θ and β jointly (`PlanarFamily.refine`). IPOPT sees at most
 `POLISH_ROWS` samples (evenly strided: CasADi builds the expression graph per sample, so a 2 kHz trial
 would otherwise cost seconds just to set up).
 """
@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import ClassVar
 
 import numpy as np
 
@@ -31,6 +32,7 @@ from ident_opt.arm.planar import PHYSICAL, PlanarArm
 from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import scoring
 from ident_opt.effects import CATALOGUE
+from ident_opt.effects.families import PlanarFamily
 from ident_opt.fitting.estimators import INSTRUMENTED, fit_for
 from ident_opt.fitting.iv import InstrumentStats, instrument_kinematics
 from ident_opt.fitting.stats import Stats
@@ -42,14 +44,12 @@ NOMINAL = PHYSICAL
 #: Rows used by the nonlinear search: longer trials are strided down to about this many samples
 #: (the final linear solve always uses every sample).
 SEARCH_ROWS = 12000
-#: Most samples an IPOPT polish is set up on (per joint for Stribeck).
-POLISH_ROWS = 6000
 #: Later rounds search again only the causes the first round found promising (`rounds._fit_round`): the planar
 #: searches and IPOPT polishes are the diagnosis's main cost.
 SEARCH_AGAIN = False
 #: The least share of a joint's torque variance a named cause removes (`scoring.shortfall`): the planar floor.
 MARGIN_VARIANCE = scoring.MARGIN_VARIANCE
-#: Most re-solves of a family whose columns depend on its coefficients (`Family.coupled`).
+#: Most re-solves of a family whose columns depend on its coefficients (`PlanarFamily.coupled`).
 COUPLING_STEPS = 5
 #: Relative step of the central differences in θ (`joint_errors`).
 THETA_STEP = 1e-4
@@ -73,6 +73,14 @@ class Context:
     #: What the candidates compute once per data view and ask for again at every grid point (e.g. an elastic
     #: joint's drive, `effects.elasticity.elastic_drive`), by key.
     cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    #: The nominal structure (`NOMINAL`): what an effect's candidate extends.
+    nominal: ClassVar[PlanarArm] = NOMINAL
+
+    @staticmethod
+    def model(extensions: tuple[str, ...]) -> PlanarArm:
+        """The planar arm with `extensions` (`ident_opt.effects`): a candidate's model."""
+        return PlanarArm(tuple(extensions))
 
     def rigid(self, model: PlanarArm, Y: np.ndarray, target: np.ndarray, Z: np.ndarray | None = None) -> np.ndarray:
         """π (P,) of `model` by the context's estimator on τ = `target` (N, 2) [N m] with regressor Y (N, 2, P) along
@@ -112,52 +120,10 @@ class Candidate:
     errors: Callable[[], dict[str, float]] | None = None
 
 
-@dataclass
-class Family:
-    """How to build one cause's model: the PlanarArm for θ, which π are freed from the datasheet, extra
-    columns, how the prediction is transformed, the θ axes, how to read the estimate and how to polish it.
-
-    `angles(θ)`: a shift δ (2,) [rad] of the angles the model is evaluated at (q + δ), or None.
-    `transform(o, X, names, θ, step)`: the whole prediction changed after the columns are built (e.g.
-    delayed), `step` [s] the sample step of the rows used.
-    `polish(baseline, ctx, o, X, β, θ, bounds)`: IPOPT on θ from the search's answer: (θ proposal or None,
-    info); the caller re-solves β at the proposal and keeps it only if the training objective drops.
-    `refine(ctx, o, X, names, β, θ)`: (β, θ, statuses) refined jointly where it fits better (kept as is).
-    """
-
-    cause: str
-    model: Callable[[dict], PlanarArm]
-    free: tuple[str, ...] | None  # names freed against the datasheet (None: the effect adds no π names)
-    extra: Callable[[Dataset, dict, float, Context], tuple[np.ndarray, list[str]]] | None = None
-    angles: Callable[[dict], np.ndarray] | None = None
-    transform: Callable | None = None
-    axes: Callable[[float], list[linear.Axis]] = lambda rate: []
-    baselines: tuple[str, ...] = ("datasheet", "rigid_fit")
-    nonnegative: tuple[str, ...] = ()  # coefficients with a physical sign (held at 0 rather than negative)
-    estimate: Callable[[dict, dict, Context], tuple[dict, dict]] = lambda p, se, ctx: ({}, {})
-    polish: Callable | None = None
-    refine: Callable | None = None
-    #: `center(ctx, baseline)`: θ values the search axes are centred on (added to each axis' bounds), or None.
-    center: Callable | None = None
-    #: Names of the columns `extra` adds, and θ held fixed (set by `compose` for earlier causes).
-    fixed: dict = field(default_factory=dict)
-    members: tuple = ()  # (cause, Family) of a composed family, in the order the causes were added
-    #: `units(p)`: (s (2,), own names) when the family rescales the logged torque (torque_scale): every
-    #: other coefficient is then fitted in logged units, and s_j turns one on joint j's row into joint
-    #: torque units (`physical_units`). None: the coefficients are in joint-torque units already.
-    units: Callable[[dict], tuple[np.ndarray, tuple[str, ...]]] | None = None
-    #: `coupled(p)`: θ entries the columns depend on, read from the coefficients of the last solve (a found
-    #: payload adds to the load torque that load-dependent friction scales with); `fit` iterates the solve
-    #: to a fixed point. None: the columns do not depend on the coefficients.
-    coupled: Callable[[dict], dict] | None = None
-    #: Causes whose columns this family's contain (an elastic joint's motor inertia is an armature): it is
-    #: named over such a cause only if it also clears the margin against that cause's own fit (`rounds._nested`).
-    nests: tuple[str, ...] = ()
-
-
-def nominal(theta: dict) -> PlanarArm:
-    """The nominal structure, whatever θ (for families that add no model extension)."""
-    return NOMINAL
+def model_of(family: PlanarFamily, theta: dict) -> PlanarArm:
+    """The PlanarArm of `family` at θ: its own (`PlanarFamily.model`), or the nominal structure when it adds no
+    model extension."""
+    return family.model(theta) if family.model is not None else NOMINAL
 
 
 _CACHE: dict = {}
@@ -175,10 +141,10 @@ def _regressor(model: PlanarArm, ds: Dataset, rows: slice) -> np.ndarray:
 
 
 def design(
-    family: Family, ds: Dataset, theta: dict, baseline: str, ctx: Context, rows: slice = slice(None)
+    family: PlanarFamily, ds: Dataset, theta: dict, baseline: str, ctx: Context, rows: slice = slice(None)
 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """(o, X, names) of `family` at θ on `ds` (rows `rows`), against `baseline` (see the module docstring)."""
-    model = family.model(theta)
+    model = model_of(family, theta)
     if family.angles is not None:  # the model, and every extra column, at the true angles q + δ (no cache)
         ds = replace(ds, q=ds.q + family.angles(theta))
         Y = model.regressor(ds.q[rows], ds.dq[rows], ds.ddq[rows])
@@ -202,7 +168,7 @@ def design(
     return offset, X, names
 
 
-def search_axes(family: Family, baseline: str, ctx: Context) -> list[linear.Axis]:
+def search_axes(family: PlanarFamily, baseline: str, ctx: Context) -> list[linear.Axis]:
     """The family's θ axes, centred where its `center` says (e.g. an offset read from the gravity columns)."""
     axes = family.axes(1.0 / ctx.dt)
     if family.center is None:
@@ -211,7 +177,7 @@ def search_axes(family: Family, baseline: str, ctx: Context) -> list[linear.Axis
     return [linear.Axis(a.name, a.low + c[a.name], a.high + c[a.name], a.points, a.log) for a in axes]
 
 
-def _solve(family: Family, ctx: Context, o, X, names, tau, labels, with_se: bool) -> linear.LinearSolve:
+def _solve(family: PlanarFamily, ctx: Context, o, X, names, tau, labels, with_se: bool) -> linear.LinearSolve:
     """β by WLS (nonnegative where the family says), data and columns compared about each rest stretch's
     mean (`signals.demean_runs`: within a rest stretch only variations count)."""
     signed = [i for i, n in enumerate(names) if n in family.nonnegative]
@@ -221,7 +187,7 @@ def _solve(family: Family, ctx: Context, o, X, names, tau, labels, with_se: bool
     )
 
 
-def _polish(family: Family, baseline: str, ctx: Context, axes: list, theta: dict, o, X, names, ls) -> tuple:
+def _polish(family: PlanarFamily, baseline: str, ctx: Context, axes: list, theta: dict, o, X, names, ls) -> tuple:
     """`family.polish` from the search's answer, kept only if β re-solved at the proposal fits better.
     Returns (θ, o, X, fit, the polish record or None)."""
     bounds = {a.name: (a.low, a.high) for a in axes}
@@ -241,8 +207,8 @@ def _polish(family: Family, baseline: str, ctx: Context, axes: list, theta: dict
     return theta, o, X, ls, nlp
 
 
-def _couple(family: Family, baseline: str, ctx: Context, theta: dict, o, X, names, ls) -> tuple:
-    """Columns that depend on the coefficients (`Family.coupled`): re-solve until what they read settles.
+def _couple(family: PlanarFamily, baseline: str, ctx: Context, theta: dict, o, X, names, ls) -> tuple:
+    """Columns that depend on the coefficients (`PlanarFamily.coupled`): re-solve until what they read settles.
     Returns (the coupled θ entries, o, X, fit)."""
     coupling: dict = {}
     for _ in range(COUPLING_STEPS):
@@ -256,7 +222,7 @@ def _couple(family: Family, baseline: str, ctx: Context, theta: dict, o, X, name
 
 
 def _estimated(
-    family: Family, baseline: str, ctx: Context, theta: dict, columns: tuple, beta: np.ndarray
+    family: PlanarFamily, baseline: str, ctx: Context, theta: dict, columns: tuple, beta: np.ndarray
 ) -> np.ndarray:
     """β against the `rigid_fit` baseline with the model's π estimated by the context's estimator (`Context.rigid`)
     rather than jointly by least squares (as is for the datasheet baseline, or a context without an estimator):
@@ -267,7 +233,7 @@ def _estimated(
     if baseline != "rigid_fit" or ctx.estimator is None:
         return beta
     o, X, names = columns
-    model = family.model(theta)
+    model = model_of(family, theta)
     P = model.n_params  # the design against rigid_fit starts with the model's π (`design`)
     Xe, tau = X[:, :, P:], ctx.train.tau
     Z = None
@@ -283,7 +249,7 @@ def _estimated(
     return out
 
 
-def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
+def fit(family: PlanarFamily, baseline: str, ctx: Context) -> Candidate:
     """Fit one family against one baseline on the training part (θ by variable projection, β by WLS)."""
     stride = max(1, -(-ctx.train.n // SEARCH_ROWS))  # ceil: at most SEARCH_ROWS rows
     # A delay needs a uniform grid: stride by whole samples and delay on the strided grid.
@@ -341,7 +307,7 @@ def fit(family: Family, baseline: str, ctx: Context) -> Candidate:
 
 
 def joint_errors(
-    family: Family,
+    family: PlanarFamily,
     baseline: str,
     ctx: Context,
     theta: dict,
@@ -440,7 +406,7 @@ def joint_estimate(families: list, new: str) -> Callable[[dict, dict, object], t
     return estimate
 
 
-def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
+def compose(earlier: list[tuple[PlanarFamily, dict]], new: PlanarFamily) -> PlanarFamily:
     """One family for several causes: the earlier ones (each with its θ held) and `new` (searched, polished).
 
     Columns: the union of the models' extensions, every family's extra columns (the new one's last, so its
@@ -456,7 +422,7 @@ def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
     frees = [f.free for f in fams if f.free is not None]
 
     def model(theta: dict) -> PlanarArm:
-        return merged_model([f.model(theta) for f in fams])
+        return merged_model([model_of(f, theta) for f in fams])
 
     def extra(ds, theta, dt, ctx):
         parts = [e(ds, theta, dt, ctx) for e in extras]
@@ -475,7 +441,7 @@ def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
         return {k: v for c in coupled_parts for k, v in c(p).items()}
 
     baselines = tuple(b for b in new.baselines if all(b in f.baselines for f in fams))
-    return Family(
+    return PlanarFamily(
         new.cause,
         model,
         tuple(n for fr in frees for n in fr) if frees else None,
@@ -496,17 +462,17 @@ def compose(earlier: list[tuple[Family, dict]], new: Family) -> Family:
     )
 
 
-def frozen(family: Family, theta: dict) -> Family:
+def frozen(family: PlanarFamily, theta: dict) -> PlanarFamily:
     """`family` with its θ held at `theta`: no search, no polish (a cause refitted linearly only)."""
     return replace(family, axes=lambda rate: [], polish=None, refine=None, center=None, fixed=dict(theta))
 
 
-def theta(family: Family, cand: Candidate, ctx: Context) -> dict:
+def theta(family: PlanarFamily, cand: Candidate, ctx: Context) -> dict:
     """The θ a later round holds a cause at: the candidate's values on the family's axes."""
     return {a.name: cand.parameters[a.name] for a in family.axes(1.0 / ctx.dt)}
 
 
 # ---------------------------------------------------------------------------------------------- families
-def families(robot: PlanarRobot) -> list[Family]:
-    """Every catalogue cause's families (`Effect.families`), in catalogue order."""
-    return [family for effect in CATALOGUE.values() for family in effect.families(robot)]
+def families(ctx: Context) -> list[PlanarFamily]:
+    """Every catalogue cause's families (`Effect.families`, given the context), in catalogue order."""
+    return [family for effect in CATALOGUE.values() for family in effect.families(ctx)]

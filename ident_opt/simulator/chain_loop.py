@@ -1,5 +1,5 @@
 """The closed loop of an arm with n joints: a digital controller (zero-order hold) on the true plant
-(`arm_plant`), integrated with RK4, the way `closed_loop` does it for the planar arm.
+(`chain_plant`), integrated with RK4, the way `closed_loop` does it for the planar arm.
 
 Controller, knowing only the datasheet: the nominal model's inverse dynamics at the reference plus a PD on the
 encoder (motor-side) angle whose gains are the nominal mass matrix at the reference,
@@ -31,7 +31,7 @@ import numpy as np
 from ident_opt.cache import cache_root
 from ident_opt.cbuild import cached_library, load_external
 from ident_opt.errors import InputError
-from ident_opt.simulator.arm_plant import ArmPlant, centre, initial_state, mass_matrix, plant_function, state_size
+from ident_opt.simulator.chain_plant import ArmPlant, centre, initial_state, mass_matrix, plant_function, state_size
 from ident_opt.simulator.closed_loop import BANDWIDTH_HZ, CHUNK, MAX_SUBSTEPS, Gains
 from ident_opt.simulator.integrate import march, rk4_step
 from ident_opt.simulator.trajectories import Box, Reference

@@ -7,14 +7,14 @@ is the arm's own CasADi expression (`Arm.tau_expression`), and its forward dynam
     M(q) = ∂τ/∂ddq,   h(q, dq) = τ(q, dq, 0),   ddq = M(q)⁻¹ (τ_applied − h(q, dq)),
 
 which `tests/test_simulate_arm.py` checks against Pinocchio's ABA. Each hidden effect of
-`ident_opt.effects.CATALOGUE` shapes it through its hook `Effect.arm_plant` (applied in catalogue order), on any
+`ident_opt.effects.CATALOGUE` shapes it through its hook `Effect.chain_plant` (applied in catalogue order), on any
 joint: extra diagonal inertia (armature), per-direction Coulomb levels and a Stribeck excess on the joint's
 velocity, load-dependent friction, a point mass on the last link (π changes), encoder zero offsets, the logged
-torque channel (a delay, a scale), and `Effect.arm_mechanism`: an elastic joint (`ElasticJoint`), whose motor
+torque channel (a delay, a scale), and `Effect.chain_mechanism`: an elastic joint (`ElasticJoint`), whose motor
 side is logged and driven and whose link side sits behind a spring.
 
 Every number that sizes the plant (π, the extra terms, the spring) is an input of the CasADi functions, not a
-constant in them, so the compiled closed loop (`arm_loop`) is built once per arm and structure.
+constant in them, so the compiled closed loop (`chain_loop`) is built once per arm and structure.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from ident_opt.effects.elasticity import Mode, spring_for
 from ident_opt.errors import InputError
 
 #: The fastest rate [1/s] the regularised friction of the effects may add (`ArmPlant.regularisation`): 32 RK4 steps
-#: per 1 ms tick near a reversal (`arm_loop.tick`), and its narrowest regularisation [rad/s].
+#: per 1 ms tick near a reversal (`chain_loop.tick`), and its narrowest regularisation [rad/s].
 FRICTION_RATE, MIN_EPS = 8000.0, 1e-4
 #: An elastic joint whose nominal motor inertia (reflected rotor inertia) is 0 gets this share of its link-side
 #: inertia as a motor: a two-mass joint needs a motor side (`ElasticJoint`).
@@ -56,7 +56,7 @@ class ElasticJoint(Mode):
 
 @dataclass
 class ArmPlant:
-    """The true plant while the hidden effects shape it (`Effect.arm_plant` changes it in place). Arrays are per
+    """The true plant while the hidden effects shape it (`Effect.chain_plant` changes it in place). Arrays are per
     joint (n,) unless said."""
 
     robot: Robot
@@ -124,7 +124,7 @@ class ArmPlant:
 
     @property
     def friction_rate(self) -> float:
-        """The fastest rate [1/s] the regularised friction adds (the substeps' sizing, `arm_loop.substeps`)."""
+        """The fastest rate [1/s] the regularised friction adds (the substeps' sizing, `chain_loop.substeps`)."""
         step, inertia = self._friction_step()
         return float(np.max(step / (inertia * self.regularisation)))
 
@@ -132,7 +132,7 @@ class ArmPlant:
         """(n,) [rad/s]: per joint, the speed below which the effects' friction changes faster than `rate` [1/s]
         (|∂F/∂v| / inertia, the sign's `smooth_sign` and the Stribeck fall-off together; `_friction_step`'s
         inertia), 0 where it never does. Away from a reversal an explicit step sized for the rest of the loop
-        integrates it; inside the band the loop takes the fine step (`arm_loop.tick`)."""
+        integrates it; inside the band the loop takes the fine step (`chain_loop.tick`)."""
         step, inertia = self._friction_step()
         eps, excess, vs = self.regularisation, np.abs(self.excess), np.where(self.excess != 0, self.velocity, 1.0)
         v = np.geomspace(1e-7, 1e2, 2000)[:, None]  # a grid fine enough for the band's edge within 1 %
@@ -247,8 +247,8 @@ def joints_of(robot: Robot, scale: ArmScale | None) -> Joints:
 
 
 def build_plant(robot: Robot, effects: dict[str, dict], scale: ArmScale, joints: Joints, limits) -> ArmPlant:
-    """The true plant for the (normalised, active) `effects`, each applied by its `Effect.arm_plant` in catalogue
-    order, then the mechanism (`Effect.arm_mechanism`) of the one that has one."""
+    """The true plant for the (normalised, active) `effects`, each applied by its `Effect.chain_plant` in catalogue
+    order, then the mechanism (`Effect.chain_mechanism`) of the one that has one."""
     arm, pi = robot.datasheets()[robot.datasheet]
     n = arm.n_joints
     mean = np.array([0.5 * (a + b) for a, b in zip(*joints)])
@@ -270,9 +270,9 @@ def build_plant(robot: Robot, effects: dict[str, dict], scale: ArmScale, joints:
     )
     hidden = [(e, effects[name]) for name, e in CATALOGUE.items() if name in effects]
     for effect, p in hidden:
-        effect.arm_plant(plant, p)
+        effect.chain_plant(plant, p)
     for effect, p in hidden:
-        joint = effect.arm_mechanism(plant, p)
+        joint = effect.chain_mechanism(plant, p)
         if joint is not None:
             plant.elastic = elastic_joint(plant, *joint, limits)
     return plant
