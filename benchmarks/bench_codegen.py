@@ -26,7 +26,7 @@ from timing import best_time  # noqa: E402
 
 from ident_opt.arm.planar import RIGID  # noqa: E402
 from ident_opt.commands.common import write_json  # noqa: E402
-from ident_opt.data.dataset import load_dataset  # noqa: E402
+from ident_opt.data.loader import load_dataset  # noqa: E402
 from ident_opt.fitting.constrained import fit_constrained  # noqa: E402
 from ident_opt.fitting.stats import Stats  # noqa: E402
 from ident_opt.models.gmr import GMR  # noqa: E402

@@ -32,15 +32,15 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ident_opt.adaptation import c_update  # noqa: E402
 from ident_opt.adaptation.identifier import base_bounds, offline_start  # noqa: E402
 from ident_opt.adaptation.replay import _standard_errors  # noqa: E402
-from ident_opt.data.dataset import load_dataset  # noqa: E402
+from ident_opt.data.loader import load_dataset  # noqa: E402
 from ident_opt.excitation import design as excitation  # noqa: E402
 from ident_opt.fitting.bounded import KKT_TOL, FactorBoundedLS, solve_bounded  # noqa: E402
 from ident_opt.fitting.stats import Stats  # noqa: E402
 from ident_opt.problem import load_problem  # noqa: E402
 from ident_opt.report import record  # noqa: E402
-from ident_opt.shipping import codegen  # noqa: E402
 from ident_opt.shipping.pi_update import _run_example  # noqa: E402
 
 PROBLEM = ROOT / "problems" / "kuka_lwr4.toml"
@@ -106,11 +106,11 @@ def run_c(data: Data, rows: list, new: tuple, folder: Path, repeats: int) -> dic
     """Generate pi_update with the state of `rows`, fold the samples `new` in its example's C loop."""
     f = factor_of(data, rows)
     n = sum(len(tau) for _, tau in rows)
-    state = codegen.UpdateState(
+    state = c_update.UpdateState(
         None, f.h, f.last.pi, f.last.state, n, data.bounds.lower, data.bounds.upper, f.R, f.z, f.hdiag
     )
-    codegen.generate_pi_update(data.arm, state, folder, KKT_TOL, data.design.columns)
-    _, example = codegen.compile_pi_update(folder)
+    c_update.generate_pi_update(data.arm, state, folder, KKT_TOL, data.design.columns)
+    _, example = c_update.compile_pi_update(folder)
     q, dq, ddq, tau, _ = new
     J = q.shape[1]
     header = ",".join(f"{k}{j + 1}" for k in ("q", "dq", "ddq", "tau") for j in range(J))
@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         "steps": steps,
         "repeats": args.repeats,
         "load_average_at_start": load,
-        "cflags": list(codegen.UPDATE_CFLAGS),
+        "cflags": list(c_update.UPDATE_CFLAGS),
     }
     print(json.dumps(summary, indent=1))
     out = Path(args.out)
@@ -191,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         "# The generated update of a 7-joint arm vs a from-scratch re-solve (`benchmarks/bench_online_arms.py`)",
         "",
         f"KUKA LWR4+, {summary['parameters']} base parameters; {steps} updates timed per N from the example's C loop "
-        f"(best of {args.repeats}; built with {' '.join(codegen.UPDATE_CFLAGS)}); load average "
+        f"(best of {args.repeats}; built with {' '.join(c_update.UPDATE_CFLAGS)}); load average "
         f"{load:.1f} on this 2-core machine at the start.",
         "",
         "| N seen | C per update [µs] | its CPU time [µs] | regressor [µs] | update alone [µs] | from scratch, QR "

@@ -33,7 +33,7 @@ sys.path.insert(0, str(ROOT))
 from timing import best_time  # noqa: E402
 
 from ident_opt.commands.common import write_json  # noqa: E402
-from ident_opt.data.dataset import load_dataset  # noqa: E402
+from ident_opt.data.loader import load_dataset  # noqa: E402
 from ident_opt.fitting.base import fit_base_ols  # noqa: E402
 from ident_opt.fitting.constrained import fit_constrained  # noqa: E402
 from ident_opt.fitting.physical import fit_physical  # noqa: E402

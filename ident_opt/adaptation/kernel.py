@@ -1,6 +1,6 @@
 """The bounded online update in generated C, for the Python online path (`OnlineIdentifier.add`).
 
-`attach(identifier, design)` generates `pi_update` (`codegen.generate_pi_update`) with the identifier's current
+`attach(identifier, design)` generates `pi_update` (`c_update.generate_pi_update`) with the identifier's current
 state (normal equations, θ, active set, bounds) baked in, compiles it into a temporary folder, loads it with ctypes
 and makes the identifier's θ a view of the C state, so each `add` is one C call: the rank-J update of the
 statistics' square-root factor, the warm-started bounded re-solve (the active-set method of
@@ -19,10 +19,11 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ident_opt.adaptation import c_update
+from ident_opt.cbuild import compile_shared, find_compiler, generate_sources, library_name
 from ident_opt.errors import InputError
 from ident_opt.fitting.bounded import KKT_TOL
 from ident_opt.models.gmr import conditioning
-from ident_opt.shipping import codegen
 
 
 def load_pi_update(library: Path, n_params: int) -> tuple[ctypes.CDLL, ctypes.Structure]:
@@ -150,13 +151,13 @@ class Predictor:
         return self.fn(*self.args)
 
 
-def update_state(ident) -> codegen.UpdateState:
-    """The state of a bounded online identifier (NumPy path), for `codegen.generate_pi_update`: its normal
+def update_state(ident) -> c_update.UpdateState:
+    """The state of a bounded online identifier (NumPy path), for `c_update.generate_pi_update`: its normal
     equations, or its square-root factor (a ``factor`` estimator)."""
     bounds = ident.estimator.bounds
     factor = ident._factor
     if factor is not None:
-        return codegen.UpdateState(
+        return c_update.UpdateState(
             None,
             factor.h.copy(),
             ident.theta.copy(),
@@ -169,7 +170,7 @@ def update_state(ident) -> codegen.UpdateState:
             factor.hdiag.copy(),
         )
     solver = ident._solve.__self__  # WarmBoundedLS: its last active set
-    return codegen.UpdateState(
+    return c_update.UpdateState(
         ident._H.copy(),
         ident._h.copy(),
         ident.theta.copy(),
@@ -187,21 +188,19 @@ def attach(identifier, design, compiler: list[str] | None = None) -> bool:
     if identifier.estimator.kind not in ("bounded", "factor"):
         return False
     try:
-        compiler = list(compiler or codegen.find_compiler())
+        compiler = list(compiler or find_compiler())
     except InputError:
         return False
     start = update_state(identifier)
     folder = Path(tempfile.mkdtemp(prefix="ident_opt_update_"))
     try:
-        codegen.generate_pi_update(design.arm, start, folder, KKT_TOL, design.columns)
-        sources = [str(folder / f"{codegen.UPDATE}.c"), str(folder / f"{codegen.UPDATE}_casadi.c")]
+        c_update.generate_pi_update(design.arm, start, folder, KKT_TOL, design.columns)
+        sources = [str(folder / f"{c_update.UPDATE}.c"), str(folder / f"{c_update.UPDATE}_casadi.c")]
         predicts = identifier._fast is not None
         if predicts:
-            step_c, _ = codegen.generate_sources([predictor_function(identifier, design)], folder, name="pi_step")
+            step_c, _ = generate_sources([predictor_function(identifier, design)], folder, name="pi_step")
             sources.append(str(step_c))
-        library = codegen.compile_shared(
-            sources, folder / codegen.library_name(codegen.UPDATE), compiler, codegen.UPDATE_CFLAGS
-        )
+        library = compile_shared(sources, folder / library_name(c_update.UPDATE), compiler, c_update.UPDATE_CFLAGS)
         kernel = Kernel(library, len(design.names), design.n_joints)  # loaded: the file may go
     except InputError:
         return False

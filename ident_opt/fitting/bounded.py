@@ -168,7 +168,7 @@ class FactorBoundedLS:
     (P, P), folded from the regressor rows by orthogonal transformations, never formed as YᵀY. Its solution is that
     of `solve_bounded` on the same data, accurate to ~κ(Y)·ε where the normal equations give ~κ(Y)²·ε: what an arm
     identified through many base parameters (an ill-conditioned Y, κ(Y)² ~ 1e7 to 1e12 on real trials) needs for the
-    generated update (`codegen.generate_pi_update`, the same factor) and this path to agree to 1e-9.
+    generated update (`adaptation.c_update.generate_pi_update`, the same factor) and this path to agree to 1e-9.
 
     `add(D, τ)` folds one sample (D (n, P), τ (n,)) by a QR of [[R z]; [D τ]] and re-solves from the previous
     solution and active set (`_active_set`; the free parameters by least squares on R's free columns, the gradient

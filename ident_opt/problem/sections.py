@@ -17,6 +17,7 @@ from ident_opt.problem.spec import (
     MAX_COMPONENTS,
     MAX_SEED,
     MAX_SEEDS,
+    TRAJECTORIES,
     DataSpec,
     Limits,
     Reference,
@@ -25,7 +26,6 @@ from ident_opt.problem.spec import (
     SplitSpec,
 )
 from ident_opt.problem.table import LIMITS, Table, excerpt
-from ident_opt.simulator.trajectories import TRAJECTORIES
 
 
 def relative(base: Path, value: str) -> Path:

@@ -74,6 +74,10 @@ class ResidualSpec:
     max_train_samples: int = 20000
 
 
+#: The simulator's reference trajectories by name (`simulator.trajectories`), as a `[simulate]` section names them.
+TRAJECTORIES = ("tud01", "fourier", "mixed")
+
+
 @dataclass(frozen=True)
 class SimulateSpec:
     """The `[simulate]` section: a trial from the built-in simulator instead of a data file."""

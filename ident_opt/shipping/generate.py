@@ -24,7 +24,7 @@ from ident_opt.problem.spec import Problem
 from ident_opt.shipping import codegen, pi_update, ship
 from ident_opt.shipping.ship import MEASURE, TOLERANCE, Shipped
 
-#: What the online update adds to the output folder (`codegen.generate_pi_update`, `compile_pi_update`, the check).
+#: What the online update adds to the output folder (`adaptation.c_update`, the check).
 UPDATE_FILES = (
     "pi_update.c",
     "pi_update.h",

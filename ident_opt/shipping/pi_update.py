@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt.adaptation import c_update
 from ident_opt.adaptation.identifier import offline_start, start_identifier
 from ident_opt.adaptation.kernel import load_pi_update, update_state
 from ident_opt.adaptation.replay import _relative, _standard_errors
 from ident_opt.data.dataset import Dataset, chronological_split
 from ident_opt.fitting.bounded import KKT_TOL
-from ident_opt.shipping import codegen
 
 
 def _torque_relative(D: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
@@ -68,8 +68,8 @@ def verify(problem, trial: Dataset, out_dir: Path, compiler: list[str] | None = 
     ident = start_identifier(start, train)
     state = update_state(ident)
     design = start.design
-    paths = codegen.generate_pi_update(design.arm, state, out_dir, KKT_TOL, design.columns)
-    library, example = codegen.compile_pi_update(out_dir, compiler)
+    paths = c_update.generate_pi_update(design.arm, state, out_dir, KKT_TOL, design.columns)
+    library, example = c_update.compile_pi_update(out_dir, compiler)
     P, J = len(start.names), design.n_joints
     c = CUpdate(library, P, J)
     D = design(test.q, test.dq, test.ddq)

@@ -26,6 +26,7 @@ import pandas as pd
 
 from ident_opt.columns import kinematic_columns
 from ident_opt.errors import InputError
+from ident_opt.problem.spec import TRAJECTORIES  # the names a [simulate] section may give
 
 Q_MIN = np.array([0.25, -1.40])  # rad
 Q_MAX = np.array([3.15, 1.40])  # rad
@@ -35,7 +36,6 @@ A_MAX = np.array([4.0, 5.0])  # rad/s²
 #: limit; these are the real trials' extremes (13.1 and 2.6 N m on exp1) with a margin.
 TAU_MAX = np.array([15.0, 4.0])
 
-TRAJECTORIES = ("tud01", "fourier", "mixed")
 #: Largest |q| [rad], |dq| [rad/s] and |ddq| [rad/s²] a trajectory file may hold: beyond them it is not a motion
 #: an arm makes (a unit mistake, a corrupted file), and the simulation would overflow.
 FILE_BOUNDS = (100.0, 100.0, 1e4)
