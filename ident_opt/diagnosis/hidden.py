@@ -45,8 +45,8 @@ def chain_errors(cause: str, estimate: dict, truth: dict) -> tuple[bool, float]:
 def chain_joints(robot, limits=None):
     """The effect syntax's view of an n-joint arm's joints (`effects.base.Joints`: the datasheet's Coulomb levels,
     the names, the reference magnitudes the draws are relative to), as the simulator builds it for `limits`."""
+    from ident_opt.simulator.chain import box_of
     from ident_opt.simulator.chain_plant import arm_scale, joints_of
-    from ident_opt.simulator.trial import box_of
 
     box = box_of(robot, limits)
     return joints_of(robot, arm_scale(robot, box, box.v_max))

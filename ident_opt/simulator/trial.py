@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -12,17 +12,17 @@ import pandas as pd
 
 from ident_opt import outputs
 from ident_opt.arm.base import Robot
-from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.arm.kinds import ByKind
 from ident_opt.columns import channel_names, data_columns
 from ident_opt.data.dataset import Dataset, in_source_convention
-from ident_opt.effects import BACKGROUND, CATALOGUE, is_active, normalise
 from ident_opt.errors import InputError
 from ident_opt.problem.spec import Limits
-from ident_opt.simulator import chain_loop, chain_plant, closed_loop, measurement
-from ident_opt.simulator.planar_dynamics import TRUTH_MODEL
-from ident_opt.simulator.trajectories import DEFAULT_ACCELERATION, RANGE_MARGIN, Box, Reference, arm_box, reference
-from ident_opt.simulator.truth import Truth, build_truth, coulomb_levels
+from ident_opt.simulator import closed_loop, measurement
+from ident_opt.simulator.chain import ChainPlant
+from ident_opt.simulator.planar import PlanarPlant
+from ident_opt.simulator.plant import plain
+from ident_opt.simulator.trajectories import RANGE_MARGIN, Reference
+from ident_opt.simulator.truth import Truth
 
 MIN_DURATION, MAX_DURATION = 1.0, 3600.0  # s: enough samples for the derivative filter; memory stays bounded
 #: The controller's closed-loop bandwidth [Hz] a trial may ask for: a sluggish loop still tracks the slow
@@ -143,8 +143,8 @@ def simulate_trial(
     `exact_derivatives=True` logs the true dq and the ddq the dynamics produce instead of estimating them
     from the logged angles. `bandwidth_hz` [Hz]: the controller's closed-loop bandwidth (its PD gains);
     `noise_scale`: the torque noise's σ as a multiple of the arm's reference σ (with `noise`), one factor for
-    every joint or one per joint. The planar two-link arm (`Robot.engine` "planar") is its datasheet read
-    physically, on the MERIt trials' motion; any other arm is its nominal model (`chain_plant`) moving within
+    every joint or one per joint. The planar two-link arm (`planar.PlanarPlant`) is its datasheet read
+    physically, on the MERIt trials' motion; an arm of n joints is its nominal model (`chain.ChainPlant`) moving within
     `limits` (the problem's `[limits]`; default: the URDF's <limit> values, `Robot.limits`). `mechanism` (planar
     arm): truth -> a mechanism that replaces the one the hidden effects built (`truth.elastic`), e.g. a plant the
     diagnosis was not tuned on (`simulator.unseen`).
@@ -181,29 +181,14 @@ def simulate_trial(
         "exact_derivatives": bool(exact_derivatives),
     }
     scale = np.broadcast_to(scale, (n,))
-    return TRIALS.of(robot)(robot, effects, settings, scale, progress, limits, mechanism)
-
-
-def _planar_trial(
-    robot: PlanarRobot, effects, settings: dict, scale: np.ndarray, progress: bool, limits, mechanism
-) -> SimTrial:
-    """The planar two-link arm's trial (`simulate_trial`): the MERIt-tuned simulator (`truth`, `closed_loop`)."""
-    coulomb = coulomb_levels(robot)
-    wanted = normalise(effects, coulomb)
-    active = {name: p for name, p in wanted.items() if is_active(name, p, coulomb)}
-    truth = build_truth(robot, active)
-    if mechanism is not None:
-        truth = replace(truth, elastic=mechanism(truth))
-    seed, rate_hz = settings["seed"], settings["rate_hz"]
-    control = closed_loop.control_hz(rate_hz)  # 1 kHz unless the log is faster
-    ref = reference(settings["trajectory"], settings["duration"], seed, 1.0 / control)
-    out = closed_loop.run(
-        truth, robot, ref, progress=progress, seed=int(seed), control=control, bandwidth_hz=settings["bandwidth_hz"]
-    )
-    finite(out, active)
-    frame = logged(out, ref, robot, settings, scale, truth.logged_torque, truth.elastic)
-    settings["effects_requested"] = {k: _plain(v) for k, v in wanted.items()}
-    return SimTrial(frame, _truth_dict(robot, truth, out, ref.q, settings), robot)
+    plant = PLANTS.of(robot)(robot, effects, limits, mechanism)
+    control = closed_loop.control_hz(settings["rate_hz"])  # 1 kHz unless the log is faster
+    ref = plant.reference(settings, control)
+    out = plant.run(ref, control, settings, progress)
+    finite(out, plant.effects)
+    frame = logged(out, ref, robot, settings, scale, plant.logged_torque, plant.elastic, **plant.sensors)
+    settings["effects_requested"] = {k: plain(v) for k, v in plant.requested.items()}
+    return SimTrial(frame, plant.truth_file(out, ref, settings, scale), robot)
 
 
 def logged(out: np.ndarray, ref: Reference, robot, settings: dict, scale, channel, elastic, **sensors) -> pd.DataFrame:
@@ -235,210 +220,5 @@ def finite(out: np.ndarray, effects: Mapping) -> None:
         )
 
 
-def box_of(robot: Robot, limits: Limits | None) -> Box:
-    """Where an n-joint arm's references move (`trajectories.arm_box`): within the problem's `[limits]`, or the
-    URDF's <limit> values (`Robot.limits`; a joint without them: ±π rad, `DEFAULT_SPEED` rad/s), and
-    `trajectories.DEFAULT_ACCELERATION`."""
-    n, urdf = robot.n_joints, robot.limits()
-
-    def value(key: str, default: float) -> np.ndarray:
-        if limits is not None:
-            return np.asarray(getattr(limits, key), dtype=float)
-        given = urdf.get(key) or (None,) * n
-        return np.array([default if v is None else float(v) for v in given])
-
-    acceleration = np.asarray(limits.acceleration, dtype=float) if limits is not None else None
-    return arm_box(
-        value("position_min", -np.pi),
-        value("position_max", np.pi),
-        value("velocity", DEFAULT_SPEED),
-        acceleration if acceleration is not None else np.full(n, DEFAULT_ACCELERATION),
-    )
-
-
-def _arm_trial(robot: Robot, effects, settings: dict, scale: np.ndarray, progress: bool, limits, mechanism) -> SimTrial:
-    """An n-joint arm's trial (`simulate_trial`): its nominal model as the true plant (`chain_plant`), the hidden
-    effects on any joint, the closed loop `chain_loop`, logged like the planar arm's."""
-    if mechanism is not None:
-        raise InputError("a replacement mechanism (simulator.unseen) is built for the planar two-link arm only")
-    box = box_of(robot, limits)
-    arm_scale = chain_plant.arm_scale(robot, box, box.v_max)
-    joints = chain_plant.joints_of(robot, arm_scale)
-    background = [name for name in _names(effects) if name in BACKGROUND]
-    if background:
-        raise InputError(
-            f"effect {background[0]!r}: the background terms ({', '.join(BACKGROUND)}) are the planar two-link "
-            f"arm's; this problem's robot is {robot.described_as}"
-        )
-    wanted = normalise(effects, joints)
-    active = {name: p for name, p in wanted.items() if is_active(name, p, joints)}
-    plant = chain_plant.build_plant(robot, active, arm_scale, joints, box)
-    chain_plant.check_finite(plant, "simulate")
-    seed, rate_hz = settings["seed"], settings["rate_hz"]
-    control = closed_loop.control_hz(rate_hz)
-    ref = reference(settings["trajectory"], settings["duration"], seed, 1.0 / control, box)
-    outside(ref, box, robot, settings["trajectory"])
-    out, g, steps = chain_loop.run(
-        plant, ref, box, progress=progress, control=control, bandwidth_hz=settings["bandwidth_hz"]
-    )
-    if plant.elastic is not None:  # the spring's link inertia over the motion run (the other joints move)
-        n, j = robot.n_joints, plant.elastic.index
-        q_true = out[:: max(1, len(out) // 2000), n : 2 * n] + plant.offset  # at most ~2000 poses
-        M = chain_plant.link_inertia(plant, j, q_true)
-        plant.elastic = replace(plant.elastic, trial_inertia=(float(M.mean()), float(M.min()), float(M.max())))
-    sigma = NOISE_SHARE * np.asarray(arm_scale.torque)
-    frame = logged(
-        out,
-        ref,
-        robot,
-        settings,
-        scale,
-        plant.logged_torque,
-        plant.elastic,
-        noise_std=sigma,
-        encoder_step=encoder_steps(robot),
-    )
-    settings["effects_requested"] = {k: _plain(v) for k, v in wanted.items()}
-    error = out[:, robot.n_joints : 2 * robot.n_joints] - ref.q
-    truth = _arm_truth(plant, settings, sigma * scale if settings["noise"] else np.zeros(robot.n_joints))
-    truth["controller"] = {
-        "control_hz": control,
-        "bandwidth_hz": settings["bandwidth_hz"],
-        "kp": list(g.kp),
-        "kd": list(g.kd),
-        "rk4_substeps": steps.fine,
-        "rk4_substeps_away_from_reversals": steps.coarse,
-        "fine_tick_share": steps.fine_share,
-    }
-    truth["tracking"] = {"rms_error": np.sqrt((error**2).mean(0)).tolist(), "max_error": np.abs(error).max(0).tolist()}
-    truth["limits"] = {"position_min": box.q_min.tolist(), "position_max": box.q_max.tolist()}
-    return SimTrial(frame, _plain(truth), robot)
-
-
-def outside(ref: Reference, box: Box, robot: Robot, trajectory: str) -> None:
-    """InputError when a trajectory file leaves the arm's joint ranges (the generated references stay inside)."""
-    low, high = (
-        box.q_min - RANGE_MARGIN_OUT * (box.q_max - box.q_min),
-        box.q_max + RANGE_MARGIN_OUT * (box.q_max - box.q_min),
-    )
-    bad = np.argwhere((ref.q < low - 1e-9) | (ref.q > high + 1e-9))
-    if len(bad):
-        k, j = bad[0]
-        raise InputError(
-            f"{trajectory}: q{j + 1} ({robot.joint_names[j]}) reaches {ref.q[k, j]:g} rad at t = {ref.t[k]:g} s, "
-            "outside the joint's range ([limits] or the URDF's <limit>)"
-        )
-
-
-def encoder_steps(robot: Robot) -> np.ndarray:
-    """Each joint's encoder step [rad], joint side: `ENCODER_COUNTS` per motor revolution through its gear ratio, or
-    `JOINT_COUNTS` per joint revolution where the problem gives no gear ratio."""
-    return np.array(
-        [
-            2 * np.pi / (measurement.ENCODER_COUNTS * j.gear_ratio) if j.gear_ratio else 2 * np.pi / JOINT_COUNTS
-            for j in robot.joints
-        ]
-    )
-
-
-def _arm_truth(plant, settings: dict, noise_std: np.ndarray) -> dict:
-    """The ground truth of an n-joint trial: π by name (true and datasheet), the plant's joint terms, each effect
-    in the diagnosis's estimate keys (`Effect.chain_truth`), the settings and the measurement."""
-    arm = plant.arm
-    effects = {name: CATALOGUE[name].chain_truth(plant, p) for name, p in plant.effects.items()}
-    return {
-        "joints": list(plant.robot.joint_names),
-        "model": list(arm.names),
-        "pi": arm.as_dict(plant.pi),
-        "pi_datasheet": arm.as_dict(plant.nominal),
-        "plant": {
-            "extra_inertia": plant.inertia.tolist(),
-            "coulomb_positive": plant.positive.tolist(),
-            "coulomb_negative": plant.negative.tolist(),
-            "stribeck_excess": plant.excess.tolist(),
-            "stribeck_velocity": plant.velocity.tolist(),
-            "load_friction": plant.load_friction.tolist(),
-            "encoder_offset": plant.offset.tolist(),
-        },
-        "effects": effects,
-        "scale": asdict(plant.scale),
-        "settings": settings,
-        "measurement": {
-            "torque_noise_std": noise_std.tolist(),
-            "encoder_step_rad": encoder_steps(plant.robot).tolist() if settings["noise"] else None,
-            "derivatives": "exact"
-            if settings["exact_derivatives"]
-            else f"estimated, zero-phase Butterworth at {measurement.DERIVATIVE_CUTOFF_HZ:g} Hz",
-        },
-    }
-
-
-def _names(effects) -> list[str]:
-    """The effect names of `effects` (a mapping or effect strings), for checks before parsing."""
-    if isinstance(effects, str):
-        effects = [effects]
-    if isinstance(effects, Mapping):
-        return [str(k) for k in effects]
-    return [str(e).partition(":")[0].strip() for e in effects]
-
-
-def _plain(value):
-    """JSON-able copy (tuples to lists, NumPy scalars to floats)."""
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple | np.ndarray):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
-def _truth_dict(robot: PlanarRobot, truth: Truth, out: np.ndarray, q_ref: np.ndarray, settings: dict) -> dict:
-    """The ground truth, with effects in the diagnosis's estimate keys (`docs/effects.md`)."""
-    effects = {name: CATALOGUE[name].truth_entry(truth, p) for name, p in truth.effects.items()}
-    physical = asdict(rigid_body(truth.robot, "physical"))  # the true plant's, not the datasheet's
-    for name, p in truth.effects.items():
-        CATALOGUE[name].true_physical(physical, p)
-    g = closed_loop.gains(robot, settings["bandwidth_hz"])
-    control = closed_loop.control_hz(settings["rate_hz"])
-    error = out[:, 2:4] - q_ref  # encoder angle minus reference, at every control tick
-    return _plain(
-        {
-            "model": list(TRUTH_MODEL.names),
-            "pi": truth.pi_rigid,
-            "pi_datasheet": datasheet_pi(robot, "physical"),
-            "plant_model": {
-                "extensions": list(truth.model.extensions),
-                "stribeck_velocity": list(truth.model.stribeck_velocity),
-                "pi": truth.model.as_dict(truth.pi),
-            },
-            "effects": effects,
-            "background": dict(truth.background),  # realism terms outside the diagnosis catalogue
-            "physical": physical,
-            "settings": settings,
-            "measurement": {
-                "torque_noise_std": (np.broadcast_to(settings["noise_scale"], (2,)) * measurement.TORQUE_NOISE).tolist()
-                if settings["noise"]
-                else [0.0, 0.0],
-                "encoder_counts_per_motor_rev": measurement.ENCODER_COUNTS if settings["noise"] else None,
-                "derivatives": "exact"
-                if settings["exact_derivatives"]
-                else f"estimated, zero-phase Butterworth at {measurement.DERIVATIVE_CUTOFF_HZ:g} Hz",
-            },
-            "controller": {
-                "control_hz": control,
-                "bandwidth_hz": settings["bandwidth_hz"],
-                "kp": list(g.kp),
-                "kd": list(g.kd),
-                "rk4_substeps": closed_loop.substeps(truth, g, robot, control),
-            },
-            "tracking": {
-                "rms_error": np.sqrt((error**2).mean(0)).tolist(),
-                "max_error": np.abs(error).max(0).tolist(),
-            },
-        }
-    )
-
-
-#: Each kind of arm's trial (`arm.kinds.ByKind`): the one place the simulator asks which kind it has.
-TRIALS = ByKind(planar=_planar_trial, chain=_arm_trial)
+#: Each kind of arm's plant (`arm.kinds.ByKind`): the one place the simulator asks which kind it has.
+PLANTS = ByKind(planar=PlanarPlant, chain=ChainPlant)
