@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from confusion_arms import ARMS, draws, places, reference
 
 from ident_opt.diagnosis import hidden
-from ident_opt.diagnosis.chain.families import ArmContext, link_side
+from ident_opt.diagnosis.chain.context import ArmContext, link_side
 from ident_opt.diagnosis.split import at_rest
 from ident_opt.effects import stribeck
 from ident_opt.numerics import signals

@@ -266,7 +266,7 @@ def test_a_coupled_drive_at_rest_has_no_coulomb_sign_and_its_friction_reaches_bo
     import pandas as pd
 
     from ident_opt.data.dataset import Dataset
-    from ident_opt.diagnosis.chain.families import ArmContext
+    from ident_opt.diagnosis.chain.context import ArmContext
 
     robot = load_problem(PROBLEMS["tx40"]).robot
     arm, pi = robot.datasheets()[robot.datasheet]
@@ -387,7 +387,7 @@ def test_samples_where_a_coupled_drive_may_stick_leave_the_comparison_on_every_r
     import pandas as pd
 
     from ident_opt.data.dataset import Dataset
-    from ident_opt.diagnosis.chain.families import ArmContext
+    from ident_opt.diagnosis.chain.context import ArmContext
     from ident_opt.numerics import signals
 
     robot = load_problem(PROBLEMS["tx40"]).robot

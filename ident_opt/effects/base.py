@@ -32,7 +32,7 @@ the chain's (`chain_…`) stand side by side, each engine calls its own and pass
 A mechanism is described, not built: `mechanism` and `chain_mechanism` return its kind, joint, frequency and damping,
 and the simulator builds the plant (`simulator.elastic`, `simulator.chain_plant`). The candidates' families are
 declared in `effects.families`; the diagnosis's `ctx` (`diagnosis.planar.families.Context`,
-`diagnosis.chain.families.ArmContext`) gives what else they need of the engine (its nominal model, its screens).
+`diagnosis.chain.search.ChainContext`) gives what else they need of the engine (its nominal model, its screens).
 
 This module and the effect modules import nothing heavy at load time: `ident-opt --help` and problem-file
 parsing read the catalogue, and must not pay for NumPy, CasADi or SciPy. Hooks reach those (and the parts

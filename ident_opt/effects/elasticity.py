@@ -157,7 +157,7 @@ class Elasticity(Effect):
         }
 
     def chain_families(self, ctx) -> list:
-        """An elastic joint on each of the joints whose residual rings most (`chain.families.elastic_joints`): the link
+        """An elastic joint on each of the joints whose residual rings most (`chain.search.elastic_joints`): the link
         behind it deflects by e, ë + 2ζω ė + ω² e = −u driven by the measured motion, and adds s M_link[:, j] ë to the
         torque (`_arm_columns`); beside it, against the datasheet, the motor's inertia B ddq_j a datasheet may lack.
         f and ζ searched as on the planar arm, against both nominal models."""

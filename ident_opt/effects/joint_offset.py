@@ -73,7 +73,7 @@ class JointOffset(Effect):
         plant.offset = plant.offset + np.asarray(p["offset"])
 
     def chain_families(self, ctx) -> list:
-        """The nominal model at q + δ, δ by Gauss–Newton on the torque's angle Jacobian (`chain.families.offset_search`)
+        """The nominal model at q + δ, δ by Gauss–Newton on the torque's angle Jacobian (`chain.search.offset_search`)
         on every joint, then on the joints where it is resolved; against both nominal models."""
         return [
             ChainFamily(

@@ -176,7 +176,7 @@ def resting(v: np.ndarray, dt: float) -> np.ndarray:
     """(N, m) bool: the samples where each velocity column of v (N, m) [rad/s] at step `dt` [s] is at rest: below
     `REST_FRACTION` of its speed scale (95th percentile of |v|) there, and staying below it for `REST_WINDOW_S` before
     or after (the filter ringing just before a start or after a stop counts as rest, a smooth reversal, slow only for an
-    instant, does not). The rule of `split.at_rest` (joints) and `chain.families.ArmContext` (drives)."""
+    instant, does not). The rule of `split.at_rest` (joints) and `chain.context.ArmContext` (drives)."""
     w = max(1, round(REST_WINDOW_S / dt))
     slow = np.abs(v) < rest_speed(v)
     padded = np.pad(slow, ((w, w), (0, 0)), mode="edge").astype(float)

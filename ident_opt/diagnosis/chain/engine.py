@@ -6,7 +6,7 @@ candidates of `chain.families` and the arm's own nominal models, under the one l
   the URDF's inertials with the problem's joint values) and the **rigid fit** (π by the recommended fit unless
   --estimator says otherwise, `fitting.recommend.chosen`, given as `rigid_fit`; the robot's default estimator when
   none is given; through `fitting.estimators.fit_for`, on the training part; joints weighted by 1/σ_j² from a
-  first least-squares pass). Every candidate refits π with the same estimator (`chain.families.ArmContext.rigid`).
+  first least-squares pass). Every candidate refits π with the same estimator (`chain.context.ArmContext.rigid`).
 - The split, the torque filter and the rest stretches are the planar diagnosis's (`split.parts`). After the
   zero-phase filter the data hold nothing above its cut-off, so the diagnosis reads them every `decimation`-th
   sample (at about `DIAGNOSIS_HZ`, at most `MAX_SAMPLES` in all): a 7-joint minute at 1 kHz is diagnosed on 12 000
@@ -24,6 +24,7 @@ from ident_opt.arm.base import Robot
 from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import evidence
 from ident_opt.diagnosis.chain import families as candidates
+from ident_opt.diagnosis.chain.search import ChainContext
 from ident_opt.diagnosis.engine import Nominal, Parts
 from ident_opt.diagnosis.result import Fitted
 from ident_opt.diagnosis.split import parts
@@ -66,7 +67,7 @@ def _every(ds: Dataset, k: int) -> Dataset:
     return ds if k == 1 else ds.subset(np.arange(0, ds.n, k))
 
 
-def weights_of(ctx: candidates.ArmContext) -> np.ndarray:
+def weights_of(ctx: ChainContext) -> np.ndarray:
     """1/σ_j² [1/(N m)²] of the training residual of the least-squares rigid fit (the projection off the rigid
     columns, every joint weighted alike)."""
     tr = ctx.train
@@ -106,7 +107,7 @@ class ChainEngine:
         self.parts = Parts(train, test, raw_test, how, trial if unseen is not None else None)
         arm, pi_ds = robot.datasheets()[robot.datasheet]
         self.dt = float(np.median(np.diff(train.t)))
-        ctx = candidates.ArmContext(
+        ctx = ChainContext(
             robot,
             arm,
             train,

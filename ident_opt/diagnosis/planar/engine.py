@@ -14,6 +14,7 @@ from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import evidence, scoring
 from ident_opt.diagnosis.engine import Nominal, Parts
+from ident_opt.diagnosis.planar import compose
 from ident_opt.diagnosis.planar import families as candidates
 from ident_opt.diagnosis.result import Fitted
 from ident_opt.diagnosis.split import parts
@@ -94,13 +95,13 @@ class PlanarEngine:
         return candidates.fit(family, baseline, self.ctx)
 
     def compose(self, earlier: list[tuple], new):
-        return candidates.compose(earlier, new)
+        return compose.compose(earlier, new)
 
     def frozen(self, family, theta: dict):
-        return candidates.frozen(family, theta)
+        return compose.frozen(family, theta)
 
     def theta(self, family, cand) -> dict:
-        return candidates.theta(family, cand, self.ctx)
+        return compose.theta(family, cand, self.ctx)
 
     def forward_after(self, final: Fitted | None, baseline: str) -> list:
         """Question 4's motion error of the extended model: its rigid part (π refitted or the datasheet's)
