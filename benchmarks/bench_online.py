@@ -37,7 +37,8 @@ sys.path.insert(0, str(ROOT))
 from ident_opt.adaptation.identifier import ArmDesign, Estimator, OnlineIdentifier  # noqa: E402
 from ident_opt.adaptation.kernel import attach  # noqa: E402
 from ident_opt.arm.planar import RIGID  # noqa: E402
-from ident_opt.fitting.bounded import WarmConsistentLS, default_bounds  # noqa: E402
+from ident_opt.fitting.bounded import default_bounds  # noqa: E402
+from ident_opt.fitting.bounded_consistent import WarmConsistentLS  # noqa: E402
 from ident_opt.fitting.stats import Stats  # noqa: E402
 from ident_opt.models.gmr import GMR, Support  # noqa: E402
 from ident_opt.report import record  # noqa: E402

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ident_opt.arm.planar import RIGID
-from ident_opt.fitting.bounded import WarmConsistentLS, default_bounds
+from ident_opt.fitting.bounded import default_bounds
+from ident_opt.fitting.bounded_consistent import WarmConsistentLS
 from ident_opt.fitting.constrained import fit_constrained
 from ident_opt.fitting.stats import Stats
 

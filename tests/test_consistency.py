@@ -25,7 +25,8 @@ from ident_opt.consistency import (
 )
 from ident_opt.evaluation.constraints import multisine_trial
 from ident_opt.fitting import constrained
-from ident_opt.fitting.bounded import WarmConsistentLS, default_bounds
+from ident_opt.fitting.bounded import default_bounds
+from ident_opt.fitting.bounded_consistent import WarmConsistentLS
 from ident_opt.fitting.constrained import ACTIVE_TOL, fit_constrained, solve_constrained
 from ident_opt.fitting.fit import fit_ols
 from ident_opt.fitting.stats import Stats

@@ -19,7 +19,8 @@ from ident_opt.arm.bodies import RobotDescription
 from ident_opt.arm.chain import ChainRobot
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PAPER, RIGID, PlanarArm
-from ident_opt.arm.realise import IMPOSSIBLE, chain_bodies, planar_bodies
+from ident_opt.arm.realise import IMPOSSIBLE, chain_bodies
+from ident_opt.arm.realise_planar import planar_bodies
 from ident_opt.arm.rnea import N_LINK
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem

@@ -20,7 +20,7 @@ from ident_opt.problem import load_problem
 from ident_opt.simulator import chain_plant as arm_plant
 from ident_opt.simulator import simulate_trial
 from ident_opt.simulator.chain import box_of
-from ident_opt.simulator.chain_plant import forward
+from ident_opt.simulator.chain_dynamics import forward
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM4 = ROOT / "tests" / "arms" / "arm4.toml"

@@ -20,7 +20,8 @@ from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.fitting.fit import finish
 from ident_opt.fitting.stats import Stats
-from ident_opt.numerics.derivatives import REST, CausalDerivatives, derivative_kernels
+from ident_opt.numerics.causal import CausalDerivatives, derivative_kernels
+from ident_opt.numerics.derivatives import REST
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "tudor_2dof.toml"

@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 from ident_opt.adaptation.identifier import offline_start, start_identifier
 from ident_opt.adaptation.stream import BadLine, LineParser, Mapping, currents_to_torques, serve
 from ident_opt.data.dataset import chronological_split
-from ident_opt.numerics.derivatives import CausalDerivatives, RateError
+from ident_opt.numerics.causal import CausalDerivatives, RateError
 from ident_opt.problem import load_problem
 from tests.test_fuzz import EXAMPLES, FUZZ, LOG
 from tests.test_fuzz import _strict_text as _strict

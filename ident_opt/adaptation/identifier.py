@@ -26,7 +26,7 @@ CPBR follows the fit the run chose (a `fitting.recommend.Choice`: `ident-opt onl
 or --estimator's; None: the arm's default estimator, `Robot.default_estimator`; through `models.fitted`, the one
 place that names it). Where that estimator has an exact online counterpart
 (`estimators.ONLINE`: the planar arm's constrained fit → M(q) ≻ 0 ∀q + friction ≥ 0,
-`fitting.bounded.WarmConsistentLS`) it is re-solved after every sample. An
+`fitting.bounded_consistent.WarmConsistentLS`) it is re-solved after every sample. An
 n-joint arm's consistent fit (per-link pseudo-inertia LMIs, with its log-det prior) is a conic program of tens to
 hundreds of milliseconds: it is re-solved from scratch on the exact statistics every `CONSISTENT_EVERY` samples
 (`Cadence`; the LMIs then hold exactly, and its parameters stay as they are in between), while PBR gives the exact
@@ -70,7 +70,8 @@ from ident_opt.consistency import necessarily_nonnegative
 from ident_opt.errors import InputError
 from ident_opt.fitting import estimators
 from ident_opt.fitting.base import BaseParameters, base_parameters
-from ident_opt.fitting.bounded import Bounds, FactorBoundedLS, WarmBoundedLS, WarmConsistentLS, default_bounds
+from ident_opt.fitting.bounded import Bounds, FactorBoundedLS, WarmBoundedLS, default_bounds
+from ident_opt.fitting.bounded_consistent import WarmConsistentLS
 from ident_opt.fitting.fit import LinearFit
 from ident_opt.fitting.iv import InstrumentStats
 from ident_opt.fitting.recommend import Choice

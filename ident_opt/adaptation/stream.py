@@ -5,7 +5,7 @@ without a header when the problem's `[data] header = false` maps column indices,
 non-empty line decides. The problem's `[data.columns]` mapping and its `{column, scale, offset}` conversions
 apply by the batch loader's rules (`columns.locate`). Each sample needs q1 … qn [rad] (n the arm's joints);
 dq1 … dqn, ddq1 … ddqn [rad/s, rad/s²] when given, else estimated causally from q and t
-(`derivatives.CausalDerivatives`: a linear-phase FIR whose delay is stated, the torque delayed to match);
+(`numerics.causal.CausalDerivatives`: a linear-phase FIR whose delay is stated, the torque delayed to match);
 tau1 … taun [N m] or motor currents i1 … in [A] make the sample an update.
 
 Guards (nothing on the input kills the stream): lines that are not UTF-8, not parseable, with numbers that
@@ -29,11 +29,12 @@ import numpy as np
 
 from ident_opt.adaptation.identifier import OnlineIdentifier, Prediction
 from ident_opt.columns import channel_names, data_columns, locate
+from ident_opt.data.checks import PLAUSIBLE
 from ident_opt.data.dataset import Dataset
-from ident_opt.data.loader import PLAUSIBLE
 from ident_opt.data.loader import _current_to_torque as current_to_torque  # the batch loader's rule and message
 from ident_opt.errors import InputError
-from ident_opt.numerics.derivatives import CausalDerivatives, NonIncreasingTime, RateError, resolve_cutoff
+from ident_opt.numerics.causal import CausalDerivatives, NonIncreasingTime, RateError
+from ident_opt.numerics.derivatives import resolve_cutoff
 
 #: The UTF-8 byte-order mark some writers put before a file's first line.
 BOM = "\ufeff"

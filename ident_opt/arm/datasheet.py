@@ -21,7 +21,7 @@ from ident_opt.arm.base import ALL_COMMANDS
 from ident_opt.arm.bodies import RobotDescription
 from ident_opt.arm.joints import Friction, JointSide
 from ident_opt.arm.planar import ANGLE_CONVENTION, EXTENSIONS, PAPER, PHYSICAL, RIGID, PlanarArm
-from ident_opt.arm.realise import planar_bodies
+from ident_opt.arm.realise_planar import planar_bodies
 from ident_opt.errors import InputError
 
 

@@ -31,7 +31,8 @@ import numpy as np
 from ident_opt.cache import cache_root
 from ident_opt.cbuild import cached_library, load_external
 from ident_opt.errors import InputError
-from ident_opt.simulator.chain_plant import ArmPlant, centre, initial_state, mass_matrix, plant_function, state_size
+from ident_opt.simulator.chain_dynamics import initial_state, plant_function, state_size
+from ident_opt.simulator.chain_plant import ArmPlant, centre, mass_matrix
 from ident_opt.simulator.closed_loop import BANDWIDTH_HZ, CHUNK, MAX_SUBSTEPS, Gains
 from ident_opt.simulator.integrate import march, rk4_step
 from ident_opt.simulator.trajectories import Box, Reference
