@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt.adaptation.identifier import batch_theta, serving_identifier
-from ident_opt.adaptation.stream import Mapping, StreamOptions, serve
+from ident_opt.adaptation.lines import Mapping
+from ident_opt.adaptation.stream import StreamOptions, serve
 from ident_opt.arm.planar import RIGID
 from ident_opt.data.dataset import chronological_split
 from ident_opt.data.loader import load_dataset

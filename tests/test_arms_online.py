@@ -14,8 +14,9 @@ import pytest
 
 from ident_opt.adaptation.identifier import offline_start, start_identifier
 from ident_opt.adaptation.kernel import attach
+from ident_opt.adaptation.lines import BadLine, LineParser, Mapping
 from ident_opt.adaptation.replay import _standard_errors
-from ident_opt.adaptation.stream import BadLine, LineParser, Mapping, StreamOptions, currents_to_torques, serve
+from ident_opt.adaptation.stream import StreamOptions, currents_to_torques, serve
 from ident_opt.cli import main
 from ident_opt.consistency import necessarily_nonnegative
 from ident_opt.data.dataset import chronological_split

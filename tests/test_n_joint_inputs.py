@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ident_opt.adaptation.stream import LineParser, Mapping
+from ident_opt.adaptation.lines import LineParser, Mapping
 from ident_opt.cli import main
 from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError

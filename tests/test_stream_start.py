@@ -21,7 +21,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ident_opt.adaptation.identifier import offline_start, start_identifier
-from ident_opt.adaptation.stream import BadLine, LineParser, Mapping, currents_to_torques, serve
+from ident_opt.adaptation.lines import BadLine, LineParser, Mapping
+from ident_opt.adaptation.stream import currents_to_torques, serve
 from ident_opt.data.dataset import chronological_split
 from ident_opt.numerics.causal import CausalDerivatives, RateError
 from ident_opt.problem import load_problem

@@ -408,7 +408,7 @@ def test_link_lengths_are_axis_to_axis_and_axis_to_tip():
 
 def test_a_stream_in_the_urdf_convention_is_mapped(planar):
     """`online --stream` reads a URDF arm's samples as the batch loader does: q_t = s q_u + θ, the rest × s."""
-    from ident_opt.adaptation.stream import LineParser, Mapping
+    from ident_opt.adaptation.lines import LineParser, Mapping
 
     robot, _, _ = planar
     parser = LineParser(mapping=Mapping.from_spec(DataSpec(), robot))

@@ -17,11 +17,12 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 from ident_opt.effects.background import BACKGROUND
-from ident_opt.effects.base import Effect, Key, discover
+from ident_opt.effects.base import Effect, discover
+from ident_opt.effects.keys import Key
 from ident_opt.errors import InputError
 
 #: The causes the diagnosis can name, name -> `Effect`, in catalogue order.
-CATALOGUE: dict[str, Effect] = discover(__name__, __path__, skip=("base", "background", "families", "lazy"))
+CATALOGUE: dict[str, Effect] = discover(__name__, __path__)
 #: Every name the syntax accepts: the diagnosis catalogue, then the background terms.
 ALL_EFFECTS: dict[str, Effect] = {**CATALOGUE, **BACKGROUND}
 #: The model extensions: the causes linear in their parameters, name -> `Effect`, in catalogue order.

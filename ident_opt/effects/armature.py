@@ -8,8 +8,9 @@ J2·ddq2 on joint 2's (the a1 and ia2 directions), J ≥ 0, against the datashee
 from __future__ import annotations
 
 from ident_opt import wording
-from ident_opt.effects.base import Effect, Key, arm_values, np
+from ident_opt.effects.base import Effect, arm_values, np
 from ident_opt.effects.families import ChainFamily, per_joint, per_joint_columns, resolved_joints, selected
+from ident_opt.effects.keys import Key
 from ident_opt.parameters import Parameter
 
 #: An n-joint arm's default extra inertia, as a share of each joint's nominal diagonal inertia.

@@ -9,8 +9,9 @@ friction. Diagnosis: the extension's four levels fitted, against both nominal mo
 from __future__ import annotations
 
 from ident_opt import wording
-from ident_opt.effects.base import Effect, Key, ca, np
+from ident_opt.effects.base import Effect, ca, np
 from ident_opt.effects.families import RESOLVED, ChainFamily, selected
+from ident_opt.effects.keys import Key
 from ident_opt.parameters import Parameter
 
 #: Least direction difference |fc+ − fc−|, relative to the joint's mean level, that makes friction asymmetric.

@@ -18,8 +18,9 @@ from __future__ import annotations
 from functools import partial
 
 from ident_opt import wording
-from ident_opt.effects.base import Effect, Key, least_squares, np, relative_error, signals
+from ident_opt.effects.base import Effect, least_squares, np, relative_error, signals
 from ident_opt.effects.families import ChainFamily, step
+from ident_opt.effects.keys import Key
 
 #: Shortest delay [s] that counts as a cause (the tolerance on hidden delays is 2 ms, too).
 MIN_DELAY_S = 0.002

@@ -26,18 +26,9 @@ import math
 from dataclasses import dataclass
 
 from ident_opt import wording
-from ident_opt.effects.base import (
-    Effect,
-    Key,
-    damped_mode,
-    edge_rule,
-    inside,
-    least_squares,
-    np,
-    relative_error,
-    signals,
-)
+from ident_opt.effects.base import Effect, damped_mode, edge_rule, inside, least_squares, np, relative_error, signals
 from ident_opt.effects.families import ChainFamily, step, view_key
+from ident_opt.effects.keys import Key
 from ident_opt.errors import InputError
 
 #: Joint-2 angles [rad] the trajectories reach: |q2| ≤ 1.4 rad (the band of the mode over the workspace).

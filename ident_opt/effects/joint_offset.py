@@ -12,19 +12,9 @@ import math
 import time
 
 from ident_opt import wording
-from ident_opt.effects.base import (
-    Effect,
-    Key,
-    arm_values,
-    ca,
-    damped_mode,
-    least_squares,
-    nlp,
-    np,
-    relative_error,
-    signals,
-)
+from ident_opt.effects.base import Effect, arm_values, ca, damped_mode, least_squares, nlp, np, relative_error, signals
 from ident_opt.effects.families import POLISH_ROWS, ChainFamily, per_joint
+from ident_opt.effects.keys import Key
 from ident_opt.parameters import Parameter
 
 #: A hidden offset is found when the estimate is within this [rad] or this relative error.

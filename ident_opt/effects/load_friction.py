@@ -11,8 +11,9 @@ the diagnosis has found, τ_load includes the payload's torque (the mass re-read
 from __future__ import annotations
 
 from ident_opt import wording
-from ident_opt.effects.base import Effect, Key, arm_values, np, per_joint_draw
+from ident_opt.effects.base import Effect, arm_values, np, per_joint_draw
 from ident_opt.effects.families import ChainFamily, per_joint, per_joint_columns, resolved_joints, selected
+from ident_opt.effects.keys import Key
 from ident_opt.effects.payload import EFFECT as PAYLOAD
 
 #: A hidden coefficient is found within this relative error (or within `ZERO_TOL` of an untouched 0).

@@ -10,8 +10,9 @@ import math
 from dataclasses import replace
 
 from ident_opt import wording
-from ident_opt.effects.base import MAGNITUDE_TOL, Effect, Key, least_squares, np, relative_error, signals
+from ident_opt.effects.base import MAGNITUDE_TOL, Effect, least_squares, np, relative_error, signals
 from ident_opt.effects.families import ChainFamily
+from ident_opt.effects.keys import Key
 from ident_opt.errors import InputError
 
 #: How far [m] the centre-of-mass search reaches on each axis around its centre (`_centre`).

@@ -22,7 +22,6 @@ from ident_opt import wording
 from ident_opt.effects.base import (
     MAGNITUDE_TOL,
     Effect,
-    Key,
     ca,
     edge_rule,
     inside,
@@ -33,6 +32,7 @@ from ident_opt.effects.base import (
     signals,
 )
 from ident_opt.effects.families import POLISH_ROWS, RESOLVED, ChainFamily, per_joint, resolved_joints, selected
+from ident_opt.effects.keys import Key
 from ident_opt.errors import InputError
 from ident_opt.parameters import Parameter
 

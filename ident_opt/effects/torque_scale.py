@@ -15,8 +15,9 @@ from __future__ import annotations
 from functools import partial
 
 from ident_opt import wording
-from ident_opt.effects.base import Effect, Key, arm_values, np, per_joint_draw, relative_error
+from ident_opt.effects.base import Effect, arm_values, np, per_joint_draw, relative_error
 from ident_opt.effects.families import ChainFamily, resolved_joints
+from ident_opt.effects.keys import Key
 
 #: A hidden factor is found when the estimate is within this of it, per joint. It is also the resolution floor: a
 #: factor within it of 1 is not named (`TorqueScale.resolved`), since the diagnosis claims no better accuracy.

@@ -28,8 +28,8 @@ import numpy as np
 
 from ident_opt.arm.base import Arm, Robot
 from ident_opt.effects import CATALOGUE
-from ident_opt.effects.base import ArmScale, Joints
 from ident_opt.effects.elasticity import Mode, spring_for
+from ident_opt.effects.keys import ArmScale, Joints
 from ident_opt.errors import InputError
 
 #: The fastest rate [1/s] the regularised friction of the effects may add (`ArmPlant.regularisation`): 32 RK4 steps

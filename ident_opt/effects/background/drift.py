@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import math
 
-from ident_opt.effects.base import Background, Key, np
+from ident_opt.effects.base import Background, np
+from ident_opt.effects.keys import Key
 
 
 class Drift(Background):

@@ -8,7 +8,8 @@ alias as a real logger's would.
 
 from __future__ import annotations
 
-from ident_opt.effects.base import Background, Key, ca
+from ident_opt.effects.base import Background, ca
+from ident_opt.effects.keys import Key
 
 
 class Ripple(Background):

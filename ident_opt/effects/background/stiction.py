@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import math
 
-from ident_opt.effects.base import Background, Key, ca, np
+from ident_opt.effects.base import Background, ca, np
+from ident_opt.effects.keys import Key
 
 #: rad/s: a bound of the joint speeds the trajectories reach (plateaus ≤ 1.33 rad/s, plus PD overshoot).
 MAX_SPEED = 3.0
