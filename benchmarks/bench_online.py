@@ -34,7 +34,8 @@ from scipy.optimize import lsq_linear  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ident_opt.adaptation.identifier import ArmDesign, Estimator, OnlineIdentifier  # noqa: E402
+from ident_opt.adaptation.estimator import Estimator  # noqa: E402
+from ident_opt.adaptation.identifier import ArmDesign, OnlineIdentifier  # noqa: E402
 from ident_opt.adaptation.kernel import attach  # noqa: E402
 from ident_opt.arm.planar import RIGID  # noqa: E402
 from ident_opt.fitting.bounded import default_bounds  # noqa: E402

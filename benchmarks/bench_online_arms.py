@@ -33,8 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from ident_opt.adaptation import c_update  # noqa: E402
-from ident_opt.adaptation.identifier import base_bounds, offline_start  # noqa: E402
+from ident_opt.adaptation.estimator import base_bounds  # noqa: E402
 from ident_opt.adaptation.replay import _standard_errors  # noqa: E402
+from ident_opt.adaptation.start import offline_start  # noqa: E402
 from ident_opt.data.loader import load_dataset  # noqa: E402
 from ident_opt.excitation import design as excitation  # noqa: E402
 from ident_opt.fitting.bounded import KKT_TOL, FactorBoundedLS, solve_bounded  # noqa: E402

@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ident_opt.adaptation.identifier import serving_identifier
 from ident_opt.adaptation.replay import _standard_errors, replay
+from ident_opt.adaptation.start import serving_identifier
 from ident_opt.adaptation.stream import StreamOptions, serve
 from ident_opt.data.dataset import chronological_split
 from ident_opt.data.loader import load_dataset

@@ -21,8 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ident_opt.adaptation.identifier import batch_theta, serving_identifier
+from ident_opt.adaptation.estimator import batch_theta
 from ident_opt.adaptation.lines import Mapping
+from ident_opt.adaptation.start import serving_identifier
 from ident_opt.adaptation.stream import StreamOptions, serve
 from ident_opt.arm.planar import RIGID
 from ident_opt.data.dataset import chronological_split

@@ -34,7 +34,7 @@ _EXPORTS = {
     "PlanarArm": ("ident_opt.arm.planar", "PlanarArm"),
     "PlanarRobot": ("ident_opt.arm.datasheet", "PlanarRobot"),
     "ChainArm": ("ident_opt.arm.chain", "ChainArm"),
-    "ChainRobot": ("ident_opt.arm.chain", "ChainRobot"),
+    "ChainRobot": ("ident_opt.arm.chain_robot", "ChainRobot"),
     # identification: one fit, every fit side by side, every model under every protocol
     "fit": ("ident_opt.api", "fit"),
     "ArmFit": ("ident_opt.fitting.recommend", "ArmFit"),

@@ -12,10 +12,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ident_opt.adaptation.identifier import offline_start, start_identifier
 from ident_opt.adaptation.kernel import attach
 from ident_opt.adaptation.lines import BadLine, LineParser, Mapping
 from ident_opt.adaptation.replay import _standard_errors
+from ident_opt.adaptation.start import offline_start, start_identifier
 from ident_opt.adaptation.stream import StreamOptions, currents_to_torques, serve
 from ident_opt.cli import main
 from ident_opt.consistency import necessarily_nonnegative

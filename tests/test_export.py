@@ -16,7 +16,7 @@ import pinocchio as pin
 import pytest
 
 from ident_opt.arm.bodies import RobotDescription
-from ident_opt.arm.chain import ChainRobot
+from ident_opt.arm.chain_robot import ChainRobot
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PAPER, RIGID, PlanarArm
 from ident_opt.arm.realise import IMPOSSIBLE, chain_bodies

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
-from ident_opt.adaptation.identifier import Estimator, OnlineIdentifier, batch_theta
+from ident_opt.adaptation.estimator import Estimator, batch_theta
+from ident_opt.adaptation.identifier import OnlineIdentifier
 from ident_opt.arm.planar import RIGID
 from ident_opt.fitting.bounded import Bounds, default_bounds, solve_bounded
 from ident_opt.fitting.stats import Stats

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident_opt.adaptation.identifier import serving_identifier
+from ident_opt.adaptation.start import serving_identifier
 from ident_opt.data.loader import load_dataset
 from ident_opt.models.gmr import GMR, Support, input_log_density
 from ident_opt.problem import load_problem

@@ -8,7 +8,8 @@ import copy
 import numpy as np
 import pytest
 
-from ident_opt.adaptation.identifier import ArmDesign, Estimator, OnlineIdentifier
+from ident_opt.adaptation.estimator import Estimator
+from ident_opt.adaptation.identifier import ArmDesign, OnlineIdentifier
 from ident_opt.adaptation.kernel import attach
 from ident_opt.arm.planar import RIGID
 from ident_opt.fitting.bounded import default_bounds

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident_opt.adaptation.identifier import offline_start, start_identifier
 from ident_opt.adaptation.lines import BadLine, LineParser
+from ident_opt.adaptation.start import offline_start, start_identifier
 from ident_opt.adaptation.stream import serve
 from ident_opt.data.dataset import chronological_split
 from ident_opt.errors import InputError

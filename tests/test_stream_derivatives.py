@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident_opt.adaptation.identifier import batch_theta, offline_start
+from ident_opt.adaptation.estimator import batch_theta
 from ident_opt.adaptation.lines import LineParser, Mapping
+from ident_opt.adaptation.start import offline_start
 from ident_opt.arm.planar import RIGID
 from ident_opt.data.dataset import chronological_split
 from ident_opt.data.loader import load_dataset

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident_opt.adaptation.identifier import offline_start, start_identifier
+from ident_opt.adaptation.start import offline_start, start_identifier
 from ident_opt.adaptation.stream import StreamOptions, serve
 from ident_opt.data.dataset import chronological_split
 

@@ -20,8 +20,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ident_opt.adaptation.identifier import offline_start, start_identifier
 from ident_opt.adaptation.lines import BadLine, LineParser, Mapping
+from ident_opt.adaptation.start import offline_start, start_identifier
 from ident_opt.adaptation.stream import currents_to_torques, serve
 from ident_opt.data.dataset import chronological_split
 from ident_opt.numerics.causal import CausalDerivatives, RateError

@@ -18,7 +18,7 @@ import pandas as pd
 import pinocchio as pin
 import pytest
 
-from ident_opt.arm.chain import ChainRobot
+from ident_opt.arm.chain_robot import ChainRobot
 from ident_opt.arm.datasheet import datasheet_pi
 from ident_opt.arm.planar import PHYSICAL
 from ident_opt.arm.planar_urdf import UrdfPlanarRobot

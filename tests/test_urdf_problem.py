@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ident_opt.arm.chain import ChainRobot
+from ident_opt.arm.chain_robot import ChainRobot
 from ident_opt.cli import main
 from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError

@@ -16,15 +16,9 @@ import numpy as np
 from scipy.optimize import lsq_linear
 from tqdm import tqdm
 
-from ident_opt.adaptation.identifier import (
-    CONSISTENT_EVERY,
-    OnlineIdentifier,
-    Start,
-    batch_theta,
-    model_keys,
-    offline_start,
-    start_identifier,
-)
+from ident_opt.adaptation.estimator import CONSISTENT_EVERY, batch_theta
+from ident_opt.adaptation.identifier import OnlineIdentifier
+from ident_opt.adaptation.start import Start, model_keys, offline_start, start_identifier
 from ident_opt.data.dataset import Dataset
 from ident_opt.fitting.recommend import Choice
 from ident_opt.fitting.stats import Stats

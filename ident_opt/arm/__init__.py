@@ -32,7 +32,7 @@ _EXPORTS = {
     "PlanarRobot": "datasheet",
     "UrdfPlanarRobot": "planar_urdf",
     "ChainArm": "chain",
-    "ChainRobot": "chain",
+    "ChainRobot": "chain_robot",
     "RobotDescription": "bodies",
 }
 

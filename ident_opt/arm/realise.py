@@ -55,7 +55,8 @@ from ident_opt.arm.urdf import UrdfJoint
 from ident_opt.errors import InputError
 
 if TYPE_CHECKING:  # the arm descriptions call these functions (`Robot.bodies`): named for the type checker only
-    from ident_opt.arm.chain import ChainArm, ChainRobot
+    from ident_opt.arm.chain import ChainArm
+    from ident_opt.arm.chain_robot import ChainRobot
 
 #: Share of a free mass's interval kept off each end (module doc): a link at an end has a zero moment of inertia.
 MASS_MARGIN = 0.01

@@ -19,8 +19,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from ident_opt.adaptation.identifier import CONSISTENT_EVERY, serving_identifier
+from ident_opt.adaptation.estimator import CONSISTENT_EVERY
 from ident_opt.adaptation.replay import replay
+from ident_opt.adaptation.start import serving_identifier
 from ident_opt.adaptation.stream import StreamOptions, serve
 from ident_opt.commands.common import (
     add_components,

@@ -33,7 +33,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ident_opt.arm import planar_urdf
-from ident_opt.arm.chain import ChainRobot
+from ident_opt.arm.chain_robot import ChainRobot
 from ident_opt.arm.urdf import UrdfJoint, parse_urdf
 from ident_opt.errors import InputError
 from ident_opt.problem.joints import joint_values

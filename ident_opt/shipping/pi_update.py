@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt.adaptation import c_update
-from ident_opt.adaptation.identifier import offline_start, start_identifier
 from ident_opt.adaptation.kernel import load_pi_update, update_state
 from ident_opt.adaptation.replay import _relative, _standard_errors
+from ident_opt.adaptation.start import offline_start, start_identifier
 from ident_opt.data.dataset import Dataset, chronological_split
 from ident_opt.fitting.bounded import KKT_TOL
 
