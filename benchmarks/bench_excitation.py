@@ -21,6 +21,7 @@ from pathlib import Path
 
 from ident_opt.data.loader import load_dataset
 from ident_opt.excitation import design as excitation
+from ident_opt.excitation.setup import make_setup
 from ident_opt.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,7 +38,7 @@ def bench(arm: str, args: argparse.Namespace) -> None:
     problem = load_problem(ROOT / "problems" / f"{name}.toml")
     trial = load_dataset(problem.data.trials[0], problem.data, problem.robot) if arm == "planar" else None
     t0 = time.perf_counter()
-    setup = excitation.make_setup(
+    setup = make_setup(
         problem.robot, problem.limits, args.duration, harmonics=args.harmonics, base_hz=base_hz, trial=trial
     )
     setup_s = time.perf_counter() - t0

@@ -37,7 +37,7 @@ from ident_opt.adaptation.estimator import base_bounds  # noqa: E402
 from ident_opt.adaptation.replay import _standard_errors  # noqa: E402
 from ident_opt.adaptation.start import offline_start  # noqa: E402
 from ident_opt.data.loader import load_dataset  # noqa: E402
-from ident_opt.excitation import design as excitation  # noqa: E402
+from ident_opt.excitation.setup import random_states  # noqa: E402
 from ident_opt.fitting.bounded import KKT_TOL, FactorBoundedLS, solve_bounded  # noqa: E402
 from ident_opt.fitting.stats import Stats  # noqa: E402
 from ident_opt.problem import load_problem  # noqa: E402
@@ -70,7 +70,7 @@ class Data:
 
     def samples(self, n: int):
         """n random samples: q, dq, ddq, τ (n, 7) each, and the design rows D (n, 7, P)."""
-        q, dq, ddq = excitation.random_states(self.limits, n, self.rng)
+        q, dq, ddq = random_states(self.limits, n, self.rng)
         D = self.design(q, dq, ddq)
         tau = D @ self.theta + 0.3 * self.rng.standard_normal(q.shape)
         return q, dq, ddq, tau, D

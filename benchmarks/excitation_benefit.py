@@ -41,7 +41,7 @@ from ident_opt.data.loader import load_dataset
 from ident_opt.diagnosis.split import at_rest
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
-from ident_opt.excitation.design import Setup
+from ident_opt.excitation.setup import Setup, make_setup
 from ident_opt.fitting import estimators
 from ident_opt.fitting.base import base_parameters
 from ident_opt.fitting.stats import Stats
@@ -194,7 +194,7 @@ def run(
     if problem.limits is None:
         raise InputError(f"{problem.path}: section [limits] is required to design an excitation")
     t0, load = time.perf_counter(), os.getloadavg()[0]
-    setup = excitation.make_setup(problem.robot, problem.limits, duration, harmonics=harmonics, base_hz=base_hz)
+    setup = make_setup(problem.robot, problem.limits, duration, harmonics=harmonics, base_hz=base_hz)
     design = design or excitation.design(setup, "d", starts=starts, progress=progress, workers=workers)
     t_design = time.perf_counter()
     closed_loop = "simulate" in problem.robot.serves and problem.robot.paper_views

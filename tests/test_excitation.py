@@ -13,6 +13,7 @@ import pytest
 from ident_opt.cli import main
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
+from ident_opt.excitation.setup import make_setup, noise_from_data
 from ident_opt.problem import load_problem
 from ident_opt.simulator.fourier import Fourier
 
@@ -50,7 +51,7 @@ def test_fourier_rest_and_derivatives():
 def test_noise_source_is_shown_relative(physical_problem, exp1, monkeypatch):
     # The committed report names the data as people read it, not by this machine's absolute path.
     monkeypatch.chdir(ROOT)
-    _, source = excitation.noise_from_data(exp1, physical_problem.robot)
+    _, source = noise_from_data(exp1, physical_problem.robot)
     assert str(ROOT) not in source and "data/merit/exp1.csv" in source
 
 
@@ -83,7 +84,7 @@ def test_bad_limits_named(tmp_path, old, new, named):
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
     problem = load_problem(problem_file(tmp_path_factory.mktemp("excite")))
-    return excitation.make_setup(problem.robot, problem.limits, 10.0, harmonics=3)
+    return make_setup(problem.robot, problem.limits, 10.0, harmonics=3)
 
 
 def _respects(setup, d) -> None:
@@ -116,7 +117,7 @@ def test_cond_optimal_beats_its_start(setup):
 def test_tight_torque_limit_still_respected(tmp_path):
     # A torque limit that binds (joint 1 needs about 4 N m against gravity near the horizontal).
     problem = load_problem(problem_file(tmp_path, LIMITS.replace("[15.0, 4.0]", "[5.0, 1.0]")))
-    s = excitation.make_setup(problem.robot, problem.limits, 10.0, harmonics=3)
+    s = make_setup(problem.robot, problem.limits, 10.0, harmonics=3)
     d = excitation.design(s, "d", starts=1, rate=1000.0, progress=False, max_iter=80)
     _respects(s, d)
     assert min(d.margins["torque"]["fraction"]) < 0.05
@@ -166,7 +167,7 @@ def test_between_is_checked(tmp_path, capsys):
 def test_discrimination_design_beats_its_start_within_limits(physical_problem, exp1):
     from ident_opt.excitation import discrimination
 
-    s = excitation.make_setup(physical_problem.robot, physical_problem.limits, 8.0, harmonics=8, base_hz=0.5)
+    s = make_setup(physical_problem.robot, physical_problem.limits, 8.0, harmonics=8, base_hz=0.5)
     d = discrimination.design(
         s, physical_problem.robot, exp1, "asymmetric_coulomb,elasticity", starts=1, seed=1, progress=False, max_iter=25
     )

@@ -28,6 +28,7 @@ from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
 from ident_opt.excitation import discrimination
 from ident_opt.excitation import proof as excitation_proof
+from ident_opt.excitation.setup import make_setup
 from ident_opt.problem import load_problem
 from ident_opt.report import excitation as report
 from ident_opt.simulator.fourier import default_base_hz
@@ -145,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
         return _proof(args, problem, trial)
     report.paths(args.out)  # a bad name fails before the work
     try:
-        setup = excitation.make_setup(
+        setup = make_setup(
             problem.robot,
             problem.limits,
             args.duration,

@@ -39,7 +39,9 @@ from ident_opt.effects import CATALOGUE
 from ident_opt.effects.families import PlanarFamily
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
-from ident_opt.excitation.design import Design, Setup
+from ident_opt.excitation.design import Design
+from ident_opt.excitation.information import NumpyFunction
+from ident_opt.excitation.setup import Setup
 from ident_opt.numerics import least_squares as linear
 from ident_opt.numerics import signals
 from ident_opt.numerics.signals import TORQUE_FILTER_HZ
@@ -247,7 +249,7 @@ def design(
     def objective(x: np.ndarray, thetas: dict | None = None) -> tuple[float, dict]:
         return _objective_value(rivals, setup, t_nlp, len(t), x, thetas)
 
-    callback = excitation.NumpyFunction(
+    callback = NumpyFunction(
         "discrimination", setup.fourier.size, 1, lambda x: [objective(x)[0]], lambda x: _gradient(objective, x)
     )
 

@@ -43,7 +43,8 @@ from ident_opt.diagnosis.split import at_rest, prepare
 from ident_opt.effects import CATALOGUE
 from ident_opt.excitation import design as excitation
 from ident_opt.excitation import discrimination
-from ident_opt.excitation.design import Design, Setup
+from ident_opt.excitation.design import Design
+from ident_opt.excitation.setup import Setup, make_setup
 from ident_opt.fitting import estimators
 from ident_opt.fitting.stats import Stats
 from ident_opt.numerics.signals import TORQUE_FILTER_HZ
@@ -168,8 +169,8 @@ def run(
     starts), then simulate and score (module doc)."""
     t0 = time.perf_counter()
     causes = discrimination.parse_between(between)
-    setup = excitation.make_setup(problem.robot, problem.limits, duration, trial=trial)
-    disc_setup = excitation.make_setup(
+    setup = make_setup(problem.robot, problem.limits, duration, trial=trial)
+    disc_setup = make_setup(
         problem.robot,
         problem.limits,
         duration,

@@ -18,8 +18,9 @@ import matplotlib.pyplot as plt
 from ident_opt import outputs
 from ident_opt.columns import joint_columns, kinematic_columns
 from ident_opt.errors import InputError
-from ident_opt.excitation.design import Design, Setup
+from ident_opt.excitation.design import Design
 from ident_opt.excitation.proof import Proof
+from ident_opt.excitation.setup import Setup
 from ident_opt.report import record, write_json
 from ident_opt.report.tables import markdown_table
 
