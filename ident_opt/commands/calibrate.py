@@ -11,10 +11,9 @@ from __future__ import annotations
 
 import argparse
 
-from ident_opt.commands.common import output_dir, require
+from ident_opt.commands.common import output_dir, problem_for
 from ident_opt.errors import InputError
 from ident_opt.paper.calibration import calibrate
-from ident_opt.problem import load_problem
 from ident_opt.report import calibration as report
 
 
@@ -35,9 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Load both problems, calibrate, write the report, print it."""
-    sim, real = load_problem(args.problem), load_problem(args.real)
-    require("calibrate", sim)
-    require("calibrate", real)
+    sim, real = problem_for(args, "calibrate"), problem_for(args, "calibrate", "real")
     if sim.simulate is None:
         raise InputError(f"{sim.path}: no [simulate] section: nothing to calibrate")
     if not real.data.trials:

@@ -14,10 +14,16 @@ import argparse
 import sys
 
 from ident_opt import outputs
-from ident_opt.commands.common import add_components, add_problem_arguments, add_switches, load, output_dir, require
-from ident_opt.fitting.estimators import ESTIMATORS
+from ident_opt.commands.common import (
+    add_components,
+    add_estimator_flag,
+    add_problem_arguments,
+    add_switches,
+    load,
+    output_dir,
+    problem_for,
+)
 from ident_opt.fitting.recommend import choose
-from ident_opt.problem import load_problem
 from ident_opt.report import codegen as report
 from ident_opt.shipping import codegen, generate, ship
 
@@ -33,13 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="model extension to include (repeatable): armature, asymmetric_coulomb, stribeck, offset",
     )
-    parser.add_argument(
-        "--estimator",
-        choices=tuple(ESTIMATORS),
-        default=None,
-        help="how π is identified, among the arm's fits (default: its physically consistent one: constrained for "
-        "the planar arm, consistent for an n-joint arm)",
-    )
+    add_estimator_flag(parser, "the fit of the generated π")
     parser.add_argument(
         "--parameters",
         metavar="FILE",
@@ -60,8 +60,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Identify (or load), generate, compile, check; 0 when the library agrees with Python, 1 when not."""
-    problem = load_problem(args.problem)
-    require("codegen", problem)
+    problem = problem_for(args, "codegen")
     if args.estimator is not None:  # an unknown one fails before any work
         choose(problem, [], estimator=args.estimator, command="codegen")
     codegen.find_compiler()  # fail before any fitting when there is none

@@ -81,9 +81,30 @@ class Loaded:
         return self.training[1] if len(self.training) > 1 else None
 
 
-def require(command: str, problem) -> None:
-    """InputError (exit 2) when `command` does not serve the problem's arm (`Problem.require`), before any work."""
+def problem_for(args: argparse.Namespace, command: str, path_flag: str = "problem"):
+    """The problem file named by --problem (or `path_flag`), once `command` is known to serve its arm
+    (`Problem.require`: an InputError, exit 2, before any work)."""
+    problem = load_problem(getattr(args, path_flag))
     problem.require(command)
+    return problem
+
+
+#: What --estimator's absence means in the commands that fit (`fitting.recommend.choose`).
+RECOMMENDED = (
+    "the recommended fit, chosen from the data's own evidence: the arm's physically consistent fit, or the robust "
+    "one when noise biases it"
+)
+
+
+def add_estimator_flag(parser: argparse.ArgumentParser, what: str, default: str = RECOMMENDED) -> None:
+    """--estimator NAME: `what` is fitted with, among the arm's fits (checked by `fitting.recommend.choose`, which
+    names the arm's fits when NAME is not one of them); `default` says what the command does without it."""
+    parser.add_argument("--estimator", metavar="NAME", help=f"{what}, among the arm's fits (default: {default})")
+
+
+def add_progress_flag(parser: argparse.ArgumentParser) -> None:
+    """--no-progress: no progress bars (for logs and CI)."""
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def load(
@@ -92,8 +113,10 @@ def load(
     """The problem file (`problem` when the command read it already) and its trials (`api.load_trials`: --data and
     --test-data, else the problem's [data] trials or its [simulate] section), once `command` is known to serve its
     arm. `fit`: the trials will be fitted, so a joint whose torque never varies is an error (else a warning)."""
-    problem = problem or load_problem(args.problem)
-    require(command, problem)
+    if problem is None:
+        problem = problem_for(args, command)
+    else:
+        problem.require(command)
     training, testing = api.load_trials(
         problem,
         getattr(args, "data", None),

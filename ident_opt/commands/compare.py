@@ -18,10 +18,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ident_opt.commands.common import add_problem_arguments, load, output_dir, require
+from ident_opt.commands.common import add_problem_arguments, add_progress_flag, load, output_dir, problem_for
 from ident_opt.errors import InputError
 from ident_opt.evaluation import compare, constraints
-from ident_opt.problem import load_problem
 from ident_opt.report import compare as report
 from ident_opt.report import constraints as constraints_report
 
@@ -64,13 +63,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="trials of the constraints study: the local rigid multisine generator, the built-in "
         "simulator (short tud01 trials), or both (default)",
     )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_progress_flag(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the comparison (or the constraints study), write the files, print a summary."""
-    problem = load_problem(args.problem)
-    require("compare", problem)
+    problem = problem_for(args, "compare")
     robot = problem.robot
     if args.margin < 0:
         raise InputError(f"--margin must be ≥ 0 (got {args.margin})")
@@ -105,7 +103,7 @@ def _constraints_study(args: argparse.Namespace, problem) -> int:
     """The study of where the constraints matter, on N short simulated trials of the problem's robot."""
     if args.constraints_study < 1:
         raise InputError("--constraints-study needs a positive number of trials")
-    require("simulate", problem)  # its trials come from the simulator
+    problem.require("simulate")  # its trials come from the simulator
     out = output_dir(args, problem)
     sources = tuple(constraints.STUDY_SOURCES) if args.study_source == "both" else (args.study_source,)
     results, rich = constraints.study(

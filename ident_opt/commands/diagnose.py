@@ -13,23 +13,23 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ident_opt.commands.common import add_problem_arguments, load, output_dir, write_json
+from ident_opt.commands.common import (
+    add_estimator_flag,
+    add_problem_arguments,
+    add_progress_flag,
+    load,
+    output_dir,
+    write_json,
+)
 from ident_opt.diagnosis import diagnose
-from ident_opt.fitting.estimators import ESTIMATORS
 from ident_opt.report import diagnosis as report
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_problem_arguments(parser)
     parser.add_argument("--out", metavar="DIR", help="folder for diagnosis.md and the figures")
-    parser.add_argument(
-        "--estimator",
-        choices=tuple(ESTIMATORS),
-        default=None,
-        help="how the rigid fit's π is identified, among the arm's fits (default: the recommended fit, chosen from "
-        "the training part's evidence)",
-    )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_estimator_flag(parser, "the rigid fit's π", "the recommended fit, chosen from the training part's evidence")
+    add_progress_flag(parser)
 
 
 def run(args: argparse.Namespace) -> int:

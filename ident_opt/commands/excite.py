@@ -22,14 +22,15 @@ import math
 from pathlib import Path
 
 from ident_opt import outputs
-from ident_opt.commands.common import add_problem_arguments, require
+from ident_opt.commands.common import add_problem_arguments, add_progress_flag, problem_for
+from ident_opt.data.dataset import Dataset
 from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
 from ident_opt.excitation import discrimination
 from ident_opt.excitation import proof as excitation_proof
-from ident_opt.excitation.setup import make_setup
-from ident_opt.problem import load_problem
+from ident_opt.excitation.setup import Setup, make_setup
+from ident_opt.problem import Problem
 from ident_opt.report import excitation as report
 from ident_opt.simulator.fourier import default_base_hz
 
@@ -86,7 +87,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="instead: design D-, cond-optimal and discriminating (--between, default asymmetric_coulomb,elasticity) "
         "trajectories and prove them in the simulator with N noise seeds each; the report to --out (*.md)",
     )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_flag(parser)
 
 
 def _check(args: argparse.Namespace) -> None:
@@ -117,8 +118,7 @@ def _check(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Design, write the CSV, figure and JSON, print a summary."""
-    problem = load_problem(args.problem)
-    require("excite", problem)
+    problem = problem_for(args, "excite")
     if args.criterion == "discriminate":
         args.harmonics = args.harmonics or discrimination.HARMONICS
         args.base_hz = args.base_hz or default_base_hz(args.duration, discrimination.BASE_HZ)
@@ -145,8 +145,18 @@ def run(args: argparse.Namespace) -> int:
     if args.proof is not None:
         return _proof(args, problem, trial)
     report.paths(args.out)  # a bad name fails before the work
+    setup = _setup(args, problem, trial)
+    design = _design(args, problem, setup, trial)
+    files = report.write(design, setup, args.out, args.json)
+    print(report.terminal(design))
+    print("wrote " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def _setup(args: argparse.Namespace, problem: Problem, trial: Dataset | None) -> Setup:
+    """The design's setup from the flags and `trial`; its errors name the flag or the problem file at fault."""
     try:
-        setup = make_setup(
+        return make_setup(
             problem.robot,
             problem.limits,
             args.duration,
@@ -159,32 +169,24 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--extension: {exc}") from None
     except InputError as exc:
         raise InputError(f"{problem.path}: {exc}") from None
+
+
+def _design(args: argparse.Namespace, problem: Problem, setup: Setup, trial: Dataset | None) -> excitation.Design:
+    """The design --criterion asks for: T-optimal between --between's causes (fitted on `trial`), else d or cond."""
     if args.criterion == "discriminate":
-        design = discrimination.design(
-            setup,
-            problem.robot,
-            trial,
-            args.between,
-            starts=args.starts,
-            seed=args.seed,
-            rate=args.rate,
-            progress=not args.no_progress,
-            workers=args.workers,
-        )
-    else:
-        design = excitation.design(
-            setup,
-            args.criterion,
-            starts=args.starts,
-            seed=args.seed,
-            rate=args.rate,
-            progress=not args.no_progress,
-            workers=args.workers,
-        )
-    files = report.write(design, setup, args.out, args.json)
-    print(report.terminal(design))
-    print("wrote " + ", ".join(str(f) for f in files))
-    return 0
+        return discrimination.design(setup, problem.robot, trial, args.between, **_search(args))
+    return excitation.design(setup, args.criterion, **_search(args))
+
+
+def _search(args: argparse.Namespace) -> dict:
+    """The search flags every design takes (starts, seed, rate, progress, workers), read in one place for both."""
+    return {
+        "starts": args.starts,
+        "seed": args.seed,
+        "rate": args.rate,
+        "progress": not args.no_progress,
+        "workers": args.workers,
+    }
 
 
 def _proof(args: argparse.Namespace, problem, trial) -> int:

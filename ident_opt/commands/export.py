@@ -19,9 +19,8 @@ import sys
 from pathlib import Path
 
 from ident_opt import api, outputs
-from ident_opt.commands.common import add_problem_arguments, load, require, write_json
+from ident_opt.commands.common import add_estimator_flag, add_problem_arguments, load, problem_for, write_json
 from ident_opt.fitting.recommend import choose
-from ident_opt.problem import load_problem
 from ident_opt.shipping.description import FORMATS, export
 
 
@@ -30,18 +29,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_problem_arguments(parser)
     parser.add_argument("--format", required=True, choices=tuple(FORMATS), help="urdf (with FILE.json) or mjcf")
     parser.add_argument("--out", required=True, metavar="FILE", help="the robot description to write")
-    parser.add_argument(
-        "--estimator",
-        metavar="NAME",
-        help="the fit to export, among the arm's (default: the recommended fit, chosen from the data's own "
-        "evidence: the arm's physically consistent fit, or the robust one when noise biases it)",
-    )
+    add_estimator_flag(parser, "the fit to export")
 
 
 def run(args: argparse.Namespace) -> int:
     """Fit, realise, write, print what was written and the notes."""
-    problem = load_problem(args.problem)
-    require("export", problem)
+    problem = problem_for(args, "export")
     robot = problem.robot
     if args.format == "urdf":
         outputs.check_file_output(Path(f"{args.out}.json"), "--out's sidecar")

@@ -30,11 +30,16 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from ident_opt.commands.common import add_problem_arguments, output_dir, require
+from ident_opt.commands.common import (
+    add_estimator_flag,
+    add_problem_arguments,
+    add_progress_flag,
+    output_dir,
+    problem_for,
+)
 from ident_opt.errors import InputError
 from ident_opt.fleet.engine import CONNECT_TIMEOUT_S
 from ident_opt.fleet.run import run_fleet
-from ident_opt.problem import load_problem
 from ident_opt.report import fleet as report
 
 
@@ -56,19 +61,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--baseline-days", type=int, default=5, metavar="K", help="each robot's first K days are its baseline (5)"
     )
-    parser.add_argument(
-        "--estimator",
-        metavar="NAME",
-        help="the fit of every robot-day, among the arm's (default: each robot's recommended fit, judged on its first "
-        "readable day)",
+    add_estimator_flag(
+        parser, "the fit of every robot-day", "each robot's recommended fit, judged on its first readable day"
     )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_progress_flag(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     """Check the flags, run the fleet on the cluster, write the reports, print the changes and the warnings."""
-    problem = load_problem(args.problem)
-    require("fleet", problem)
+    problem = problem_for(args, "fleet")
     if args.scheduler and args.workers:
         raise InputError("--workers sets the local cluster's size; with --scheduler the cluster's own workers run")
     out = output_dir(args, problem)

@@ -25,6 +25,7 @@ from ident_opt.adaptation.start import serving_identifier
 from ident_opt.adaptation.stream import StreamOptions, serve
 from ident_opt.commands.common import (
     add_components,
+    add_estimator_flag,
     add_problem_arguments,
     add_switches,
     load,
@@ -92,12 +93,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="random steps at which the online parameters are checked against a batch "
         "re-solve (plus the last step; default 10)",
     )
-    parser.add_argument(
-        "--estimator",
-        metavar="NAME",
-        help="the fit cpbr starts from and follows, among the arm's (default: the recommended fit, chosen from the "
-        "training part's own evidence: the arm's physically consistent fit, or the robust one when noise biases it)",
-    )
+    add_estimator_flag(parser, "the fit cpbr starts from and follows")
     add_components(parser)
 
 

@@ -23,10 +23,9 @@ from __future__ import annotations
 
 import argparse
 
-from ident_opt.commands.common import add_problem_arguments, add_switches, require, write_json
+from ident_opt.commands.common import add_problem_arguments, add_switches, problem_for, write_json
 from ident_opt.effects import describe
 from ident_opt.errors import InputError
-from ident_opt.problem import load_problem
 from ident_opt.simulator import truth_path
 from ident_opt.simulator.simulate import simulate
 from ident_opt.simulator.trajectories import TRAJECTORIES
@@ -97,8 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    problem = load_problem(args.problem)
-    require("simulate", problem)
+    problem = problem_for(args, "simulate")
     if args.trajectory and args.trajectory_file:
         raise InputError("give --trajectory or --trajectory-file, not both")
     trial = simulate(

@@ -270,28 +270,40 @@ def _complete(
     q = signals["q"]
     tau = signals["tau"] if load_kind == "tau" else signals["i"] * _current_to_torque(robot, path)
 
-    notes: list[str] = []
-    if "dq" in signals and "ddq" in signals:
-        dq, ddq, how = signals["dq"], signals["ddq"], "given"
-    else:
-        cutoff, rule = resolve_cutoff(spec.derivative_cutoff_hz, t, q)
-        dq, ddq, how = estimate_derivatives(t, q, cutoff, signals.get("dq"))
-        how += rule
-        if "ddq" in signals:  # logged accelerations are kept: only the velocities were missing
-            ddq, how = signals["ddq"], how + " (accelerations as logged)"
-        notes.append(f"derivatives {how}")
-        if not allow_implausible:  # estimated from q and t: a wrong time unit shows here first
-            _check_plausible({"dq": dq, "ddq": ddq}, keep, path, spec, estimated=True)
+    dq, ddq, how, cutoff_hz = _derivatives(signals, t, q, keep, path, spec, allow_implausible)
+    notes: list[str] = [] if cutoff_hz is None else [f"derivatives {how}"]
     dropped = int(bad.sum())
     if dropped:
         notes.append(f"dropped {dropped} invalid row(s)")
     extra = _extra_columns(frame, cols, keep)
-    cutoff_hz = None if how == "given" else cutoff
     tau_filtered = None if cutoff_hz is None else lowpass(t, tau, cutoff_hz)
     # Logged derivatives carry the logger's own filters; the instruments come from q at the cut-off the data support.
     instruments = instrument_derivatives(t, q, cutoff_hz if cutoff_hz is not None else choose_cutoff(t, q))
     trial = Dataset(str(path), t, q, dq, ddq, tau, extra, how, dropped, notes, cutoff_hz, tau_filtered, instruments)
     return trial if cutoff_hz is None else _settled(trial, path, min_samples)
+
+
+def _derivatives(
+    signals: dict[str, np.ndarray],
+    t: np.ndarray,
+    q: np.ndarray,
+    keep: np.ndarray,
+    path: Path,
+    spec: DataSpec,
+    allow_implausible: bool,
+) -> tuple[np.ndarray, np.ndarray, str, float | None]:
+    """(dq, ddq, how, cut-off [Hz] or None when given): the logged derivatives when both are there, else estimated
+    from q and t at the data's cut-off (logged accelerations kept) and checked, since a wrong time unit shows there."""
+    if "dq" in signals and "ddq" in signals:
+        return signals["dq"], signals["ddq"], "given", None
+    cutoff, rule = resolve_cutoff(spec.derivative_cutoff_hz, t, q)
+    dq, ddq, how = estimate_derivatives(t, q, cutoff, signals.get("dq"))
+    how += rule
+    if "ddq" in signals:  # logged accelerations are kept: only the velocities were missing
+        ddq, how = signals["ddq"], how + " (accelerations as logged)"
+    if not allow_implausible:  # estimated from q and t: a wrong time unit shows here first
+        _check_plausible({"dq": dq, "ddq": ddq}, keep, path, spec, estimated=True)
+    return dq, ddq, how, cutoff
 
 
 def _settled(trial: Dataset, path: Path, min_samples: int) -> Dataset:

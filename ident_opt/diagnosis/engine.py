@@ -22,6 +22,19 @@ from ident_opt.arm.base import Arm
 from ident_opt.data.dataset import Dataset
 
 
+@dataclass(frozen=True)
+class Request:
+    """What the loop hands an engine to build itself on: the trial to diagnose, an unseen trial for the held-out
+    part (None: the trial's last `1 - train_fraction` is held out), the torque low-pass setting (`split.prepare`)
+    and the rigid fit's estimator (a name of `ident_opt.fitting.estimators`)."""
+
+    trial: Dataset
+    unseen: Dataset | None
+    train_fraction: float
+    torque_filter_hz: float | str | None
+    estimator: str
+
+
 @dataclass
 class Parts:
     """The diagnosis's data: the training and held-out parts as prepared (torque low-passed like the derivatives,
@@ -51,9 +64,9 @@ class Nominal:
 
 
 class Engine(Protocol):
-    """An arm kind's side of the diagnosis (module doc). `Family` and `Candidate` are the engine's own types: the
-    loop only passes them back (`family.cause`, `family.nests`, `family.baselines`; `cand.cause`, `cand.estimate`,
-    `cand.detail`, `cand.n_added`, `cand.predict(ds)`)."""
+    """An arm kind's side of the diagnosis (module doc), built as `Kind(robot, request)` (a `Request`). `Family` and
+    `Candidate` are the engine's own types: the loop only passes them back (`family.cause`, `family.nests`,
+    `family.baselines`; `cand.cause`, `cand.estimate`, `cand.detail`, `cand.n_added`, `cand.predict(ds)`)."""
 
     #: The least share of a joint's torque variance a named cause removes (`scoring.shortfall`).
     margin_variance: float
@@ -94,3 +107,34 @@ class Engine(Protocol):
     def screening(self) -> dict | None:
         """What the engine's screening found, for the JSON's evidence (None: it has none)."""
         ...
+
+
+@dataclass(frozen=True)
+class FamilyFunctions:
+    """An arm kind's candidate functions, as its families modules define them: `fit(family, baseline, ctx)`,
+    `compose(earlier, new)`, `frozen(family, theta)` and `theta(family, cand, ctx)`."""
+
+    fit: Callable
+    compose: Callable
+    frozen: Callable
+    theta: Callable
+
+
+class OverFunctions:
+    """`Engine.fit`, `compose`, `frozen` and `theta` as an engine's `functions` (a `FamilyFunctions`) called with
+    its context `ctx`: how both engines implement them."""
+
+    functions: FamilyFunctions
+    ctx: object
+
+    def fit(self, family, baseline: str):
+        return self.functions.fit(family, baseline, self.ctx)
+
+    def compose(self, earlier: list[tuple], new):
+        return self.functions.compose(earlier, new)
+
+    def frozen(self, family, theta: dict):
+        return self.functions.frozen(family, theta)
+
+    def theta(self, family, cand) -> dict:
+        return self.functions.theta(family, cand, self.ctx)

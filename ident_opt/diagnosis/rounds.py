@@ -20,7 +20,7 @@ from ident_opt.arm.kinds import ByKind
 from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import scoring
 from ident_opt.diagnosis.chain.engine import ChainEngine
-from ident_opt.diagnosis.engine import Engine
+from ident_opt.diagnosis.engine import Engine, Request
 from ident_opt.diagnosis.planar.engine import PlanarEngine
 from ident_opt.diagnosis.result import Diagnosis, Fitted, conclude, nominal_entries, row_of, versions
 from ident_opt.numerics import signals
@@ -165,7 +165,7 @@ def _fit_round(engine: Engine, named: list, ref: Fitted, version, bar, searched:
     """Every cause not yet named, composed with those named, fitted against every baseline it allows.
 
     After the first round (`searched` given) a cause whose first-round fit was `_promising` (every cause, where
-    the engine's `SEARCH_AGAIN` says so) is searched again in full; any other is refitted with its θ held at the
+    the engine's `search_again` says so) is searched again in full; any other is refitted with its θ held at the
     first-round value (`searched[cause]`): only its linear coefficients move. A cause masked by a larger one in
     the first round (a weak mode under a strong friction asymmetry) thus still gets its chance once the larger
     one is in the model, while the costly searches and polishes run only where they can change the answer."""
@@ -202,7 +202,7 @@ def diagnose_trial(
     for the nominal rigid fit and every candidate that refits π."""
     estimator = robot.default_estimator if rigid_fit is None else rigid_fit.estimator
     t0 = time.perf_counter()
-    engine = ENGINES.of(robot)(robot, trial, unseen, train_fraction, torque_filter_hz, estimator)
+    engine = ENGINES.of(robot)(robot, Request(trial, unseen, train_fraction, torque_filter_hz, estimator))
     parts, nominal = engine.parts, engine.nominal
     test = parts.test
     entries, nominal_mse = nominal_entries(

@@ -28,7 +28,7 @@ from ident_opt.numerics import signals
 #: Least fraction of the baseline's held-out MSE (on some joint) the named extension must remove.
 MARGIN = 0.05
 #: Least fraction of the measured torque's variance (on the same joint) it must remove: the planar engine's;
-#: the n-joint engine's is its own (`chain.families.Engine.MARGIN_VARIANCE`).
+#: the n-joint engine's is its own (`chain.engine.ChainEngine.margin_variance`).
 MARGIN_VARIANCE = 1e-4
 #: Least share of a refitted π's log-gain a cause fitted with the datasheet's π must explain.
 RECOVER = 0.8

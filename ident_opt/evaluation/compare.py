@@ -253,6 +253,66 @@ def _within_trial(pool: Dataset, model: Arm, split, fitters: dict[str, FitFn], p
     return seeds, metrics, test_sets
 
 
+def _extended_model(robot, extensions: Sequence[str] | None) -> Arm:
+    """The model every estimator fits: the robot's own, or with `extensions`; an unknown one is an InputError."""
+    try:
+        return robot.model(tuple(extensions) if extensions else None)
+    except ValueError as exc:
+        raise InputError(f"extension: {exc}") from None
+
+
+def _fit_all(
+    robot, model: Arm, trains: list[Dataset], margin: float, weights: str | None
+) -> tuple[dict[str, FitFn], dict[str, LinearFit]]:
+    """(the estimators, their fits and IV's on all training trials): one set of statistics for every fit (they add
+    up over trials); the estimators are reused by the within-trial protocols."""
+    fitters = fitted_estimators(robot, margin, weights)
+    whole = estimators.statistics(model, trains, probes=True)  # the robust fit's errors cover its bias
+    fits = {key: fn(whole, model) for key, fn in fitters.items()}
+    fits["iv"] = estimators.iv(whole, model)
+    return fitters, fits
+
+
+def _cross_trial(
+    test_pool: Dataset,
+    tests: list[Dataset],
+    model: Arm,
+    fits: dict[str, LinearFit],
+    sheets: dict[str, tuple[Arm, np.ndarray]],
+) -> tuple[dict[str, dict[str, list[float]]], dict[str, dict[str, dict[str, list[float]]]]]:
+    """(metrics on the pooled held-out trials, metrics per held-out trial when there are several) of every fit and
+    nominal model: the cross-trial protocol, each fit scored on data it never saw."""
+    scored = {**{k: (model, f.pi) for k, f in fits.items()}, **sheets}
+    pooled = _held_out(test_pool, scored)
+    return pooled, ({d.source: _held_out(d, scored) for d in tests} if len(tests) > 1 else {})
+
+
+def _score_nominal(
+    metrics: dict[str, dict[str, dict[str, list[float]]]],
+    test_sets: dict[str, list],
+    sheets: dict[str, tuple[Arm, np.ndarray]],
+) -> None:
+    """Add the nominal models' scores to `metrics` on each within-trial protocol's own test samples, so that they
+    stand beside the fits' on the same data."""
+    for protocol, pairs in test_sets.items():
+        for key, (sheet_model, pi) in sheets.items():
+            for m, v in _scores(pairs, sheet_model, pi).items():
+                metrics[protocol][m][key] = v
+
+
+def _trust(
+    choice: Choice, overlap: list, model: Arm, fits: dict[str, LinearFit], nominal: tuple[Arm, np.ndarray]
+) -> Trust:
+    """The recommendation's trust checks with the trials' own warnings first and the fits' link masses checked
+    against the `nominal` (arm, π): everything that qualifies the comparison, in one list."""
+    trust = choice.evidence.trust
+    trust.warnings[:0] = overlap  # the trials' own (a held-out trial that trains) come first
+    nominal_arm, nominal_pi = nominal
+    estimates = {k: f.pi for k, f in fits.items() if "base_parameters" not in f.details}  # not a lifted base fit
+    trust.warnings += check_masses(model, estimates, nominal_arm.link_masses(nominal_pi))
+    return trust
+
+
 def compare(
     problem: Problem,
     training: Dataset | Sequence[Dataset],
@@ -275,36 +335,21 @@ def compare(
     if margin < 0:
         raise InputError(f"compare: the constrained fit's margin must be ≥ 0 (got {margin})")
     robot, split, reference = problem.robot, problem.split, problem.reference
-    try:
-        model = robot.model(tuple(extensions) if extensions else None)
-    except ValueError as exc:
-        raise InputError(f"extension: {exc}") from None
+    model = _extended_model(robot, extensions)
     trains, tests = _as_list(training), _as_list(testing)
     overlap = held_out_overlap(trains, tests)
     choice = choose(problem, trains, model=model, command="compare")
     trains = choice.at_cutoff(trains)  # every fit is compared on the same derivatives
     pool, test_pool = concat(trains), (concat(tests) if tests else None)
-    fitters = fitted_estimators(robot, margin, weights)
-    whole = estimators.statistics(model, trains, probes=True)  # the robust fit's errors cover its bias
-    fits = {key: fn(whole, model) for key, fn in fitters.items()}
-    fits["iv"] = estimators.iv(whole, model)
+    fitters, fits = _fit_all(robot, model, trains, margin, weights)
     seeds, metrics, test_sets = _within_trial(pool, model, split, fitters, robot.paper_views, progress)
     sheets = nominal_models(robot, reference)
     by_trial: dict[str, dict[str, dict[str, list[float]]]] = {}
     if test_pool is not None:
-        scored = {**{k: (model, f.pi) for k, f in fits.items()}, **sheets}
-        metrics["cross_trial"] = _held_out(test_pool, scored)
-        by_trial = {d.source: _held_out(d, scored) for d in tests} if len(tests) > 1 else {}
-    for protocol, pairs in test_sets.items():
-        for key, (sheet_model, pi) in sheets.items():
-            for m, v in _scores(pairs, sheet_model, pi).items():
-                metrics[protocol][m][key] = v
+        metrics["cross_trial"], by_trial = _cross_trial(test_pool, tests, model, fits, sheets)
+    _score_nominal(metrics, test_sets, sheets)
     sources = {"train": pool.source, **({"unseen": test_pool.source} if test_pool is not None else {})}
-    trust = choice.evidence.trust
-    trust.warnings[:0] = overlap  # the trials' own (a held-out trial that trains) come first
-    nominal_arm, nominal_pi = sheets[f"datasheet_{robot.datasheet}"]
-    estimates = {k: f.pi for k, f in fits.items() if "base_parameters" not in f.details}  # not a lifted base fit
-    trust.warnings += check_masses(model, estimates, nominal_arm.link_masses(nominal_pi))
+    trust = _trust(choice, overlap, model, fits, sheets[f"datasheet_{robot.datasheet}"])
     return Comparison(
         model,
         fits,

@@ -340,31 +340,8 @@ def design(
         raise InputError(f"--criterion {criterion!r}: known criteria are {', '.join(CRITERIA)}")
     t0 = time.perf_counter()
     evaluate = evaluate or (lambda q, dq, ddq: criteria(setup, q, dq, ddq))
-    solver, lbg, ubg = build_nlp(setup, objective or information_objective(setup, criterion), max_iter, expand)
-    rng = np.random.default_rng([seed, 15])
-    centre = 0.5 * (np.array(setup.limits.position_min) + np.array(setup.limits.position_max))
-    centre = rest_pose(setup, centre)
-    grid = np.arange(round(setup.duration * 100.0)) / 100.0  # criteria on the whole duration at 100 Hz
-    best, records = None, []
-    # One BLAS thread: the callbacks' matrices are small (r × r, r ≈ 70), and on a shared machine a threaded BLAS
-    # mostly waits for cores (measured 30× slower per objective evaluation under load).
-    blas = threadpool_limits(limits=1)
-    x0s = [into_limits(setup, setup.fourier.random(rng, centre)) for _ in range(starts)]
-    bar = tqdm(total=starts, desc=f"excite ({criterion})", disable=not progress, leave=False)
-    runs = _run_starts((solver, lbg, ubg), x0s, workers, bar.update)
-    bar.close()
-    for k, (x0, (answer, run)) in enumerate(zip(x0s, runs)):
-        start_values = evaluate(*setup.fourier.evaluate(x0, grid))
-        x = repaired(setup, answer)
-        record = {"start": k, **run, "feasible": x is not None, "start_criteria": start_values}
-        if x is not None:
-            record["criteria"] = evaluate(*setup.fourier.evaluate(x, grid))
-            if _score(criterion, start_values) > _score(criterion, record["criteria"]) and feasible(setup, x0):
-                x, record["criteria"], record["kept_start"] = x0, start_values, True  # IPOPT ended worse
-            if best is None or _score(criterion, record["criteria"]) > _score(criterion, best[1]["criteria"]):
-                best = (x, record)
-        records.append(record)
-    blas.restore_original_limits()
+    nlp = build_nlp(setup, objective or information_objective(setup, criterion), max_iter, expand)
+    best, records = _search(setup, criterion, nlp, evaluate, starts, seed, progress, workers)
     if best is None:
         raise InputError(
             f"no start of the {criterion} design ended within the limits ({starts} starts); widen [limits] or "
@@ -390,6 +367,57 @@ def design(
         seconds=time.perf_counter() - t0,
         warnings=warnings,
     )
+
+
+def _search(
+    setup: Setup,
+    criterion: str,
+    nlp: tuple,
+    evaluate: Callable[[np.ndarray, np.ndarray, np.ndarray], dict],
+    starts: int,
+    seed: int,
+    progress: bool,
+    workers: int,
+) -> tuple[tuple[np.ndarray, dict] | None, list[dict]]:
+    """Seeded random starts near a rest pose, solved by `nlp` and judged on one BLAS thread: (best or None, records)."""
+    rng = np.random.default_rng([seed, 15])
+    centre = 0.5 * (np.array(setup.limits.position_min) + np.array(setup.limits.position_max))
+    centre = rest_pose(setup, centre)
+    grid = np.arange(round(setup.duration * 100.0)) / 100.0  # criteria on the whole duration at 100 Hz
+    # One BLAS thread: the callbacks' matrices are small (r × r, r ≈ 70), and on a shared machine a threaded BLAS
+    # mostly waits for cores (measured 30× slower per objective evaluation under load).
+    blas = threadpool_limits(limits=1)
+    x0s = [into_limits(setup, setup.fourier.random(rng, centre)) for _ in range(starts)]
+    bar = tqdm(total=starts, desc=f"excite ({criterion})", disable=not progress, leave=False)
+    runs = _run_starts(nlp, x0s, workers, bar.update)
+    bar.close()
+    best, records = _judge(setup, criterion, evaluate, grid, x0s, runs)
+    blas.restore_original_limits()
+    return best, records
+
+
+def _judge(
+    setup: Setup,
+    criterion: str,
+    evaluate: Callable[[np.ndarray, np.ndarray, np.ndarray], dict],
+    grid: np.ndarray,
+    x0s: list[np.ndarray],
+    runs: list,
+) -> tuple[tuple[np.ndarray, dict] | None, list[dict]]:
+    """Each answer repaired into the limits and scored on `grid` (its start if IPOPT ended worse): (best, records)."""
+    best, records = None, []
+    for k, (x0, (answer, run)) in enumerate(zip(x0s, runs)):
+        start_values = evaluate(*setup.fourier.evaluate(x0, grid))
+        x = repaired(setup, answer)
+        record = {"start": k, **run, "feasible": x is not None, "start_criteria": start_values}
+        if x is not None:
+            record["criteria"] = evaluate(*setup.fourier.evaluate(x, grid))
+            if _score(criterion, start_values) > _score(criterion, record["criteria"]) and feasible(setup, x0):
+                x, record["criteria"], record["kept_start"] = x0, start_values, True  # IPOPT ended worse
+            if best is None or _score(criterion, record["criteria"]) > _score(criterion, best[1]["criteria"]):
+                best = (x, record)
+        records.append(record)
+    return best, records
 
 
 def rest_pose(setup: Setup, centre: np.ndarray) -> np.ndarray:

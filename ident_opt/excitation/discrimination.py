@@ -26,6 +26,7 @@ inner minimisers held (envelope theorem); the limits stay exact CasADi expressio
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -243,22 +244,7 @@ def design(
         )
     rivals = fit_rivals(robot, trial, causes)
     t = np.arange(round(setup.duration / rivals.dt)) * rivals.dt  # the data's rate: the diagnosis's samples
-    # The NLP sees the first two periods (the start from rest, then the steady state), standing for all of them.
-    t_nlp = t[t < min(setup.duration, 2 * setup.fourier.period)]
-
-    def objective(x: np.ndarray, thetas: dict | None = None) -> tuple[float, dict]:
-        return _objective_value(rivals, setup, t_nlp, len(t), x, thetas)
-
-    callback = NumpyFunction(
-        "discrimination", setup.fourier.size, 1, lambda x: [objective(x)[0]], lambda x: _gradient(objective, x)
-    )
-
-    def evaluate(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> dict:
-        # Criteria on the data's rate over the duration (q etc. may come at another rate: resample by time).
-        tt = np.linspace(0.0, setup.duration, len(q), endpoint=False)
-        qi, dqi, ddqi = (np.column_stack([np.interp(t, tt, v[:, j]) for j in range(v.shape[1])]) for v in (q, dq, ddq))
-        return {**excitation.criteria(setup, q, dq, ddq), **expected_gaps(rivals, trajectory_dataset(t, qi, dqi, ddqi))}
-
+    callback = _objective_callback(rivals, setup, t)
     d = excitation.design(
         setup,
         "discriminate",
@@ -266,17 +252,48 @@ def design(
         seed=seed,
         rate=rate,
         objective=lambda x: callback(x),
-        evaluate=evaluate,
+        evaluate=_evaluator(rivals, setup, t),
         progress=progress,
         max_iter=max_iter,
         expand=False,
         workers=workers,
     )
+    d.discrimination = _discrimination(rivals, causes, setup, trial, d.criteria)
+    return d
+
+
+def _objective_callback(rivals: Rivals, setup: Setup, t: np.ndarray) -> NumpyFunction:
+    """The NLP's objective as a CasADi callback: NumPy gaps on the first two periods, gradient by differences."""
+    # The NLP sees the first two periods (the start from rest, then the steady state), standing for all of them.
+    t_nlp = t[t < min(setup.duration, 2 * setup.fourier.period)]
+
+    def objective(x: np.ndarray, thetas: dict | None = None) -> tuple[float, dict]:
+        return _objective_value(rivals, setup, t_nlp, len(t), x, thetas)
+
+    return NumpyFunction(
+        "discrimination", setup.fourier.size, 1, lambda x: [objective(x)[0]], lambda x: _gradient(objective, x)
+    )
+
+
+def _evaluator(rivals: Rivals, setup: Setup, t: np.ndarray) -> Callable[[np.ndarray, np.ndarray, np.ndarray], dict]:
+    """(q, dq, ddq) -> the information criteria and the expected gaps at the data's rate (times `t`), as diagnosed."""
+
+    def evaluate(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> dict:
+        # Criteria on the data's rate over the duration (q etc. may come at another rate: resample by time).
+        tt = np.linspace(0.0, setup.duration, len(q), endpoint=False)
+        qi, dqi, ddqi = (np.column_stack([np.interp(t, tt, v[:, j]) for j in range(v.shape[1])]) for v in (q, dq, ddq))
+        return {**excitation.criteria(setup, q, dq, ddq), **expected_gaps(rivals, trajectory_dataset(t, qi, dqi, ddqi))}
+
+    return evaluate
+
+
+def _discrimination(rivals: Rivals, causes: tuple[str, str], setup: Setup, trial: Dataset, criteria: dict) -> dict:
+    """The design's `discrimination` entry: the causes' candidates, the noise, and its gap against `trial`'s."""
     ref = reference_gaps(rivals, trial, setup.duration)
     source = shown(trial.source)
-    same, mine = ref["same_duration"]["discrimination"], d.criteria["discrimination"]
+    same, mine = ref["same_duration"]["discrimination"], criteria["discrimination"]
     ratio = mine / same if same > 0 else float("inf")
-    d.discrimination = {
+    return {
         "between": list(causes),
         "candidates": {
             r.cause: {
@@ -289,7 +306,7 @@ def design(
         },
         "noise_sigma": np.sqrt(1.0 / rivals.ctx.weights).tolist(),
         "noise_source": f"residual of the refitted nominal model on {source} (the diagnosis's joint weights)",
-        "design": {k: v for k, v in d.criteria.items() if k not in ("log_det", "cond", "rank")},
+        "design": {k: v for k, v in criteria.items() if k not in ("log_det", "cond", "rank")},
         "reference": ref,
         "ratio_same_duration": ratio,
         "summary": (
@@ -297,4 +314,3 @@ def design(
             f"({ratio:.2f}×; whole trial: {ref['whole_trial']['discrimination']:.3g})"
         ),
     }
-    return d

@@ -95,47 +95,73 @@ def run_fleet(
     (None: a local cluster of `workers` processes, or threads with `processes` False), which must answer within
     `connect_timeout` [s]. `estimator`: the fit every robot-day gets (None: each robot's recommended fit)."""
     start = time.perf_counter()
-    problem_path = str(Path(problem.path if isinstance(problem, Problem) else problem).resolve())
-    setup = tasks.setup(problem_path)
+    problem_path, setup = _load(problem, estimator)
     problem = setup.problem
-    problem.require("fleet")
-    if estimator is not None:  # an unknown fit is refused here, before any work
-        choose(problem, [], model=setup.model, estimator=estimator, command="fleet")
     found = layout.discover(logs)
     job = tasks.Job(problem_path, allow_implausible, drop_invalid, estimator)
     with Engine(scheduler, workers, processes, connect_timeout) as engine:
         engine.check(tasks.ready, problem_path)
-        phase1 = time.perf_counter()
-        submit = _phase1(job, found, baseline_days)
-        gathered = engine.run(found.robots, submit, _count1(found), progress, "fleet: statistics and fits")
-        engine_seconds = time.perf_counter() - phase1
+        gathered, engine_seconds = _run_phase1(engine, job, found, baseline_days, progress)
         baselines = {b.robot: b for b in gathered if isinstance(b, tasks.Baseline)}
         choices = {c.robot: c for c in gathered if isinstance(c, tasks.RobotChoice)}
         robots, skipped, warnings = _series(gathered, setup, found)
         warnings += _choice_warnings(choices)
         onsets = _test(robots, baseline_days, warnings)
-        units = [
-            (r, _change_files(found, robots[r], max(t for t, _ in onsets[r].values())), baselines[r], choices[r])
-            for r in onsets
-            if r in baselines
-        ]
-        total = sum(len(unit[1]) + 2 for unit in units)
-        evidence = engine.run(units, _phase2(job), total, progress, "fleet: naming the changes")
+        units = _change_units(found, robots, onsets, baselines, choices)
+        evidence = _run_phase2(engine, job, units, progress)
         n_workers, address = engine.workers, engine.address
-    named = {e.robot: e for e in evidence if e is not None}
-    unnamed = tasks.Evidence("", "change", 0.0, {}, {}, np.ones(setup.model.n_joints), {})  # no evidence: other
-    found_changes = [_change(robots[r], onsets[r], named.get(r, unnamed), setup, baseline_days) for r in sorted(onsets)]
-    samples = sum(sum(r.samples) for r in robots.values())
+    found_changes = _named_changes(robots, onsets, evidence, setup, baseline_days)
     seconds = time.perf_counter() - start
-    cpu = sum(
-        item.cpu
-        for item in [*gathered, *evidence]
-        if isinstance(item, tasks.DayFit | tasks.Evidence | tasks.RobotChoice)
-    )
     for name, r in robots.items():
         r.choice = choices.get(name)
     fit_name, why = _one_choice(choices)
-    fleet = {
+    fleet = _numbers(
+        robots, found, units, gathered + evidence, seconds, engine_seconds, n_workers, address, baseline_days, fit_name
+    )
+    return FleetResult(
+        problem=str(problem.path),
+        logs=str(logs),
+        arm=problem.robot.headline,
+        estimator=fit_name,
+        why=why,
+        baseline_days=baseline_days,
+        names=setup.model.names,
+        tested_names=tested_names(setup),
+        definitions=setup.base.definitions() if setup.base.rank < setup.model.n_params else {},
+        robots=robots,
+        changes=found_changes,
+        skipped=found.skipped + skipped,
+        fleet=fleet,
+        warnings=found.warnings + warnings,
+    )
+
+
+def _load(problem: Problem | str | Path, estimator: str | None) -> tuple[str, tasks.Setup]:
+    """The problem file's absolute path (the workers load it again) and its setup, checked before any work."""
+    problem_path = str(Path(problem.path if isinstance(problem, Problem) else problem).resolve())
+    setup = tasks.setup(problem_path)
+    setup.problem.require("fleet")
+    if estimator is not None:  # an unknown fit is refused here, before any work
+        choose(setup.problem, [], model=setup.model, estimator=estimator, command="fleet")
+    return problem_path, setup
+
+
+def _numbers(
+    robots: dict[str, RobotResult],
+    found: layout.Layout,
+    units: list,
+    results: list,
+    seconds: float,
+    engine_seconds: float,
+    n_workers: int,
+    address: str,
+    baseline_days: int,
+    estimator: str,
+) -> dict:
+    """The run's numbers (`FleetResult.fleet`): its size, its time and the cluster's throughput, and the fit."""
+    samples = sum(sum(r.samples) for r in robots.values())
+    cpu = sum(item.cpu for item in results if isinstance(item, tasks.DayFit | tasks.Evidence | tasks.RobotChoice))
+    return {
         "robots": len(robots),
         "robot_days": sum(len(r.days) for r in robots.values()),
         "files": len(found.files),
@@ -150,26 +176,8 @@ def run_fleet(
         "cpu_seconds": cpu,
         "cpu_seconds_per_file": cpu / max(len(found.files), 1),
         "baseline_days": baseline_days,
-        "estimator": fit_name,
+        "estimator": estimator,
     }
-    base = setup.base
-    definitions = base.definitions() if base.rank < setup.model.n_params else {}
-    return FleetResult(
-        problem=str(problem.path),
-        logs=str(logs),
-        arm=problem.robot.headline,
-        estimator=fit_name,
-        why=why,
-        baseline_days=baseline_days,
-        names=setup.model.names,
-        tested_names=tested_names(setup),
-        definitions=definitions,
-        robots=robots,
-        changes=found_changes,
-        skipped=found.skipped + skipped,
-        fleet=fleet,
-        warnings=found.warnings + warnings,
-    )
 
 
 # ---------------------------------------------------------------------------------------------- phase 1
@@ -199,6 +207,16 @@ def _phase1(job: tasks.Job, found: layout.Layout, baseline_days: int):
         return gathered, others + days
 
     return submit
+
+
+def _run_phase1(
+    engine: Engine, job: tasks.Job, found: layout.Layout, baseline_days: int, progress: bool
+) -> tuple[list, float]:
+    """Phase 1 on the cluster (`_phase1`): what it gathers, and its wall seconds (the engine's throughput)."""
+    phase1 = time.perf_counter()
+    submit = _phase1(job, found, baseline_days)
+    gathered = engine.run(found.robots, submit, _count1(found), progress, "fleet: statistics and fits")
+    return gathered, time.perf_counter() - phase1
 
 
 def _day_number(day: str) -> int:
@@ -333,6 +351,27 @@ def _change_files(found: layout.Layout, robot: RobotResult, tau: int) -> list:
     return [f for day in robot.days[tau:] for f in found.files_of(robot.robot, day)]
 
 
+def _change_units(
+    found: layout.Layout,
+    robots: dict[str, RobotResult],
+    onsets: dict[str, dict[str, tuple[int, float]]],
+    baselines: dict[str, tasks.Baseline],
+    choices: dict[str, tasks.RobotChoice],
+) -> list[tuple]:
+    """Phase 2's units, per changed robot with a baseline: (robot, files from its latest onset, baseline, choice)."""
+    return [
+        (r, _change_files(found, robots[r], max(t for t, _ in onsets[r].values())), baselines[r], choices[r])
+        for r in onsets
+        if r in baselines
+    ]
+
+
+def _run_phase2(engine: Engine, job: tasks.Job, units: list[tuple], progress: bool) -> list:
+    """Phase 2 on the cluster (`_phase2`): each unit's evidence (its files, a sum and the evidence per unit)."""
+    total = sum(len(unit[1]) + 2 for unit in units)
+    return engine.run(units, _phase2(job), total, progress, "fleet: naming the changes")
+
+
 def _phase2(job: tasks.Job):
     """A changed robot's phase-2 tasks: its change's files read again (as in phase 1: its choice's derivatives) and
     pooled, the evidence against its baseline model (gathered)."""
@@ -344,6 +383,19 @@ def _phase2(job: tasks.Job):
         return [client.submit(tasks.evidence, job, after, base)], [*stats, after]
 
     return submit
+
+
+def _named_changes(
+    robots: dict[str, RobotResult],
+    onsets: dict[str, dict[str, tuple[int, float]]],
+    evidence: list,
+    setup: tasks.Setup,
+    K: int,
+) -> list[changes.Change]:
+    """Each changed robot's change (`_change`), its cause named by its phase-2 evidence (none: neutral, "other")."""
+    named = {e.robot: e for e in evidence if e is not None}
+    unnamed = tasks.Evidence("", "change", 0.0, {}, {}, np.ones(setup.model.n_joints), {})  # no evidence: other
+    return [_change(robots[r], onsets[r], named.get(r, unnamed), setup, K) for r in sorted(onsets)]
 
 
 def _roles(setup: tasks.Setup) -> tuple[dict[int, list[int]], list[int], dict[int, int]]:

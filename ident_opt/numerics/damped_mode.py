@@ -140,6 +140,110 @@ def _shooting(u_ext, h: float, S: int, L: int, f, zeta, xs, x_scale: np.ndarray)
     return gap / ca.DM(np.repeat(x_scale, S - 1)), ca.reshape(E.T, S * L, 1), ca.reshape(Y.T, S * L, 1)
 
 
+def _decimate(
+    u: np.ndarray,
+    pattern: np.ndarray,
+    K: np.ndarray,
+    target: np.ndarray,
+    X_rigid: np.ndarray,
+    labels: np.ndarray,
+    dt: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """(u, P, K, target, X_rigid, labels, h [s]) on a grid of at most `MAX_ROWS` samples: the NLP's size stays bounded
+    on long or fast trials; the rest stretches are relabelled on the coarser grid."""
+    every = max(1, -(-len(u) // MAX_ROWS))
+    u, pattern, K, target, X_rigid, labels = (a[::every] for a in (u, pattern, K, target, X_rigid, labels))
+    if every > 1:  # stretch labels on the decimated grid: relabel consecutive runs
+        labels = signals.rest_runs(np.where(labels >= 0, 0.0, 1.0))
+    return u, pattern, K, target, X_rigid, labels, dt * every
+
+
+def _rigid_basis(X_rigid: np.ndarray, labels: np.ndarray, sw: np.ndarray, k: int) -> np.ndarray:
+    """Orthonormal basis Q of the weighted, rest-projected rigid columns of both joints stacked: what variable
+    projection removes from the residual, so the rigid coefficients need not be decision variables."""
+    n = len(X_rigid)
+    Xd = signals.demean_runs(X_rigid, labels) * sw[None, :, None]
+    return _basis(Xd.transpose(1, 0, 2).reshape(2 * n, k - 1))
+
+
+def _scale_norm(
+    u: np.ndarray, pattern: np.ndarray, K: np.ndarray, sw: np.ndarray, f0: float, z0: float, h: float
+) -> float:
+    """The weighted norm of the deflection's column at the start's mode: s over it is the O(1) decision variable."""
+    e_ref, edd_ref = signals.deflection(u, f0, z0, h)
+    return max(float(np.linalg.norm((pattern * edd_ref[:, None] + K * e_ref[:, None]) * sw[None, :])), 1e-300)
+
+
+def _objective(
+    e: ca.MX,
+    edd: ca.MX,
+    pattern: np.ndarray,
+    K: np.ndarray,
+    target: np.ndarray,
+    labels: np.ndarray,
+    sw: np.ndarray,
+    ss: ca.MX,
+    s_scale: float,
+    Q: np.ndarray,
+) -> ca.MX:
+    """Mean squared weighted, rest-projected residual ρ = √w (t − s·v(f, ζ)) of both joints stacked, the rigid
+    columns projected out by Q (variable projection): the training objective the grid search minimised."""
+    n = len(target)
+    # The rigid columns enter linearly, so their best coefficients for any (f, ζ, s) are a least-squares solve;
+    # minimising over them exactly leaves |(I − Q Qᵀ) ρ|² with Q an orthonormal basis of the weighted columns
+    # (variable projection, Golub–Pereyra: the same minimiser as the joint problem in (f, ζ, s, β), without
+    # the ill-conditioned quadratic in β that slows a quasi-Newton method down).
+    td = signals.demean_runs(target, labels) * sw[None, :]
+    column = [ca.DM(pattern[:, j]) * edd + ca.DM(K[:, j]) * e for j in range(2)]
+    v = ca.vertcat(*[sw[j] * demean_mx(column[j], labels[:, j]) for j in range(2)])
+    rho = ca.DM(td.T.reshape(-1)) - (ss / s_scale) * v
+    if Q.shape[1]:
+        rho = rho - ca.mtimes(ca.DM(Q), ca.mtimes(ca.DM(Q.T), rho))
+    return ca.sumsqr(rho) / n
+
+
+def _start_and_box(
+    f0: float,
+    z0: float,
+    s0: float,
+    states: np.ndarray,
+    x_scale: np.ndarray,
+    S: int,
+    L: int,
+    bounds: dict[str, tuple[float, float]],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(start, lower, upper) of the scaled decision variables (log f, log ζ, s, segment states): the search's answer
+    as the start, its box on f and ζ, the rest free."""
+    z0_ = np.concatenate([[math.log(f0), math.log(z0)], [s0], (states[L : (S - 1) * L + 1 : L] / x_scale).T.ravel()])
+    (flo, fhi), (zlo, zhi) = bounds["frequency_hz"], bounds["damping"]
+    lbz = np.concatenate([[math.log(flo), math.log(zlo)], np.full(1 + 2 * (S - 1), -np.inf)])
+    ubz = np.concatenate([[math.log(fhi), math.log(zhi)], np.full(1 + 2 * (S - 1), np.inf)])
+    return z0_, lbz, ubz
+
+
+def _solve(z: ca.MX, objective: ca.MX, gap: ca.MX, z0_: np.ndarray, lbz: np.ndarray, ubz: np.ndarray) -> tuple:
+    """(solution, stats) of IPOPT on min objective(z) in the box, continuity gaps = 0: the lifted NLP, solved."""
+    # Quasi-Newton (L-BFGS) Hessian: the exact one through 1 s of recursion per segment cost ~6x more per
+    # trial for the same answer (checked on a hidden-elasticity trial: the same f to 1e-7 relative).
+    options = {**IPOPT_QUIET, "ipopt.max_iter": 200, "ipopt.hessian_approximation": "limited-memory"}
+    solver = ca.nlpsol("elastic", "ipopt", {"x": z, "f": objective, "g": gap}, options)
+    sol = solver(x0=z0_, lbx=lbz, ubx=ubz, lbg=0.0, ubg=0.0)
+    return sol, solver.stats()
+
+
+def _info(sol: dict, st: dict, S: int, L: int, h: float, t0: float) -> dict:
+    """What the polish reports (method, IPOPT status, iterations, seconds since t0, largest continuity gap): the
+    caller's record of how the proposal was reached."""
+    return {
+        "method": f"IPOPT, multiple shooting ({S} segments of {L * h:.2f} s, trapezoidal = Tustin steps of "
+        f"{1e3 * h:.3g} ms)",
+        "status": st["return_status"],
+        "iterations": int(st["iter_count"]),
+        "seconds": time.perf_counter() - t0,
+        "max_gap": float(np.max(np.abs(np.array(sol["g"])))) if S > 1 else 0.0,
+    }
+
+
 def polish(
     u: np.ndarray,
     pattern: np.ndarray,
@@ -160,12 +264,8 @@ def polish(
     β (k,) (scale last) the search's answer; `bounds` the search box of f [Hz] and ζ; `stiffness` (N, 2) K
     [N m/rad], the deflection's own column (τ̂ gains s·K e; None: 0)."""
     t0 = time.perf_counter()
-    every = max(1, -(-len(u) // MAX_ROWS))
     K = np.zeros_like(pattern) if stiffness is None else stiffness
-    u, pattern, K, target, X_rigid, labels = (a[::every] for a in (u, pattern, K, target, X_rigid, labels))
-    if every > 1:  # stretch labels on the decimated grid: relabel consecutive runs
-        labels = signals.rest_runs(np.where(labels >= 0, 0.0, 1.0))
-    h = dt * every
+    u, pattern, K, target, X_rigid, labels, h = _decimate(u, pattern, K, target, X_rigid, labels, dt)
     n = len(u)
     L = max(2, round(SEGMENT_S / h))
     S = -(-n // L)
@@ -178,54 +278,22 @@ def polish(
     x_scale = np.maximum(np.std(states, axis=0), 1e-12)
 
     # Decision variables, scaled to O(1): log f, log ζ, the scale s on a unit-norm column, segment states
-    # over their std. The rigid coefficients (π, when refitted) are projected out exactly (below).
-    k = len(beta)
+    # over their std. The rigid coefficients (π, when refitted) are projected out exactly (`_objective`).
     sw = np.sqrt(np.asarray(weights, dtype=float))
-    Xd = signals.demean_runs(X_rigid, labels) * sw[None, :, None]
-    Q = _basis(Xd.transpose(1, 0, 2).reshape(2 * n, k - 1))
-    e_ref, edd_ref = signals.deflection(u, f0, z0, h)
-    s_scale = max(float(np.linalg.norm((pattern * edd_ref[:, None] + K * e_ref[:, None]) * sw[None, :])), 1e-300)
+    Q = _rigid_basis(X_rigid, labels, sw, len(beta))
+    s_scale = _scale_norm(u, pattern, K, sw, f0, z0, h)
     lf, lz = ca.MX.sym("lf"), ca.MX.sym("lz")
     ss = ca.MX.sym("s")
     xs = ca.MX.sym("x", 2, S - 1)
     gap, e, edd = _shooting(u_ext, h, S, L, ca.exp(lf), ca.exp(lz), xs, x_scale)
     e, edd = e[:n], edd[:n]  # time order
-
-    # Weighted, rest-projected residual of both joints stacked: ρ = √w (t − s·v(f, ζ)). The rigid columns
-    # enter linearly, so their best coefficients for any (f, ζ, s) are a least-squares solve; minimising
-    # over them exactly leaves |(I − Q Qᵀ) ρ|² with Q an orthonormal basis of the weighted columns
-    # (variable projection, Golub–Pereyra: the same minimiser as the joint problem in (f, ζ, s, β), without
-    # the ill-conditioned quadratic in β that slows a quasi-Newton method down).
-    td = signals.demean_runs(target, labels) * sw[None, :]
-    column = [ca.DM(pattern[:, j]) * edd + ca.DM(K[:, j]) * e for j in range(2)]
-    v = ca.vertcat(*[sw[j] * demean_mx(column[j], labels[:, j]) for j in range(2)])
-    rho = ca.DM(td.T.reshape(-1)) - (ss / s_scale) * v
-    if Q.shape[1]:
-        rho = rho - ca.mtimes(ca.DM(Q), ca.mtimes(ca.DM(Q.T), rho))
-    objective = ca.sumsqr(rho) / n
+    objective = _objective(e, edd, pattern, K, target, labels, sw, ss, s_scale, Q)
 
     z = ca.vertcat(lf, lz, ss, ca.vec(xs))
-    z0_ = np.concatenate(
-        [[math.log(f0), math.log(z0)], [beta[-1] * s_scale], (states[L : (S - 1) * L + 1 : L] / x_scale).T.ravel()]
-    )
-    (flo, fhi), (zlo, zhi) = bounds["frequency_hz"], bounds["damping"]
-    lbz = np.concatenate([[math.log(flo), math.log(zlo)], np.full(1 + 2 * (S - 1), -np.inf)])
-    ubz = np.concatenate([[math.log(fhi), math.log(zhi)], np.full(1 + 2 * (S - 1), np.inf)])
-    # Quasi-Newton (L-BFGS) Hessian: the exact one through 1 s of recursion per segment cost ~6x more per
-    # trial for the same answer (checked on a hidden-elasticity trial: the same f to 1e-7 relative).
-    options = {**IPOPT_QUIET, "ipopt.max_iter": 200, "ipopt.hessian_approximation": "limited-memory"}
-    solver = ca.nlpsol("elastic", "ipopt", {"x": z, "f": objective, "g": gap}, options)
-    sol = solver(x0=z0_, lbx=lbz, ubx=ubz, lbg=0.0, ubg=0.0)
-    st = solver.stats()
+    z0_, lbz, ubz = _start_and_box(f0, z0, beta[-1] * s_scale, states, x_scale, S, L, bounds)
+    sol, st = _solve(z, objective, gap, z0_, lbz, ubz)
     zs = np.array(sol["x"]).ravel()
-    info = {
-        "method": f"IPOPT, multiple shooting ({S} segments of {L * h:.2f} s, trapezoidal = Tustin steps of "
-        f"{1e3 * h:.3g} ms)",
-        "status": st["return_status"],
-        "iterations": int(st["iter_count"]),
-        "seconds": time.perf_counter() - t0,
-        "max_gap": float(np.max(np.abs(np.array(sol["g"])))) if S > 1 else 0.0,
-    }
+    info = _info(sol, st, S, L, h, t0)
     if not np.all(np.isfinite(zs[:2])):
         return None, info
     # Whatever IPOPT's status, the proposal is judged on the training objective by the caller.

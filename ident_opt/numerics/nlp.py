@@ -57,6 +57,39 @@ def _solve_nlp(
     return np.array(sol["x"]).ravel(), float(sol["f"]), solver.stats()
 
 
+def _input_columns(inputs: list[ca.SX], data: Sequence[np.ndarray], N: int) -> list[np.ndarray]:
+    """The data of each input as a (d_i, N) array, one column per sample (what `Function.map` takes), its shape
+    checked against the input's symbol."""
+    if len(data) != len(inputs):
+        raise ValueError(f"{len(inputs)} inputs but {len(data)} data arrays")
+    cols = []
+    for sym, arr in zip(inputs, data):
+        arr = np.asarray(arr, dtype=float).reshape(N, -1)
+        if arr.shape[1] != sym.numel():
+            raise ValueError(f"data for input {sym} has {arr.shape[1]} columns, the symbol {sym.numel()}")
+        cols.append(arr.T)
+    return cols
+
+
+def _mean_squared_error(
+    expr: ca.SX,
+    params: ca.SX,
+    inputs: list[ca.SX],
+    cols: list[np.ndarray],
+    target: np.ndarray,
+    weights: Sequence[float] | None,
+) -> tuple[ca.SX, ca.SX]:
+    """(θ, objective(θ)): the weighted mean over the N samples of Σ_i w_i (expr_i − target_i)², the expression
+    mapped over the samples so that the NLP's derivatives are exact and one evaluation is O(N)."""
+    K, m, N = params.numel(), expr.numel(), target.shape[0]
+    f = ca.Function("model", [*inputs, params], [expr])
+    theta = ca.SX.sym("theta", K)
+    predicted = f.map(N)(*[ca.DM(c) for c in cols], ca.repmat(theta, 1, N))  # m × N
+    w = np.ones(m) if weights is None else np.asarray(weights, dtype=float)
+    err = predicted - ca.DM(target.T)
+    return theta, ca.sum2(ca.sum1(ca.diag(ca.DM(w)) @ (err * err))) / N
+
+
 def fit_expression(
     expr: ca.SX,
     params: ca.SX,
@@ -101,20 +134,8 @@ def fit_expression(
     N = target.shape[0]
     if target.shape[1] != m:
         raise ValueError(f"target has {target.shape[1]} outputs, the expression {m}")
-    if len(data) != len(inputs):
-        raise ValueError(f"{len(inputs)} inputs but {len(data)} data arrays")
-    cols = []
-    for sym, arr in zip(inputs, data):
-        arr = np.asarray(arr, dtype=float).reshape(N, -1)
-        if arr.shape[1] != sym.numel():
-            raise ValueError(f"data for input {sym} has {arr.shape[1]} columns, the symbol {sym.numel()}")
-        cols.append(arr.T)
-    f = ca.Function("model", [*inputs, params], [expr])
-    theta = ca.SX.sym("theta", K)
-    predicted = f.map(N)(*[ca.DM(c) for c in cols], ca.repmat(theta, 1, N))  # m × N
-    w = np.ones(m) if weights is None else np.asarray(weights, dtype=float)
-    err = predicted - ca.DM(target.T)
-    objective = ca.sum2(ca.sum1(ca.diag(ca.DM(w)) @ (err * err))) / N
+    cols = _input_columns(inputs, data, N)
+    theta, objective = _mean_squared_error(expr, params, inputs, cols, target, weights)
     lb = np.full(K, -np.inf) if lb is None else np.asarray(lb, dtype=float)
     ub = np.full(K, np.inf) if ub is None else np.asarray(ub, dtype=float)
     t0 = time.perf_counter()

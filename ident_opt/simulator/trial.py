@@ -117,6 +117,40 @@ def _atomic(path: Path, write) -> None:
         write(tmp)
 
 
+def _checked_arguments(
+    robot: Robot,
+    output: str,
+    duration: float,
+    seed: int,
+    rate_hz: float,
+    bandwidth_hz: float,
+    noise_scale: float | Sequence[float],
+) -> np.ndarray:
+    """The noise scale as an array (one value, or one per joint), after an InputError for any argument of
+    `simulate_trial` out of range: a bad request is refused before any simulation work."""
+    n = robot.n_joints
+    if output not in ("torque", "current"):
+        raise InputError(f'output {output!r}: must be "torque" or "current"')
+    if not (np.isfinite(duration) and MIN_DURATION <= duration <= MAX_DURATION):
+        raise InputError(f"duration {duration!r}: must be between {MIN_DURATION:g} and {MAX_DURATION:g} s")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise InputError(f"seed {seed!r}: must be an integer >= 0")
+    measurement.decimation(rate_hz)
+    if not (np.isfinite(bandwidth_hz) and MIN_BANDWIDTH <= bandwidth_hz <= MAX_BANDWIDTH):
+        raise InputError(
+            f"bandwidth {bandwidth_hz!r}: the controller's bandwidth must be between {MIN_BANDWIDTH:g} and "
+            f"{MAX_BANDWIDTH:g} Hz"
+        )
+    scale = np.asarray(noise_scale, dtype=float)
+    if scale.shape not in ((), (n,)) or not np.all(np.isfinite(scale) & (scale >= 0) & (scale <= MAX_NOISE_SCALE)):
+        raise InputError(
+            f"noise scale {noise_scale!r}: must be between 0 and {MAX_NOISE_SCALE:g}, one for every joint or one each"
+        )
+    if output == "current":
+        measurement.current_factors(robot)  # refuses before any work when the problem lacks what currents need
+    return scale
+
+
 def simulate_trial(
     robot: Robot,
     *,
@@ -150,25 +184,7 @@ def simulate_trial(
     diagnosis was not tuned on (`simulator.unseen`).
     """
     n = robot.n_joints
-    if output not in ("torque", "current"):
-        raise InputError(f'output {output!r}: must be "torque" or "current"')
-    if not (np.isfinite(duration) and MIN_DURATION <= duration <= MAX_DURATION):
-        raise InputError(f"duration {duration!r}: must be between {MIN_DURATION:g} and {MAX_DURATION:g} s")
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise InputError(f"seed {seed!r}: must be an integer >= 0")
-    measurement.decimation(rate_hz)
-    if not (np.isfinite(bandwidth_hz) and MIN_BANDWIDTH <= bandwidth_hz <= MAX_BANDWIDTH):
-        raise InputError(
-            f"bandwidth {bandwidth_hz!r}: the controller's bandwidth must be between {MIN_BANDWIDTH:g} and "
-            f"{MAX_BANDWIDTH:g} Hz"
-        )
-    scale = np.asarray(noise_scale, dtype=float)
-    if scale.shape not in ((), (n,)) or not np.all(np.isfinite(scale) & (scale >= 0) & (scale <= MAX_NOISE_SCALE)):
-        raise InputError(
-            f"noise scale {noise_scale!r}: must be between 0 and {MAX_NOISE_SCALE:g}, one for every joint or one each"
-        )
-    if output == "current":
-        measurement.current_factors(robot)  # refuses before any work when the problem lacks what currents need
+    scale = _checked_arguments(robot, output, duration, seed, rate_hz, bandwidth_hz, noise_scale)
     settings = {
         "trajectory": trajectory,
         "duration": float(duration),

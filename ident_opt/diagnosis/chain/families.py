@@ -32,7 +32,6 @@ from dataclasses import replace
 
 import numpy as np
 
-from ident_opt.arm.base import Robot
 from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis.chain.context import ArmContext, advanced
 from ident_opt.diagnosis.planar.compose import joint_estimate
@@ -314,43 +313,6 @@ def frozen(family: ChainFamily, theta: dict) -> ChainFamily:
     )
 
 
-def theta_of(family: ChainFamily, cand: Candidate, ctx: ArmContext) -> dict:
+def theta(family: ChainFamily, cand: Candidate, ctx: ArmContext) -> dict:
     """The θ a later round holds the cause at: the candidate's (`detail["theta"]`)."""
     return dict(cand.detail.get("theta", {}))
-
-
-class Engine:
-    """The n-joint engine as `diagnosis.chain.engine.ChainEngine` calls it: the families (built once, with the
-    evidence), `fit`, `compose`, `frozen` and `theta`."""
-
-    #: Every cause's θ searched again in every round (`rounds._fit_round`), not only the first round's promising
-    #: ones: a θ searched against a model without a cause that shifts time or angles holds the wrong answer — an
-    #: encoder offset beside a 23 ms delay on the TX40 was fitted to the delay's residual in round 1 and, held
-    #: there, removed 0.0 % of the held-out MSE in round 2; searched again it is named. The n-joint searches
-    #: are variable projections over a few axes per joint, cheap beside the rounds' linear solves.
-    SEARCH_AGAIN = True
-    #: The least share of a joint's torque variance a named cause removes (`scoring.shortfall`), a tenth of the
-    #: planar floor: an arm's proximal joints carry its whole gravity load, so their variance dwarfs a friction
-    #: effect's — a Panda shoulder's 0.44 N m Stribeck excess, resolved at ten standard errors and removing 7 % of
-    #: the held-out MSE beside an asymmetric Coulomb level, removes 4.4e-5 of its torque variance. On 27 clean
-    #: trials (three arms, seeds 0–2, the tud01, fourier and mixed references) nothing is named at this floor; on
-    #: the unseen seed 700 it lets a third, spurious cause into three pairs (docs/effects.md: a limit, open).
-    MARGIN_VARIANCE = 1e-5
-    #: The least share of a refitted π's log-gain a datasheet-side cause explains to be taken on trial
-    #: (`scoring.PARTNER`, 20 % on the planar arm): none here, the pair's own test (80 % of the gap together) is the
-    #: guard. A refitted π on an arm carries a torque offset per joint, which takes an asymmetric Coulomb level
-    #: whole, and beside a large armature on the same joint neither cause alone explains a fifth of what the refit
-    #: gains (the Panda's shoulder, seeds 800, 900, 1000: 16 %, 10 %, 17 %), while together they close the gap.
-    PARTNER = 0.0
-
-    def __init__(self, ctx: ArmContext):
-        self.ctx = ctx
-        self._families = families(ctx)
-
-    def families(self, robot: Robot) -> list[ChainFamily]:
-        return self._families
-
-    fit = staticmethod(fit)
-    compose = staticmethod(compose)
-    frozen = staticmethod(frozen)
-    theta = staticmethod(theta_of)

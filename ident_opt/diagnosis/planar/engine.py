@@ -13,8 +13,8 @@ import numpy as np
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import evidence, scoring
-from ident_opt.diagnosis.engine import Nominal, Parts
-from ident_opt.diagnosis.planar import compose
+from ident_opt.diagnosis.engine import FamilyFunctions, Nominal, OverFunctions, Parts, Request
+from ident_opt.diagnosis.planar import compose as composition
 from ident_opt.diagnosis.planar import families as candidates
 from ident_opt.diagnosis.result import Fitted
 from ident_opt.diagnosis.split import parts
@@ -45,30 +45,26 @@ def nominal_fit(ctx: candidates.Context) -> np.ndarray:
     return ctx.rigid(model, model.regressor(tr.q, tr.dq, tr.ddq), tr.tau, Z)
 
 
-class PlanarEngine:
+class PlanarEngine(OverFunctions):
     """The planar two-link arm's engine (module doc); built on the trials to diagnose."""
+
+    functions = FamilyFunctions(candidates.fit, composition.compose, composition.frozen, composition.theta)
 
     margin_variance = candidates.MARGIN_VARIANCE
     partner = scoring.PARTNER
     search_again = candidates.SEARCH_AGAIN
     pose = staticmethod(evidence.pose_r2)
 
-    def __init__(
-        self,
-        robot: PlanarRobot,
-        trial: Dataset,
-        unseen: Dataset | None,
-        train_fraction: float,
-        torque_filter_hz: float | str | None,
-        estimator: str,
-    ) -> None:
+    def __init__(self, robot: PlanarRobot, request: Request) -> None:
+        trial, unseen, estimator = request.trial, request.unseen, request.estimator
+        torque_filter_hz = request.torque_filter_hz
         if estimator not in REFITS:  # e.g. nlp_physical: π from the rigid arm's physical parameters alone
             raise InputError(
                 f"diagnose: the rigid fit {estimator!r} cannot carry a cause's parameters beside the grouped π, as "
                 f"the planar diagnosis refits them together; use one of {', '.join(REFITS)}"
             )
         self.robot = robot
-        train, test, raw_test, how = parts(trial, unseen, train_fraction, torque_filter_hz, robot.joint_names)
+        train, test, raw_test, how = parts(trial, unseen, request.train_fraction, torque_filter_hz, robot.joint_names)
         self.parts = Parts(train, test, raw_test, how, trial if unseen is not None else None)
         self.dt = float(np.median(np.diff(train.t)))
         self.datasheet_pi = datasheet_pi(robot, "physical")
@@ -90,18 +86,6 @@ class PlanarEngine:
 
     def families(self) -> list:
         return candidates.families(self.ctx)
-
-    def fit(self, family, baseline: str):
-        return candidates.fit(family, baseline, self.ctx)
-
-    def compose(self, earlier: list[tuple], new):
-        return compose.compose(earlier, new)
-
-    def frozen(self, family, theta: dict):
-        return compose.frozen(family, theta)
-
-    def theta(self, family, cand) -> dict:
-        return compose.theta(family, cand, self.ctx)
 
     def forward_after(self, final: Fitted | None, baseline: str) -> list:
         """Question 4's motion error of the extended model: its rigid part (π refitted or the datasheet's)
