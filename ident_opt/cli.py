@@ -1,8 +1,8 @@
 """The `ident-opt` command line: one subcommand per job, each in `ident_opt/commands/<name>.py`.
 
 Exit status: 0 success, 2 bad input or usage (a one-paragraph message, no traceback), 1 anything else.
-Each command module is thin: arguments, then `run()` = load, call a study (`ident_opt.studies`), call its
-report writer (`ident_opt.report`), return the exit status. Only the command being run is imported (its flags
+Each command module is thin: arguments, then `run()` = load, call the stage function the API exports (`ident_opt`),
+call its report writer (`ident_opt.report`), return the exit status. Only the command being run is imported (its flags
 are added to the parser then): `ident-opt --help` lists the commands without importing any of them.
 """
 

@@ -155,30 +155,20 @@ def update_state(ident) -> c_update.UpdateState:
     """The state of a bounded online identifier (NumPy path), for `c_update.generate_pi_update`: its normal
     equations, or its square-root factor (a ``factor`` estimator)."""
     bounds = ident.estimator.bounds
+    common = {"theta": ident.theta.copy(), "n": ident.stats.n, "lower": bounds.lower, "upper": bounds.upper}
     factor = ident._factor
-    if factor is not None:
+    if factor is not None:  # R, z and diag H as the factor keeps them; no H
         return c_update.UpdateState(
-            None,
-            factor.h.copy(),
-            ident.theta.copy(),
-            factor.last.state.copy(),
-            ident.stats.n,
-            bounds.lower,
-            bounds.upper,
-            factor.R.copy(),
-            factor.z.copy(),
-            factor.hdiag.copy(),
+            H=None,
+            h=factor.h.copy(),
+            state=factor.last.state.copy(),
+            R=factor.R.copy(),
+            z=factor.z.copy(),
+            hdiag=factor.hdiag.copy(),
+            **common,
         )
     solver = ident._solve.__self__  # WarmBoundedLS: its last active set
-    return c_update.UpdateState(
-        ident._H.copy(),
-        ident._h.copy(),
-        ident.theta.copy(),
-        solver.last.state.copy(),
-        ident.stats.n,
-        bounds.lower,
-        bounds.upper,
-    )
+    return c_update.UpdateState(H=ident._H.copy(), h=ident._h.copy(), state=solver.last.state.copy(), **common)
 
 
 def attach(identifier, design, compiler: list[str] | None = None) -> bool:

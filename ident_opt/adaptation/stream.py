@@ -67,13 +67,13 @@ def prediction_record(n: int, sample: dict[str, float], p: Prediction) -> dict:
 class Counts:
     """What the stream did, for the final line."""
 
-    lines: int = 0
-    samples: int = 0
-    updates: int = 0
-    predictions: int = 0
-    outliers: int = 0
-    extrapolating: int = 0
-    skipped: dict[str, int] = field(default_factory=dict)
+    lines: int = 0  # input lines read
+    samples: int = 0  # complete samples (angles and derivatives) predicted
+    updates: int = 0  # samples with a torque folded into θ
+    predictions: int = 0  # samples without a torque: predicted only
+    outliers: int = 0  # samples whose torque failed the residual test: predicted, not learnt from
+    extrapolating: int = 0  # samples outside the GMR residual's training region
+    skipped: dict[str, int] = field(default_factory=dict)  # lines not used, by kind (`BadLine.kind`)
 
     def skip(self, kind: str) -> None:
         self.skipped[kind] = self.skipped.get(kind, 0) + 1

@@ -1,9 +1,12 @@
 """Diagnosis: what the nominal model gets wrong, which catalogue cause explains it, the extended model and its
-held-out gain (`docs/effects.md`). Modules: `evidence` (residual features), `candidates` (fitting each cause's
-model families, declared by the cause's own module in `ident_opt.effects`), `scoring` (held-out score and the
-naming rule), `loop` (the four questions in order), `hidden` (hidden-effect trials for tests and benchmarks);
-`linear`, `signals` and `elastic_nlp` (the IPOPT polish of a lightly damped mode) are shared tools. The report is
-`ident_opt.report.diagnosis`."""
+held-out gain (`docs/effects.md`).
+
+One loop (`rounds.diagnose_trial`: the four questions, the rounds, the naming rules) talks to a declared engine
+(`engine.Engine`) of the robot's kind: `planar.PlanarEngine` (grouped π, flexible links) or `chain.ChainEngine`
+(an arm of n joints from a URDF), each with its candidate families (the causes' own, declared in
+`ident_opt.effects`). `split` prepares the training and held-out parts, `evidence` reads the residual's features,
+`scoring` holds the held-out score and the naming rule, `result` the `Diagnosis` and its JSON, `hidden` the
+hidden-effect trials of the tests and benchmarks. The report is `ident_opt.report.diagnosis`."""
 
 from __future__ import annotations
 

@@ -9,7 +9,12 @@ from __future__ import annotations
 
 from ident_opt import wording
 from ident_opt.effects.base import Effect, arm_values, np
-from ident_opt.effects.families import ChainFamily, per_joint, per_joint_columns, resolved_joints, selected
+from ident_opt.effects.families import (
+    ChainFamily,
+    one_coefficient_per_joint,
+    per_joint_columns,
+    selected,
+)
 from ident_opt.effects.keys import Key
 from ident_opt.parameters import Parameter
 
@@ -58,12 +63,7 @@ class Armature(Effect):
                 self.name,
                 extra=_arm_columns,
                 baselines=("datasheet",),
-                nonnegative=("j",),
-                estimate=lambda p, se, ctx: (
-                    {"inertia": per_joint(p, "j", ctx.n)},
-                    {"se": per_joint(se, "j", ctx.n)},
-                ),
-                screen=lambda p, se, ctx: resolved_joints(p, se, ("j",), ctx.n),
+                **one_coefficient_per_joint("inertia", "j"),
             )
         ]
 

@@ -8,7 +8,7 @@ In the simulator (values in SI units):
   driven by τ_s at joint j. k = J_l (2π f)², d = 2 ζ √(k J_l), with J_l the link-side inertia at joint j
   (joint 1: at q2 = 0 with joint 2 held). The logged angle of joint j is the motor's θ.
 - ``kind=link``: link j is cut at mid-length into two rigid halves joined by a torsional spring (see
-  `simulate/flexible_link.py`); the joints stay rigid and their angles are logged.
+  `simulator/flexible_link.py`); the joints stay rigid and their angles are logged.
 
 Either way the plant gains two states and logs the spring's deflection as ``deflection<j>``.
 

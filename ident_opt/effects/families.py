@@ -136,6 +136,17 @@ def resolved_joints(p: dict, se: dict, prefixes: tuple[str, ...], n: int, untouc
     return out
 
 
+def one_coefficient_per_joint(key: str, prefix: str) -> dict:
+    """A chain family's `nonnegative`, `estimate` and `screen` for one coefficient ≥ 0 per joint, `<prefix><j + 1>`:
+    the estimate reports it under `key` (n entries, 0 where not fitted) with its standard errors, and the screen keeps
+    the joints where it is resolved (`resolved_joints`)."""
+    return {
+        "nonnegative": (prefix,),
+        "estimate": lambda p, se, ctx: ({key: per_joint(p, prefix, ctx.n)}, {"se": per_joint(se, prefix, ctx.n)}),
+        "screen": lambda p, se, ctx: resolved_joints(p, se, (prefix,), ctx.n),
+    }
+
+
 def step(ds) -> float:
     """The sample step [s] of a data view (the search reads every few samples of the training part)."""
     return float(np.median(np.diff(ds.t)))

@@ -12,7 +12,12 @@ from __future__ import annotations
 
 from ident_opt import wording
 from ident_opt.effects.base import Effect, arm_values, np, per_joint_draw
-from ident_opt.effects.families import ChainFamily, per_joint, per_joint_columns, resolved_joints, selected
+from ident_opt.effects.families import (
+    ChainFamily,
+    one_coefficient_per_joint,
+    per_joint_columns,
+    selected,
+)
 from ident_opt.effects.keys import Key
 from ident_opt.effects.payload import EFFECT as PAYLOAD
 
@@ -45,12 +50,7 @@ class LoadFriction(Effect):
                 extra=lambda ds, theta, ctx, baseline: per_joint_columns(
                     np.abs(ctx.link_torque(ds)) * np.sign(ds.dq), selected(theta, self.name, ctx.n), "mu"
                 ),
-                nonnegative=("mu",),
-                estimate=lambda p, se, ctx: (
-                    {"coefficient": per_joint(p, "mu", ctx.n)},
-                    {"se": per_joint(se, "mu", ctx.n)},
-                ),
-                screen=lambda p, se, ctx: resolved_joints(p, se, ("mu",), ctx.n),
+                **one_coefficient_per_joint("coefficient", "mu"),
             )
         ]
 

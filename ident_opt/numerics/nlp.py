@@ -72,19 +72,14 @@ def _input_columns(inputs: list[ca.SX], data: Sequence[np.ndarray], N: int) -> l
 
 
 def _mean_squared_error(
-    expr: ca.SX,
-    params: ca.SX,
-    inputs: list[ca.SX],
-    cols: list[np.ndarray],
-    target: np.ndarray,
-    weights: Sequence[float] | None,
+    model: ca.Function, cols: list[np.ndarray], target: np.ndarray, weights: Sequence[float] | None
 ) -> tuple[ca.SX, ca.SX]:
-    """(θ, objective(θ)): the weighted mean over the N samples of Σ_i w_i (expr_i − target_i)², the expression
-    mapped over the samples so that the NLP's derivatives are exact and one evaluation is O(N)."""
-    K, m, N = params.numel(), expr.numel(), target.shape[0]
-    f = ca.Function("model", [*inputs, params], [expr])
+    """(θ, objective(θ)): the weighted mean over the N samples of Σ_i w_i (model_i − target_i)², `model` (the
+    expression of the inputs and θ) mapped over the samples so that the NLP's derivatives are exact and one
+    evaluation is O(N)."""
+    K, m, N = model.numel_in(model.n_in() - 1), model.numel_out(0), target.shape[0]
     theta = ca.SX.sym("theta", K)
-    predicted = f.map(N)(*[ca.DM(c) for c in cols], ca.repmat(theta, 1, N))  # m × N
+    predicted = model.map(N)(*[ca.DM(c) for c in cols], ca.repmat(theta, 1, N))  # m × N
     w = np.ones(m) if weights is None else np.asarray(weights, dtype=float)
     err = predicted - ca.DM(target.T)
     return theta, ca.sum2(ca.sum1(ca.diag(ca.DM(w)) @ (err * err))) / N
@@ -135,7 +130,8 @@ def fit_expression(
     if target.shape[1] != m:
         raise ValueError(f"target has {target.shape[1]} outputs, the expression {m}")
     cols = _input_columns(inputs, data, N)
-    theta, objective = _mean_squared_error(expr, params, inputs, cols, target, weights)
+    model = ca.Function("model", [*inputs, params], [expr])
+    theta, objective = _mean_squared_error(model, cols, target, weights)
     lb = np.full(K, -np.inf) if lb is None else np.asarray(lb, dtype=float)
     ub = np.full(K, np.inf) if ub is None else np.asarray(ub, dtype=float)
     t0 = time.perf_counter()

@@ -73,11 +73,13 @@ class ChainPlant:
         return ref
 
     def run(self, ref: Reference, control: float, settings: dict, progress: bool) -> np.ndarray:
-        """The loop (`chain_loop.run`); the elastic joint's link inertia over the motion run (the other joints move)
-        is kept for the truth file."""
+        """The loop of `chain_loop` along `ref` (sampled at the control rate `control` [Hz]): out (N, 4n + 1), τ,
+        q_enc, dq_enc, ddq_enc, deflection at each tick; the gains, the RK4 sub-steps per tick (and the share of
+        ticks that took the fine ones) and the elastic joint's link inertia over the motion run (the other joints
+        move) are kept for the truth file."""
         plant, self.control = self.plant, control
-        out, self.gains, self.steps = chain_loop.run(
-            plant, ref, self.box, progress=progress, control=control, bandwidth_hz=settings["bandwidth_hz"]
+        out, self.gains, self.steps = chain_loop.follow(
+            plant, ref, self.box, control, settings["bandwidth_hz"], progress
         )
         if plant.elastic is not None:
             n, j = self.robot.n_joints, plant.elastic.index

@@ -168,17 +168,12 @@ def chunked(step: ca.Function, plant: ArmPlant, ticks: int) -> ca.Function:
     return load_external(lib, accumulated.name()) if lib is not None else accumulated
 
 
-def run(
-    plant: ArmPlant,
-    ref: Reference,
-    box: Box,
-    progress: bool = True,
-    control: float = 1000.0,
-    bandwidth_hz: float = BANDWIDTH_HZ,
+def follow(
+    plant: ArmPlant, ref: Reference, box: Box, control: float, bandwidth_hz: float, progress: bool
 ) -> tuple[np.ndarray, Gains, Steps]:
-    """Simulate the loop over the reference (sampled at the control rate `control` [Hz]); returns (out (N, 4n + 1):
-    τ, q_enc, dq_enc, ddq_enc, deflection at each tick; the gains; the RK4 sub-steps per tick and the share of
-    ticks that took the fine ones)."""
+    """The loop along `ref` (sampled at the control rate `control` [Hz]): (out (N, 4n + 1): τ, q_enc, dq_enc, ddq_enc,
+    deflection at each tick; the gains; the RK4 sub-steps per tick and the share of ticks that took the fine ones);
+    an InputError when it diverges."""
     g = gains(plant, box, bandwidth_hz)
     step, steps = tick(plant, bandwidth_hz, box, control)
     p = ca.DM(plant.parameters())

@@ -31,10 +31,9 @@ import numpy as np
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi
 from ident_opt.errors import InputError
 from ident_opt.simulator import background
-from ident_opt.simulator.integrate import march, rk4_step
+from ident_opt.simulator.integrate import rk4_step
 from ident_opt.simulator.planar_dynamics import TRUTH_MODEL
-from ident_opt.simulator.trajectories import Reference
-from ident_opt.simulator.truth import Truth, initial_state, plant, state_size
+from ident_opt.simulator.truth import Truth, plant, state_size
 
 CONTROL_HZ = 1000.0  # the controller's rate [Hz] for logging rates up to it
 MAX_CONTROL_HZ = 5000.0  # fastest loop [Hz]: memory grows with the tick count (9 floats per tick)
@@ -119,26 +118,3 @@ def tick(truth: Truth, robot: PlanarRobot, g: Gains, control: float = CONTROL_HZ
     for _ in range(n):
         xk = rk4_step(lambda z: f(z, tau, d)[0], xk, h)
     return ca.Function("tick", [x, ref], [xk, ca.vertcat(tau, y)], ["x", "ref"], ["x_next", "out"])
-
-
-def run(
-    truth: Truth,
-    robot: PlanarRobot,
-    ref: Reference,
-    progress: bool = True,
-    seed: int = 0,
-    control: float = CONTROL_HZ,
-    bandwidth_hz: float = BANDWIDTH_HZ,
-) -> np.ndarray:
-    """Simulate the loop over the reference (sampled at the control rate `control` [Hz]); returns out (N, 9):
-    τ, q_enc, dq_enc, ddq_enc, deflection at each tick. `seed` drives the background terms' randomness
-    (external torques, initial states), on streams of their own; `bandwidth_hz` sets the PD gains (`gains`)."""
-    g = gains(robot, bandwidth_hz)
-    step = tick(truth, robot, g, control)
-    bg = truth.background
-    z0 = background.initial_states(bg, np.random.default_rng([seed, 17]))
-    x = ca.DM(np.concatenate([initial_state(truth, ref.q[0]), z0]))
-    d = background.disturbance(bg, len(ref.t), 1.0 / control, np.random.default_rng([seed, 13]))
-    refs = np.hstack([ref.q, ref.dq, ref.ddq, d]).T
-    chunk = max(1, min(CHUNK, refs.shape[1]))  # a short trial in one call of its own length
-    return march(step.mapaccum(chunk), x, refs, (), chunk, progress).T

@@ -60,7 +60,7 @@ def log(
     encoder_step: np.ndarray | None = None,
 ) -> pd.DataFrame:
     """The logged trial as a data-format frame, from the per-tick loop output (N, 4n + 1): τ, q_enc, dq_enc, ddq_enc
-    (n each) and a deflection (see closed_loop.run).
+    (n each) and a deflection (see `plant.Plant.run`).
 
     `channel`: (t [s], τ (N, n) [N m]) -> the torque as logged, at the ticks; `deflection_column`: where the
     spring deflection goes (None: the plant has none); `noise_std` (n,) [N m] and `encoder_step` (n,) [rad]: the

@@ -6,15 +6,17 @@ from __future__ import annotations
 
 from dataclasses import asdict, replace
 
+import casadi as ca
 import numpy as np
 
 from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.effects import CATALOGUE, is_active, normalise
-from ident_opt.simulator import closed_loop, measurement
+from ident_opt.simulator import background, closed_loop, measurement
+from ident_opt.simulator.integrate import march
 from ident_opt.simulator.planar_dynamics import TRUTH_MODEL
 from ident_opt.simulator.plant import plain
 from ident_opt.simulator.trajectories import Reference, reference
-from ident_opt.simulator.truth import Truth, build_truth, coulomb_levels
+from ident_opt.simulator.truth import Truth, build_truth, coulomb_levels, initial_state
 
 
 class PlanarPlant:
@@ -44,15 +46,17 @@ class PlanarPlant:
         return reference(settings["trajectory"], settings["duration"], settings["seed"], 1.0 / control)
 
     def run(self, ref: Reference, control: float, settings: dict, progress: bool) -> np.ndarray:
-        return closed_loop.run(
-            self.truth,
-            self.robot,
-            ref,
-            progress=progress,
-            seed=int(settings["seed"]),
-            control=control,
-            bandwidth_hz=settings["bandwidth_hz"],
-        )
+        """The loop of `closed_loop` along `ref` (sampled at the control rate `control` [Hz]): out (N, 9), τ, q_enc,
+        dq_enc, ddq_enc, deflection at each tick. The run's seed drives the background terms' randomness (external
+        torques, initial states) on streams of their own; its `bandwidth_hz` sets the PD gains."""
+        truth, seed = self.truth, int(settings["seed"])
+        step = closed_loop.tick(truth, self.robot, closed_loop.gains(self.robot, settings["bandwidth_hz"]), control)
+        z0 = background.initial_states(truth.background, np.random.default_rng([seed, 17]))
+        x = ca.DM(np.concatenate([initial_state(truth, ref.q[0]), z0]))
+        d = background.disturbance(truth.background, len(ref.t), 1.0 / control, np.random.default_rng([seed, 13]))
+        refs = np.hstack([ref.q, ref.dq, ref.ddq, d]).T
+        chunk = max(1, min(closed_loop.CHUNK, refs.shape[1]))  # a short trial in one call of its own length
+        return march(step.mapaccum(chunk), x, refs, (), chunk, progress).T
 
     def truth_file(self, out: np.ndarray, ref: Reference, settings: dict, scale: np.ndarray) -> dict:
         return truth_file(self.robot, self.truth, out, ref.q, settings)

@@ -154,19 +154,22 @@ def _checked_arguments(
 def simulate_trial(
     robot: Robot,
     *,
+    # the motion
     trajectory: str = "tud01",
     duration: float = 80.0,
-    rate_hz: float = 100.0,
     seed: int = 0,
+    limits: Limits | None = None,
+    # the hidden plant and its loop
     effects: Mapping[str, Mapping] | Sequence[str] = (),
+    mechanism: Callable[[Truth], object] | None = None,
+    bandwidth_hz: float = closed_loop.BANDWIDTH_HZ,
+    # the log
+    rate_hz: float = 100.0,
     output: str = "torque",
     noise: bool = True,
+    noise_scale: float | Sequence[float] = 1.0,
     exact_derivatives: bool = False,
     progress: bool = True,
-    bandwidth_hz: float = closed_loop.BANDWIDTH_HZ,
-    noise_scale: float | Sequence[float] = 1.0,
-    limits: Limits | None = None,
-    mechanism: Callable[[Truth], object] | None = None,
 ) -> SimTrial:
     """Simulate one trial of `robot` with hidden `effects`; deterministic.
 
