@@ -50,6 +50,11 @@ _EXPORTS = {
     "Diagnosis": ("ident_opt.diagnosis", "Diagnosis"),
     "simulate": ("ident_opt.simulator.simulate", "simulate"),
     "simulate_trial": ("ident_opt.simulator.trial", "simulate_trial"),
+    "excite": ("ident_opt.excitation.excite", "excite"),
+    "Design": ("ident_opt.excitation.design", "Design"),
+    # online identification: the offline start, then the rest of the trial replayed sample by sample
+    "online": ("ident_opt.adaptation.replay", "online"),
+    "Replay": ("ident_opt.adaptation.replay", "Replay"),
     # shipping: a robot description, C for the controller
     "export": ("ident_opt.shipping.description", "export"),
     "codegen": ("ident_opt.shipping.generate", "generate"),

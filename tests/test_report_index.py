@@ -7,8 +7,9 @@ import itertools
 
 import pytest
 
-from ident_opt.cli import build_parser, main
+from ident_opt.cli import main
 from ident_opt.fitting import estimators
+from ident_opt.problem import load_problem
 from ident_opt.report import MANIFESTS, record
 
 from .conftest import PROBLEMS
@@ -71,10 +72,18 @@ def test_unknown_estimator_is_named():
         estimators.estimator("lasso")
 
 
-def test_codegen_offers_exactly_the_registered_estimators():
-    codegen = build_parser()._subparsers._group_actions[0].choices["codegen"]
-    choices = next(a.choices for a in codegen._actions if a.dest == "estimator")
-    assert set(choices) == set(estimators.ESTIMATORS)
+@pytest.mark.parametrize("problem", ["tudor_2dof", "kuka_lwr4"])
+def test_codegen_estimator_is_one_of_the_arms_fits(problem, tmp_path, capsys):
+    # --estimator is checked against the arm's own fits (`Robot.estimators`, a subset of the registry), before any
+    # work: an unknown name is exit 2, the arm's fits named, nothing written.
+    path = PROBLEMS / f"{problem}.toml"
+    robot = load_problem(path).robot
+    assert set(robot.estimators) <= set(estimators.ESTIMATORS)
+    out = tmp_path / "c"
+    assert main(["codegen", "--problem", str(path), "--out", str(out), "--estimator", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert "--estimator nope" in err and all(name in err for name in robot.estimators)
+    assert not out.exists()
 
 
 def test_calibrate_needs_a_simulate_section(capsys):

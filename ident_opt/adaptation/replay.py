@@ -19,8 +19,9 @@ from tqdm import tqdm
 from ident_opt.adaptation.estimator import CONSISTENT_EVERY, batch_theta
 from ident_opt.adaptation.identifier import OnlineIdentifier
 from ident_opt.adaptation.start import Start, model_keys, offline_start, start_identifier
-from ident_opt.data.dataset import Dataset
-from ident_opt.fitting.recommend import Choice
+from ident_opt.data.dataset import Dataset, chronological_split
+from ident_opt.errors import InputError
+from ident_opt.fitting.recommend import Choice, choose
 from ident_opt.fitting.stats import Stats
 from ident_opt.metrics import METRICS, all_metrics, coverage
 from ident_opt.models.hybrid import features, make_gmr
@@ -52,6 +53,7 @@ class Replay:
     solve_seconds: dict[str, float]
     batch_check: dict
     consistency: dict | None = None
+    choice: Choice | None = None  # the fit cpbr starts from and follows
 
     @property
     def n(self) -> int:
@@ -73,6 +75,49 @@ class Replay:
         return {
             k: [float(v) for v in coverage(self.test.tau, preds[k], stds[k])] for k in (b + "+gmr" for b in self.keys)
         }
+
+
+#: The fewest samples of the offline part (the first part of the trial in time).
+MIN_OFFLINE = 20
+
+
+def online_parts(problem: Problem, trial: Dataset) -> tuple[Dataset, Dataset]:
+    """(offline part, online part): the problem's chronological split of `trial` (`[split] train_fraction`)."""
+    train_idx, test_idx = chronological_split(trial.n, problem.split.train_fraction)
+    train, test = trial.subset(train_idx), trial.subset(test_idx)
+    if train.n < MIN_OFFLINE or test.n < 1:
+        raise InputError(f"{trial.source}: too few samples for an offline part and an online part ({trial.n})")
+    return train, test
+
+
+def online(
+    problem: Problem,
+    trial: Dataset,
+    *,
+    estimator: str | None = None,
+    cross_covariance: bool = False,
+    checks: int = 10,
+    components: int | None = None,
+    every: int = CONSISTENT_EVERY,
+    progress: bool = True,
+) -> Replay:
+    """`online`'s stage function (what `ident-opt online` runs): `trial` split in time (`online_parts`), the fit
+    cpbr starts from and follows chosen on the offline part (the recommended fit, or `estimator`), then `replay`
+    with the problem's first seed for the batch checks."""
+    train, test = online_parts(problem, trial)
+    choice = choose(problem, [train], model=problem.robot.model(()), estimator=estimator, command="online")
+    return replay(
+        problem,
+        train,
+        test,
+        cross_covariance=cross_covariance,
+        checks=checks,
+        components=components,
+        seed=int(problem.split.seeds[0]),
+        progress=progress,
+        every=every,
+        choice=choice,
+    )
 
 
 def replay(
@@ -117,6 +162,7 @@ def replay(
         solve_seconds,
         check,
         consistency_check(starts, online, theta, train, test),
+        choice,
     )
 
 

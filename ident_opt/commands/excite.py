@@ -23,16 +23,12 @@ from pathlib import Path
 
 from ident_opt import outputs
 from ident_opt.commands.common import add_problem_arguments, add_progress_flag, problem_for
-from ident_opt.data.dataset import Dataset
 from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
-from ident_opt.excitation import discrimination
 from ident_opt.excitation import proof as excitation_proof
-from ident_opt.excitation.setup import Setup, make_setup
-from ident_opt.problem import Problem
+from ident_opt.excitation.excite import excite
 from ident_opt.report import excitation as report
-from ident_opt.simulator.fourier import default_base_hz
 
 #: Accepted ranges of the numeric flags.
 DURATION = (2.0, 3600.0)  # s
@@ -94,7 +90,7 @@ def _check(args: argparse.Namespace) -> None:
     """InputError for a flag out of range."""
     if not (math.isfinite(args.duration) and DURATION[0] <= args.duration <= DURATION[1]):
         raise InputError(f"--duration must be between {DURATION[0]:g} and {DURATION[1]:g} s, got {args.duration:g}")
-    if not 1 <= args.harmonics <= MAX_HARMONICS:
+    if args.harmonics is not None and not 1 <= args.harmonics <= MAX_HARMONICS:
         raise InputError(f"--harmonics must be an integer in [1, {MAX_HARMONICS}], got {args.harmonics}")
     if not 1 <= args.starts <= MAX_STARTS:
         raise InputError(f"--starts must be an integer in [1, {MAX_STARTS}], got {args.starts}")
@@ -117,19 +113,14 @@ def _check(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Design, write the CSV, figure and JSON, print a summary."""
+    """Design (`excitation.excite`), write the CSV, figure and JSON, print a summary."""
     problem = problem_for(args, "excite")
-    if args.criterion == "discriminate":
-        args.harmonics = args.harmonics or discrimination.HARMONICS
-        args.base_hz = args.base_hz or default_base_hz(args.duration, discrimination.BASE_HZ)
-    args.harmonics = args.harmonics or 5
     _check(args)
-    if (args.criterion == "discriminate" or args.proof is not None) and not problem.robot.extensions:
-        what = "--proof (its discriminating design)" if args.proof is not None else "--criterion discriminate"
+    if args.proof is not None and not problem.robot.extensions:
         raise InputError(
-            f"{what} tells two causes of the diagnosis apart, which only an arm with model extensions has; "
-            f"{problem.robot.described_as} has none: design with --criterion d or cond (and see "
-            "`python benchmarks/excitation_benefit.py` for the proof against random motions)"
+            "--proof (its discriminating design) tells two causes of the diagnosis apart, which only an arm with "
+            f"model extensions has; {problem.robot.described_as} has none: design with --criterion d or cond (and "
+            "see `python benchmarks/excitation_benefit.py` for the proof against random motions)"
         )
     if problem.limits is None:
         raise InputError(
@@ -144,49 +135,25 @@ def run(args: argparse.Namespace) -> int:
     trial = load_dataset(data[0], problem.data, problem.robot, **kwargs) if data else None
     if args.proof is not None:
         return _proof(args, problem, trial)
-    report.paths(args.out)  # a bad name fails before the work
-    setup = _setup(args, problem, trial)
-    design = _design(args, problem, setup, trial)
-    files = report.write(design, setup, args.out, args.json)
+    design = excite(
+        problem,
+        trial,
+        criterion=args.criterion,
+        duration=args.duration,
+        between=args.between,
+        harmonics=args.harmonics,
+        base_hz=args.base_hz,
+        extensions=args.extension,
+        starts=args.starts,
+        seed=args.seed,
+        rate=args.rate,
+        workers=args.workers,
+        progress=not args.no_progress,
+    )
+    files = report.write(design, design.setup, args.out, args.json)
     print(report.terminal(design))
     print("wrote " + ", ".join(str(f) for f in files))
     return 0
-
-
-def _setup(args: argparse.Namespace, problem: Problem, trial: Dataset | None) -> Setup:
-    """The design's setup from the flags and `trial`; its errors name the flag or the problem file at fault."""
-    try:
-        return make_setup(
-            problem.robot,
-            problem.limits,
-            args.duration,
-            harmonics=args.harmonics,
-            base_hz=args.base_hz,
-            extensions=tuple(args.extension),
-            trial=trial,
-        )
-    except ValueError as exc:  # an unknown extension
-        raise InputError(f"--extension: {exc}") from None
-    except InputError as exc:
-        raise InputError(f"{problem.path}: {exc}") from None
-
-
-def _design(args: argparse.Namespace, problem: Problem, setup: Setup, trial: Dataset | None) -> excitation.Design:
-    """The design --criterion asks for: T-optimal between --between's causes (fitted on `trial`), else d or cond."""
-    if args.criterion == "discriminate":
-        return discrimination.design(setup, problem.robot, trial, args.between, **_search(args))
-    return excitation.design(setup, args.criterion, **_search(args))
-
-
-def _search(args: argparse.Namespace) -> dict:
-    """The search flags every design takes (starts, seed, rate, progress, workers), read in one place for both."""
-    return {
-        "starts": args.starts,
-        "seed": args.seed,
-        "rate": args.rate,
-        "progress": not args.no_progress,
-        "workers": args.workers,
-    }
 
 
 def _proof(args: argparse.Namespace, problem, trial) -> int:

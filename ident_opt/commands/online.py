@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 from ident_opt.adaptation.estimator import CONSISTENT_EVERY
-from ident_opt.adaptation.replay import replay
+from ident_opt.adaptation.replay import online, online_parts
 from ident_opt.adaptation.start import serving_identifier
 from ident_opt.adaptation.stream import StreamOptions, serve
 from ident_opt.commands.common import (
@@ -32,7 +32,6 @@ from ident_opt.commands.common import (
     output_dir,
     write_json,
 )
-from ident_opt.data.dataset import chronological_split
 from ident_opt.errors import InputError
 from ident_opt.fitting.recommend import choose
 from ident_opt.outputs import shown
@@ -113,37 +112,33 @@ def run(args: argparse.Namespace) -> int:
     problem, trial = loaded.problem, loaded.train
     if args.estimator is not None:  # an unknown one fails before any work
         choose(problem, [], model=problem.robot.model(()), estimator=args.estimator, command="online")
-    train_idx, test_idx = chronological_split(trial.n, problem.split.train_fraction)
-    train, test = trial.subset(train_idx), trial.subset(test_idx)
-    if train.n < 20 or test.n < 1:
-        raise InputError(f"{trial.source}: too few samples for an offline part and an online part ({trial.n})")
-    choice = choose(problem, [train], model=problem.robot.model(()), estimator=args.estimator, command="online")
-    print(f"ident-opt online: cpbr starts from the {choice.estimator} fit ({choice.why})", file=sys.stderr)
     if args.stream:
-        return _stream(args, problem, train, choice)
+        return _stream(args, problem, trial)
     out = output_dir(args, problem)
-    result = replay(
+    result = online(
         problem,
-        train,
-        test,
+        trial,
+        estimator=args.estimator,
         cross_covariance=args.cross_covariance,
         checks=args.checks,
         components=args.components,
-        seed=int(problem.split.seeds[0]),
-        progress=not args.no_progress,
         every=args.consistent_every,
-        choice=choice,
+        progress=not args.no_progress,
     )
+    _starts_from(result.choice)
     data = report.payload(result, problem, trial.source, args.cross_covariance)
-    data["estimator"], data["estimator_why"] = choice.estimator, choice.why
     data["warnings"] += [w.as_dict() for w in unused_test_data(args)]
     report.write(result, data, out, args.json)
     print(report.terminal(data, out))
     return 0
 
 
-def _stream(args: argparse.Namespace, problem, train, choice) -> int:
-    """The offline fit of --model, then samples from standard input until its end or a signal."""
+def _stream(args: argparse.Namespace, problem, trial) -> int:
+    """The offline fit of --model on the offline part, then samples from standard input until its end or a
+    signal."""
+    train, _ = online_parts(problem, trial)
+    choice = choose(problem, [train], model=problem.robot.model(()), estimator=args.estimator, command="online")
+    _starts_from(choice)
     start, ident = serving_identifier(
         args.model,
         problem,
@@ -171,6 +166,11 @@ def _stream(args: argparse.Namespace, problem, train, choice) -> int:
         options=options,
     )
     return 0
+
+
+def _starts_from(choice) -> None:
+    """The fit cpbr starts from and why, on the terminal."""
+    print(f"ident-opt online: cpbr starts from the {choice.estimator} fit ({choice.why})", file=sys.stderr)
 
 
 def unused_test_data(args: argparse.Namespace) -> list[ResultWarning]:

@@ -249,6 +249,61 @@ def versions(
     return version
 
 
+def _final_model(chain: list[dict], current: dict, nominal_pred: dict) -> tuple[Fitted, str, np.ndarray]:
+    """The final model (the best current one on the common footing), the baseline the report compares against (the
+    first cause's when a chain is named, else the final model's) and the held-out prediction after."""
+    final = max(current.values(), key=lambda v: v.common)
+    if chain:
+        baseline = chain[0]["fitted"].baseline
+        after_pred = final.pred
+    else:
+        baseline = final.baseline
+        after_pred = nominal_pred[baseline]
+    return final, baseline, after_pred
+
+
+def _chain_entries(chain: list[dict], final: Fitted, parts: Parts, rest_test: np.ndarray) -> list[dict]:
+    """The named chain's JSON entries in the order named: each cause's estimate in the final model (its members),
+    score, held-out nMSE after it (raw and as scored), baseline, round and estimate when it was added."""
+    members = final.cand.detail.get("members", {}) if final.cand is not None else {}
+    if final.cand is not None and not members:
+        members = {final.cand.cause: final.cand.estimate}
+    return [
+        {
+            "cause": c["cause"],
+            "estimate": members.get(c["cause"], c["fitted"].cand.estimate),
+            "score": c["score"],
+            "nmse_after": nmse(parts.raw_test.tau, c["fitted"].pred).tolist(),
+            "nmse_after_filtered": scoring.nmse(parts.test.tau, c["fitted"].pred, rest_test),
+            "baseline": c["fitted"].baseline,
+            "round": c["round"],
+            "estimate_when_added": c["fitted"].cand.estimate,
+        }
+        for c in chain
+    ]
+
+
+def _evidence(
+    parts: Parts,
+    nominals: tuple,
+    model,
+    after_pred: np.ndarray,
+    after_forward_error: Callable[[], Any],
+    dt: float,
+    pose,
+) -> dict:
+    """The held-out evidence: each nominal model's and the extended model's (`after_pred`) residual evidence, their
+    forward-simulation errors (the extended model's from `after_forward_error()`) and the other channels' peaks."""
+    _, nominal_pi, nominal_pred = nominals
+    test, trial = parts.test, parts.source
+    ev = {b: evidence.residual_evidence(test, p, dt, pose) for b, p in nominal_pred.items()}
+    ev["forward_error_rad"] = {b: evidence.forward_error(model, pi, test, dt) for b, pi in nominal_pi.items()}
+    ev["after"] = evidence.residual_evidence(test, after_pred, dt, pose)
+    ev["forward_error_rad"]["after"] = after_forward_error()
+    ev["other_channels"] = evidence.channel_peaks(test if trial is None else trial, dt)
+    return ev
+
+
 def conclude(
     rounds, nominals, parts: Parts, model, forward_after, timings: dict, joints, pose, rest_test: np.ndarray
 ) -> Diagnosis:
@@ -257,42 +312,19 @@ def conclude(
     (question 4's motion error), the stages' timings so far, the joints' names, the pose evidence (`Engine.pose`)
     and the held-out part's labels the engine scored with: the named chain, its gain and the evidence."""
     chain, current, candidates, dropped, history = rounds
-    nominal, nominal_pi, nominal_pred = nominals
-    train, test, raw_test, how, trial = parts.train, parts.test, parts.raw_test, parts.how, parts.source
+    nominal, _, nominal_pred = nominals
+    train, test, raw_test, how = parts.train, parts.test, parts.raw_test, parts.how
     dt = float(np.median(np.diff(train.t)))
-    final = max(current.values(), key=lambda v: v.common)
-    if chain:
-        baseline = chain[0]["fitted"].baseline
-        after_pred = final.pred
-    else:
-        baseline = final.baseline
-        after_pred = nominal_pred[baseline]
-    members = final.cand.detail.get("members", {}) if final.cand is not None else {}
-    if final.cand is not None and not members:
-        members = {final.cand.cause: final.cand.estimate}
-    causes = [
-        {
-            "cause": c["cause"],
-            "estimate": members.get(c["cause"], c["fitted"].cand.estimate),
-            "score": c["score"],
-            "nmse_after": nmse(raw_test.tau, c["fitted"].pred).tolist(),
-            "nmse_after_filtered": scoring.nmse(test.tau, c["fitted"].pred, rest_test),
-            "baseline": c["fitted"].baseline,
-            "round": c["round"],
-            "estimate_when_added": c["fitted"].cand.estimate,
-        }
-        for c in chain
-    ]
+    final, baseline, after_pred = _final_model(chain, current, nominal_pred)
+    causes = _chain_entries(chain, final, parts, rest_test)
     cause = causes[0]["cause"] if causes else "none"
     estimate = causes[0]["estimate"] if causes else {}
     before_pred = nominal_pred[baseline]
     named_cand = _with_joint_errors(final.cand) if chain else None
 
-    ev = {b: evidence.residual_evidence(test, p, dt, pose) for b, p in nominal_pred.items()}
-    ev["forward_error_rad"] = {b: evidence.forward_error(model, pi, test, dt) for b, pi in nominal_pi.items()}
-    ev["after"] = evidence.residual_evidence(test, after_pred, dt, pose)
-    ev["forward_error_rad"]["after"] = forward_after(final if chain else None, baseline)
-    ev["other_channels"] = evidence.channel_peaks(test if trial is None else trial, dt)
+    ev = _evidence(
+        parts, nominals, model, after_pred, lambda: forward_after(final if chain else None, baseline), dt, pose
+    )
     t_end = time.perf_counter()
     t0, t_fit = timings.pop("t0"), timings["nominal"] + timings["candidates"]
     return Diagnosis(

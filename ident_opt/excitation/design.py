@@ -76,6 +76,7 @@ class Design:
     seconds: float
     warnings: list[str] = field(default_factory=list)
     discrimination: dict | None = None
+    setup: Setup | None = None  # what it was designed on (the model, limits, noise, base parameters)
 
 
 # ---------------------------------------------------------------------------------------------- the NLP
@@ -366,6 +367,7 @@ def design(
         converged=kept["converged"],
         seconds=time.perf_counter() - t0,
         warnings=warnings,
+        setup=setup,
     )
 
 

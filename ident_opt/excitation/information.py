@@ -5,12 +5,9 @@ NumPy and handed to CasADi as callbacks with their Jacobians (`SampleFunctions`,
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import casadi as ca
 import numpy as np
 
-from ident_opt.cache import cache_root
 from ident_opt.cbuild import CompiledRows
 from ident_opt.errors import InputError
 from ident_opt.excitation.setup import COND_POWER, OBJECTIVE_HZ, STILL, TINY, Setup, _grid
@@ -95,7 +92,7 @@ def _rows(function: ca.Function):
     """`function` (one sample's input column → one dense output) over many samples: X (N, k) → (N, c, r), each
     output transposed (`cbuild.CompiledRows`); CasADi's evaluation when it cannot be compiled."""
     try:
-        return CompiledRows(function, cache_root(Path(__file__)) / "excitation")
+        return CompiledRows(function, "excitation")
     except (InputError, OSError):
         mapped = {}
 

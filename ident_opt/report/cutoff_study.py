@@ -32,8 +32,9 @@ def write(rows: list[Row], out: Path, label: str, seeds: tuple[int, ...], second
     return [stem.with_suffix(s) for s in (".md", ".csv", ".json", ".png")]
 
 
-def _markdown(table: pd.DataFrame, label: str, seeds: tuple[int, ...], seconds: float, stem: str) -> str:
-    shown = table[
+def _shown(table: pd.DataFrame) -> pd.DataFrame:
+    """The table's columns as the report shows them: in order, with their headings."""
+    return table[
         [
             "kind",
             "rate_hz",
@@ -67,41 +68,59 @@ def _markdown(table: pd.DataFrame, label: str, seeds: tuple[int, ...], seconds: 
             "covered": "within 2 SE",
         }
     )
+
+
+def _method_lines(label: str, seeds: tuple[int, ...], seconds: float) -> list[str]:
+    """The title, how the study was made and what each column of the table means."""
+    return [
+        f"# Where the derivative cut-off rule stands ({label} seeds)",
+        "",
+        "Made by `make cutoff-study` (`benchmarks/cutoff_study.py`, `ident_opt/evaluation/cutoff_study.py`) in "
+        f"{seconds:.0f} s; seeds {', '.join(map(str, seeds))}. Each row: 20 s trials of the DFKI C.0 arm's "
+        "nominal model (friction made larger) in the study's own plant (`evaluate/cutoff_plant.py`: RK4 on the "
+        "arm's M, C, G, F, a PD with feed-forward, encoder quantisation, white angle and torque noise), read "
+        "back from CSV by the loader with the default settings. Errors are the median over the inertial, "
+        "coupling and gravity parameters of |π̂ − π| / |π| (friction depends on how a plant models stiction, "
+        "which no cut-off decides), medians over seeds.",
+        "",
+        '- **recommended**: the default pipeline (`derivative_cutoff_hz = "auto"`, the recommended fit).',
+        "- **best (condition)**: the consistent fit at the one cut-off of a 12-point grid (0.5 Hz to a quarter of "
+        "the rate) that is best across the condition's seeds, knowing the truth.",
+        "- **best (trial)**: the same, the luckiest grid cut-off for each trial's noise draw (a stricter "
+        "yardstick: the minimum of 12 noisy errors).",
+        "- **cross-validated**: the yardstick of a rule that knew the condition but not the trial: for each "
+        "seed, the grid cut-off best over the condition's other seeds, scored on that seed (median over seeds). "
+        "The per-condition best is the least of 12 noisy medians chosen on the trials it is scored on; "
+        "**cross-validated ÷ best (condition)** is how much of a ratio that luck alone makes.",
+        "- **within 2 SE**: the share of the recommended fit's judged parameters whose truth lies within two "
+        "of its standard errors.",
+        "",
+    ]
+
+
+def _target_sentence(table: pd.DataFrame) -> str:
+    """In how many conditions the target ratio holds, per condition, per trial and against the cross-validated one."""
     held = int((table["ratio_per_condition"] <= TARGET).sum())
     held_trial = int((table["ratio_per_trial"] <= TARGET).sum())
     oracle = int((table["ratio_cross_validated_to_best"] <= TARGET).sum())
     beside = int((table["ratio_to_cross_validated"] <= TARGET).sum())
     beats = int((table["ratio_to_cross_validated"] <= 1.0).sum())
+    return (
+        f"Target: ratio ≤ {TARGET} in every condition. Held per condition in {held} of {len(table)} conditions, "
+        f"per trial in {held_trial} of {len(table)}. The cross-validated yardstick itself is within {TARGET}× "
+        f"of the per-condition best in {oracle} of {len(table)} conditions; the recommended fit is within "
+        f"{TARGET}× of the cross-validated yardstick in {beside} and at or below it in {beats}."
+    )
+
+
+def _markdown(table: pd.DataFrame, label: str, seeds: tuple[int, ...], seconds: float, stem: str) -> str:
+    """The study's Markdown: how it was made, the target's tally, the table of conditions and the figure."""
     return "\n".join(
         [
-            f"# Where the derivative cut-off rule stands ({label} seeds)",
+            *_method_lines(label, seeds, seconds),
+            _target_sentence(table),
             "",
-            "Made by `make cutoff-study` (`benchmarks/cutoff_study.py`, `ident_opt/evaluation/cutoff_study.py`) in "
-            f"{seconds:.0f} s; seeds {', '.join(map(str, seeds))}. Each row: 20 s trials of the DFKI C.0 arm's "
-            "nominal model (friction made larger) in the study's own plant (`evaluate/cutoff_plant.py`: RK4 on the "
-            "arm's M, C, G, F, a PD with feed-forward, encoder quantisation, white angle and torque noise), read "
-            "back from CSV by the loader with the default settings. Errors are the median over the inertial, "
-            "coupling and gravity parameters of |π̂ − π| / |π| (friction depends on how a plant models stiction, "
-            "which no cut-off decides), medians over seeds.",
-            "",
-            '- **recommended**: the default pipeline (`derivative_cutoff_hz = "auto"`, the recommended fit).',
-            "- **best (condition)**: the consistent fit at the one cut-off of a 12-point grid (0.5 Hz to a quarter of "
-            "the rate) that is best across the condition's seeds, knowing the truth.",
-            "- **best (trial)**: the same, the luckiest grid cut-off for each trial's noise draw (a stricter "
-            "yardstick: the minimum of 12 noisy errors).",
-            "- **cross-validated**: the yardstick of a rule that knew the condition but not the trial: for each "
-            "seed, the grid cut-off best over the condition's other seeds, scored on that seed (median over seeds). "
-            "The per-condition best is the least of 12 noisy medians chosen on the trials it is scored on; "
-            "**cross-validated ÷ best (condition)** is how much of a ratio that luck alone makes.",
-            "- **within 2 SE**: the share of the recommended fit's judged parameters whose truth lies within two "
-            "of its standard errors.",
-            "",
-            f"Target: ratio ≤ {TARGET} in every condition. Held per condition in {held} of {len(table)} conditions, "
-            f"per trial in {held_trial} of {len(table)}. The cross-validated yardstick itself is within {TARGET}× "
-            f"of the per-condition best in {oracle} of {len(table)} conditions; the recommended fit is within "
-            f"{TARGET}× of the cross-validated yardstick in {beside} and at or below it in {beats}.",
-            "",
-            markdown_table(shown, digits=3, index=False),
+            markdown_table(_shown(table), digits=3, index=False),
             "",
             f"![ratios]({stem}.png)",
             "",

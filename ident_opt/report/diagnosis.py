@@ -251,10 +251,9 @@ def _rounded(estimate: dict) -> dict:
     return {k: (np.round(v, 4).tolist() if not isinstance(v, int) else v) for k, v in estimate.items()}
 
 
-def markdown(d: Diagnosis, figure_files: list[str]) -> str:
-    """The Markdown report."""
-    nom = d.nominal
-    lines = [
+def _preamble(d: Diagnosis) -> list[str]:
+    """The title, what the data are and how the residual is measured, and the warnings."""
+    return [
         "# Diagnosis",
         "",
         f"Data: {d.split} ({d.rate_hz:.4g} Hz). All numbers are on the held-out part. The torque is "
@@ -266,6 +265,13 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "",
         *markdown_lines(d.warnings),
         "",
+    ]
+
+
+def _nominal_section(d: Diagnosis) -> list[str]:
+    """Section 1: the nominal models' held-out nMSE, the rigid fit's estimator and the evidence table."""
+    nom = d.nominal
+    return [
         "## 1. What the nominal models get wrong",
         "",
         f"Held-out nMSE (MSE ÷ variance) per joint: datasheet {pair(nom['datasheet']['nmse'])}, "
@@ -275,13 +281,12 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "",
         *_evidence_table(d),
         "",
-        "## 2. The cause",
-        "",
-        f"**{d.cause}**"
-        + (f" (found against the {d.baseline} model)" if d.cause != "none" else "")
-        + ". "
-        + cause_sentence(d),
-        "",
+    ]
+
+
+def _scoring_paragraph(d: Diagnosis) -> str:
+    """How every catalogue effect is fitted and scored, and when a cause is named."""
+    return (
         "Every catalogue effect was fitted on the training part (with the datasheet's π held, and/or with π "
         "refitted) and scored on the held-out part against the same reference for all: score = (n/2) Σ_j "
         "ln(MSE_ref,j / MSE_cand,j) − (Δk/2) ln n, the reference being the current model with the datasheet's π "
@@ -296,7 +301,21 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         + ". The best such cause is added to the model and the question is asked again (a datasheet-side cause that"
         + (f" explains {d.partner:.0%} to" if d.partner > 0 else " explains less than")
         + f" {scoring.RECOVER:.0%} of the refit's gain is tried with a partner, kept"
-        f" only if the pair explains {scoring.RECOVER:.0%}).",
+        f" only if the pair explains {scoring.RECOVER:.0%})."
+    )
+
+
+def _cause_section(d: Diagnosis) -> list[str]:
+    """Section 2: the cause named, how causes are scored, every candidate, the chain and other clear candidates."""
+    lines = [
+        "## 2. The cause",
+        "",
+        f"**{d.cause}**"
+        + (f" (found against the {d.baseline} model)" if d.cause != "none" else "")
+        + ". "
+        + cause_sentence(d),
+        "",
+        _scoring_paragraph(d),
         "",
         "| cause | score | baseline | added parameters | held-out nMSE after | estimate |",
         "|---|---|---|---|---|---|",
@@ -309,23 +328,32 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
     chain = chain_sentences(d)
     if chain:
         lines += ["", "### The chain of causes", "", *chain]
-    lines += ["", *also_clear(d), "## 3. The extended model", ""]
-    if d.named is not None:
-        lines += ["| parameter | value | standard error |", "|---|---|---|"]
-        for name, value in d.named.parameters.items():
-            se = d.named.se.get(name)
-            shown = f"{se:.2g}" if se is not None else "(searched)"
-            lines.append(f"| {name} | {value:.5g} | {shown} |")
-        lines += [
-            "",
-            "Standard errors: every coefficient and every searched parameter together (Gauss–Newton at the "
-            "optimum, on the training part), with the residuals' correlation over time counted (Newey–West). "
-            "They measure what the noise leaves uncertain, not a bias from something the model lacks.",
-            "",
-        ]
-    else:
-        lines += ["No extension: the nominal model is kept.", ""]
-    lines += [
+    return [*lines, "", *also_clear(d)]
+
+
+def _extended_section(d: Diagnosis) -> list[str]:
+    """Section 3: the extended model's parameters with their standard errors, or that the nominal model is kept."""
+    lines = ["## 3. The extended model", ""]
+    if d.named is None:
+        return [*lines, "No extension: the nominal model is kept.", ""]
+    lines += ["| parameter | value | standard error |", "|---|---|---|"]
+    for name, value in d.named.parameters.items():
+        se = d.named.se.get(name)
+        shown = f"{se:.2g}" if se is not None else "(searched)"
+        lines.append(f"| {name} | {value:.5g} | {shown} |")
+    return [
+        *lines,
+        "",
+        "Standard errors: every coefficient and every searched parameter together (Gauss–Newton at the "
+        "optimum, on the training part), with the residuals' correlation over time counted (Newey–West). "
+        "They measure what the noise leaves uncertain, not a bias from something the model lacks.",
+        "",
+    ]
+
+
+def _gain_section(d: Diagnosis, figure_files: list[str]) -> list[str]:
+    """Section 4: the held-out gain in torque and in motion, and the figures."""
+    return [
         "## 4. The gain",
         "",
         f"Held-out nMSE (measured torque) before → after: {_gain(d)}.",
@@ -334,9 +362,21 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
         "(a mode, a delay, a friction shape) is evaluated along the measured motion, since some of it depends "
         "on the history.",
         "",
+        *(f"![{f}]({f})" for f in figure_files),
+        "",
     ]
-    lines += [f"![{f}]({f})" for f in figure_files] + [""]
-    lines += channels_paragraph(d)
+
+
+def markdown(d: Diagnosis, figure_files: list[str]) -> str:
+    """The Markdown report."""
+    lines = [
+        *_preamble(d),
+        *_nominal_section(d),
+        *_cause_section(d),
+        *_extended_section(d),
+        *_gain_section(d, figure_files),
+        *channels_paragraph(d),
+    ]
     return "\n".join(lines)
 
 

@@ -173,9 +173,9 @@ def write_proof(p: Proof, report: str | Path) -> list[str]:
     return files
 
 
-def proof_markdown(p: Proof, designs: str = "excitation") -> str:
-    """The report: the designs, the identification table, the discrimination table, what was measured."""
-    lines = [
+def _designs_section(p: Proof, designs: str) -> list[str]:
+    """The title, how to reproduce the proof, and the designs' table with the D-criterion's noise model."""
+    return [
         "# Excitation design: proof in the simulator",
         "",
         f"Reproduce: `{PROOF_COMMAND}` (or `make excitation`; {sum(p.seconds.values()) / 60:.0f} min here). "
@@ -189,6 +189,12 @@ def proof_markdown(p: Proof, designs: str = "excitation") -> str:
         f"Noise model of the D-criterion: {p.setup.noise}, σ = {', '.join(f'{s:.3g}' for s in p.setup.sigma)} N m "
         f"per joint; base parameters: {', '.join(p.setup.base_names)}.",
         "",
+    ]
+
+
+def _identification_section(p: Proof) -> list[str]:
+    """The identification table and each design's improvement over the MERIt-like trajectory."""
+    lines = [
         "## Identification (clean rigid truth, the simulator's noise)",
         "",
         "Medians over the seeds. Error: median over the parameters of |π̂ − π|/|π| against the simulator's truth "
@@ -204,16 +210,21 @@ def proof_markdown(p: Proof, designs: str = "excitation") -> str:
         f"{ratio['ols (rests 0)']:.3g}× (OLS), {ratio['constrained (rests 0)']:.3g}× (constrained)."
         for label, ratio in p.improvement().items()
     ]
-    lines += [
+    return [
+        *lines,
         "",
         "The MERIt-like trajectory rests a large part of the time; at rest the sign of an estimated velocity is noise "
         'and the Coulomb columns carry it, so part of its error is its rests (the columns "rests 0" read resting '
         "velocities as 0, as the diagnosis does) and part its poorer excitation.",
+        "",
     ]
+
+
+def _discrimination_section(p: Proof) -> list[str]:
+    """The discrimination table, the discriminating design's margin ratios and the gap it expects on real data."""
     a, b = p.between
     scales = "; ".join(f"{level}: × {', '.join(f'{x:.3g}' for x in scale)}" for level, scale in p.noise_scales.items())
-    lines += [
-        "",
+    lines = [
         f"## Discrimination: {a} or {b}",
         "",
         f"Each cause hidden in turn where the data put it (`{p.hidden[a]}`; `{p.hidden[b]}`); a training and a "
@@ -236,7 +247,19 @@ def proof_markdown(p: Proof, designs: str = "excitation") -> str:
     disc = p.designs["discriminate"].discrimination or {}
     if disc:
         lines += ["", f"Expected gap on the real data (the design's criterion): {disc['summary']}."]
-    lines += ["", f"Timings: {', '.join(f'{k} {v:.0f} s' for k, v in p.seconds.items())}.", ""]
+    return lines
+
+
+def proof_markdown(p: Proof, designs: str = "excitation") -> str:
+    """The report: the designs, the identification table, the discrimination table, what was measured."""
+    lines = [
+        *_designs_section(p, designs),
+        *_identification_section(p),
+        *_discrimination_section(p),
+        "",
+        f"Timings: {', '.join(f'{k} {v:.0f} s' for k, v in p.seconds.items())}.",
+        "",
+    ]
     return "\n".join(lines)
 
 

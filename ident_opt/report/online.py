@@ -66,6 +66,7 @@ def payload(r: Replay, problem, source: str, cross_covariance: bool) -> dict:
         "cpbr_solver": _solver_counts(online.get("cpbr")),
         "consistency": r.consistency,
         "warnings": _warnings(r),
+        **({} if r.choice is None else {"estimator": r.choice.estimator, "estimator_why": r.choice.why}),
     }
 
 
