@@ -1,6 +1,7 @@
 """The output rules of every command: outputs are checked before any work, never resolve to an input, are written
 atomically (a temporary file in the same folder, renamed into place, removed on every failure) with the user's
-umask, and a run that fails leaves nothing behind.
+umask, and a run that fails leaves nothing behind. An output is only ever a regular file (or a folder): an existing
+device, named pipe or socket there (or a link to one) is refused, never replaced by the rename (`refuse_special`).
 
 `cli.main` opens a `Run` around each command. Inside it, `declare_inputs` / `declare_output` refuse an output
 that is an input; `write_text`, `write_bytes` and `atomic_path` write through the run, which remembers what each
@@ -16,6 +17,7 @@ import hashlib
 import json
 import os
 import shutil
+import stat
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -24,6 +26,51 @@ from ident_opt.errors import InputError
 
 #: How deep `watch_folder` looks for files a failed run created (results/, results/figures, results/.manifest).
 WATCH_DEPTH = 2
+
+
+#: Kinds of file by `stat` mode test: what a path is when it is not a regular file (`file_kind`).
+_KINDS = (
+    (stat.S_ISDIR, "a folder"),
+    (stat.S_ISFIFO, "a named pipe (FIFO)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+FOLDER = _KINDS[0][1]
+
+
+def file_kind(path: str | Path) -> str | None:
+    """What `path` names when that is not a regular file, following links ("a folder", "a named pipe (FIFO)",
+    "a character device", "a block device", "a socket"); None for a regular file or nothing (a dangling link, a
+    path that cannot be looked up). By `os.stat` alone: it never opens the path (opening a FIFO blocks, opening
+    some devices acts on them)."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):  # missing, dangling, unreadable parent, a NUL byte in the name
+        return None
+    return mode_kind(mode)
+
+
+def mode_kind(mode: int) -> str | None:
+    """`file_kind` of a file of `st_mode` `mode` (from `os.stat` or `os.fstat`): None for a regular file."""
+    if stat.S_ISREG(mode):
+        return None
+    return next((kind for test, kind in _KINDS if test(mode)), "not a regular file")
+
+
+def refuse_special(path: str | Path, flag: str | None = None) -> None:
+    """InputError (naming `flag` and the path) when `path` exists and is neither a regular file nor a folder: a
+    device, a named pipe or a socket, or a link to one. An output is written beside and renamed into place, which
+    would replace the device node itself (as root: /dev/null, /dev/full) with a regular file."""
+    kind = file_kind(path)
+    if kind is None or kind == FOLDER:
+        return
+    label = f"{flag} {path}" if flag else str(path)
+    link = f" (through a link to {os.path.realpath(path)})" if Path(path).is_symlink() else ""
+    raise InputError(
+        f"{label}: exists and is {kind}{link}, not a regular file; ident-opt writes outputs only as regular files "
+        "and never replaces a device, pipe or socket: give another path"
+    )
 
 
 def umask() -> int:
@@ -83,9 +130,11 @@ class Run:
         self.folders.append(path)
 
     def before_write(self, path: Path) -> None:
-        """Refuse a write over an input; keep what `path` holds now (once) so a rollback can restore it."""
+        """Refuse a write over an input or a device, pipe or socket (`refuse_special`); keep what `path` holds
+        now (once) so a rollback can restore it."""
         for inp in self.inputs:
             _refuse(path, inp)
+        refuse_special(path)
         key = _key(path)
         if key in self.backups:
             return
@@ -216,10 +265,12 @@ def watch_folder(folder: str | Path) -> None:
 
 
 def check_file_output(path: str | Path, flag: str) -> Path:
-    """An output file path usable before any work: not a folder, its folder a folder (or creatable), writable."""
+    """An output file path usable before any work: not a folder, nor a device, pipe or socket (or a link to one:
+    `refuse_special`), its folder a folder (or creatable), writable."""
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{flag} {path}: is a folder; give a file name")
+    refuse_special(path, flag)
     parent = _existing_parent(path.parent)
     if not parent.is_dir():
         raise InputError(f"{flag} {path}: cannot create its output folder ({parent} is not a folder)")
@@ -231,10 +282,12 @@ def check_file_output(path: str | Path, flag: str) -> Path:
 
 
 def check_folder_output(path: str | Path, flag: str) -> Path:
-    """An output folder usable before any work: a folder or creatable, writable."""
+    """An output folder usable before any work: a folder or creatable, writable. Anything else already there (a
+    file, a device, a pipe, a socket, or a link to one) is refused."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise InputError(f"{flag} {path}: exists and is not a folder; cannot use it as the output folder")
+        kind = file_kind(path) or "a regular file"
+        raise InputError(f"{flag} {path}: exists and is not a folder but {kind}; cannot use it as the output folder")
     parent = _existing_parent(path)
     if not parent.is_dir():
         raise InputError(f"{flag} {path}: cannot create the output folder ({parent} is not a folder)")
@@ -256,10 +309,13 @@ def _existing_parent(path: Path) -> Path:
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path beside `path` (same suffix) to write to; renamed onto `path` when the body returns,
-    removed whatever happens. The file gets the permissions the umask gives a new file."""
+    removed whatever happens. The file gets the permissions the umask gives a new file. `write_text`,
+    `write_bytes` and the report figures write through here: a device, pipe or socket at `path` (or a link to one)
+    is refused (`refuse_special`), before the body and again just before the rename."""
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{path}: is a folder; cannot write a file there")
+    refuse_special(path)
     if _current is not None:
         _current.before_write(path)
     elif not path.parent.is_dir():
@@ -270,6 +326,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~umask())
+        refuse_special(path)  # again: the body may have run for a while
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
@@ -301,6 +358,7 @@ def _digest(path: Path) -> str:
 
 
 def _owned(folder: Path) -> dict[str, str]:
+    refuse_special(folder / OWNED)  # read below: a pipe would block, /dev/zero would fill the memory
     try:
         raw = json.loads((folder / OWNED).read_text(encoding="utf-8"))
     except (OSError, ValueError):
@@ -317,6 +375,7 @@ def guard_owned(folder: str | Path, names: Iterable[str], force: bool = False) -
     for path in paths:
         if path.is_dir():
             raise InputError(f"{path}: is a folder; cannot write {path.name} there")
+        refuse_special(path)  # before `_digest` reads it
         if path.exists() and not force and owned.get(path.name) != _digest(path):
             raise InputError(
                 f"{path}: exists and was not written by ident-opt (or was edited since); "

@@ -1,14 +1,16 @@
 """Reading a URDF: its joints, links and inertials, checked, and Pinocchio's model of a chain of its joints.
 
-Every fault is an `InputError` naming the file and the element: a file that does not parse, a joint that is
-not in it or not revolute, joints that are not one serial chain from the base, and (`chain_model`) anything
-Pinocchio cannot read. Both arm implementations read URDFs through this module: the n-joint chain
-(`ident_opt.arm.chain`) and the planar two-link arm (`ident_opt.arm.planar_urdf`).
+Every fault is an `InputError` naming the file and the element: a path that is not a regular file (a named pipe
+would block the read, /dev/zero would fill the memory) or is larger than `MAX_URDF_BYTES`, a file that does not
+parse, a joint that is not in it or not revolute, joints that are not one serial chain from the base, and
+(`chain_model`) anything Pinocchio cannot read. Both arm implementations read URDFs through this module: the
+n-joint chain (`ident_opt.arm.chain`) and the planar two-link arm (`ident_opt.arm.planar_urdf`).
 """
 
 from __future__ import annotations
 
 import math
+import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +27,11 @@ REVOLUTE = ("revolute", "continuous")
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 LIMITED = ("revolute", "prismatic")
 
+
+#: Largest URDF the tool reads [bytes], 64 MiB: it is read whole into memory and parsed; real arms' URDFs are a few
+#: kB to a few MB (meshes are separate files), so a larger one is a mistake (a log, a mesh, /dev/zero through a
+#: link), refused before it is read.
+MAX_URDF_BYTES = 64 * 2**20
 
 #: Largest magnitude of a URDF number the tool accepts, per kind: a mass [kg], a length [m], an inertia [kg m²],
 #: a friction [N m s/rad or N m]; beyond, the value is a unit mistake or a typo and overflows the arithmetic.
@@ -165,12 +172,10 @@ def _joint(path: Path, j: ET.Element, links: dict[str, ET.Element]) -> UrdfJoint
 def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Element]]:
     """(the file's text, joints by name, links by name) of a URDF, every <joint> and <inertial> checked;
     InputError naming the file and the element on any fault (module doc)."""
+    text = read_urdf_text(path)
     try:
-        text = path.read_text(encoding="utf-8")
         root = ET.fromstring(text)
-    except FileNotFoundError:
-        raise InputError(f"{path}: URDF file not found") from None
-    except (ET.ParseError, UnicodeDecodeError, OSError) as exc:
+    except ET.ParseError as exc:
         raise InputError(f"{path}: not a valid URDF (XML error: {exc})") from None
     if root.tag != "robot":
         raise InputError(f"{path}: not a URDF: the root element is <{root.tag}>, not <robot>")
@@ -194,6 +199,49 @@ def parse_urdf(path: Path) -> tuple[str, dict[str, UrdfJoint], dict[str, ET.Elem
         joints[joint.name] = joint
     _check_tree(path, joints)
     return text, joints, links
+
+
+def read_urdf_text(path: Path) -> str:
+    """The text of the URDF at `path` (UTF-8, newlines as `Path.read_text` gives them): a regular file of at most
+    `MAX_URDF_BYTES`, checked by `os.stat` before it is opened and again on the open file; InputError naming the
+    file otherwise (not found, a named pipe, a device, a socket, a folder, too large, unreadable, not UTF-8)."""
+    path = Path(path)
+    try:
+        _regular_urdf(path, os.stat(path))
+        # O_NONBLOCK: should a pipe replace the file after the check, the open returns instead of waiting for a
+        # writer, and the check of the open file refuses it. It changes nothing for a regular file.
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        with os.fdopen(fd, "rb") as file:
+            _regular_urdf(path, os.fstat(file.fileno()))
+            data = file.read(MAX_URDF_BYTES + 1)
+    except FileNotFoundError:
+        raise InputError(f"{path}: URDF file not found") from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL byte in the name
+        raise InputError(f"{path}: cannot read the URDF ({getattr(exc, 'strerror', None) or exc})") from None
+    if len(data) > MAX_URDF_BYTES:  # it grew after the check
+        _regular_urdf(path, None, len(data))
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not a valid URDF (not UTF-8 text: {exc})") from None
+    return text.replace("\r\n", "\n").replace("\r", "\n")  # universal newlines, as `Path.read_text` reads
+
+
+def _regular_urdf(path: Path, status: os.stat_result | None, size: int | None = None) -> None:
+    """InputError naming the URDF `path` when `status` is not a regular file's, or its size (or `size`) is above
+    `MAX_URDF_BYTES`."""
+    kind = outputs.mode_kind(status.st_mode) if status is not None else None
+    if kind is not None:
+        raise InputError(
+            f"{path}: the URDF is {kind}, not a regular file; give the path of the .urdf file itself (a named pipe "
+            "or a device is never read)"
+        )
+    size = status.st_size if size is None else size
+    if size > MAX_URDF_BYTES:
+        raise InputError(
+            f"{path}: the URDF is {size / 2**20:.1f} MiB, larger than the {MAX_URDF_BYTES // 2**20} MiB ident-opt "
+            "reads (real URDFs are a few MB at most; meshes are separate files)"
+        )
 
 
 def _check_tree(path: Path, joints: dict[str, UrdfJoint]) -> None:

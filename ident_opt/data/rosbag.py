@@ -7,10 +7,14 @@ the model is the k-th name); `ros_topic` the topic (default "/joint_states"). Th
 format's names: t [s] from the messages' header stamps (the bag's receive time when a stamp is zero), relative
 to the first; q_k = position, dq_k = velocity (when the messages carry velocities), tau_k = effort. Units are
 ROS's: rad, rad/s, N m. `[data.columns]` can still convert them (`q1 = { column = "q1", offset = … }`).
+
+Every file of the bag's folder must be a regular file (`regular_bag_files`), checked before `rosbags` (and SQLite)
+open any: a named pipe there would block the open for good, unreachable even by SIGTERM.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +29,7 @@ BAG_SUFFIXES = (".mcap", ".db3")
 
 def is_bag(path: Path) -> bool:
     """A ROS 2 bag: a folder with metadata.yaml, or a .mcap / .db3 storage file."""
-    return (path.is_dir() and (path / "metadata.yaml").is_file()) or path.name.lower().endswith(BAG_SUFFIXES)
+    return (path.is_dir() and (path / "metadata.yaml").exists()) or path.name.lower().endswith(BAG_SUFFIXES)
 
 
 def read_bag(path: Path, topic: str, joints: tuple[str, ...]) -> pd.DataFrame:
@@ -35,10 +39,11 @@ def read_bag(path: Path, topic: str, joints: tuple[str, ...]) -> pd.DataFrame:
 
     if not joints:
         raise InputError(f'{path}: a ROS bag needs [data] ros_joints = ["…", "…"] (its joint names, base to tip)')
-    folder = path.parent if path.is_file() else path
-    if not (folder / "metadata.yaml").is_file():
+    folder = path if path.is_dir() else path.parent
+    if not (folder / "metadata.yaml").exists():
         raise InputError(f"{path}: not a ROS 2 bag: its folder has no metadata.yaml (give the bag's folder)")
     outputs.declare_inputs([folder])  # the bag is its folder: metadata.yaml and the storage files in it
+    regular_bag_files(path, folder)
     rows: list[tuple[float, np.ndarray, np.ndarray | None, np.ndarray]] = []
     try:
         with AnyReader([folder]) as reader:
@@ -61,6 +66,24 @@ def read_bag(path: Path, topic: str, joints: tuple[str, ...]) -> pd.DataFrame:
     if not rows:
         raise InputError(f"{path}: the topic '{topic}' has no messages")
     return _frame(rows, len(joints))
+
+
+def regular_bag_files(path: Path, folder: Path) -> None:
+    """InputError naming the culprit unless metadata.yaml and every other file in the bag's `folder` (following
+    links; subfolders aside) is a regular file: `rosbags` reads metadata.yaml whole and SQLite opens the .db3,
+    and a named pipe blocks that open (SIGTERM included: the wait is in C), a device is read without end. Checked
+    by `os.stat` only, before anything opens them."""
+    try:
+        entries = sorted(os.scandir(folder), key=lambda e: e.name)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the ROS bag's folder {folder} ({exc.strerror})") from None
+    for entry in [folder / "metadata.yaml", *(Path(e.path) for e in entries if e.name != "metadata.yaml")]:
+        kind = outputs.file_kind(entry)
+        if kind is not None and (kind != outputs.FOLDER or entry.name == "metadata.yaml"):
+            raise InputError(
+                f"{entry}: this file of the ROS 2 bag {folder} is {kind}, not a regular file; a bag's metadata.yaml "
+                "and storage files (.db3, .mcap) are read only when they are regular files"
+            )
 
 
 #: The message type a bag's topic must carry.
