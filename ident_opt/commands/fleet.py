@@ -12,7 +12,8 @@ robot's first K days (default 5) are its baseline; a parameter the data determin
 more consecutive days, by more on average than the fleet's day-to-day scatter allows, has changed, and the change is
 named: wear (a joint's friction), payload (a body on the last link), drive (one factor on a joint's torque) or other
 (docs/fleet.md). A file that fails validation is listed as skipped, with the
-reason, and the run goes on.
+reason, and the run goes on. Symbolic links under ROOT (a robot or day folder, a file) are not followed: each is
+listed as skipped, and nothing outside ROOT is read.
 
 Without --scheduler: a local cluster of --workers processes (default: the cores). With --scheduler tcp://host:8786:
 an existing cluster (`dask scheduler`, `dask worker`), whose workers need ident-opt and the problem file and logs
@@ -20,16 +21,18 @@ at the same paths; a scheduler that does not answer within --connect-timeout (10
 
 Writes to --out (default: the problem's [output] dir, else results/): fleet.md, fleet_changes.csv,
 fleet_series.csv and .parquet, figures/fleet_<robot>.png; with --json the result of `docs/cli.md` (fleet).
+Neither --out nor --json may lie inside ROOT, however ROOT is given (a path, relative, or a file:// URL): an error
+(exit 2) before any work.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from tqdm import tqdm
 
+from ident_opt import outputs
 from ident_opt.commands.common import (
     add_estimator_flag,
     add_problem_arguments,
@@ -39,6 +42,7 @@ from ident_opt.commands.common import (
 )
 from ident_opt.errors import InputError
 from ident_opt.fleet.engine import CONNECT_TIMEOUT_S
+from ident_opt.fleet.layout import local_root
 from ident_opt.fleet.run import run_fleet
 from ident_opt.report import fleet as report
 
@@ -72,8 +76,8 @@ def run(args: argparse.Namespace) -> int:
     problem = problem_for(args, "fleet")
     if args.scheduler and args.workers:
         raise InputError("--workers sets the local cluster's size; with --scheduler the cluster's own workers run")
+    _outside(args)
     out = output_dir(args, problem)
-    _outside(out, args.logs)
     result = run_fleet(
         problem,
         args.logs,
@@ -97,11 +101,17 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _outside(out: Path, logs: str) -> None:
-    """The output folder must not lie inside the logs (a later run would find the reports in its layout)."""
-    root = Path(logs)
-    if root.is_dir() and out.resolve().is_relative_to(root.resolve()):
-        raise InputError(f"--out {out}: inside --logs {logs}; write the reports elsewhere")
+def _outside(args: argparse.Namespace) -> None:
+    """Before any work: --out and --json must not lie inside the logs' local folder, however --logs names it (a
+    report there would overwrite a log, or be found in the next run's layout); the folder is then an input of the
+    run (`outputs.declare_inputs`), so that no output, the default --out included, is ever written inside it."""
+    root = local_root(args.logs)
+    if root is None or not root.is_dir():
+        return  # not on this machine (an object store, memory://), or not a folder: `layout.discover` says so
+    for flag, path in (("--out", args.out), ("--json", args.json)):
+        if path and outputs.same_or_inside(path, root):
+            raise InputError(f"{flag} {path}: inside --logs {args.logs} ({root}); write the reports elsewhere")
+    outputs.declare_inputs([root])
 
 
 def _command(args: argparse.Namespace) -> str:

@@ -53,12 +53,15 @@ from ident_opt.fitting.base import BaseParameters, base_parameters, fit_base_ols
 from ident_opt.fitting.fit import solve_normal
 from ident_opt.fitting.iv import InstrumentStats
 from ident_opt.fitting.stats import Stats
-from ident_opt.fleet.layout import FleetFile
+from ident_opt.fleet.layout import LINK, FleetFile, linked
 from ident_opt.problem import load_problem
 from ident_opt.warnings import ResultWarning
 
 #: A robot-day is fitted when its samples × joints reach this many times the base parameters.
 MIN_ROWS_PER_PARAMETER = 5
+#: A skipped file's reason, in every report, is the first line of the loader's message, cut to this many
+#: characters: a bad file's contents (a header, a cell) are shown only as far as they say what is wrong with it.
+REASON_CHARS = 300
 
 
 @dataclass(frozen=True)
@@ -138,7 +141,11 @@ class RobotChoice:
 
 def _read(job: Job, s: Setup, file: FleetFile) -> Dataset:
     """One trial read, checked and differentiated by the loader every command uses; refused, an InputError whose
-    message names the file as the layout does (not the path of a temporary copy)."""
+    message names the file as the layout does (not the path of a temporary copy), on one line of at most
+    `REASON_CHARS`. A file that is a symbolic link now, or lies in a linked folder, is not opened (`layout.linked`:
+    the fleet reads only what lies inside its root)."""
+    if linked(file):
+        raise InputError(LINK)
     with local_copy(file.url) as local:
         try:
             trial = load_dataset(
@@ -146,8 +153,15 @@ def _read(job: Job, s: Setup, file: FleetFile) -> Dataset:
             )
             fittable(trial)
         except InputError as exc:
-            raise InputError(str(exc).replace(f"{local}: ", "", 1).replace(str(local), file.name)) from None
+            raise InputError(_reason(str(exc).replace(f"{local}: ", "", 1).replace(str(local), file.name))) from None
     return trial
+
+
+def _reason(message: str) -> str:
+    """A loader's message as a skip reason: its first line, cut to `REASON_CHARS` characters."""
+    lines = message.strip().splitlines()
+    first = lines[0] if lines else ""
+    return first if len(first) <= REASON_CHARS else first[: REASON_CHARS - 1] + "…"
 
 
 def choose(job: Job, robot: str, *days: list[FleetFile]) -> RobotChoice:
