@@ -66,6 +66,32 @@ class UpdateState:
         return np.triu(R * sign[:, None]), sign * (Q.T @ np.asarray(self.z, dtype=float)), self.hdiag[order]
 
 
+def c_string(text: str | bytes) -> str:
+    """`text` as one C string literal, quotes included, whose bytes are exactly `text`'s (a str as UTF-8, a lone
+    surrogate kept as "surrogatepass" writes it). Every name that reaches generated C goes through here: the C must
+    hold the name as data, never read any of it as code.
+
+    The literal is plain printable ASCII. Printable ASCII stays as is but for `\\` and `"` (backslash-escaped) and
+    `?` (written `\\?`, so that no trigraph such as `??/` can form: ISO C modes replace those before anything else,
+    inside string literals too); every other byte (controls, newline, DEL, all of UTF-8's bytes) is a 3-digit octal
+    escape `\\ooo`, which, unlike a hex escape, never swallows a digit that follows it. So the literal has no
+    newline, no line splice, no non-ASCII character (nothing for a bidirectional-text trick to reorder) and cannot
+    end before its closing quote. A NUL byte is kept (`\\000`), but C code that reads the literal as a string stops
+    there: refuse such names where that matters. For string literals only: never paste the result into a comment.
+    """
+    data = text.encode("utf-8", "surrogatepass") if isinstance(text, str) else bytes(text)
+    out = ['"']
+    for byte in data:
+        if byte in b'\\"?':
+            out.append("\\" + chr(byte))
+        elif 0x20 <= byte < 0x7F:
+            out.append(chr(byte))
+        else:
+            out.append(f"\\{byte:03o}")
+    out.append('"')
+    return "".join(out)
+
+
 def _c_numbers(values) -> str:
     out = []
     for v in np.asarray(values, dtype=float).ravel():
@@ -131,6 +157,11 @@ def generate_pi_update(
     s = model.symbols
     Y = update_design(model, columns)
     names = model.names if columns is None else tuple(model.names[i] for i in columns)
+    for name in names:
+        if "\0" in name:
+            raise InputError(
+                f"pi_update: the parameter name {name!r} holds a NUL character, which C cannot hold in a name"
+            )
     f = ca.Function("pi_regressor", [s["q"], s["dq"], s["ddq"]], [ca.densify(Y)], ["q", "dq", "ddq"], ["Y"])
     casadi_c, casadi_h = generate_sources([f], out_dir, name=f"{UPDATE}_casadi")
     held = np.asarray(start.state) != 0
@@ -152,7 +183,7 @@ def generate_pi_update(
         "theta0": _c_numbers(start.theta),
         "state0": ", ".join(str(int(v)) for v in start.state),
         "n0": str(int(start.n)),
-        "names": ", ".join(f'"{n}"' for n in names),
+        "names": ", ".join(c_string(n) for n in names),  # escaped: a name is data, never code
         "kernels": _reflect_kernels(model.n_joints),
     }
     paths = [casadi_c, casadi_h]

@@ -4,20 +4,26 @@ baked in, the estimator, the GMR, the check against Python); with the terminal l
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from ident_opt import outputs
 from ident_opt.report import write_json
+from ident_opt.shipping.codegen import one_line
 from ident_opt.shipping.generate import Built
 from ident_opt.shipping.ship import MEASURE, TOLERANCE
 
 
 def _urdf_angles(statement: list[str]) -> str:
-    """The README section of a two-joint URDF arm: its angles are not the C code's; the offsets to apply."""
+    """The README section of a two-joint URDF arm: its angles are not the C code's; the offsets to apply. The
+    statement's lines hold the URDF's names: each is kept on its line (`one_line`) inside a fence longer than any
+    run of backticks they hold, so no name can close the block."""
+    lines = [one_line(line) for line in statement]
+    fence = "`" * max(3, 1 + max((len(run) for line in lines for run in re.findall("`+", line)), default=0))
     return (
         "\n## This robot's angles\n\nThe arm comes from a URDF whose angle zero and axis signs are its own. The C "
         "code takes ident-opt's angles: pass q = sign × q_urdf + offset, and dq, ddq, tau × sign, per joint, as "
-        "ident-opt applied them to the data:\n\n```\n" + "\n".join(statement) + "\n```\n"
+        f"ident-opt applied them to the data:\n\n{fence}\n" + "\n".join(lines) + f"\n{fence}\n"
     )
 
 

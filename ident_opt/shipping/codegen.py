@@ -21,6 +21,8 @@ Constants are printed by CasADi with 17 significant digits, so they round-trip e
 
 from __future__ import annotations
 
+import re
+import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 from string import Template
@@ -228,22 +230,68 @@ EXAMPLE_GMR = """  {
   }"""
 
 
+# ---------------------------------------------------------------------------------------------- names in the README
+# Names (a URDF's joints, its path) are the user's: the README shows them, escaped, and never lets them change the
+# document. No name enters the generated C but through `adaptation.c_update.c_string` (pi_update's parameter names);
+# the CasADi sources and main.c hold none.
+
+#: What Markdown (or the HTML it allows) reads inside a line: backslash-escaped where a name enters the README's
+#: prose, so that it cannot open a link, an image, raw HTML, a code span, emphasis or a table cell. `_` is left as
+#: it is: inside a word it is plain text, and ordinary names are full of it.
+MARKDOWN_SPECIAL = frozenset("\\`*[]<>&|~!#")
+#: Unicode categories shown as a visible escape: controls (a newline would start a new Markdown block), format
+#: characters (bidirectional overrides, zero-width), surrogates, private-use and unassigned code points, line and
+#: paragraph separators.
+INVISIBLE = frozenset(("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"))
+
+
+def one_line(text: str) -> str:
+    """`text` with every `INVISIBLE` character written as a visible \\uXXXX (\\UXXXXXXXX) escape: one line of
+    text that shows what it holds."""
+    return "".join(
+        (f"\\u{ord(ch):04x}" if ord(ch) < 0x10000 else f"\\U{ord(ch):08x}")
+        if unicodedata.category(ch) in INVISIBLE
+        else ch
+        for ch in text
+    )
+
+
+def markdown_text(text: str) -> str:
+    """A user's name (or any text from the user's files) as Markdown prose that shows it literally, on the line it
+    is on: `one_line`, then each of `MARKDOWN_SPECIAL` backslash-escaped. Ordinary names pass unchanged."""
+    return "".join("\\" + ch if ch in MARKDOWN_SPECIAL else ch for ch in one_line(text))
+
+
+def markdown_code(text: str) -> str:
+    """`text` (`one_line`) as one Markdown code span, backticks included: fenced by one backtick more than its
+    longest run of them, padded with a space (which Markdown strips) where it starts or ends with one."""
+    text = one_line(text)
+    fence = "`" * (1 + max((len(run) for run in re.findall("`+", text)), default=0))
+    pad = " " if text[:1] in ("`", " ") or text[-1:] in ("`", " ") else ""
+    return f"{fence}{pad}{text}{pad}{fence}"
+
+
 def write_readme(out_dir: Path, functions: list[ca.Function], robot, name: str = NAME) -> Path:
     """The embedding README (template in `templates/README.md`) for this arm (`robot`: its joints and their
-    angle convention, `ident_opt.arm.base.Robot`) and this build's functions."""
+    angle convention, `ident_opt.arm.base.Robot`) and this build's functions. The robot's names are shown escaped
+    (`markdown_text`, `markdown_code`), its headline and angle convention on one line each."""
     rows = "\n".join(f"| `{f.name()}` | {_signature(f)} |" for f in functions)
     described = "\n".join(f"- `{f.name()}`: {DESCRIPTIONS[f.name()]}" for f in functions if f.name() in DESCRIPTIONS)
     calls = [f"`{f.name()}`" for f in functions if f.name() in ("tau_hat", "tau_hat_gmr")]
+    joints = ", ".join(markdown_text(joint) for joint in robot.joint_names)
+    convention = robot.angle_convention
+    if robot.joint_names:  # the convention's own list of the joints (a URDF arm's), escaped like the one above
+        convention = convention.replace(", ".join(robot.joint_names), joints)
     text = Template((FILES / "README.md").read_text(encoding="utf-8")).substitute(
         name=name,
         library=library_name(name),
         cflags=" ".join(CFLAGS),
         functions=rows,
         descriptions=described,
-        robot=robot.headline,
+        robot=markdown_code(robot.headline),
         n=robot.n_joints,
-        joints=", ".join(robot.joint_names),
-        convention=robot.angle_convention,
+        joints=joints,
+        convention=one_line(convention),
         example=" and ".join(calls),
     )
     path = Path(out_dir) / "README.md"

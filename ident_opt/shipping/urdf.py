@@ -40,9 +40,16 @@ def numbers(values: Iterable[float]) -> str:
 
 
 def comment(lines: Sequence[str]) -> ET.Element:
-    """An XML comment of `lines` (one per line); "--", which XML comments may not hold, is spaced apart."""
-    body = "\n".join(f"  {line}".replace("--", "- -") for line in lines)
-    return ET.Comment(f"\n{body}\n")
+    """An XML comment of `lines` (one per line); "--", which XML comments may not hold, is spaced apart until none
+    is left (a name holding "--->" cannot close the comment)."""
+
+    def spaced(text: str) -> str:
+        while "--" in text:
+            text = text.replace("--", "- -")
+        return text
+
+    body = "\n".join(spaced(f"  {line}") for line in lines)
+    return ET.Comment(f"\n{spaced(body)}\n")
 
 
 def xml_text(root: ET.Element, header: ET.Element) -> str:

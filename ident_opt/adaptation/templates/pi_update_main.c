@@ -12,6 +12,7 @@
  * allocation. */
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <time.h>
 
 #include "pi_update.h"
@@ -28,6 +29,59 @@ static double seconds_since(const struct timespec *t0, clockid_t clock) {
   struct timespec t1;
   clock_gettime(clock, &t1);
   return (t1.tv_sec - t0->tv_sec) + 1e-9 * (t1.tv_nsec - t0->tv_nsec);
+}
+
+/* The parameter names are data from the user's files (a URDF's link and joint names): printed escaped, never as
+ * they come. json_string: `s` (UTF-8) as a JSON string in plain ASCII: a quote and a backslash backslash-escaped,
+ * anything else outside printable ASCII as a u-escape of its code point (a surrogate pair beyond U+FFFF); a byte
+ * that is not UTF-8 becomes U+FFFD. */
+static void json_string(FILE *out, const char *s) {
+  const unsigned char *p = (const unsigned char *)s;
+  fputc('"', out);
+  while (*p) {
+    unsigned long c = *p++;
+    int more = 0;
+    if (c >= 0xF0 && c <= 0xF4)
+      more = 3, c &= 0x07;
+    else if (c >= 0xE0 && c <= 0xEF)
+      more = 2, c &= 0x0F;
+    else if (c >= 0xC2 && c <= 0xDF)
+      more = 1, c &= 0x1F;
+    else if (c >= 0x80)
+      c = 0xFFFD;
+    for (; more > 0; --more) {
+      if ((*p & 0xC0) != 0x80) {
+        c = 0xFFFD;
+        break;
+      }
+      c = (c << 6) | (*p++ & 0x3F);
+    }
+    if (c > 0x10FFFF) c = 0xFFFD;
+    if (c == '"' || c == '\\')
+      fprintf(out, "\\%c", (int)c);
+    else if (c >= 0x20 && c < 0x7F)
+      fputc((int)c, out);
+    else if (c < 0x10000)
+      fprintf(out, "\\u%04lx", c);
+    else
+      fprintf(out, "\\u%04lx\\u%04lx", 0xD800 + ((c - 0x10000) >> 10), 0xDC00 + ((c - 0x10000) & 0x3FF));
+  }
+  fputc('"', out);
+}
+
+/* `s` as one CSV field (RFC 4180): as it is unless it holds a comma, a quote or a line break, else quoted with its
+ * quotes doubled. */
+static void csv_field(FILE *out, const char *s) {
+  if (!strpbrk(s, ",\"\r\n")) {
+    fputs(s, out);
+    return;
+  }
+  fputc('"', out);
+  for (; *s; ++s) {
+    if (*s == '"') fputc('"', out);
+    fputc(*s, out);
+  }
+  fputc('"', out);
 }
 
 /* ns per call of the regressor alone over the rows (what pi_update spends before the update proper). */
@@ -97,7 +151,10 @@ int main(int argc, char **argv) {
       perror(argv[2]);
       return 2;
     }
-    for (int p = 0; p < PI_UPDATE_P; ++p) fprintf(out, "%s%s", PI_UPDATE_NAMES[p], p + 1 < PI_UPDATE_P ? "," : "\n");
+    for (int p = 0; p < PI_UPDATE_P; ++p) {
+      csv_field(out, PI_UPDATE_NAMES[p]);
+      fputs(p + 1 < PI_UPDATE_P ? "," : "\n", out);
+    }
     for (long k = 0; k < n; ++k)
       for (int p = 0; p < PI_UPDATE_P; ++p) fprintf(out, "%.17g%s", thetas[k][p], p + 1 < PI_UPDATE_P ? "," : "\n");
     fclose(out);
@@ -105,7 +162,9 @@ int main(int argc, char **argv) {
   printf("{\"samples\": %ld, \"updates\": %ld, \"failed\": %ld, \"ns_per_update\": %.1f, \"cpu_ns_per_update\": "
          "%.1f, \"ns_regressor\": %.1f, \"parameters\": {",
          n, n - failed, failed, ns, cpu_ns, ns_regressor);
-  for (int p = 0; p < PI_UPDATE_P; ++p)
-    printf("\"%s\": %.17g%s", PI_UPDATE_NAMES[p], s.theta[p], p + 1 < PI_UPDATE_P ? ", " : "}}\n");
+  for (int p = 0; p < PI_UPDATE_P; ++p) {
+    json_string(stdout, PI_UPDATE_NAMES[p]);
+    printf(": %.17g%s", s.theta[p], p + 1 < PI_UPDATE_P ? ", " : "}}\n");
+  }
   return failed ? 1 : 0;
 }
