@@ -2,14 +2,16 @@
 
 `generate_sources` writes CasADi's generated C, `compile_library` builds a shared library from it with the
 machine's compiler (`find_compiler`: $CC, else cc, gcc or clang; an `InputError` when there is none), and
-`load_external` loads a function of it back as a `casadi.Function`. `CompiledRows` maps one such function over
-many samples at once (the n-joint regressor). Code generation proper (what is generated, READMEs, checks) is
-`ident_opt.shipping.codegen`.
+`load_external` loads a function of it back as a `casadi.Function`. `cached_function` compiles a function once per
+machine and user into the private code cache (`ident_opt.cache.CodeCache`: only libraries this tool built and
+signed are read back from it) and loads it; `CompiledRows` maps one such function over many samples at once (the
+n-joint regressor). Code generation proper (what is generated, READMEs, checks) is `ident_opt.shipping.codegen`.
 """
 
 from __future__ import annotations
 
 import hashlib
+import itertools
 import os
 import shlex
 import shutil
@@ -22,6 +24,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ident_opt.cache import CodeCache, scratch
 from ident_opt.errors import InputError
 
 #: The default base name of generated files: <NAME>.c, <NAME>.h and lib<NAME>.so (.dylib on macOS).
@@ -101,24 +104,45 @@ def load_external(lib: Path, fname: str) -> ca.Function:
     return ca.external(fname, str(Path(lib).resolve()))
 
 
-def cached_library(function: ca.Function, folder: Path, build: bool = True) -> Path | None:
-    """The shared library of `function`'s generated C, cached in `folder` under the hash of its source, so a
-    machine compiles each function once; written under a temporary name and renamed, so parallel processes never
-    load a half-written file. With `build=False`, None when it is not cached yet (nothing compiled)."""
+def cached_function(function: ca.Function, kind: str, build: bool = True) -> ca.Function | None:
+    """`function` as generated C compiled into a shared library and loaded back: from the code cache's folder
+    `kind` (`CodeCache`) when this tool built it there before (its key: a hash of the C source and `CFLAGS`), else
+    compiled now and kept there, so a machine compiles each function once. With `build=False`, None when it is not
+    cached yet (nothing compiled). A library in the cache without a valid record (planted, tampered) is never
+    loaded: it is compiled anew and replaced."""
     name = function.name()
     with tempfile.TemporaryDirectory() as tmp:
         source, _ = generate_sources([function], Path(tmp), name)
         key = hashlib.sha256(source.read_bytes() + " ".join(CFLAGS).encode()).hexdigest()[:16]
-        lib = Path(folder) / library_name(f"{name}_{key}")
-        if not lib.is_file():
-            if not build:
-                return None
-            built = compile_library(source, Path(tmp), name=name)
-            lib.parent.mkdir(parents=True, exist_ok=True)
-            partial = lib.with_name(f"{lib.name}.{os.getpid()}.part")
-            partial.write_bytes(built.read_bytes())
-            os.replace(partial, lib)
-    return lib
+        lib = library_name(f"{name}_{key}")
+        with CodeCache(kind) as cache:
+            data = cache.read(lib)
+            if data is None:
+                if not build:
+                    return None
+                data = compile_library(source, Path(tmp), name=name).read_bytes()
+                try:
+                    cache.write(lib, data)
+                except OSError:
+                    pass  # a full or read-only cache: this run still uses what it built
+    return load_bytes(data, lib, name)
+
+
+_loads = itertools.count()
+
+
+def load_bytes(data: bytes, lib: str, fname: str) -> ca.Function:
+    """The entry point `fname` of the library whose bytes are `data` (checked or just built), as a CasADi Function.
+    The bytes are written to a new file of this process's private folder (`cache.scratch`, mode 0700), loaded from
+    there and the file removed: what is loaded is what was checked, whatever happens to the cache meanwhile."""
+    path = scratch() / f"{os.getpid()}-{next(_loads)}-{lib}"
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o600)
+    try:
+        with open(fd, "wb", closefd=True) as fh:
+            fh.write(data)
+        return ca.external(fname, str(path))
+    finally:
+        path.unlink(missing_ok=True)
 
 
 #: Samples per call of the compiled regressor: its input and output buffers (~4 kB a sample) stay cache-sized.
@@ -130,16 +154,13 @@ class CompiledRows:
     library and mapped over `chunk` samples: `rows(X)` for X (N, k) gives (N, c, r), i.e. each sample's output
     transposed, read through CasADi's buffers (no copies into CasADi matrices, which cost more than the C).
 
-    The library is cached in `folder` under the hash of its source, so a machine compiles each model once;
-    it is written under a temporary name and renamed, so parallel processes never load a half-written file."""
+    The library is compiled once per machine and user into the code cache's folder `kind` (`cached_function`)."""
 
-    def __init__(self, function: ca.Function, folder: Path, chunk: int = REGRESSOR_CHUNK):
+    def __init__(self, function: ca.Function, kind: str, chunk: int = REGRESSOR_CHUNK):
         self.n_in = function.size1_in(0)
         self.shape = (function.size2_out(0), function.size1_out(0))
         self.chunk = chunk
-        name = function.name()
-        lib = cached_library(function, folder)
-        self.mapped = load_external(lib, name).map(chunk, "serial")
+        self.mapped = cached_function(function, kind).map(chunk, "serial")
         self._buffer, self._run = self.mapped.buffer()
         self._x = np.zeros((chunk, self.n_in))  # the last, partial chunk goes through these
         self._y = np.empty((chunk, *self.shape))

@@ -42,7 +42,6 @@ import pinocchio as pin
 from ident_opt.arm.base import casadi_function, symbol_table
 from ident_opt.arm.rnea import N_LINK, ChainJoint, rnea
 from ident_opt.arm.urdf import chain_model, check_chain, parse_urdf
-from ident_opt.cache import cache_root
 from ident_opt.cbuild import CompiledRows
 from ident_opt.errors import InputError
 from ident_opt.parameters import Parameter
@@ -280,7 +279,7 @@ class ChainArm:
         # Yᵀ, dense: CasADi writes column-major, so each sample's block is Y (n, P) row-major, as NumPy reads it
         rows = ca.Function("urdf_regressor", [ca.vertcat(q, dq, ddq)], [ca.densify(Y).T])
         try:
-            return CompiledRows(rows, cache_root(Path(self.urdf)) / "regressor")
+            return CompiledRows(rows, "regressor")
         except (InputError, OSError):
             return None
 

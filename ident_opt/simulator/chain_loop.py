@@ -14,7 +14,7 @@ hundredths of the torque noise (tests/test_simulate_arm.py).
 
 Speed: one tick is one CasADi function of (x, ref, p, band), its RK4 step looped (`rk4`), not unrolled;
 `mapaccum` runs `closed_loop.CHUNK` ticks per call. For a long trial it is generated as C, compiled once per
-machine and arm structure (`cbuild.cached_library`, in the URDF project's cache; seconds of gcc) and loaded back: a
+machine and arm structure (`cbuild.cached_function`, in the user's code cache; seconds of gcc) and loaded back: a
 7-joint arm's 60 s at 1 kHz then takes about a second clean, 4–10 s with every effect (benchmarks/bench_simulate.py).
 Short trials, or a machine without a C compiler, run CasADi's own virtual machine.
 """
@@ -23,13 +23,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from ident_opt.cache import cache_root
-from ident_opt.cbuild import cached_library, load_external
+from ident_opt.cbuild import cached_function
 from ident_opt.errors import InputError
 from ident_opt.simulator.chain_dynamics import initial_state, plant_function, state_size
 from ident_opt.simulator.chain_plant import ArmPlant, centre, mass_matrix
@@ -157,15 +155,13 @@ def tick(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> tupl
 
 def chunked(step: ca.Function, plant: ArmPlant, ticks: int) -> ca.Function:
     """`step` accumulated over `CHUNK` ticks, compiled to C when the trial is long or it is compiled already
-    (cached per machine, `cbuild.cached_library`); CasADi's virtual machine otherwise, or without a compiler."""
+    (cached per machine, `cbuild.cached_function`); CasADi's virtual machine otherwise, or without a compiler."""
     accumulated = step.mapaccum(CHUNK)
-    urdf = getattr(plant.robot, "urdf", None)
-    folder = cache_root(Path(urdf) if urdf else Path.cwd() / "x") / "simulate"
     try:
-        lib = cached_library(accumulated, folder, build=ticks >= COMPILE_TICKS)
+        compiled = cached_function(accumulated, "simulate", build=ticks >= COMPILE_TICKS)
     except (InputError, OSError):
-        lib = None
-    return load_external(lib, accumulated.name()) if lib is not None else accumulated
+        compiled = None
+    return accumulated if compiled is None else compiled
 
 
 def follow(

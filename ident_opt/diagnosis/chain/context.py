@@ -5,7 +5,6 @@ the views and columns the candidates share (remembered per data view)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -13,7 +12,6 @@ from scipy import sparse
 from scipy.signal import butter, filtfilt
 
 from ident_opt.arm.base import Arm, Robot
-from ident_opt.cache import cache_root
 from ident_opt.cbuild import CompiledRows
 from ident_opt.data.dataset import Dataset
 from ident_opt.effects.families import (
@@ -342,9 +340,8 @@ class ArmContext:
             q, dq, ddq, pi = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n), ca.SX.sym("pi", P)
             J = ca.jacobian(self.arm.tau_expression(q, dq, ddq, pi), q)
             fn = ca.Function("torque_jacobian", [ca.vertcat(q, dq, ddq, pi)], [ca.densify(J).T])
-            urdf = getattr(self.robot, "urdf", None)
             try:
-                compiled = CompiledRows(fn, cache_root(Path(urdf) if urdf else Path.cwd() / "x") / "diagnosis")
+                compiled = CompiledRows(fn, "diagnosis")
             except (InputError, OSError):
                 compiled = None
             self._cache["dtau_dq"] = compiled or (lambda X, fn=fn: _mapped(fn, X))
