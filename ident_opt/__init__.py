@@ -60,7 +60,7 @@ _EXPORTS = {
     "codegen": ("ident_opt.shipping.generate", "generate"),
     # a fleet: every robot every day, and what changed (Dask)
     "run_fleet": ("ident_opt.fleet.run", "run_fleet"),
-    "FleetResult": ("ident_opt.fleet.run", "FleetResult"),
+    "FleetResult": ("ident_opt.fleet.result", "FleetResult"),
     "simulate_fleet": ("ident_opt.fleet.simulated", "simulate_fleet"),
     # the paper's own view of its robot
     "audit": ("ident_opt.paper.audit", "audit"),

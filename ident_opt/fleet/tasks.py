@@ -50,9 +50,9 @@ from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.fitting import estimators, recommend
 from ident_opt.fitting.base import BaseParameters, base_parameters, fit_base_ols, fit_least_squares
-from ident_opt.fitting.fit import solve_normal
 from ident_opt.fitting.iv import InstrumentStats
 from ident_opt.fitting.stats import Stats
+from ident_opt.fleet.causes import Block, cause_gains
 from ident_opt.fleet.layout import LINK, FleetFile, linked
 from ident_opt.problem import load_problem
 from ident_opt.warnings import ResultWarning
@@ -73,11 +73,6 @@ class Job:
     allow_implausible: bool = False
     drop_invalid: bool = False
     estimator: str | None = None
-
-
-#: A block of a cause's columns: directions in π (P, m), or "pi0" (the baseline π0 itself), and the joints (rows of
-#: Y, a bool mask) they act on.
-Block = tuple[np.ndarray | str, np.ndarray]
 
 
 @dataclass(frozen=True, eq=False)
@@ -371,7 +366,7 @@ def baseline(job: Job, *days: DayStats, count: int | None = None) -> Baseline | 
     weights = 1.0 / np.maximum(variance, floor)
     null: dict[str, float] = {}
     for stats, pi in zip(read, others):
-        for key, gain in _gains(s, stats, pi, weights)[0].items():
+        for key, gain in cause_gains(s.causes, stats, pi, weights)[0].items():
             null[key] = null.get(key, 0.0) + gain / n
     used = [d.day for d in days if d.stats is not None][: len(read)]
     return Baseline(days[0].robot, fit.pi, weights, null, used)
@@ -417,38 +412,6 @@ class Evidence:
     cpu: float = 0.0  # the pooled files' tasks and its own [s]
 
 
-def _columns(blocks: list[Block], pi0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A cause's columns: directions A (P, m), π0 for "pi0", and the joints each acts on, (m, n) bool."""
-    directions, rows = [], []
-    for A, joints in blocks:
-        A = pi0[:, None] if isinstance(A, str) else A
-        directions.append(A)
-        rows += [joints] * A.shape[1]
-    return np.hstack(directions), np.array(rows, dtype=float)
-
-
-def _gains(s: Setup, S: Stats, pi0: np.ndarray, w: np.ndarray) -> tuple[dict[str, float], np.ndarray, dict]:
-    """(gains, drive factors k_j, friction growths) of every cause on statistics S against π0 with weights w."""
-    residual = S.b - np.einsum("jpr,r->jp", S.G, pi0)  # b_j − G_j π0
-    gains, growth, scale = {}, {}, np.ones(S.n_joints)
-    for key, blocks in s.causes.items():
-        A, rows = _columns(blocks, pi0)
-        H, h = np.zeros((A.shape[1], A.shape[1])), np.zeros(A.shape[1])
-        for j in range(S.n_joints):
-            Aj = A * rows[:, j]  # the columns acting on joint j
-            H += w[j] * (Aj.T @ S.G[j] @ Aj)
-            h += w[j] * (Aj.T @ residual[j])
-        delta = solve_normal(H, h)
-        gains[key] = float(delta @ h)
-        cause, _, joint = key.partition(":")
-        if cause == "drive":
-            scale[int(joint) - 1] = 1.0 + delta[0]
-        elif cause == "wear":
-            f = A.T @ pi0
-            growth[key] = float(delta @ f / max(f @ f, 1e-300))
-    return gains, scale, growth
-
-
 def evidence(job: Job, day: DayStats, base: Baseline | None) -> Evidence | None:
     """The pooled days' `Evidence` against the robot's baseline (module doc); None without statistics or baseline."""
     if day.stats is None or base is None:
@@ -456,7 +419,7 @@ def evidence(job: Job, day: DayStats, base: Baseline | None) -> Evidence | None:
     start = time.thread_time()
     s = setup(job.problem)
     S = day.stats
-    gains, scale, growth = _gains(s, S, base.pi, base.weights)
+    gains, scale, growth = cause_gains(s.causes, S, base.pi, base.weights)
     null = {key: rate * S.n for key, rate in base.null.items()}
     cpu = day.cpu + time.thread_time() - start
     return Evidence(day.robot, day.day, float(base.weights @ S.rss(base.pi)), gains, null, scale, growth, cpu)

@@ -14,7 +14,7 @@ import pandas as pd
 
 from ident_opt import outputs
 from ident_opt.fleet.changes import BAND_Z, DAY_Z, RUN_DAYS, WINDOW_Z
-from ident_opt.fleet.run import FleetResult, RobotResult
+from ident_opt.fleet.result import FleetResult, RobotResult
 from ident_opt.report import record, write_json
 from ident_opt.report.figures import daily_figure
 from ident_opt.report.tables import markdown_table, write_table
