@@ -1,6 +1,6 @@
 """The package's sizes, as the refactors measure them: the largest modules and every function over 60 lines.
 
-    python benchmarks/sizes.py [--limit 60] [--top 5]
+python benchmarks/sizes.py [--limit 60] [--top 5]
 """
 
 from __future__ import annotations
