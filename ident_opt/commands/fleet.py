@@ -17,7 +17,9 @@ listed as skipped, and nothing outside ROOT is read.
 
 Without --scheduler: a local cluster of --workers processes (default: the cores). With --scheduler tcp://host:8786:
 an existing cluster (`dask scheduler`, `dask worker`), whose workers need ident-opt and the problem file and logs
-at the same paths; a scheduler that does not answer within --connect-timeout (10 s) is an error (exit 2).
+at the same paths; a scheduler that does not answer within --connect-timeout (10 s), or an address where something
+else listens (a web server), is an error (exit 2). Ctrl-C or SIGTERM to the process group ends the run in one line
+(status 130 or 143), the local cluster's workers closed (`fleet.interrupts`).
 
 Writes to --out (default: the problem's [output] dir, else results/): fleet.md, fleet_changes.csv,
 fleet_series.csv and .parquet, figures/fleet_<robot>.png; with --json the result of `docs/cli.md` (fleet).

@@ -9,6 +9,8 @@ and those add up. The modules, in the order a run uses them:
 | `tasks`     | what runs on a worker: a file's statistics (the loader every command uses), a day's fit, a      |
 |             | robot's baseline model and each day's evidence for the named causes; samples never leave it     |
 | `engine`    | the Dask client (a local cluster, or an existing scheduler) and the task graph with its progress |
+| `interrupts`| Ctrl-C and SIGTERM during a run: the workers ignore them, the client takes them between Dask's   |
+|             | calls, closes the cluster and kills what is left                                                |
 | `changes`   | per robot: the baseline, the test that separates a change from day-to-day scatter, its cause    |
 | `simulated` | a simulated fleet with hidden changes, for tests and the benchmark (`python -m ...simulated`)   |
 

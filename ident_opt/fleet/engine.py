@@ -2,9 +2,13 @@
 default) or on an existing scheduler, and a runner that submits the task graph robot by robot and gathers only the
 small results, with a progress bar over the tasks.
 
-A scheduler that does not answer within `CONNECT_TIMEOUT_S`, one without workers, or workers that cannot run
-ident-opt on the problem (not installed, the problem file not at the same path) are `InputError`s naming the
-address: exit 2, in bounded time.
+A scheduler that does not answer within `CONNECT_TIMEOUT_S`, an address that answers but does not speak Dask's
+protocol (a web server: Dask's own handshake would wait for it forever, so the address is probed first with a
+bounded one, `_probe`), one without workers, or workers that cannot run ident-opt on the problem (not installed, the
+problem file not at the same path) are `InputError`s naming the address: exit 2, in bounded time.
+
+Ctrl-C or SIGTERM to the process group ends a run in one line, its workers closed (`fleet.interrupts`): the local
+cluster's worker processes ignore both signals, and the client takes them between Dask's calls.
 
 The runner keeps at most a window of robots in flight: each robot's futures are released as they complete (the
 scheduler keeps a task's input until its dependents ran), so what the cluster holds at once is bounded by the window,
@@ -13,20 +17,34 @@ whatever the fleet's size, and the client holds only the results it gathers (fit
 
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
+import contextlib
 import logging
+import multiprocessing
 import os
 import sys
+import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
 from distributed import Client, LocalCluster, as_completed
+from distributed.comm import connect
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from ident_opt.errors import InputError
+from ident_opt.fleet import interrupts
 
 #: How long to wait for a scheduler to answer, and for it to have a worker [s].
 CONNECT_TIMEOUT_S = 10.0
+#: The local cluster's worker processes: at most this long [s] with signals ignored while they are spawned, and
+#: this long for them all to start.
+SPAWN_S, START_S = 30.0, 300.0
+#: An interrupted run's cluster is given this long to close [s], then its worker processes are killed.
+CLOSE_S = 15.0
+#: How often the runner looks for a signal while it waits for a task [s].
+POLL_S = 0.02
 #: Robots in flight per worker (at least `MIN_WINDOW`).
 WINDOW_PER_WORKER, MIN_WINDOW = 2, 4
 
@@ -53,30 +71,32 @@ class Engine:
         self.client = None
         self.cluster = None
         self.blas = None
+        self.spawned: list[multiprocessing.Process] = []  # the worker processes started with signals ignored
+        self.signals = interrupts.Deferred()
 
     def __enter__(self) -> Engine:
+        self.signals.__enter__()
+        try:
+            self._start()
+            self.signals.deliver()  # one that came while the cluster started
+        except BaseException as exc:  # `__exit__` does not run when `__enter__` fails
+            self.__exit__(type(exc), exc, exc.__traceback__)
+            raise
+        return self
+
+    def _start(self) -> None:
+        """The client, on the local cluster or the scheduler (class doc)."""
         if self.scheduler is None:
             workers = self.requested or os.cpu_count() or 1
             if not self.processes:  # as Dask's worker processes run: one BLAS thread each (many threads thrash)
                 self.blas = threadpool_limits(limits=1)
-            self.cluster = LocalCluster(
-                n_workers=workers,
-                threads_per_worker=1,
-                processes=self.processes,
-                dashboard_address=None,
-                silence_logs=logging.ERROR,
-            )
-            self.client = Client(self.cluster)
-            return self
+            self._start_local(workers)
+            return
+        _probe(self.scheduler, self.timeout)
         try:
             self.client = Client(self.scheduler, timeout=f"{self.timeout}s")
         except (OSError, TimeoutError, ValueError, TypeError) as exc:
-            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise InputError(
-                f"--scheduler {self.scheduler}: no Dask scheduler answered within {self.timeout:g} s ({first}); "
-                "start one (`dask scheduler`) and its workers (`dask worker ADDRESS`), or leave --scheduler out for "
-                "a local cluster"
-            ) from None
+            raise InputError(_no_scheduler(self.scheduler, self.timeout, _first_line(exc))) from None
         try:
             self.client.wait_for_workers(1, timeout=self.timeout)
         except (TimeoutError, OSError):
@@ -85,22 +105,76 @@ class Engine:
                 f"--scheduler {self.scheduler}: the scheduler has no workers after {self.timeout:g} s; start some "
                 f"(`dask worker {self.scheduler}`)"
             ) from None
-        return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def _start_local(self, workers: int) -> None:
+        """The local cluster of `workers` processes (or threads) and its client. The worker processes ignore SIGINT
+        and SIGTERM (`fleet.interrupts`): this process ignores them while it spawns them (a fraction of a second),
+        not while they start (seconds, the scheduler started first), so that a signal then still reaches it. The
+        scheduler's web server takes a free port (8787 taken by another cluster is a warning otherwise)."""
+        if not self.processes:
+            self.cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=False,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+            )
+            self.client = Client(self.cluster)
+            return
+        self.cluster = LocalCluster(
+            n_workers=0,
+            threads_per_worker=1,
+            processes=True,
+            memory_limit=1.0 / workers,  # each worker's share of the memory, as LocalCluster(n_workers=...) gives
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+        )
+        before = set(multiprocessing.active_children())
+        with interrupts.ignored():
+            self.cluster.scale(workers)
+            deadline = time.monotonic() + SPAWN_S
+            while len(self.spawned) < workers and time.monotonic() < deadline:  # else: waiting for them says so
+                time.sleep(0.01)
+                self.spawned = [p for p in multiprocessing.active_children() if p not in before]
+        self.client = Client(self.cluster)
+        try:
+            self.client.wait_for_workers(workers, timeout=START_S)
+        except TimeoutError:
+            raise RuntimeError(
+                f"the local cluster's {workers} worker processes did not start within {START_S:g} s"
+            ) from None
 
-    def close(self) -> None:
-        """Close the client and the local cluster (an existing scheduler and its workers are left running)."""
-        if self.client is not None:
-            self.client.close()
-            self.client = None
-        if self.cluster is not None:
-            self.cluster.close()
-            self.cluster = None
-        if self.blas is not None:
-            self.blas.restore_original_limits()
-            self.blas = None
+    def __exit__(self, kind, value, traceback) -> None:
+        try:
+            if kind is not None and issubclass(kind, KeyboardInterrupt):
+                # interrupted (Ctrl-C, SIGTERM): the cluster is closed mid-work; Dask's logs and errors about what
+                # it drops are not news (the command says it was interrupted, in one line)
+                with interrupts.quiet():
+                    self.close(interrupted=True)
+            else:
+                self.close()
+        finally:
+            self.signals.__exit__(kind, value, traceback)
+
+    def close(self, interrupted: bool = False) -> None:
+        """Close the client and the local cluster (an existing scheduler and its workers are left running); the
+        worker processes that ignore signals are then ended whatever happened (`interrupts.end`). `interrupted`: the
+        run is abandoned, the cluster is given `CLOSE_S` to close and its errors are dropped."""
+        try:
+            if self.client is not None:
+                client, self.client = self.client, None
+                _closing(client.close, interrupted)
+            if self.cluster is not None:
+                cluster, self.cluster = self.cluster, None
+                _closing(lambda: cluster.close(timeout=CLOSE_S if interrupted else None), interrupted)
+        finally:
+            interrupts.end(self.spawned)
+            self.spawned = []
+            if self.blas is not None:
+                self.blas.restore_original_limits()
+                self.blas = None
 
     @property
     def workers(self) -> int:
@@ -117,7 +191,7 @@ class Engine:
         up before the timed work): an `InputError` there (the problem not found on a worker) or a worker that cannot
         run ident-opt at all is an InputError naming the scheduler, before any work. {worker: result}."""
         try:
-            return self.client.run(task, *args)
+            answers = self.client.run(task, *args)
         except InputError as exc:
             raise InputError(f"a worker of {self.address} cannot load the problem: {exc}") from None
         except Exception as exc:  # whatever stops a worker, said with the address
@@ -125,6 +199,8 @@ class Engine:
                 f"a worker of {self.address} cannot run ident-opt ({type(exc).__name__}: {exc}); the workers need "
                 "ident-opt installed and the problem file and logs at the same paths"
             ) from None
+        self.signals.deliver()
+        return answers
 
     def run(self, units: Iterable, submit: Submit, total: int, progress: bool, desc: str) -> list:
         """Submit each unit's tasks (`submit(client, unit)`), a window of units at a time, and return the results of
@@ -156,7 +232,12 @@ class Engine:
             count += 1
         results = []
         with tqdm(total=total, desc=desc, unit="task", file=sys.stderr, disable=not progress, leave=False) as bar:
-            for future in live:
+            while not live.is_empty():
+                if not live.has_ready():  # waiting: the moment to take a signal (`fleet.interrupts`)
+                    self.signals.deliver()
+                    time.sleep(POLL_S)
+                    continue
+                future = next(live)
                 if future.key in gathered:
                     results.append(future.result())
                 bar.update(1)
@@ -165,3 +246,63 @@ class Engine:
                 if outstanding[index] == 0 and start(count):
                     count += 1
         return results
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+def _first_line(exc: BaseException) -> str:
+    """An exception's first line, or its type's name when it has no message."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _no_scheduler(address: str, timeout: float, why: str) -> str:
+    """The one-line message of an address where no Dask scheduler answered."""
+    return (
+        f"--scheduler {address}: no Dask scheduler answered within {timeout:g} s ({why}); start one (`dask "
+        "scheduler`) and its workers (`dask worker ADDRESS`), or leave --scheduler out for a local cluster"
+    )
+
+
+async def _identity(address: str, timeout: float) -> dict:
+    """Dask's handshake with `address` and its answer to "identity", each bounded by `timeout` [s] (Dask's own
+    `connect` waits for the peer's handshake without a limit)."""
+    comm = await asyncio.wait_for(connect(address, timeout=timeout), timeout)
+    try:
+        await comm.write({"op": "identity"})
+        return await asyncio.wait_for(comm.read(), timeout)
+    finally:
+        comm.abort()
+
+
+def _probe(address: str, timeout: float) -> None:
+    """Check that a Dask scheduler answers at `address` within about `timeout` [s] (module doc), in a thread of
+    its own (the caller may be running an event loop); an InputError naming the address otherwise."""
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        try:
+            answer = pool.submit(asyncio.run, _identity(address, timeout)).result()
+        except TimeoutError:
+            raise InputError(
+                _no_scheduler(address, timeout, "something listens there but does not speak Dask's protocol")
+            ) from None
+        except OSError as exc:  # nothing listens, or the connection was refused or closed
+            raise InputError(_no_scheduler(address, timeout, _first_line(exc))) from None
+        except Exception as exc:  # a malformed address, or a peer whose bytes are not Dask's messages
+            raise InputError(
+                _no_scheduler(address, timeout, f"not Dask's protocol: {type(exc).__name__}: {_first_line(exc)}")
+            ) from None
+    kind = answer.get("type") if isinstance(answer, dict) else None
+    if kind != "Scheduler":
+        raise InputError(
+            f"--scheduler {address}: a Dask {kind or 'peer'} answered, not a scheduler; give the scheduler's "
+            "address (`dask scheduler` prints it)"
+        )
+
+
+def _closing(close: Callable[[], Any], interrupted: bool) -> None:
+    """Call `close`; when the run was `interrupted`, whatever it raises is dropped (the worker processes are ended
+    after, whatever Dask did: `interrupts.end`)."""
+    if not interrupted:
+        close()
+        return
+    with contextlib.suppress(Exception):
+        close()

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt.arguments import range_of
+from ident_opt.errors import InputError, excerpt
 from ident_opt.fitting.recommend import choose
 from ident_opt.fleet import changes, layout, tasks
 from ident_opt.fleet.engine import CONNECT_TIMEOUT_S, Engine
@@ -31,6 +33,8 @@ from ident_opt.warnings import ResultWarning
 
 #: The engine every run names in its JSON.
 ENGINE = "dask.distributed"
+#: The arguments of `run_fleet` that are counts (the others are numbers).
+INTEGERS = ("baseline_days", "workers")
 #: The baseline model may look this many days past the baseline for days with statistics (unreadable days).
 SPARE_DAYS = 3
 
@@ -55,6 +59,7 @@ def run_fleet(
     (None: a local cluster of `workers` processes, or threads with `processes` False), which must answer within
     `connect_timeout` [s]. `estimator`: the fit every robot-day gets (None: each robot's recommended fit)."""
     start = time.perf_counter()
+    _check_numbers(baseline_days=baseline_days, workers=workers, connect_timeout=connect_timeout)
     problem_path, setup = _load(problem, estimator)
     problem = setup.problem
     found = layout.discover(logs)
@@ -65,6 +70,7 @@ def run_fleet(
         baselines = {b.robot: b for b in gathered if isinstance(b, tasks.Baseline)}
         choices = {c.robot: c for c in gathered if isinstance(c, tasks.RobotChoice)}
         robots, skipped, warnings = _series(gathered, setup, found)
+        choices = {name: c for name, c in choices.items() if name in robots}  # a robot left out has no fit to name
         warnings += _choice_warnings(choices)
         onsets = _test(robots, baseline_days, warnings)
         units = _change_units(found, robots, onsets, baselines, choices)
@@ -94,6 +100,26 @@ def run_fleet(
         fleet=fleet,
         warnings=found.warnings + warnings,
     )
+
+
+def _check_numbers(**values: float | None) -> None:
+    """At the door: each number in the range its command-line flag accepts (`arguments.RANGES`: the API takes no
+    value the command would refuse), an integer where the flag's is; None passes (the default). An InputError
+    naming the argument otherwise."""
+    for name, value in values.items():
+        if value is None and name == "workers":
+            continue
+        low, high = range_of("fleet", name)
+        integer = name in INTEGERS
+        kinds = (int, np.integer) if integer else (int, float, np.integer, np.floating)
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, kinds)
+            or not (integer or np.isfinite(value))
+            or not low <= value <= high
+        ):
+            what = "an integer" if integer else "a number"
+            raise InputError(f"run_fleet: {name} must be {what} in [{low:g}, {high:g}], got {excerpt(value)}")
 
 
 def _load(problem: Problem | str | Path, estimator: str | None) -> tuple[str, tasks.Setup]:
@@ -188,7 +214,7 @@ def _series(
 ) -> tuple[dict[str, RobotResult], list[dict], list[ResultWarning]]:
     """Phase 1's results gathered into each robot's series (fitted days only): the fit, and the tested parameters
     (the base parameters, then each joint's torque scale); the files skipped; a warning per robot with days that
-    have no fit."""
+    have no fit, and per robot left out because none of its days has one (every file unreadable)."""
     fits: dict[str, list[tasks.DayFit]] = {}
     scales: dict[tuple[str, str], tasks.Scales] = {}
     for item in gathered:
@@ -205,8 +231,12 @@ def _series(
             skipped += fit.skipped
         good = [f for f in days if f.pi is not None]
         bad = [f for f in days if f.pi is None]
+        listed = "; ".join(f"{f.day}: {', '.join(f.notes)}" for f in bad[:5]) + (" …" if len(bad) > 5 else "")
+        if not good:  # not one readable, fittable day: the robot is left out, the others answered as without it
+            sentence = f"robot {robot}: no day with a fit ({listed or 'no day'}); the robot is left out"
+            warnings.append(ResultWarning("robot_skipped", sentence))
+            continue
         if bad:
-            listed = "; ".join(f"{f.day}: {', '.join(f.notes)}" for f in bad[:5]) + (" …" if len(bad) > 5 else "")
             sentence = f"robot {robot}: {len(bad)} day(s) without a fit ({listed})"
             warnings.append(ResultWarning("unfitted_days", sentence))
         k = [(s.scale, s.se) if (s := scales.get((robot, f.day))) else missing for f in good]

@@ -3,6 +3,10 @@ day-to-day scatter, written in the fleet layout (`docs/data-format.md`), for the
 
     python -m ident_opt.fleet.simulated --problem P --out ROOT [--robots 30] [--days 20] [--seed 0] ...
 
+Every option is checked before any work, against `BOUNDS` and the size limits (`MAX_FILE_SAMPLES` per file,
+`MAX_SAMPLES` and `MAX_FILES` in all): a value outside is a usage error naming the flag (exit 2). The fleet is written
+into a temporary folder beside ROOT and renamed onto it when complete: on an error or Ctrl-C nothing is left.
+
 The plant is the problem's own identification model, τ = Y(q, dq, ddq) π (rigid inverse dynamics plus the
 joint terms), evaluated on the exact motion; the files hold what a logger gives: t, the angles with encoder noise
 and the torques with noise, so the reader estimates dq and ddq as it does on real logs. Per robot and day:
@@ -29,16 +33,20 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import os
+import shutil
 import sys
+import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from ident_opt.arguments import MAX_SEED, number
 from ident_opt.columns import columns_of
 from ident_opt.data.dataset import in_source_convention
-from ident_opt.errors import InputError
+from ident_opt.errors import InputError, excerpt
 from ident_opt.problem import load_problem
 from ident_opt.simulator.fourier import Fourier
 
@@ -55,6 +63,24 @@ RIGID_SHARE = 0.5
 TRUTH = "_truth.json"
 #: The excitation: harmonics of the Fourier series and its base frequency [Hz].
 HARMONICS, BASE_HZ = 4, 0.2
+#: Each numeric option's accepted range, both ends included (`check_spec`, and the script's flags).
+BOUNDS: dict[str, tuple[float, float]] = {
+    "robots": (1, 10_000),
+    "days": (1, 3650),
+    "files_per_day": (1, 100),
+    "seconds": (1.0, 3600.0),  # s, a file's length before its ±30 %
+    "rate_hz": (1.0, 5000.0),  # Hz, as `ident-opt simulate --rate`
+    "spread": (0.0, 0.5),
+    "temperature": (0.0, 0.5),
+    "noise": (0.0, 1.0),
+    "angle_noise": (0.0, 0.1),  # rad
+    "changed": (0.0, 1.0),
+    "baseline_days": (2, 3650),  # as `ident-opt fleet --baseline-days`
+    "seed": (0, MAX_SEED),
+}
+#: At most this many samples in one file (its longest, 1.3 × seconds × rate: the regressor a file's torques come
+#: from holds joints × parameters numbers per sample), this many in the whole fleet, and this many files.
+MAX_FILE_SAMPLES, MAX_SAMPLES, MAX_FILES = 200_000, 100_000_000, 200_000
 
 
 @dataclass(frozen=True)
@@ -105,6 +131,44 @@ class _Plant:
     friction: np.ndarray  # int (P,): the joint (1-based) of a friction term, 0 otherwise
     offset: np.ndarray  # int (P,): the joint of an offset-like term (kind "other" with a joint), 0 otherwise
     drives: np.ndarray  # the joints (1-based) a drive change may be hidden on (`RIGID_SHARE`)
+
+
+def check_spec(spec: FleetSpec) -> None:
+    """Every field of `spec` in its `BOUNDS` (an integer where the default is one), the start a date that the last
+    day still is, the causes known, and the fleet within the size limits; an InputError naming the flag."""
+    for key, (low, high) in BOUNDS.items():
+        value, integer = getattr(spec, key), isinstance(getattr(FleetSpec, key), int)
+        kinds = (int, np.integer) if integer else (int, float, np.integer, np.floating)
+        flag = "--" + key.replace("_", "-")
+        if isinstance(value, bool) or not isinstance(value, kinds) or not (np.isfinite(value) and low <= value <= high):
+            what = "an integer" if integer else "a number"
+            raise InputError(f"{flag} must be {what} in [{low:g}, {high:g}], got {excerpt(value)}")
+    try:
+        datetime.date.fromisoformat(spec.start) + datetime.timedelta(days=spec.days - 1)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(
+            f"--start must be a date (YYYY-MM-DD) whose {spec.days} days end by 9999-12-31, got {excerpt(spec.start)}"
+        ) from None
+    causes = [c.strip() for c in str(spec.causes).split(",") if c.strip()]
+    if not causes or any(c not in CAUSES for c in causes):
+        raise InputError(f"--causes must be names of {', '.join(CAUSES)}, comma-separated, got {excerpt(spec.causes)}")
+    per_file = 1.3 * spec.seconds * spec.rate_hz
+    files = spec.robots * spec.days * spec.files_per_day
+    if per_file > MAX_FILE_SAMPLES:
+        raise InputError(
+            f"--seconds {spec.seconds:g} at --rate-hz {spec.rate_hz:g}: up to {per_file:,.0f} samples in a file, "
+            f"more than {MAX_FILE_SAMPLES:,}; give fewer seconds or a lower rate"
+        )
+    if files > MAX_FILES:
+        raise InputError(
+            f"--robots {spec.robots} × --days {spec.days} × --files-per-day {spec.files_per_day}: {files:,} files, "
+            f"more than {MAX_FILES:,}"
+        )
+    if files * spec.seconds * spec.rate_hz > MAX_SAMPLES:
+        raise InputError(
+            f"--robots × --days × --files-per-day × --seconds × --rate-hz: about "
+            f"{files * spec.seconds * spec.rate_hz:,.0f} samples, more than {MAX_SAMPLES:,}; simulate a smaller fleet"
+        )
 
 
 def robot_names(count: int) -> list[str]:
@@ -207,18 +271,46 @@ def _payload_mass(problem, plant: _Plant, share: float) -> float:
 
 def simulate_fleet(problem_path: str | Path, root: str | Path, spec: FleetSpec = FleetSpec()) -> list[Hidden]:
     """Write a simulated fleet of `spec` for the problem at `problem_path` into `root` (which must be missing or
-    empty) in the fleet layout, and its ground truth into root/_truth.json; return the hidden changes."""
+    empty) in the fleet layout, and its ground truth into root/_truth.json; return the hidden changes. `spec` is
+    checked first (`check_spec`); the fleet is written into a temporary folder renamed onto `root` when complete
+    (module doc)."""
+    root = Path(root).absolute()
+    if root.exists() and not (root.is_dir() and not any(root.iterdir())):
+        raise InputError(f"--out {root}: exists and is not an empty folder; a simulated fleet goes into a new folder")
+    check_spec(spec)
     problem = load_problem(problem_path)
-    root = Path(root)
-    if root.exists() and any(root.iterdir()):
-        raise InputError(f"{root}: exists and is not empty; a simulated fleet goes into a new folder")
     rng = np.random.default_rng(spec.seed)
     plant = _plant(problem)
     names = robot_names(spec.robots)
     hidden = _hidden(names, spec, problem.robot.n_joints, plant.drives, rng)
-    truth = []
     start = datetime.date.fromisoformat(spec.start)
     days = [(start + datetime.timedelta(days=d)).isoformat() for d in range(spec.days)]
+    parent = next(p for p in root.parents if p.exists())  # the temporary folder must be on root's filesystem
+    staging = Path(tempfile.mkdtemp(prefix=f".{root.name}.", suffix=".partial", dir=parent))
+    try:
+        truth = _write_fleet(problem, plant, spec, names, days, hidden, rng, staging)
+        record = {"problem": str(problem_path), "spec": asdict(spec), "hidden": [asdict(h) for h in truth]}
+        (staging / TRUTH).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+        os.chmod(staging, 0o777 & ~_umask())  # mkdtemp's folder is private; the fleet is a folder like any other
+        root.parent.mkdir(parents=True, exist_ok=True)
+        if root.exists():
+            root.rmdir()  # empty (checked above)
+        staging.rename(root)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return truth
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _write_fleet(problem, plant: _Plant, spec: FleetSpec, names, days, hidden, rng, root: Path) -> list[Hidden]:
+    """Every robot's days' files into `root`; the hidden changes."""
+    truth = []
     for name in names:
         pi = _robot_pi(plant, spec, rng)
         change = hidden.get(name)
@@ -233,9 +325,6 @@ def simulate_fleet(problem_path: str | Path, root: str | Path, spec: FleetSpec =
             folder.mkdir(parents=True, exist_ok=True)
             for f in range(spec.files_per_day):
                 _write(_day_file(problem, plant, pi, spec, d, change, rng), folder, f, d)
-    root.mkdir(parents=True, exist_ok=True)
-    record = {"problem": str(problem_path), "spec": asdict(spec), "hidden": [asdict(h) for h in truth]}
-    (root / TRUTH).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
     return truth
 
 
@@ -290,7 +379,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", required=True, help="the fleet's root folder (missing or empty)")
     defaults = FleetSpec()
     for key, value in asdict(defaults).items():
-        parser.add_argument(f"--{key.replace('_', '-')}", type=type(value), default=value, help=f"default {value}")
+        kind = number(type(value), *BOUNDS[key]) if key in BOUNDS else type(value)  # checked while parsing
+        parser.add_argument(f"--{key.replace('_', '-')}", type=kind, default=value, help=f"default {value}")
     args = parser.parse_args(argv)
     spec = FleetSpec(**{k: getattr(args, k) for k in asdict(defaults)})
     try:

@@ -59,6 +59,10 @@ from ident_opt.warnings import ResultWarning
 
 #: A robot-day is fitted when its samples × joints reach this many times the base parameters.
 MIN_ROWS_PER_PARAMETER = 5
+#: What one file's reading or reduction may raise beyond the loader's InputError (a NaN where a spline takes none,
+#: a singular matrix, an overflow): the file's task turns it into its skip reason, as an InputError, so that one
+#: odd file never ends the run.
+UNREADABLE = (ValueError, ArithmeticError, np.linalg.LinAlgError, IndexError)
 #: A skipped file's reason, in every report, is the first line of the loader's message, cut to this many
 #: characters: a bad file's contents (a header, a cell) are shown only as far as they say what is wrong with it.
 REASON_CHARS = 300
@@ -149,7 +153,20 @@ def _read(job: Job, s: Setup, file: FleetFile) -> Dataset:
             fittable(trial)
         except InputError as exc:
             raise InputError(_reason(str(exc).replace(f"{local}: ", "", 1).replace(str(local), file.name))) from None
+        except UNREADABLE as exc:  # data the loader did not foresee: this file is skipped, not the run
+            raise InputError(_unreadable(exc, str(local), file.name)) from None
     return trial
+
+
+def _finite(stats: Stats) -> bool:
+    """Whether every number of `stats` is finite."""
+    return all(np.isfinite(a).all() for a in (stats.G, stats.b, stats.s))
+
+
+def _unreadable(exc: BaseException, local: str, name: str) -> str:
+    """The skip reason of a file whose reading or reduction failed with `exc` (not a loader's InputError)."""
+    text = str(exc).replace(local, name)
+    return _reason(f"cannot be processed ({type(exc).__name__}: {text or 'no message'})")
 
 
 def _reason(message: str) -> str:
@@ -175,7 +192,10 @@ def choose(job: Job, robot: str, *days: list[FleetFile]) -> RobotChoice:
             with contextlib.suppress(InputError):  # the file's own task says why it is skipped
                 trials.append(_read(job, s, file))
         if trials:
-            found = recommend.choose(s.problem, trials, model=s.model, command="fleet")
+            try:
+                found = recommend.choose(s.problem, trials, model=s.model, command="fleet")
+            except UNREADABLE:  # trials nothing can be judged on: the next day's (each file's task says more)
+                continue
             chosen = replace(found, evidence=None)  # the evidence (fits, trials) stays on the worker
             return RobotChoice(robot, chosen, found.warnings, files[0].day, time.thread_time() - start)
     consistent = s.robot.default_estimator
@@ -222,11 +242,16 @@ def file_stats(job: Job, file: FleetFile, choice: RobotChoice) -> FileStats:
     s = setup(job.problem)
     try:
         trial = _read(job, s, file)
+        rec = choice.choice
+        try:
+            (trial,) = rec.at_cutoff([trial])
+            stats = estimators.statistics(s.model, [trial], rec.estimator)
+            if not _finite(stats.stats if isinstance(stats, InstrumentStats) else stats):
+                raise ValueError("its statistics are not finite")  # it would poison its day's sum
+        except UNREADABLE as exc:
+            raise InputError(_unreadable(exc, file.url, file.name)) from None
     except InputError as exc:
         return FileStats(file, None, 0, str(exc), time.thread_time() - start)
-    rec = choice.choice
-    (trial,) = rec.at_cutoff([trial])
-    stats = estimators.statistics(s.model, [trial], rec.estimator)
     if isinstance(stats, InstrumentStats):
         return FileStats(file, stats.stats, trial.n, cpu=time.thread_time() - start, instruments=stats)
     return FileStats(file, stats, trial.n, cpu=time.thread_time() - start)

@@ -285,7 +285,10 @@ def daily_figure(
         ax.set_xticks(x[ticks], [days[i][5:] for i in ticks])
     for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
-    axes.flat[0].legend(fontsize=7)
+    if len(x) == 1:  # one day: a span of zero width would leave matplotlib to guess the axis
+        axes.flat[0].set_xlim(-1, 1)
+    if axes.flat[0].get_legend_handles_labels()[0]:  # no band (a robot not tested): no legend, and no warning
+        axes.flat[0].legend(fontsize=7)
     height = 2.5 * rows  # inches
     fig.suptitle(title, fontsize=11, y=1 - 0.1 / height, va="top")
     # fixed margins: tight_layout would cost a third of the figure's time, once per robot of a fleet

@@ -14,6 +14,7 @@ import pandas as pd
 
 from ident_opt import outputs
 from ident_opt.fleet.changes import BAND_Z, DAY_Z, RUN_DAYS, WINDOW_Z
+from ident_opt.fleet.layout import file_stem
 from ident_opt.fleet.result import FleetResult, RobotResult
 from ident_opt.report import record, write_json
 from ident_opt.report.figures import daily_figure
@@ -152,7 +153,7 @@ def write(result: FleetResult, out: Path, json_path: str | Path | None, command:
     figures = []
     for r in result.robots.values():
         if r.days:
-            figures.append(robot_figure(result, r, out / "figures" / f"fleet_{r.robot}.png"))
+            figures.append(robot_figure(result, r, out / "figures" / f"fleet_{file_stem(r.robot)}.png"))
         if progress is not None:
             progress()
     outputs.write_text(out / "fleet.md", markdown(result, table, command, figures, out))
