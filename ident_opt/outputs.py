@@ -13,6 +13,7 @@ Outside a run (library use) the writes are still atomic; nothing is rolled back.
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import os
@@ -26,6 +27,15 @@ from ident_opt.errors import InputError
 
 #: How deep `watch_folder` looks for files a failed run created (results/, results/figures, results/.manifest).
 WATCH_DEPTH = 2
+#: The longest file name [bytes] (NAME_MAX) and path [bytes, with its terminating NUL] (PATH_MAX) of Linux and
+#: macOS's usual file systems, when `os.pathconf` cannot say (an output folder not created yet).
+NAME_MAX, PATH_MAX = 255, 4096
+#: Bytes left free below PATH_MAX in an output folder's path for the names a command writes inside it (e.g.
+#: figures/identify_torque_joint1.png) and the temporary name each is written under first.
+FOLDER_ROOM = 128
+#: At most this many bytes of a file's own name go into the temporary and backup names beside it (`_temp_name`):
+#: ".<name>.<8 random>.tmp<suffix>" must itself stay within NAME_MAX.
+TEMP_STEM = 96
 
 
 #: Kinds of file by `stat` mode test: what a path is when it is not a regular file (`file_kind`).
@@ -71,6 +81,72 @@ def refuse_special(path: str | Path, flag: str | None = None) -> None:
         f"{label}: exists and is {kind}{link}, not a regular file; ident-opt writes outputs only as regular files "
         "and never replaces a device, pipe or socket: give another path"
     )
+
+
+def _limit(path: Path, name: str, default: int) -> int:
+    """`os.pathconf` value `name` of the nearest existing folder of `path`, else `default`."""
+    for folder in [path, *path.parents]:
+        try:
+            return int(os.pathconf(folder if str(folder) else ".", name))
+        except (OSError, ValueError):  # missing (yet), a name too long, not a folder
+            continue
+    return default
+
+
+def abbreviated(path: str | Path, keep: int = 120) -> str:
+    """A path as a message shows it on one line: a name beyond `keep` characters as its start, an ellipsis and its
+    end; a name that is not valid UTF-8 with a replacement character where the byte was (never a surrogate escape,
+    which a terminal cannot show)."""
+    text = os.fsencode(os.fspath(path)).decode("utf-8", "replace")
+    return text if len(text) <= 2 * keep else f"{text[:keep]}…{text[-keep:]}"
+
+
+def check_length(path: str | Path, flag: str | None = None, room: int = 0, reading: bool = False) -> None:
+    """InputError naming `path` (and `flag`) when no file system here can hold it: a component longer than NAME_MAX
+    bytes, or an absolute path (plus `room` bytes for names to come inside it) of PATH_MAX bytes or more. The system
+    calls would fail with ENAMETOOLONG only once the work is done (or half-written). `reading`: an input, which
+    therefore cannot exist."""
+    path = Path(path)
+    label = f"{flag} {abbreviated(path)}" if flag else abbreviated(path)
+    fix = "no file can have it, so it cannot be read" if reading else "give a shorter one"
+    name_max = _limit(path.parent, "PC_NAME_MAX", NAME_MAX)
+    for part in path.parts:
+        size = len(os.fsencode(part))
+        if size > name_max and part != path.anchor:
+            which = "its name" if part == path.name else f"its folder {abbreviated(part, 24)!r}"
+            raise InputError(
+                f"{label}: {which} is {size} bytes long, and a name may have at most {name_max} bytes (NAME_MAX) "
+                f"here: {fix}"
+            )
+    path_max = _limit(path.parent, "PC_PATH_MAX", PATH_MAX)
+    size = len(os.fsencode(os.path.abspath(path)))
+    if size + room >= path_max:
+        extra = f", and {room} more are kept for the files written inside it" if room else ""
+        raise InputError(
+            f"{label}: the path is {size} bytes long{extra}; a path must have fewer than {path_max} bytes "
+            f"(PATH_MAX) here: {fix}"
+        )
+
+
+def cannot_write(path: str | Path, exc: OSError) -> InputError:
+    """The InputError of a write of `path` that failed with `exc` (a full disk, a quota, a name too long, …): one
+    line naming the file and the reason. Whatever was written of it was removed (`atomic_path`)."""
+    reason = {
+        errno.ENOSPC: "no space left on the device",
+        errno.EDQUOT: "the disk quota is exhausted",
+        errno.EFBIG: "the file is larger than this process may write (its file size limit)",
+    }.get(exc.errno, exc.strerror or type(exc).__name__)
+    return InputError(f"{abbreviated(path)}: cannot write ({reason}); nothing of it was left behind")
+
+
+def _temp_name(path: Path, kind: str) -> tuple[str, str]:
+    """(prefix, suffix) of a temporary (`kind` "tmp") or backup ("bak") file beside `path`: its name cut to
+    `TEMP_STEM` bytes, so that the temporary name fits NAME_MAX whenever the name itself does. A temporary file
+    keeps the suffix when short (a writer may choose its format by it); a backup ends in .bak alone (a reader of
+    the folder's *.json, e.g. the reports' index, must not take it for one)."""
+    stem = os.fsdecode(os.fsencode(path.name)[:TEMP_STEM])
+    suffix = path.suffix if kind == "tmp" and len(os.fsencode(path.suffix)) <= 16 else ""
+    return f".{stem}.", f".{kind}{suffix}"
 
 
 def umask() -> int:
@@ -141,10 +217,16 @@ class Run:
         self._mkdirs(path.parent)
         backup = None
         if path.is_file():
-            fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".bak")
-            os.close(fd)
-            backup = Path(name)
-            shutil.copy2(path, backup)
+            prefix, suffix = _temp_name(path, "bak")
+            try:
+                fd, name = tempfile.mkstemp(dir=path.parent, prefix=prefix, suffix=suffix)
+                os.close(fd)
+                backup = Path(name)
+                shutil.copy2(path, backup)
+            except OSError as exc:  # a full disk: the old content cannot be kept, so it is not replaced
+                if backup is not None:
+                    backup.unlink(missing_ok=True)
+                raise cannot_write(path, exc) from None
         self.backups[key] = backup
 
     def _mkdirs(self, folder: Path) -> None:
@@ -208,7 +290,10 @@ def _files(folder: Path, depth: int = WATCH_DEPTH) -> Iterator[str]:
 
 def _inside(path: Path, folder: Path) -> bool:
     """Whether `path` is in the (existing) folder `folder` or one of its subfolders, also through links."""
-    return folder.is_dir() and same_or_inside(path, folder)
+    try:
+        return folder.is_dir() and same_or_inside(path, folder)
+    except OSError:  # a name too long to exist (a URDF's mesh, say): no folder, nothing inside it
+        return False
 
 
 def same_or_inside(path: str | Path, target: str | Path) -> bool:
@@ -268,6 +353,7 @@ def check_file_output(path: str | Path, flag: str) -> Path:
     """An output file path usable before any work: not a folder, nor a device, pipe or socket (or a link to one:
     `refuse_special`), its folder a folder (or creatable), writable."""
     path = Path(path)
+    check_length(path, flag)  # before any look-up: os.stat of such a name raises ENAMETOOLONG
     if path.is_dir():
         raise InputError(f"{flag} {path}: is a folder; give a file name")
     refuse_special(path, flag)
@@ -285,6 +371,7 @@ def check_folder_output(path: str | Path, flag: str) -> Path:
     """An output folder usable before any work: a folder or creatable, writable. Anything else already there (a
     file, a device, a pipe, a socket, or a link to one) is refused."""
     path = Path(path)
+    check_length(path, flag, room=FOLDER_ROOM)
     if path.exists() and not path.is_dir():
         kind = file_kind(path) or "a regular file"
         raise InputError(f"{flag} {path}: exists and is not a folder but {kind}; cannot use it as the output folder")
@@ -309,25 +396,34 @@ def _existing_parent(path: Path) -> Path:
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path beside `path` (same suffix) to write to; renamed onto `path` when the body returns,
-    removed whatever happens. The file gets the permissions the umask gives a new file. `write_text`,
-    `write_bytes` and the report figures write through here: a device, pipe or socket at `path` (or a link to one)
-    is refused (`refuse_special`), before the body and again just before the rename."""
+    removed whatever happens. The file gets the permissions the umask gives a new file. Every writer of ident-opt
+    writes through here (`write_text`, `write_bytes`, the tables, the figures, the simulated trials): a device, pipe
+    or socket at `path` (or a link to one) is refused (`refuse_special`), before the body and again just before the
+    rename; an OS failure while writing (a full disk, a quota, a name too long) is an InputError naming `path`
+    (`cannot_write`), the temporary file removed, so nothing is left half-written."""
     path = Path(path)
+    check_length(path)
     if path.is_dir():
         raise InputError(f"{path}: is a folder; cannot write a file there")
     refuse_special(path)
-    if _current is not None:
-        _current.before_write(path)
-    elif not path.parent.is_dir():
-        path.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=f".tmp{path.suffix}")
-    os.close(fd)
+    prefix, suffix = _temp_name(path, "tmp")
+    try:
+        if _current is not None:
+            _current.before_write(path)
+        elif not path.parent.is_dir():
+            path.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(dir=path.parent, prefix=prefix, suffix=suffix)
+        os.close(fd)
+    except OSError as exc:
+        raise cannot_write(path, exc) from None
     tmp = Path(name)
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~umask())
         refuse_special(path)  # again: the body may have run for a while
         os.replace(tmp, path)
+    except OSError as exc:  # the body's writer (savefig, to_csv, …) or the rename: ENOSPC, EDQUOT, EFBIG, EIO
+        raise cannot_write(path, exc) from None
     finally:
         tmp.unlink(missing_ok=True)
 
@@ -335,11 +431,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 def write_bytes(path: str | Path, data: bytes) -> Path:
     """`data` into `path`, atomically (`atomic_path`); an OS failure is an `InputError` naming the file."""
     path = Path(path)
-    try:
-        with atomic_path(path) as tmp:
-            tmp.write_bytes(data)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot write ({exc.strerror})") from None
+    with atomic_path(path) as tmp:  # an OS failure: `cannot_write`
+        tmp.write_bytes(data)
     return path
 
 

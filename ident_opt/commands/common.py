@@ -117,6 +117,7 @@ def load(
         problem = problem_for(args, command)
     else:
         problem.require(command)
+    check_trial_names(args)
     training, testing = api.load_trials(
         problem,
         getattr(args, "data", None),
@@ -130,6 +131,14 @@ def load(
         if trial.dropped_rows:
             print(f"note: {trial.source}: dropped {trial.dropped_rows} invalid row(s)", file=sys.stderr)
     return Loaded(problem, training, testing)
+
+
+def check_trial_names(args: argparse.Namespace) -> None:
+    """InputError naming --data / --test-data when one of their paths cannot exist (a name over NAME_MAX, a path
+    over PATH_MAX): said as such, where looking it up would raise ENAMETOOLONG."""
+    for flag in ("data", "test_data"):
+        for path in getattr(args, flag, None) or []:
+            outputs.check_length(path, "--" + flag.replace("_", "-"), reading=True)
 
 
 def output_dir(args: argparse.Namespace, problem, default: Path | None = None, indexed: bool = True) -> Path:

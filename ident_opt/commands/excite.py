@@ -8,6 +8,8 @@ smallest condition number of the column-equilibrated regressor), discriminate (T
 difference between two causes' predicted torques, --between CAUSE_A,CAUSE_B). Several random starts, the
 best kept. Writes OUT.csv (t, q, dq, ddq at the controller rate and the feed-forward torque tau_ff),
 OUT.png and OUT.json (criteria, limits' margins); `ident-opt simulate --trajectory-file OUT.csv` follows it.
+A --duration at a --rate whose samples would not fit in memory (about 200 + 140 n bytes each for n joints, at most
+half the memory available or 8 GiB; docs/cli.md) is refused before any work.
 
 Examples:
   ident-opt excite --problem problems/tudor_2dof.toml --out traj.csv --duration 20 --criterion d
@@ -22,12 +24,12 @@ import math
 from pathlib import Path
 
 from ident_opt import outputs
-from ident_opt.commands.common import add_problem_arguments, add_progress_flag, problem_for
+from ident_opt.commands.common import add_problem_arguments, add_progress_flag, check_trial_names, problem_for
 from ident_opt.data.loader import load_dataset
 from ident_opt.errors import InputError
 from ident_opt.excitation import design as excitation
 from ident_opt.excitation import proof as excitation_proof
-from ident_opt.excitation.excite import excite
+from ident_opt.excitation.excite import check_output_size, excite
 from ident_opt.report import excitation as report
 
 #: Accepted ranges of the numeric flags.
@@ -116,6 +118,8 @@ def run(args: argparse.Namespace) -> int:
     """Design (`excitation.excite`), write the CSV, figure and JSON, print a summary."""
     problem = problem_for(args, "excite")
     _check(args)
+    if args.proof is None:  # the output's memory, before any data is read or any start solved
+        check_output_size(problem.robot.n_joints, args.duration, args.rate)
     if args.proof is not None and not problem.robot.extensions:
         raise InputError(
             "--proof (its discriminating design) tells two causes of the diagnosis apart, which only an arm with "
@@ -126,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             f"{problem.path}: section [limits] is required to design an excitation (docs/problem-files.md)"
         )
+    check_trial_names(args)
     data = args.data or [str(p) for p in problem.data.trials]
     outputs.declare_inputs(data)  # the problem's own trials too: --out (declared by the CLI) is refused if one
     written = report.proof_paths(args.out)[:3] if args.proof is not None else report.paths(args.out)

@@ -23,12 +23,14 @@ from __future__ import annotations
 
 import argparse
 
+from ident_opt import outputs
 from ident_opt.commands.common import add_problem_arguments, add_switches, problem_for, write_json
 from ident_opt.effects import describe
 from ident_opt.errors import InputError
 from ident_opt.simulator import truth_path
 from ident_opt.simulator.simulate import simulate
 from ident_opt.simulator.trajectories import TRAJECTORIES
+from ident_opt.simulator.trial import check_trial_path
 
 #: The flags that override a key of the problem's [simulate] section: flag -> (key, type, metavar, help).
 OVERRIDES = {
@@ -96,6 +98,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # The names first: a wrong suffix, or a truth file beside it that cannot be written, fail before the simulation.
+    check_trial_path(args.out, "--out")
+    outputs.check_file_output(truth_path(args.out), "--out's truth file")
     problem = problem_for(args, "simulate")
     if args.trajectory and args.trajectory_file:
         raise InputError("give --trajectory or --trajectory-file, not both")

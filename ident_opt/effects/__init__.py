@@ -18,7 +18,7 @@ from collections.abc import Mapping, Sequence
 
 from ident_opt.effects.background import BACKGROUND
 from ident_opt.effects.base import Effect, discover
-from ident_opt.effects.keys import Key
+from ident_opt.effects.keys import Joints, Key, as_joints
 from ident_opt.errors import InputError
 
 #: The causes the diagnosis can name, name -> `Effect`, in catalogue order.
@@ -63,15 +63,15 @@ def _effect(name: str, where: str) -> Effect:
     return ALL_EFFECTS[name]
 
 
-def parse_effect(text: str) -> tuple[str, dict]:
+def parse_effect(text: str, joints: Joints | None = None) -> tuple[str, dict]:
     """``"elasticity:joint=2,frequency_hz=8"`` -> ``("elasticity", {"joint": 2, "frequency_hz": 8.0})``.
 
     Only the keys written are returned (defaults are filled by `normalise`); raises `InputError` on an
-    unknown effect, an unknown key or a bad value.
+    unknown effect, an unknown key or a bad value (said for the arm of `joints` when given).
     """
     name, _, body = text.strip().partition(":")
     name = name.strip()
-    return name, _effect(name, text).parse(body, text)
+    return name, _effect(name, text).parse(body, text, joints)
 
 
 def normalise(effects: Mapping[str, Mapping] | Sequence[str], coulomb: tuple[tuple, tuple]) -> dict[str, dict]:
@@ -85,7 +85,8 @@ def normalise(effects: Mapping[str, Mapping] | Sequence[str], coulomb: tuple[tup
     if isinstance(effects, Mapping):
         items = [(str(n), dict(p or {}), str(n)) for n, p in effects.items()]
     else:
-        items = [(*parse_effect(e), e) if isinstance(e, str) else _bad(e) for e in effects]
+        joints = as_joints(coulomb)
+        items = [(*parse_effect(e, joints), e) if isinstance(e, str) else _bad(e) for e in effects]
     out: dict[str, dict] = {}
     for name, params, where in items:
         effect = _effect(name, where)

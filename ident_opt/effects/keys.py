@@ -116,6 +116,25 @@ def _shape(spec: Key, joints: Joints) -> str:
     return f"one number or a list of {joints.n} (one per joint: {', '.join(joints.names[:3])}, …)"
 
 
+def _written(spec: Key, joints: Joints | None) -> str:
+    """How a value of `spec` is written in an effect string, in words: on this arm (`joints`) when it is known,
+    else for any arm (an effect of a problem's [simulate] section is read before its arm)."""
+    if spec.kind == "pair":
+        if joints is None:
+            return "one number, or a bracketed list of one number per joint ([v1,v2] on a two-joint arm)"
+        if joints.n == 2:
+            return "one number or a pair [v1,v2]"
+        return f"one number or a bracketed list of {joints.n} ([v1,…,v{joints.n}], one per joint: " + (
+            f"{', '.join(joints.names[:3])}, …)"
+        )
+    if spec.kind in ("joint", "joints"):
+        if joints is not None and joints.n == 2 and joints.names == ("joint1", "joint2"):
+            return "1 or 2" if spec.kind == "joint" else "a joint (1 or 2) or a list [1,2]"
+        one = f"a joint: 1 to {joints.n} or its name" if joints is not None else "a joint: its 1-based index or name"
+        return one if spec.kind == "joint" else f"{one}, or a list of them [2,5]"
+    return {"vector": "a vector [x,y,z]"}.get(spec.kind, "a number")
+
+
 def _show(value: object) -> str:
     if isinstance(value, tuple):
         return "[" + ",".join(f"{v:g}" for v in value) + "]"
@@ -149,8 +168,9 @@ class Syntax:
             )
         return self.keys[key]
 
-    def parse(self, body: str, text: str) -> dict:
-        """The ``key=value,...`` part of an effect string as key -> value (only the keys written)."""
+    def parse(self, body: str, text: str, joints: Joints | None = None) -> dict:
+        """The ``key=value,...`` part of an effect string as key -> value (only the keys written). `joints`: the
+        arm's, when known, so that a malformed per-joint value is told the count this arm needs."""
         params: dict[str, object] = {}
         if body.strip():
             # Split on commas that are not inside brackets, so that key=[v1,v2] stays whole.
@@ -161,10 +181,10 @@ class Syntax:
                     raise InputError(f"effect {text!r}: expected key=value, got {item.strip()!r}")
                 if key in params:
                     raise InputError(f"effect {text!r}: key {key!r} given twice")
-                params[key] = self._parse_value(text, key, value.strip())
+                params[key] = self._parse_value(text, key, value.strip(), joints)
         return params
 
-    def _parse_value(self, text: str, key: str, value: str) -> object:
+    def _parse_value(self, text: str, key: str, value: str, joints: Joints | None = None) -> object:
         spec = self.key(key, text)
         bracketed = value[1:-1] if value.startswith("[") and value.endswith("]") else None
         try:
@@ -183,9 +203,8 @@ class Syntax:
                 return value
             return float(value)
         except ValueError:
-            shape = {"pair": "[v1,v2]", "vector": "[x,y,z]", "joint": "1 or 2", "joints": "a joint or a list"}
             raise InputError(
-                f"effect {text!r}: key {key!r} of {self.name} must be {shape.get(spec.kind, 'a number')}, got {value!r}"
+                f"effect {text!r}: key {key!r} of {self.name} must be {_written(spec, joints)}, got {value!r}"
             ) from None
 
     def check(self, key: str, value: object, where: str, joints: Joints | None = None) -> object:

@@ -53,6 +53,9 @@ from ident_opt.excitation.setup import (
 
 #: IPOPT's iteration limit per start.
 MAX_ITER = 200
+#: Samples per block when the datasheet model's torques are predicted over a grid (`limit_values`): bounds the
+#: regressor's temporary memory (N × n × P doubles) to a few tens of MB whatever the duration and rate.
+PREDICT_BLOCK = 4096
 
 
 @dataclass
@@ -179,9 +182,18 @@ def information_objective(setup: Setup, criterion: str) -> Callable[[ca.MX], ca.
 # ---------------------------------------------------------------------------------------------- limits
 def limit_values(setup: Setup, x: np.ndarray, t: np.ndarray) -> dict[str, np.ndarray]:
     """q, dq, ddq and the datasheet τ (N, n) of coefficients x at times t."""
-    q, dq, ddq = setup.fourier.evaluate(x, t)
-    tau = setup.torque_model.predict(setup.pi_datasheet, q, dq, ddq)
-    return {"position": q, "velocity": dq, "acceleration": ddq, "torque": tau}
+    t = np.asarray(t, dtype=float)
+    out = {
+        key: np.empty((len(t), setup.fourier.n_joints)) for key in ("position", "velocity", "acceleration", "torque")
+    }
+    # In blocks: the Fourier basis is 3 (N, 2H + 1) doubles and the model's regressor (N, n, P) (5 kB a sample on a
+    # 7-joint arm), where the samples kept are 32 n bytes each.
+    for k in range(0, len(t), PREDICT_BLOCK):
+        block = slice(k, k + PREDICT_BLOCK)
+        q, dq, ddq = setup.fourier.evaluate(x, t[block])
+        out["position"][block], out["velocity"][block], out["acceleration"][block] = q, dq, ddq
+        out["torque"][block] = setup.torque_model.predict(setup.pi_datasheet, q, dq, ddq)
+    return out
 
 
 def margins(setup: Setup, x: np.ndarray, rate: float = CHECK_HZ) -> dict[str, dict]:

@@ -13,15 +13,24 @@ from ident_opt.errors import InputError
 from ident_opt.excitation.setup import COND_POWER, OBJECTIVE_HZ, STILL, TINY, Setup, _grid
 from ident_opt.fitting.fit import base_combinations
 
-
 # ---------------------------------------------------------------------------------------------- criteria
+#: Samples per block of the regressor in `information`.
+BLOCK = 4096
+
+
 def information(setup: Setup, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(F, H): F = (1/N) Σ Y_Bᵀ W Y_B of the base columns (own units, W = 1/σ²) and H = Σ_j Y_jᵀY_j (all columns)."""
-    Y = setup.arm.regressor(q, dq, ddq)
-    Yb = Y[:, :, list(setup.base)] / setup.sigma[None, :, None]
-    F = np.einsum("njp,njr->pr", Yb, Yb) / len(q)
-    H = np.einsum("njp,njr->pr", Y, Y)
-    return F, H
+    """(F, H): F = (1/N) Σ Y_Bᵀ W Y_B of the base columns (own units, W = 1/σ²) and H = Σ_j Y_jᵀY_j (all columns).
+    Summed over blocks of `BLOCK` samples: the regressor is N × n × P doubles (5 kB a sample on a 7-joint arm), and
+    the criteria of a design are read on its whole output grid (hours at kHz rates)."""
+    base, P = list(setup.base), setup.arm.n_params
+    F, H = np.zeros((len(base), len(base))), np.zeros((P, P))
+    for k in range(0, len(q), BLOCK):
+        block = slice(k, k + BLOCK)
+        Y = setup.arm.regressor(q[block], dq[block], ddq[block])
+        Yb = Y[:, :, base] / setup.sigma[None, :, None]
+        F += np.einsum("njp,njr->pr", Yb, Yb)
+        H += np.einsum("njp,njr->pr", Y, Y)
+    return F / len(q), H
 
 
 def criteria(setup: Setup, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> dict:

@@ -10,6 +10,7 @@ back silently to a default. Paths are relative to the problem file.
 
 from __future__ import annotations
 
+import os
 import tomllib
 from pathlib import Path
 
@@ -29,6 +30,10 @@ from ident_opt.problem.spec import DataSpec, Limits, Problem, Reference, Residua
 from ident_opt.problem.table import Table
 from ident_opt.problem.urdf import parse_urdf_robot
 
+#: The largest problem file read [bytes]: the shipped ones are a few kB; a larger file is a wrong path (a log, an
+#: image), read whole otherwise.
+MAX_PROBLEM_BYTES = 10_000_000
+
 __all__ = [
     "DataSpec",
     "Limits",
@@ -44,11 +49,9 @@ __all__ = [
 def load_problem(path: str | Path) -> Problem:
     """Read and validate a problem file; raise `InputError` naming the file and key on any fault."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: problem file not found")
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raw = tomllib.loads(read_problem_text(path))
+    except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not a valid TOML file ({exc})") from None
     except RecursionError:  # tomllib parses nested arrays and tables recursively
         raise InputError(f"{path}: not a problem file: arrays or tables nested too deeply to read") from None
@@ -76,8 +79,41 @@ def load_problem(path: str | Path) -> Problem:
     problem = Problem(
         name=name, path=path, robot=robot, output_dir=relative(base, out_dir) if out_dir else None, **sections
     )
-    outputs.declare_inputs([*problem.data.trials, *problem.data.train, *problem.data.test])  # every trial listed
+    listed = [*problem.data.trials, *problem.data.train, *problem.data.test]
+    for trial in listed:  # a name no file can have: the file's fault, said now (a look-up would raise)
+        outputs.check_length(trial, f"{outputs.abbreviated(path)}: [data]", reading=True)
+    outputs.declare_inputs(listed)  # every trial listed
     return problem
+
+
+def read_problem_text(path: Path) -> str:
+    """The text of the problem file `path`; an InputError naming it when it is missing, not a regular file (a folder,
+    a pipe: opening one would block), too large to be a problem file (`MAX_PROBLEM_BYTES`), unreadable (its
+    permissions, an I/O error) or not UTF-8."""
+    outputs.check_length(path, reading=True)  # os.stat of a name too long raises, it does not say "missing"
+    shown = outputs.abbreviated(path)
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise InputError(f"{shown}: problem file not found") from None
+    except OSError as exc:  # a folder on the way that cannot be searched, a loop of links
+        raise InputError(f"{shown}: cannot read the problem file ({exc.strerror})") from None
+    kind = outputs.mode_kind(mode)
+    if kind is not None:
+        raise InputError(f"{shown}: is {kind}, not a problem file; give the path of a .toml file")
+    try:
+        with open(path, "rb") as file:
+            data = file.read(MAX_PROBLEM_BYTES + 1)
+    except OSError as exc:  # PermissionError (mode 000 and not root), EIO
+        raise InputError(f"{shown}: cannot read the problem file ({exc.strerror or type(exc).__name__})") from None
+    if len(data) > MAX_PROBLEM_BYTES:
+        raise InputError(f"{shown}: larger than {MAX_PROBLEM_BYTES // 1_000_000} MB, which no problem file is")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(
+            f"{shown}: not a valid TOML file (not UTF-8 text: byte {data[exc.start]:#04x} at offset {exc.start})"
+        ) from None
 
 
 def _robot(table: Table):

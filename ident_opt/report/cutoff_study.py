@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ident_opt import outputs
 from ident_opt.evaluation.cutoff_study import Row, summary
 from ident_opt.report import write_json
 from ident_opt.report.figures import plt
@@ -25,10 +26,11 @@ def write(rows: list[Row], out: Path, label: str, seeds: tuple[int, ...], second
     stem = out / f"cutoff_study_{label}"
     table = pd.DataFrame(summary(rows))
     per_trial = pd.DataFrame([dataclasses.asdict(r) | {"best_hz": r.best_hz, "error_best": r.error_best} for r in rows])
-    per_trial.drop(columns=["grid_hz", "error_grid"]).to_csv(stem.with_suffix(".csv"), index=False)
+    with outputs.atomic_path(stem.with_suffix(".csv")) as tmp:
+        per_trial.drop(columns=["grid_hz", "error_grid"]).to_csv(tmp, index=False)
     write_json(stem.with_suffix(".json"), {"seeds": list(seeds), "conditions": table.to_dict("records")})
     _figure(table, stem.with_suffix(".png"))
-    stem.with_suffix(".md").write_text(_markdown(table, label, seeds, seconds, stem.name), encoding="utf-8")
+    outputs.write_text(stem.with_suffix(".md"), _markdown(table, label, seeds, seconds, stem.name))
     return [stem.with_suffix(s) for s in (".md", ".csv", ".json", ".png")]
 
 
@@ -141,5 +143,8 @@ def _figure(table: pd.DataFrame, path: Path) -> None:
     ax.set_ylabel("recommended error ÷ hindsight best")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    try:
+        with outputs.atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+    finally:
+        plt.close(fig)

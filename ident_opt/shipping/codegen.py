@@ -30,6 +30,8 @@ from string import Template
 import casadi as ca
 import numpy as np
 
+from ident_opt import outputs
+from ident_opt.adaptation.c_update import UPDATE_CFLAGS
 from ident_opt.arm.base import Arm
 from ident_opt.cbuild import (  # noqa: F401  (the toolchain, re-exported for codegen's callers)
     CFLAGS,
@@ -271,10 +273,52 @@ def markdown_code(text: str) -> str:
     return f"{fence}{pad}{text}{pad}{fence}"
 
 
-def write_readme(out_dir: Path, functions: list[ca.Function], robot, name: str = NAME) -> Path:
+#: The online update's files in the output folder, for the README's table (`update`: `generate.UPDATE_FILES`).
+UPDATE_FILES = (
+    (
+        "`pi_update.c`, `pi_update.h`",
+        "the online update: statistics of every sample and the bounded least-squares "
+        "re-solve, started from the offline fit baked in (no dynamic allocation; the caller owns `pi_update_state`)",
+    ),
+    (
+        "`pi_update_casadi.c`, `pi_update_casadi.h`",
+        "the regressor Y(q, dq, ddq) the update uses (CasADi's code generator)",
+    ),
+    (
+        "`libpi_update.so`",
+        "those two sources compiled as a shared library (`cc $update_cflags -shared pi_update.c "
+        "pi_update_casadi.c -o libpi_update.so -lm`)",
+    ),
+    ("`pi_update_main.c`", "an example: replays a CSV of samples through the update and times it"),
+    ("`pi_update_example`", "that example compiled (the line below)"),
+    (
+        "`pi_update_samples.csv`",
+        "the samples ident-opt checked the C update on against Python (the held-out part of the first trial)",
+    ),
+)
+#: The README's section on the online update; the compile line is the one `adaptation.c_update.compile_pi_update`
+#: runs, plus the warnings the README's other examples use (`tests/test_cli_hostile.py` compiles it as written).
+UPDATE_SECTION = """
+
+**The online update (`pi_update`).** `pi_update(&state, q, dq, ddq, tau)` folds one measured sample
+in and re-solves the parameters exactly (bounded least squares, warm-started); `pi_update_initial(&state)` starts from
+the offline fit baked in. See `pi_update.h`. The example uses POSIX clocks (`clock_gettime`), which `-std=c99`
+hides unless `_POSIX_C_SOURCE` says which POSIX it may use:
+
+    $update_compile
+    ./pi_update_example pi_update_samples.csv"""
+#: The example's compile line in the README.
+UPDATE_COMPILE = (
+    "cc $update_cflags -D_POSIX_C_SOURCE=199309L -Wall -Wextra -Werror -Wno-unused-parameter pi_update_main.c "
+    "pi_update.c pi_update_casadi.c -o pi_update_example -lm"
+)
+
+
+def write_readme(out_dir: Path, functions: list[ca.Function], robot, name: str = NAME, update: bool = False) -> Path:
     """The embedding README (template in `templates/README.md`) for this arm (`robot`: its joints and their
-    angle convention, `ident_opt.arm.base.Robot`) and this build's functions. The robot's names are shown escaped
-    (`markdown_text`, `markdown_code`), its headline and angle convention on one line each."""
+    angle convention, `ident_opt.arm.base.Robot`) and this build's functions (`update`: with the online update's
+    files, `pi_update`, and how to build its example). The robot's names are shown escaped (`markdown_text`,
+    `markdown_code`), its headline and angle convention on one line each."""
     rows = "\n".join(f"| `{f.name()}` | {_signature(f)} |" for f in functions)
     described = "\n".join(f"- `{f.name()}`: {DESCRIPTIONS[f.name()]}" for f in functions if f.name() in DESCRIPTIONS)
     calls = [f"`{f.name()}`" for f in functions if f.name() in ("tau_hat", "tau_hat_gmr")]
@@ -293,10 +337,18 @@ def write_readme(out_dir: Path, functions: list[ca.Function], robot, name: str =
         joints=joints,
         convention=one_line(convention),
         example=" and ".join(calls),
+        update_files="".join(f"| {files} | {_flags(what)} |\n" for files, what in UPDATE_FILES) if update else "",
+        update_section=_flags(UPDATE_SECTION) if update else "",
     )
     path = Path(out_dir) / "README.md"
-    path.write_text(text, encoding="utf-8")
+    outputs.write_text(path, text)
     return path
+
+
+def _flags(text: str) -> str:
+    """`text` with the online update's compiler flags in place of $update_cflags (before the text joins the README,
+    so that nothing from the user's names is ever substituted)."""
+    return text.replace("$update_compile", UPDATE_COMPILE).replace("$update_cflags", " ".join(UPDATE_CFLAGS))
 
 
 def _signature(f: ca.Function) -> str:
@@ -315,7 +367,7 @@ def copy_example(out_dir: Path, n_joints: int, gmr: bool = True) -> Path:
         n=n_joints, gmr_call=EXAMPLE_GMR if gmr else "", **state
     )
     path = Path(out_dir) / "main.c"
-    path.write_text(text, encoding="utf-8")
+    outputs.write_text(path, text)
     return path
 
 

@@ -54,6 +54,30 @@ def export_format(path: str | Path, format: str | None = None) -> str:
     raise InputError(f"{path}: name it *.urdf (URDF) or *.xml / *.mjcf (MuJoCo MJCF)")
 
 
+def massless(problem: Problem, fit: ArmFit, undetermined: list[str]) -> None:
+    """InputError when `fit` gives a link a mass ≤ 0 kg, which no rigid body has and no robot description can
+    say: naming the fit and the link, why (a mass the data do not determine, which least squares leaves at 0; or a
+    negative one, which an unconstrained fit can give) and the physically consistent fit to export instead."""
+    masses = fit.model.link_masses(fit.pi)
+    bad = [(link, m) for link, m in masses.items() if not m > 0]
+    if not bad:
+        return
+    link, mass = bad[0]
+    name = fit.choice.estimator if fit.choice is not None else fit.method
+    why = (
+        "the joint torques do not determine it, and least squares leaves such a parameter at 0"
+        if f"m_{link}" in undetermined and mass == 0
+        else "nothing in that fit keeps a mass positive"
+    )
+    more = f" (and {len(bad) - 1} more link(s))" if len(bad) > 1 else ""
+    consistent = problem.robot.default_estimator
+    raise InputError(
+        f"export: the {name} fit gave link {link!r} a mass of {mass:.6g} kg{more}, which no rigid body has ({why}), "
+        f"so no robot description can hold it; export a physically consistent fit: --estimator {consistent}, or "
+        "no --estimator for the recommended fit"
+    )
+
+
 def export(problem: Problem, fit: ArmFit, path: str | Path, format: str | None = None) -> Exported:
     """`ident-opt export`: write the arm of `problem` with the parameters of `fit` (`ident_opt.fit`) to `path` as a
     URDF with its JSON sidecar `path.json` (`format` "urdf", or a path ending in .urdf) or a MuJoCo MJCF ("mjcf",
@@ -62,6 +86,7 @@ def export(problem: Problem, fit: ArmFit, path: str | Path, format: str | None =
     fmt = export_format(path, format)
     model = fit.model
     undetermined = fit.details.get("not_determined", [])
+    massless(problem, fit, undetermined)  # the fit's fault, said as such (not the URDF's, which realises it)
     description = problem.robot.bodies(model, fit.pi, undetermined=undetermined)
     record = {
         **identified(model.names, fit.pi, fit.se, fit.choice.estimator if fit.choice is not None else fit.method),

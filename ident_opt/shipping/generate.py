@@ -98,14 +98,14 @@ def written_files(problem: Problem, trials: Sequence[Dataset], update: bool = Tr
     return written
 
 
-def build(shipped: Shipped, robot, out: Path, compiler: list[str], forward: bool = True) -> Built:
+def build(shipped: Shipped, robot, out: Path, compiler: list[str], forward: bool = True, update: bool = False) -> Built:
     """Generate the C code of `shipped` into `out` and compile it (`forward`: also ddq_hat), with the example and
-    the README written for `robot` (its joints and angle convention)."""
+    the README written for `robot` (its joints and angle convention; `update`: the online update's files too)."""
     functions = codegen.build_functions(shipped.model, shipped.pi, shipped.gmr, forward=forward)
     source, header = codegen.generate_sources(functions, out)
     library = codegen.compile_library(source, out, compiler)
     example = codegen.copy_example(out, shipped.model.n_joints, gmr=shipped.gmr is not None)
-    readme = codegen.write_readme(out, functions, robot)
+    readme = codegen.write_readme(out, functions, robot, update=update)
     return Built(functions, [source, header, library, example, readme], library)
 
 
@@ -182,7 +182,7 @@ def generate(
         f"{robot.headline}; {len(model.names)} parameters ({shipped.estimator}), GMR with "
         f"{len(shipped.gmr.weights_)} components; generating C in {out}"
     )
-    built = build(shipped, robot, out, compiler, forward=forward)
+    built = build(shipped, robot, out, compiler, forward=forward, update=with_update(problem, trials, update))
     train = concat(trials) if trials else None
     errors = ship.check(built.library, shipped, train, built.names, np.random.default_rng(0))
     data = payload(shipped, built, errors, problem, [t.source for t in trials])

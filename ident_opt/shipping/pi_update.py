@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ident_opt import outputs
 from ident_opt.adaptation import c_update
 from ident_opt.adaptation.kernel import load_pi_update, update_state
 from ident_opt.adaptation.replay import _relative, _standard_errors
@@ -91,7 +92,8 @@ def verify(problem, trial: Dataset, out_dir: Path, compiler: list[str] | None = 
     csv = out_dir / "pi_update_samples.csv"
     rows = np.hstack([test.q, test.dq, test.ddq, test.tau])
     header = ",".join(f"{k}{j + 1}" for k in ("q", "dq", "ddq", "tau") for j in range(J))
-    np.savetxt(csv, rows, delimiter=",", header=header, comments="", fmt="%.17g")
+    with outputs.atomic_path(csv) as tmp:
+        np.savetxt(tmp, rows, delimiter=",", header=header, comments="", fmt="%.17g")
     runs = [_run_example(example, csv) for _ in range(repeats)]
     return {
         "samples": int(test.n),

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ident_opt.arm.base import Arm
-from ident_opt.data.dataset import Dataset, concat
+from ident_opt.data.dataset import MAX_MAGNITUDE, Dataset, concat
 from ident_opt.errors import InputError
 from ident_opt.fitting.recommend import Choice
 from ident_opt.models.gmr import GMR
@@ -29,6 +29,8 @@ TOLERANCE = {"tau_hat": 1e-12, "tau_hat_gmr": 1e-10, "ddq_hat": 1e-12, "pi_updat
 MEASURE = {"tau_hat": "max_relative_error", "tau_hat_gmr": "max_relative_error", "ddq_hat": "max_backward_error"}
 #: Random states for the check, in addition to the training states.
 N_RANDOM = 4000
+#: Random states on which a loaded parameter's torque contribution is bounded (`torque_bound`).
+N_BOUND = 200
 
 
 @dataclass
@@ -106,16 +108,53 @@ def read_parameters(path: str) -> dict:
 
 
 def saved_vector(saved: dict, model: Arm) -> np.ndarray:
-    """π in the model's order; every model parameter must be in the file, as a finite number."""
-    params = saved["parameters"]
+    """π in the model's order. Every model parameter must be in the file, as a finite number whose torques on the
+    check's states stay within `MAX_TORQUE` (`torque_bound`); a name that is not one of the model's is refused (it
+    would be silently left out of the generated code)."""
+    params, path = saved["parameters"], saved["path"]
     missing = [n for n in model.names if n not in params]
     if missing:
-        raise InputError(f"{saved['path']}: parameters {missing} of the model are missing")
-    try:
-        pi = np.array([float(params[n]) for n in model.names])
-    except (TypeError, ValueError):
-        raise InputError(f"{saved['path']}: every parameter must be a number") from None
+        raise InputError(f"{path}: parameters {missing} of the model are missing")
+    unknown = [str(n) for n in params if n not in model.names]
+    if unknown:
+        shown = ", ".join(repr(n) for n in unknown[:8]) + (", …" if len(unknown) > 8 else "")
+        raise InputError(
+            f"{path}: {len(unknown)} parameter(s) the model ({', '.join(model.extensions) or 'rigid'}, "
+            f"{model.n_params} parameters) does not have: {shown}; remove them, or give the --extension that has them"
+        )
+    pi = np.empty(model.n_params)
+    for k, name in enumerate(model.names):
+        value = params[name]
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise InputError(f"{path}: parameter {name} must be a number, got {value!r}")
+        if not np.isfinite(value):
+            raise InputError(f"{path}: parameter {name} = {value!r} is not a finite number")
+        pi[k] = value
+    torque_bound(model, pi, path)
     return pi
+
+
+#: The largest torque [N m] a parameter may contribute on the check's states (±π rad, ±3 rad/s, ±10 rad/s²): the
+#: largest value ident-opt accepts in data (`data.dataset.MAX_MAGNITUDE`). Beyond it no arm is described, and the
+#: check of the compiled code against Python loses its meaning (its differences overflow to inf − inf = NaN).
+MAX_TORQUE = MAX_MAGNITUDE
+
+
+def torque_bound(model: Arm, pi: np.ndarray, path: str) -> None:
+    """InputError naming the parameter(s) of `pi` whose torque contribution |Y_k π_k| on the check's states without
+    a trial (`_states`) is not finite or exceeds `MAX_TORQUE`: finite values that overflow the prediction."""
+    states = _states(model, np.zeros(model.n_params), None, np.random.default_rng(0), N_BOUND)
+    Y = model.regressor(states.q, states.dq, states.ddq)  # (N, n, P)
+    with np.errstate(over="ignore", invalid="ignore"):
+        reach = np.max(np.abs(Y), axis=(0, 1)) * np.abs(pi)  # the largest |τ| each parameter adds
+    bad = [k for k in range(len(pi)) if not reach[k] <= MAX_TORQUE]
+    if bad:
+        worst = ", ".join(f"{model.names[k]} = {pi[k]:.6g} (up to {reach[k]:.3g} N m)" for k in bad[:4])
+        raise InputError(
+            f"{path}: parameter(s) {worst} predict torques beyond {MAX_TORQUE:.0e} N m on ordinary states "
+            "(±π rad, ±3 rad/s, ±10 rad/s²); no arm has them, and the compiled code could not be checked (its "
+            "torques overflow): fix the parameters file"
+        )
 
 
 def gmr_from_saved(raw: dict, n_joints: int) -> GMR:
@@ -154,8 +193,8 @@ def check(library: Path, shipped: Shipped, train: Dataset | None, names: list[st
     return errors
 
 
-def _states(model: Arm, pi: np.ndarray, train: Dataset | None, rng) -> Dataset:
-    """`N_RANDOM` random states spanning the training states (at least ±π, ±1, ±1) followed by the training
+def _states(model: Arm, pi: np.ndarray, train: Dataset | None, rng, count: int = N_RANDOM) -> Dataset:
+    """`count` random states spanning the training states (at least ±π, ±1, ±1) followed by the training
     states themselves (without a trial: ±π rad, ±3 rad/s, ±10 rad/s²), with the model's torques τ(π)."""
     n = model.n_joints
     if train is not None:
@@ -164,7 +203,7 @@ def _states(model: Arm, pi: np.ndarray, train: Dataset | None, rng) -> Dataset:
     else:
         lo = (-np.pi * np.ones(n), -3 * np.ones(n), -10 * np.ones(n))
         hi = (np.pi * np.ones(n), 3 * np.ones(n), 10 * np.ones(n))
-    q, dq, ddq = (rng.uniform(a, b, (N_RANDOM, n)) for a, b in zip(lo, hi))
+    q, dq, ddq = (rng.uniform(a, b, (count, n)) for a, b in zip(lo, hi))
     if train is not None:
         q, dq, ddq = np.vstack([q, train.q]), np.vstack([dq, train.dq]), np.vstack([ddq, train.ddq])
     tau = model.predict(pi, q, dq, ddq)

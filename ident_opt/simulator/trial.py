@@ -82,9 +82,7 @@ class SimTrial:
 
         Both are written to temporary files and renamed into place, so a reader never sees half a file.
         """
-        path = Path(csv_path)
-        if not path.name.lower().endswith((".csv", ".csv.gz")):
-            raise InputError(f"{path}: the simulated trial is written as CSV; name it *.csv or *.csv.gz")
+        path = check_trial_path(csv_path)
         gz = path.name.lower().endswith(".gz")
         try:
             truth = json.dumps(self.truth, indent=2, allow_nan=False) + "\n"
@@ -94,7 +92,6 @@ class SimTrial:
                 "nothing written"
             ) from None
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
             # A robot whose data have their own angle convention (a URDF arm's) logs in it; the loader maps it back.
             frame = in_source_convention(self.frame, self.robot.column_map)
             _atomic(path, lambda tmp: frame.to_csv(tmp, index=False, compression="gzip" if gz else None))
@@ -102,6 +99,19 @@ class SimTrial:
         except OSError as exc:
             raise InputError(f"{path}: cannot write the simulated trial ({exc.strerror})") from None
         return path
+
+
+def check_trial_path(csv_path: str | Path, flag: str | None = None) -> Path:
+    """`csv_path` as a Path, once it names a CSV (*.csv or *.csv.gz, the only format a simulated trial is written
+    in); an InputError (naming `flag`) otherwise, which `ident-opt simulate` raises before it simulates anything."""
+    path = Path(csv_path)
+    if not path.name.lower().endswith((".csv", ".csv.gz")):
+        label = f"{flag} {path}" if flag else str(path)
+        raise InputError(
+            f"{label}: the simulated trial is written as CSV only (not {path.suffix or 'a name without a suffix'}); "
+            "name it *.csv or *.csv.gz"
+        )
+    return path
 
 
 def truth_path(csv_path: str | Path) -> Path:
