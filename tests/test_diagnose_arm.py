@@ -236,9 +236,9 @@ def test_the_rigid_fit_is_the_recommended_fit_unless_an_estimator_is_asked(tmp_p
 
 
 def test_forward_evidence_on_a_joint_without_inertia_is_null_not_a_crash():
-    """The shipped TX40's last link has no inertia about its axis and the problem gives no rotor: its mass matrix is
-    singular, and the diagnosis's forward simulation (`evidence.forward_error`) raised LinAlgError on the real log.
-    That joint's error is now not reported (NaN, null in the JSON) and the others' are finite."""
+    """The TX40's last link has no inertia about its axis; without the rotor the shipped problem gives it, its mass
+    matrix is singular, and the diagnosis's forward simulation (`evidence.forward_error`) raised LinAlgError on the real
+    log. That joint's error is now not reported (NaN, null in the JSON) and the others' are finite."""
     import pandas as pd
 
     from ident_opt.data.dataset import Dataset
@@ -246,6 +246,8 @@ def test_forward_evidence_on_a_joint_without_inertia_is_null_not_a_crash():
 
     robot = load_problem(ROOT / "problems" / "staubli_tx40.toml").robot
     arm, pi = robot.datasheets()[robot.datasheet]
+    pi = np.array(pi, dtype=float)
+    pi[list(arm.names).index("ia_joint_6")] = 0.0  # the shipped problem's rotor taken away: the singular case
     t = np.arange(0.0, 2.0, 0.01)
     q = 0.3 * np.sin(np.outer(t, np.arange(1, 7)))
     dq = 0.3 * np.cos(np.outer(t, np.arange(1, 7))) * np.arange(1, 7)

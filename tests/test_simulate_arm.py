@@ -64,13 +64,21 @@ def test_forward_dynamics_equal_pinocchio(path):
 
 
 def test_a_singular_nominal_model_is_refused_naming_the_joint(tmp_path, capsys):
-    """The shipped TX40's URDF gives its last link no inertia about its axis: no forward simulation (exit 2)."""
-    code = main(
-        ["simulate", "--problem", str(ROOT / "problems" / "staubli_tx40.toml"), "--out", str(tmp_path / "t.csv")]
-    )
+    """The TX40's URDF gives its last link no inertia about its axis: without the rotor inertia the shipped problem
+    adds (`[robot.joint_6]`), no forward simulation (exit 2)."""
+    text = (ROOT / "problems" / "staubli_tx40.toml").read_text()
+    assert "[robot.joint_6]" in text, "the shipped problem's rotor, which this test takes away"
+    head, tail = text.split("[robot.joint_6]")
+    text = head + tail[tail.index("\n[") :]  # the table's lines up to the next table
+    problem = tmp_path / "problems" / "tx40.toml"
+    problem.parent.mkdir()
+    problem.write_text(text.replace('"../', f'"{ROOT}/'))
+    out = tmp_path / "out"
+    out.mkdir()
+    code = main(["simulate", "--problem", str(problem), "--out", str(out / "t.csv")])
     err = capsys.readouterr().err
     assert code == 2 and "singular" in err and "joint_6" in err and "[robot.joint_6] rotor_inertia" in err
-    assert not list(tmp_path.iterdir())
+    assert not list(out.iterdir())
 
 
 def test_a_clean_trial_is_the_nominal_model_exactly_and_stays_inside_the_limits(arm4):
