@@ -13,6 +13,7 @@ from string import Template
 import casadi as ca
 import numpy as np
 
+from ident_opt import outputs
 from ident_opt.arm.base import Arm
 from ident_opt.cbuild import compile_shared, find_compiler, generate_sources, library_name, run_compiler
 from ident_opt.errors import InputError
@@ -190,12 +191,12 @@ def generate_pi_update(
     for suffix in ("c", "h"):
         text = Template((FILES / f"{UPDATE}.{suffix}.in").read_text(encoding="utf-8")).substitute(values)
         path = out_dir / f"{UPDATE}.{suffix}"
-        path.write_text(text, encoding="utf-8")
+        outputs.write_text(path, text)
         paths.append(path)
     columns_text = ",".join(f"{k}{j + 1}" for k in ("q", "dq", "ddq", "tau") for j in range(model.n_joints))
     example = Template((FILES / UPDATE_EXAMPLE).read_text(encoding="utf-8")).substitute(columns=columns_text)
     path = out_dir / UPDATE_EXAMPLE
-    path.write_text(example, encoding="utf-8")
+    outputs.write_text(path, example)
     paths.append(path)
     return paths
 
