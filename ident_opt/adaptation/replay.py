@@ -19,7 +19,8 @@ from tqdm import tqdm
 from ident_opt.adaptation.estimator import CONSISTENT_EVERY, batch_theta
 from ident_opt.adaptation.identifier import OnlineIdentifier
 from ident_opt.adaptation.start import Start, model_keys, offline_start, start_identifier
-from ident_opt.data.dataset import Dataset, chronological_split
+from ident_opt.data.dataset import Dataset, chronological_split, fittable
+from ident_opt.data.validate import checked_problem, checked_trial
 from ident_opt.errors import InputError
 from ident_opt.fitting.recommend import Choice, choose
 from ident_opt.fitting.stats import Stats
@@ -103,7 +104,11 @@ def online(
 ) -> Replay:
     """`online`'s stage function (what `ident-opt online` runs): `trial` split in time (`online_parts`), the fit
     cpbr starts from and follows chosen on the offline part (the recommended fit, or `estimator`), then `replay`
-    with the problem's first seed for the batch checks."""
+    with the problem's first seed for the batch checks. A trial not of the arm's joints, or not finite, is an
+    InputError naming it."""
+    checked_problem(problem, "online").require("online")
+    trial = checked_trial(problem.robot, trial, "online: trial")
+    fittable(trial)
     train, test = online_parts(problem, trial)
     choice = choose(problem, [train], model=problem.robot.model(()), estimator=estimator, command="online")
     return replay(

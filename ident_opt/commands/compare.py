@@ -103,6 +103,13 @@ def _constraints_study(args: argparse.Namespace, problem) -> int:
     """The study of where the constraints matter, on N short simulated trials of the problem's robot."""
     if args.constraints_study < 1:
         raise InputError("--constraints-study needs a positive number of trials")
+    robot = problem.robot
+    if not robot.paper_views:  # one of the paper's views: its truth is the planar arm's datasheet (`Robot.paper_views`)
+        raise InputError(
+            f"--constraints-study is a study of the planar two-link arm (its datasheet is the truth the fits are "
+            f"scored against); {problem.path} describes {robot.described_as}: run `ident-opt compare` without it, "
+            "or the study on a planar problem (e.g. problems/tudor_2dof.toml)"
+        )
     problem.require("simulate")  # its trials come from the simulator
     out = output_dir(args, problem)
     sources = tuple(constraints.STUDY_SOURCES) if args.study_source == "both" else (args.study_source,)

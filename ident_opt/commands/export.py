@@ -19,9 +19,10 @@ import sys
 from pathlib import Path
 
 from ident_opt import api, outputs
+from ident_opt.api import export  # the API's, which checks its output as this command does (one path)
 from ident_opt.commands.common import add_estimator_flag, add_problem_arguments, load, problem_for, write_json
 from ident_opt.fitting.recommend import choose
-from ident_opt.shipping.description import FORMATS, export
+from ident_opt.shipping.description import FORMATS
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -25,6 +25,9 @@ PLAUSIBLE = {"q": 100.0, "dq": 1e3, "ddq": 1e5, "tau": 1e5, "i": 1e3}
 
 #: Sampling rates [Hz] a robot log can have: outside, t is almost surely not in seconds.
 PLAUSIBLE_RATE_HZ = (0.1, 1e5)
+#: The shortest step t may take, as a fraction of its median step: a shorter one is a repeated time stamp to
+#: rounding (the fraction the derivative pipeline already treats as rounding, `derivatives._uniform`).
+MIN_STEP_FRACTION = 1e-6
 
 
 def _check_unique_header(frame: pd.DataFrame, path: Path, spec: DataSpec) -> None:
@@ -119,7 +122,9 @@ def _non_increasing(t: np.ndarray, bad: np.ndarray) -> np.ndarray:
 
 
 def _check_time(t: np.ndarray, path: Path, spec: DataSpec) -> None:
-    """t strictly increasing, else an error naming the first row where it repeats or goes back."""
+    """t strictly increasing, each step at least `MIN_STEP_FRACTION` of the median step; else an error naming the
+    first row where it repeats, goes back or steps too little. Not lifted by --allow-implausible: the derivative
+    pipeline divides by these steps (a step of 1e-300 s overflows its splines to inf)."""
     steps = np.diff(t)
     if (steps <= 0).any():
         row = int(np.argmax(steps <= 0)) + 1
@@ -127,6 +132,18 @@ def _check_time(t: np.ndarray, path: Path, spec: DataSpec) -> None:
         raise InputError(
             f"{path}: column 't' is not strictly increasing: it {kind} at "
             f"{_row_label(path, row, spec)} ({excerpt(float(t[row - 1]))} then {excerpt(float(t[row]))})"
+        )
+    if not steps.size:
+        return
+    median = float(np.median(steps))
+    short = steps < MIN_STEP_FRACTION * median
+    if short.any():
+        row = int(np.argmax(short)) + 1
+        raise InputError(
+            f"{path}: column 't' steps by only {float(steps[row - 1]):.3g} s at {_row_label(path, row, spec)} "
+            f"({excerpt(float(t[row - 1]))} then {excerpt(float(t[row]))}), less than {MIN_STEP_FRACTION:g} of its "
+            f"median step ({median:.3g} s): the two samples share one time stamp to rounding and no derivative can "
+            "be taken between them; correct that time stamp or remove the row"
         )
 
 

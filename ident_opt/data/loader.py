@@ -32,6 +32,7 @@ from ident_opt.data.checks import (
     _row_label,
 )
 from ident_opt.data.dataset import Dataset, convert
+from ident_opt.data.validate import checked_array
 from ident_opt.errors import InputError, excerpt
 from ident_opt.numerics.derivatives import (
     choose_cutoff,
@@ -204,22 +205,20 @@ def from_arrays(
 ) -> Dataset:
     """A trial from arrays: `t` (N,) [s], `q` (N, n) [rad] and either `tau` (N, n) [N m] or `current` (N, n) [A],
     optionally `dq` [rad/s] and `ddq` [rad/s²], in SI units and in the convention of the problem's data files
-    (`Robot.column_map` applies; `[data.columns]` does not: arrays come by role, not by column). They go through
-    the loader's own checks and derivative pipeline (`spec.derivative_cutoff_hz`: the same cut-off rule, filters and
-    edge trimming as a file); `source` names them in messages and reports."""
+    (`Robot.column_map` applies; `[data.columns]` does not: arrays come by role, not by column). Each array is
+    checked at the door (`checked_array`: real numbers, its shape, every value finite; an InputError naming it),
+    then they go through the loader's own checks and derivative pipeline (`spec.derivative_cutoff_hz`: the same
+    cut-off rule, filters and edge trimming as a file); `source` names them in messages and reports."""
     n = robot.n_joints
-    columns = {"t": np.asarray(t, dtype=float).reshape(-1)}
+    times = checked_array(f"{source}: t", t, (None,), " (the sample times [s])")
+    columns = {"t": times}
     given = {"q": q, "dq": dq, "ddq": ddq, "tau": tau, "i": current}
+    named = {"i": "current"}  # the argument's name where it is not the data format's
+    why = f" (one row per sample of t, one column per joint of {robot.described_as})"
     for kind, values in given.items():
         if values is None:
             continue
-        a = np.asarray(values, dtype=float)
-        a = a.reshape(-1, 1) if a.ndim == 1 and n == 1 else a
-        if a.ndim != 2 or a.shape != (len(columns["t"]), n):
-            raise InputError(
-                f"{source}: {kind} must be an array of shape ({len(columns['t'])}, {n}) (one column per joint of "
-                f"{robot.described_as}), got {a.shape}"
-            )
+        a = checked_array(f"{source}: {named.get(kind, kind)}", values, (len(times), n), why)
         columns.update({f"{kind}{j + 1}": a[:, j] for j in range(n)})
     if (tau is None) == (current is None):
         raise InputError(f"{source}: give the joint torques (tau) or the motor currents (current), one of the two")

@@ -21,11 +21,12 @@ from ident_opt.arm.base import Arm
 from ident_opt.consistency import lmi_eigenvalues, necessarily_nonnegative, sign_violations
 from ident_opt.data.dataset import Dataset, chronological_split, concat, shuffled_split
 from ident_opt.data.loader import held_out_overlap
-from ident_opt.errors import InputError
+from ident_opt.data.validate import checked_problem, checked_trials
+from ident_opt.errors import InputError, excerpt
 from ident_opt.fitting import estimators
 from ident_opt.fitting.base import base_parameters
 from ident_opt.fitting.fit import LinearFit
-from ident_opt.fitting.recommend import Choice, choose
+from ident_opt.fitting.recommend import Choice, choose, option
 from ident_opt.fitting.trust import Trust, check_masses
 from ident_opt.metrics import METRICS, all_metrics
 from ident_opt.outputs import shown
@@ -230,12 +231,6 @@ def _held_out(d: Dataset, scored: dict[str, tuple[Arm, np.ndarray]]) -> dict[str
     return out
 
 
-def _as_list(trials: Dataset | Sequence[Dataset] | None) -> list[Dataset]:
-    if trials is None:
-        return []
-    return [trials] if isinstance(trials, Dataset) else list(trials)
-
-
 def _within_trial(pool: Dataset, model: Arm, split, fitters: dict[str, FitFn], paper: bool, progress: bool):
     """(seed study or None, metrics and the test sets of the protocols within the training pool): the paper's
     shuffled protocol when `paper`, and the chronological split."""
@@ -331,12 +326,16 @@ def compare(
     weighted by 1/σ_j², estimated per fit). Fits use the torque filtered like the regressor's inputs
     (`Dataset.tau_fit`); every score is against the measured torque. A held-out trial that is a training trial is a
     warning."""
-    problem.require("compare")
-    if margin < 0:
-        raise InputError(f"compare: the constrained fit's margin must be ≥ 0 (got {margin})")
+    checked_problem(problem, "compare").require("compare")
     robot, split, reference = problem.robot, problem.split, problem.reference
+    if isinstance(extensions, str):  # one name, not its letters
+        raise InputError(f"compare: extensions must be a list of extension names, got {extensions!r}")
     model = _extended_model(robot, extensions)
-    trains, tests = _as_list(training), _as_list(testing)
+    margin = option("margin", margin, model, "compare")  # a number in --margin's range: never NaN, never < 0
+    if weights is not None and not (isinstance(weights, str) and weights == "wls"):
+        raise InputError(f'compare: weights must be None (plain least squares) or "wls", got {excerpt(weights)}')
+    trains = checked_trials(problem, training, "compare", "training", fit=True)
+    tests = checked_trials(problem, testing, "compare", "testing", required=False)
     overlap = held_out_overlap(trains, tests)
     choice = choose(problem, trains, model=model, command="compare")
     trains = choice.at_cutoff(trains)  # every fit is compared on the same derivatives

@@ -13,6 +13,7 @@ import numpy as np
 from ident_opt.columns import kinematic_columns
 from ident_opt.data.dataset import Dataset, concat
 from ident_opt.data.loader import held_out_overlap
+from ident_opt.data.validate import checked_problem, checked_trials
 from ident_opt.fitting import estimators
 from ident_opt.fitting.recommend import Choice, choose
 from ident_opt.fitting.trust import Trust, check_masses
@@ -92,9 +93,11 @@ def identify(
     and the held-out `testing` ones (pooled, and each scored on its own). `progress`: a tqdm-like bar (`update()`,
     `set_postfix_str(text)`) or None. The paper's protocol (and its GMR variants, its seed study) runs where the
     paper's views apply (`Robot.paper_views`). The trust checks of `fitting.trust` run on the training trials."""
+    checked_problem(problem, "identify").require("identify")
+    training = checked_trials(problem, training, "identify", "training", fit=True)
+    testing = checked_trials(problem, testing, "identify", "testing", required=False)
     bar = progress or _Silent()
     robot = problem.robot
-    problem.require("identify")
     overlap = held_out_overlap(training, testing or [])
     choice = choose(problem, training, model=robot.model(()), command="identify")
     training = choice.at_cutoff(training)

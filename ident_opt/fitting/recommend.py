@@ -23,14 +23,17 @@ parameters moving at half the cut-off too), a warning says so and what to record
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
+from numbers import Real
 
 import numpy as np
 
+from ident_opt.arguments import range_of
 from ident_opt.arm.base import Arm, Robot
 from ident_opt.data.dataset import Dataset, refiltered
-from ident_opt.errors import InputError
+from ident_opt.data.validate import checked_array
+from ident_opt.errors import InputError, excerpt
 from ident_opt.fitting import estimators
 from ident_opt.fitting.fit import LinearFit
 from ident_opt.fitting.trust import JUDGED_KINDS, SENSITIVITY_TOLERANCE, Trust, checks
@@ -119,8 +122,20 @@ class ArmFit(LinearFit):
     trials: tuple[str, ...] = ()
 
     def predict(self, trial: Dataset) -> np.ndarray:
-        """τ̂ (N, n) [N m] of the fitted model along `trial`'s q, dq, ddq."""
-        return self.model.predict(self.pi, trial.q, trial.dq, trial.ddq)
+        """τ̂ (N, n) [N m] of the fitted model along `trial`'s q, dq, ddq: each (N, n) with n the model's joints and
+        every value finite, else an InputError naming it (never a prediction from some of q's columns)."""
+        if self.model is None:
+            raise InputError("predict: this fit knows no model (ident_opt.fit makes fits that do)")
+        if not isinstance(trial, Dataset):
+            raise InputError(
+                f"predict: trial must be a trial (ident_opt.Dataset: ident_opt.trial or ident_opt.load_trials make "
+                f"one), got {type(trial).__name__} {excerpt(trial)}"
+            )
+        n = self.model.n_joints
+        why = f" (one row per sample, one column per joint of the fit's {n}-joint model)"
+        q = checked_array("predict: trial.q", trial.q, (None, n), why)
+        dq, ddq = (checked_array(f"predict: trial.{k}", getattr(trial, k), (len(q), n), why) for k in ("dq", "ddq"))
+        return self.model.predict(self.pi, q, dq, ddq)
 
     def summary(self) -> dict:
         """`LinearFit.summary` (the model, the choice and the trials are not part of it)."""
@@ -233,6 +248,11 @@ def choose(
     is for (default `problem.robot.model()`). The one entry point of the recommended fit."""
     robot = problem.robot
     if estimator is not None:
+        if not isinstance(estimator, str):  # the API's `estimator=`: a name, never a fit or a choice
+            raise InputError(
+                f"{command}: estimator must be None (the recommended fit) or the name of one of the arm's fits "
+                f"({', '.join(robot.estimators)}), got {type(estimator).__name__} {excerpt(estimator)}"
+            )
         if estimator not in robot.estimators:
             raise InputError(
                 f"{command}: --estimator {estimator} is not a fit of this arm ({robot.described_as}); its fits: "
@@ -242,3 +262,158 @@ def choose(
     model = model if model is not None else robot.model()
     data = problem.data
     return judge(robot, model, list(trials), data.conversions, data.derivative_cutoff_hz)
+
+
+def checked_choice(value: object, robot: Robot, argument: str, command: str) -> Choice | None:
+    """`value` when it is None or a `Choice` of one of `robot`'s fits (`choose` makes them; `ArmFit.choice` and
+    `Comparison.choice` are ones); an InputError naming `argument` and what it must be otherwise (a fit's name goes
+    to `estimator=`, which is chosen from)."""
+    if value is None or (isinstance(value, Choice) and value.estimator in robot.estimators):
+        return value
+    if isinstance(value, Choice):
+        raise InputError(
+            f"{command}: {argument} is a choice of the {value.estimator} fit, which {robot.described_as} does not "
+            f"have; its fits: {', '.join(robot.estimators)}"
+        )
+    hint = f"; to name a fit, pass estimator={value!r}" if isinstance(value, str) else ""
+    raise InputError(
+        f"{command}: {argument} must be None or a Choice of fit (ident_opt.fitting.recommend."
+        f"choose makes one; fit.choice and comparison.choice are ones), got {type(value).__name__} "
+        f"{excerpt(value)}{hint}"
+    )
+
+
+# ---------------------------------------------------------------------------------------------- fit options
+#: The keyword options each estimator takes (`ident_opt.fit(problem, trials, estimator, **options)`; meaning and
+#: defaults: the estimator's function, `fitting.estimators`). The robust fit takes those of the arm's consistent
+#: fit (`Robot.default_estimator`); options the problem file sets for a fit (`Robot.fit_options`) are not the
+#: caller's to give again.
+FIT_OPTIONS = {
+    "ols": ("weights",),
+    "constrained": ("margin", "weights", "prior", "prior_weight", "bounds", "friction", "mass", "shortcut", "backend"),
+    "nlp_physical": ("weights", "prior_weight", "options"),
+    "consistent": ("margin", "weights", "prior", "prior_weight", "mass_range", "com_box", "backend"),
+}
+#: The solvers the conic fits can run on.
+BACKENDS = ("clarabel", "cvxpy")
+
+
+def fit_options(robot: Robot, estimator: str, model: Arm, options: Mapping[str, object], command: str) -> dict:
+    """`options` for the `estimator` fit of `model` (the API's `**options`), each checked at the door like the
+    command line's flags (`option`); an option the fit does not take is an InputError naming it and the ones it
+    takes, never a solver's TypeError."""
+    own = robot.default_estimator if estimator == "robust" else estimator
+    fixed = set(estimators.options_for(robot, estimator))
+    takes = [name for name in FIT_OPTIONS.get(own, ()) if name not in fixed]
+    for name in options:
+        if name not in takes:
+            set_by = " (the problem file sets it)" if name in fixed else ""
+            raise InputError(
+                f"{command}: the {estimator} fit takes no option {name!r}{set_by}; its options: "
+                f"{', '.join(takes) or 'none'}"
+            )
+    return {name: option(name, value, model, command, own) for name, value in options.items()}
+
+
+def option(name: str, value: object, model: Arm, command: str, estimator: str = "constrained") -> object:
+    """One fit option `name` of the `estimator` fit of `model`, checked (`_CHECKS`); an InputError naming it (as
+    "`command`: `name`") otherwise."""
+    check = _CHECKS.get(name)
+    if check is None:
+        raise InputError(f"{command}: {name}: not an option of any fit")
+    return check(f"{command}: {name}", value, model, estimator)
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, Real) and not isinstance(value, bool)
+
+
+def _margin(label: str, value: object, model: Arm, estimator: str) -> float:
+    """The LMIs' margin [kg m²]: a number in the command line's range for --margin."""
+    low, high = range_of("compare", "margin")
+    if not (_is_number(value) and low <= value <= high):
+        raise InputError(
+            f"{label} must be a number in [{low:g}, {high:g}] kg m² (M(q) ⪰ margin·I), got {excerpt(value)}"
+        )
+    return float(value)
+
+
+def _nonnegative(label: str, value: object, model: Arm, estimator: str) -> float | None:
+    """prior_weight ≥ 0 (> 0 for the consistent fit's log-det prior); mass_range, com_box [m]: None or ≥ 0."""
+    strict = label.endswith("prior_weight") and estimator == "consistent"
+    if value is None and not label.endswith("prior_weight"):
+        return None
+    if not (_is_number(value) and np.isfinite(value) and (value > 0 if strict else value >= 0)):
+        raise InputError(f"{label} must be a finite number {'> 0' if strict else '≥ 0'}, got {excerpt(value)}")
+    return float(value)
+
+
+def _weights(label: str, value: object, model: Arm, estimator: str) -> str | np.ndarray | None:
+    """None (plain least squares), "wls" (1/σ_j² per joint) or one positive weight per joint."""
+    if value is None or (isinstance(value, str) and value == "wls"):
+        return value
+    if isinstance(value, str):
+        raise InputError(f'{label} must be None, "wls" or one positive weight per joint, got {excerpt(value)}')
+    w = checked_array(label, value, (model.n_joints,), f" (one weight per joint of the {model.n_joints}-joint model)")
+    if (w <= 0).any():
+        raise InputError(f"{label} must be positive (one weight per joint), got {excerpt(w)}")
+    return w
+
+
+def _prior(label: str, value: object, model: Arm, estimator: str) -> np.ndarray | None:
+    """None or π0: one finite value per parameter."""
+    return None if value is None else checked_array(label, value, (model.n_params,), " (one value per parameter)")
+
+
+def _bounds(label: str, value: object, model: Arm, estimator: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """None or (lb, ub): one bound per parameter each, ±inf for none, lb ≤ ub."""
+    if value is None:
+        return None
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != 2:
+        raise InputError(
+            f"{label} must be None or a pair (lb, ub) of {model.n_params} bounds each, got {excerpt(value)}"
+        )
+    why = " (one bound per parameter, ±inf for none)"
+    lb, ub = (checked_array(f"{label}[{i}]", v, (model.n_params,), why, infinite=True) for i, v in enumerate(value))
+    if (lb > ub).any():
+        i = int(np.argmax(lb > ub))
+        raise InputError(f"{label}: the lower bound of {model.names[i]} is above its upper one ({lb[i]:g} > {ub[i]:g})")
+    return lb, ub
+
+
+def _switch(label: str, value: object, model: Arm, estimator: str) -> bool:
+    """friction, mass, shortcut: True or False."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise InputError(f"{label} must be True or False, got {excerpt(value)}")
+    return bool(value)
+
+
+def _backend(label: str, value: object, model: Arm, estimator: str) -> str:
+    """One of `BACKENDS`."""
+    if not isinstance(value, str) or value not in BACKENDS:
+        raise InputError(f"{label} must be one of {', '.join(BACKENDS)}, got {excerpt(value)}")
+    return value
+
+
+def _ipopt(label: str, value: object, model: Arm, estimator: str) -> Mapping | None:
+    """None or a dict of IPOPT options (the NLP on physical parameters)."""
+    if value is not None and not isinstance(value, Mapping):
+        raise InputError(f"{label} must be None or a dict of IPOPT options, got {excerpt(value)}")
+    return value
+
+
+#: Each fit option's check: (label, value, model, estimator) → the value to pass on, or an InputError.
+_CHECKS = {
+    "margin": _margin,
+    "prior_weight": _nonnegative,
+    "mass_range": _nonnegative,
+    "com_box": _nonnegative,
+    "weights": _weights,
+    "prior": _prior,
+    "bounds": _bounds,
+    "friction": _switch,
+    "mass": _switch,
+    "shortcut": _switch,
+    "backend": _backend,
+    "options": _ipopt,
+}

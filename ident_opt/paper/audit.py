@@ -18,6 +18,7 @@ from ident_opt.arm.datasheet import PlanarRobot, datasheet_pi, rigid_body
 from ident_opt.arm.planar import PI_NAMES, RIGID, PlanarArm
 from ident_opt.data.dataset import Dataset, shuffled_split
 from ident_opt.data.loader import held_out_overlap
+from ident_opt.data.validate import checked_problem, checked_trials
 from ident_opt.fitting.ols import solve_ols
 from ident_opt.fitting.stats import Stats
 from ident_opt.metrics import all_metrics
@@ -162,7 +163,9 @@ def audit(problem, training: list[Dataset], testing: list[Dataset] = ()) -> Audi
     """`ident-opt audit`: the paper audit of `problem`'s robot on its identification trial (the first of `training`)
     and its unseen trial (the first of `testing`, else the second of `training`), if any. A held-out trial that is a
     training trial is a warning."""
-    problem.require("audit")
+    checked_problem(problem, "audit").require("audit")
+    training = checked_trials(problem, training, "audit", "training", fit=True)
+    testing = checked_trials(problem, testing, "audit", "testing", required=False)
     robot = problem.robot
     train = training[0]
     unseen = testing[0] if testing else (training[1] if len(training) > 1 else None)
