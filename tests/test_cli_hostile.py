@@ -399,11 +399,6 @@ def test_a_malformed_per_joint_effect_value_says_the_arms_count(tmp_path, capsys
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.xfail(
-    reason="needs ident_opt/data/loader.py (another helper's file) to open the parquet file itself: pyarrow cannot "
-    "encode a name that is not UTF-8 (issue 52, point 5)",
-    strict=False,
-)
 def test_a_parquet_file_whose_name_is_not_utf8_is_read_or_refused_clearly(tmp_path, capsys):
     """Before: "cannot read the file ('utf-8' codec can't encode character '\\udcff' …)": pyarrow's failure to
     encode the name, shown as the reason. The file is a valid trial: it should be read (or, if refused, the message

@@ -118,3 +118,23 @@ def test_only_the_factory_asks_which_kind_of_arm():
             if re.search(r"\brobot\.kind\b|\bengine\s*==", code):
                 readers.append(f"{module}: {line.strip()}")
     assert readers == []
+
+
+def test_no_module_but_the_console_script_has_an_entry_point_or_knows_the_repository():
+    """Scripts live in `benchmarks/`: inside the package only `cli.py` (the console script) has a `main()` or a
+    `__main__` block, and no module computes the repository's root from its own path (`Path(__file__)` two folders up or
+    more)."""
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE).as_posix()
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef) and node.name == "main" and rel != "cli.py":
+                found.append(f"{rel}: def main")
+            if isinstance(node, ast.If) and "__main__" in ast.unparse(node.test) and rel != "cli.py":
+                found.append(f"{rel}: __main__ block")
+            if isinstance(node, ast.Attribute) and node.attr in ("parent", "parents"):
+                inner = ast.unparse(node.value)  # `.parents[k]`, or `.parent` of a `.parent`: above the package
+                if "__file__" in inner and (node.attr == "parents" or ".parent" in inner):
+                    found.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
+    assert not found, "\n".join(found)

@@ -66,7 +66,8 @@ def _read_table(path: Path, spec: DataSpec) -> pd.DataFrame:
         if name.endswith(".csv") or name.endswith(".csv.gz"):
             frame = pd.read_csv(path, header=header, sep=",", dtype=str, keep_default_na=False, skipinitialspace=True)
         elif name.endswith(".parquet"):
-            frame = pd.read_parquet(path)
+            with open(path, "rb") as fh:  # pyarrow cannot encode a file name that is not UTF-8; a handle has none
+                frame = pd.read_parquet(fh)
             if not spec.header and not _standard_names(frame.columns, spec):
                 frame.columns = range(frame.shape[1])
         elif name.endswith(".xlsx"):

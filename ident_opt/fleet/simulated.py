@@ -1,11 +1,12 @@
 """A simulated fleet: robots of one model around its nominal arm, a day's logs each, with hidden changes and
 day-to-day scatter, written in the fleet layout (`docs/data-format.md`), for the tests and the benchmark.
 
-    python -m ident_opt.fleet.simulated --problem P --out ROOT [--robots 30] [--days 20] [--seed 0] ...
+    python benchmarks/simulate_fleet.py --problem P --out ROOT [--robots 30] [--days 20] [--seed 0] ...
 
 Every option is checked before any work, against `BOUNDS` and the size limits (`MAX_FILE_SAMPLES` per file,
-`MAX_SAMPLES` and `MAX_FILES` in all): a value outside is a usage error naming the flag (exit 2). The fleet is written
-into a temporary folder beside ROOT and renamed onto it when complete: on an error or Ctrl-C nothing is left.
+`MAX_SAMPLES` and `MAX_FILES` in all): a value outside is an InputError naming the option (the script: exit 2 naming the
+flag). The fleet is written into a temporary folder beside ROOT and renamed onto it when complete: on an error or Ctrl-C
+nothing is left.
 
 The plant is the problem's own identification model, τ = Y(q, dq, ddq) π (rigid inverse dynamics plus the
 joint terms), evaluated on the exact motion; the files hold what a logger gives: t, the angles with encoder noise
@@ -30,12 +31,10 @@ and the torques with noise, so the reader estimates dq and ddq as it does on rea
 
 from __future__ import annotations
 
-import argparse
 import datetime
 import json
 import os
 import shutil
-import sys
 import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -43,7 +42,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ident_opt.arguments import MAX_SEED, number
+from ident_opt.arguments import MAX_SEED
 from ident_opt.columns import columns_of
 from ident_opt.data.dataset import in_source_convention
 from ident_opt.errors import InputError, excerpt
@@ -370,29 +369,3 @@ def read_truth(root: str | Path) -> list[Hidden]:
     """The hidden changes a simulated fleet in `root` was written with."""
     record = json.loads((Path(root) / TRUTH).read_text(encoding="utf-8"))
     return [Hidden(**h) for h in record["hidden"]]
-
-
-def main(argv: list[str] | None = None) -> int:
-    """The script: parse, simulate, print what was hidden."""
-    parser = argparse.ArgumentParser(prog="python -m ident_opt.fleet.simulated", description=__doc__.split("\n")[0])
-    parser.add_argument("--problem", required=True, help="problem file: the fleet's arm")
-    parser.add_argument("--out", required=True, help="the fleet's root folder (missing or empty)")
-    defaults = FleetSpec()
-    for key, value in asdict(defaults).items():
-        kind = number(type(value), *BOUNDS[key]) if key in BOUNDS else type(value)  # checked while parsing
-        parser.add_argument(f"--{key.replace('_', '-')}", type=kind, default=value, help=f"default {value}")
-    args = parser.parse_args(argv)
-    spec = FleetSpec(**{k: getattr(args, k) for k in asdict(defaults)})
-    try:
-        hidden = simulate_fleet(args.problem, args.out, spec)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    print(f"wrote {spec.robots} robots × {spec.days} days to {args.out}; hidden changes:")
-    for h in hidden:
-        print(f"  {h.robot}: {h.cause} joint {h.joint} from {h.first_day} (size {h.size:.3g})")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
