@@ -123,6 +123,9 @@ def _sigterm_as_interrupt() -> Iterator[None]:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status (SIGTERM: 143, Ctrl-C: 130)."""
+    for stream in (sys.stdout, sys.stderr):  # a file name that is not UTF-8 is printed with "?", not a traceback
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="replace")
     try:
         with _sigterm_as_interrupt():
             argv = sys.argv[1:] if argv is None else list(argv)
