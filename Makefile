@@ -43,14 +43,16 @@ test-arms: $(STAMP)
 
 ## The long hostile-input fuzz (tests/test_fuzz.py: data, problem, command line, stream; tests/test_stream_start.py:
 ## the stream's first samples; tests/test_fuzz_inputs.py: URDF, n-joint columns, ROS 2 bags, trial gaps, output
-## paths; the suite runs a small share of each): FUZZ_EXAMPLES cases per property (11 properties, >= 8,800 cases in
-## all), each logged to build/fuzz.log, then summed up (cases per property; tracebacks, NaN, modified inputs,
-## partial outputs, hangs).
+## paths; tests/test_fuzz_hostile.py: fleet layouts and --logs URLs, output path kinds, the API's argument shapes;
+## the suite runs a small share of each): FUZZ_EXAMPLES cases per property (14 properties, >= 11,200 cases in all;
+## the fleet's: its layout scan every case, the whole command one case in 12), each logged to build/fuzz.log, then
+## summed up (cases per property; tracebacks, NaN, modified inputs, partial outputs, hangs, specials replaced).
 FUZZ_EXAMPLES ?= 800
 fuzz: $(STAMP)
 	mkdir -p build && rm -f build/fuzz.log
 	IDENT_OPT_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) IDENT_OPT_FUZZ_LOG=build/fuzz.log $(BIN)/python -m pytest -n 2 -q \
-	    tests/test_fuzz.py tests/test_stream_start.py::test_fuzz_stream_start tests/test_fuzz_inputs.py
+	    tests/test_fuzz.py tests/test_stream_start.py::test_fuzz_stream_start tests/test_fuzz_inputs.py \
+	    tests/test_fuzz_hostile.py
 	$(BIN)/python -m tests.test_fuzz build/fuzz.log
 
 ## Style: ruff's lint rules (with complexity limits, see pyproject.toml) and its formatter, checked not applied.

@@ -208,6 +208,13 @@ def codegen(
     required = not (saved and saved.get("gmr"))
     trials = checked_trials(problem, training, "codegen", "training", required=required, fit=True)
     out = _output_path(out, "codegen: out")
+    try:  # CasADi writes its C sources by a UTF-8 name: a folder named otherwise would not be where they land
+        os.fsencode(os.path.abspath(out)).decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError(
+            f"codegen: out {outputs.abbreviated(out)}: the folder's path is not UTF-8, which the C code generator "
+            "cannot write to; choose a folder whose path is"
+        ) from None
     options = {"estimator": estimator, "extensions": extensions, "saved": saved, "components": components}
     switches = {"forward": forward, "update": update, "force": force}
     for name, value in switches.items():

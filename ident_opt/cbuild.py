@@ -92,7 +92,8 @@ def compile_shared(sources: list[str], library: Path, compiler: list[str], flags
 def run_compiler(cmd: list[str], name: str, what: str = "the online update") -> None:
     """Run the compiler command `cmd` (its program `name`) on `what`; `InputError` when it cannot run or fails."""
     try:
-        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        # errors="replace": the compiler's messages quote the paths, which need not be UTF-8
+        done = subprocess.run(cmd, capture_output=True, text=True, errors="replace", check=False)
     except OSError as exc:
         raise InputError(f"cannot run the C compiler {name!r} ({exc.strerror})") from None
     if done.returncode != 0:

@@ -437,8 +437,9 @@ def write_bytes(path: str | Path, data: bytes) -> Path:
 
 
 def write_text(path: str | Path, text: str) -> Path:
-    """`text` (UTF-8) into `path`, atomically."""
-    return write_bytes(path, text.encode("utf-8"))
+    """`text` (UTF-8) into `path`, atomically. A file name that is not UTF-8 inside `text` (a sidecar names its
+    description) is written with backslash escapes (`\\udcff`), so the file stays valid UTF-8."""
+    return write_bytes(path, text.encode("utf-8", "backslashreplace"))
 
 
 #: The file in a folder that lists what a command wrote there (name -> SHA-256), so that a later run knows which

@@ -244,3 +244,43 @@ def test_the_constraints_study_refuses_an_n_joint_arm(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--constraints-study is a study of the planar two-link arm" in err and "7-joint" in err
     assert "Traceback" not in err and not (tmp_path / "out").exists()
+
+
+def test_a_simulated_trial_is_never_written_over_its_problems_files(tmp_path):
+    """`iopt.simulate(problem).write(path)` outside a command: before, it replaced the problem's own trial file when
+    told to (the command refuses); now the trial knows the files it was made from and keeps the command's rules."""
+    problem = _urdf_problem(tmp_path)
+    log = iopt.simulate(problem, duration=1.0, seed=1).write(tmp_path / "log.csv")  # not an input yet: written
+    toml = tmp_path / "p.toml"
+    toml.write_text(toml.read_text(encoding="utf-8") + '[data]\ntrain = ["log.csv"]\n', encoding="utf-8")
+    problem = iopt.load_problem(toml)
+    trial = iopt.simulate(problem, duration=1.0, seed=2)
+    assert {log.resolve(), toml.resolve(), (tmp_path / "arm.urdf").resolve()} <= {p.resolve() for p in trial.inputs}
+    before = log.read_bytes(), (tmp_path / "log.truth.json").read_bytes()
+    with pytest.raises(iopt.InputError, match=r"this output is also an input"):
+        trial.write(log)
+    assert (log.read_bytes(), (tmp_path / "log.truth.json").read_bytes()) == before
+    assert trial.write(tmp_path / "other.csv").is_file()
+
+
+# ---------------------------------------------------------------------------------------------- found by make fuzz
+def test_fuzz_findings_on_the_api_are_input_errors(tmp_path, planar, good):
+    """Each was a raw exception before (`make fuzz`, test_fuzz_hostile.py::test_fuzz_api): a list as export's format
+    (TypeError), a data path too long for any file system (OSError), prior_weight without a prior (the solver's
+    ValueError), and a trial edited in code with a 1e-300 s step (LinAlgError) or a value of 1e308 (LinAlgError)."""
+    fit = iopt.fit(planar, [good])
+    with pytest.raises(iopt.InputError, match=r"format must be one of"):
+        iopt.export(planar, fit, tmp_path / "x.urdf", ["urdf"])
+    with pytest.raises(iopt.InputError, match=r"cannot be read"):
+        iopt.load_trials(planar, [str(tmp_path / ("x" * 300 + ".csv"))])
+    with pytest.raises(iopt.InputError, match=r"prior_weight > 0 pulls π towards a prior"):
+        iopt.fit(planar, [good], "constrained", prior_weight=1e-6)
+    tiny = replace(good, t=np.arange(len(good.t)) * 1e-300)
+    with pytest.raises(iopt.InputError, match=r"trials\[0\]\.t steps by 1e-300 s"):
+        iopt.fit(planar, [tiny])
+    huge = good.dq.copy()
+    huge[5, 1] = 1e308
+    with pytest.raises(iopt.InputError, match=r"trials\[0\]\.instruments\[0\] reaches 1e\+308"):
+        iopt.fit(planar, [replace(good, instruments=(huge, good.ddq))])
+    with pytest.raises(iopt.InputError, match=r"trials\[0\]\.tau reaches 1e\+308"):
+        iopt.fit(planar, [replace(good, tau=np.where(np.arange(len(good.t))[:, None] == 7, 1e308, good.tau))])

@@ -479,3 +479,40 @@ def test_outputs_temporary_names_fit_and_oserrors_are_input_errors(tmp_path):
         raise OSError(28, "No space left on device")
     assert sorted(p.name for p in tmp_path.iterdir()) == [long.name]
     assert snapshot(tmp_path)[long.name][0] == b"ok\n"
+
+
+# ---------------------------------------------------------------------------------------------- found by make fuzz
+def test_export_to_a_name_that_is_not_utf8_is_written(tmp_path, capsys):
+    """Before: UnicodeEncodeError (the sidecar names its description, and the name held a surrogate escape)."""
+    out = tmp_path / os.fsdecode(b"\xff\xfe.urdf")
+    data = str(ROOT / "data" / "dfki" / "trajectory_00.csv.gz")  # one trial: quick
+    argv = [
+        "export",
+        "--problem",
+        str(PROBLEMS / "dfki_c0.toml"),
+        "--data",
+        data,
+        "--format",
+        "urdf",
+        "--out",
+        str(out),
+    ]
+    assert main(argv) == 0, capsys.readouterr().err
+    side = Path(str(out) + ".json")
+    record = json.loads(side.read_bytes().decode("utf-8"))  # valid UTF-8, the name escaped
+    assert record["urdf"] == out.name and out.stat().st_size > 0  # escaped in the file, the same name read back
+
+
+@needs_gcc
+def test_codegen_into_the_current_folder(tmp_path, monkeypatch, capsys):
+    """Before: `--out .` ran the example program by its bare name, looked up on PATH: FileNotFoundError."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["codegen", "--problem", TUDOR, "--out", "."]) == 0, capsys.readouterr().err
+    assert (tmp_path / "parameters.json").is_file()
+
+
+def test_codegen_into_a_folder_whose_name_is_not_utf8_is_refused_first(tmp_path, capsys):
+    """Before: UnicodeDecodeError from the compiler's messages (CasADi had written the sources elsewhere)."""
+    out = tmp_path / os.fsdecode(b"\xff\xfe")
+    refused(capsys, ["codegen", "--problem", TUDOR, "--out", str(out)], "not UTF-8")
+    assert list(tmp_path.iterdir()) == []

@@ -405,3 +405,20 @@ def test_the_simulated_fleet_is_written_whole_or_not_at_all(tmp_path, monkeypatc
     with pytest.raises(InputError, match="--robots"):
         simulate_fleet(PLANAR, tmp_path / "b", FleetSpec(robots=-3))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_json_onto_the_zip_archive_the_logs_are_read_from_is_refused(base, tmp_path, capsys):
+    """Found by `make fuzz`: `--logs zip://…::file:///…/logs.zip --json logs.zip` exited 0 and overwrote the archive
+    (the logs themselves): the archive a chained URL reads is an input of the run."""
+    archive = tmp_path / "logs.zip"
+    with zipfile.ZipFile(archive, "w") as z:
+        for path in sorted(base[0].rglob("*")):
+            if path.is_file():
+                z.write(path, path.relative_to(base[0]).as_posix())
+    before = archive.read_bytes()
+    for logs in (f"zip://::file://{archive}", f"zip://::{archive}"):
+        argv = ["fleet", "--problem", str(PLANAR), "--logs", logs, "--json", str(archive), "--workers", "1"]
+        assert main([*argv, "--out", str(tmp_path / "r"), "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert "--json" in err and "logs.zip" in err and "Traceback" not in err, err
+    assert archive.read_bytes() == before and not (tmp_path / "r").exists()

@@ -405,7 +405,25 @@ def summary(log: str) -> str:
             counts["hang"],
         )
     )
+    lines.append(", ".join(f"{label}: {counts[key]}" for key, label in HOSTILE_KINDS.items()))
+    known = ("uncaught", "NaN", "modified input", "partial output", "temporary file left", "traceback or repr", "hang")
+    others = {k: n for k, n in counts.items() if not k.startswith(known) and k not in HOSTILE_KINDS}
+    if others:
+        lines.append("other violations: " + ", ".join(f"{k}: {n}" for k, n in sorted(others.items())))
+    noted = sum(1 for c in cases if c.get("notes"))
+    if noted:
+        lines.append(f"noted, not failed: {noted} cases replaced a link to a file (or to nothing) with their output")
     return "\n".join(lines)
+
+
+#: The violations `tests.test_fuzz_hostile` adds (the problem's prefix → how the summary names it).
+HOSTILE_KINDS = {
+    "special replaced": "specials replaced",
+    "wrote outside its outputs": "writes outside the outputs",
+    "leak": "leaks of the file outside the logs",
+    "read outside the logs": "reads outside the logs",
+    "reason not one short line": "long skip reasons",
+}
 
 
 if __name__ == "__main__":

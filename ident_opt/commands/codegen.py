@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ident_opt import outputs
+from ident_opt import api
 from ident_opt.commands.common import (
     add_components,
     add_estimator_flag,
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     generate.shipped_model(problem.robot, args.extension, saved)  # a bad extension or file fails before reading data
     trials = load(args, "codegen", problem=problem).training if saved is None or saved.get("gmr") is None else []
     out = output_dir(args, problem, indexed=False)  # only once every input is read and checked
-    made = generate.generate(
+    made = api.codegen(  # the API's: its checks, and the files written remembered as the tool's
         problem,
         trials,
         out,
@@ -84,7 +84,6 @@ def run(args: argparse.Namespace) -> int:
     print(report.write(made.payload, made.built, out, getattr(args, "json", None)))
     if "pi_update" in made.payload:
         print(_update_line(made.payload["pi_update"], ship.TOLERANCE["pi_update"]))
-    outputs.remember_owned(out, made.written)
     if made.disagreeing:
         print(
             f"ident-opt codegen: the compiled code disagrees with the Python model: {made.disagreeing}", file=sys.stderr

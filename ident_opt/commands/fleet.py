@@ -104,16 +104,18 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _outside(args: argparse.Namespace) -> None:
-    """Before any work: --out and --json must not lie inside the logs' local folder, however --logs names it (a
-    report there would overwrite a log, or be found in the next run's layout); the folder is then an input of the
-    run (`outputs.declare_inputs`), so that no output, the default --out included, is ever written inside it."""
-    root = local_root(args.logs)
-    if root is None or not root.is_dir():
-        return  # not on this machine (an object store, memory://), or not a folder: `layout.discover` says so
-    for flag, path in (("--out", args.out), ("--json", args.json)):
-        if path and outputs.same_or_inside(path, root):
-            raise InputError(f"{flag} {path}: inside --logs {args.logs} ({root}); write the reports elsewhere")
-    outputs.declare_inputs([root])
+    """Before any work: --out and --json must not lie inside the logs' local folder or be the archive they are read
+    from, however --logs names them (a report there would overwrite a log, or be found in the next run's layout);
+    they are then inputs of the run (`outputs.declare_inputs`), so that no output, the default --out included, is
+    ever written inside them."""
+    # The root folder, and any archive or file a chained URL's other parts read (zip://…::file:///data/fleet.zip).
+    parts = [args.logs, *args.logs.split("::")[1:]] if "::" in args.logs else [args.logs]
+    read = [root for root in map(local_root, parts) if root is not None and root.exists()]
+    for root in read:
+        for flag, path in (("--out", args.out), ("--json", args.json)):
+            if path and outputs.same_or_inside(path, root):
+                raise InputError(f"{flag} {path}: inside --logs {args.logs} ({root}); write the reports elsewhere")
+    outputs.declare_inputs(read)  # not on this machine (an object store, memory://): `layout.discover` says so
 
 
 def _command(args: argparse.Namespace) -> str:

@@ -49,6 +49,7 @@ from ident_opt.warnings import ResultWarning
 def _read(path: Path, spec: DataSpec) -> pd.DataFrame:
     """The raw table of a data file, or of a ROS 2 bag (`ident_opt.data.rosbag`: already in the data format's names)."""
     outputs.declare_inputs([path])
+    outputs.check_length(path, reading=True)  # a name no file system holds: "cannot be read", not an OSError
     if path.exists() and rosbag.is_bag(path):
         return rosbag.read_bag(path, spec.ros_topic, spec.ros_joints)
     return _read_table(path, spec)

@@ -17,9 +17,13 @@ import pandas as pd
 
 from ident_opt.arm.base import Robot
 from ident_opt.data.checks import _check_time
-from ident_opt.data.dataset import Dataset, fittable
+from ident_opt.data.dataset import MAX_MAGNITUDE, Dataset, fittable
 from ident_opt.errors import InputError, excerpt
 from ident_opt.problem.spec import DataSpec, Problem
+
+#: The shortest median sampling step a trial built in code may have [s] (10 MHz: far beyond any joint logger; the
+#: derivative filters' design becomes singular long before 1e-300 s). Files have their own, stricter, rate check.
+MIN_STEP_S = 1e-7
 
 
 def checked_array(
@@ -119,6 +123,7 @@ def checked_trial(robot: Robot, trial: object, name: str) -> Dataset:
         pair = tuple(checked_array(f"{name}.instruments[{i}]", v, (N, n), why) for i, v in enumerate(trial.instruments))
         arrays["instruments"] = trial.instruments if all(a is b for a, b in zip(pair, trial.instruments)) else pair
     _check_time(t, Path(name), DataSpec())
+    _check_scales(arrays, name)
     if not isinstance(trial.source, str):
         raise InputError(f"{name}.source must be a string naming the trial, got {excerpt(trial.source)}")
     cutoff = trial.cutoff_hz
@@ -131,3 +136,24 @@ def checked_trial(robot: Robot, trial: object, name: str) -> Dataset:
         raise InputError(f"{name}.extra must be a DataFrame with no rows or one row per sample ({N}), got {rows}")
     changed = {k: v for k, v in arrays.items() if v is not getattr(trial, k)}
     return replace(trial, **changed) if changed else trial
+
+
+def _check_scales(arrays: dict[str, object], name: str) -> None:
+    """A trial built in code within what double precision and the derivative filters handle: a median step of at
+    least `MIN_STEP_S`, every signal within `MAX_MAGNITUDE` (the loader's own bound); an InputError naming it."""
+    t = arrays["t"]
+    step = float(np.median(np.diff(t)))
+    if step < MIN_STEP_S:
+        raise InputError(
+            f"{name}.t steps by {step:.3g} s (median): below {MIN_STEP_S:g} s ({1 / MIN_STEP_S:g} Hz), beyond any "
+            "logger; is t in seconds?"
+        )
+    pairs = [(k, v) for k, v in arrays.items() if k not in ("t", "instruments")]
+    pairs += [(f"instruments[{i}]", v) for i, v in enumerate(arrays.get("instruments", ()))]
+    for label, value in pairs:
+        worst = float(np.abs(value).max()) if np.size(value) else 0.0
+        if worst > MAX_MAGNITUDE:
+            raise InputError(
+                f"{name}.{label} reaches {worst:.3g} (SI units), beyond {MAX_MAGNITUDE:.0e}: no fit is possible in "
+                "double precision"
+            )

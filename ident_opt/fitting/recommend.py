@@ -312,7 +312,14 @@ def fit_options(robot: Robot, estimator: str, model: Arm, options: Mapping[str, 
                 f"{command}: the {estimator} fit takes no option {name!r}{set_by}; its options: "
                 f"{', '.join(takes) or 'none'}"
             )
-    return {name: option(name, value, model, command, own) for name, value in options.items()}
+    checked = {name: option(name, value, model, command, own) for name, value in options.items()}
+    if own == "constrained" and (checked.get("prior_weight") or 0) > 0 and checked.get("prior") is None:
+        if "prior" not in fixed:  # the solver's own ValueError otherwise
+            raise InputError(
+                f"{command}: prior_weight > 0 pulls π towards a prior: give it too (prior=, one value per "
+                f"parameter of the {model.n_params}-parameter model), or leave prior_weight at 0"
+            )
+    return checked
 
 
 def option(name: str, value: object, model: Arm, command: str, estimator: str = "constrained") -> object:

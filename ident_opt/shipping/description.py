@@ -43,7 +43,7 @@ def export_format(path: str | Path, format: str | None = None) -> str:
     """The format of a description written to `path`: `format` when given, else read from the file's ending
     (*.urdf: URDF; *.xml, *.mjcf: MuJoCo MJCF); an InputError otherwise."""
     if format is not None:
-        if format not in FORMATS:
+        if not isinstance(format, str) or format not in FORMATS:
             raise InputError(f"export: the format must be one of {', '.join(FORMATS)}, got {format!r}")
         return format
     suffix = Path(path).suffix.lower()

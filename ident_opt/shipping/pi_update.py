@@ -116,7 +116,10 @@ def verify(problem, trial: Dataset, out_dir: Path, compiler: list[str] | None = 
 
 
 def _run_example(example: Path, csv: Path) -> dict:
-    done = subprocess.run([str(example), str(csv)], capture_output=True, text=True, check=False)
+    # absolute: a bare name (codegen --out .) would be looked up on PATH
+    done = subprocess.run(
+        [str(example.absolute()), str(csv)], capture_output=True, text=True, errors="replace", check=False
+    )
     if done.returncode != 0:
         raise RuntimeError(f"{example.name} failed ({done.returncode}): {done.stderr or done.stdout}")
     return json.loads(done.stdout)

@@ -26,8 +26,6 @@ from ident_opt.simulator.trajectories import (
 #: An n-joint arm's torque noise: this share of each joint's reference torque (`ArmScale.torque`, its effort limit):
 #: 0.35 N m on a 176 N m joint, 0.024 N m on a 12 N m wrist, the order of a joint-torque sensor's.
 NOISE_SHARE = 0.002
-#: Encoder counts per joint revolution where a joint's gear ratio is not given (a 19-bit joint-side encoder).
-JOINT_COUNTS = 2**19
 #: Where neither [limits] nor the URDF gives a joint's speed limit [rad/s].
 DEFAULT_SPEED = 2.0
 #: How far beyond the references' box [share of its span] a trajectory file may go: the box is the joint range
@@ -57,7 +55,7 @@ class ChainPlant:
         self.plant = chain_plant.build_plant(robot, self.effects, self.scale, joints, self.box)
         chain_plant.check_finite(self.plant, "simulate")
         self.sigma = NOISE_SHARE * np.asarray(self.scale.torque)
-        self.sensors = {"noise_std": self.sigma, "encoder_step": encoder_steps(robot)}
+        self.sensors = {"noise_std": self.sigma, "encoder_step": measurement.encoder_steps(robot)}
         self.gains, self.steps, self.control = None, None, None
 
     @property
@@ -145,17 +143,6 @@ def outside(ref: Reference, box: Box, robot: Robot, trajectory: str) -> None:
         )
 
 
-def encoder_steps(robot: Robot) -> np.ndarray:
-    """Each joint's encoder step [rad], joint side: `ENCODER_COUNTS` per motor revolution through its gear ratio, or
-    `JOINT_COUNTS` per joint revolution where the problem gives no gear ratio."""
-    return np.array(
-        [
-            2 * np.pi / (measurement.ENCODER_COUNTS * j.gear_ratio) if j.gear_ratio else 2 * np.pi / JOINT_COUNTS
-            for j in robot.joints
-        ]
-    )
-
-
 def truth_file(plant, settings: dict, noise_std: np.ndarray) -> dict:
     """The ground truth of an n-joint trial: π by name (true and datasheet), the plant's joint terms, each effect
     in the diagnosis's estimate keys (`Effect.chain_truth`), the settings and the measurement."""
@@ -180,7 +167,7 @@ def truth_file(plant, settings: dict, noise_std: np.ndarray) -> dict:
         "settings": settings,
         "measurement": {
             "torque_noise_std": noise_std.tolist(),
-            "encoder_step_rad": encoder_steps(plant.robot).tolist() if settings["noise"] else None,
+            "encoder_step_rad": measurement.encoder_steps(plant.robot).tolist() if settings["noise"] else None,
             "derivatives": "exact"
             if settings["exact_derivatives"]
             else f"estimated, zero-phase Butterworth at {measurement.DERIVATIVE_CUTOFF_HZ:g} Hz",

@@ -23,6 +23,8 @@ from ident_opt.numerics.derivatives import estimate_derivatives
 from ident_opt.simulator.closed_loop import CONTROL_HZ, MAX_CONTROL_HZ, control_hz
 
 ENCODER_COUNTS = 4096  # counts per motor revolution (a 1024-line encoder, quadrature)
+#: Encoder counts per joint revolution where a joint's gear ratio is not given (a 19-bit joint-side encoder).
+JOINT_COUNTS = 2**19
 TORQUE_NOISE = (
     0.16,
     0.054,
@@ -82,7 +84,7 @@ def log(
     q = q_enc[idx].copy()
     if noise:
         if encoder_step is None:
-            encoder_step = 2 * np.pi / (ENCODER_COUNTS * np.array([j.gear_ratio for j in robot.joints]))
+            encoder_step = encoder_steps(robot)
         sigma = np.asarray(TORQUE_NOISE) if noise_std is None else np.asarray(noise_std)
         q = np.round(q / encoder_step) * encoder_step
         tau = tau + rng.normal(size=tau.shape) * (noise_scale * sigma)
@@ -113,3 +115,14 @@ def current_factors(robot) -> np.ndarray:
             )
         factors.append(float(k))
     return np.array(factors)
+
+
+def encoder_steps(robot) -> np.ndarray:
+    """Each joint's encoder step [rad], joint side: `ENCODER_COUNTS` per motor revolution through its gear ratio, or
+    `JOINT_COUNTS` per joint revolution where the problem gives no gear ratio."""
+    return np.array(
+        [
+            2 * np.pi / (ENCODER_COUNTS * j.gear_ratio) if j.gear_ratio else 2 * np.pi / JOINT_COUNTS
+            for j in robot.joints
+        ],
+    )

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from pathlib import Path
 
 from ident_opt.problem.spec import Problem, SimulateSpec
 from ident_opt.simulator.trial import SimTrial, simulate_trial
@@ -34,7 +35,7 @@ def simulate(
     given = {"trajectory": trajectory, "duration": duration, "rate_hz": rate_hz, "seed": seed, "output": output}
     spec = replace(spec, **{key: value for key, value in given.items() if value is not None})
     extra = {k: v for k, v in (("bandwidth_hz", bandwidth_hz), ("noise_scale", noise_scale)) if v is not None}
-    return simulate_trial(
+    trial = simulate_trial(
         problem.robot,
         trajectory=spec.trajectory,
         duration=spec.duration,
@@ -48,3 +49,6 @@ def simulate(
         progress=progress,
         **extra,
     )
+    urdf = getattr(problem.robot, "urdf", None)
+    made_from = [problem.path, urdf, *problem.data.trials, *problem.data.train, *problem.data.test]
+    return replace(trial, inputs=tuple(Path(p) for p in made_from if p is not None))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -33,8 +34,6 @@ MAX_NOISE_SCALE = 100.0
 #: An n-joint arm's torque noise: this share of each joint's reference torque (`ArmScale.torque`, its effort limit):
 #: 0.35 N m on a 176 N m joint, 0.024 N m on a 12 N m wrist, the order of a joint-torque sensor's.
 NOISE_SHARE = 0.002
-#: Encoder counts per joint revolution where a joint's gear ratio is not given (a 19-bit joint-side encoder).
-JOINT_COUNTS = 2**19
 #: Where neither [limits] nor the URDF gives a joint's speed limit [rad/s].
 DEFAULT_SPEED = 2.0
 #: How far beyond the references' box [share of its span] a trajectory file may go: the box is the joint range
@@ -49,6 +48,8 @@ class SimTrial:
     frame: pd.DataFrame
     truth: dict
     robot: Robot
+    #: the files the trial was made from (the problem file, its URDF, its trials): `write` never replaces one
+    inputs: tuple[Path, ...] = ()
 
     def dataset(self) -> Dataset:
         """The trial as the data loader would return it (currents converted to joint torques)."""
@@ -91,13 +92,17 @@ class SimTrial:
                 f"{path}: the simulated trial's truth holds non-finite numbers (an effect too large to simulate); "
                 "nothing written"
             ) from None
-        try:
-            # A robot whose data have their own angle convention (a URDF arm's) logs in it; the loader maps it back.
-            frame = in_source_convention(self.frame, self.robot.column_map)
-            _atomic(path, lambda tmp: frame.to_csv(tmp, index=False, compression="gzip" if gz else None))
-            _atomic(truth_path(path), lambda tmp: tmp.write_text(truth))
-        except OSError as exc:
-            raise InputError(f"{path}: cannot write the simulated trial ({exc.strerror})") from None
+        # A robot whose data have their own angle convention (a URDF arm's) logs in it; the loader maps it back.
+        frame = in_source_convention(self.frame, self.robot.column_map)
+        # Called from the API (no command's run around it): a run of its own, so that the command line's output
+        # rules hold (never one of the trial's inputs; both files or neither).
+        with contextlib.nullcontext() if outputs.current() is not None else outputs.run():
+            outputs.declare_inputs(self.inputs)
+            try:
+                _atomic(path, lambda tmp: frame.to_csv(tmp, index=False, compression="gzip" if gz else None))
+                _atomic(truth_path(path), lambda tmp: tmp.write_text(truth))
+            except OSError as exc:
+                raise InputError(f"{path}: cannot write the simulated trial ({exc.strerror})") from None
         return path
 
 
