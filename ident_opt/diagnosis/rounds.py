@@ -23,6 +23,7 @@ from ident_opt.diagnosis.chain.engine import ChainEngine
 from ident_opt.diagnosis.engine import Engine, Request
 from ident_opt.diagnosis.planar.engine import PlanarEngine
 from ident_opt.diagnosis.result import Diagnosis, Fitted, conclude, nominal_entries, row_of, versions
+from ident_opt.fitting.recommend import checked_choice
 from ident_opt.numerics import signals
 
 #: Each kind of arm's engine (`arm.kinds.ByKind`): the one place the diagnosis asks which kind it has.
@@ -199,7 +200,8 @@ def diagnose_trial(
     and the engines' (`split.parts` for the split, `split.prepare` for `torque_filter_hz`: the problem's derivative
     cut-off is the natural choice). `rigid_fit`: how the rigid fit's π is identified and why (a
     `fitting.recommend.Choice`: the recommended fit, which `diagnose` passes; None: the robot's default estimator),
-    for the nominal rigid fit and every candidate that refits π."""
+    for the nominal rigid fit and every candidate that refits π; anything else is an InputError naming it."""
+    rigid_fit = checked_choice(rigid_fit, robot, "rigid_fit", "diagnose")
     estimator = robot.default_estimator if rigid_fit is None else rigid_fit.estimator
     t0 = time.perf_counter()
     engine = ENGINES.of(robot)(robot, Request(trial, unseen, train_fraction, torque_filter_hz, estimator))
