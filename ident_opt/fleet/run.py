@@ -54,14 +54,13 @@ def run_fleet(
     estimator: str | None = None,
 ) -> FleetResult:
     """`ident-opt fleet`: identify every robot-day under `logs` for `problem` (a parsed problem, or its file: the
-    workers read it again from its file), test each robot against its first
-    `baseline_days` days and name what changed (module doc). `scheduler`: an existing Dask scheduler's address
+    workers read it again from its file), test each robot against its first `baseline_days` days and name what
+    changed (module doc). `scheduler`: an existing Dask scheduler's address
     (None: a local cluster of `workers` processes, or threads with `processes` False), which must answer within
     `connect_timeout` [s]. `estimator`: the fit every robot-day gets (None: each robot's recommended fit)."""
     start = time.perf_counter()
     _check_numbers(baseline_days=baseline_days, workers=workers, connect_timeout=connect_timeout)
     problem_path, setup = _load(problem, estimator)
-    problem = setup.problem
     found = layout.discover(logs)
     job = tasks.Job(problem_path, allow_implausible, drop_invalid, estimator)
     with Engine(scheduler, workers, processes, connect_timeout) as engine:
@@ -85,9 +84,9 @@ def run_fleet(
         robots, found, units, gathered + evidence, seconds, engine_seconds, n_workers, address, baseline_days, fit_name
     )
     return FleetResult(
-        problem=str(problem.path),
+        problem=str(setup.problem.path),
         logs=str(logs),
-        arm=problem.robot.headline,
+        arm=setup.problem.robot.headline,
         estimator=fit_name,
         why=why,
         baseline_days=baseline_days,
