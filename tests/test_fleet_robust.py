@@ -286,7 +286,15 @@ def test_a_signal_to_the_process_group_ends_the_run_in_one_line_and_no_worker_is
     argv = [sys.executable, "-m", "ident_opt", "fleet", "--problem", str(PLANAR), "--logs", str(base[0])]
     argv += ["--out", str(tmp_path / "report"), "--workers", "1", "--no-progress"]
     process = subprocess.Popen(
-        argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, text=True
+        argv,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+        text=True,
+        # as from a terminal: pytest-xdist's workers ignore SIGINT, and a child would inherit that (Python keeps an
+        # ignored SIGINT ignored, and so would the run, rightly: a background job is not for Ctrl-C)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         deadline = time.monotonic() + 120
@@ -315,6 +323,14 @@ def test_a_signal_to_the_process_group_ends_the_run_in_one_line_and_no_worker_is
 def test_a_signal_during_a_run_is_taken_where_the_engine_delivers_it():
     """While a run is on the cluster a Ctrl-C is noted, not raised inside a call of Dask's; it is raised where the
     engine delivers it, and the handler before is back."""
+    outer = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (xdist's workers ignore it)
+    try:
+        _deferred_delivery()
+    finally:
+        signal.signal(signal.SIGINT, outer)
+
+
+def _deferred_delivery() -> None:
     before = signal.getsignal(signal.SIGINT)
     with interrupts.Deferred() as deferred:
         os.kill(os.getpid(), signal.SIGINT)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ident_opt import api
+from ident_opt import api, outputs
 from ident_opt.commands.common import (
     add_components,
     add_estimator_flag,
@@ -82,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
         say=lambda line: print(f"ident-opt codegen: {line}", file=sys.stderr, flush=True),
     )
     print(report.write(made.payload, made.built, out, getattr(args, "json", None)))
+    outputs.remember_owned(out, made.written)  # again: the report has rewritten parameters.json and the README
     if "pi_update" in made.payload:
         print(_update_line(made.payload["pi_update"], ship.TOLERANCE["pi_update"]))
     if made.disagreeing:
