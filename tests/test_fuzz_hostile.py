@@ -557,7 +557,10 @@ def run_fleet_command(folder: Path, case: dict, logs: str, out: str | None, json
     argv += ["--json", json_path] if json_path else []
     argv += ["--estimator", case["estimator"]] if case["estimator"] else []
     allowed = [out or "out", *([json_path] if json_path else [])]
-    inputs = ("logs", "fp.toml", "secret.csv", "elsewhere", "logs.zip")
+    # The run's inputs: the logs it reads. Read from logs.zip, the folder the archive was made from is scaffolding
+    # the run never opens (a report written there is the user's choice, as anywhere else).
+    logs_read = ("logs.zip",) if case["form"] == "zip://" else ("logs",)
+    inputs = (*logs_read, "fp.toml", "secret.csv", "elsewhere")
     specials = [str(p.relative_to(folder)) for p in _specials(folder)]
     return run_cli(
         "fleet", folder, argv, inputs, trees=("logs", "elsewhere"), specials=specials, allowed=allowed, secret=SECRET
