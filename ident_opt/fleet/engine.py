@@ -128,7 +128,9 @@ class Engine:
             processes=True,
             memory_limit=1.0 / workers,  # each worker's share of the memory, as LocalCluster(n_workers=...) gives
             dashboard_address=None,
-            silence_logs=logging.ERROR,
+            # the worker processes print nothing short of a crash: a task's error reaches the client as the file's
+            # skip reason, and a worker that outlives an interrupted scheduler logged its failed heartbeat's traceback
+            silence_logs=logging.CRITICAL,
             scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
         )
         before = set(multiprocessing.active_children())
