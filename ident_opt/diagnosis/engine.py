@@ -108,6 +108,29 @@ class Engine(Protocol):
         """What the engine's screening found, for the JSON's evidence (None: it has none)."""
         ...
 
+    #: The request the engine was built on, and the torque low-pass's cut-off it applied [Hz] (None: none).
+    request: Request
+    filter_hz: float | None
+    #: The arm's moving links' mass [kg] (0: unknown) and the chain's length [m] (None: no centre of mass to bound):
+    #: the plausibility rule's payload bounds (`plausibility.facts`).
+    moving_mass: float
+    reach: float | None
+
+    def other(self, trial: Dataset) -> tuple[Dataset, Dataset, np.ndarray]:
+        """Another trial read as the held-out part is (prepared alike): (prepared, its torque as logged on the same
+        samples, the labels the engine scores with): where a named cause is confirmed (`confirm`)."""
+        ...
+
+    def nominal_prediction(self, baseline: str, ds: Dataset) -> np.ndarray:
+        """The nominal model `baseline`'s torque (N, n) [N m] along a prepared trial `ds`."""
+        ...
+
+    def leave_implausible(self, failing: Callable) -> None:
+        """Hand the engine the plausibility rule's per-joint failures (`failing(cause, estimate, detail) -> {joint:
+        [why]}`, `plausibility.failing_joints`): an engine whose per-joint candidates can be fitted again without a
+        joint does so (the n-joint engine, `chain.families.fit`); the planar engine's two-joint families cannot."""
+        ...
+
 
 @dataclass(frozen=True)
 class FamilyFunctions:

@@ -63,6 +63,18 @@ class Diagnosis:
     warnings: list = field(default_factory=list)
     margin_variance: float = scoring.MARGIN_VARIANCE  # the least share of the torque variance a cause removes
     partner: float = scoring.PARTNER  # the least share of the refit's gain a cause taken on trial explains
+    #: The verdict beside the causes (`verdict`): "causes", "none", "mismatch" or "not_identifiable".
+    verdict: str = "none"
+    #: What the data can tell (`identifiability.Identifiability.as_json`), the spec's `identifiability`.
+    identifiability: dict = field(default_factory=dict)
+    #: Where the model or the description is wrong, and where the data cannot tell (`verdict.conclude`).
+    mismatch: list[dict] = field(default_factory=list)
+    not_identifiable: list[dict] = field(default_factory=list)
+    #: Candidates the plausibility rule rejected where they would have been picked (`rounds._pick`), with why.
+    rejected: list[dict] = field(default_factory=list)
+    #: The rule's facts and thresholds (`plausibility.Facts.describe`), and the confirmation's findings (`confirm`).
+    plausibility: dict = field(default_factory=dict)
+    confirmation: dict = field(default_factory=dict)
 
     def detail_of(self, cause: str) -> dict:
         """What the extended model's joint fit says of `cause` beyond its estimate (e.g. an elastic joint's
@@ -120,6 +132,13 @@ class Diagnosis:
             "evidence": self.evidence,
             "timings_s": self.timings,
             "warnings": [w.as_dict() for w in self.warnings],
+            "verdict": self.verdict,
+            "identifiability": self.identifiability,
+            "mismatch": self.mismatch,
+            "not_identifiable": self.not_identifiable,
+            "rejected": self.rejected,
+            "plausibility": self.plausibility,
+            "confirmation": self.confirmation,
         }
 
 
@@ -172,6 +191,7 @@ def _row(
         "clears_margin": why is None,
         "shortfall": why,
         "needs_partner": bool(margin and share is not None and partner <= share < scoring.RECOVER),
+        "plausible": None,  # the plausibility rule's answer where it was asked (`rounds._pick`), else None
         **({"polish": c.detail["polish"]} if "polish" in c.detail else {}),
     }
 

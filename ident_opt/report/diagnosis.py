@@ -14,6 +14,7 @@ from ident_opt.diagnosis.result import Diagnosis
 from ident_opt.effects import CATALOGUE
 from ident_opt.numerics import signals
 from ident_opt.report import record
+from ident_opt.report.diagnosis_verdict import cause_lines, identifiability_sentence, verdict_lines, verdict_section
 from ident_opt.warnings import markdown_lines
 from ident_opt.wording import NOT_RESOLVED, num, pair
 
@@ -86,10 +87,11 @@ def rigid_fit_sentence(d: Diagnosis) -> str:
 
 
 def summary(d: Diagnosis) -> str:
-    """The terminal summary: the four questions, briefly."""
+    """The terminal summary: the four questions, briefly, then the verdict and what stands behind each cause."""
     nom = d.nominal
     lines = [
         f"diagnosis ({d.split}; {d.rate_hz:.4g} Hz)",
+        *(["0. " + identifiability_sentence(d)] if d.identifiability else []),
         "1. nominal models, held-out nMSE per joint: datasheet "
         + pair(nom["datasheet"]["nmse"])
         + ", rigid fit "
@@ -105,6 +107,7 @@ def summary(d: Diagnosis) -> str:
         )
     lines.append(f"4. held-out nMSE before → after: {_gain(d)}")
     lines.append("   " + forward_sentence(d))
+    lines += [f"5. {verdict_lines(d)[0]}", *("   " + line for line in [*cause_lines(d), *verdict_lines(d)[1:]])]
     return "\n".join(lines)
 
 
@@ -128,9 +131,11 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
     axes[-1].set_xlabel("time [s] (held-out part)")
     fig.suptitle("Torque residual τ − τ̂ on held-out data")
     fig.tight_layout()
-    with outputs.atomic_path(out / "residual_before_after.png") as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    try:
+        with outputs.atomic_path(out / "residual_before_after.png") as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+    finally:
+        plt.close(fig)
 
     dt = 1.0 / d.rate_hz
     if n == 2:
@@ -154,9 +159,11 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
         ax.legend(fontsize=8)
     fig.suptitle("Residual spectrum on held-out data")
     fig.tight_layout()
-    with outputs.atomic_path(out / "spectrum_before_after.png") as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    try:
+        with outputs.atomic_path(out / "spectrum_before_after.png") as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+    finally:
+        plt.close(fig)
     return ["residual_before_after.png", "spectrum_before_after.png"]
 
 
@@ -371,6 +378,7 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
     """The Markdown report."""
     lines = [
         *_preamble(d),
+        *verdict_section(d),
         *_nominal_section(d),
         *_cause_section(d),
         *_extended_section(d),
