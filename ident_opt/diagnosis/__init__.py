@@ -13,12 +13,15 @@ the loop applies them). The report is `ident_opt.report.diagnosis`."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
+from pathlib import Path
 
 from ident_opt.data.dataset import Dataset
 from ident_opt.data.loader import held_out_overlap
 from ident_opt.data.validate import checked_problem, checked_trials
 from ident_opt.diagnosis import identifiability
+from ident_opt.diagnosis.nominal import NominalFit, read_nominal
 from ident_opt.diagnosis.result import Diagnosis
 from ident_opt.diagnosis.rounds import diagnose_trial
 from ident_opt.diagnosis.split import held_out, split
@@ -32,7 +35,23 @@ from ident_opt.warnings import ResultWarning
 #: The catalogue's cause names, `none` first.
 CAUSES = ("none", *CATALOGUE)
 
-__all__ = ["CAUSES", "Diagnosis", "diagnose", "diagnose_trial", "rigid_choice", "scored_trial"]
+__all__ = [
+    "CAUSES",
+    "Diagnosis",
+    "NominalFit",
+    "diagnose",
+    "diagnose_trial",
+    "read_nominal",
+    "rigid_choice",
+    "scored_trial",
+]
+
+
+def _path(value: object, argument: str) -> Path:
+    """`value` as a path, else an InputError naming `argument`."""
+    if not isinstance(value, str | os.PathLike) or not str(value):
+        raise InputError(f"diagnose: {argument} must be a path to a compare JSON or an export sidecar, got {value!r}")
+    return Path(value)
 
 
 def diagnose(
@@ -42,6 +61,7 @@ def diagnose(
     *,
     estimator: str | None = None,
     rigid_fit: Choice | None = None,
+    nominal: str | os.PathLike | NominalFit | None = None,
     progress: bool = False,
 ) -> Diagnosis:
     """`ident-opt diagnose`: the first of `training` trains; the first of `testing` (else the second of `training`)
@@ -50,13 +70,19 @@ def diagnose(
     (a fit's name) or `rigid_fit` (a `Choice` made already, e.g. `comparison.choice`) says otherwise; the torque is
     low-passed like the derivatives (the problem's `derivative_cutoff_hz`). Warnings: the trials' own (a held-out
     trial that trains), the evidence behind the rigid fit's, the diagnosis's. Bad arguments (trials not of the
-    arm's joints or not finite, a rigid fit that is not a `Choice`) raise an InputError naming them."""
+    arm's joints or not finite, a rigid fit that is not a `Choice`) raise an InputError naming them.
+
+    `nominal`: an identified arm in place of the problem's datasheet (a `compare --json` or an `export` sidecar, or
+    a `NominalFit` read already; `estimator` picks the compare JSON's fit, default its recommended): "what changed
+    since this model?" (`nominal.read_nominal`); the JSON then calls that baseline "nominal"."""
     checked_problem(problem, "diagnose").require("diagnose")
     training = checked_trials(problem, training, "diagnose", "training", fit=True)
     testing = checked_trials(problem, testing, "diagnose", "testing", required=False)
     rigid_fit = checked_choice(rigid_fit, problem.robot, "rigid_fit", "diagnose")
     if rigid_fit is not None and estimator is not None:
         raise InputError("diagnose: give estimator (a fit's name) or rigid_fit (a Choice), not both")
+    if nominal is not None and not isinstance(nominal, NominalFit):
+        nominal = read_nominal(_path(nominal, "nominal"), estimator)
     train = training[0]
     others = [t for t in [*testing, *training[1:]] if t is not train]
     unseen, others, switched = scored_trial(problem, train, others)
@@ -71,6 +97,7 @@ def diagnose(
         rigid_fit=choice,
         others=others,
         problem_path=shown(problem.path) if getattr(problem, "path", None) else None,
+        nominal_fit=nominal,
     )
     result.warnings = [*held_out_overlap(training, testing), *choice.warnings, *switched, *result.warnings]
     return result

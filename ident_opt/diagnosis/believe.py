@@ -65,43 +65,49 @@ def judge(engine: Engine, facts: plausibility.Facts, rejected: list[dict]):
         )
         left_out = v.cand.detail.get("implausible_joints") or {}
         if left_out:  # joints the rule took out of the candidate before this fit (`chain.families.fit`)
-            rejected.append(
-                {
-                    "cause": v.cand.cause,
-                    "round": round_,
-                    "baseline": v.baseline,
-                    "estimate": None,
-                    "score": None,
-                    "nmse_after": None,
-                    "checks": {**LEFT_OUT_CHECKS},
-                    "identifiable": True,
-                    "reasons": [why for whys in left_out.values() for why in whys],
-                    "gains_on": [names.index(name) for name in left_out],
-                    "gains_on_joints": list(left_out),
-                    "left_out_joints": list(left_out),
-                }
-            )
+            rejected.append(_left_out(v, round_, left_out, names))
         if not j["plausible"]:
             r["clears_margin"] = r["needs_partner"] = False
             r["shortfall"] = plausibility.shortfall(j)
-            rejected.append(
-                {
-                    "cause": v.cand.cause,
-                    "round": round_,
-                    "baseline": v.baseline,
-                    "estimate": v.cand.estimate,
-                    "score": r["score"],
-                    "nmse_after": r["nmse_after"],
-                    "checks": j["checks"],
-                    "identifiable": j["identifiable"],
-                    "reasons": j["reasons"],
-                    "gains_on": j["gains_on"],
-                    "gains_on_joints": [names[k] for k in j["gains_on"]],
-                }
-            )
+            rejected.append(_rejected(v, r, j, round_, names))
         return j["plausible"]
 
     return judge
+
+
+def _left_out(v: Fitted, round_: int, left_out: dict, names: tuple[str, ...]) -> dict:
+    """The `rejected` entry of the joints the rule took out of a per-joint candidate (`left_out`: joint name → why)."""
+    return {
+        "cause": v.cand.cause,
+        "round": round_,
+        "baseline": v.baseline,
+        "estimate": None,
+        "score": None,
+        "nmse_after": None,
+        "checks": {**LEFT_OUT_CHECKS},
+        "identifiable": True,
+        "reasons": [why for whys in left_out.values() for why in whys],
+        "gains_on": [names.index(name) for name in left_out],
+        "gains_on_joints": list(left_out),
+        "left_out_joints": list(left_out),
+    }
+
+
+def _rejected(v: Fitted, r: dict, j: dict, round_: int, names: tuple[str, ...]) -> dict:
+    """The `rejected` entry of a candidate `v` (its row `r`) the plausibility rule's judgement `j` turned down."""
+    return {
+        "cause": v.cand.cause,
+        "round": round_,
+        "baseline": v.baseline,
+        "estimate": v.cand.estimate,
+        "score": r["score"],
+        "nmse_after": r["nmse_after"],
+        "checks": j["checks"],
+        "identifiable": j["identifiable"],
+        "reasons": j["reasons"],
+        "gains_on": j["gains_on"],
+        "gains_on_joints": [names[k] for k in j["gains_on"]],
+    }
 
 
 def complete(

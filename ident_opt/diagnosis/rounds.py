@@ -22,6 +22,7 @@ from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import believe, identifiability, plausibility, scoring
 from ident_opt.diagnosis.chain.engine import ChainEngine
 from ident_opt.diagnosis.engine import Engine, Request
+from ident_opt.diagnosis.nominal import NominalFit
 from ident_opt.diagnosis.planar.engine import PlanarEngine
 from ident_opt.diagnosis.result import Diagnosis, Fitted, conclude, nominal_entries, row_of, versions
 from ident_opt.fitting.recommend import checked_choice
@@ -89,12 +90,7 @@ def _rounds(engine: Engine, current: dict, version, row, var, progress: bool, ju
         # The round's reference: the current model with the datasheet's π where it has that version.
         ref = current.get("datasheet") or max(current.values(), key=lambda v: v.common)
         fits = _fit_round(engine, named, ref, version, bar, searched)
-        best: dict[str, Fitted] = {}
-        for v in fits:
-            if v.baseline == "rigid_fit" and v.cand.detail.get("empty", False):
-                continue  # screened to no joint (`chain.families`): the refitted π alone, hiding the other version
-            if v.cand.cause not in best or v.common > best[v.cand.cause].common:
-                best[v.cand.cause] = v
+        best = _best(fits)
         if searched is None:
             again = engine.search_again
             searched = {
@@ -133,6 +129,17 @@ def _rounds(engine: Engine, current: dict, version, row, var, progress: bool, ju
         named, chain, current, dropped = tentative
     bar.close()
     return chain, current, candidates, dropped, history
+
+
+def _best(fits: list[Fitted]) -> dict[str, Fitted]:
+    """Each cause's best-scoring version of a round (cause → fit)."""
+    best: dict[str, Fitted] = {}
+    for v in fits:
+        if v.baseline == "rigid_fit" and v.cand.detail.get("empty", False):
+            continue  # screened to no joint (`chain.families`): the refitted π alone, hiding the other version
+        if v.cand.cause not in best or v.common > best[v.cand.cause].common:
+            best[v.cand.cause] = v
+    return best
 
 
 def _nested(ranked: list[Fitted], rows: list[dict], var, floor: float) -> None:
@@ -220,6 +227,7 @@ def diagnose_trial(
     rigid_fit=None,
     others: Sequence[Dataset] = (),
     problem_path: str | None = None,
+    nominal_fit: NominalFit | None = None,
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data) of `robot`'s arm; see the module docstring
     and the engines' (`split.parts` for the split, `split.prepare` for `torque_filter_hz`: the problem's derivative
@@ -230,11 +238,12 @@ def diagnose_trial(
     Before naming anything, what the data can tell (`identifiability`); every candidate picked must pass the
     plausibility rule (`plausibility`, in `_pick`); each named cause is confirmed on the first of `others` (trials
     that neither trained nor selected it) where it still gains (`confirm`); the verdict beside the causes
-    (`verdict`) names `problem_path` in the `ident-opt excite` commands it suggests."""
+    (`verdict`) names `problem_path` in the `ident-opt excite` commands it suggests. `nominal_fit`: an identified arm in
+    place of the datasheet (`nominal.NominalFit`; the JSON then calls that baseline "nominal")."""
     rigid_fit = checked_choice(rigid_fit, robot, "rigid_fit", "diagnose")
     estimator = robot.default_estimator if rigid_fit is None else rigid_fit.estimator
     t0 = time.perf_counter()
-    engine = ENGINES.of(robot)(robot, Request(trial, unseen, train_fraction, torque_filter_hz, estimator))
+    engine = ENGINES.of(robot)(robot, Request(trial, unseen, train_fraction, torque_filter_hz, estimator, nominal_fit))
     parts, nominal = engine.parts, engine.nominal
     test = parts.test
     entries, nominal_mse = nominal_entries(
@@ -242,9 +251,7 @@ def diagnose_trial(
     )
     entries["rigid_fit"].update(nominal.extra)
     var = np.var(test.tau, axis=0)
-    ident = identifiability.read(parts.train, test, nominal.model, _scored_on(parts, unseen), robot.joint_names)
-    facts = plausibility.facts(engine, ident, var, robot)
-    engine.leave_implausible(lambda cause, est, detail: plausibility.failing_joints(cause, est, detail, facts))
+    ident, facts = _what_can_tell(engine, robot, unseen, var)
     t_nominal = time.perf_counter()
     version = versions(test, nominal.rest_test, nominal_mse["datasheet"], nominal.rigid_parameters)
     row = row_of(parts, nominal.rest_test, var, engine.margin_variance, engine.partner)
@@ -263,16 +270,29 @@ def diagnose_trial(
         engine.pose,
         nominal.rest_test,
     )
-    result.margin_variance = engine.margin_variance
-    result.partner = engine.partner
-    screening = engine.screening()
-    if screening is not None:
+    result.margin_variance, result.partner = engine.margin_variance, engine.partner
+    if nominal_fit is not None:
+        result.nominal_fit = nominal_fit
+        result.warnings += nominal_fit.warning(engine.kept)
+    if (screening := engine.screening()) is not None:
         result.evidence["screening"] = screening
     t_believe = time.perf_counter()
     believe.complete(result, engine, rounds[0], ident, facts, rejected, others, problem_path)
     result.timings["verdict"] = time.perf_counter() - t_believe
     result.timings["total"] += result.timings["verdict"]
     return result
+
+
+def _what_can_tell(engine: Engine, robot: Robot, unseen: Dataset | None, var: np.ndarray) -> tuple:
+    """(what the data can tell, the plausibility rule's facts) before anything is named; the engine leaves out of a
+    per-joint candidate the joints whose value the rule rejects."""
+    parts = engine.parts
+    ident = identifiability.read(
+        parts.train, parts.test, engine.nominal.model, _scored_on(parts, unseen), robot.joint_names
+    )
+    facts = plausibility.facts(engine, ident, var, robot)
+    engine.leave_implausible(lambda cause, est, detail: plausibility.failing_joints(cause, est, detail, facts))
+    return ident, facts
 
 
 def _scored_on(parts, unseen: Dataset | None) -> str:

@@ -172,6 +172,31 @@ def conclude(
     structured = {j for c in rejected if _implausible(c) and c.get("round") == last for j in c.get("gains_on", ())}
     left = beyond_noise(*noise, frozenset(structured if last == final_round else ()))
     undetermined = set(ident.undetermined_joints) if not ident.full_rank else set()
+    not_identifiable = _not_identifiable(rejected, ident, left, undetermined, ev_after, joints, problem, band_hz)
+    mismatch = _mismatch(rejected, left, undetermined, nmse_after, ev_after, joints, band_hz)
+    if named:
+        verdict = "causes"
+    elif left:
+        blind = any(j in undetermined for j in left) or not ident.held_out_distinct
+        verdict = "not_identifiable" if blind else "mismatch"
+    else:
+        verdict = "none"
+    return verdict, mismatch, not_identifiable, left
+
+
+def _not_identifiable(
+    rejected: list[dict],
+    ident: Identifiability,
+    left: list[int],
+    undetermined: set[int],
+    ev_after: dict,
+    joints: tuple[str, ...],
+    problem: str | None,
+    band_hz: float | None,
+) -> list[dict]:
+    """The `not_identifiable` entries (`conclude`): the joints the motion leaves undetermined (with the residual
+    beyond noise on them) and a held-out part that repeats the training motion, each with the command recording what
+    is missing."""
     not_identifiable = []
     if undetermined:
         unclear = sorted({c["cause"] for c in rejected if not c.get("identifiable", True)})
@@ -202,6 +227,21 @@ def conclude(
                 + " (a motion of its own; log it and give it as --test-data)",
             }
         )
+    return not_identifiable
+
+
+def _mismatch(
+    rejected: list[dict],
+    left: list[int],
+    undetermined: set[int],
+    nmse_after: list[float],
+    ev_after: dict,
+    joints: tuple[str, ...],
+    band_hz: float | None,
+) -> list[dict]:
+    """The `mismatch` entries (`conclude`): the joints beyond noise grouped by the implausible candidates that gained on
+    them, with the residual's signature and what to check; undetermined joints no candidate explains are left to
+    `not_identifiable`."""
     implausible = [c for c in rejected if _implausible(c)]
     by_causes: dict[tuple, list[int]] = {}
     for j in left:
@@ -223,11 +263,4 @@ def conclude(
                 "check": _check(names, list(causes), sig),
             }
         )
-    if named:
-        verdict = "causes"
-    elif left:
-        blind = any(j in undetermined for j in left) or not ident.held_out_distinct
-        verdict = "not_identifiable" if blind else "mismatch"
-    else:
-        verdict = "none"
-    return verdict, mismatch, not_identifiable, left
+    return mismatch

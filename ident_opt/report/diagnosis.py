@@ -268,6 +268,8 @@ def _preamble(d: Diagnosis) -> list[str]:
         "rests its residual is compared about its mean over the rest (stiction holds a level no model "
         "predicts); `nmse_raw_*` in the JSON are without that.",
         "",
+        f"Compared: {d.compared()}.",
+        "",
         "## Warnings",
         "",
         *markdown_lines(d.warnings),

@@ -91,25 +91,7 @@ def verdict_section(d: Diagnosis) -> list[str]:
     lines = ["## Verdict", "", f"**{d.verdict}**. {VERDICT_MEANING.get(d.verdict, '')}", ""]
     if d.identifiability:
         lines += [f"Can these data tell? {identifiability_sentence(d)}", ""]
-    if d.causes:
-        lines += ["| cause | plausible | range | search edge | no joint worse | forward simulation | confirmed on |"]
-        lines += ["|---|---|---|---|---|---|---|"]
-        for c in d.causes:
-            k = c.get("checks") or {}
-            yes = {True: "yes", False: "no", None: "—"}
-            lines.append(
-                f"| {c['cause']} | {yes[c.get('plausible')]} | {yes[k.get('range')]} | "
-                f"{'at an edge' if k.get('search_edge') else 'inside'} | {yes[k.get('no_joint_worse')]} | "
-                f"{yes[k.get('forward_simulation')]} | {c.get('confirmed_on') or 'unconfirmed'} |"
-            )
-        lines.append("")
-        unconfirmed = [c["cause"] for c in d.causes if not c.get("confirmed_on")]
-        if unconfirmed:
-            lines += [
-                f"Unconfirmed: {', '.join(unconfirmed)} — no trial that neither trained nor selected the cause shows "
-                "its gain (none was given, or it does not gain there; `confirmation` in the JSON).",
-                "",
-            ]
+    lines += _causes_table(d)
     for m in d.mismatch:
         rejected = ", ".join(f"`{c}`" for c in m["explained_by_rejected"])
         lines += [
@@ -132,20 +114,52 @@ def verdict_section(d: Diagnosis) -> list[str]:
         lines += [f"- **not identifiable**: {e['what']}.{rejected}{beyond} Record it: `{e['record']}`"]
     if d.mismatch or d.not_identifiable:
         lines.append("")
-    if d.rejected:
-        lines += ["Candidates the plausibility rule rejected where they would have been named:", ""]
-        for r in d.rejected:
-            if r.get("left_out_joints"):
-                lines.append(
-                    f"- round {r['round']}: **{r['cause']}** on {', '.join(r['left_out_joints'])} (left out of the "
-                    f"candidate, fitted again without): {'; '.join(r['reasons'])}"
-                )
-                continue
+    lines += _rejected_lines(d)
+    return lines
+
+
+def _causes_table(d: Diagnosis) -> list[str]:
+    """Each named cause's plausibility checks and confirmation, as a table."""
+    if not d.causes:
+        return []
+    lines = ["| cause | plausible | range | search edge | no joint worse | forward simulation | confirmed on |"]
+    lines += ["|---|---|---|---|---|---|---|"]
+    for c in d.causes:
+        k = c.get("checks") or {}
+        yes = {True: "yes", False: "no", None: "—"}
+        lines.append(
+            f"| {c['cause']} | {yes[c.get('plausible')]} | {yes[k.get('range')]} | "
+            f"{'at an edge' if k.get('search_edge') else 'inside'} | {yes[k.get('no_joint_worse')]} | "
+            f"{yes[k.get('forward_simulation')]} | {c.get('confirmed_on') or 'unconfirmed'} |"
+        )
+    lines.append("")
+    unconfirmed = [c["cause"] for c in d.causes if not c.get("confirmed_on")]
+    if unconfirmed:
+        lines += [
+            f"Unconfirmed: {', '.join(unconfirmed)} — no trial that neither trained nor selected the cause shows "
+            "its gain (none was given, or it does not gain there; `confirmation` in the JSON).",
+            "",
+        ]
+    return lines
+
+
+def _rejected_lines(d: Diagnosis) -> list[str]:
+    """The candidates the plausibility rule rejected where they would have been named, with why."""
+    if not d.rejected:
+        return []
+    lines = ["Candidates the plausibility rule rejected where they would have been named:", ""]
+    for r in d.rejected:
+        if r.get("left_out_joints"):
             lines.append(
-                f"- round {r['round']}: **{r['cause']}** (score {r['score']:.1f}, against the {r['baseline']} model, "
-                f"estimate `{_rounded(r['estimate'])}`): {'; '.join(r['reasons'])}"
+                f"- round {r['round']}: **{r['cause']}** on {', '.join(r['left_out_joints'])} (left out of the "
+                f"candidate, fitted again without): {'; '.join(r['reasons'])}"
             )
-        lines.append("")
+            continue
+        lines.append(
+            f"- round {r['round']}: **{r['cause']}** (score {r['score']:.1f}, against the {r['baseline']} model, "
+            f"estimate `{_rounded(r['estimate'])}`): {'; '.join(r['reasons'])}"
+        )
+    lines.append("")
     return lines
 
 

@@ -124,6 +124,9 @@ class ChainEngine(OverFunctions):
             how += f"; one sample in {k} kept ({rate / k:g} Hz) after the {cutoff:g} Hz low-pass"
         self.parts = Parts(train, test, raw_test, how, trial if unseen is not None else None)
         arm, pi_ds = robot.datasheets()[robot.datasheet]
+        self.kept: list[str] = []  # the datasheet values an identified nominal did not replace
+        if request.nominal is not None:
+            pi_ds, self.kept = request.nominal.vector(arm.names, pi_ds)
         self.dt = float(np.median(np.diff(train.t)))
         ctx = ChainContext(
             robot,

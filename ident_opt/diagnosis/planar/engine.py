@@ -70,6 +70,11 @@ class PlanarEngine(OverFunctions):
         self.parts = Parts(train, test, raw_test, how, trial if unseen is not None else None)
         self.dt = float(np.median(np.diff(train.t)))
         self.datasheet_pi = datasheet_pi(robot, "physical")
+        self.kept: list[str] = []  # the datasheet values an identified nominal did not replace
+        if request.nominal is not None:
+            names = candidates.NOMINAL.names
+            pi, self.kept = request.nominal.vector(names, candidates.NOMINAL.vector(self.datasheet_pi))
+            self.datasheet_pi = {**self.datasheet_pi, **dict(zip(names, pi.tolist()))}
         self.ctx = candidates.Context(
             robot,
             train,
