@@ -4,6 +4,7 @@ What each cause's finding says in words is the cause's own (`Effect.sentence`, b
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +56,10 @@ def chain_sentences(d: Diagnosis) -> list[str]:
             f"Round {c['round']}: {given}**{c['cause']}** clears the margin (score {c['score']:.1f}, fitted "
             f"against the {c['baseline']} model); estimate `{_rounded(c['estimate'])}`; held-out nMSE {step}."
         )
+        if names:  # the first cause's reading is `cause_sentence`; a later one's is said here, in its own words
+            base = "datasheet" if c["baseline"] == "datasheet" else "best rigid fit"
+            seen = replace(d, cause=c["cause"], estimate=c["estimate"])
+            out.append(CATALOGUE[c["cause"]].sentence(seen, base, f"held-out nMSE {step}."))
         before, names = c["nmse_after"], [*names, c["cause"]]
     last = d.rounds[-1] if len(d.rounds) > len(d.causes) and d.rounds[-1] else []
     why = last[0]["shortfall"] if last else None
@@ -121,11 +126,11 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
     t, tau = d.test.t, d.test.tau
     n = tau.shape[1]
     before, after = tau - d.predictions["before"], tau - d.predictions["after"]
-    label_after = "after" if d.cause != "none" else "after (no extension)"
+    label_after = f"after ({' + '.join(c['cause'] for c in d.causes)})" if d.causes else "after (no extension)"
     fig, axes = plt.subplots(n, 1, figsize=(10, 6 if n == 2 else 1.8 * n + 1), sharex=True)
     for j, ax in enumerate(axes):
         ax.plot(t, before[:, j], lw=0.7, label=f"before ({d.baseline})")
-        ax.plot(t, after[:, j], lw=0.7, label=f"{label_after} ({d.cause})", alpha=0.8)
+        ax.plot(t, after[:, j], lw=0.7, label=label_after, alpha=0.8)
         ax.set_ylabel(f"{joint(d, j)} residual [N m]", fontsize=8 if n > 2 else None)
         ax.legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time [s] (held-out part)")
