@@ -57,7 +57,7 @@ def test_an_exported_sidecar_gives_back_every_fitted_value(arm4, sidecar):
     assert engine.kept == []
     np.testing.assert_array_equal(engine.nominal.pi["datasheet"], fit.pi)
     plain = ChainEngine(problem.robot, Request(first, None, 0.7, "auto", "consistent"))
-    arm, pi_ds = problem.robot.datasheets()[problem.robot.datasheet]
+    _, pi_ds = problem.robot.datasheets()[problem.robot.datasheet]
     np.testing.assert_array_equal(plain.nominal.pi["datasheet"], pi_ds)
     assert not np.allclose(fit.pi, pi_ds)  # the test would not tell them apart otherwise
 
@@ -88,7 +88,7 @@ def test_bad_nominal_files_are_named(arm4, tmp_path):
     problem, first, _, _, folder = arm4
     broken = tmp_path / "broken.json"
     broken.write_text("{")
-    with pytest.raises(InputError, match="broken.json: cannot read the identified arm"):
+    with pytest.raises(InputError, match=r"broken\.json: cannot read the identified arm"):
         read_nominal(broken)
     record = json.loads((folder / "arm.urdf.json").read_text())
     record["parameters"]["fv_yaw"]["value"] = float("nan")
@@ -125,3 +125,29 @@ def test_the_json_calls_the_identified_arm_nominal_and_says_what_was_compared(ar
     assert plain["nominal"]["datasheet"]["nmse"] != payload["nominal"]["nominal"]["nmse"]
     assert plain["nominal"]["rigid_fit"]["nmse"] == payload["nominal"]["rigid_fit"]["nmse"]
     assert "--nominal FIT" in plain["compared"]  # a separate held-out trial without a nominal: said how to ask
+
+
+def test_rated_payload_is_read_on_every_arm_and_bounds_the_payload(tmp_path):
+    """`[robot] rated_payload` on a planar and on an n-joint problem: kept on the robot, the plausibility rule's
+    bound (a payload above it fails its range); out of range or not a number: an InputError naming the key."""
+    from ident_opt.diagnosis import plausibility
+
+    root = Path(__file__).resolve().parents[1]
+    for source in (root / "problems" / "tudor_2dof.toml", ARM4):
+        text = source.read_text(encoding="utf-8").replace("[robot]\n", "[robot]\nrated_payload = 1.5\n", 1)
+        copy = source.parent / f"_rated_{source.name}"
+        try:
+            copy.write_text(text, encoding="utf-8")
+            robot = load_problem(copy).robot
+            assert robot.rated_payload == 1.5
+            copy.write_text(text.replace("rated_payload = 1.5", "rated_payload = -1"), encoding="utf-8")
+            with pytest.raises(InputError, match="rated_payload"):
+                load_problem(copy)
+        finally:
+            copy.unlink(missing_ok=True)
+    n = 4
+    facts = plausibility.Facts(("a", "b", "c", "d"), np.ones(n), np.ones(n), 1.5, 0.2, True, (), np.ones(n), 0.01, 10)
+    estimate = {"mass": 1.4, "com": [0.0, 0.0, 0.05]}
+    assert plausibility.ranges("payload", estimate, {}, facts) == ([], [])
+    heavy, _ = plausibility.ranges("payload", {**estimate, "mass": 1.6}, {}, facts)
+    assert len(heavy) == 1 and "1.5" in heavy[0], heavy

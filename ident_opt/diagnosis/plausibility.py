@@ -48,9 +48,10 @@ BLOCK_S = 0.5
 #: A bound holds with this many standard errors of the value, where the fit gives them (`se` in a declaration): μ4 =
 #: 0.97 ± 0.06 on the TX40 is a gear of 51 % efficiency by its value, and of 48 % one standard error up.
 SE_MARGIN = 2.0
-#: Without a rated payload in the problem, the arm's is taken as this share of its moving links' mass: generous on
-#: every arm here (rated payload over arm mass: KUKA LWR4+ 7/16 kg, Panda 3/18 kg, TX40 2/27 kg, UR10e 12.5/33.5 kg).
-RATED_SHARE = 0.5
+#: Without `[robot] rated_payload` in the problem, the arm's is taken as this share of its moving links' mass (the
+#: problem format's default: the nominal arm's mass): generous on every arm here (rated payload over arm mass: KUKA
+#: LWR4+ 7/16 kg, Panda 3/18 kg, TX40 2/27 kg, UR10e 12.5/33.5 kg); a problem that knows its arm's says so.
+RATED_SHARE = 1.0
 #: A payload's centre of mass is near the flange when within this share of the chain's length of the last link's frame.
 FLANGE_SHARE = 0.25
 
@@ -111,7 +112,7 @@ def facts(engine, ident, var: np.ndarray, robot) -> Facts:
         mass = engine.moving_mass
         rated = RATED_SHARE * mass if mass else None
         how["rated_payload"] = (
-            f"{RATED_SHARE:.0%} of the moving links' mass ({mass:.3g} kg): the problem gives no rated payload"
+            f"the moving links' mass ({mass:.3g} kg): the problem gives no rated payload ([robot] rated_payload)"
             if mass
             else "unknown: the problem gives no rated payload and the model no link masses"
         )
