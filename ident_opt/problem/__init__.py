@@ -120,6 +120,6 @@ def read_problem_text(path: Path) -> str:
 def _robot(table: Table):
     """The arm the `[robot]` table describes: from a URDF when it names one, else the planar two-link arm; with
     `rated_payload` [kg], the most it is specified to carry (the diagnosis's plausibility of a payload), on any arm."""
-    rated = table.positive("rated_payload", None, high=LIMITS["mass"])
+    rated = table.positive("rated_payload", high=LIMITS["mass"]) if "rated_payload" in table.raw else None
     robot = parse_urdf_robot(table, table.path.resolve().parent) if "urdf" in table.raw else parse_planar(table)
     return robot if rated is None else replace(robot, rated_payload=rated)
