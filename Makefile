@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PROBLEM ?= problems/tudor_2dof.toml
 
-.PHONY: identify test test-arms lint bench codegen audit arms calibration clean-venv fuzz online-arms excitation-arms cutoff-study
+.PHONY: identify test test-arms lint bench codegen audit arms calibration clean-venv fuzz online-arms excitation-arms cutoff-study real-arms
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -56,6 +56,11 @@ fuzz: $(STAMP)
 	$(BIN)/python -m tests.test_fuzz build/fuzz.log
 
 ## Style: ruff's lint rules (with complexity limits, see pyproject.toml) and its formatter, checked not applied.
+## The diagnosis on every shipped real robot: each arm's page into results/<arm>/diagnosis/, and
+## results/diagnosis/real_arms.md generated from the verdicts the tool gives (about 5 minutes on 2 cores).
+real-arms: $(STAMP)
+	$(BIN)/python benchmarks/real_arms.py
+
 lint: $(STAMP)
 	$(BIN)/ruff check ident_opt tests benchmarks
 	$(BIN)/ruff format --check ident_opt tests benchmarks

@@ -42,7 +42,15 @@ import numpy as np
 from ident_opt.diagnosis import CAUSES
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
-from ident_opt.report.confusion import chain, confusion_matrix, exact_set_summary, rounded, worst
+from ident_opt.report.confusion import (
+    believability,
+    believability_lines,
+    chain,
+    confusion_matrix,
+    exact_set_summary,
+    rounded,
+    worst,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 ARMS = {
@@ -129,6 +137,7 @@ def one(job: tuple) -> dict:
         "cpu": cpu,
         "trajectory": trajectory,
         "gain": [b - a for b, a in zip(d.nmse_before, d.nmse_after)],
+        "believability": {**believability(d), "named": named},
     }
 
 
@@ -194,8 +203,9 @@ def table(results: list[dict], command: str) -> str:
             (("exact set", "within tolerance"), tallies),
         ),
     ]
+    lines += ["", *believability_lines((r["causes"], r["believability"]) for r in results if "believability" in r)]
     misses = [r for r in results if not (r["within"] if r["causes"] else r["exact"])]
-    lines += ["", "## Misses", ""]
+    lines += ["## Misses", ""]
     lines += [
         f"- {r['arm']} {' + '.join(r['causes']) or 'clean'} on {', '.join(r['joints']) or '—'} (seed {r['seed']}): "
         f"named {chain(r['named'])}; errors {rounded(r['errors'])}; estimates "

@@ -30,7 +30,15 @@ import numpy as np
 from ident_opt.diagnosis import CAUSES
 from ident_opt.effects import CATALOGUE
 from ident_opt.report import record
-from ident_opt.report.confusion import chain, confusion_matrix, exact_set_summary, rounded, worst
+from ident_opt.report.confusion import (
+    believability,
+    believability_lines,
+    chain,
+    confusion_matrix,
+    exact_set_summary,
+    rounded,
+    worst,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -72,6 +80,7 @@ def pair(job: tuple[tuple[str, str], int, float, str]) -> dict:
         "truth": {c: {k: v for k, v in truth[c].items() if k in CATALOGUE[c].judged} for c in causes},
         "seconds": seconds,
         "trajectory": trajectory,
+        "believability": {**believability(d), "named": named},
     }
 
 
@@ -118,6 +127,7 @@ def one(job: tuple) -> dict:
         "ok": None,
         "error": None,
         "truth": trial.truth["effects"].get(cause),
+        "believability": {**believability(d), "named": [c["cause"] for c in d.causes]},
     }
     if cause != "none" and d.cause == cause:
         out["ok"], out["error"] = hidden.errors(cause, d.estimate, trial.truth["effects"][cause])
@@ -231,8 +241,10 @@ def table(results: list[dict], command: str, pairs: list[dict] | None = None) ->
             f"| {cause} | {len(rows)} | {kept} | {np.median(b):.4f} | {np.median(a):.4f} | {np.max(b):.4f} "
             f"| {np.max(a):.4f} |"
         )
+    rows = [([] if r["cause"] == "none" else [r["cause"]], r["believability"]) for r in results]
+    rows += [(p["causes"], p["believability"]) for p in pairs or []]
+    lines += ["", *believability_lines(r for r in rows if r[1] is not None)]
     lines += [
-        "",
         "## Trials",
         "",
         "`named`: the first cause (the matrix's column); `chain`: every cause named, in order (exact: that one "

@@ -184,7 +184,7 @@ def _round_trip(description: RobotDescription, sidecar: dict, tmp_path, expected
     """Write both files, check they are valid XML and strict JSON, load them in Pinocchio and MuJoCo and return
     each one's worst relative error against `expected(q, dq, ddq)` (the model's τ in the file's convention)."""
     urdf, side = write_urdf(description, tmp_path / "arm.urdf", sidecar)
-    xml = write_mjcf(description, tmp_path / "arm.xml")
+    (xml,) = write_mjcf(description, tmp_path / "arm.xml")
     for path in (urdf, xml):
         ET.parse(path)
     record = _strict_json(side.read_text(encoding="utf-8"))

@@ -42,6 +42,8 @@ class ChainRobot:
     com_box: float | None = 0.1
     couplings: tuple[tuple[str, str, float], ...] = ()
     notes: tuple[str, ...] = field(default=(), compare=False)
+    #: The most the arm is specified to carry [kg] (`[robot] rated_payload`); None: not given.
+    rated_payload: float | None = None
     description: str = "urdf"
 
     @property

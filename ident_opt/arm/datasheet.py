@@ -84,6 +84,8 @@ class PlanarRobot:
     joint2: Joint | JointSide
     payload_mass: float = 0.0
     description: str = "bars"
+    #: The most the arm is specified to carry [kg] (`[robot] rated_payload`); None: not given.
+    rated_payload: float | None = None
 
     @property
     def joints(self) -> tuple[Joint | JointSide, ...]:

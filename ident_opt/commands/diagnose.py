@@ -28,17 +28,33 @@ from ident_opt.report import diagnosis as report
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_problem_arguments(parser)
     parser.add_argument("--out", metavar="DIR", help="folder for diagnosis.md and the figures")
-    add_estimator_flag(parser, "the rigid fit's π", "the recommended fit, chosen from the training part's evidence")
+    add_estimator_flag(
+        parser,
+        "the rigid fit's π (and the fit of a --nominal compare JSON)",
+        "the recommended fit, chosen from the training part's evidence",
+    )
+    parser.add_argument(
+        "--nominal",
+        metavar="FIT",
+        help="an identified arm as the nominal model instead of the datasheet: a `compare --json` or an `export` "
+        "sidecar (ARM.urdf.json, ARM.xml.json); answers 'what changed since this model?'",
+    )
     add_progress_flag(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     loaded = load(args, "diagnose")
     result = diagnose(
-        loaded.problem, loaded.training, loaded.testing, estimator=args.estimator, progress=not args.no_progress
+        loaded.problem,
+        loaded.training,
+        loaded.testing,
+        estimator=args.estimator,
+        nominal=args.nominal,
+        progress=not args.no_progress,
     )
     rigid = result.nominal["rigid_fit"]
     print(f"ident-opt diagnose: rigid fit: the {rigid['estimator']} fit ({rigid['why']})", file=sys.stderr)
+    print(f"ident-opt diagnose: compared: {result.compared()}", file=sys.stderr)
     for w in result.warnings:
         print(w, file=sys.stderr)
     out = output_dir(args, loaded.problem)

@@ -20,19 +20,23 @@ import numpy as np
 
 from ident_opt.arm.base import Arm
 from ident_opt.data.dataset import Dataset
+from ident_opt.diagnosis.nominal import NominalFit
 
 
 @dataclass(frozen=True)
 class Request:
     """What the loop hands an engine to build itself on: the trial to diagnose, an unseen trial for the held-out
-    part (None: the trial's last `1 - train_fraction` is held out), the torque low-pass setting (`split.prepare`)
-    and the rigid fit's estimator (a name of `ident_opt.fitting.estimators`)."""
+    part (None: the trial's last `1 - train_fraction` is held out), the torque low-pass setting (`split.prepare`),
+    the rigid fit's estimator (a name of `ident_opt.fitting.estimators`) and the identified arm that stands in for the
+    datasheet, if any."""
 
     trial: Dataset
     unseen: Dataset | None
     train_fraction: float
     torque_filter_hz: float | str | None
     estimator: str
+    #: An identified arm in place of the datasheet (`nominal.NominalFit`; None: the problem's datasheet).
+    nominal: NominalFit | None = None
 
 
 @dataclass
@@ -106,6 +110,31 @@ class Engine(Protocol):
 
     def screening(self) -> dict | None:
         """What the engine's screening found, for the JSON's evidence (None: it has none)."""
+        ...
+
+    #: The request the engine was built on, and the torque low-pass's cut-off it applied [Hz] (None: none).
+    request: Request
+    filter_hz: float | None
+    #: The datasheet parameters an identified nominal (`Request.nominal`) gave no value for, kept as they were.
+    kept: list[str]
+    #: The arm's moving links' mass [kg] (0: unknown) and the chain's length [m] (None: no centre of mass to bound):
+    #: the plausibility rule's payload bounds (`plausibility.facts`).
+    moving_mass: float
+    reach: float | None
+
+    def other(self, trial: Dataset) -> tuple[Dataset, Dataset, np.ndarray]:
+        """Another trial read as the held-out part is (prepared alike): (prepared, its torque as logged on the same
+        samples, the labels the engine scores with): where a named cause is confirmed (`confirm`)."""
+        ...
+
+    def nominal_prediction(self, baseline: str, ds: Dataset) -> np.ndarray:
+        """The nominal model `baseline`'s torque (N, n) [N m] along a prepared trial `ds`."""
+        ...
+
+    def leave_implausible(self, failing: Callable) -> None:
+        """Hand the engine the plausibility rule's per-joint failures (`failing(cause, estimate, detail) -> {joint:
+        [why]}`, `plausibility.failing_joints`): an engine whose per-joint candidates can be fitted again without a
+        joint does so (the n-joint engine, `chain.families.fit`); the planar engine's two-joint families cannot."""
         ...
 
 

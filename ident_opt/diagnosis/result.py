@@ -15,6 +15,7 @@ import numpy as np
 from ident_opt.data.dataset import Dataset
 from ident_opt.diagnosis import evidence, scoring
 from ident_opt.diagnosis.engine import Parts
+from ident_opt.diagnosis.nominal import NominalFit
 from ident_opt.diagnosis.split import compared_warnings
 from ident_opt.metrics import nmse
 
@@ -63,6 +64,20 @@ class Diagnosis:
     warnings: list = field(default_factory=list)
     margin_variance: float = scoring.MARGIN_VARIANCE  # the least share of the torque variance a cause removes
     partner: float = scoring.PARTNER  # the least share of the refit's gain a cause taken on trial explains
+    #: The verdict beside the causes (`verdict`): "causes", "none", "mismatch" or "not_identifiable".
+    verdict: str = "none"
+    #: What the data can tell (`identifiability.Identifiability.as_json`), the spec's `identifiability`.
+    identifiability: dict = field(default_factory=dict)
+    #: Where the model or the description is wrong, and where the data cannot tell (`verdict.conclude`).
+    mismatch: list[dict] = field(default_factory=list)
+    not_identifiable: list[dict] = field(default_factory=list)
+    #: Candidates the plausibility rule rejected where they would have been picked (`rounds._pick`), with why.
+    rejected: list[dict] = field(default_factory=list)
+    #: The rule's facts and thresholds (`plausibility.Facts.describe`), and the confirmation's findings (`confirm`).
+    plausibility: dict = field(default_factory=dict)
+    confirmation: dict = field(default_factory=dict)
+    #: The identified arm that stood in for the datasheet (`nominal.NominalFit`), None: the problem's datasheet.
+    nominal_fit: NominalFit | None = None
 
     def detail_of(self, cause: str) -> dict:
         """What the extended model's joint fit says of `cause` beyond its estimate (e.g. an elastic joint's
@@ -77,7 +92,35 @@ class Diagnosis:
 
     def as_json(self) -> dict:
         """The `--json` payload (`docs/cli.md`), plus extra keys (NaN, e.g. no reversal, as null)."""
-        return _finite(self._payload())
+        payload = _finite(self._payload())
+        if self.nominal_fit is None:
+            return payload
+        payload = _as_nominal(payload)
+        payload["nominal"].update(self.nominal_fit.as_json())
+        return payload
+
+    def compared(self) -> str:
+        """What was compared with what, in a sentence: where the causes were fitted and scored (`split`), against
+        which nominal model, and — when a separate trial was held out without an identified nominal — that a change
+        only the held-out trial shows cannot be named this way, and the command that asks for it."""
+        against = (
+            f"the identified arm in {self.nominal_fit.path} ({self.nominal_fit.estimator} fit) as the nominal model"
+            if self.nominal_fit is not None
+            else "the problem's datasheet and the rigid fit of the training part as the nominal models"
+        )
+        out = f"{self.split}; causes are fitted on the training part and scored on the held-out one, against {against}"
+        if self.nominal_fit is None and self.split.startswith("train on "):
+            out += (
+                ". A change only the held-out trial shows (a payload added since) is absent where the causes are "
+                "fitted, so it cannot be named this way: to ask what changed in it, identify the first trial "
+                "(`ident-opt compare --json FIT`) and diagnose the second with --nominal FIT"
+            )
+        return out
+
+    @property
+    def baseline_name(self) -> str:
+        """What the first nominal model is called: "datasheet", or "nominal" when an identified arm stands in."""
+        return "datasheet" if self.nominal_fit is None else "nominal"
 
     def _payload(self) -> dict:
         extended = None
@@ -114,12 +157,20 @@ class Diagnosis:
             "dropped": self.dropped,
             "rounds": self.rounds,
             "split": self.split,
+            "compared": self.compared(),
             "rate_hz": self.rate_hz,
             "nominal": self.nominal,
             "extended_model": extended,
             "evidence": self.evidence,
             "timings_s": self.timings,
             "warnings": [w.as_dict() for w in self.warnings],
+            "verdict": self.verdict,
+            "identifiability": self.identifiability,
+            "mismatch": self.mismatch,
+            "not_identifiable": self.not_identifiable,
+            "rejected": self.rejected,
+            "plausibility": self.plausibility,
+            "confirmation": self.confirmation,
         }
 
 
@@ -172,6 +223,7 @@ def _row(
         "clears_margin": why is None,
         "shortfall": why,
         "needs_partner": bool(margin and share is not None and partner <= share < scoring.RECOVER),
+        "plausible": None,  # the plausibility rule's answer where it was asked (`rounds._pick`), else None
         **({"polish": c.detail["polish"]} if "polish" in c.detail else {}),
     }
 
@@ -361,3 +413,15 @@ def row_of(parts: Parts, rest_test: np.ndarray, var: np.ndarray, floor: float, p
         return _row(v, score, current, parts.raw_test.tau, parts.test, rest_test, var, dt, gap, floor, partner)
 
     return row
+
+
+def _as_nominal(value: Any, key: str | None = None) -> Any:
+    """The JSON with the datasheet baseline called "nominal" (an identified arm stood in for it): every dict key
+    "datasheet" and every `baseline` value "datasheet"."""
+    if isinstance(value, dict):
+        return {("nominal" if k == "datasheet" else k): _as_nominal(v, k) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_as_nominal(v, key) for v in value]
+    if key == "baseline" and value == "datasheet":
+        return "nominal"
+    return value

@@ -11,6 +11,7 @@ on trial until a partner closes the refit's gap), the scoring and the naming rul
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 from tqdm import tqdm
@@ -18,13 +19,15 @@ from tqdm import tqdm
 from ident_opt.arm.base import Robot
 from ident_opt.arm.kinds import ByKind
 from ident_opt.data.dataset import Dataset
-from ident_opt.diagnosis import scoring
+from ident_opt.diagnosis import believe, identifiability, plausibility, scoring
 from ident_opt.diagnosis.chain.engine import ChainEngine
 from ident_opt.diagnosis.engine import Engine, Request
+from ident_opt.diagnosis.nominal import NominalFit
 from ident_opt.diagnosis.planar.engine import PlanarEngine
 from ident_opt.diagnosis.result import Diagnosis, Fitted, conclude, nominal_entries, row_of, versions
 from ident_opt.fitting.recommend import checked_choice
 from ident_opt.numerics import signals
+from ident_opt.outputs import shown
 
 #: Each kind of arm's engine (`arm.kinds.ByKind`): the one place the diagnosis asks which kind it has.
 ENGINES = ByKind(planar=PlanarEngine, chain=ChainEngine)
@@ -41,6 +44,7 @@ ROUND_KEYS = (
     "clears_margin",
     "needs_partner",
     "shortfall",
+    "plausible",
 )
 
 
@@ -67,12 +71,13 @@ def _prune(named: list, chain: list, current: dict, version, var, engine: Engine
     return named, chain, current, gone
 
 
-def _rounds(engine: Engine, current: dict, version, row, var, progress: bool) -> tuple:
+def _rounds(engine: Engine, current: dict, version, row, var, progress: bool, judge=None) -> tuple:
     """The loop of question 2: name the best cause, extend the model with it, ask again against the extended
     model, until nothing clears the margin (at most `MAX_CAUSES`). Every candidate of a round is scored
     against the same reference (the best model so far). Returns (chain, versions of the final model, the
     first round's candidate rows, dropped causes, every round's rows cut to `ROUND_KEYS`). `engine`: how the arm's
-    candidates are built and fitted (`engine.Engine`)."""
+    candidates are built and fitted (`engine.Engine`). `judge(v, row, current, round)`: the plausibility rule
+    (`plausibility`, applied where a candidate is picked, `_pick`); None: every candidate that clears is plausible."""
     chain: list[dict] = []
     history: list[list[dict]] = []
     named: list[tuple] = []  # each cause's own family and its θ, in the order named
@@ -85,12 +90,7 @@ def _rounds(engine: Engine, current: dict, version, row, var, progress: bool) ->
         # The round's reference: the current model with the datasheet's π where it has that version.
         ref = current.get("datasheet") or max(current.values(), key=lambda v: v.common)
         fits = _fit_round(engine, named, ref, version, bar, searched)
-        best: dict[str, Fitted] = {}
-        for v in fits:
-            if v.baseline == "rigid_fit" and v.cand.detail.get("empty", False):
-                continue  # screened to no joint (`chain.families`): the refitted π alone, hiding the other version
-            if v.cand.cause not in best or v.common > best[v.cand.cause].common:
-                best[v.cand.cause] = v
+        best = _best(fits)
         if searched is None:
             again = engine.search_again
             searched = {
@@ -99,10 +99,12 @@ def _rounds(engine: Engine, current: dict, version, row, var, progress: bool) ->
         ranked = sorted(best.values(), key=lambda v: v.common, reverse=True)
         rows = [row(v, v.common - ref.common, current, gap) for v in ranked]
         _nested(ranked, rows, var, engine.margin_variance)
+        here = None if judge is None else (lambda v, r, c=current, k=round_ + 1: judge(v, r, c, k))
+        top, on_trial = _pick(ranked, rows, tentative is not None, here)  # the rule marks the rows it rejects
+        judgements = {id(v): r.pop("judgement", None) for v, r in zip(ranked, rows)}  # kept off the JSON rows
         if round_ == 0:
             candidates = rows
         history.append([{k: r[k] for k in ROUND_KEYS} for r in rows])
-        top, on_trial = _pick(ranked, rows, tentative is not None)
         if top is None:
             break
         if on_trial:
@@ -111,7 +113,15 @@ def _rounds(engine: Engine, current: dict, version, row, var, progress: bool) ->
         else:
             tentative, gap = None, None
         named.append((top.family, top.theta))
-        chain.append({"cause": top.cand.cause, "score": top.common - ref.common, "fitted": top, "round": round_ + 1})
+        chain.append(
+            {
+                "cause": top.cand.cause,
+                "score": top.common - ref.common,
+                "fitted": top,
+                "round": round_ + 1,
+                "judgement": judgements.get(id(top)),
+            }
+        )
         current = {v.baseline: v for v in fits if v.family is top.family}
         named, chain, current, gone = _prune(named, chain, current, version, var, engine)
         dropped += gone
@@ -119,6 +129,17 @@ def _rounds(engine: Engine, current: dict, version, row, var, progress: bool) ->
         named, chain, current, dropped = tentative
     bar.close()
     return chain, current, candidates, dropped, history
+
+
+def _best(fits: list[Fitted]) -> dict[str, Fitted]:
+    """Each cause's best-scoring version of a round (cause → fit)."""
+    best: dict[str, Fitted] = {}
+    for v in fits:
+        if v.baseline == "rigid_fit" and v.cand.detail.get("empty", False):
+            continue  # screened to no joint (`chain.families`): the refitted π alone, hiding the other version
+        if v.cand.cause not in best or v.common > best[v.cand.cause].common:
+            best[v.cand.cause] = v
+    return best
 
 
 def _nested(ranked: list[Fitted], rows: list[dict], var, floor: float) -> None:
@@ -139,21 +160,30 @@ def _nested(ranked: list[Fitted], rows: list[dict], var, floor: float) -> None:
                 break
 
 
-def _pick(ranked: list[Fitted], rows: list[dict], on_trial: bool) -> tuple[Fitted | None, bool]:
+def _pick(ranked: list[Fitted], rows: list[dict], on_trial: bool, judge=None) -> tuple[Fitted | None, bool]:
     """(The cause this round adds, whether it is taken on trial.)
 
-    The best candidate that clears the margin; while a cause is on trial, only a datasheet-side partner
-    counts (the pair must close the refit's gap together). Failing that, two datasheet-side causes (a
-    payload and extra rotor inertia, say) can each explain too little of what a refitted π gains to be
-    named alone, yet together all of it: the best one that `needs_partner` is taken on trial, and kept only
-    if the next round finds a partner that makes the pair recover `scoring.RECOVER` of the same gap."""
+    The best candidate that clears the margin and is plausible (`judge(v, row)`, the plausibility rule, which marks
+    a candidate it rejects as not clearing, with its `shortfall`: the loop goes on to the next); while a cause is on
+    trial, only a datasheet-side partner counts (the pair must close the refit's gap together). Failing that, two
+    datasheet-side causes (a payload and extra rotor inertia, say) can each explain too little of what a refitted π
+    gains to be named alone, yet together all of it: the best plausible one that `needs_partner` is taken on trial,
+    and kept only if the next round finds a partner that makes the pair recover `scoring.RECOVER` of the same gap."""
+
+    def plausible(v: Fitted, r: dict) -> bool:
+        return judge is None or judge(v, r)
+
     top = next(
-        (v for v, r in zip(ranked, rows) if r["clears_margin"] and (not on_trial or v.baseline == "datasheet")),
+        (
+            v
+            for v, r in zip(ranked, rows)
+            if r["clears_margin"] and (not on_trial or v.baseline == "datasheet") and plausible(v, r)
+        ),
         None,
     )
     if top is not None or on_trial:
         return top, False
-    return next((v for v, r in zip(ranked, rows) if r["needs_partner"]), None), True
+    return next((v for v, r in zip(ranked, rows) if r["needs_partner"] and plausible(v, r)), None), True
 
 
 def _promising(v: Fitted, without: Fitted) -> bool:
@@ -195,28 +225,39 @@ def diagnose_trial(
     progress: bool = True,
     torque_filter_hz: float | str | None = signals.TORQUE_FILTER_HZ,
     rigid_fit=None,
+    others: Sequence[Dataset] = (),
+    problem_path: str | None = None,
+    nominal_fit: NominalFit | None = None,
 ) -> Diagnosis:
     """Diagnose `trial` (and `unseen`, if given, as the held-out data) of `robot`'s arm; see the module docstring
     and the engines' (`split.parts` for the split, `split.prepare` for `torque_filter_hz`: the problem's derivative
     cut-off is the natural choice). `rigid_fit`: how the rigid fit's π is identified and why (a
     `fitting.recommend.Choice`: the recommended fit, which `diagnose` passes; None: the robot's default estimator),
-    for the nominal rigid fit and every candidate that refits π; anything else is an InputError naming it."""
+    for the nominal rigid fit and every candidate that refits π; anything else is an InputError naming it.
+
+    Before naming anything, what the data can tell (`identifiability`); every candidate picked must pass the
+    plausibility rule (`plausibility`, in `_pick`); each named cause is confirmed on the first of `others` (trials
+    that neither trained nor selected it) where it still gains (`confirm`); the verdict beside the causes
+    (`verdict`) names `problem_path` in the `ident-opt excite` commands it suggests. `nominal_fit`: an identified arm in
+    place of the datasheet (`nominal.NominalFit`; the JSON then calls that baseline "nominal")."""
     rigid_fit = checked_choice(rigid_fit, robot, "rigid_fit", "diagnose")
     estimator = robot.default_estimator if rigid_fit is None else rigid_fit.estimator
     t0 = time.perf_counter()
-    engine = ENGINES.of(robot)(robot, Request(trial, unseen, train_fraction, torque_filter_hz, estimator))
+    engine = ENGINES.of(robot)(robot, Request(trial, unseen, train_fraction, torque_filter_hz, estimator, nominal_fit))
     parts, nominal = engine.parts, engine.nominal
     test = parts.test
     entries, nominal_mse = nominal_entries(
         nominal.pi, nominal.pred, test, nominal.rest_test, nominal.model.as_dict, estimator, rigid_fit
     )
     entries["rigid_fit"].update(nominal.extra)
-    t_nominal = time.perf_counter()
     var = np.var(test.tau, axis=0)
+    ident, facts = _what_can_tell(engine, robot, unseen, var)
+    t_nominal = time.perf_counter()
     version = versions(test, nominal.rest_test, nominal_mse["datasheet"], nominal.rigid_parameters)
     row = row_of(parts, nominal.rest_test, var, engine.margin_variance, engine.partner)
     current = {b: version(None, b, nominal.pred[b], (), None, {}) for b in nominal.pred}
-    rounds = _rounds(engine, current, version, row, var, progress)
+    rejected: list[dict] = []
+    rounds = _rounds(engine, current, version, row, var, progress, believe.judge(engine, facts, rejected))
     t_fit = time.perf_counter()
     result = conclude(
         rounds,
@@ -229,9 +270,33 @@ def diagnose_trial(
         engine.pose,
         nominal.rest_test,
     )
-    result.margin_variance = engine.margin_variance
-    result.partner = engine.partner
-    screening = engine.screening()
-    if screening is not None:
+    result.margin_variance, result.partner = engine.margin_variance, engine.partner
+    if nominal_fit is not None:
+        result.nominal_fit = nominal_fit
+        result.warnings += nominal_fit.warning(engine.kept)
+    if (screening := engine.screening()) is not None:
         result.evidence["screening"] = screening
+    t_believe = time.perf_counter()
+    believe.complete(result, engine, rounds[0], ident, facts, rejected, others, problem_path)
+    result.timings["verdict"] = time.perf_counter() - t_believe
+    result.timings["total"] += result.timings["verdict"]
     return result
+
+
+def _what_can_tell(engine: Engine, robot: Robot, unseen: Dataset | None, var: np.ndarray) -> tuple:
+    """(what the data can tell, the plausibility rule's facts) before anything is named; the engine leaves out of a
+    per-joint candidate the joints whose value the rule rejects."""
+    parts = engine.parts
+    ident = identifiability.read(
+        parts.train, parts.test, engine.nominal.model, _scored_on(parts, unseen), robot.joint_names
+    )
+    facts = plausibility.facts(engine, ident, var, robot)
+    engine.leave_implausible(lambda cause, est, detail: plausibility.failing_joints(cause, est, detail, facts))
+    return ident, facts
+
+
+def _scored_on(parts, unseen: Dataset | None) -> str:
+    """The trial the gains are scored on, in words: the unseen trial's name, or the held-out part of the trial."""
+    if unseen is not None:
+        return shown(unseen.source)
+    return f"{shown(parts.train.source)}, its held-out part"

@@ -22,6 +22,12 @@ from ident_opt.parameters import Parameter
 ARM_SHARE = 0.3
 
 
+#: Plausibility (`diagnosis.plausibility`, docs/effects.md "Plausibility"): no range beyond J ≥ 0, which the fit holds:
+#: a reflected rotor inertia N² J_rotor can exceed the link's own many times over on a high-ratio drive (230:1 with a
+#: 1e-5 kg m² rotor is 0.5 kg m²), and the problem gives no motor data to bound it.
+PLAUSIBLE: tuple = ()
+
+
 class Armature(Effect):
     summary = "extra reflected rotor inertia on the diagonal of M, beyond the datasheet's"
     order = 1
@@ -72,6 +78,7 @@ class Armature(Effect):
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("inertia",)
+    plausible = PLAUSIBLE
 
     def families(self, ctx) -> list:
         return [

@@ -26,6 +26,19 @@ def _mean(coulomb: tuple[tuple, tuple]) -> list[float]:
     return [0.5 * (a + b) for a, b in zip(*coulomb)]
 
 
+#: Plausibility (`diagnosis.plausibility`, docs/effects.md "Plausibility"): the physical range of the estimate, as data.
+#: "torque_logged" is each joint's largest logged torque on the training part (`plausibility.Facts`).
+PLAUSIBLE = tuple(
+    {
+        "key": key,
+        "most": "torque_logged",
+        "unit": "N m",
+        "why": "a joint that moved was driven past its friction level in each direction",
+    }
+    for key in ("positive", "negative")
+)
+
+
 class AsymmetricCoulomb(Effect):
     summary = "Coulomb friction that differs by direction (replaces the datasheet mean)"
     order = 2
@@ -124,6 +137,7 @@ class AsymmetricCoulomb(Effect):
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("positive", "negative")
+    plausible = PLAUSIBLE
     resolution = (
         f"Coulomb levels that differ by direction by less than {ASYMMETRY:.0%} of their mean on every joint are "
         "not named asymmetric",

@@ -158,6 +158,10 @@ class Effect(Syntax):
     # ------------------------------------------------------------------ diagnosis
     #: (rule, reason) when `resolved` can refuse an estimate: the rule goes into the reports.
     resolution: tuple[str, str] | None = None
+    #: The estimate's physical ranges and its searches' bounds, as data (each cause's `PLAUSIBLE`): entries {"key",
+    #: "least"/"most"/"most_abs"/"most_norm"/"most_sag", "search", "se", "unless", "unit", "why"}, which one rule reads
+    #: for every cause (`diagnosis.plausibility`, docs/effects.md "Plausibility").
+    plausible: tuple[dict, ...] = ()
 
     def families(self, ctx) -> list:
         """The candidate families (`effects.families.PlanarFamily`) that explain this cause on the planar arm, in the

@@ -28,6 +28,19 @@ MIN_DELAY_S = 0.002
 DELAY_TOL = (0.002, 0.20)
 #: Longest delay the simulator accepts [s].
 MAX_DELAY_S = 10.0
+#: Where a delay is searched [s].
+DELAY_SEARCH = (0.0, 0.15)
+#: Plausibility (`diagnosis.plausibility`, docs/effects.md "Plausibility"): the physical range of the estimate, as data.
+PLAUSIBLE = (
+    {
+        "key": "seconds",
+        "search": DELAY_SEARCH,
+        "most": 0.1,
+        "unit": "s",
+        "why": "a torque or current channel lags its encoders by bus cycles and filters, a few to a few tens of "
+        "milliseconds; a lag beyond 0.1 s means two logs not on one clock (a misaligned export), not a drive's lag",
+    },
+)
 
 
 class Delay(Effect):
@@ -49,7 +62,7 @@ class Delay(Effect):
             ChainFamily(
                 self.name,
                 delay=lambda theta: theta["delay"],
-                axes=lambda rate, theta: [least_squares.Axis("delay", 0.0, 0.15, 31)],
+                axes=lambda rate, theta: [least_squares.Axis("delay", *DELAY_SEARCH, 31)],
                 estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {}),
                 check=_like_with_like,
             )
@@ -63,6 +76,7 @@ class Delay(Effect):
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("seconds",)
+    plausible = PLAUSIBLE
     resolution = (
         f"delays shorter than {1e3 * MIN_DELAY_S:g} ms (on an arm with n joints, also when read with the "
         "prediction through the torque's low-pass) are not named",
@@ -73,7 +87,7 @@ class Delay(Effect):
         return [
             self.family(
                 transform=_delayed_prediction,
-                axes=lambda rate: [least_squares.Axis("delay", 0.0, 0.15, 31)],
+                axes=lambda rate: [least_squares.Axis("delay", *DELAY_SEARCH, 31)],
                 estimate=lambda p, se, ctx: ({"seconds": p["delay"]}, {}),
             )
         ]

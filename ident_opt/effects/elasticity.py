@@ -37,6 +37,27 @@ Q2_RANGE = (0.0, 1.4)
 #: ~12 Hz a mode is no longer observable in accelerations estimated with the usual 15 Hz low-pass, and a
 #: "mode" there only fits filter transients at starts and stops.
 ELASTIC_BAND_HZ = (1.5, 12.0)
+#: Where an elastic mode's damping ratio is searched.
+DAMPING_RANGE = (0.005, 0.3)
+#: Largest static deflection [rad] of an elastic joint under its RMS logged torque (`PLAUSIBLE`): the diagnosis's
+#: deflection model is linear (sin e ≈ e within 1.5 % up to 0.3 rad, gravity's own stiffness left out), and a spring
+#: that sags more under the joint's everyday torque lets the link hang visibly off its pose (17°), which no drive
+#: (a gear deflects by arc-minutes) and no link of a position-controlled arm does.
+MOST_SAG_RAD = 0.3
+#: Plausibility (`diagnosis.plausibility`, docs/effects.md "Plausibility"): the physical range of the estimate, as data.
+PLAUSIBLE = (
+    {"key": "frequency_hz", "search": ELASTIC_BAND_HZ, "unit": "Hz"},
+    {"key": "damping_ratio", "search": DAMPING_RANGE, "unit": ""},
+    {
+        "key": "stiffness",
+        "most_sag": MOST_SAG_RAD,
+        "unit": "N m/rad",
+        "why": "a spring that would sag more than 0.3 rad (17°) under the joint's RMS torque holds no pose: no drive "
+        "(arc-minutes under rated torque) and no link of a position-controlled arm is that soft, and the fitted mode "
+        "then carries a sliver of the link's inertia (the TX40's 0.068 N m/rad: 6e-4 kg m²), following a filter or "
+        "timing mismatch rather than a resonance",
+    },
+)
 #: Relative tolerance on a hidden mode's frequency.
 FREQUENCY_TOL = 0.20
 #: Highest mode the simulator accepts [Hz]: a stiffer spring is a rigid joint at any control rate it runs at
@@ -158,7 +179,7 @@ class Elasticity(Effect):
                 extra=_arm_columns(joint),
                 axes=lambda rate, theta: [
                     least_squares.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
-                    least_squares.Axis("damping", 0.005, 0.3, 6, True),
+                    least_squares.Axis("damping", *DAMPING_RANGE, 6, True),
                 ],
                 nonnegative=("scale", "motor"),
                 estimate=_arm_estimate(joint),
@@ -190,6 +211,7 @@ class Elasticity(Effect):
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("joint", "frequency_hz")
+    plausible = PLAUSIBLE
     resolution = edge_rule(
         "an elastic mode whose frequency lies", ELASTIC_BAND_HZ, "Hz", "the residual has no resonance inside the band"
     )
@@ -203,7 +225,7 @@ class Elasticity(Effect):
                 extra=_columns(joint),
                 axes=lambda rate: [
                     least_squares.Axis("frequency_hz", *ELASTIC_BAND_HZ, 16, True),
-                    least_squares.Axis("damping", 0.005, 0.3, 6, True),
+                    least_squares.Axis("damping", *DAMPING_RANGE, 6, True),
                 ],
                 # The spring carries a positive share of the link's inertia: a negative one is no mode (it
                 # is what a filter or timing mismatch, e.g. a delay estimated a millisecond long, leaves).

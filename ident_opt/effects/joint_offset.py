@@ -21,6 +21,19 @@ from ident_opt.parameters import Parameter
 OFFSET_TOL = (0.01, 0.20)
 #: Most linear fits that centre the offset search (`gravity_rotation`).
 CENTRE_ITERATIONS = 6
+#: Plausibility (`diagnosis.plausibility`, docs/effects.md "Plausibility"): the physical range of the estimate, as data.
+PLAUSIBLE = (
+    {
+        "key": "offset",
+        "most_abs": 0.05,
+        "unit": "rad",
+        "unless": "distinct",
+        "why": "an encoder's zero is set at assembly against a mark, to within a few tenths of a degree to a few "
+        "degrees (0.05 rad is 2.9°); a larger offset is a real mistake only when the same offset gains on a motion "
+        "distinct from the one it was fitted on (on the motion it was fitted on, a wrong zero imitates any pose-"
+        "dependent error: a frame, a mass)",
+    },
+)
 
 
 class JointOffset(Effect):
@@ -84,6 +97,7 @@ class JointOffset(Effect):
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("offset",)
+    plausible = PLAUSIBLE
 
     def families(self, ctx) -> list:
         return [

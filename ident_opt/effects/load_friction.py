@@ -25,6 +25,21 @@ from ident_opt.effects.payload import EFFECT as PAYLOAD
 COEFFICIENT_TOL = 0.25
 #: Largest |μ| [-] that still reads as an untouched joint.
 ZERO_TOL = 0.02
+#: Least efficiency of a gear (`PLAUSIBLE`): a drive that loses more than half the torque it transmits is no gear.
+LEAST_EFFICIENCY = 0.5
+#: Plausibility (`diagnosis.plausibility`, docs/effects.md "Plausibility"): the physical range of the estimate, as data.
+PLAUSIBLE = (
+    {
+        "key": "coefficient",
+        "most": 1.0 / LEAST_EFFICIENCY - 1.0,
+        "se": "se",
+        "unit": "",
+        "why": "a gear of efficiency η passes η of the torque its motor gives, so the friction that grows with the "
+        "transmitted torque is μ = 1/η − 1 of it; an efficiency of at least 50 % (harmonic drives 60–90 %, "
+        "planetary and spur gears 70–95 %, worm gears down to 50 %) bounds μ ≤ 1 (MERIt's 230:1 drive at μ 0.44 "
+        "is a 70 % gear)",
+    },
+)
 
 
 class LoadFriction(Effect):
@@ -62,6 +77,7 @@ class LoadFriction(Effect):
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("coefficient",)
+    plausible = PLAUSIBLE
 
     def families(self, ctx) -> list:
         return [self.family(extra=_columns, nonnegative=("mu1", "mu2"), estimate=_estimate)]

@@ -24,6 +24,24 @@ COM_TOL = (0.02, 0.25)
 MAX_MASS = 1e3
 #: An n-joint arm's default payload: this share of its moving links' mass, at `ARM_COM` [m] in the last link's frame.
 ARM_SHARE, ARM_COM = 0.05, (0.0, 0.0, 0.05)
+#: Plausibility (`diagnosis.plausibility`, docs/effects.md "Plausibility"): the physical range of the estimate, as data.
+#: "rated_payload" and "flange" are the arm's own bounds, which the rule reads from the arm (`plausibility.Facts`).
+PLAUSIBLE = (
+    {
+        "key": "mass",
+        "most": "rated_payload",
+        "unit": "kg",
+        "why": "an arm carries at most its rated payload (a tool, a part); a heavier unmodelled mass is a wrong "
+        "link mass or frame in the description",
+    },
+    {
+        "key": "com",
+        "most_norm": "flange",
+        "unit": "m",
+        "why": "a payload rides on the flange: its centre of mass lies near the last link's frame (a gripper's a "
+        "decimetre or two out), not across the arm",
+    },
+)
 
 
 class Payload(Effect):
@@ -105,6 +123,7 @@ class Payload(Effect):
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("mass",)
+    plausible = PLAUSIBLE
 
     def families(self, ctx) -> list:
         return [

@@ -59,6 +59,17 @@ def plant_coulomb(pi: dict, j: int) -> float:
 #: vs at its edge is the search stopped by its bound (`resolved`). A hump as wide as 0.5 rad/s, the joints' whole
 #: speed range in a typical trial, no longer falls off within the motion: it is a reshaped Coulomb level.
 VS_RANGE = (0.005, 0.5)
+#: Plausibility (`diagnosis.plausibility`, docs/effects.md "Plausibility"): the physical range of the estimate, as data.
+#: "torque_logged" is each joint's largest logged torque on the training part (`plausibility.Facts`).
+PLAUSIBLE = (
+    {"key": "velocity", "search": VS_RANGE, "unit": "rad/s"},
+    {
+        "key": "static",
+        "most": "torque_logged",
+        "unit": "N m",
+        "why": "a joint that moved was driven past its breakaway level",
+    },
+)
 #: The least Stribeck velocity an n-joint candidate names, in multiples of the lowest speed compared on its joint
 #: (`_arm_estimate`).
 FALL = 2.0
@@ -223,6 +234,7 @@ class Stribeck(Effect):
     # ------------------------------------------------------------------ diagnosis
     reference = "fourier"
     judged = ("static", "velocity")
+    plausible = PLAUSIBLE
     resolution = edge_rule(
         "Stribeck friction with no joint's excess resolved, or whose velocity vs lies",
         VS_RANGE,

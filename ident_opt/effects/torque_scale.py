@@ -22,6 +22,21 @@ from ident_opt.effects.keys import Key
 #: A hidden factor is found when the estimate is within this of it, per joint. It is also the resolution floor: a
 #: factor within it of 1 is not named (`TorqueScale.resolved`), since the diagnosis claims no better accuracy.
 SCALE_TOL = 0.02
+#: Plausibility (`diagnosis.plausibility`, docs/effects.md "Plausibility"): the physical range of the estimate, as data.
+PLAUSIBLE = (
+    {
+        "key": "scale",
+        "least": 0.8,
+        "most": 1.25,
+        "unit": "",
+        "why": "a motor's torque constant is within about ±10 % of its datasheet (tolerance, and magnets losing about "
+        "0.1 %/K warm), a current sensor's or amplifier's gain within a few per cent, a gear ratio exact; and a torque "
+        "logged as current × torque constant × gear ratio reads the motor's side: the joint gets the gear's "
+        "efficiency of it while driving (a harmonic drive's 80–90 %), a factor s of 0.8–0.9. Together: 0.8 to 1.25. "
+        "A factor beyond (1.5 to 2 on DFKI A.0's joint 1) is a wrong channel, unit or ratio: a description to check, "
+        "not a drive's property",
+    },
+)
 
 
 class TorqueScale(Effect):
@@ -92,6 +107,7 @@ class TorqueScale(Effect):
 
     # ------------------------------------------------------------------ diagnosis
     judged = ("scale",)
+    plausible = PLAUSIBLE
     resolution = (
         f"torque scales within {SCALE_TOL:g} of 1 on every joint are not named",
         "the diagnosis claims a scale only to that tolerance: closer to 1, a factor cannot be told from a correct "

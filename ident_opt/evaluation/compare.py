@@ -23,8 +23,9 @@ from ident_opt.data.dataset import Dataset, chronological_split, concat, shuffle
 from ident_opt.data.loader import held_out_overlap
 from ident_opt.data.validate import checked_problem, checked_trials
 from ident_opt.errors import InputError, excerpt
-from ident_opt.fitting import estimators
+from ident_opt.fitting import drive_gains, estimators
 from ident_opt.fitting.base import base_parameters
+from ident_opt.fitting.drive_gains import DriveGains
 from ident_opt.fitting.fit import LinearFit
 from ident_opt.fitting.recommend import Choice, choose, option
 from ident_opt.fitting.trust import Trust, check_masses
@@ -85,6 +86,8 @@ class Comparison:
     default: str = "constrained"  # the fit the tool uses downstream: the recommended one
     #: the recommended fit and why (`fitting.recommend`)
     choice: Choice | None = None
+    #: each drive's gain, when a training trial carries a known load (`fitting.drive_gains`); None: none does
+    drive_gains: DriveGains | None = None
 
     def as_json(self) -> dict:
         """The `compare --json` payload (`docs/cli.md`): parameters, standard errors, consistency, metrics, warnings,
@@ -127,6 +130,8 @@ class Comparison:
                 if "bias_bound" in fit.details
             },
         }
+        if self.drive_gains is not None:
+            out["drive_gains"] = self.drive_gains.as_json()
         if self.seeds is not None:
             out["seed_study"] = {
                 "seeds": self.seeds.labels,
@@ -349,6 +354,10 @@ def compare(
     _score_nominal(metrics, test_sets, sheets)
     sources = {"train": pool.source, **({"unseen": test_pool.source} if test_pool is not None else {})}
     trust = _trust(choice, overlap, model, fits, sheets[f"datasheet_{robot.datasheet}"])
+    loads = [problem.data.load_of(d.source) for d in trains]
+    drives = drive_gains.identify(robot, model, trains, loads) if any(loads) else None
+    if drives is not None:
+        trust.warnings += drives.warnings
     return Comparison(
         model,
         fits,
@@ -365,4 +374,5 @@ def compare(
         tuple(robot.statement),
         choice.estimator,
         choice,
+        drives,
     )

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 from ident_opt import outputs
@@ -27,7 +28,7 @@ from ident_opt.problem.sections import (
     relative,
 )
 from ident_opt.problem.spec import DataSpec, Limits, Problem, Reference, ResidualSpec, SimulateSpec, SplitSpec
-from ident_opt.problem.table import Table
+from ident_opt.problem.table import LIMITS, Table
 from ident_opt.problem.urdf import parse_urdf_robot
 
 #: The largest problem file read [bytes]: the shipped ones are a few kB; a larger file is a wrong path (a log, an
@@ -117,7 +118,8 @@ def read_problem_text(path: Path) -> str:
 
 
 def _robot(table: Table):
-    """The arm the `[robot]` table describes: from a URDF when it names one, else the planar two-link arm."""
-    if "urdf" in table.raw:
-        return parse_urdf_robot(table, table.path.resolve().parent)
-    return parse_planar(table)
+    """The arm the `[robot]` table describes: from a URDF when it names one, else the planar two-link arm; with
+    `rated_payload` [kg], the most it is specified to carry (the diagnosis's plausibility of a payload), on any arm."""
+    rated = table.positive("rated_payload", high=LIMITS["mass"]) if "rated_payload" in table.raw else None
+    robot = parse_urdf_robot(table, table.path.resolve().parent) if "urdf" in table.raw else parse_planar(table)
+    return robot if rated is None else replace(robot, rated_payload=rated)

@@ -19,6 +19,7 @@ from ident_opt.problem.spec import (
     MAX_SEEDS,
     TRAJECTORIES,
     DataSpec,
+    KnownLoad,
     Limits,
     Reference,
     ResidualSpec,
@@ -105,6 +106,29 @@ def _names(table: Table, key: str, n_joints: int) -> list[str]:
     return names
 
 
+def _payloads(table: Table, base: Path) -> dict[Path, KnownLoad]:
+    """`[data.payloads]`: each trial file (a key, relative to `base`) → its known load, `{mass = kg, com = [m, ...]}`
+    (`com` optional: the arm's tool point)."""
+    out = {}
+    for key in list(table.raw):
+        sub = table.table(key)
+        mass = sub.positive("mass", high=LIMITS["mass"])
+        com = sub.take("com", list, None)
+        if com is not None and (
+            not 1 <= len(com) <= 3
+            or not all(isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c) for c in com)
+            or any(abs(c) > LIMITS["length"] for c in com)
+        ):
+            raise InputError(
+                f"{table.path}: key 'com' in [data.payloads.\"{key}\"] must list 1 to 3 finite numbers [m] (a "
+                f"planar arm's: x along link 2; an n-joint arm's: x, y, z in the last link's frame), got {excerpt(com)}"
+            )
+        sub.done()
+        out[relative(base, key)] = KnownLoad(mass, None if com is None else tuple(float(c) for c in com))
+    table.done()
+    return out
+
+
 def parse_data(table: Table, base: Path, n_joints: int = 2) -> DataSpec:
     """`[data]` and `[data.columns]` of an arm of `n_joints` joints: the trials (relative to `base`), how to read
     them, and where each standard column is (a name, an index, a conversion, or false: not read)."""
@@ -143,6 +167,7 @@ def parse_data(table: Table, base: Path, n_joints: int = 2) -> DataSpec:
         ros_topic=table.take("ros_topic", str, DataSpec.ros_topic),
         ros_joints=tuple(_names(table, "ros_joints", n_joints)),
         ignored=tuple(ignored),
+        payloads=_payloads(table.table("payloads", required=False), base),
     )
     if not spec.header and any(isinstance(v, str) for v in columns.values()):
         raise InputError(f"{table.path}: [data] header = false needs 0-based column indices in [data.columns]")

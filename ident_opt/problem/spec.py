@@ -19,6 +19,15 @@ MAX_COMPONENTS = 50
 
 
 @dataclass(frozen=True)
+class KnownLoad:
+    """A load a trial carries and the problem knows (`[data.payloads]`): a point mass `mass` [kg] on the last link at
+    `com` [m] in that link's frame (a planar arm's: (x,) along link 2; None: the arm's tool point)."""
+
+    mass: float
+    com: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
 class DataSpec:
     """The `[data]` section: the trials and how to read them.
 
@@ -43,6 +52,17 @@ class DataSpec:
     ros_topic: str = "/joint_states"  # a ROS 2 bag's topic of sensor_msgs/msg/JointState messages
     ros_joints: tuple[str, ...] = ()  # a bag's joint names, base to tip: joint k is the k-th (`ident_opt.data.rosbag`)
     ignored: tuple[str, ...] = ()  # standard names not to read (`[data.columns]` name = false)
+    #: The loads some trials carry (`[data.payloads]`: trial file → its known load); what splits a drive's gain
+    #: from the dynamics' scale (`fitting.drive_gains`).
+    payloads: dict[Path, KnownLoad] = field(default_factory=dict)
+
+    def load_of(self, source: str | Path) -> KnownLoad | None:
+        """The known load of the trial read from `source` (None: none declared)."""
+        path = Path(source)
+        for declared, load in self.payloads.items():
+            if declared == path or declared.resolve() == path.resolve():
+                return load
+        return None
 
     @property
     def training(self) -> tuple[Path, ...]:

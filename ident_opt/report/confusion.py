@@ -73,3 +73,42 @@ def confusion_matrix(
             f"| {label} | " + " | ".join(map(str, counts)) + "".join(f" | {x}" for x in cells(label, rows)) + " |"
         )
     return lines
+
+
+def believability(d) -> dict:
+    """What a trial's diagnosis `d` (a `Diagnosis`) says beyond the causes named, for the tables below: its verdict,
+    the causes the plausibility rule rejected, and the joints whose held-out nMSE the named model made worse by more
+    than 5 % (a named model worse than the one before it on some joint)."""
+    worse = [
+        name for name, before, after in zip(d.joints, d.nmse_before, d.nmse_after) if d.causes and after > 1.05 * before
+    ]
+    return {"verdict": d.verdict, "rejected": sorted({r["cause"] for r in d.rejected}), "worse_on": worse}
+
+
+def believability_lines(rows: Iterable[tuple[Sequence[str], dict]]) -> list[str]:
+    """The plausibility section: per trial (hidden causes, `believability` record), how often the rule rejected a
+    cause that was truly hidden and was then not named (it must stay right on the simulator), the verdicts, and the
+    named models worse than the nominal one on some joint."""
+    rows = list(rows)
+    verdicts: dict[str, int] = {}
+    for _, b in rows:
+        verdicts[b["verdict"]] = verdicts.get(b["verdict"], 0) + 1
+    lost = [(hidden, b) for hidden, b in rows if set(hidden) & set(b["rejected"]) - set(b.get("named", ()))]
+    worse = [(hidden, b) for hidden, b in rows if b["worse_on"]]
+    with_cause = sum(1 for hidden, _ in rows if hidden)
+    out = [
+        "## Plausibility and verdicts",
+        "",
+        f"Verdicts: {', '.join(f'{k} {v}' for k, v in sorted(verdicts.items()))} (of {len(rows)} trials).",
+        "",
+        f"A hidden cause the plausibility rule rejected and that was not named: {len(lost)} of {with_cause} trials "
+        "with a cause" + (":" if lost else "."),
+    ]
+    out += [f"- {' + '.join(h)}: rejected {', '.join(b['rejected'])}; verdict {b['verdict']}" for h, b in lost]
+    out += [
+        "",
+        f"A named model worse than the nominal one by more than 5 % on some joint: {len(worse)} of {len(rows)} trials"
+        + (":" if worse else "."),
+    ]
+    out += [f"- {' + '.join(h) or 'clean'}: worse on {', '.join(b['worse_on'])}" for h, b in worse]
+    return [*out, ""]

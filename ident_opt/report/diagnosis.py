@@ -4,6 +4,7 @@ What each cause's finding says in words is the cause's own (`Effect.sentence`, b
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from ident_opt.diagnosis.result import Diagnosis
 from ident_opt.effects import CATALOGUE
 from ident_opt.numerics import signals
 from ident_opt.report import record
+from ident_opt.report.diagnosis_verdict import cause_lines, identifiability_sentence, verdict_lines, verdict_section
 from ident_opt.warnings import markdown_lines
 from ident_opt.wording import NOT_RESOLVED, num, pair
 
@@ -54,6 +56,10 @@ def chain_sentences(d: Diagnosis) -> list[str]:
             f"Round {c['round']}: {given}**{c['cause']}** clears the margin (score {c['score']:.1f}, fitted "
             f"against the {c['baseline']} model); estimate `{_rounded(c['estimate'])}`; held-out nMSE {step}."
         )
+        if names:  # the first cause's reading is `cause_sentence`; a later one's is said here, in its own words
+            base = "datasheet" if c["baseline"] == "datasheet" else "best rigid fit"
+            seen = replace(d, cause=c["cause"], estimate=c["estimate"])
+            out.append(CATALOGUE[c["cause"]].sentence(seen, base, f"held-out nMSE {step}."))
         before, names = c["nmse_after"], [*names, c["cause"]]
     last = d.rounds[-1] if len(d.rounds) > len(d.causes) and d.rounds[-1] else []
     why = last[0]["shortfall"] if last else None
@@ -86,10 +92,11 @@ def rigid_fit_sentence(d: Diagnosis) -> str:
 
 
 def summary(d: Diagnosis) -> str:
-    """The terminal summary: the four questions, briefly."""
+    """The terminal summary: the four questions, briefly, then the verdict and what stands behind each cause."""
     nom = d.nominal
     lines = [
         f"diagnosis ({d.split}; {d.rate_hz:.4g} Hz)",
+        *(["0. " + identifiability_sentence(d)] if d.identifiability else []),
         "1. nominal models, held-out nMSE per joint: datasheet "
         + pair(nom["datasheet"]["nmse"])
         + ", rigid fit "
@@ -105,6 +112,7 @@ def summary(d: Diagnosis) -> str:
         )
     lines.append(f"4. held-out nMSE before → after: {_gain(d)}")
     lines.append("   " + forward_sentence(d))
+    lines += [f"5. {verdict_lines(d)[0]}", *("   " + line for line in [*cause_lines(d), *verdict_lines(d)[1:]])]
     return "\n".join(lines)
 
 
@@ -118,19 +126,21 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
     t, tau = d.test.t, d.test.tau
     n = tau.shape[1]
     before, after = tau - d.predictions["before"], tau - d.predictions["after"]
-    label_after = "after" if d.cause != "none" else "after (no extension)"
+    label_after = f"after ({' + '.join(c['cause'] for c in d.causes)})" if d.causes else "after (no extension)"
     fig, axes = plt.subplots(n, 1, figsize=(10, 6 if n == 2 else 1.8 * n + 1), sharex=True)
     for j, ax in enumerate(axes):
         ax.plot(t, before[:, j], lw=0.7, label=f"before ({d.baseline})")
-        ax.plot(t, after[:, j], lw=0.7, label=f"{label_after} ({d.cause})", alpha=0.8)
+        ax.plot(t, after[:, j], lw=0.7, label=label_after, alpha=0.8)
         ax.set_ylabel(f"{joint(d, j)} residual [N m]", fontsize=8 if n > 2 else None)
         ax.legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time [s] (held-out part)")
     fig.suptitle("Torque residual τ − τ̂ on held-out data")
     fig.tight_layout()
-    with outputs.atomic_path(out / "residual_before_after.png") as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    try:
+        with outputs.atomic_path(out / "residual_before_after.png") as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+    finally:
+        plt.close(fig)
 
     dt = 1.0 / d.rate_hz
     if n == 2:
@@ -154,9 +164,11 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
         ax.legend(fontsize=8)
     fig.suptitle("Residual spectrum on held-out data")
     fig.tight_layout()
-    with outputs.atomic_path(out / "spectrum_before_after.png") as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    try:
+        with outputs.atomic_path(out / "spectrum_before_after.png") as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+    finally:
+        plt.close(fig)
     return ["residual_before_after.png", "spectrum_before_after.png"]
 
 
@@ -260,6 +272,8 @@ def _preamble(d: Diagnosis) -> list[str]:
         "low-passed by the same zero-phase filter the derivatives are estimated with, and where a joint "
         "rests its residual is compared about its mean over the rest (stiction holds a level no model "
         "predicts); `nmse_raw_*` in the JSON are without that.",
+        "",
+        f"Compared: {d.compared()}.",
         "",
         "## Warnings",
         "",
@@ -371,6 +385,7 @@ def markdown(d: Diagnosis, figure_files: list[str]) -> str:
     """The Markdown report."""
     lines = [
         *_preamble(d),
+        *verdict_section(d),
         *_nominal_section(d),
         *_cause_section(d),
         *_extended_section(d),

@@ -98,5 +98,5 @@ def export(problem: Problem, fit: ArmFit, path: str | Path, format: str | None =
     if fmt == "urdf":
         files = list(write_urdf(description, path, record))
     else:
-        files = [write_mjcf(description, path)]
+        files = write_mjcf(description, path, record)
     return Exported(fit, description, record, fmt, files)

@@ -19,13 +19,15 @@ compiled by MuJoCo first, so a file MuJoCo cannot load is never written (InputEr
 
 from __future__ import annotations
 
+import json
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from pathlib import Path
 
 from ident_opt.arm.bodies import ABSOLUTE_TOLERANCE, RELATIVE_TOLERANCE, Body, Origin, RobotDescription
 from ident_opt.errors import InputError
 from ident_opt.outputs import write_text
-from ident_opt.shipping.urdf import comment, number, numbers, xml_text
+from ident_opt.shipping.urdf import comment, jsonable, number, numbers, xml_text
 
 #: The lower bound MuJoCo's compiler puts on principal moments when a link has a zero one [kg m²] (its mjMINVAL).
 BOUND_INERTIA = 1e-15
@@ -119,9 +121,13 @@ def mjcf_text(description: RobotDescription) -> str:
     return xml_text(root, comment(lines))
 
 
-def write_mjcf(description: RobotDescription, path: str | Path) -> Path:
-    """Write `description` as a MuJoCo MJCF to `path`, atomically through `ident_opt.outputs` (module doc).
-    InputError when a link is not physically possible or MuJoCo cannot compile the model; returns the path."""
+def write_mjcf(
+    description: RobotDescription, path: str | Path, sidecar: Mapping[str, object] | None = None
+) -> list[Path]:
+    """Write `description` as a MuJoCo MJCF to `path` and, given the caller's record of the fit (`sidecar`), its
+    sidecar to `path` + ".json" (every identified value with its standard error: what `diagnose --nominal` reads
+    back), atomically through `ident_opt.outputs` (module doc). InputError when a link is not physically possible or
+    MuJoCo cannot compile the model; returns the paths written."""
     path = Path(path)
     violations = description.violations()
     if violations:
@@ -133,5 +139,14 @@ def write_mjcf(description: RobotDescription, path: str | Path) -> Path:
         mujoco.MjModel.from_xml_string(text)
     except ValueError as exc:
         raise InputError(f"{path}: MuJoCo cannot load the exported model ({exc})") from None
+    written = [path]
+    if sidecar is not None:
+        robot = description.as_dict()
+        payload = {"format": "ident-opt export sidecar", "mjcf": path.name, **sidecar, "robot": robot}
+        payload["notes"] = robot.pop("notes")
+        data = json.dumps(jsonable(payload), indent=1, ensure_ascii=False, allow_nan=False)
     write_text(path, text)
-    return path
+    if sidecar is not None:
+        written.append(Path(f"{path}.json"))
+        write_text(written[-1], data + "\n")
+    return written

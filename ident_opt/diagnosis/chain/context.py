@@ -59,6 +59,9 @@ class ArmContext:
     rank: int = 0
     evidence: dict = field(default_factory=dict)
     pi_rigid: np.ndarray | None = None
+    #: `failing(cause, estimate, detail) -> {joint: [why]}`: the plausibility rule's per-joint range failures
+    #: (`plausibility.failing_joints`), set by the rounds once the facts are read; None: none asked (`families.fit`).
+    failing: object = None
     _cache: dict = field(default_factory=dict)
 
     @property

@@ -29,7 +29,8 @@ from ident_opt.diagnosis.chain import families as candidates
 from ident_opt.diagnosis.chain.search import ChainContext
 from ident_opt.diagnosis.engine import FamilyFunctions, Nominal, OverFunctions, Parts, Request
 from ident_opt.diagnosis.result import Fitted
-from ident_opt.diagnosis.split import parts
+from ident_opt.diagnosis.split import parts, prepare
+from ident_opt.simulator.chain_plant import reach as chain_reach
 
 #: Filter periods (1/cut-off) dropped at each end of a trial (`inner`).
 EDGE_PERIODS = 3.0
@@ -111,16 +112,21 @@ class ChainEngine(OverFunctions):
         trial, unseen, estimator = request.trial, request.unseen, request.estimator
         torque_filter_hz = request.torque_filter_hz
         self.robot = robot
+        self.request = request
         trial, unseen = (None if d is None else inner(d, torque_filter_hz) for d in (trial, unseen))
         train, test, raw_test, how = parts(trial, unseen, request.train_fraction, torque_filter_hz, robot.joint_names)
         rate = 1.0 / float(np.median(np.diff(train.t)))
         cutoff = train.cutoff_hz if torque_filter_hz == "auto" else torque_filter_hz
+        self.filter_hz = cutoff
         self.decimation = k = decimation(rate, cutoff, train.n + test.n)
         train, test, raw_test = (_every(d, k) for d in (train, test, raw_test))
         if k > 1:
             how += f"; one sample in {k} kept ({rate / k:g} Hz) after the {cutoff:g} Hz low-pass"
         self.parts = Parts(train, test, raw_test, how, trial if unseen is not None else None)
         arm, pi_ds = robot.datasheets()[robot.datasheet]
+        self.kept: list[str] = []  # the datasheet values an identified nominal did not replace
+        if request.nominal is not None:
+            pi_ds, self.kept = request.nominal.vector(arm.names, pi_ds)
         self.dt = float(np.median(np.diff(train.t)))
         ctx = ChainContext(
             robot,
@@ -162,6 +168,35 @@ class ChainEngine(OverFunctions):
         pi = arm.vector(params) if all(name in params for name in arm.names) else self.ctx.datasheet
         rigid = self.Y_test @ pi
         return evidence.forward_error(arm, pi, test, self.dt, extension=final.pred - rigid)
+
+    def other(self, trial: Dataset) -> tuple[Dataset, Dataset, np.ndarray]:
+        """Another trial as the held-out part is read (`split.prepare`d, its filter's ends cut, decimated alike):
+        (prepared, its measured torque as logged on the same samples, its labels `ArmContext.labels`)."""
+        torque_filter_hz = self.request.torque_filter_hz
+        raw = inner(trial, torque_filter_hz)
+        prepared = prepare(raw, torque_filter_hz)
+        prepared, raw = _every(prepared, self.decimation), _every(raw, self.decimation)
+        return prepared, raw, self.ctx.labels(prepared)
+
+    def nominal_prediction(self, baseline: str, ds: Dataset) -> np.ndarray:
+        """The nominal model `baseline`'s torque (N, n) [N m] along `ds`."""
+        return self.ctx.regressor(ds) @ self.nominal.pi[baseline]
+
+    def leave_implausible(self, failing) -> None:
+        """Per-joint candidates are fitted again without the joints whose values fail their range
+        (`chain.families.fit`)."""
+        self.ctx.failing = failing
+
+    @property
+    def moving_mass(self) -> float:
+        """The moving links' mass [kg] in the datasheet (0 when it gives none)."""
+        arm, pi = self.robot.datasheets()[self.robot.datasheet]
+        return float(sum(arm.link_masses(np.asarray(pi, dtype=float)).values()))
+
+    @property
+    def reach(self) -> float:
+        """The chain's length [m] (`simulator.chain_plant.reach`)."""
+        return chain_reach(self.robot)
 
     def screening(self) -> dict | None:
         """The joints screened for an elastic mode, the decimation and the joint weights."""

@@ -182,7 +182,24 @@ def fit(family: ChainFamily, baseline: str, ctx: ArmContext) -> Candidate:
         family = replace(family, fixed={**family.fixed, key: tuple(j for j in family.fixed[key] if j not in failed)})
         cand = _final(family, baseline, ctx, search_theta(family, baseline, ctx))
         cand.detail["dropped_joints"] = [ctx.robot.joint_names[j] for j in failed]
-    return cand
+    return _plausible_joints(family, baseline, ctx, cand)
+
+
+def _plausible_joints(family: ChainFamily, baseline: str, ctx: ArmContext, cand: Candidate) -> Candidate:
+    """The candidate fitted again, once, without the joints whose per-joint values fail their physical range (the
+    plausibility rule, `ctx.failing`): an implausible value is never named, and the joints where the cause is read
+    plausibly keep their chance. The joints left and why are in `detail["implausible_joints"]`."""
+    key = f"{family.cause}.joints"
+    touched = cand.detail.get("theta", {}).get(key)
+    if ctx.failing is None or touched is None or cand.detail.get("empty"):
+        return cand
+    bad = {j: why for j, why in ctx.failing(family.cause, cand.estimate, cand.detail).items() if j in touched}
+    if not bad:
+        return cand
+    family = replace(family, fixed={**family.fixed, key: tuple(j for j in touched if j not in bad)})
+    again = _final(family, baseline, ctx, search_theta(family, baseline, ctx))
+    again.detail["implausible_joints"] = {ctx.robot.joint_names[j]: why for j, why in bad.items()}
+    return again
 
 
 def _screen(family: ChainFamily, baseline: str, start: dict, ctx: ArmContext) -> tuple[int, ...]:

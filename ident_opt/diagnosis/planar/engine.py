@@ -17,7 +17,7 @@ from ident_opt.diagnosis.engine import FamilyFunctions, Nominal, OverFunctions, 
 from ident_opt.diagnosis.planar import compose as composition
 from ident_opt.diagnosis.planar import families as candidates
 from ident_opt.diagnosis.result import Fitted
-from ident_opt.diagnosis.split import parts
+from ident_opt.diagnosis.split import parts, prepare
 from ident_opt.errors import InputError
 from ident_opt.numerics import least_squares as linear
 from ident_opt.numerics import signals
@@ -64,10 +64,17 @@ class PlanarEngine(OverFunctions):
                 f"the planar diagnosis refits them together; use one of {', '.join(REFITS)}"
             )
         self.robot = robot
+        self.request = request
         train, test, raw_test, how = parts(trial, unseen, request.train_fraction, torque_filter_hz, robot.joint_names)
+        self.filter_hz = train.cutoff_hz if torque_filter_hz == "auto" else torque_filter_hz
         self.parts = Parts(train, test, raw_test, how, trial if unseen is not None else None)
         self.dt = float(np.median(np.diff(train.t)))
         self.datasheet_pi = datasheet_pi(robot, "physical")
+        self.kept: list[str] = []  # the datasheet values an identified nominal did not replace
+        if request.nominal is not None:
+            names = candidates.NOMINAL.names
+            pi, self.kept = request.nominal.vector(names, candidates.NOMINAL.vector(self.datasheet_pi))
+            self.datasheet_pi = {**self.datasheet_pi, **dict(zip(names, pi.tolist()))}
         self.ctx = candidates.Context(
             robot,
             train,
@@ -97,6 +104,27 @@ class PlanarEngine(OverFunctions):
         pi = model.vector({**self.datasheet_pi, **final.cand.parameters})
         rigid = model.predict(pi, test.q, test.dq, test.ddq)
         return evidence.forward_error(model, pi, test, self.dt, extension=final.pred - rigid)
+
+    def other(self, trial: Dataset) -> tuple[Dataset, Dataset, np.ndarray]:
+        """Another trial as the held-out part is read (`split.prepare`d): (prepared, its measured torque as logged,
+        its rest-stretch labels)."""
+        prepared = prepare(trial, self.request.torque_filter_hz)
+        return prepared, trial, signals.rest_runs(prepared.dq)
+
+    def nominal_prediction(self, baseline: str, ds: Dataset) -> np.ndarray:
+        """The nominal model `baseline`'s torque (N, 2) [N m] along `ds`."""
+        return candidates.NOMINAL.predict(self.nominal.pi[baseline], ds.q, ds.dq, ds.ddq)
+
+    def leave_implausible(self, failing) -> None:
+        """Nothing: the planar families fit both joints at once; an implausible candidate is rejected whole."""
+
+    @property
+    def moving_mass(self) -> float:
+        """The links' mass [kg] the datasheet gives (`PlanarRobot.nominal_masses`)."""
+        return float(sum(self.robot.nominal_masses))
+
+    #: The planar arm's payload is a point mass at the tip of link 2 (no centre of mass to bound).
+    reach = None
 
     def screening(self) -> dict | None:
         return None
