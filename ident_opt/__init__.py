@@ -55,6 +55,10 @@ _EXPORTS = {
     # online identification: the offline start, then the rest of the trial replayed sample by sample
     "online": ("ident_opt.adaptation.replay", "online"),
     "Replay": ("ident_opt.adaptation.replay", "Replay"),
+    # contacts and collisions: the external-torque observer, its thresholds and alarms
+    "detect": ("ident_opt.api", "detect"),
+    "Detection": ("ident_opt.contact.detect", "Detection"),
+    "Thresholds": ("ident_opt.contact.thresholds", "Thresholds"),
     # shipping: a robot description, C for the controller
     "export": ("ident_opt.api", "export"),  # the shipping writers behind the command line's output checks
     "codegen": ("ident_opt.api", "codegen"),

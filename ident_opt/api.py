@@ -37,6 +37,7 @@ from ident_opt.problem import Problem
 from ident_opt.warnings import ResultWarning
 
 if TYPE_CHECKING:  # the writers' modules load CasADi, Pinocchio and a C compiler's helpers: on first use only
+    from ident_opt.contact.detect import Detection
     from ident_opt.shipping.description import Exported
     from ident_opt.shipping.generate import Generated
 
@@ -156,6 +157,24 @@ def fit(problem: Problem, trials: Sequence[Dataset], estimator: str | None = Non
         return choice.fit(robot, model, trials, **checked)
     except RuntimeError as exc:  # the solver failed: nothing to stand behind
         raise InputError(f"the {choice.estimator} fit failed ({exc}); try another estimator") from None
+
+
+def detect(
+    problem: Problem,
+    training: Sequence[Dataset],
+    calibration: Sequence[Dataset] | None = None,
+    data: Sequence[Dataset] = (),
+    *,
+    estimator: str | None = None,
+    margin: float | None = None,
+) -> Detection:
+    """`ident-opt detect` (`ident_opt.contact.detect.detect`, `docs/contacts.md`): the fit on `training`, thresholds
+    calibrated on the collision-free `calibration` trials (default: `training`; false alarms per minute held out one
+    trial at a time), and the external-torque observer with its alarms over each trial of `data`."""
+    from ident_opt.contact.detect import detect as run
+    from ident_opt.contact.thresholds import MARGIN
+
+    return run(problem, training, calibration, data, estimator=estimator, margin=MARGIN if margin is None else margin)
 
 
 # ---------------------------------------------------------------------------------------------- writers

@@ -31,6 +31,7 @@ RANGES: dict[tuple[str, str] | str, tuple[float, float]] = {
     ("fleet", "workers"): (1, 4096),
     ("fleet", "baseline_days"): (2, 3650),  # days: a scatter needs two
     ("fleet", "connect_timeout"): (0.1, 3600.0),  # s
+    ("detect", "margin"): (1.0, 100.0),  # a factor on the calibrated collision-free level
     "components": (1, MAX_COMPONENTS),
     "seed": (0, MAX_SEED),
 }

@@ -21,7 +21,7 @@ from ident_opt.arguments import validate_numbers
 from ident_opt.errors import InputError
 
 #: Flags (by dest) that name input files, and output files; `--out` is a file for these subcommands, else a folder.
-INPUT_FLAGS = ("problem", "data", "test_data", "parameters", "real", "trajectory_file")
+INPUT_FLAGS = ("problem", "data", "test_data", "calibrate", "parameters", "real", "trajectory_file")
 OUTPUT_FLAGS = ("json", "final")
 FILE_OUT = ("simulate", "excite", "export")
 
@@ -47,6 +47,7 @@ COMMANDS = {
     "calibrate": "how close the simulator's default trial is to a real one (residual size, spectrum, strain)",
     "export": "write the identified arm as a robot description: URDF (with a JSON sidecar) or MuJoCo MJCF",
     "fleet": "every robot of a fleet identified every day on Dask, and what changed (wear, payload, drive), named",
+    "detect": "contacts and collisions: an external-torque observer with calibrated thresholds, its alarms per trial",
 }
 
 

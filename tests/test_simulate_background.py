@@ -47,7 +47,7 @@ def test_background_terms_are_not_in_the_diagnosis_catalogue():
         "load_friction",
     }
     assert set(CATALOGUE) == names
-    assert set(BACKGROUND) == {"stiction", "drift", "ripple"} and not set(BACKGROUND) & names
+    assert set(BACKGROUND) == {"stiction", "drift", "ripple", "contact"} and not set(BACKGROUND) & names
     assert parse_effect("stiction:breakaway=[0.5,0.4]") == ("stiction", {"breakaway": (0.5, 0.4)})
     text = describe()
     assert all(f"  {name}:" in text for name in BACKGROUND)

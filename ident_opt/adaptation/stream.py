@@ -12,8 +12,12 @@ Guards (nothing on the input kills the stream): lines that are not UTF-8, not pa
 overflow, missing fields or values outside the batch loader's plausibility limits (`data.PLAUSIBLE`) are
 reported on the error stream as {"error", "kind", "line"} and skipped; a sample whose one-step residual is
 beyond `outlier_k` robust standard deviations is answered but updates nothing (counted); a failed update
-changes nothing. Output is strict JSON (no NaN or Infinity). A header or mapping error is an `InputError`
-(exit status 2, one message), raised before any output.
+changes nothing. With a contact watch (`StreamOptions.watch`, `ident_opt.contact.watch`), every line carries the
+external-torque estimate `tau_ext` [N m] and `alarm`; while an alarm or its settling lasts, a sample updates
+nothing (neither θ nor the GMR residual; counted as `contact`); with `learning_lag` > 0 a sample is learnt that many
+samples after it came (an alarm drops those still waiting: a push's onset, before its alarm, is not learnt). Output is
+strict JSON (no NaN or Infinity). A header or mapping error is an `InputError` (exit status 2, one message),
+raised before any output.
 """
 
 from __future__ import annotations
@@ -21,9 +25,10 @@ from __future__ import annotations
 import json
 import math
 import signal
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
@@ -36,6 +41,9 @@ from ident_opt.errors import InputError
 from ident_opt.numerics.causal import CausalDerivatives, NonIncreasingTime, RateError
 from ident_opt.numerics.derivatives import resolve_cutoff
 
+if TYPE_CHECKING:
+    from ident_opt.contact.watch import ContactWatch
+
 #: Default robust outlier threshold: residuals beyond this many robust standard deviations update nothing.
 OUTLIER_K = 10.0
 #: Memory (samples) of the robust residual scale; an outlier moves it by 1/`OUTLIER_MEMORY` of its clipped square.
@@ -47,8 +55,11 @@ LINE = "_line"
 
 
 # ---------------------------------------------------------------------------------------------- the service
-def prediction_record(n: int, sample: dict[str, float], p: Prediction) -> dict:
-    """The output line for one sample (n = updates so far, t echoed when given)."""
+def prediction_record(
+    n: int, sample: dict[str, float], p: Prediction, contact: tuple[np.ndarray, bool] | None = None
+) -> dict:
+    """The output line for one sample (n = updates so far, t echoed when given; with a contact watch, `contact` =
+    (τ_ext [N m], alarm))."""
     record: dict = {"n": n}
     if "t" in sample:
         record["t"] = sample["t"]
@@ -60,6 +71,8 @@ def prediction_record(n: int, sample: dict[str, float], p: Prediction) -> dict:
         parametric=p.parametric.tolist(),
         extrapolating=bool(p.extrapolating),
     )
+    if contact is not None:
+        record.update(tau_ext=contact[0].tolist(), alarm=bool(contact[1]))
     return record
 
 
@@ -72,6 +85,8 @@ class Counts:
     updates: int = 0  # samples with a torque folded into θ
     predictions: int = 0  # samples without a torque: predicted only
     outliers: int = 0  # samples whose torque failed the residual test: predicted, not learnt from
+    contact: int = 0  # samples with a torque during a contact alarm or its settling: predicted, not learnt from
+    alarms: int = 0  # contact alarms raised
     extrapolating: int = 0  # samples outside the GMR residual's training region
     skipped: dict[str, int] = field(default_factory=dict)  # lines not used, by kind (`BadLine.kind`)
 
@@ -92,7 +107,7 @@ def currents_to_torques(robot) -> tuple[tuple[float, ...] | None, str]:
 class StreamOptions:
     """How `serve` reads and guards: the column `mapping`, `current_to_torque` [N m/A per joint] (None: currents
     are refused, `currents_refused` says why), `cutoff_hz` of the causal derivative filter (used when dq/ddq are
-    not given), `outlier_k` (0: no residual test), `snapshot_every` updates."""
+    not given), `outlier_k` (0: no residual test), `snapshot_every` updates, the contact `watch` (None: none)."""
 
     mapping: Mapping = field(default_factory=Mapping)
     current_to_torque: tuple[float, ...] | None = None
@@ -100,6 +115,10 @@ class StreamOptions:
     cutoff_hz: float = 15.0
     outlier_k: float = OUTLIER_K
     snapshot_every: int = 1000
+    watch: ContactWatch | None = None
+    #: With a watch: samples a sample waits before it is learnt (0: at once; `Thresholds.learning_lag` is long
+    #: enough that a push's onset, before its alarm, is never learnt, at the price of θ lagging the stream).
+    learning_lag: int = 0
 
     @classmethod
     def for_problem(cls, problem, train: Dataset, outlier_k: float = OUTLIER_K) -> StreamOptions:
@@ -130,6 +149,8 @@ class Service:
         self.counts = Counts()
         self.scale2: np.ndarray | None = None  # robust residual variance per joint [N² m²]
         self.errors: list[dict] = []  # error records about earlier lines (times found stray later), to report
+        #: (design row, τ) of samples that passed every test, learnt `StreamOptions.learning_lag` samples later
+        self.pending: deque[tuple[np.ndarray, np.ndarray]] = deque()
 
     def line(self, raw: str | bytes, lineno: int) -> list[dict]:
         """The output records for one input line; raises BadLine or InputError."""
@@ -179,26 +200,55 @@ class Service:
             raise BadLine("the prediction is not finite for this sample", "numeric")
         self.counts.extrapolating += bool(p.extrapolating)
         out = []
+        watch = self.options.watch
+        contact = None if watch is None else (watch.tau_ext.copy(), watch.alarm)
         if names["tau"][0] in sample:
             tau = np.array([sample[n] for n in names["tau"]])
+            if watch is not None:
+                contact = self._watch(watch, sample.get("t"), q, dq, tau)
+                if watch.quiet:  # a push, or the settling after one: nothing is learnt from it
+                    return [prediction_record(self.ident.n_updates, sample, p, contact)]
             if self._outlier(tau - p.parametric):
                 self.counts.outliers += 1
-                record = prediction_record(self.ident.n_updates, sample, p)
+                record = prediction_record(self.ident.n_updates, sample, p, contact)
                 record["outlier"] = True
                 return [record]
-            try:
-                self.ident.add(D, tau)
-            except (FloatingPointError, RuntimeError, np.linalg.LinAlgError, ValueError) as exc:
-                raise BadLine(f"update failed, sample not used ({type(exc).__name__}: {exc})", "numeric") from None
-            self.counts.updates += 1
-            out.append(prediction_record(self.ident.n_updates, sample, p))
+            self.pending.append((D, tau))
+            folded = len(self.pending) > (0 if watch is None else self.options.learning_lag)
+            if folded:
+                self._fold(*self.pending.popleft())
+            out.append(prediction_record(self.ident.n_updates, sample, p, contact))
             every = self.options.snapshot_every
-            if every and self.ident.n_updates % every == 0:
+            if folded and every and self.ident.n_updates % every == 0:
                 out.append({"snapshot": self.parameters()})
         else:
             self.counts.predictions += 1
-            out.append(prediction_record(self.ident.n_updates, sample, p))
+            out.append(prediction_record(self.ident.n_updates, sample, p, contact))
         return out
+
+    def _watch(self, watch: ContactWatch, t: float | None, q, dq, tau) -> tuple[np.ndarray, bool]:
+        """The contact watch's step: (τ_ext, alarm). An alarm also drops the samples still waiting to be learnt
+        (`StreamOptions.learning_lag`): a push's onset, before the alarm, is not learnt either."""
+        raised = not watch.alarm
+        contact = watch.step(t, q, dq, tau)
+        self.counts.alarms += bool(raised and contact[1])
+        if watch.quiet:
+            self.counts.contact += 1 + len(self.pending)
+            self.pending.clear()
+        return contact
+
+    def _fold(self, D: np.ndarray, tau: np.ndarray) -> None:
+        """Fold one sample into θ (and the GMR residual)."""
+        try:
+            self.ident.add(D, tau)
+        except (FloatingPointError, RuntimeError, np.linalg.LinAlgError, ValueError) as exc:
+            raise BadLine(f"update failed, sample not used ({type(exc).__name__}: {exc})", "numeric") from None
+        self.counts.updates += 1
+
+    def flush(self) -> None:
+        """At the end of the stream: the samples still waiting (no alarm came) are learnt."""
+        while self.pending:
+            self._fold(*self.pending.popleft())
 
     def _outlier(self, r: np.ndarray) -> bool:
         """Robust residual test on the parametric model's one-step residual r = τ − Dθ [N m]: |r_j| > k·s_j for a
@@ -231,6 +281,7 @@ class Service:
                 "updates": c.updates,
                 "predictions": c.predictions,
                 "outliers": c.outliers,
+                **({"contact": c.contact, "alarms": c.alarms} if self.options.watch is not None else {}),
                 "extrapolating": c.extrapolating,
                 "skipped": dict(c.skipped),
                 "derivatives": {
@@ -285,6 +336,11 @@ def serve(
     finally:
         for sig, handler in previous.items():
             _install(sig, signal.SIG_DFL if handler is None else handler)
+    try:
+        service.flush()
+    except BadLine as exc:
+        service.counts.skip(exc.kind)
+        _emit(errstream, {"error": str(exc), "kind": exc.kind, "line": None})
     final = service.final()
     _emit(outstream, final)
     if on_final is not None:

@@ -173,6 +173,7 @@ ALL_COMMANDS = (
     "calibrate",
     "export",
     "fleet",
+    "detect",
 )
 
 

@@ -59,7 +59,19 @@ class ChainRobot:
     # ------------------------------------------------------------------ the `Robot` interface
     #: The commands that serve an n-joint arm.
     serves = frozenset(
-        ("identify", "compare", "codegen", "check", "export", "fleet", "online", "excite", "simulate", "diagnose")
+        (
+            "identify",
+            "compare",
+            "codegen",
+            "check",
+            "export",
+            "fleet",
+            "online",
+            "excite",
+            "simulate",
+            "diagnose",
+            "detect",
+        )
     )
     #: The fits `compare` runs, in report order: OLS on the base parameters, consistent without and with the
     #: URDF as a prior (`ident_opt.fitting.estimators`).

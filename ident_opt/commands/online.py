@@ -10,7 +10,8 @@ parameters against from-scratch batch solves at random steps and, on an n-joint 
 sign-bounded parameters are from the consistent re-solves.
 
 Streaming (`--stream`): the same offline fit, then samples from standard input (CSV with a header, or JSON
-lines), one JSON line out per sample; see `ident_opt.adaptation.stream`.
+lines), one JSON line out per sample, each with the contact observer's `tau_ext` and `alarm` (`docs/contacts.md`:
+nothing is learnt while an alarm or its settling lasts); see `ident_opt.adaptation.stream`.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from ident_opt.commands.common import (
     output_dir,
     write_json,
 )
+from ident_opt.contact.watch import stream_watch
 from ident_opt.errors import InputError
 from ident_opt.fitting.recommend import choose
 from ident_opt.outputs import shown
@@ -59,6 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="--stream: a parameter snapshot line every N updates (0: none; default 1000)",
     )
     parser.add_argument("--final", metavar="F", help="--stream: also write the final parameters to F (JSON)")
+    _contact_flags(parser)
     parser.add_argument(
         "--outlier-k",
         type=float,
@@ -94,6 +97,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_estimator_flag(parser, "the fit cpbr starts from and follows")
     add_components(parser)
+
+
+def _contact_flags(parser: argparse.ArgumentParser) -> None:
+    """--no-contact and --learning-lag: the stream's contact observer (`docs/contacts.md`)."""
+    add_switches(
+        parser,
+        {"--no-contact": "--stream: no contact observer (lines carry no tau_ext, alarm; every sample is learnt)"},
+    )
+    parser.add_argument(
+        "--learning-lag",
+        type=_lag,
+        default=0,
+        metavar="N",
+        help="--stream: learn a sample N samples after it came, so that an alarm drops a push's onset too; 'auto': "
+        "the persistence plus three observer time constants (default 0: at once, as the replay)",
+    )
+
+
+def _lag(text: str) -> int | str:
+    """--learning-lag: "auto" or a whole number of samples ≥ 0."""
+    if text.strip() == "auto":
+        return "auto"
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 'auto' or a whole number of samples ≥ 0, got {text!r}")
+    return value
 
 
 def run(args: argparse.Namespace) -> int:
@@ -150,6 +182,10 @@ def _stream(args: argparse.Namespace, problem, trial) -> int:
         choice=choice,
     )
     options = StreamOptions.for_problem(problem, train, args.outlier_k)
+    if not args.no_contact:  # every line: tau_ext and alarm; no learning from a push
+        options.watch = stream_watch(problem, [train], choice)
+        lag = args.learning_lag
+        options.learning_lag = options.watch.thresholds.learning_lag if lag == "auto" else int(lag)
     print(
         f"ident-opt online --stream: {args.model} ready (offline fit on {train.n} samples); reading samples",
         file=sys.stderr,

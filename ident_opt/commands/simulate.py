@@ -8,8 +8,8 @@ OUT.truth.json (π in the names of the armature model, effects in the diagnosis'
 Effect syntax: --effect NAME or --effect NAME:key=value,key=value (repeatable); per-joint values are
 bracketed pairs, key=[v1,v2] (quote the argument in the shell). Every effect takes scale=S (default 1),
 which multiplies its magnitude; scale=0 gives the clean trial. Besides the catalogue, background terms of
-a real arm that the diagnosis does not name (stiction, drift, ripple) take the same syntax; the default
-simulated problem uses them so that its residuals resemble the real MERIt trial's.
+a real arm that the diagnosis does not name (stiction, drift, ripple; contact, an external push on any arm)
+take the same syntax; the default simulated problem uses them so that its residuals resemble the real MERIt trial's.
 Without --effect, the problem's [simulate] effects are used (none if it has no [simulate] section);
 with --effect, exactly the ones given.
 Examples:

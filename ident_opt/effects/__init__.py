@@ -5,8 +5,8 @@ Each module of this package (besides `base`) defines ``EFFECT``, an `base.Effect
 its parameters (`PlanarArm(extensions=...)`), its plant term in the simulator, its candidate family in the
 diagnosis, its resolution rule and report sentence, and how a hidden instance is drawn and judged. The
 modules are found by listing the package, so a new cause is one new module. `background` holds the
-simulator's realism terms that no diagnosis names (stiction, drift, ripple) the same way; `docs/effects.md`
-describes the catalogue.
+simulator's realism terms that no diagnosis names (stiction, drift, ripple, and a contact: an external push) the same
+way; `docs/effects.md` describes the catalogue.
 
 Everything that handles effects (the simulator, the diagnosis, the model, the problem-file parser, the CLI,
 the reports, the benchmarks) iterates `CATALOGUE` / `BACKGROUND`; nothing else names a cause.

@@ -249,6 +249,8 @@ class Background(Effect):
 
     #: Whether the term is an external torque d on the joints (see `disturbance`).
     disturbs: bool = False
+    #: Whether the term acts on any arm (the n-joint simulator adds its `disturbance` too), not the planar one's only.
+    any_arm: bool = False
 
     def disturbance(self, p: dict, n: int, dt: float, rng):
         """The external torque d (n, 2) [N m] on a grid of step dt [s] (terms that `disturb`)."""

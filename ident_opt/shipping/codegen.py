@@ -217,6 +217,10 @@ DESCRIPTIONS = {
     "x = [q; dq; ddq] (a fixed sum of Gaussians, evaluated with a log-sum-exp, so it stays finite far from the "
     "training data).",
     "ddq_hat": "forward dynamics ddq = M(q)⁻¹ (τ − C dq − G − F), for on-board simulation (an LDLᵀ solve).",
+    "observer_step": "the contact observer, one sample: the external torque τ_ext [N m] from q, dq, τ (a "
+    "generalized-momentum observer) and the alarm (0/1), with the thresholds calibrated on the training trials baked "
+    "in; the state (zeros before the first sample) is laid out as parameters.json's `observer.state_layout` says; "
+    "samples at the calibration's step `observer.dt`.",
 }
 #: The example's state (q [rad], dq [rad/s], ddq [rad/s²]) for joint j, cycled over the joints.
 EXAMPLE_STATE = {"q": (0.3, -0.5, 0.2, -0.1), "dq": (0.8, -0.2, 0.4, -0.6), "ddq": (1.5, 2.0, -1.0, 0.5)}

@@ -3,8 +3,10 @@
 The model shipped is the arm's (with its extensions) with π the chosen fit on the training trials (by default the
 recommended fit: the π `compare` reports, `fitting.recommend.Choice.fit`) or loaded from an earlier run's
 parameters.json, plus its GMR residual (`ship.prepare`). The C is generated and compiled (`build`: `tau_hat`,
-`tau_hat_gmr`, `ddq_hat`), compared with the Python model (`ship.check`), and where the arm serves online
-identification the online update `pi_update` is generated and checked too (`pi_update.verify`).
+`tau_hat_gmr`, `ddq_hat`, and with training trials `observer_step`: the contact observer with thresholds calibrated
+on them, `ident_opt.contact.casadi_step`), compared with the Python model (`ship.check`, `casadi_step.check`), and
+where the arm serves online identification the online update `pi_update` is generated and checked too
+(`pi_update.verify`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 
 from ident_opt import outputs
 from ident_opt.arm.base import Arm
+from ident_opt.contact import casadi_step
 from ident_opt.data.dataset import Dataset, concat
 from ident_opt.errors import InputError
 from ident_opt.fitting.recommend import Choice, choose
@@ -98,10 +101,13 @@ def written_files(problem: Problem, trials: Sequence[Dataset], update: bool = Tr
     return written
 
 
-def build(shipped: Shipped, robot, out: Path, compiler: list[str], forward: bool = True, update: bool = False) -> Built:
-    """Generate the C code of `shipped` into `out` and compile it (`forward`: also ddq_hat), with the example and
-    the README written for `robot` (its joints and angle convention; `update`: the online update's files too)."""
-    functions = codegen.build_functions(shipped.model, shipped.pi, shipped.gmr, forward=forward)
+def build(
+    shipped: Shipped, robot, out: Path, compiler: list[str], forward: bool = True, update: bool = False, extra=()
+) -> Built:
+    """Generate the C code of `shipped` into `out` and compile it (`forward`: also ddq_hat; `extra`: more CasADi
+    Functions, e.g. observer_step), with the example and the README written for `robot` (its joints and angle
+    convention; `update`: the online update's files too)."""
+    functions = [*codegen.build_functions(shipped.model, shipped.pi, shipped.gmr, forward=forward), *extra]
     source, header = codegen.generate_sources(functions, out)
     library = codegen.compile_library(source, out, compiler)
     example = codegen.copy_example(out, shipped.model.n_joints, gmr=shipped.gmr is not None)
@@ -138,6 +144,18 @@ def payload(shipped: Shipped, built: Built, errors: dict[str, float], problem: P
     if robot.statement:  # e.g. a two-joint URDF arm: the offsets and signs from its angles to the C code's
         out["robot"] = list(robot.statement)
     return out
+
+
+def _check_observer(built: Built, observer: tuple, trial: Dataset, data: dict) -> float:
+    """The compiled observer_step against the Python watch along `trial` (`casadi_step.check`): its entry of
+    parameters.json (`data["observer"]`, with the check) and the error (inf when an alarm differs)."""
+    _, watch, data["observer"] = observer
+    step = codegen.load_external(built.library, "observer_step")
+    found = casadi_step.check(step, watch, trial.q, trial.dq, trial.tau)
+    data["observer"]["check"] = found
+    error = found["max_relative_difference"] if not found["alarm_mismatches"] else float("inf")
+    data["check"]["observer_step"] = {MEASURE["observer_step"]: error, "limit": TOLERANCE["observer_step"]}
+    return error
 
 
 def generate(
@@ -182,10 +200,15 @@ def generate(
         f"{robot.headline}; {len(model.names)} parameters ({shipped.estimator}), GMR with "
         f"{len(shipped.gmr.weights_)} components; generating C in {out}"
     )
-    built = build(shipped, robot, out, compiler, forward=forward, update=with_update(problem, trials, update))
+    observer = casadi_step.for_codegen(shipped.model, shipped.pi, trials) if trials else None
+    extra = [observer[0]] if observer else []
+    built = build(shipped, robot, out, compiler, forward, with_update(problem, trials, update), extra)
     train = concat(trials) if trials else None
     errors = ship.check(built.library, shipped, train, built.names, np.random.default_rng(0))
     data = payload(shipped, built, errors, problem, [t.source for t in trials])
+    if observer:
+        say("checking observer_step (the contact observer) against Python")
+        errors["observer_step"] = _check_observer(built, observer, trials[0], data)
     if with_update(problem, trials, update):
         say("generating pi_update (the online update) and checking it against Python")
         found = pi_update.verify(problem, trials[0], out, compiler)

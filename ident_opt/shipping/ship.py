@@ -24,9 +24,14 @@ from ident_opt.shipping import codegen
 #: The solver status written for estimators that have none to report.
 STATUS = {"ols": "least squares (no constraints)"}
 #: Largest accepted relative difference between the compiled library and the Python model.
-TOLERANCE = {"tau_hat": 1e-12, "tau_hat_gmr": 1e-10, "ddq_hat": 1e-12, "pi_update": 1e-9}
+TOLERANCE = {"tau_hat": 1e-12, "tau_hat_gmr": 1e-10, "ddq_hat": 1e-12, "pi_update": 1e-9, "observer_step": 1e-9}
 #: What is compared: τ with the NumPy model (+ GMR), ddq by how well it solves M ddq = τ − C dq − G − F.
-MEASURE = {"tau_hat": "max_relative_error", "tau_hat_gmr": "max_relative_error", "ddq_hat": "max_backward_error"}
+MEASURE = {
+    "tau_hat": "max_relative_error",
+    "tau_hat_gmr": "max_relative_error",
+    "ddq_hat": "max_backward_error",
+    "observer_step": "max_relative_error",  # τ_ext along the first training trial, relative to its largest size
+}
 #: Random states for the check, in addition to the training states.
 N_RANDOM = 4000
 #: Random states on which a loaded parameter's torque contribution is bounded (`torque_bound`).

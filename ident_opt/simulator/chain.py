@@ -44,14 +44,18 @@ class ChainPlant:
         self.box = box_of(robot, limits)
         self.scale = chain_plant.arm_scale(robot, self.box, self.box.v_max)
         joints = chain_plant.joints_of(robot, self.scale)
-        background = [name for name in _names(effects) if name in BACKGROUND]
+        background = [name for name in _names(effects) if name in BACKGROUND and not BACKGROUND[name].any_arm]
         if background:
             raise InputError(
-                f"effect {background[0]!r}: the background terms ({', '.join(BACKGROUND)}) are the planar two-link "
+                f"effect {background[0]!r}: the background terms "
+                f"({', '.join(n for n, e in BACKGROUND.items() if not e.any_arm)}) are the planar two-link "
                 f"arm's; this problem's robot is {robot.described_as}"
             )
         self.requested = normalise(effects, joints)
-        self.effects = {name: p for name, p in self.requested.items() if is_active(name, p, joints)}
+        active = {name: p for name, p in self.requested.items() if is_active(name, p, joints)}
+        #: The background terms that act on any arm (a contact: an external torque), outside the plant.
+        self.background = {name: p for name, p in active.items() if name in BACKGROUND}
+        self.effects = {name: p for name, p in active.items() if name not in BACKGROUND}
         self.plant = chain_plant.build_plant(robot, self.effects, self.scale, joints, self.box)
         chain_plant.check_finite(self.plant, "simulate")
         self.sigma = NOISE_SHARE * np.asarray(self.scale.torque)
@@ -76,8 +80,9 @@ class ChainPlant:
         ticks that took the fine ones) and the elastic joint's link inertia over the motion run (the other joints
         move) are kept for the truth file."""
         plant, self.control = self.plant, control
+        d = self.disturbance(len(ref.t), 1.0 / control, int(settings["seed"]))
         out, self.gains, self.steps = chain_loop.follow(
-            plant, ref, self.box, control, settings["bandwidth_hz"], progress
+            plant, ref, self.box, control, settings["bandwidth_hz"], progress, d
         )
         if plant.elastic is not None:
             n, j = self.robot.n_joints, plant.elastic.index
@@ -85,6 +90,13 @@ class ChainPlant:
             M = chain_plant.link_inertia(plant, j, q_true)
             plant.elastic = replace(plant.elastic, trial_inertia=(float(M.mean()), float(M.min()), float(M.max())))
         return out
+
+    def disturbance(self, ticks: int, dt: float, seed: int) -> np.ndarray | None:
+        """The external torque (ticks, n) [N m] of the background terms that act on any arm (None without one)."""
+        if not self.background:
+            return None
+        rng, n = np.random.default_rng([seed, 13]), self.robot.n_joints
+        return sum(BACKGROUND[name].disturbance(p, ticks, dt, rng, joints=n) for name, p in self.background.items())
 
     def truth_file(self, out: np.ndarray, ref: Reference, settings: dict, scale: np.ndarray) -> dict:
         n, g, steps = self.robot.n_joints, self.gains, self.steps
@@ -104,6 +116,7 @@ class ChainPlant:
             "max_error": np.abs(error).max(0).tolist(),
         }
         truth["limits"] = {"position_min": self.box.q_min.tolist(), "position_max": self.box.q_max.tolist()}
+        truth["background"] = dict(self.background)  # outside the diagnosis catalogue (a contact)
         return plain(truth)
 
 

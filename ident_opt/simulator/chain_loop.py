@@ -118,9 +118,12 @@ def rk4(plant: ArmPlant, steps: int, control: float) -> ca.Function:
     return ca.Function(f"rk4_{steps}", [X, T, P], [one.fold(steps)(X, T, P)], ["x", "tau", "p"], ["x_next"])
 
 
-def tick(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> tuple[ca.Function, Steps]:
+def tick(
+    plant: ArmPlant, bandwidth_hz: float, box: Box, control: float, disturbed: bool = False
+) -> tuple[ca.Function, Steps]:
     """One tick of a `control` [Hz] loop: (x, ref, p, band) -> (x_next, out), out = [τ (n), y (3n + 1), fine] at
-    its start, and its sub-steps.
+    its start, and its sub-steps. `disturbed`: ref = [q_r, dq_r, ddq_r, d] carries an external torque d [N m] over
+    the tick (a contact, `effects.background.contact`), applied with the drive's τ (the logged τ is the drive's).
 
     The effects' friction is stiff only near a reversal (its sign is regularised over ε ≪ the cruise speed,
     `ArmPlant.regularisation`), so a tick takes the fine steps (sized for it) only when some joint's rate dq is
@@ -132,21 +135,23 @@ def tick(plant: ArmPlant, bandwidth_hz: float, box: Box, control: float) -> tupl
     f = plant_function(plant)
     ctrl = controller(plant, bandwidth_hz)
     steps = substeps(plant, bandwidth_hz, box, control)
-    x, ref = ca.MX.sym("x", state_size(plant)), ca.MX.sym("ref", 3 * n)
+    x, ref = ca.MX.sym("x", state_size(plant)), ca.MX.sym("ref", (4 if disturbed else 3) * n)
     p, band = ca.MX.sym("p", f.size1_in(2)), ca.MX.sym("band", n)
-    _, y = f(x, ca.DM.zeros(n), p)
-    tau = ctrl(ref, y[:n], y[n : 2 * n])
-    _, y = f(x, tau, p)  # y's accelerations are those the dynamics produce under the applied torque
+    d = ref[3 * n :] if disturbed else ca.DM.zeros(n)
+    _, y = f(x, d, p)
+    tau = ctrl(ref[: 3 * n] if disturbed else ref, y[:n], y[n : 2 * n])
+    applied = tau + d if disturbed else tau
+    _, y = f(x, applied, p)  # y's accelerations are those the dynamics produce under the applied torque
     if steps.fine == steps.coarse:
         fine = ca.MX(0)
-        x_next = rk4(plant, steps.fine, control)(x, tau, p)
+        x_next = rk4(plant, steps.fine, control)(x, applied, p)
     else:
         speed, change = ca.fabs(y[n : 2 * n]), 2.0 / control * ca.fabs(y[2 * n : 3 * n])
         fine = ca.logic_or(ca.mmax(ca.logic_and(band > 0, speed < band + change)), ca.mmax(speed < change))
         switch = ca.Function.conditional(
             "substeps", [rk4(plant, steps.coarse, control)], rk4(plant, steps.fine, control)
         )
-        x_next = switch(fine, x, tau, p)
+        x_next = switch(fine, x, applied, p)
     out = ca.vertcat(tau, y, fine)
     return ca.Function(
         "arm_tick", [x, ref, p, band], [x_next, out], ["x", "ref", "p", "band"], ["x_next", "out"]
@@ -165,17 +170,24 @@ def chunked(step: ca.Function, plant: ArmPlant, ticks: int) -> ca.Function:
 
 
 def follow(
-    plant: ArmPlant, ref: Reference, box: Box, control: float, bandwidth_hz: float, progress: bool
+    plant: ArmPlant,
+    ref: Reference,
+    box: Box,
+    control: float,
+    bandwidth_hz: float,
+    progress: bool,
+    disturbance: np.ndarray | None = None,
 ) -> tuple[np.ndarray, Gains, Steps]:
     """The loop along `ref` (sampled at the control rate `control` [Hz]): (out (N, 4n + 1): τ, q_enc, dq_enc, ddq_enc,
     deflection at each tick; the gains; the RK4 sub-steps per tick and the share of ticks that took the fine ones);
-    an InputError when it diverges."""
+    an InputError when it diverges. `disturbance` (N, n) [N m]: an external torque at each tick (None: none)."""
     g = gains(plant, box, bandwidth_hz)
-    step, steps = tick(plant, bandwidth_hz, box, control)
+    step, steps = tick(plant, bandwidth_hz, box, control, disturbed=disturbance is not None)
     p = ca.DM(plant.parameters())
     band = ca.DM(plant.stiff_band(0.25 * control * steps.coarse))
     x = ca.DM(initial_state(plant, ref.q[0]))
-    refs = np.hstack([ref.q, ref.dq, ref.ddq]).T
+    columns = [ref.q, ref.dq, ref.ddq] + ([] if disturbance is None else [disturbance])
+    refs = np.hstack(columns).T
     out = march(chunked(step, plant, refs.shape[1]), x, refs, (p, band), CHUNK, progress)
     if not np.all(np.isfinite(out)):
         raise InputError(

@@ -11,7 +11,7 @@ M(q) ddq + C(q, dq) dq + G(q) + F(dq) = τ, and the encoders log q. Each hidden 
    flexible link: its kind, joint, frequency and damping), built here (`simulator.elastic`) with its own states,
    plant, initial state and fastest rate.
 
-Background terms (`ident_opt.effects.background`: stiction, drift, ripple) are kept apart in
+Background terms (`ident_opt.effects.background`: stiction, drift, ripple, contact) are kept apart in
 `Truth.background` and wrapped around this plant by background.py.
 """
 
