@@ -270,17 +270,23 @@ def diagnose_trial(
         engine.pose,
         nominal.rest_test,
     )
+    _engine_notes(result, engine, nominal_fit)
+    t_believe = time.perf_counter()
+    believe.complete(result, engine, rounds[0], ident, facts, rejected, others, problem_path)
+    result.timings["verdict"] = time.perf_counter() - t_believe
+    result.timings["total"] += result.timings["verdict"]
+    return result
+
+
+def _engine_notes(result: Diagnosis, engine: Engine, nominal_fit: NominalFit | None) -> None:
+    """What the engine adds to the result (in place): its naming thresholds, its screening, and the identified
+    nominal with the datasheet values it kept."""
     result.margin_variance, result.partner = engine.margin_variance, engine.partner
     if nominal_fit is not None:
         result.nominal_fit = nominal_fit
         result.warnings += nominal_fit.warning(engine.kept)
     if (screening := engine.screening()) is not None:
         result.evidence["screening"] = screening
-    t_believe = time.perf_counter()
-    believe.complete(result, engine, rounds[0], ident, facts, rejected, others, problem_path)
-    result.timings["verdict"] = time.perf_counter() - t_believe
-    result.timings["total"] += result.timings["verdict"]
-    return result
 
 
 def _what_can_tell(engine: Engine, robot: Robot, unseen: Dataset | None, var: np.ndarray) -> tuple:

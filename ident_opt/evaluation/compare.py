@@ -313,6 +313,17 @@ def _trust(
     return trust
 
 
+def _drive_gains(problem: Problem, model: Arm, trains: Sequence[Dataset], trust: Trust) -> DriveGains | None:
+    """Each drive's gain when a training trial carries a known load (`[data.payloads]`), its warnings added to the
+    trust checks'; None when none does."""
+    loads = [problem.data.load_of(d.source) for d in trains]
+    if not any(loads):
+        return None
+    drives = drive_gains.identify(problem.robot, model, trains, loads)
+    trust.warnings += drives.warnings
+    return drives
+
+
 def compare(
     problem: Problem,
     training: Dataset | Sequence[Dataset],
@@ -354,10 +365,7 @@ def compare(
     _score_nominal(metrics, test_sets, sheets)
     sources = {"train": pool.source, **({"unseen": test_pool.source} if test_pool is not None else {})}
     trust = _trust(choice, overlap, model, fits, sheets[f"datasheet_{robot.datasheet}"])
-    loads = [problem.data.load_of(d.source) for d in trains]
-    drives = drive_gains.identify(robot, model, trains, loads) if any(loads) else None
-    if drives is not None:
-        trust.warnings += drives.warnings
+    drives = _drive_gains(problem, model, trains, trust)
     return Comparison(
         model,
         fits,
