@@ -84,7 +84,7 @@ def test_a_known_payload_gives_each_drive_its_gain_on_the_planar_arm(tmp_path):
 def test_exact_data_give_the_six_joint_arms_gains_exactly(tmp_path):
     """The TX40 with drives (6 joints, a coupled wrist), its drives given a torque constant and gear ratio, noise-free
     with the true derivatives logged: every gain to 1e-6 — the estimator, not the data, is what is checked here (with
-    noise and estimated derivatives, joints 1 and 4 are off by 35 % and 14 %: `benchmarks/drive_gains.py`)."""
+    noise and estimated derivatives, joints 1 and 4 are off by 35 % and 5 %: `benchmarks/drive_gains.py`)."""
     text = (ROOT / "tests" / "arms" / "tx40_drives.toml").read_text(encoding="utf-8")
     text = text.replace('urdf = "../../', f'urdf = "{ROOT.as_posix()}/')
     text = re.sub(r"(\[robot\.joint_\d\]\n)", r"\1torque_constant = 0.2\ngear_ratio = 40\n", text)
