@@ -19,10 +19,13 @@ given as one ROOT of real folders (a bind mount, or a copy).
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import hashlib
 import os
 import re
+import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path, PurePosixPath
@@ -221,6 +224,23 @@ def linked(file: FleetFile) -> bool:
         if os.path.islink(here):
             return True
     return False
+
+
+@contextlib.contextmanager
+def local_copy(url: str) -> Iterator[Path]:
+    """A local path to the file at `url`: itself when local, else a temporary copy with the same name (the loader
+    reads by path and by file ending), removed afterwards."""
+    fs, path = fsspec.core.url_to_fs(url)
+    if isinstance(fs, LocalFileSystem):
+        yield Path(path)
+        return
+    with tempfile.TemporaryDirectory(prefix="ident-opt-fleet-") as folder:
+        local = Path(folder) / PurePosixPath(path).name
+        try:
+            fs.get_file(path, str(local))
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{local}: cannot fetch {url} ({exc})") from None
+        yield local
 
 
 def discover(root: str) -> Layout:

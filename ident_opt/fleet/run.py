@@ -1,15 +1,16 @@
 """What `ident-opt fleet` computes: every robot of a fleet identified every day on Dask, and what changed, named.
 
 1. The layout under `--logs` is found and checked (`fleet.layout`), before any work.
-2. Phase 1, on the cluster (`fleet.engine`): per robot the fit its days get (`tasks.choose`: the recommended fit,
-   judged on its first readable day as `identify` judges its training trials; or `--estimator`), per file its
-   statistics, per robot-day their sum and that fit, per robot a baseline model from its first days and against it
-   each day's torque scale per joint (`fleet.tasks`); the client gathers the choices, fits, baselines and scales
-   only.
+2. Phase 1 (`fleet.incremental`), on the cluster (`fleet.engine`) for what the store (`fleet.store`) does not
+   hold: per robot the fit its days get (`tasks.choose`: the recommended fit, judged on its first readable day as
+   `identify` judges its training trials; or `--estimator`), per file its statistics, per robot-day their sum and
+   that fit; on the client, from every file's statistics, per robot a baseline model from its first days and
+   against it each day's torque scale per joint (`fleet.tasks`). The client holds statistics only.
 3. On the client (`fleet.changes`): the fleet's scatter of each tested parameter, each robot's test against its
    first `baseline_days` fitted days, and for a robot with a moved parameter the day its change began.
-4. Phase 2, on the cluster, for the robots with a change only: the change's files read again and pooled, and the
+4. Phase 2, on the client, for the robots with a change only: the statistics of the change's files pooled, and the
    evidence against the robot's baseline model that names the cause (`tasks.evidence`, `changes.name_cause`).
+5. What phase 1 computed is written to the store, in one transaction.
 
 A robot with fewer fitted days than the baseline plus `changes.RUN_DAYS` gets its series but no test (a warning).
 """
@@ -25,7 +26,8 @@ import numpy as np
 from ident_opt.arguments import range_of
 from ident_opt.errors import InputError, excerpt
 from ident_opt.fitting.recommend import choose
-from ident_opt.fleet import changes, layout, tasks
+from ident_opt.fleet import changes, incremental, layout, tasks
+from ident_opt.fleet import store as fleet_store
 from ident_opt.fleet.engine import CONNECT_TIMEOUT_S, Engine
 from ident_opt.fleet.result import FleetResult, RobotResult
 from ident_opt.problem.spec import Problem
@@ -35,8 +37,6 @@ from ident_opt.warnings import ResultWarning
 ENGINE = "dask.distributed"
 #: The arguments of `run_fleet` that are counts (the others are numbers).
 INTEGERS = ("baseline_days", "workers")
-#: The baseline model may look this many days past the baseline for days with statistics (unreadable days).
-SPARE_DAYS = 3
 
 
 def run_fleet(
@@ -52,37 +52,35 @@ def run_fleet(
     processes: bool = True,
     connect_timeout: float = CONNECT_TIMEOUT_S,
     estimator: str | None = None,
+    store: str | Path | fleet_store.StoreLocation | None = None,
 ) -> FleetResult:
     """`ident-opt fleet`: identify every robot-day under `logs` for `problem` (a parsed problem, or its file: the
     workers read it again from its file), test each robot against its first `baseline_days` days and name what
     changed (module doc). `scheduler`: an existing Dask scheduler's address
     (None: a local cluster of `workers` processes, or threads with `processes` False), which must answer within
-    `connect_timeout` [s]. `estimator`: the fit every robot-day gets (None: each robot's recommended fit)."""
+    `connect_timeout` [s]. `estimator`: the fit every robot-day gets (None: each robot's recommended fit).
+    `store`: what earlier runs gave per file (`fleet.store`: a path, `sqlite:///path`, or None: none kept); only
+    files it does not hold are read."""
     start = time.perf_counter()
     _check_numbers(baseline_days=baseline_days, workers=workers, connect_timeout=connect_timeout)
     problem_path, setup = _load(problem, estimator)
     found = layout.discover(logs)
     job = tasks.Job(problem_path, allow_implausible, drop_invalid, estimator)
-    with Engine(scheduler, workers, processes, connect_timeout) as engine:
-        engine.check(tasks.ready, problem_path)
-        gathered, engine_seconds = _run_phase1(engine, job, found, baseline_days, progress)
-        baselines = {b.robot: b for b in gathered if isinstance(b, tasks.Baseline)}
-        choices = {c.robot: c for c in gathered if isinstance(c, tasks.RobotChoice)}
-        robots, skipped, warnings = _series(gathered, setup, found)
-        choices = {name: c for name, c in choices.items() if name in robots}  # a robot left out has no fit to name
-        warnings += _choice_warnings(choices)
-        onsets = _test(robots, baseline_days, warnings)
-        units = _change_units(found, robots, onsets, baselines, choices)
-        evidence = _run_phase2(engine, job, units, progress)
-        n_workers, address = engine.workers, engine.address
-    found_changes = _named_changes(robots, onsets, evidence, setup, baseline_days)
+    where = fleet_store.location(store)
+    key = fleet_store.model_key(setup, job)
+    stored = fleet_store.read(where, key)  # a store of another model is refused here, before any work
+
+    def open_engine(small: bool) -> Engine:  # a small run's local workers are threads (`incremental.SMALL_RUN`)
+        return Engine(scheduler, workers, processes and not small, connect_timeout)
+
+    phase = incremental.phase1(open_engine, job, found, stored, baseline_days, progress)
+    robots, skipped, warnings, units, evidence, found_changes = _analyse(job, setup, found, phase, baseline_days)
+    fleet_store.write(where, key, phase.update)  # one transaction, once everything is computed
     seconds = time.perf_counter() - start
-    for name, r in robots.items():
-        r.choice = choices.get(name)
+    choices = {name: r.choice for name, r in robots.items() if r.choice is not None}
     fit_name, why = _one_choice(choices)
-    fleet = _numbers(
-        robots, found, units, gathered + evidence, seconds, engine_seconds, n_workers, address, baseline_days, fit_name
-    )
+    fleet = _numbers(robots, found, units, phase.gathered + evidence, seconds, phase, fit_name)
+    fleet["baseline_days"], fleet["estimator"] = baseline_days, fleet.pop("estimator")  # the contract's order
     return FleetResult(
         problem=str(setup.problem.path),
         logs=str(logs),
@@ -97,8 +95,26 @@ def run_fleet(
         changes=found_changes,
         skipped=found.skipped + skipped,
         fleet=fleet,
-        warnings=found.warnings + warnings,
+        warnings=found.warnings + phase.warnings + warnings,
     )
+
+
+def _analyse(job: tasks.Job, setup: tasks.Setup, found: layout.Layout, phase: incremental.Phase1, K: int) -> tuple:
+    """From phase 1's results: the robots' series (each with its fit's choice), the files skipped, the warnings, the
+    test with each change's onset, phase 2's units and evidence, and the changes named."""
+    gathered = phase.gathered
+    baselines = {b.robot: b for b in gathered if isinstance(b, tasks.Baseline)}
+    choices = {c.robot: c for c in gathered if isinstance(c, tasks.RobotChoice)}
+    robots, skipped, warnings = _series(gathered, setup, found)
+    choices = {name: c for name, c in choices.items() if name in robots}  # a robot left out has no fit to name
+    warnings += _choice_warnings(choices)
+    onsets = _test(robots, K, warnings)
+    units = _change_units(found, robots, onsets, baselines, choices)
+    evidence = _phase2(job, units, phase.files)
+    found_changes = _named_changes(robots, onsets, evidence, setup, K)
+    for name, r in robots.items():
+        r.choice = choices.get(name)
+    return robots, skipped, warnings, units, evidence, found_changes
 
 
 def _check_numbers(**values: float | None) -> None:
@@ -137,73 +153,35 @@ def _numbers(
     units: list,
     results: list,
     seconds: float,
-    engine_seconds: float,
-    n_workers: int,
-    address: str,
-    baseline_days: int,
+    phase: incremental.Phase1,
     estimator: str,
 ) -> dict:
-    """The run's numbers (`FleetResult.fleet`): its size, its time and the cluster's throughput, and the fit."""
+    """The run's numbers (`FleetResult.fleet`): its size, its time and the cluster's throughput on the files it
+    read, what the store gave (`files_new`, `files_cached`, `files_changed`, `files_gone`), and the fit."""
     samples = sum(sum(r.samples) for r in robots.values())
     cpu = sum(item.cpu for item in results if isinstance(item, tasks.DayFit | tasks.Evidence | tasks.RobotChoice))
+    engine_seconds = phase.engine_seconds
     return {
         "robots": len(robots),
         "robot_days": sum(len(r.days) for r in robots.values()),
         "files": len(found.files),
         "samples": samples,
         "seconds": seconds,
-        "workers": n_workers,
+        "workers": phase.cluster[0],
         "engine": ENGINE,
-        "scheduler": address,
+        "scheduler": phase.cluster[1],
         "engine_seconds": engine_seconds,
-        "samples_per_second": samples / engine_seconds if engine_seconds > 0 else None,
-        "files_read_again": sum(len(unit[1]) for unit in units),
+        "samples_per_second": phase.samples_read / engine_seconds if engine_seconds > 0 else None,
+        "files_read_again": 0,  # the changes' evidence pools phase 1's statistics: no file is read twice
+        "files_pooled": sum(len(unit[1]) for unit in units),
+        **phase.counts,
         "cpu_seconds": cpu,
         "cpu_seconds_per_file": cpu / max(len(found.files), 1),
-        "baseline_days": baseline_days,
         "estimator": estimator,
     }
 
 
-# ---------------------------------------------------------------------------------------------- phase 1
-def _count1(found: layout.Layout) -> int:
-    """Phase 1's tasks: a choice of fit per robot, one per file, a sum, a fit and the scales per robot-day, a
-    baseline per robot."""
-    return len(found.files) + sum(3 * len(found.days(r)) + 2 for r in found.robots)
-
-
-def _phase1(job: tasks.Job, found: layout.Layout, baseline_days: int):
-    """A robot's phase-1 tasks: the fit its days get (`tasks.choose`, from its first days); each file's statistics
-    for it; each day's sum, fit and torque scales against the baseline model, fitted on the first `baseline_days`
-    days with statistics (of the first `baseline_days` + `SPARE_DAYS`). The choice, the fits, the baseline and the
-    scales are gathered."""
-
-    def submit(client, robot: str) -> tuple[list, list]:
-        first = [found.files_of(robot, day) for day in found.days(robot)[: baseline_days + SPARE_DAYS]]
-        choice = client.submit(tasks.choose, job, robot, *first)
-        gathered, others, days = [choice], [], []
-        for day in found.days(robot):
-            files = [client.submit(tasks.file_stats, job, f, choice) for f in found.files_of(robot, day)]
-            days.append(client.submit(tasks.day_stats, *files))
-            gathered.append(client.submit(tasks.fit_day, job, days[-1], choice))
-            others += files
-        base = client.submit(tasks.baseline, job, *days[: baseline_days + SPARE_DAYS], count=baseline_days)
-        gathered += [base, *(client.submit(tasks.scales, job, day, base) for day in days)]
-        return gathered, others + days
-
-    return submit
-
-
-def _run_phase1(
-    engine: Engine, job: tasks.Job, found: layout.Layout, baseline_days: int, progress: bool
-) -> tuple[list, float]:
-    """Phase 1 on the cluster (`_phase1`): what it gathers, and its wall seconds (the engine's throughput)."""
-    phase1 = time.perf_counter()
-    submit = _phase1(job, found, baseline_days)
-    gathered = engine.run(found.robots, submit, _count1(found), progress, "fleet: statistics and fits")
-    return gathered, time.perf_counter() - phase1
-
-
+# ---------------------------------------------------------------------------------------------- series
 def _day_number(day: str) -> int:
     return datetime.date.fromisoformat(day).toordinal()
 
@@ -355,23 +333,14 @@ def _change_units(
     ]
 
 
-def _run_phase2(engine: Engine, job: tasks.Job, units: list[tuple], progress: bool) -> list:
-    """Phase 2 on the cluster (`_phase2`): each unit's evidence (its files, a sum and the evidence per unit)."""
-    total = sum(len(unit[1]) + 2 for unit in units)
-    return engine.run(units, _phase2(job), total, progress, "fleet: naming the changes")
-
-
-def _phase2(job: tasks.Job):
-    """A changed robot's phase-2 tasks: its change's files read again (as in phase 1: its choice's derivatives) and
-    pooled, the evidence against its baseline model (gathered)."""
-
-    def submit(client, unit) -> tuple[list, list]:
-        _, files, base, choice = unit
-        stats = [client.submit(tasks.file_stats, job, f, choice) for f in files]
-        after = client.submit(tasks.day_stats, *stats, day="change")
-        return [client.submit(tasks.evidence, job, after, base)], [*stats, after]
-
-    return submit
+def _phase2(job: tasks.Job, units: list[tuple], files: dict[str, tasks.FileStats]) -> list:
+    """Phase 2 on the client: each unit's files' statistics (phase 1's, nothing read again) pooled in the files'
+    order, and the evidence against the robot's baseline model."""
+    out = []
+    for _, unit_files, base, _ in units:
+        pooled = tasks.day_stats(*(files[f.name] for f in unit_files), day="change")
+        out.append(tasks.evidence(job, pooled, base))
+    return out
 
 
 def _named_changes(

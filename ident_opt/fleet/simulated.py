@@ -193,6 +193,19 @@ def motion(problem, seconds: float, rate_hz: float, rng: np.random.Generator) ->
     return t, q, dq, ddq
 
 
+def long_trial(problem_path: str | Path, samples: int, rate_hz: float, seed: int = 0) -> pd.DataFrame:
+    """One logged trial of the problem's nominal arm of `samples` rows at `rate_hz` [Hz] (the fleet's motion and
+    noise, `FleetSpec`'s defaults), in the data format: for measuring how a task's cost grows with a file's length."""
+    problem, rng, spec = load_problem(problem_path), np.random.default_rng(seed), FleetSpec()
+    plant = _plant(problem)
+    t, q, dq, ddq = motion(problem, samples / rate_hz, rate_hz, rng)
+    tau = plant.arm.predict(plant.pi, q, dq, ddq)
+    tau += rng.normal(0.0, 1.0, tau.shape) * spec.noise * np.sqrt(np.mean(tau**2, axis=0))
+    q_logged = q + rng.normal(0.0, spec.angle_noise, q.shape)
+    frame = pd.DataFrame({"t": t, **columns_of({"q": q_logged, "tau": tau})})
+    return in_source_convention(frame, problem.robot.column_map)
+
+
 def _plant(problem) -> _Plant:
     """The model, its nominal π (friction where the nominal has none: `NOMINAL_FRICTION`) and the roles."""
     robot = problem.robot

@@ -1,4 +1,5 @@
-"""What runs on a Dask worker: each function takes and returns small picklable objects; samples never leave it.
+"""What runs on a Dask worker (`baseline`, `scales`, `evidence`: on the client, from statistics): each function
+takes and returns small picklable objects; samples never leave the worker.
 
 - `choose`: a robot's first days' files → `RobotChoice`, the fit its days get: the recommended fit
   (`fitting.recommend.evidence` on the first day that has a readable trial, its trials read together on the worker),
@@ -34,15 +35,10 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import tempfile
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
-from pathlib import Path, PurePosixPath
 
-import fsspec
 import numpy as np
-from fsspec.implementations.local import LocalFileSystem
 
 from ident_opt.arm.base import Arm, Robot
 from ident_opt.data.dataset import Dataset, fittable
@@ -52,8 +48,9 @@ from ident_opt.fitting import estimators, recommend
 from ident_opt.fitting.base import BaseParameters, base_parameters, fit_base_ols, fit_least_squares
 from ident_opt.fitting.iv import InstrumentStats
 from ident_opt.fitting.stats import Stats
+from ident_opt.fleet import streamed
 from ident_opt.fleet.causes import Block, cause_gains
-from ident_opt.fleet.layout import LINK, FleetFile, linked
+from ident_opt.fleet.layout import LINK, FleetFile, linked, local_copy
 from ident_opt.problem import load_problem
 from ident_opt.warnings import ResultWarning
 
@@ -206,8 +203,8 @@ def choose(job: Job, robot: str, *days: list[FleetFile]) -> RobotChoice:
 @dataclass
 class FileStats:
     """One file's statistics (None when skipped, with the `reason`; `instruments` too when the robot's fit takes
-    them), its number of samples and the task's CPU time [s] (`time.thread_time`: what it costs, whatever else the
-    machine runs)."""
+    them), its number of samples, the task's CPU time [s] (`time.thread_time`: what it costs, whatever else the
+    machine runs) and the loader's notes (kept in the fleet's store)."""
 
     file: FleetFile
     stats: Stats | None
@@ -215,31 +212,22 @@ class FileStats:
     reason: str = ""
     cpu: float = 0.0
     instruments: InstrumentStats | None = None
-
-
-@contextlib.contextmanager
-def local_copy(url: str) -> Iterator[Path]:
-    """A local path to the file at `url`: itself when local, else a temporary copy with the same name (the loader
-    reads by path and by file ending), removed afterwards."""
-    fs, path = fsspec.core.url_to_fs(url)
-    if isinstance(fs, LocalFileSystem):
-        yield Path(path)
-        return
-    with tempfile.TemporaryDirectory(prefix="ident-opt-fleet-") as folder:
-        local = Path(folder) / PurePosixPath(path).name
-        try:
-            fs.get_file(path, str(local))
-        except (OSError, ValueError) as exc:
-            raise InputError(f"{local}: cannot fetch {url} ({exc})") from None
-        yield local
+    notes: list[str] = field(default_factory=list)
 
 
 def file_stats(job: Job, file: FleetFile, choice: RobotChoice) -> FileStats:
     """Read, check, differentiate (at the robot's `choice` of cut-off factor) and reduce one trial to the statistics
     its robot's fit takes, with the torque the fits use (`Dataset.tau_fit`, `estimators.statistics`); a file the
-    loader refuses is returned as skipped, with the loader's reason (the file named as in the layout)."""
+    loader refuses is returned as skipped, with the loader's reason (the file named as in the layout). A long, plain
+    log is read in pieces (`fleet.streamed`: the same statistics, memory flat in its length)."""
     start = time.thread_time()
     s = setup(job.problem)
+    streamed_stats = _streamed(job, s, file, choice.choice)
+    if streamed_stats is not None:
+        stats, n, notes = streamed_stats
+        plain = stats.stats if isinstance(stats, InstrumentStats) else stats
+        instruments = stats if isinstance(stats, InstrumentStats) else None
+        return FileStats(file, plain, n, cpu=time.thread_time() - start, instruments=instruments, notes=notes)
     try:
         trial = _read(job, s, file)
         rec = choice.choice
@@ -252,9 +240,22 @@ def file_stats(job: Job, file: FleetFile, choice: RobotChoice) -> FileStats:
             raise InputError(_unreadable(exc, file.url, file.name)) from None
     except InputError as exc:
         return FileStats(file, None, 0, str(exc), time.thread_time() - start)
+    cpu, notes = time.thread_time() - start, list(trial.notes)
     if isinstance(stats, InstrumentStats):
-        return FileStats(file, stats.stats, trial.n, cpu=time.thread_time() - start, instruments=stats)
-    return FileStats(file, stats, trial.n, cpu=time.thread_time() - start)
+        return FileStats(file, stats.stats, trial.n, cpu=cpu, instruments=stats, notes=notes)
+    return FileStats(file, stats, trial.n, cpu=cpu, notes=notes)
+
+
+def _streamed(job: Job, s: Setup, file: FleetFile, choice: recommend.Choice) -> tuple | None:
+    """`streamed.statistics` of the file, or None when the loader must read it whole: not a long plain log, or
+    anything odd in it (the loader then says what, as for every command)."""
+    if linked(file):
+        return None  # `_read` refuses it, saying why
+    try:
+        with local_copy(file.url) as local:
+            return streamed.statistics(local, s, job, choice)
+    except Exception:
+        return None
 
 
 # ---------------------------------------------------------------------------------------------- days

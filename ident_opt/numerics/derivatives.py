@@ -77,11 +77,18 @@ def _butter(cutoff_hz: float, fs: float):
     return None if cutoff_hz >= 0.5 * fs else signal.butter(4, cutoff_hz / (0.5 * fs), output="sos")
 
 
-def _filtfilt(sos, x: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
-    """Zero-phase filtering of `x` (N, J) along axis 0, its ends extended by local cubics (`EDGE_FIT`) over at most
-    `EDGE_PAD` periods of the cut-off and at most the segment's own length again on each side (a cut-off far
+def zero_phase_sos(cutoff_hz: float, fs: float):
+    """The second-order sections every zero-phase filter here runs forward and backward (`_butter`): for a reader
+    that filters a segment in pieces (`fleet.chunks`); None at or above Nyquist."""
+    return _butter(cutoff_hz, fs)
+
+
+def edge_extensions(x: np.ndarray, fs: float, cutoff_hz: float, n: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(before, after): the samples `_filtfilt` puts before the first and after the last of a segment `x` (N, J)
+    of `n` samples (default: len(x); only its first and last `EDGE_FIT` periods are read): local cubics over at
+    most `EDGE_PAD` periods of the cut-off and at most the segment's own length again on each side (a cut-off far
     below what the segment can show must not ask for millions of padding samples)."""
-    n = len(x)
+    n = len(x) if n is None else n
     fit = max(4, min(n, round(EDGE_FIT * fs / cutoff_hz)))
     pad = min(round(EDGE_PAD * fs / cutoff_hz), EDGE_PAD_MAX * n)
     s = np.arange(fit) / fs  # time into the segment from its first (last) sample
@@ -90,8 +97,14 @@ def _filtfilt(sos, x: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
     tail = np.polynomial.polynomial.polyfit(s, x[::-1][:fit], 3)
     left = np.polynomial.polynomial.polyval(beyond, head).T[::-1]
     right = np.polynomial.polynomial.polyval(beyond, tail).T
+    return left, right
+
+
+def _filtfilt(sos, x: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
+    """Zero-phase filtering of `x` (N, J) along axis 0, its ends extended by local cubics (`edge_extensions`)."""
+    left, right = edge_extensions(x, fs, cutoff_hz)
     y = signal.sosfiltfilt(sos, np.concatenate([left, x, right]), axis=0, padtype=None)
-    return y[pad : pad + n]
+    return y[len(left) : len(left) + len(x)]
 
 
 def lowpass(t: np.ndarray, x: np.ndarray, cutoff_hz: float) -> np.ndarray:

@@ -1,6 +1,7 @@
 """What `ident-opt fleet` writes: fleet.md (the fleet table a maintenance engineer reads: robot, change, joint,
 since, size, confidence; the run's numbers; skipped files; warnings), fleet_changes.csv, the daily series for
-dashboards (fleet_series.csv and fleet_series.parquet: one row per robot, day and parameter), a figure per robot
+dashboards (fleet_series.csv and fleet_series.parquet: one row per robot, day and parameter), for alerting
+changes.jsonl and metrics.prom (`fleet.alerts`), a figure per robot
 (figures/fleet_<robot>.png: each tested parameter's daily values with their standard errors and the baseline's band),
 the JSON of the contract (`docs/cli.md`, fleet) and the terminal summary."""
 
@@ -13,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from ident_opt import outputs
+from ident_opt.fleet import alerts
 from ident_opt.fleet.changes import BAND_Z, DAY_Z, RUN_DAYS, WINDOW_Z
 from ident_opt.fleet.layout import file_stem
 from ident_opt.fleet.result import FleetResult, RobotResult
@@ -157,7 +159,7 @@ def write(result: FleetResult, out: Path, json_path: str | Path | None, command:
         if progress is not None:
             progress()
     outputs.write_text(out / "fleet.md", markdown(result, table, command, figures, out))
-    files = [out / f for f in FILES] + figures
+    files = [out / f for f in FILES] + alerts.write(result, out) + figures
     record(out, "fleet", "fleet: every robot identified every day, and what changed", files)
     write_json(json_path, data)
     return files
