@@ -475,7 +475,7 @@ def scan(folder: Path, logs: str, out: str | None, json_path: str | None, estima
     from ident_opt.fleet import layout, tasks
 
     with outputs.run():
-        fleet_command._outside(SimpleNamespace(logs=logs, out=out, json=json_path))
+        fleet_command._outside(SimpleNamespace(logs=logs, out=out, json=json_path), None)
     found = layout.discover(logs)
     job = tasks.Job(fleet_problem(), estimator=estimator)
     got = {"layout": found, "choices": [], "files": [], "fits": [], "scales": []}
