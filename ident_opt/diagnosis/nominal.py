@@ -84,7 +84,8 @@ def read_nominal(path: str | Path, estimator: str | None = None) -> NominalFit:
         )
     if "recommended" in raw:  # compare --json: parameters per fit
         name = estimator or raw.get("recommended")
-        fits = {k: v for k, v in raw["parameters"].items() if k in (raw.get("fits") or raw["parameters"])}
+        ran = raw.get("fits") or raw["parameters"]  # the fits compare ran, not the datasheets it scored beside them
+        fits = {k: v for k, v in raw["parameters"].items() if k in ran}
         if not isinstance(name, str) or not isinstance(fits.get(name), dict):
             raise InputError(f"--nominal {where}: no fit {name!r} in it; it has {', '.join(sorted(fits)) or 'none'}")
         values = fits[name]
