@@ -206,13 +206,14 @@ def test_a_robot_id_too_long_for_its_figures_name_gets_a_short_stem(base, fleet,
     long_id = "R" * 240  # robot=<id> is 246 bytes: a folder may be named so, fleet_<id>.png under a temporary name not
     (fleet / "robot=R01").rename(fleet / f"robot={long_id}")
     result = _run(fleet)
-    files = report.write(result, tmp_path / "report", tmp_path / "fleet.json", "ident-opt fleet")
+    files = report.write(result, tmp_path / "report", tmp_path / "fleet.json", "ident-opt fleet", figures="all")
     data = json.loads((tmp_path / "fleet.json").read_text())
     assert sorted(data["robots"]) == ["R02", long_id]  # the id kept whole in the data
     _same_robot(data["robots"][long_id], base[1]["robots"]["R01"])
     figures = sorted(p.name for p in (tmp_path / "report" / "figures").iterdir())
     stem = layout.file_stem(long_id)
-    assert figures == sorted([f"fleet_{stem}.png", "fleet_R02.png"]) and len(f"fleet_{stem}.png") + 30 < NAME_MAX
+    assert figures == sorted([f"fleet_{stem}.png", "fleet_R02.png", "fleet_overview.png"])
+    assert len(f"fleet_{stem}.png") + 30 < NAME_MAX
     assert stem.startswith("R" * layout.STEM_KEEP) and stem != layout.file_stem("R" * 239)
     assert f"figures/fleet_{stem}.png" in (tmp_path / "report" / "fleet.md").read_text()
     assert all(p.exists() for p in files)

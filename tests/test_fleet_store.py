@@ -10,6 +10,7 @@ import os
 import re
 import shutil
 import sqlite3
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from ident_opt.fleet import store, tasks
 from ident_opt.fleet.layout import discover
 from ident_opt.fleet.run import run_fleet
 from ident_opt.fleet.simulated import FleetSpec, simulate_fleet
+from ident_opt.report import fleet as fleet_report
 from ident_opt.report.fleet import payload
 from tests.conftest import PROBLEMS
 
@@ -223,3 +225,33 @@ def test_every_run_writes_changes_jsonl_and_metrics_prom(fleet, tmp_path):
             assert seen["ident_opt_fleet_parameter_z", labels] == pytest.approx(tested["z"][-1], rel=1e-15)
         changed = any(c["robot"] == robot for c in data["changes"])
         assert seen["ident_opt_fleet_changes", f'robot="{robot}"'] == float(changed)
+
+
+def test_a_robots_figure_is_drawn_once_per_change_and_again_when_its_change_moves(fleet, tmp_path):
+    """--figures new (the default): the first run into a folder draws each changed robot's figure; a run with the
+    same changes redraws none (the bytes stay) but names them in fleet.md; a change that moves (here its first day)
+    is drawn again, alone; `all` draws every robot; the overview every time."""
+    result = run_fleet(PLANAR, str(fleet), workers=2, processes=False, progress=False)
+    out = tmp_path / "report"
+    changed = sorted(c.robot for c in result.changes)
+    assert changed and len(changed) < len(result.robots), "the test needs changed and unchanged robots"
+
+    def figures() -> dict[str, bytes]:
+        return {p.name: p.read_bytes() for p in (out / "figures").iterdir()}
+
+    fleet_report.write(result, out, None, "first")
+    first = figures()
+    assert sorted(first) == sorted(["fleet_overview.png", *(f"fleet_{r}.png" for r in changed)])
+    fleet_report.write(result, out, None, "again")
+    again = figures()
+    assert {k: v for k, v in again.items() if k != "fleet_overview.png"} == {
+        k: v for k, v in first.items() if k != "fleet_overview.png"
+    }
+    assert all(f"figures/fleet_{r}.png" in (out / "fleet.md").read_text() for r in changed)
+    moved = result.changes[0]
+    result.changes[0] = replace(moved, first_day=result.robots[moved.robot].days[-1])
+    fleet_report.write(result, out, None, "moved")
+    redrawn = {k for k, v in figures().items() if v != again[k]} - {"fleet_overview.png"}
+    assert redrawn == {f"fleet_{moved.robot}.png"}
+    fleet_report.write(result, out, None, "all", figures="all")
+    assert sorted(figures()) == sorted(["fleet_overview.png", *(f"fleet_{r}.png" for r in result.robots)])

@@ -1,7 +1,8 @@
 """`ident-opt fleet`: every robot of a fleet identified every day on Dask, and what changed, named.
 
     ident-opt fleet --problem P --logs ROOT [--out DIR] [--json F] [--store PATH] [--scheduler ADDRESS]
-                    [--workers N] [--baseline-days K] [--estimator NAME] [--connect-timeout S] [--no-progress]
+                    [--workers N] [--baseline-days K] [--estimator NAME] [--connect-timeout S]
+                    [--figures new|all|none] [--no-progress]
 
 ROOT holds the logs in the fleet layout, ROOT/robot=<id>/day=<YYYY-MM-DD>/*.parquet|csv|csv.gz (a local folder or a
 URL the installed filesystem libraries read); every file is a trial of the problem's arm, read with its column
@@ -26,7 +27,9 @@ reads only the files the store does not hold (new, or changed since), and its re
 store written for another model (the problem file, --estimator, the loader's switches) is an error (exit 2).
 
 Writes to --out (default: the problem's [output] dir, else results/): fleet.md, fleet_changes.csv,
-fleet_series.csv and .parquet, changes.jsonl, metrics.prom, figures/fleet_<robot>.png; with --json the result of
+fleet_series.csv and .parquet, changes.jsonl, metrics.prom, figures/fleet_overview.png (every robot's tested
+parameters' latest z) and figures/fleet_<robot>.png (--figures new: each robot with a change its figure in --out
+does not show yet, so that a day added redraws only what it changed; all: every robot; none); with --json the result of
 `docs/cli.md` (fleet). Neither --out, --json nor --store may lie inside ROOT, however ROOT is given (a path,
 relative, or a file:// URL): an error (exit 2) before any work.
 """
@@ -55,7 +58,8 @@ from ident_opt.report import fleet as report
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """--problem, --logs, --out, --json, --store, --scheduler, --workers, --baseline-days, --estimator, --no-progress
+    """--problem, --logs, --out, --json, --store, --scheduler, --workers, --baseline-days, --figures, --estimator,
+    --no-progress
     and the loader's switches."""
     add_problem_arguments(parser, data=False)
     parser.add_argument("--logs", required=True, metavar="ROOT", help="the fleet's logs: ROOT/robot=<id>/day=<date>/")
@@ -74,6 +78,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--baseline-days", type=int, default=5, metavar="K", help="each robot's first K days are its baseline (5)"
+    )
+    parser.add_argument(
+        "--figures",
+        choices=report.FIGURE_CHOICES,
+        default="new",
+        help="robots' figures drawn: new (a change not yet drawn in --out; default), all (every robot, ~1 s each), "
+        "none (not even the fleet overview)",
     )
     add_estimator_flag(
         parser, "the fit of every robot-day", "each robot's recommended fit, judged on its first readable day"
@@ -106,10 +117,11 @@ def run(args: argparse.Namespace) -> int:
         store=store,
     )
     print(report.recommended_line(result), file=sys.stderr)
-    with tqdm(
-        total=len(result.robots), desc="fleet: figures", unit="robot", file=sys.stderr, disable=args.no_progress
-    ) as bar:
-        report.write(result, out, args.json, _command(args), bar.update)
+
+    def bar(due: list) -> tqdm:
+        return tqdm(due, desc="fleet: figures", unit="robot", file=sys.stderr, disable=args.no_progress)
+
+    report.write(result, out, args.json, _command(args), bar, args.figures)
     print(report.terminal(result, out, args.json))
     for warning in result.warnings:
         print(warning, file=sys.stderr)

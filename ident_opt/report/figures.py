@@ -32,10 +32,10 @@ PAPER_MODELS = (
 )
 
 
-def _save(fig, path: Path, dpi: int = 110) -> Path:
+def _save(fig, path: Path, dpi: int = 110, metadata: dict[str, str] | None = None, bbox: str | None = None) -> Path:
     try:
         with outputs.atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=dpi, format=path.suffix.lstrip(".") or "png")
+            fig.savefig(tmp, dpi=dpi, format=path.suffix.lstrip(".") or "png", metadata=metadata, bbox_inches=bbox)
     finally:
         plt.close(fig)
     return path
@@ -259,12 +259,19 @@ def calibration_figure(summaries: list, path: Path) -> Path:
 
 
 def daily_figure(
-    days: list[str], panels: list[dict], shaded_days: int, band_label: str, title: str, path: Path
+    days: list[str],
+    panels: list[dict],
+    shaded_days: int,
+    band_label: str,
+    title: str,
+    path: Path,
+    metadata: dict[str, str] | None = None,
 ) -> Path:
     """Parameters day by day (`ident-opt fleet`, one robot): one panel per dict of `panels` (name, values and se
     (D,), mean (or None), band (D,) half-width, moved: bool, since: the first day of its change or None), each day's
     value ± one standard error, the mean and its band shaded, the first `shaded_days` (the baseline) tinted. The
-    x axis counts days from the first (at most 6 dates labelled: date axes cost seconds per figure)."""
+    x axis counts days from the first (at most 6 dates labelled: date axes cost seconds per figure). `metadata`: PNG
+    text kept in the file."""
     cols = 3 if len(panels) > 4 else max(len(panels), 1)
     rows = -(-len(panels) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.5 * rows), squeeze=False, sharex=True)
@@ -293,4 +300,26 @@ def daily_figure(
     fig.suptitle(title, fontsize=11, y=1 - 0.1 / height, va="top")
     # fixed margins: tight_layout would cost a third of the figure's time, once per robot of a fleet
     fig.subplots_adjust(left=0.06, right=0.99, bottom=0.25 / height, top=1 - 0.65 / height, wspace=0.28, hspace=0.5)
-    return _save(fig, path, dpi=90)
+    return _save(fig, path, dpi=90, metadata=metadata)
+
+
+def z_overview_figure(
+    rows: list[str], columns: list[str], z: np.ndarray, marks: dict[int, str], clip: float, title: str, path: Path
+) -> Path:
+    """A fleet at a glance: z (R, C) of each row's (a robot's) columns (its tested parameters) as colours clipped to
+    ±`clip`, NaN grey; `marks` {row: text} written at the right of the marked rows (their change). One image, so
+    its cost does not grow with the fleet as one figure per robot does."""
+    height = min(max(1.6 + 0.16 * len(rows), 2.6), 40.0)  # inches: 0.16 per robot, capped for huge fleets
+    fig, ax = plt.subplots(figsize=(max(5.0, 0.45 * len(columns) + 3.5), height))
+    cmap = plt.get_cmap("RdBu_r").with_extremes(bad="0.85")
+    image = ax.imshow(np.ma.masked_invalid(z), cmap=cmap, vmin=-clip, vmax=clip, aspect="auto", interpolation="none")
+    ax.set_xticks(range(len(columns)), columns, rotation=60, ha="right", fontsize=7)
+    step = max(1, len(rows) // 60)  # at most ~60 robot names on the axis; the marked ones always
+    shown_rows = sorted(set(range(0, len(rows), step)) | set(marks))
+    ax.set_yticks(shown_rows, [rows[i] for i in shown_rows], fontsize=6)
+    for i, text in marks.items():
+        ax.annotate(text, (1.0, i), xycoords=("axes fraction", "data"), xytext=(4, 0), textcoords="offset points",
+                    va="center", fontsize=6, color=PARAMETRIC)  # fmt: skip
+    fig.colorbar(image, ax=ax, label=f"z on the latest day (clipped to ±{clip:g})", pad=0.25, fraction=0.05)
+    ax.set_title(title, fontsize=9)
+    return _save(fig, path, dpi=90, bbox="tight")  # the canvas grown to the marks outside the axes

@@ -1,17 +1,27 @@
 """What `ident-opt fleet` writes: fleet.md (the fleet table a maintenance engineer reads: robot, change, joint,
 since, size, confidence; the run's numbers; skipped files; warnings), fleet_changes.csv, the daily series for
 dashboards (fleet_series.csv and fleet_series.parquet: one row per robot, day and parameter), for alerting
-changes.jsonl and metrics.prom (`fleet.alerts`), a figure per robot
-(figures/fleet_<robot>.png: each tested parameter's daily values with their standard errors and the baseline's band),
-the JSON of the contract (`docs/cli.md`, fleet) and the terminal summary."""
+changes.jsonl and metrics.prom (`fleet.alerts`), the fleet at a glance (figures/fleet_overview.png: each robot's
+tested parameters' latest z against its baseline, changes marked), a figure per robot with a change
+(figures/fleet_<robot>.png: each tested parameter's daily values with their standard errors and the baseline's
+band), the JSON of the contract (`docs/cli.md`, fleet) and the terminal summary.
+
+A robot's figure costs about a second (twelve panels drawn by matplotlib), the whole of a day-added run's fleet work
+for a handful of robots: `Figures` decides which are drawn. By default (`new`) a robot's figure is drawn when it has
+a change that its figure in the folder does not show yet (the change's cause, joint, first day and parameters are
+kept in the PNG's metadata); a change already drawn keeps its figure (its title names the last day it shows). So a
+day added redraws only what the day changed, and a run from scratch draws every change."""
 
 from __future__ import annotations
 
 import io
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import pandas as pd
+from PIL import Image
 
 from ident_opt import outputs
 from ident_opt.fleet import alerts
@@ -19,13 +29,21 @@ from ident_opt.fleet.changes import BAND_Z, DAY_Z, RUN_DAYS, WINDOW_Z
 from ident_opt.fleet.layout import file_stem
 from ident_opt.fleet.result import FleetResult, RobotResult
 from ident_opt.report import record, write_json
-from ident_opt.report.figures import daily_figure
+from ident_opt.report.figures import daily_figure, z_overview_figure
 from ident_opt.report.tables import markdown_table, write_table
 
 #: The files every run writes (figures besides, one per robot).
 FILES = ("fleet.md", "fleet_changes.csv", "fleet_series.csv", "fleet_series.parquet")
 #: At most this many panels per robot's figure: the moved parameters first, then the others in order.
 MAX_PANELS = 12
+#: Which robots' figures a run draws (module doc): `new` (a change its figure does not show yet), `all` (every
+#: robot, about a second each), `none`. The fleet overview is drawn unless `none`.
+Figures = Literal["new", "all", "none"]
+FIGURE_CHOICES: tuple[str, ...] = ("new", "all", "none")
+#: The PNG text key under which a robot's figure keeps the change it shows.
+SHOWS = "ident-opt-change"
+#: The fleet overview's z colour scale is clipped to ± this.
+Z_CLIP = 6.0
 
 
 def payload(result: FleetResult) -> dict:
@@ -142,8 +160,16 @@ def _size(change) -> str:
     return f"{change.size:+.0%} {change.lead}"
 
 
-def write(result: FleetResult, out: Path, json_path: str | Path | None, command: str, progress=None) -> list[Path]:
-    """Every file into `out` (a figure per robot under figures/), the JSON to `json_path`; returns the files."""
+def write(
+    result: FleetResult,
+    out: Path,
+    json_path: str | Path | None,
+    command: str,
+    progress: Callable[[list], Iterable] | None = None,
+    figures: Figures = "new",
+) -> list[Path]:
+    """Every file into `out` (the overview and the robots' figures under figures/, as `figures` decides), the JSON
+    to `json_path`; returns the files. `progress`: wraps the list of robot figures to draw (e.g. a tqdm bar)."""
     data = payload(result)
     series = series_frame(result)
     table = changes_frame(result)
@@ -152,21 +178,54 @@ def write(result: FleetResult, out: Path, json_path: str | Path | None, command:
     buffer = io.BytesIO()
     series.to_parquet(buffer, index=False)
     outputs.write_bytes(out / "fleet_series.parquet", buffer.getvalue())
-    figures = []
-    for r in result.robots.values():
-        if r.days:
-            figures.append(robot_figure(result, r, out / "figures" / f"fleet_{file_stem(r.robot)}.png"))
-        if progress is not None:
-            progress()
-    outputs.write_text(out / "fleet.md", markdown(result, table, command, figures, out))
-    files = [out / f for f in FILES] + alerts.write(result, out) + figures
+    drawn, kept = _robot_figures(result, out / "figures", figures, progress)
+    overview = [overview_figure(result, out / "figures" / "fleet_overview.png")] if figures != "none" else []
+    outputs.write_text(out / "fleet.md", markdown(result, table, command, overview + drawn, kept, out))
+    files = [out / f for f in FILES] + alerts.write(result, out) + overview + drawn + kept
     record(out, "fleet", "fleet: every robot identified every day, and what changed", files)
     write_json(json_path, data)
     return files
 
 
-def markdown(result: FleetResult, table: pd.DataFrame, command: str, figures: list[Path], out: Path) -> str:
-    """fleet.md: the run, the fleet table, the robots with no change, skipped files, warnings, figures."""
+def _shows(change) -> str:
+    """What a robot's figure of `change` shows, as kept in its PNG (`SHOWS`): a redraw is due when this differs."""
+    return f"{change.cause}|{change.joint}|{change.first_day}|{','.join(change.parameters)}"
+
+
+def _drawn_shows(path: Path) -> str | None:
+    """The change a figure already in the folder shows (its `SHOWS` text), None when there is none or it cannot be
+    read (then it is drawn again)."""
+    try:
+        with Image.open(path) as image:
+            return image.text.get(SHOWS)  # type: ignore[attr-defined]  (PNG images have .text)
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def _robot_figures(
+    result: FleetResult, folder: Path, figures: Figures, progress: Callable[[list], Iterable] | None
+) -> tuple[list[Path], list[Path]]:
+    """(figures drawn, figures kept): per robot with days, as `figures` decides (module doc)."""
+    change_of = {c.robot: c for c in result.changes}
+    due, kept = [], []
+    for r in result.robots.values():
+        path = folder / f"fleet_{file_stem(r.robot)}.png"
+        change = change_of.get(r.robot)
+        if not r.days or figures == "none" or (figures == "new" and change is None):
+            continue
+        if figures == "new" and path.is_file() and _drawn_shows(path) == _shows(change):
+            kept.append(path)
+        else:
+            due.append((r, path))
+    drawn = [robot_figure(result, r, path) for r, path in (progress(due) if progress is not None else due)]
+    return drawn, kept
+
+
+def markdown(
+    result: FleetResult, table: pd.DataFrame, command: str, figures: list[Path], kept: list[Path], out: Path
+) -> str:
+    """fleet.md: the run, the fleet table, the robots with no change, skipped files, warnings, the figures drawn by
+    this run and those of changes drawn by an earlier one (`kept`)."""
     f = result.fleet
     unchanged = [name for name, r in result.robots.items() if r.test is not None and not r.test.moved]
     untested = [name for name, r in result.robots.items() if r.test is None]
@@ -212,6 +271,7 @@ def markdown(result: FleetResult, table: pd.DataFrame, command: str, figures: li
         "values (kind `fit`: the fit's parameters with standard errors; kind `tested`: the identifiable parameters "
         "tested, with the baseline, the band and z)",
         *(f"- [{p.name}]({p.relative_to(out).as_posix()})" for p in figures),
+        *(f"- [{p.name}]({p.relative_to(out).as_posix()}) (drawn by an earlier run, same change)" for p in kept),
         "",
     ]
     return "\n".join(lines)
@@ -247,8 +307,24 @@ def robot_figure(result: FleetResult, r: RobotResult, path: Path) -> Path:
                 "since": change.first_day if change is not None and name in change.parameters else None,
             }
         )
-    title = f"robot {r.robot}: " + (_headline(change) if change else "no change")
-    return daily_figure(r.days, panels, result.baseline_days, f"baseline ± {BAND_Z:g} σ", title, path)
+    title = f"robot {r.robot}: " + (_headline(change) if change else "no change") + f" (days to {r.days[-1]})"
+    metadata = {SHOWS: _shows(change)} if change is not None else None
+    return daily_figure(r.days, panels, result.baseline_days, f"baseline ± {BAND_Z:g} σ", title, path, metadata)
+
+
+def overview_figure(result: FleetResult, path: Path) -> Path:
+    """The fleet at a glance (`figures.z_overview_figure`): per robot (rows) each tested parameter's z on its
+    latest day against its baseline (grey: not tested or not determined), the robots with a change marked."""
+    names = list(result.robots)
+    z = np.full((len(names), len(result.tested_names)), np.nan)
+    for i, r in enumerate(result.robots.values()):
+        if r.test is not None and r.days:
+            z[i] = r.test.z[-1]
+    change_of = {c.robot: c for c in result.changes}
+    marks = {i: _headline(change_of[name]) for i, name in enumerate(names) if name in change_of}
+    last = max((r.days[-1] for r in result.robots.values() if r.days), default="–")
+    title = f"{len(names)} robots to {last}: z of each tested parameter on the latest day; {len(marks)} changed"
+    return z_overview_figure(names, list(result.tested_names), z, marks, Z_CLIP, title, path)
 
 
 def _headline(change) -> str:
