@@ -45,6 +45,10 @@ _EXPORTS = {
     "Comparison": ("ident_opt.evaluation.compare", "Comparison"),
     "identify": ("ident_opt.evaluation.identify", "identify"),
     "IdentifyResult": ("ident_opt.evaluation.identify", "IdentifyResult"),
+    "read_run": ("ident_opt.runs", "read_run"),  # two runs side by side (compare --against)
+    "summarize": ("ident_opt.runs", "summarize"),
+    "side_by_side": ("ident_opt.runs", "side_by_side"),
+    "SideBySide": ("ident_opt.runs", "SideBySide"),
     # what the model gets wrong, a simulated trial, the motion to record next
     "diagnose": ("ident_opt.diagnosis", "diagnose"),
     "Diagnosis": ("ident_opt.diagnosis", "Diagnosis"),

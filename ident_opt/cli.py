@@ -21,7 +21,10 @@ from ident_opt.arguments import validate_numbers
 from ident_opt.errors import InputError
 
 #: Flags (by dest) that name input files, and output files; `--out` is a file for these subcommands, else a folder.
-INPUT_FLAGS = ("problem", "data", "test_data", "calibrate", "parameters", "real", "trajectory_file")
+INPUT_FLAGS = (
+    *("problem", "data", "test_data", "calibrate", "parameters", "real", "trajectory_file"),
+    *("nominal", "against"),  # diagnose's identified arm, compare's other run
+)
 OUTPUT_FLAGS = ("json", "final")
 FILE_OUT = ("simulate", "excite", "export")
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ident_opt import runs
 from ident_opt.cli import main
 from ident_opt.evaluation.constraints import constraints_study
 from ident_opt.report.constraints import study_markdown
@@ -159,3 +160,69 @@ def test_identify_reports_the_standard_errors_compare_does_on_trials_with_differ
     for name, se in errors.items():
         theirs = compared.fits[name].se_dict()
         np.testing.assert_allclose([se[k] for k in se], [theirs[k] for k in se], rtol=1e-9, err_msg=name)
+
+
+# ---------------------------------------------------------------------------------------------- --against
+def _doctored(data: dict, tmp_path: Path, shifts: dict[str, float]) -> Path:
+    """A copy of a compare JSON whose recommended fit has each parameter of `shifts` moved by that many of its own
+    standard errors."""
+    other = json.loads(json.dumps(data))
+    fit = other["recommended"]
+    for name, k in shifts.items():
+        other["parameters"][fit][name] += k * other["standard_errors"][fit][name]
+    path = tmp_path / "other.json"
+    path.write_text(json.dumps(other))
+    return path
+
+
+def test_against_flags_exactly_the_parameters_moved_beyond_their_errors(compare_run, tmp_path):
+    """z = d / √(se² + se_other²): moved by 10 of its standard errors, fc1 has z = −10/√2 and is flagged; moved by 2,
+    fv2 has z = −2/√2 and is not; the rest are equal (z = 0); the held-out errors are the same run's (ratio 1)."""
+    data = compare_run[2]
+    this = runs.summarize(data, "this run")
+    diff = runs.side_by_side(this, runs.read_run(_doctored(data, tmp_path, {"fc1": 10.0, "fv2": 2.0})))
+    z = diff.parameters["z"]
+    assert diff.beyond == ["fc1"] and z["fc1"] == pytest.approx(-10 / np.sqrt(2), rel=1e-12)
+    assert z["fv2"] == pytest.approx(-2 / np.sqrt(2), rel=1e-12)
+    assert (z.drop(["fc1", "fv2"]) == 0).all()
+    assert len(diff.errors) and (diff.errors["ratio"] == 1).all()
+    assert set(diff.errors["held_out"]) == set(data["metrics"]) & set(runs._side_by_side.PROTOCOLS)
+
+
+def test_compare_against_another_run_end_to_end(compare_run, tmp_path, capsys):
+    """The command: the same problem run again against a doctored copy of the first run's JSON writes the side by
+    side (fc1 in bold, beyond), says it on the terminal, and adds `against` to its JSON; the fits are deterministic,
+    so every other z is 0."""
+    other = _doctored(compare_run[2], tmp_path, {"fc1": 10.0})
+    out = tmp_path / "b"
+    argv = ["compare", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--out", str(out), "--no-progress"]
+    assert main([*argv, "--json", str(tmp_path / "b.json"), "--against", str(other)]) == 0
+    data = json.loads((tmp_path / "b.json").read_text())
+    assert data["against"]["beyond"] == ["fc1"] and data["against"]["estimator"] == compare_run[2]["recommended"]
+    assert {r["parameter"]: r["z"] for r in data["against"]["parameters"]}["fv1"] == 0
+    assert "| **fc1** |" in (out / "compare_against.md").read_text()
+    assert "1 of 9 parameters moved beyond their errors" in capsys.readouterr().out
+    assert {"compare_against.md", "compare_against.csv", "compare_against_errors.csv"} <= set(data["files"])
+
+
+@pytest.mark.parametrize(
+    "content, named",
+    [("not json", "cannot read the other run"), ('{"parameters": {"ols": {"a1": "x"}}, "recommended": "ols"}', "a1")],
+)
+def test_a_bad_other_run_is_exit_2_before_any_work(tmp_path, capsys, content, named):
+    other = tmp_path / "other.json"
+    other.write_text(content)
+    argv = ["compare", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--out", str(tmp_path / "o"), "--no-progress"]
+    assert main([*argv, "--against", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert str(other) in err and named in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_other_run_is_an_input_never_overwritten(compare_run, tmp_path, capsys):
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps(compare_run[2]))
+    before = other.read_bytes()
+    argv = ["compare", "--problem", str(PROBLEMS / "tudor_2dof.toml"), "--out", str(tmp_path / "o"), "--no-progress"]
+    assert main([*argv, "--against", str(other), "--json", str(other)]) == 2
+    assert other.read_bytes() == before and "Traceback" not in capsys.readouterr().err

@@ -9,8 +9,14 @@ OLS on the base parameters, the consistent fit (a pseudo-inertia ⪰ 0 per link)
 Writes to the output folder: compare.md (the report), compare_parameters.csv (values and standard
 errors), compare_consistency.csv, compare_metrics.csv (held-out rmse / nmse / nmse_range per joint and
 protocol), compare_seeds.csv + compare_seeds.png (the paper's seed study) and, with --json, the
-machine-readable result. `--constraints-study N` instead runs the study of where the constraints matter
-(N short simulated trials) and writes constraints_study.md and constraints_study.csv.
+machine-readable result. `--against OTHER.json` (a `compare --json` or `identify --json` of another run: last week's,
+before a maintenance, at another cut-off) puts the two runs side by side (`ident_opt.runs`): this run's recommended
+fit beside the other's same fit (its recommended when it has not that one), each parameter with its standard errors,
+the difference and z = difference / √(se² + se_other²), |z| > 3 marked, and the held-out nMSE per joint of each:
+compare_against.md, compare_against.csv, compare_against_errors.csv and the JSON's `against`.
+
+`--constraints-study N` instead runs the study of where the constraints matter (N short simulated trials) and writes
+constraints_study.md and constraints_study.csv.
 """
 
 from __future__ import annotations
@@ -18,9 +24,11 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ident_opt import runs
 from ident_opt.commands.common import add_problem_arguments, add_progress_flag, load, output_dir, problem_for
 from ident_opt.errors import InputError
 from ident_opt.evaluation import compare, constraints
+from ident_opt.report import against as against_report
 from ident_opt.report import compare as report
 from ident_opt.report import constraints as constraints_report
 
@@ -49,6 +57,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="fit an extended model (armature, asymmetric_coulomb, stribeck, offset); repeatable (default: the "
         "rigid model, plus armature for a robot given by its inertials with a rotor inertia)",
+    )
+    parser.add_argument(
+        "--against",
+        metavar="OTHER.json",
+        help="another run's compare --json (or identify --json): its fit beside this run's, parameters moved beyond "
+        "their errors marked, held-out errors of each",
     )
     parser.add_argument(
         "--constraints-study",
@@ -80,6 +94,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"model: rigid + {robot.model_note} (--extension chooses another)", file=sys.stderr)
     if args.constraints_study is not None:
         return _constraints_study(args, problem)
+    if args.against and args.constraints_study is not None:
+        raise InputError("--against compares two runs' fits; the constraints study has none: give one or the other")
+    other = runs.read_run(args.against) if args.against else None  # a bad file is an error before any work
     loaded = load(args, "compare", min_samples=2 * model.n_params, problem=problem)
     out = output_dir(args, loaded.problem)
     result = compare.compare(
@@ -91,8 +108,15 @@ def run(args: argparse.Namespace) -> int:
         weights=None if args.weights == "ols" else "wls",
         progress=not args.no_progress,
     )
-    files = report.write(result, out, args.json)
+    against = None
+    if other is not None:
+        this = runs.summarize(result.as_json(), "this run")
+        other = runs.read_run(args.against, prefer=this.estimator)  # like with like when the other run has it
+        against = runs.side_by_side(this, other)
+    files = report.write(result, out, args.json, against)
     print(report.to_terminal(result))
+    if against is not None:
+        print(against_report.to_terminal(against))
     for warning in result.trust.warnings:
         print(warning, file=sys.stderr)
     print(f"wrote {', '.join(files)} to {out.resolve()}")

@@ -13,9 +13,11 @@ from ident_opt import outputs
 from ident_opt.evaluation.compare import PROTOCOLS, Comparison
 from ident_opt.metrics import METRICS
 from ident_opt.paper.seeds import rmse_table
+from ident_opt.report import against as against_report
 from ident_opt.report import record, shown, write_json
 from ident_opt.report.figures import seed_heatmap
 from ident_opt.report.tables import fmt, markdown_table, write_table
+from ident_opt.runs import SideBySide
 from ident_opt.warnings import markdown_lines
 
 #: The files `write` puts in the output folder, the report first.
@@ -29,10 +31,14 @@ FILES = (
 )
 
 
-def write(c: Comparison, out: Path, json_path: str | Path | None = None) -> list[str]:
+def write(
+    c: Comparison, out: Path, json_path: str | Path | None = None, against: SideBySide | None = None
+) -> list[str]:
     """Every file of the comparison into `out` (and the JSON payload to `json_path`); returns their names (the
-    seed study's only when the paper's protocol ran)."""
+    seed study's only when the paper's protocol ran; with `against`, another run beside this one:
+    `report.against`, and the JSON's `against`)."""
     files = [f for f in FILES if c.seeds is not None or "seeds" not in f]
+    files += against_report.write(against, out) if against is not None else []
     figure = seed_heatmap(c.seeds, out / "compare_seeds.png", "ols") if c.seeds is not None else None
     write_table(parameter_table(c), out / "compare_parameters.csv")
     write_table(consistency_table(c), out / "compare_consistency.csv")
@@ -42,7 +48,8 @@ def write(c: Comparison, out: Path, json_path: str | Path | None = None) -> list
         write_table(rmse_table(c.seeds), out / "compare_seeds.csv")
     outputs.write_text(out / "compare.md", to_markdown(c, figure.name if figure else None))
     record(out, "compare", "the nominal model against OLS and the consistent fits", files)
-    write_json(json_path, {**to_json(c), "files": files})  # "files": in the output folder
+    extra = {"against": against.as_json()} if against is not None else {}
+    write_json(json_path, {**to_json(c), **extra, "files": files})  # "files": in the output folder
     return files
 
 
