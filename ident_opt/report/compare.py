@@ -13,7 +13,7 @@ from ident_opt import outputs
 from ident_opt.evaluation.compare import PROTOCOLS, Comparison
 from ident_opt.metrics import METRICS
 from ident_opt.paper.seeds import rmse_table
-from ident_opt.report import record, shown, write_json
+from ident_opt.report import record, shown, verdicts, write_json
 from ident_opt.report.figures import seed_heatmap
 from ident_opt.report.tables import fmt, markdown_table, write_table
 from ident_opt.warnings import markdown_lines
@@ -41,7 +41,8 @@ def write(c: Comparison, out: Path, json_path: str | Path | None = None) -> list
     if c.seeds is not None:
         write_table(rmse_table(c.seeds), out / "compare_seeds.csv")
     outputs.write_text(out / "compare.md", to_markdown(c, figure.name if figure else None))
-    record(out, "compare", "the nominal model against OLS and the consistent fits", files)
+    verdict = verdicts.fit_verdict(c.choice, c.trust.warnings)
+    record(out, "compare", "the nominal model against OLS and the consistent fits", files, verdict=verdict)
     write_json(json_path, {**to_json(c), "files": files})  # "files": in the output folder
     return files
 

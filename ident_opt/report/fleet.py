@@ -18,7 +18,7 @@ from ident_opt.fleet import alerts
 from ident_opt.fleet.changes import BAND_Z, DAY_Z, RUN_DAYS, WINDOW_Z
 from ident_opt.fleet.layout import file_stem
 from ident_opt.fleet.result import FleetResult, RobotResult
-from ident_opt.report import record, write_json
+from ident_opt.report import record, verdicts, write_json
 from ident_opt.report.figures import daily_figure
 from ident_opt.report.tables import markdown_table, write_table
 
@@ -160,7 +160,8 @@ def write(result: FleetResult, out: Path, json_path: str | Path | None, command:
             progress()
     outputs.write_text(out / "fleet.md", markdown(result, table, command, figures, out))
     files = [out / f for f in FILES] + alerts.write(result, out) + figures
-    record(out, "fleet", "fleet: every robot identified every day, and what changed", files)
+    verdict = verdicts.fleet_verdict(result)
+    record(out, "fleet", "fleet: every robot identified every day, and what changed", files, verdict=verdict)
     write_json(json_path, data)
     return files
 
