@@ -61,9 +61,9 @@ def run(args: argparse.Namespace) -> int:
     data = api.load_trials(problem, args.data, **flags, fit=False)[0]
     if calibration is None:
         calibration = [*training, *testing]
-    out = output_dir(args, problem, indexed=False)
+    out = output_dir(args, problem)
     result = api.detect(problem, training, calibration, data, estimator=args.estimator, margin=args.margin)
-    files = report.write(result, out)
+    files = report.write(result, out, tuple(problem.robot.joint_names))
     for warning in result.warnings:
         print(warning, file=sys.stderr)
     print(report.summary(result))

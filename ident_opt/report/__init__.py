@@ -4,7 +4,8 @@ One writer per study (`identify`, `compare`, `constraints`, `audit`, `online`, `
 writes its own in `ident_opt.report.diagnosis`); `tables` and `figures` are their helpers. Every writer ends
 with `record(out_dir, study, title, files)`: a small manifest (`.manifest/<study>.json` in the output folder)
 says what the study wrote, and the folder's `README.md` is rebuilt from every manifest present — so the
-index lists what is there whatever order the commands ran in.
+index lists what is there whatever order the commands ran in. The folder's `index.html` (`report.html`) is
+rebuilt beside it from the same manifests, with each study's `verdict` (optional, Markdown) first.
 
 A study may also give the README a front part and a back part (`readme_head`, `readme_tail`: Markdown); the
 identify report does (the reproduction table, findings, its tables, its figures). The other reports are listed
@@ -24,6 +25,7 @@ from typing import Any
 from ident_opt import outputs
 from ident_opt.errors import InputError
 from ident_opt.outputs import shown  # noqa: F401  (re-exported: every writer names its inputs so)
+from ident_opt.report import html
 
 #: Where the manifests live inside an output folder.
 MANIFESTS = ".manifest"
@@ -41,20 +43,27 @@ def record(
     *,
     readme_head: str = "",
     readme_tail: str = "",
+    verdict: str = "",
 ) -> Path:
     """Note that `study` wrote `files` (relative to `out_dir`, or inside it; the main report first) under
     `title` (one line for the index), then rebuild the results folder's README.md. The results folder is
     `out_dir`, or its parent when that holds manifests too (so `results/diagnosis` is indexed in
-    `results/README.md`). Returns the README's path."""
+    `results/README.md`); `out_dir`/index.html is rebuilt in either case. `verdict`: what a person needs first
+    (Markdown, `report.verdicts`), at the top of the page. Returns the README's path."""
     out_dir = Path(out_dir)
     rel = [_relative(Path(f), out_dir) for f in files]
     manifest = {"study": study, "title": title, "files": rel, "readme_head": readme_head, "readme_tail": readme_tail}
+    if verdict:
+        manifest["verdict"] = verdict
     folder = out_dir / MANIFESTS
     check_folder(out_dir)
     outputs.write_text(folder / f"{study}.json", json.dumps(manifest, indent=1, ensure_ascii=False) + "\n")
     in_parent = (out_dir.parent / MANIFESTS).is_dir()
     own = write_index(out_dir) if _has_main(out_dir) or not in_parent else None
     parent = write_index(out_dir.parent) if in_parent else None
+    if own is None:  # indexed in its parent's README, yet the folder the command wrote gets its page too
+        _check_ours(out_dir, html.PAGE)
+        _write_page(out_dir, _manifests(out_dir))
     return own or parent
 
 
@@ -66,9 +75,9 @@ def check_folder(out_dir: str | Path) -> None:
     folder = out_dir / MANIFESTS
     run = outputs.current()
     for path in run.outputs if run is not None else []:  # --json/--final onto the index this run writes
-        if outputs.same_or_inside(path, out_dir / "README.md") or outputs.same_or_inside(path, folder):
+        if any(outputs.same_or_inside(path, out_dir / name) for name in ("README.md", html.PAGE, MANIFESTS)):
             raise InputError(
-                f"{path}: the output folder {out_dir} keeps its index there (README.md, {MANIFESTS}/); "
+                f"{path}: the output folder {out_dir} keeps its index there (README.md, {html.PAGE}, {MANIFESTS}/); "
                 "write this output elsewhere"
             )
     if folder.exists() and not folder.is_dir():
@@ -80,22 +89,26 @@ def check_folder(out_dir: str | Path) -> None:
     roots = ([out_dir] if _has_main(out_dir) or not in_parent else []) + ([out_dir.parent] if in_parent else [])
     for root in roots:
         _manifests(root)  # every manifest read (InputError naming a malformed one)
-        _check_readme(root)
+        _check_ours(root, "README.md")
+        _check_ours(root, html.PAGE)
+    _check_ours(out_dir, html.PAGE)  # written even when the index is its parent's
 
 
-def _check_readme(root: Path) -> None:
-    """`root`/README.md may be replaced by the index: it is absent, or it is what ident-opt last wrote there (its
-    SHA-256 in `README_DIGEST`), or, with no digest kept (written by a version that kept none), the folder holds
-    manifests already. A README.md of the user's is never replaced."""
-    readme, digest = root / "README.md", root / README_DIGEST
+def _check_ours(root: Path, name: str) -> None:
+    """`root`/`name` (README.md or index.html) may be replaced by the index: it is absent, or it is what
+    ident-opt last wrote there (its SHA-256 in `.manifest/<name>.sha256`), or, a README.md with no digest kept
+    (written by a version that kept none), the folder holds manifests already. A user's file is never replaced."""
+    readme, digest = root / name, root / MANIFESTS / f"{name}.sha256"
     if not readme.exists():
         return
     if readme.is_dir() or not readme.is_file():
         raise InputError(f"{readme}: is not a file; ident-opt writes the folder's index there: move it away")
     if digest.is_file():
         ours = digest.read_text(encoding="utf-8", errors="replace").strip() == _sha256(readme)
-    else:
+    elif name == "README.md":
         ours = any((root / MANIFESTS).glob("*.json")) if (root / MANIFESTS).is_dir() else False
+    else:
+        ours = False
     if not ours:
         raise InputError(
             f"{readme}: exists and was not written by ident-opt (or was edited since); ident-opt writes the "
@@ -118,7 +131,8 @@ def _has_main(folder: Path) -> bool:
 
 
 def write_index(root: Path) -> Path:
-    """`root`/README.md from every manifest in `root` and its subfolders whose main file exists."""
+    """`root`/README.md and `root`/index.html from every manifest in `root` and its subfolders whose main file
+    exists. Returns the README's path."""
     manifests = _manifests(root)
     main = [m for m in manifests if m["readme_head"] or m["readme_tail"]]
     others = [m for m in manifests if not (m["readme_head"] or m["readme_tail"])]
@@ -128,10 +142,18 @@ def write_index(root: Path) -> Path:
         parts += [f"- [{m['files'][0]}]({m['files'][0]}): {m['title']}" for m in others]
     parts += [m["readme_tail"] for m in main if m["readme_tail"]]
     path = root / "README.md"
-    _check_readme(root)
+    _check_ours(root, "README.md")
+    _check_ours(root, html.PAGE)
     outputs.write_text(path, "\n".join(parts) + "\n")
     outputs.write_text(root / README_DIGEST, _sha256(path) + "\n")
+    _write_page(root, manifests)
     return path
+
+
+def _write_page(root: Path, manifests: list[dict]) -> None:
+    """`root`/index.html (`report.html`) and its digest (so that the next run knows the page is its own)."""
+    page = html.write_page(root, manifests)
+    outputs.write_text(root / MANIFESTS / f"{html.PAGE}.sha256", _sha256(page) + "\n")
 
 
 def _manifests(root: Path) -> list[dict]:
@@ -149,6 +171,7 @@ def _manifests(root: Path) -> list[dict]:
                 "files": [f"{sub.name}/README.md"],
                 "readme_head": "",
                 "readme_tail": "",
+                "subfolder": True,  # a folder with its own README and page, linked from this one
             }
         )
     for path in [*root.glob(f"{MANIFESTS}/*.json"), *root.glob(f"*/{MANIFESTS}/*.json")]:
@@ -165,6 +188,8 @@ def _manifests(root: Path) -> list[dict]:
 
 #: The keys of a manifest and their types.
 MANIFEST_KEYS = {"study": str, "title": str, "files": list, "readme_head": str, "readme_tail": str}
+#: Keys a manifest may have (older manifests have none of them).
+OPTIONAL_KEYS = {"verdict": str}
 
 
 def _load(path: Path) -> dict:
@@ -182,6 +207,7 @@ def _load(path: Path) -> dict:
             for k, kind in MANIFEST_KEYS.items()
             if not isinstance(manifest, dict) or not isinstance(manifest.get(k), kind)
         ]
+        wrong += [k for k, kind in OPTIONAL_KEYS.items() if not wrong and not isinstance(manifest.get(k, ""), kind)]
         if wrong or not all(isinstance(f, str) for f in manifest["files"]):
             fault = f"is not a manifest of ident-opt (key {(wrong or ['files'])[0]!r} missing or of the wrong type)"
     if fault:

@@ -14,7 +14,7 @@ from ident_opt.evaluation.compare import PROTOCOLS, Comparison
 from ident_opt.metrics import METRICS
 from ident_opt.paper.seeds import rmse_table
 from ident_opt.report import against as against_report
-from ident_opt.report import record, shown, write_json
+from ident_opt.report import record, shown, verdicts, write_json
 from ident_opt.report.figures import seed_heatmap
 from ident_opt.report.tables import fmt, markdown_table, write_table
 from ident_opt.runs import SideBySide
@@ -47,7 +47,10 @@ def write(
     if c.seeds is not None:
         write_table(rmse_table(c.seeds), out / "compare_seeds.csv")
     outputs.write_text(out / "compare.md", to_markdown(c, figure.name if figure else None))
-    record(out, "compare", "the nominal model against OLS and the consistent fits", files)
+    verdict = verdicts.fit_verdict(c.choice, c.trust.warnings)
+    if against is not None:
+        verdict += f"\n\n**Against {against.other.source}:** {against_report.headline(against)}."
+    record(out, "compare", "the nominal model against OLS and the consistent fits", files, verdict=verdict)
     extra = {"against": against.as_json()} if against is not None else {}
     write_json(json_path, {**to_json(c), **extra, "files": files})  # "files": in the output folder
     return files

@@ -15,6 +15,7 @@ import matplotlib.pyplot as plt
 
 from ident_opt import outputs
 from ident_opt.contact.detect import Detection, TrialDetection
+from ident_opt.report import record, verdicts
 from ident_opt.report.figures import _save
 
 #: Compression suffixes left out of a trial's stem (measurements_1.csv.gz → measurements_1).
@@ -64,13 +65,23 @@ def figure(trial: TrialDetection, detection: Detection, path: Path) -> Path:
     return _save(fig, path)
 
 
-def write(detection: Detection, out: Path) -> list[str]:
-    """The CSV and the figure of every data trial in `out` (atomically); the names written."""
+def write(detection: Detection, out: Path, joint_names: tuple[str, ...] = ()) -> list[str]:
+    """The CSV and the figure of every data trial in `out` (atomically), and the folder's index (its page says the
+    alarms first, `joint_names` naming the joints); the names of the trials' files written."""
     written = []
     for trial, stem in zip(detection.trials, stems(detection)):
         outputs.write_text(out / f"{stem}.csv", csv_text(trial))
         figure(trial, detection, out / f"{stem}.png")
         written += [f"{stem}.csv", f"{stem}.png"]
+    figures_first = [f for f in written if f.endswith(".png")] + [f for f in written if f.endswith(".csv")]
+    verdict = verdicts.detect_verdict(detection, joint_names)
+    record(
+        out,
+        "detect",
+        "contact detection: τ_ext per joint, its thresholds and the alarms",
+        figures_first,
+        verdict=verdict,
+    )
     return written
 
 

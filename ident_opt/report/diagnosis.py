@@ -405,5 +405,6 @@ def write(d: Diagnosis, out: Path) -> list[str]:
         "diagnosis",
         "what the rigid model gets wrong, why, and the held-out gain of the fix",
         ["diagnosis.md", *files],
+        verdict="\n".join(verdict_section(d)[2:]),  # without its "## Verdict" heading: the page has one
     )
     return [*files, "diagnosis.md"]

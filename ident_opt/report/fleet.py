@@ -28,7 +28,7 @@ from ident_opt.fleet import alerts
 from ident_opt.fleet.changes import BAND_Z, DAY_Z, RUN_DAYS, WINDOW_Z
 from ident_opt.fleet.layout import file_stem
 from ident_opt.fleet.result import FleetResult, RobotResult
-from ident_opt.report import record, write_json
+from ident_opt.report import record, verdicts, write_json
 from ident_opt.report.figures import daily_figure, z_overview_figure
 from ident_opt.report.tables import markdown_table, write_table
 
@@ -182,7 +182,8 @@ def write(
     overview = [overview_figure(result, out / "figures" / "fleet_overview.png")] if figures != "none" else []
     outputs.write_text(out / "fleet.md", markdown(result, table, command, overview + drawn, kept, out))
     files = [out / f for f in FILES] + alerts.write(result, out) + overview + drawn + kept
-    record(out, "fleet", "fleet: every robot identified every day, and what changed", files)
+    verdict = verdicts.fleet_verdict(result)
+    record(out, "fleet", "fleet: every robot identified every day, and what changed", files, verdict=verdict)
     write_json(json_path, data)
     return files
 

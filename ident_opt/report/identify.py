@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ident_opt.evaluation.identify import IdentifyResult
 from ident_opt.paper.protocols import ProtocolResult
-from ident_opt.report import figures, record, shown, write_json
+from ident_opt.report import figures, record, shown, verdicts, write_json
 from ident_opt.report.identify_readme import readme_parts
 from ident_opt.report.identify_tables import figure_models, reproduction_frame, write_tables
 from ident_opt.report.tables import fmt
@@ -38,7 +38,10 @@ def write(
     tables = write_tables(result, out)
     head, tail = readme_parts(result, out, tables, made, command, seconds)
     files = [*(f"{name}.md" for name in tables), *(f"{name}.csv" for name in tables), *made.values()]
-    record(out, "identify", "every model under every protocol", files, readme_head=head, readme_tail=tail)
+    verdict = verdicts.fit_verdict(result.choice, result.warnings)
+    record(
+        out, "identify", "every model under every protocol", files, readme_head=head, readme_tail=tail, verdict=verdict
+    )
     write_json(json_path, json_payload(result, seconds))
     return seconds
 

@@ -12,7 +12,7 @@ import pandas as pd
 
 from ident_opt import outputs
 from ident_opt.adaptation.replay import Replay
-from ident_opt.report import record, shown, write_json
+from ident_opt.report import record, shown, verdicts, write_json
 from ident_opt.report.figures import online_trajectories_figure
 from ident_opt.report.tables import markdown_table, write_table
 from ident_opt.warnings import ResultWarning, markdown_lines
@@ -158,7 +158,10 @@ def write(r: Replay, data: dict, out: Path, json_path: str | Path | None = None)
             theta, theta0 = {k: v[:, keep] for k, v in theta.items()}, {k: v[keep] for k, v in theta0.items()}
             title = f"The {len(keep)} parameters that moved most online (relative to their offline value; dotted)"
         online_trajectories_figure(names, theta, theta0, out / FIGURE, title)
-    record(out, "online", "online adaptation: exact re-solves after every sample, online vs frozen", FILES)
+    verdict = "\n".join(verdicts.warning_lines([ResultWarning(w["code"], w["message"]) for w in _warnings(r)]))
+    record(
+        out, "online", "online adaptation: exact re-solves after every sample, online vs frozen", FILES, verdict=verdict
+    )
     write_json(json_path, data)
 
 
