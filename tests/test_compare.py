@@ -201,6 +201,8 @@ def test_compare_against_another_run_end_to_end(compare_run, tmp_path, capsys):
     assert data["against"]["beyond"] == ["fc1"] and data["against"]["estimator"] == compare_run[2]["recommended"]
     assert {r["parameter"]: r["z"] for r in data["against"]["parameters"]}["fv1"] == 0
     assert "| **fc1** |" in (out / "compare_against.md").read_text()
+    page = (out / "index.html").read_text()  # the side by side on the folder's page too, its verdict first
+    assert "<strong>fc1</strong>" in page and page.index("moved beyond their errors") < page.index("This run against")
     assert "1 of 9 parameters moved beyond their errors" in capsys.readouterr().out
     assert {"compare_against.md", "compare_against.csv", "compare_against_errors.csv"} <= set(data["files"])
 

@@ -101,8 +101,8 @@ def _table_section(rel: str, inliner: _Inliner) -> str:
 
 
 def _study_section(m: dict, inliner: _Inliner) -> str:
-    """A study: its title, its main Markdown rendered (a subfolder's README: a link to its page), its other
-    figures, links to its other files."""
+    """A study: its title, its main Markdown rendered (a subfolder's README: a link to its page), then its other
+    Markdown files, its other figures, links to its other files."""
     first = m["files"][0]
     parts = [f'<section class="study" id="{_anchor(m["study"])}">', f"<h2>{html.escape(m['title'])}</h2>"]
     if m.get("subfolder"):
@@ -112,6 +112,8 @@ def _study_section(m: dict, inliner: _Inliner) -> str:
         if text.startswith("# "):  # the report's own title stands for the study's
             parts.pop()
         parts.append(inliner.render(text, str(PurePosixPath(first).parent)))
+    for other in [f for f in m["files"][1:] if f.endswith(".md")]:  # e.g. compare --against's compare_against.md
+        parts.append(inliner.render(inliner.read(other), str(PurePosixPath(other).parent)))
     parts.append(_leftover_figures(m, inliner))
     rest = [f for f in m["files"] if f != first and PurePosixPath(f).suffix.lower() not in IMAGES]
     if rest:
