@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from sklearn.model_selection import train_test_split
 
 from ident_opt.errors import InputError
 from ident_opt.numerics.derivatives import estimate_derivatives, instrument_derivatives, lowpass
@@ -166,6 +165,8 @@ def fittable(trial, fit: bool = True) -> None:
 # ---------------------------------------------------------------------------------------------- splits
 def shuffled_split(n: int, train_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """The paper's protocol: shuffle the samples, then train on `train_fraction` of them."""
+    from sklearn.model_selection import train_test_split  # here: scikit-learn takes a second to import
+
     _nonempty_parts(n, int(train_fraction * n))
     train, test = train_test_split(np.arange(n), train_size=train_fraction, random_state=seed, shuffle=True)
     return np.sort(train), np.sort(test)

@@ -310,7 +310,12 @@ def z_overview_figure(
     ±`clip`, NaN grey; `marks` {row: text} written at the right of the marked rows (their change). One image, so
     its cost does not grow with the fleet as one figure per robot does."""
     height = min(max(1.6 + 0.16 * len(rows), 2.6), 40.0)  # inches: 0.16 per robot, capped for huge fleets
-    fig, ax = plt.subplots(figsize=(max(5.0, 0.45 * len(columns) + 3.5), height))
+    width = 0.45 * len(columns) + 5.0  # the matrix, the marks (2 in) and the colour bar beside it
+    fig = plt.figure(figsize=(width, height))
+    # fixed margins (inches): names left, rotated parameter names below, the marks and the colour bar right
+    left, right, bottom, top = 0.7 / width, 1 - 2.9 / width, 0.9 / height, 1 - 0.45 / height
+    ax = fig.add_axes((left, bottom, right - left, top - bottom))
+    bar = fig.add_axes((1 - 0.75 / width, bottom, 0.15 / width, top - bottom))
     cmap = plt.get_cmap("RdBu_r").with_extremes(bad="0.85")
     image = ax.imshow(np.ma.masked_invalid(z), cmap=cmap, vmin=-clip, vmax=clip, aspect="auto", interpolation="none")
     ax.set_xticks(range(len(columns)), columns, rotation=60, ha="right", fontsize=7)
@@ -320,6 +325,6 @@ def z_overview_figure(
     for i, text in marks.items():
         ax.annotate(text, (1.0, i), xycoords=("axes fraction", "data"), xytext=(4, 0), textcoords="offset points",
                     va="center", fontsize=6, color=PARAMETRIC)  # fmt: skip
-    fig.colorbar(image, ax=ax, label=f"z on the latest day (clipped to ±{clip:g})", pad=0.25, fraction=0.05)
+    fig.colorbar(image, cax=bar, label=f"z on the latest day (clipped to ±{clip:g})")
     ax.set_title(title, fontsize=9)
-    return _save(fig, path, dpi=90, bbox="tight")  # the canvas grown to the marks outside the axes
+    return _save(fig, path, dpi=90)

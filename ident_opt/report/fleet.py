@@ -197,8 +197,9 @@ def _drawn_shows(path: Path) -> str | None:
     """The change a figure already in the folder shows (its `SHOWS` text), None when there is none or it cannot be
     read (then it is drawn again)."""
     try:
-        with Image.open(path) as image:
-            return image.text.get(SHOWS)  # type: ignore[attr-defined]  (PNG images have .text)
+        with Image.open(path) as image:  # the text chunks before the image data: read without decoding the image
+            shows = image.info.get(SHOWS)
+            return shows if isinstance(shows, str) else None
     except (OSError, ValueError, AttributeError):
         return None
 
