@@ -278,7 +278,8 @@ def test_a_planar_fleet_end_to_end(planar_fleet, planar_run):
     series = pd.read_parquet(report / "fleet_series.parquet")
     assert set(series["robot"]) == set(data["robots"]) and len(series) == len(pd.read_csv(report / "fleet_series.csv"))
     changed = sorted(f"fleet_{c['robot']}.png" for c in data["changes"])  # --figures new, into a new folder
-    assert sorted(p.name for p in (report / "figures").iterdir()) == ["fleet_overview.png", *changed] and changed
+    drawn = sorted(p.name for p in (report / "figures").iterdir())
+    assert drawn == sorted(["fleet_overview.png", *changed]) and changed
     table = (report / "fleet.md").read_text()
     assert all(f"| {c['robot']} | {c['cause']} |" in table for c in data["changes"]) and victim in table
 

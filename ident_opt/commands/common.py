@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ident_opt import api, outputs, report
+from ident_opt import outputs, report
 from ident_opt.errors import InputError
 from ident_opt.problem import load_problem
 from ident_opt.report import write_json  # noqa: F401  (every command's --json goes through it)
@@ -118,6 +118,8 @@ def load(
     else:
         problem.require(command)
     check_trial_names(args)
+    from ident_opt import api  # here: the API imports every stage, which a command reading no trials (fleet) skips
+
     training, testing = api.load_trials(
         problem,
         getattr(args, "data", None),
