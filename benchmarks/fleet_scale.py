@@ -1,12 +1,13 @@
 """Benchmark (issue 51): a fleet run every day — what adding a day costs next to a run from scratch, a file task's
 memory against the file's length, and the pieces' filters against the whole trial's.
 
-    .venv/bin/python benchmarks/fleet_scale.py [--robots 30] [--days 30] [--workers 2] [--repeats 2]
-                                               [--samples 1000000] [--out results/fleet_scale.md]
+    .venv/bin/python benchmarks/fleet_scale.py [--problem P] [--robots 30] [--days 30] [--seconds 30] [--rate 200]
+                                               [--workers 2] [--repeats 2] [--samples 1000000] [--skip-memory]
+                                               [--out results/fleet_scale.md]
 
-1. **A day added** (the command in its own process, as a user runs it): a simulated planar fleet
-   (problems/tudor_2dof.toml, `FleetSpec`'s files: 30 s ± 30 % at
-   200 Hz, one a day) of `--robots` × (`--days` + 1) days. Its first `--days` days are run with a store (from
+1. **A day added** (the command in its own process, as a user runs it): a simulated fleet of the arm of `--problem`
+   (default the planar problems/tudor_2dof.toml; one log a day of `--seconds` ± 30 % at `--rate` Hz) of `--robots` ×
+   (`--days` + 1) days. Its first `--days` days are run with a store (from
    scratch, the store and the output folder written), then the last day is added and run again with that store and
    folder; the same full fleet is run from scratch with a fresh store and folder. Reported: the wall seconds of each
    command (local cluster of `--workers` processes, its start and the reports included) and the fleet's own clock,
@@ -75,12 +76,13 @@ def _restore(saved: Path, to: Path) -> None:
     (shutil.copytree if saved.is_dir() else shutil.copyfile)(saved, to)
 
 
-def day_added(problem: Path, robots: int, days: int, workers: int, seed: int, folder: Path, repeats: int) -> dict:
+def day_added(problem: Path, spec: FleetSpec, workers: int, folder: Path, repeats: int) -> dict:
     """Part 1 (module doc); the day-added and the from-scratch runs each the best of `repeats` (the store and the
     output folder as they were before the day was added, put back before each; the run from scratch into a fresh
     store and a fresh folder)."""
     full, daily = folder / "full", folder / "daily"
-    simulate_fleet(problem, full, FleetSpec(robots=robots, days=days + 1, seed=seed))
+    simulate_fleet(problem, full, spec)
+    robots, days = spec.robots, spec.days - 1
     shutil.copytree(full, daily)
     last = [sorted(robot.glob("day=*"))[-1] for robot in sorted(full.glob("robot=*"))]
     for day in last:
@@ -105,6 +107,7 @@ def day_added(problem: Path, robots: int, days: int, workers: int, seed: int, fo
         "problem": problem.relative_to(ROOT).as_posix() if problem.is_relative_to(ROOT) else str(problem),
         "robots": robots,
         "days": days + 1,
+        "file": f"{spec.seconds:g} s ± 30 % at {spec.rate_hz:g} Hz",
         "repeats": repeats,
         "files": scratch["fleet"]["files"],
         "samples": scratch["fleet"]["samples"],
@@ -261,7 +264,7 @@ def report(day: dict, mem: list[dict], filt: list[dict], command: str) -> str:
         "## A day added, against a run from scratch",
         "",
         f"A simulated fleet of {day['robots']} robots × {day['days']} days ({day['files']} files, "
-        f"{day['samples']:,} samples; {day['problem']}, one 30 s ± 30 % log a day at 200 Hz); a local "
+        f"{day['samples']:,} samples; {day['problem']}, one {day['file']} log a day); a local "
         "cluster of 2 workers on a shared 2-core machine, its start included in every run (worker processes; "
         f"{_threads(day)}). The timed pair ran "
         f"{day['repeats']} times, interleaved; the best of each is compared (the machine is shared).",
@@ -315,6 +318,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--problem", default=str(PLANAR), help="the fleet's arm (part 1; default the planar arm)")
     parser.add_argument("--skip-memory", action="store_true", help="part 1 and 3 only (part 2 measured elsewhere)")
     parser.add_argument("--robots", type=int, default=30)
+    parser.add_argument("--seconds", type=float, default=30.0, help="each simulated log's length [s] (30)")
+    parser.add_argument("--rate", type=float, default=200.0, help="each simulated log's rate [Hz] (200)")
     parser.add_argument("--days", type=int, default=30, help="days before the one added")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--seed", type=int, default=51)
@@ -330,9 +335,10 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="fleet-scale-") as tmp:
         filt = filters()
         mem = [] if args.skip_memory else memory(sorted({10_000, 100_000, args.samples}), Path(tmp))
-        day = day_added(
-            Path(args.problem).resolve(), args.robots, args.days, args.workers, args.seed, Path(tmp), args.repeats
+        spec = FleetSpec(
+            robots=args.robots, days=args.days + 1, seed=args.seed, seconds=args.seconds, rate_hz=args.rate
         )
+        day = day_added(Path(args.problem).resolve(), spec, args.workers, Path(tmp), args.repeats)
     command = "python benchmarks/fleet_scale.py " + " ".join(sys.argv[1:] if argv is None else argv)
     text = report(day, mem, filt, command.strip())
     Path(args.out).write_text(text, encoding="utf-8")
