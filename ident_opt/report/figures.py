@@ -303,17 +303,23 @@ def daily_figure(
     return _save(fig, path, dpi=90, metadata=metadata)
 
 
+#: Up to this many changes are written beside their rows in the fleet overview; more are marked only.
+MAX_MARK_TEXTS = 40
+
+
 def z_overview_figure(
     rows: list[str], columns: list[str], z: np.ndarray, marks: dict[int, str], clip: float, title: str, path: Path
 ) -> Path:
     """A fleet at a glance: z (R, C) of each row's (a robot's) columns (its tested parameters) as colours clipped to
-    ±`clip`, NaN grey; `marks` {row: text} written at the right of the marked rows (their change). One image, so
-    its cost does not grow with the fleet as one figure per robot does."""
+    ±`clip`, NaN grey; `marks` {row: text} written at the right of the marked rows (their change; only a mark
+    beyond `MAX_MARK_TEXTS`). One image, so its cost does not grow with the fleet as one figure per robot does."""
     height = min(max(1.6 + 0.16 * len(rows), 2.6), 40.0)  # inches: 0.16 per robot, capped for huge fleets
-    width = 0.45 * len(columns) + 5.0  # the matrix, the marks (2 in) and the colour bar beside it
+    texts = len(marks) <= MAX_MARK_TEXTS
+    room = 2.9 if texts else 1.1  # inches right of the matrix: the changes written (2 in), the colour bar
+    width = 0.45 * len(columns) + 2.1 + room
     fig = plt.figure(figsize=(width, height))
     # fixed margins (inches): names left, rotated parameter names below, the marks and the colour bar right
-    left, right, bottom, top = 0.7 / width, 1 - 2.9 / width, 0.9 / height, 1 - 0.45 / height
+    left, right, bottom, top = 0.7 / width, 1 - room / width, 0.9 / height, 1 - 0.45 / height
     ax = fig.add_axes((left, bottom, right - left, top - bottom))
     bar = fig.add_axes((1 - 0.75 / width, bottom, 0.15 / width, top - bottom))
     cmap = plt.get_cmap("RdBu_r").with_extremes(bad="0.85")
@@ -322,9 +328,12 @@ def z_overview_figure(
     step = max(1, len(rows) // 60)  # at most ~60 robot names on the axis; the marked ones always
     shown_rows = sorted(set(range(0, len(rows), step)) | set(marks))
     ax.set_yticks(shown_rows, [rows[i] for i in shown_rows], fontsize=6)
-    for i, text in marks.items():
-        ax.annotate(text, (1.0, i), xycoords=("axes fraction", "data"), xytext=(4, 0), textcoords="offset points",
-                    va="center", fontsize=6, color=PARAMETRIC)  # fmt: skip
+    if texts:
+        for i, text in marks.items():
+            ax.annotate(text, (1.0, i), xycoords=("axes fraction", "data"), xytext=(4, 0), textcoords="offset points",
+                        va="center", fontsize=6, color=PARAMETRIC)  # fmt: skip
+    else:  # text is what costs (a second per hundred labels): a mark, the changes being in the report's table
+        ax.plot(np.full(len(marks), len(columns) - 0.3), list(marks), ">", color=PARAMETRIC, ms=3, clip_on=False)
     fig.colorbar(image, cax=bar, label=f"z on the latest day (clipped to ±{clip:g})")
     ax.set_title(title, fontsize=9)
     return _save(fig, path, dpi=90)
