@@ -5,6 +5,7 @@ alarm over the push, no alarm on a contact-free trial, bad input refused with ex
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -132,3 +133,14 @@ def test_api_detect_types():
     with pytest.raises(InputError, match="problem"):
         iopt.detect("problems/tudor_sim.toml", [])
     assert np.isfinite(iopt.Thresholds((50.0,), (1.0,), (1.0,), (0.1,), 3, 2.0, 0.01).limits(np.zeros(1))).all()
+
+
+def test_a_trial_named_like_mathematics_is_written_as_text(trials, tmp_path):
+    """matplotlib reads "$…$" in a title as mathematics and fails on `$x^$`: a trial so named is text in its
+    figure's title (`report.figures.text`), and the run writes its figure and page."""
+    named = tmp_path / "$x^$.csv"
+    shutil.copyfile(trials["pushed"], named)
+    out = tmp_path / "o"
+    argv = ["detect", "--problem", PLANAR, "--calibrate", trials["free1"], "--data", str(named), "--out", str(out)]
+    assert main(argv) == 0
+    assert (out / "$x^$.png").is_file() and "$x^$" in (out / "index.html").read_text()

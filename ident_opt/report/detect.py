@@ -16,7 +16,7 @@ import matplotlib.pyplot as plt
 from ident_opt import outputs
 from ident_opt.contact.detect import Detection, TrialDetection
 from ident_opt.report import record, verdicts
-from ident_opt.report.figures import _save
+from ident_opt.report.figures import _save, text
 
 #: Compression suffixes left out of a trial's stem (measurements_1.csv.gz → measurements_1).
 COMPRESSED = (".gz", ".bz2", ".xz", ".zst", ".zip")
@@ -59,7 +59,7 @@ def figure(trial: TrialDetection, detection: Detection, path: Path) -> Path:
             ax.axvspan(a.start, a.end, color="tab:orange", alpha=0.3, lw=0)
         ax.set_ylabel(f"joint {j + 1} [N m]")
     axes[0, 0].legend(loc="upper right", fontsize=7)
-    axes[0, 0].set_title(f"{Path(trial.source).name}: {len(trial.alarms)} alarm(s) (shaded)")
+    axes[0, 0].set_title(f"{text(Path(trial.source).name)}: {len(trial.alarms)} alarm(s) (shaded)")
     axes[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
     return _save(fig, path)

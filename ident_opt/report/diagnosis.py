@@ -16,6 +16,7 @@ from ident_opt.effects import CATALOGUE
 from ident_opt.numerics import signals
 from ident_opt.report import record
 from ident_opt.report.diagnosis_verdict import cause_lines, identifiability_sentence, verdict_lines, verdict_section
+from ident_opt.report.figures import text
 from ident_opt.warnings import markdown_lines
 from ident_opt.wording import NOT_RESOLVED, num, pair
 
@@ -127,14 +128,16 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
     n = tau.shape[1]
     before, after = tau - d.predictions["before"], tau - d.predictions["after"]
     label_after = f"after ({' + '.join(c['cause'] for c in d.causes)})" if d.causes else "after (no extension)"
+    rigid = d.nominal.get("rigid_fit", {}).get("estimator")
+    label_before = f"before (rigid fit: {rigid})" if d.baseline == "rigid_fit" and rigid else f"before ({d.baseline})"
     fig, axes = plt.subplots(n, 1, figsize=(10, 6 if n == 2 else 1.8 * n + 1), sharex=True)
     for j, ax in enumerate(axes):
-        ax.plot(t, before[:, j], lw=0.7, label=f"before ({d.baseline})")
+        ax.plot(t, before[:, j], lw=0.7, label=label_before)
         ax.plot(t, after[:, j], lw=0.7, label=label_after, alpha=0.8)
         ax.set_ylabel(f"{joint(d, j)} residual [N m]", fontsize=8 if n > 2 else None)
         ax.legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time [s] (held-out part)")
-    fig.suptitle("Torque residual τ − τ̂ on held-out data")
+    fig.suptitle(f"Torque residual τ − τ̂ on held-out data ({text(Path(d.test.source).name)})")
     fig.tight_layout()
     try:
         with outputs.atomic_path(out / "residual_before_after.png") as tmp:
@@ -152,7 +155,7 @@ def figures(d: Diagnosis, out: Path) -> list[str]:
         for spare in grid.ravel()[n:]:
             spare.set_visible(False)
     for j, ax in enumerate(axes):
-        for r, lab in ((before, "before"), (after, label_after)):
+        for r, lab in ((before, label_before), (after, label_after)):
             f, p = signals.spectrum(r[:, j], dt)
             ax.loglog(f[1:], p[1:], lw=0.8, label=lab)  # log frequency: slow drifts and modes both legible
         # Every cause of the chain that has a frequency to show (an elastic mode found in a later round too).

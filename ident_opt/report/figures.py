@@ -32,6 +32,12 @@ PAPER_MODELS = (
 )
 
 
+def text(value: object) -> str:
+    """`value` (a file name) as literal text in a figure: a "$" escaped, so that matplotlib never reads a name such
+    as `$x^$.csv` as mathematics (which fails to parse and would stop the report)."""
+    return str(value).replace("$", r"\$")
+
+
 def _save(fig, path: Path, dpi: int = 110, metadata: dict[str, str] | None = None, bbox: str | None = None) -> Path:
     try:
         with outputs.atomic_path(path) as tmp:

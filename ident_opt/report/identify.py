@@ -87,13 +87,13 @@ def _cross_trial_figures(result: IdentifyResult, cross: ProtocolResult, fig_dir:
             j,
             fig_dir / f"identify_cross_trial_j{j + 1}.png",
             models,
-            title=f"Joint {j + 1} on the unseen trial {unseen} (identified on {trial})",
+            title=f"Joint {j + 1} on the unseen trial {figures.text(unseen)} (identified on {figures.text(trial)})",
         )
         tick()
     made["cross_interval"] = figures.interval_figure(
         cross.example,
         fig_dir / "identify_cross_trial_interval_pbr.png",
-        title=f"PBR + GMR with 95 % intervals on the unseen trial {unseen}",
+        title=f"PBR + GMR with 95 % intervals on the unseen trial {figures.text(unseen)}",
     )
     tick()
     return made
