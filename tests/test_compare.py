@@ -43,6 +43,7 @@ def test_compare_writes_its_files(compare_run):
         "compare_parameters.csv",
         "compare_consistency.csv",
         "compare_metrics.csv",
+        "compare_parameters.png",
         "compare_seeds.csv",
         "compare_seeds.png",
     ):

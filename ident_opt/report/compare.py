@@ -15,7 +15,7 @@ from ident_opt.metrics import METRICS
 from ident_opt.paper.seeds import rmse_table
 from ident_opt.report import against as against_report
 from ident_opt.report import record, shown, verdicts, write_json
-from ident_opt.report.figures import seed_heatmap
+from ident_opt.report.figures import parameters_figure, seed_heatmap
 from ident_opt.report.tables import fmt, markdown_table, write_table
 from ident_opt.runs import SideBySide
 from ident_opt.warnings import markdown_lines
@@ -26,6 +26,7 @@ FILES = (
     "compare_parameters.csv",
     "compare_consistency.csv",
     "compare_metrics.csv",
+    "compare_parameters.png",
     "compare_seeds.csv",
     "compare_seeds.png",
 )
@@ -40,6 +41,7 @@ def write(
     files = [f for f in FILES if c.seeds is not None or "seeds" not in f]
     files += against_report.write(against, out) if against is not None else []
     figure = seed_heatmap(c.seeds, out / "compare_seeds.png", "ols") if c.seeds is not None else None
+    parameters_png(c, out / "compare_parameters.png")
     write_table(parameter_table(c), out / "compare_parameters.csv")
     write_table(consistency_table(c), out / "compare_consistency.csv")
     metrics = pd.concat({m: metrics_table(c, m) for m in METRICS}, names=["metric"])
@@ -66,6 +68,22 @@ LABELS = {
     "consistent": "consistent (URDF prior)",
     "iv": "IV",
 }
+
+
+def parameters_png(c: Comparison, path: Path) -> Path:
+    """compare_parameters.png: every fit's parameters with ±2 standard errors beside the nominal values
+    (`figures.parameters_figure`)."""
+    params = c.parameters()
+    names = list(c.model.names)
+    fits = {}
+    for key, fit in c.fits.items():
+        se = fit.se_dict()
+        values = np.array([params[key].get(n, np.nan) for n in names], dtype=float)
+        fits[label(c, key)] = (values, np.array([np.nan if se.get(n) is None else se[n] for n in names], dtype=float))
+    nominal = params.get("datasheet")
+    nominal_pi = np.array([nominal.get(n, np.nan) for n in names], dtype=float) if nominal else None
+    title = f"Parameters ± 2 SE, each fit (recommended: {label(c, c.default)})"
+    return parameters_figure(names, fits, nominal_pi, title, path)
 
 
 def parameter_table(c: Comparison) -> pd.DataFrame:
@@ -382,6 +400,8 @@ def to_markdown(c: Comparison, figure: str | None = None) -> str:
         "## Parameters (± standard error)",
         "",
         markdown_table(_with_se(c)),
+        "",
+        "![Every fit's parameters with ±2 standard errors beside the nominal values](compare_parameters.png)",
         "",
         *([NOT_DETERMINED_NOTE, ""] if any(f.details.get("not_determined") for f in c.fits.values()) else []),
         "## Physical consistency",

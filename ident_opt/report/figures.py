@@ -343,3 +343,38 @@ def z_overview_figure(
     fig.colorbar(image, cax=bar, label=f"z on the latest day (clipped to ±{clip:g})")
     ax.set_title(title, fontsize=9)
     return _save(fig, path, dpi=90)
+
+
+def parameters_figure(
+    names: list[str],
+    fits: dict[str, tuple[np.ndarray, np.ndarray]],
+    nominal: np.ndarray | None,
+    title: str,
+    path: Path,
+    max_rows: int = 40,
+) -> Path:
+    """Each parameter under each fit with ±2 standard errors, one row per parameter (the first `max_rows`), one
+    axes: `fits` {label: (values (P,), se (P,), NaN where none)}, `nominal` (P,) the nominal values (a black bar).
+    Parameters differ in unit and size, so each row is scaled by its own largest |value| + 2 SE over the fits: the
+    figure shows where the fits agree within their errors and where one (a constraint, the noise) moved."""
+    rows = min(len(names), max_rows)
+    values = np.array([f[0][:rows] for f in fits.values()])
+    se = np.nan_to_num(np.array([f[1][:rows] for f in fits.values()]))
+    scale = np.nanmax(np.abs(values) + 2 * se, axis=0)
+    scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
+    fig, ax = plt.subplots(figsize=(8.0, 1.2 + 0.28 * rows))
+    offsets = np.linspace(-0.3, 0.3, len(fits)) if len(fits) > 1 else np.zeros(1)
+    y = np.arange(rows)
+    for k, label in enumerate(fits):
+        ax.errorbar(values[k] / scale, y + offsets[k], xerr=2 * se[k] / scale, fmt="o", ms=3, lw=0.9, label=label)
+    if nominal is not None:
+        ax.plot(nominal[:rows] / scale, y, "|", color="black", ms=12, mew=1.5, label="nominal")
+    ax.axvline(0.0, color="0.6", lw=0.6)
+    ax.set_yticks(y, names[:rows], fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xlabel("value / (largest |value| + 2 SE of the row)", fontsize=8)
+    shown_rows = f" (the first {rows} of {len(names)}; all in the CSV)" if rows < len(names) else ""
+    ax.set_title(title + shown_rows, fontsize=9)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the rows, never over them
+    fig.tight_layout()
+    return _save(fig, path, dpi=90)
