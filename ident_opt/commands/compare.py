@@ -28,6 +28,7 @@ from ident_opt import runs
 from ident_opt.commands.common import add_problem_arguments, add_progress_flag, load, output_dir, problem_for
 from ident_opt.errors import InputError
 from ident_opt.evaluation import compare, constraints
+from ident_opt.outputs import shown
 from ident_opt.report import against as against_report
 from ident_opt.report import compare as report
 from ident_opt.report import constraints as constraints_report
@@ -96,7 +97,9 @@ def run(args: argparse.Namespace) -> int:
         return _constraints_study(args, problem)
     if args.against and args.constraints_study is not None:
         raise InputError("--against compares two runs' fits; the constraints study has none: give one or the other")
-    other = runs.read_run(args.against) if args.against else None  # a bad file is an error before any work
+    other = runs.read_payload(args.against) if args.against else None
+    if other is not None:
+        runs.summarize(other, shown(args.against))  # a file that is not a run is an error before any work
     loaded = load(args, "compare", min_samples=2 * model.n_params, problem=problem)
     out = output_dir(args, loaded.problem)
     result = compare.compare(
@@ -111,8 +114,8 @@ def run(args: argparse.Namespace) -> int:
     against = None
     if other is not None:
         this = runs.summarize(result.as_json(), "this run")
-        other = runs.read_run(args.against, prefer=this.estimator)  # like with like when the other run has it
-        against = runs.side_by_side(this, other)
+        theirs = runs.summarize(other, shown(args.against), prefer=this.estimator)  # like with like when it can
+        against = runs.side_by_side(this, theirs)
     files = report.write(result, out, args.json, against)
     print(report.to_terminal(result))
     if against is not None:

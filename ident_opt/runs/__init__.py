@@ -11,6 +11,14 @@ takes the same payload from memory; `side_by_side` puts two summaries together.
     diff.parameters[diff.parameters["beyond"]]   # the parameters that moved beyond their errors
 """
 
-from ident_opt.runs._side_by_side import Z_BEYOND, RunSummary, SideBySide, read_run, side_by_side, summarize
+from ident_opt.runs._side_by_side import (
+    Z_BEYOND,
+    RunSummary,
+    SideBySide,
+    read_payload,
+    read_run,
+    side_by_side,
+    summarize,
+)
 
-__all__ = ["Z_BEYOND", "RunSummary", "SideBySide", "read_run", "side_by_side", "summarize"]
+__all__ = ["Z_BEYOND", "RunSummary", "SideBySide", "read_payload", "read_run", "side_by_side", "summarize"]

@@ -73,12 +73,15 @@ def read_run(path: str | Path, estimator: str | None = None, prefer: str | None 
     """The fit of a `compare --json` or `identify --json` at `path`: `estimator`, else `prefer` when the run has it
     (like with like: this run's fit), else the run's recommended; InputError naming the file when it cannot be read
     or holds no such fit."""
-    where = shown(path)
+    return summarize(read_payload(path), shown(path), estimator, prefer)
+
+
+def read_payload(path: str | Path) -> dict:
+    """The JSON at `path`, as written (`summarize` checks it); InputError naming the file when it cannot be read."""
     try:
-        raw = json.loads(Path(path).read_text(encoding="utf-8"))
+        return json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"--against {where}: cannot read the other run ({exc})") from None
-    return summarize(raw, where, estimator, prefer)
+        raise InputError(f"--against {shown(path)}: cannot read the other run ({exc})") from None
 
 
 def summarize(payload: dict, source: str, estimator: str | None = None, prefer: str | None = None) -> RunSummary:
