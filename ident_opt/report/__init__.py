@@ -234,7 +234,7 @@ def write_json(path: str | Path | None, payload: dict) -> None:
     if not path:
         return
     try:  # the common case, in one pass: every number finite, every key a plain one (a fleet's JSON is megabytes)
-        text = json.dumps(payload, indent=2, allow_nan=False, default=_plain_or_fail)
+        text = json.dumps(payload, indent=2, allow_nan=False, default=_plain)
     except (ValueError, TypeError):  # a non-finite number or a NumPy key somewhere: walk it, and name the keys
         clean, bad = strict(payload)
         if bad:
@@ -242,14 +242,6 @@ def write_json(path: str | Path | None, payload: dict) -> None:
             print(f"warning: {path}: {len(bad)} non-finite value(s) written as null: {shown_keys}", file=sys.stderr)
         text = json.dumps(clean, indent=2, allow_nan=False)
     outputs.write_text(path, text + "\n")
-
-
-def _plain_or_fail(value: Any) -> Any:
-    """`json.dumps`'s `default`: what `_plain` makes of a NumPy value or a path; anything else a TypeError."""
-    plain = _plain(value)
-    if plain is value:
-        raise TypeError(f"not JSON serialisable: {type(value).__name__}")
-    return plain
 
 
 def strict(value: Any, where: str = "", bad: list[str] | None = None) -> tuple[Any, list[str]]:
