@@ -45,6 +45,7 @@ def test_background_terms_are_not_in_the_diagnosis_catalogue():
         "joint_offset",
         "torque_scale",
         "load_friction",
+        "torque_offset",
     }
     assert set(CATALOGUE) == names
     assert set(BACKGROUND) == {"stiction", "drift", "ripple", "contact"} and not set(BACKGROUND) & names

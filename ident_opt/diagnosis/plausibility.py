@@ -9,8 +9,9 @@ A candidate is plausible when all of these hold:
    (`Effect.plausible`, each cause's `PLAUSIBLE`; read by `ranges`): a bound on a value (`least`, `most`: a number or
    one of the arm's own bounds, `Facts`; held with `SE_MARGIN` standard errors where the declaration names them,
    `se`), on its magnitude (`most_abs`, waived by `unless: "distinct"` when the held-out motion is distinct from the
-   training one: the same value then gains on a trajectory it was not fitted on), on a vector's length
-   (`most_norm`) or, for an elastic joint, on the static sag of its spring under the joint's RMS torque
+   training one: the same value then gains on a trajectory it was not fitted on), on its magnitude as a share of one
+   of the arm's bounds (`most_share` of `of`: a torque offset against the joint's largest logged torque), on a
+   vector's length (`most_norm`) or, for an elastic joint, on the static sag of its spring under the joint's RMS torque
    (`most_sag`). On an arm with n joints a per-joint candidate is first fitted again without the joints whose values
    fail (`failing_joints`, `chain.families.fit`);
 2. **search_edge** (false when it holds): no searched value lies within `EDGE` (a ratio) of a bound of its search
@@ -189,6 +190,10 @@ def _bounds(entry: dict, v: float, j: int | None, where: str, facts: Facts, se: 
         if not (entry.get("unless") == "distinct" and facts.distinct):
             why = " (the held-out motion repeats the training one)" if entry.get("unless") == "distinct" else ""
             out.append(f"{key} {v:.3g}{u}{where} beyond ±{entry['most_abs']:g}{u}{why}")
+    if "most_share" in entry:
+        of = facts.bound(entry["of"], j)
+        if of is not None and abs(v) > entry["most_share"] * of:
+            out.append(f"{key} {v:.3g}{u}{where} beyond ±{entry['most_share']:.0%} of {entry['of']} ({of:.3g}{u})")
     margin = SE_MARGIN * se if _finite(se) and se > 0 else 0.0
     sure = f" within {SE_MARGIN:g} standard errors ({v:.3g} ± {se:.2g})" if margin else ""
     for side, word in (("least", "below"), ("most", "beyond")):

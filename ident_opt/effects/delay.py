@@ -111,7 +111,7 @@ class Delay(Effect):
         return [(abs(d - t) <= DELAY_TOL[0] or relative_error(d, t) <= DELAY_TOL[1], relative_error(d, t))]
 
 
-def _like_with_like(predict, theta: dict, ctx) -> tuple[dict, str | None]:
+def _like_with_like(predict, theta: dict, ctx, params: dict | None = None) -> tuple[dict, str | None]:
     """The delay read again with the candidate's prediction through the low-pass the measured torque went through
     (`ArmContext.lowpass`). The fit compares the filtered torque with a prediction from the filtered angles, and
     where the model is not linear in them (a friction's sign at every reversal: the filter smooths the measured step,

@@ -65,6 +65,9 @@ class PlanarFamily:
     #: Causes whose columns this family's contain (an elastic joint's motor inertia is an armature): it is
     #: named over such a cause only if it also clears the margin against that cause's own fit (`rounds._nested`).
     nests: tuple[str, ...] = ()
+    #: `check(predict, θ, ctx, params) -> (detail, reason or None)`: a test of the fitted candidate on evidence its fit
+    #: did not weigh (`ChainFamily.check`); a reason marks it unresolved.
+    check: Callable | None = None
 
 
 @dataclass
@@ -75,9 +78,9 @@ class ChainFamily:
     the θ axes and the nonlinear search of its own (`search(family, baseline, ctx) -> θ`), the baselines it allows, the
     nonnegative coefficients, how to read its estimate, `screen(params, se, ctx) -> joints` (the joints where it is
     resolved; None: not screened), `center` (θ the axes are centred on), `coupled` (θ read from the coefficients,
-    re-solved to a fixed point) and `check(predict, θ, ctx) -> (detail, reason or None)` (a test of the fitted candidate
-    on evidence its fit did not weigh alone; a reason marks it unresolved). `polish` and `refine` are the planar
-    engine's (unused here)."""
+    re-solved to a fixed point) and `check(predict, θ, ctx, params) -> (detail, reason or None)` (a test of the fitted
+    candidate on evidence its fit did not weigh alone; a reason marks it unresolved). `polish` and `refine` are the
+    planar engine's (unused here)."""
 
     cause: str
     extra: Callable | None = None

@@ -266,7 +266,7 @@ def _final(family: ChainFamily, baseline: str, ctx: ArmContext, theta: dict) -> 
         return out if family.delay is None else signals.delayed(out, family.delay(theta), step(ds))
 
     if family.check is not None:
-        found, reason = family.check(predict, theta, ctx)
+        found, reason = family.check(predict, theta, ctx, params)
         detail.update(found)
         if reason is not None:
             detail["unresolved"] = reason

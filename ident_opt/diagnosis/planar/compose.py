@@ -97,6 +97,7 @@ def compose(earlier: list[tuple[PlanarFamily, dict]], new: PlanarFamily) -> Plan
         estimate=estimate,
         polish=new.polish if not earlier or (new.extra is not None and not transforms) else None,
         refine=new.refine,
+        check=new.check,
         center=new.center,
         fixed=fixed,
         members=tuple((f.cause, f) for f in fams),

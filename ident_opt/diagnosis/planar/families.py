@@ -296,6 +296,8 @@ def fit(family: PlanarFamily, baseline: str, ctx: Context) -> Candidate:
         o, X, _ = design(family, ds, columns_theta, baseline, ctx)
         return o + np.einsum("njk,k->nj", X, beta)
 
+    _check(family, predict, theta, ctx, params, detail)
+
     def errors() -> dict[str, float]:
         joint = joint_errors(family, baseline, ctx, columns_theta, list(theta), (o, X, names), beta, ls.se)
         if family.units is None:
@@ -304,6 +306,17 @@ def fit(family: PlanarFamily, baseline: str, ctx: Context) -> Candidate:
         return physical_units(family.units(coefficients), X, names, coefficients, joint, ctx.weights)[1]
 
     return Candidate(family.cause, baseline, estimate, params, se, n_added, predict, detail, errors)
+
+
+def _check(family: PlanarFamily, predict, theta: dict, ctx: Context, params: dict, detail: dict) -> None:
+    """The family's test of its fitted candidate (`PlanarFamily.check`) into `detail`: what it found, and
+    `unresolved` with why when it fails."""
+    if family.check is None:
+        return
+    found, reason = family.check(predict, theta, ctx, params)
+    detail.update(found)
+    if reason is not None:
+        detail["unresolved"] = reason
 
 
 def joint_errors(
