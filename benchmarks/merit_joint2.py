@@ -149,6 +149,89 @@ def strain_tests(train, test, robot) -> list[str]:
     ]
 
 
+def rigid_pi(d) -> np.ndarray:
+    """π of the rigid model by OLS on both joints' rows of trial `d` (joint velocities at rest read as 0)."""
+    Y = RIGID.regressor(d.q, d.dq, d.ddq)
+    return np.linalg.lstsq(np.vstack([Y[:, 0], Y[:, 1]]), np.concatenate([d.tau[:, 0], d.tau[:, 1]]), rcond=None)[0]
+
+
+def crosstalk_steps(d, c_tau1: float) -> str:
+    """Cross-talk from drive 1 into drive 2's channel puts c × each step of joint 1's torque into joint 2's, at zero
+    lag. Joint 1's reversals while joint 2 rests (±0.3 s) step joint 1's torque by its Coulomb level: the step of
+    joint 2's torque there (mean over 0.05–0.25 s after minus before) against c × joint 1's."""
+    s = np.sign(d.dq[:, 0])
+    events = []
+    for k in np.flatnonzero(s[1:] * s[:-1] < 0) + 1:
+        if 40 < k < d.n - 40 and np.all(np.abs(d.dq[k - 30 : k + 30, 1]) < 0.02):
+            step = [d.tau[k + 5 : k + 25, j].mean() - d.tau[k - 25 : k - 5, j].mean() for j in (0, 1)]
+            events.append(step)
+    e = np.array(events)
+    big = np.abs(e[:, 0]) > 2.0
+    slope = float(e[:, 0] @ e[:, 1] / (e[:, 0] @ e[:, 0]))
+    return (
+        f"{Path(d.source).name}: {len(e)} reversals of joint 1 while joint 2 rests; joint 2's torque steps by "
+        f"{slope:.4f} x joint 1's (the cross-talk fitted above: {c_tau1:.3f}); steps of joint 1 beyond 2 N m: "
+        + ", ".join(f"{a:.2f} -> {b:.3f}" for a, b in e[big])
+        + " N m"
+    )
+
+
+def approach_levels(d, pi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per rest stretch of joint 2 (at least 0.3 s): the sign of joint 2's velocity just before it stopped, and the
+    stretch's mean residual of the rigid fit `pi`."""
+    from ident_opt.numerics import signals
+
+    r = d.tau[:, 1] - np.einsum("np,p->n", RIGID.regressor(d.q, d.dq, d.ddq)[:, 1, :], pi)
+    labels = signals.rest_runs(d.dq)[:, 1]
+    sign, level = [], []
+    for k in np.unique(labels[labels >= 0]):
+        idx = np.flatnonzero(labels == k)
+        if len(idx) >= 30 and idx[0] >= 20:
+            sign.append(np.sign(d.raw_dq2[idx[0] - 20 : idx[0]].mean()))
+            level.append(r[idx].mean())
+    return np.array(sign), np.array(level)
+
+
+def channel_stories(train, test, c_tau1: float) -> list[str]:
+    """The two stories left for the torque on joint 2 that follows joint 1's angle (issue 48, point 7), told apart on
+    the samples each predicts, and the constant offset per trial."""
+    from dataclasses import replace
+
+    from ident_opt.diagnosis.split import at_rest
+
+    views = [replace(at_rest(d), extra=d.extra) for d in (train, test)]
+    for v, d in zip(views, (train, test)):
+        v.raw_dq2 = d.dq[:, 1]
+    lines = ["", "Cross-talk from drive 1's current into drive 2's channel (zero-lag steps at joint 1's reversals):"]
+    lines += ["  " + crosstalk_steps(d, c_tau1) for d in (train, test)]
+    lines.append("A rest level set by the direction joint 2 approached from (level = a x sign + c per rest stretch):")
+    fits = [(approach_levels(v, rigid_pi(views[0]))) for v in views]
+    for name, other in ((0, 1), (1, 0)):
+        A = np.column_stack([fits[name][0], np.ones(len(fits[name][0]))])
+        beta, *_ = np.linalg.lstsq(A, fits[name][1], rcond=None)
+        B = np.column_stack([fits[other][0], np.ones(len(fits[other][0]))])
+        r2 = 1 - np.var(fits[other][1] - B @ beta) / np.var(fits[other][1])
+        lines.append(
+            f"  fitted on {Path(views[name].source).name} ({len(A)} stretches): a {beta[0]:.3f}, c {beta[1]:.3f} N m; "
+            f"R² on {Path(views[other].source).name}: {r2:.2f}"
+        )
+    lines.append(
+        "A constant offset of each torque channel (the rigid fit of each trial alone with a constant per joint):"
+    )
+    for v in views:
+        Y = RIGID.regressor(v.q, v.dq, v.ddq)
+        A = np.concatenate([Y, np.broadcast_to(np.eye(2), (v.n, 2, 2))], axis=2)
+        A2, b2 = np.vstack([A[:, 0], A[:, 1]]), np.concatenate([v.tau[:, 0], v.tau[:, 1]])
+        beta, *_ = np.linalg.lstsq(A2, b2, rcond=None)
+        res = A2 @ beta - b2
+        se = np.sqrt(np.diag(res @ res / (len(b2) - A2.shape[1]) * np.linalg.inv(A2.T @ A2)))
+        lines.append(
+            f"  {Path(v.source).name}: b = {beta[-2]:.3f} ± {se[-2]:.3f}, {beta[-1]:.3f} ± {se[-1]:.3f} N m "
+            "(white-noise standard errors)"
+        )
+    return lines
+
+
 def figure(train, robot, path: Path) -> None:
     """Joint 2's torque and link 2's strain (in N m), each minus the rigid part of a fit with sin/cos q1 beside
     it (the q1 term plus the residual), binned against q1, with the q1 term fitted."""
@@ -202,6 +285,15 @@ def main() -> None:
         coefficients = np.array2string(beta[len(RIGID.names) :], precision=3, max_line_width=60)
         print(f"{name:32s} {nmse[0]:7.3f} {nmse[1]:9.3f}  {coefficients}")
     print("\n".join(strain_tests(train, test, problem.robot)))
+    X = np.column_stack([RIGID.regressor(train.q, train.dq, train.ddq)[:, 1, :], train.tau[:, :1]])
+    c_tau1 = float(np.linalg.lstsq(X, train.tau[:, 1], rcond=None)[0][-1])
+    print("\n".join(channel_stories(train, test, c_tau1)))
+    raw = problem.data.trials[0].parent / "exp1.csv"
+    still = np.loadtxt(raw, delimiter=",", usecols=(1, 7))
+    print(
+        f"TUDOR's first drive (it never moves: {np.ptp(still[:, 0]):.1e} rad) reads {still[:, 1].mean():.4f} A "
+        f"± {still[:, 1].std():.4f} A on exp1: the logger's current channels carry zero offsets of that size"
+    )
     figure(train, problem.robot, ROOT / "results" / "diagnosis" / "merit_joint2_strain.png")
 
 
