@@ -96,9 +96,6 @@ class TorqueOffset(Effect):
             )
         }
 
-    def chain_judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
-        return Effect.chain_judge(self, estimate, truth)
-
     # ------------------------------------------------------------------ diagnosis
     judged = ("offset",)
     plausible = PLAUSIBLE
@@ -123,7 +120,7 @@ class TorqueOffset(Effect):
 
     def judge(self, estimate: dict, truth: dict) -> list[tuple[bool, float]]:
         # An untouched joint's 0 is judged against the largest true offset, as on an n-joint arm.
-        return Effect.chain_judge(self, estimate, truth)
+        return self.chain_judge(estimate, truth)
 
 
 def _columns(ds, theta: dict, dt: float, ctx) -> tuple[np.ndarray, list[str]]:
