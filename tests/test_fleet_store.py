@@ -63,21 +63,42 @@ def _copy_without_last_day(root: Path, to: Path) -> list[Path]:
     return last
 
 
-def test_a_day_added_reads_only_that_day_and_answers_as_from_scratch(fleet, tmp_path):
+def test_a_day_added_reads_only_that_day_and_answers_as_from_scratch(fleet, tmp_path, monkeypatch):
     logs, db = tmp_path / "logs", tmp_path / "fleet.db"
     last = _copy_without_last_day(fleet, logs)
     first = _run(logs, db)
     assert first["fleet"]["files_new"] == len(discover(str(logs)).files) and first["fleet"]["files_cached"] == 0
     for day in last:
         shutil.copytree(day, logs / day.relative_to(fleet))
+    shutil.copyfile(db, tmp_path / "before.db")
+    read: list[str] = []  # the stored statistics the run reads back (the real reader, counted)
+    real = store.read_files
+    monkeypatch.setattr(
+        store, "read_files", lambda stored, files: read.extend(f.name for f in files) or real(stored, files)
+    )
     daily = _run(logs, db)
+    monkeypatch.undo()
     scratch = _run(fleet, None)
     assert daily["fleet"]["files_new"] == len(last)
     assert daily["fleet"]["files_cached"] == first["fleet"]["files_new"]
     assert daily["changes"], "the simulated fleet hides changes: the comparison must cover some"
     assert _answer(daily).replace(str(logs), str(fleet)) == _answer(scratch)
+    # baselines and scales came from the store: only the files of a change (phase 2 pools them) were read back
+    changed: dict[str, str] = {}  # robot → its latest change's first day
+    for c in daily["changes"]:
+        changed[c["robot"]] = max(changed.get(c["robot"], ""), c["first_day"])
+    assert read and len(read) < daily["fleet"]["files_cached"]
+    for name in read:
+        robot, day = (part.split("=")[1] for part in name.split("/")[:2])
+        assert robot in changed and day >= changed[robot], name
     again = _run(logs, db)  # nothing new: nothing read, the same answer
     assert again["fleet"]["files_new"] == 0 and _answer(again) == _answer(daily)
+    # a store written before scales were kept: they are computed, stored, and the answer is the same
+    with sqlite3.connect(tmp_path / "before.db") as con:
+        con.execute("DROP TABLE scales")
+    older = _run(logs, tmp_path / "before.db")
+    assert _answer(older) == _answer(daily)
+    assert len(_rows(tmp_path / "before.db")["scales"]) == len(_rows(db)["scales"]) > 0
 
 
 def test_a_changed_file_is_read_again_and_a_gone_one_dropped_with_warnings(fleet, tmp_path):
@@ -134,7 +155,10 @@ def test_the_statistics_are_stored_bit_for_bit(fleet):
 
 def _rows(db: Path) -> dict:
     with sqlite3.connect(db) as con:
-        return {t: sorted(con.execute(f"SELECT * FROM {t}")) for t in ("meta", "files", "choices", "fits")}
+        return {
+            t: sorted(con.execute(f"SELECT * FROM {t}"))
+            for t in ("meta", "files", "choices", "fits", "baselines", "scales")
+        }
 
 
 def test_an_interrupted_write_leaves_the_store_as_it_was(fleet, tmp_path, monkeypatch):

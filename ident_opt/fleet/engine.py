@@ -116,6 +116,9 @@ class Engine:
                 n_workers=workers,
                 threads_per_worker=1,
                 processes=False,
+                # threads in this process: a worker's memory monitor would measure the whole process (the client and
+                # what it holds) against its share and pause the worker, waiting on memory it cannot free
+                memory_limit=0,
                 dashboard_address=None,
                 silence_logs=logging.ERROR,
                 scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},

@@ -8,11 +8,14 @@
 3. Files: a stored file with the same hash, reduced for the same fit (estimator and cut-off factor), keeps its
    statistics; the others are read on the cluster (`tasks.file_stats`). Days: a robot-day whose files and fit are as
    when its fit was stored keeps it; the others are summed and fitted on the cluster (`tasks.day_stats`,
-   `tasks.fit_day`), their stored files' statistics sent along.
-4. On the client, from every file's statistics: each robot-day's sum, the robot's baseline model (stored, when
-   its first days' files and its fit are as then) and each day's torque scales (`tasks.baseline`, `tasks.scales`: a
-   few small solves). The same functions on the same numbers in
-   the same order as a run with an empty store: the result is the same.
+   `tasks.fit_day`), their stored files' statistics read from the store and sent along.
+4. On the client: the robot's baseline model (stored, when its first days' files and its fit are as then; else from
+   those days' statistics, `tasks.baseline`) and each day's torque scales (stored, when the day's files, its fit and
+   the baseline's files are as then; else from the day's statistics, `tasks.scales`). The same functions on the
+   same numbers in the same order as a run with an empty store: the result is the same.
+
+A stored file's statistics are read from the store only where step 3 or 4 (or phase 2, a change's files) needs them
+(`Files`): a day added reads the statistics of its robots' changes, not of the whole history.
 
 A file whose bytes changed since they were stored is read again, with a warning naming it; a stored file gone from
 the layout is dropped from the store (and so from the series), with a warning.
@@ -48,15 +51,33 @@ SMALL_RUN = 250
 NAMED = 5
 
 
+class Files:
+    """Every file's statistics, by name: those this run computed (held) and those the store holds (read when asked
+    for, `store.read_files`)."""
+
+    def __init__(self, stored: store.Stored, made: dict[str, tasks.FileStats]):
+        self.stored, self.made = stored, made
+
+    def get(self, files: list[layout.FleetFile]) -> list[tasks.FileStats]:
+        """The statistics of `files`, in their order."""
+        read = store.read_files(self.stored, [f for f in files if f.name not in self.made])
+        found = {r.file.name: r for r in read}
+        return [self.made[f.name] if f.name in self.made else found[f.name] for f in files]
+
+    def day(self, files: list[layout.FleetFile], day: str | None = None) -> tasks.DayStats:
+        """The sum of `files`' statistics (`tasks.day_stats`)."""
+        return tasks.day_stats(*self.get(files), day=day)
+
+
 @dataclass
 class Phase1:
     """What phase 1 gathered: the choices, day fits, baselines and scales (as `run._series` takes them), every
-    file's statistics by name (phase 2 pools them), what to write back to the store, the counts of files computed,
+    file's statistics (`Files`: phase 2 pools them), what to write back to the store, the counts of files computed,
     taken from the store, changed and gone, the samples read, the cluster's wall seconds, its workers and address,
     and the warnings."""
 
     gathered: list
-    files: dict[str, tasks.FileStats]
+    files: Files
     update: store.Update
     counts: dict[str, int]
     samples_read: int
@@ -152,31 +173,29 @@ def _day_digest(files: list[layout.FleetFile], hashes, choice: tasks.RobotChoice
     return store.digest(choice.choice.estimator, choice.choice.factor, _files_key(files, hashes))
 
 
-def _plan(found: layout.Layout, stored: store.Stored, hashes, choices) -> tuple[dict, dict, dict]:
-    """(stored statistics that stand, by name; stored fits that stand, by (robot, day); fits to make, by (robot,
-    day): their digest)."""
-    kept, fits, todo = {}, {}, {}
+def _plan(found: layout.Layout, stored: store.Stored, hashes, choices) -> tuple[set, dict, dict, dict]:
+    """(names of the stored files whose statistics stand; stored fits that stand, by (robot, day); fits to make, by
+    (robot, day): their digest; every day's digest, "" for a day with a file that could not be hashed)."""
+    kept, fits, todo, digests = set(), {}, {}, {}
     for robot in found.robots:
         choice = choices[robot]
         for day in found.days(robot):
             files = found.files_of(robot, day)
-            for f in files:
-                row = stored.files.get(f.name)
-                if _kept_file(row, hashes[f.name], choice):
-                    kept[f.name] = store.decode_file(f, row.meta, row.arrays)
+            kept.update(f.name for f in files if _kept_file(stored.files.get(f.name), hashes[f.name], choice))
             dg = _day_digest(files, hashes, choice)
-            known = stored.fits.get((robot, day))
             unhashed = any(hashes[f.name] is None for f in files)
+            digests[robot, day] = "" if unhashed else dg
+            known = stored.fits.get((robot, day))
             if known is not None and known[0] == dg and not unhashed and all(f.name in kept for f in files):
                 fits[robot, day] = known[1]
             else:
                 todo[robot, day] = dg
-    return kept, fits, todo
+    return kept, fits, todo, digests
 
 
-def _submit_files(job: tasks.Job, found: layout.Layout, kept: dict, todo: dict, choices):
+def _submit_files(job: tasks.Job, found: layout.Layout, stored: store.Stored, kept: set, todo: dict, choices):
     """A robot's phase-1 tasks: its files not in the store (gathered), and each day to fit: the sum of its files'
-    statistics (stored ones sent along) and its fit (gathered)."""
+    statistics (stored ones read and sent along) and its fit (gathered)."""
 
     def submit(client, robot: str) -> tuple[list, list]:
         choice = choices[robot]
@@ -186,7 +205,8 @@ def _submit_files(job: tasks.Job, found: layout.Layout, kept: dict, todo: dict, 
             made = {f.name: client.submit(tasks.file_stats, job, f, choice) for f in files if f.name not in kept}
             gathered += made.values()
             if (robot, day) in todo:
-                stats = [made.get(f.name, kept.get(f.name)) for f in files]
+                read = iter(store.read_files(stored, [f for f in files if f.name in kept]))
+                stats = [made[f.name] if f.name in made else next(read) for f in files]
                 summed = client.submit(tasks.day_stats, *stats)
                 gathered.append(client.submit(tasks.fit_day, job, summed, choice))
                 others.append(summed)
@@ -196,24 +216,37 @@ def _submit_files(job: tasks.Job, found: layout.Layout, kept: dict, todo: dict, 
 
 
 def _days_and_baselines(
-    job: tasks.Job, found: layout.Layout, files: dict[str, tasks.FileStats], K: int, stored: store.Stored, keys: dict
-) -> tuple[list, dict]:
-    """On the client: per robot, its days' sums, its baseline model (the stored one when the files of its first
-    days and its fit are as when it was stored: `keys`, robot → digest) and each day's scales (module doc, 4);
-    and {robot: (digest, baseline)} of the baselines made anew."""
+    job: tasks.Job, found: layout.Layout, files: Files, K: int, stored: store.Stored, keys: dict, digests: dict
+) -> tuple[list, dict, dict]:
+    """On the client: per robot, its baseline model (the stored one when the files of its first days and its fit
+    are as when it was stored: `keys`, robot → digest) and each day's scales (the stored ones when, besides, the
+    day's files are as then: `digests`, (robot, day) → digest) (module doc, 4); and {robot: (digest, baseline)},
+    {(robot, day): (digest, scales)} of those made anew."""
     out: list = []
     made: dict[str, tuple[str, tasks.Baseline]] = {}
+    made_scales: dict[tuple[str, str], tuple[str, tasks.Scales | None]] = {}
     for robot in found.robots:
-        days = [tasks.day_stats(*(files[f.name] for f in found.files_of(robot, d))) for d in found.days(robot)]
+        days = found.days(robot)
         kept = stored.baselines.get(robot)
         if kept is not None and keys[robot] and kept[0] == keys[robot]:
             base = kept[1]
         else:
-            base = tasks.baseline(job, *days[: K + SPARE_DAYS], count=K)
+            base = tasks.baseline(job, *(files.day(found.files_of(robot, d)) for d in days[: K + SPARE_DAYS]), count=K)
             if base is not None and keys[robot]:  # "": an unreadable file among its first days, never stored
                 made[robot] = (keys[robot], base)
-        out += [base, *(tasks.scales(job, day, base) for day in days)]
-    return out, made
+        out.append(base)
+        for day in days:
+            # "" (an unhashed file, or among the baseline's): computed, never stored
+            dg = store.digest(keys[robot], digests[robot, day]) if keys[robot] and digests[robot, day] else ""
+            known = stored.scales.get((robot, day))
+            if dg and known is not None and known[0] == dg:
+                out.append(known[1])
+                continue
+            found_scales = tasks.scales(job, files.day(found.files_of(robot, day)), base)
+            out.append(found_scales)
+            if dg:
+                made_scales[robot, day] = (dg, found_scales)
+    return out, made, made_scales
 
 
 def _baseline_keys(found: layout.Layout, hashes, choices: dict, K: int) -> dict[str, str]:
@@ -259,19 +292,18 @@ def phase1(
         engine.check(tasks.ready, job.problem)
         start = time.perf_counter()
         choices, new_choices = _choose(engine, job, found, known, judged, baseline_days, progress)
-        kept, fits, todo = _plan(found, stored, hashes, choices)
+        kept, fits, todo, digests = _plan(found, stored, hashes, choices)
         total = len(found.files) - len(kept) + 2 * len(todo)
-        submit = _submit_files(job, found, kept, todo, choices)
+        submit = _submit_files(job, found, stored, kept, todo, choices)
         made = engine.run(found.robots, submit, total, progress, "fleet: statistics and fits")
         engine_seconds = time.perf_counter() - start
         cluster = (engine.workers, engine.address)
     new_files = {m.file.name: m for m in made if isinstance(m, tasks.FileStats)}
     new_fits = {(m.robot, m.day): m for m in made if isinstance(m, tasks.DayFit)}
-    files = {**kept, **new_files}
+    files = Files(stored, new_files)
     changed, gone, warnings = _store_warnings(found, stored, hashes)
-    gathered, baselines = _days_and_baselines(
-        job, found, files, baseline_days, stored, _baseline_keys(found, hashes, choices, baseline_days)
-    )
+    keys = _baseline_keys(found, hashes, choices, baseline_days)
+    gathered, baselines, scales = _days_and_baselines(job, found, files, baseline_days, stored, keys, digests)
     update = store.Update(
         files={n: (hashes[n], stamps[n], choices[r.file.robot].choice, r) for n, r in new_files.items() if hashes[n]},
         gone=gone,
@@ -279,6 +311,7 @@ def phase1(
         choices=new_choices,
         fits={key: (todo[key], fit) for key, fit in new_fits.items()},
         baselines=baselines,
+        scales=scales,
         stamps={n: stamps[n] for n in kept if stamps[n] != stored.files[n].stamp},
     )
     counts = {"files_new": len(new_files), "files_cached": len(kept), "files_changed": len(changed)}

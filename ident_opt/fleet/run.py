@@ -333,12 +333,12 @@ def _change_units(
     ]
 
 
-def _phase2(job: tasks.Job, units: list[tuple], files: dict[str, tasks.FileStats]) -> list:
-    """Phase 2 on the client: each unit's files' statistics (phase 1's, nothing read again) pooled in the files'
+def _phase2(job: tasks.Job, units: list[tuple], files: incremental.Files) -> list:
+    """Phase 2 on the client: each unit's files' statistics (phase 1's, no file read again) pooled in the files'
     order, and the evidence against the robot's baseline model."""
     out = []
     for _, unit_files, base, _ in units:
-        pooled = tasks.day_stats(*(files[f.name] for f in unit_files), day="change")
+        pooled = files.day(unit_files, day="change")
         out.append(tasks.evidence(job, pooled, base))
     return out
 

@@ -7,12 +7,17 @@ robust fit: float64 arrays as raw little-endian bytes after a JSON header of the
 for bit, never unpickled), its samples, the loader's
 notes, the skip reason. Per robot: the fit its days get (`tasks.RobotChoice`) with a digest of the files it was
 judged on, and its baseline model (`tasks.Baseline`) with a digest of the files of its first days. Per robot-day:
-its fit (`tasks.DayFit`) with a digest of the day's files and the choice. A file's stamp (size, modification and
+its fit (`tasks.DayFit`) with a digest of the day's files and the choice, and its torque scales (`tasks.Scales`) with
+a digest of the day's files, the choice and the baseline's files. A file's stamp (size, modification and
 change times, inode) lets a run take its stored hash without reading it again (`incremental.content_hashes`).
 
 A store belongs to one *model key* (`model_key`: the parameters, the estimator asked, the loader's switches, the
 derivative cut-off setting, the problem file's SHA-256, `STORE_FORMAT`). A store written under another key is
 refused (`InputError`, exit 2, naming the store and what differs): its statistics would not add up with this run's.
+A run reads the small rows (hashes, choices, fits, baselines, scales) at its start and a file's statistics only
+when it needs them (`read_files`: the files of the days it fits, of a baseline it makes, of a change it tests), so a
+day added reads a few of the stored statistics, not all of them.
+
 Everything a run learnt is written in one transaction at its end: an interrupted run leaves the store as it was.
 A store is not rolled back with a failed command's reports (what it holds stays true of its files); a store the
 failed run would have created is removed with them.
@@ -56,6 +61,8 @@ CREATE TABLE IF NOT EXISTS fits (
     PRIMARY KEY (robot, day));
 CREATE TABLE IF NOT EXISTS baselines (
     robot TEXT PRIMARY KEY, digest TEXT NOT NULL, meta TEXT NOT NULL, arrays BLOB NOT NULL);
+CREATE TABLE IF NOT EXISTS scales (
+    robot TEXT NOT NULL, day TEXT NOT NULL, digest TEXT NOT NULL, arrays BLOB, PRIMARY KEY (robot, day));
 """
 
 
@@ -220,11 +227,22 @@ def _decode_baseline(robot: str, text: str, blob: bytes) -> tasks.Baseline:
     return tasks.Baseline(robot, arrays["pi"], arrays["weights"], m["null"], m["days"])
 
 
+def _encode_scales(found: tasks.Scales | None) -> bytes | None:
+    return None if found is None else _pack({"scale": found.scale, "se": found.se})
+
+
+def _decode_scales(robot: str, day: str, blob: bytes | None) -> tasks.Scales | None:
+    if blob is None:
+        return None
+    arrays = _unpack(blob)
+    return tasks.Scales(robot, day, arrays["scale"], arrays["se"])
+
+
 # ---------------------------------------------------------------------------------------------- the store
 @dataclass
 class StoredFile:
-    """A file's row: its hash, its stamp (size, modification and change times, inode: `incremental.stamp`), the fit
-    it was reduced for, and its result as stored (decoded on use)."""
+    """A file's row without its statistics (`read_files` reads those): its hash, its stamp (size, modification and
+    change times, inode: `incremental.stamp`) and the fit it was reduced for."""
 
     robot: str
     day: str
@@ -232,26 +250,28 @@ class StoredFile:
     stamp: str | None
     estimator: str
     factor: float
-    meta: str
-    arrays: bytes | None
 
 
 @dataclass
 class Stored:
-    """What a store held when the run began: files by name, choices by robot ((judged digest, choice)), fits by
-    (robot, day) ((digest, fit)), baselines by robot ((digest, baseline))."""
+    """What a store held when the run began: where it is, files by name (their rows: `read_files` reads their
+    statistics), choices by robot ((judged digest, choice)), fits by (robot, day) ((digest, fit)), baselines by
+    robot ((digest, baseline)), scales by (robot, day) ((digest, scales or None))."""
 
+    where: StoreLocation
     files: dict[str, StoredFile]
     choices: dict[str, tuple[str, tasks.RobotChoice]]
     fits: dict[tuple[str, str], tuple[str, tasks.DayFit]]
     baselines: dict[str, tuple[str, tasks.Baseline]] = field(default_factory=dict)
+    scales: dict[tuple[str, str], tuple[str, tasks.Scales | None]] = field(default_factory=dict)
 
 
 @dataclass
 class Update:
     """What a run writes back: new or recomputed files (`tasks.FileStats` by name, with their hash, stamp and the
     choice they were reduced for), the names of files gone from the layout and the robot-days gone, the choices,
-    fits and baselines (each with its digest) made anew, and the new stamps of files kept (touched, not changed)."""
+    fits, baselines and scales (each with its digest) made anew, and the new stamps of files kept (touched, not
+    changed)."""
 
     files: dict[str, tuple[str, str | None, recommend.Choice, tasks.FileStats]]
     gone: list[str]
@@ -259,6 +279,7 @@ class Update:
     choices: dict[str, tuple[str, tasks.RobotChoice]]
     fits: dict[tuple[str, str], tuple[str, tasks.DayFit]]
     baselines: dict[str, tuple[str, tasks.Baseline]] = field(default_factory=dict)
+    scales: dict[tuple[str, str], tuple[str, tasks.Scales | None]] = field(default_factory=dict)
     stamps: dict[str, str | None] = field(default_factory=dict)
 
 
@@ -287,7 +308,7 @@ def _connect(where: StoreLocation, create: bool) -> sqlite3.Connection | None:
 def read(where: StoreLocation, key: dict) -> Stored:
     """What the store at `where` holds (nothing for a missing or in-memory store), checked against this run's model
     `key` (a store of another model: an InputError naming what differs)."""
-    empty = Stored({}, {}, {})
+    empty = Stored(where, {}, {}, {})
     con = _connect(where, create=False)
     if con is None or where.path is None:
         return empty
@@ -299,7 +320,7 @@ def read(where: StoreLocation, key: dict) -> Stored:
             raise InputError(f"--store {where.given}: an SQLite file, but not a fleet store (no meta table)")
         meta = dict(con.execute("SELECT key, value FROM meta"))
         _check_key(where, json.loads(meta.get("model_key", "{}")), key)
-        return _load(con)
+        return _load(con, where, tables)
     except (sqlite3.Error, ValueError, KeyError, TypeError) as exc:  # ValueError: a damaged record (JSON, arrays)
         raise _error(where, exc) from None
     finally:
@@ -317,16 +338,54 @@ def _check_key(where: StoreLocation, stored: dict, key: dict) -> None:
         )
 
 
-def _load(con: sqlite3.Connection) -> Stored:
+def _load(con: sqlite3.Connection, where: StoreLocation, tables: set[str]) -> Stored:
+    """Every row but the files' statistics (module doc)."""
     files = {
         row[0]: StoredFile(*row[1:])
-        for row in con.execute("SELECT name, robot, day, sha256, stamp, estimator, factor, meta, arrays FROM files")
+        for row in con.execute("SELECT name, robot, day, sha256, stamp, estimator, factor FROM files")
     }
     choices = {r: (judged, _decode_choice(r, m)) for r, judged, m in con.execute("SELECT * FROM choices")}
     fits = {(r, d): (dg, _decode_fit(r, d, m, a)) for r, d, dg, m, a in con.execute("SELECT * FROM fits")}
     rows = con.execute("SELECT * FROM baselines")
     baselines = {r: (dg, _decode_baseline(r, m, a)) for r, dg, m, a in rows}
-    return Stored(files, choices, fits, baselines)
+    scales = {}
+    if "scales" in tables:  # a store written before scales were kept: they are computed and stored this time
+        rows = con.execute("SELECT robot, day, digest, arrays FROM scales")
+        scales = {(r, d): (dg, _decode_scales(r, d, a)) for r, d, dg, a in rows}
+    return Stored(where, files, choices, fits, baselines, scales)
+
+
+#: `read_files` asks for at most this many files per query (SQLite's limit on a statement's parameters is 32766).
+QUERY_FILES = 500
+
+
+def read_files(stored: Stored, files: list[FleetFile]) -> list[tasks.FileStats]:
+    """The stored statistics of `files` (each a file the store holds, with the hash `stored` read at the run's
+    start), in their order. A row whose hash moved since (another run wrote the store meanwhile) is an InputError:
+    what this run planned on is gone."""
+    con = _connect(stored.where, create=False) if files else None
+    if con is None:
+        if files:
+            raise InputError(f"--store {stored.where.given}: removed while this run read it")
+        return []
+    rows: dict[str, tuple[str, str, bytes | None]] = {}
+    try:
+        names = [f.name for f in files]
+        for start in range(0, len(names), QUERY_FILES):
+            part = names[start : start + QUERY_FILES]
+            marks = ", ".join("?" * len(part))
+            query = f"SELECT name, sha256, meta, arrays FROM files WHERE name IN ({marks})"
+            rows.update((name, rest) for name, *rest in con.execute(query, part))
+        moved = [f.name for f in files if f.name not in rows or rows[f.name][0] != stored.files[f.name].sha256]
+        if moved:
+            raise InputError(
+                f"--store {stored.where.given}: written by another run while this one read it ({moved[0]}); run again"
+            )
+        return [decode_file(f, rows[f.name][1], rows[f.name][2]) for f in files]
+    except (sqlite3.Error, ValueError, KeyError, TypeError) as exc:
+        raise _error(stored.where, exc) from None
+    finally:
+        con.close()
 
 
 def write(where: StoreLocation, key: dict, update: Update) -> None:
@@ -359,6 +418,7 @@ def _write(con: sqlite3.Connection, key: dict, update: Update) -> None:
     con.execute("INSERT OR REPLACE INTO meta VALUES ('model_key', ?)", (json.dumps(key, sort_keys=True),))
     con.executemany("DELETE FROM files WHERE name = ?", [(name,) for name in update.gone])
     con.executemany("DELETE FROM fits WHERE robot = ? AND day = ?", update.gone_days)
+    con.executemany("DELETE FROM scales WHERE robot = ? AND day = ?", update.gone_days)
     for name, (sha, stamp, choice, result) in update.files.items():
         text, blob = encode_file(result)
         row = (name, result.file.robot, result.file.day, sha, stamp, choice.estimator, choice.factor, text, blob)
@@ -372,3 +432,6 @@ def _write(con: sqlite3.Connection, key: dict, update: Update) -> None:
     for robot, (dg, base) in update.baselines.items():
         text, blob = _encode_baseline(base)
         con.execute("INSERT OR REPLACE INTO baselines VALUES (?, ?, ?, ?)", (robot, dg, text, blob))
+    for (robot, day), (dg, found) in update.scales.items():
+        row = (robot, day, dg, _encode_scales(found))
+        con.execute("INSERT OR REPLACE INTO scales VALUES (?, ?, ?, ?)", row)
