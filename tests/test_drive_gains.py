@@ -81,18 +81,21 @@ def test_a_known_payload_gives_each_drive_its_gain_on_the_planar_arm(tmp_path):
     assert any(w["code"] == "drive_gain" for w in result["warnings"])
 
 
-def test_exact_data_give_the_six_joint_arms_gains_exactly(tmp_path):
-    """The TX40 with drives (6 joints, a coupled wrist), its drives given a torque constant and gear ratio, noise-free
-    with the true derivatives logged: every gain to 1e-6 — the estimator, not the data, is what is checked here (with
-    noise and estimated derivatives, joints 1 and 4 are off by 35 % and 5 %: `benchmarks/drive_gains.py`)."""
+@pytest.mark.parametrize("exact", [True, False], ids=["exact", "noisy"])
+def test_the_six_joint_arms_gains(tmp_path, exact):
+    """The TX40 with drives (6 joints, a coupled wrist), its drives given a torque constant and gear ratio. Noise-free
+    with the true derivatives logged: every gain to 1e-6 (the estimator itself). With the logger's noise and the
+    derivatives estimated from the angles: every gain within 3 % (measured 0.01–0.4 %; before each joint's samples
+    slower than its stick speed were left out of its equation, joints 1 and 4 were off by 35 % and 5 %:
+    `benchmarks/drive_gains.py`)."""
     text = (ROOT / "tests" / "arms" / "tx40_drives.toml").read_text(encoding="utf-8")
     text = text.replace('urdf = "../../', f'urdf = "{ROOT.as_posix()}/')
     text = re.sub(r"(\[robot\.joint_\d\]\n)", r"\1torque_constant = 0.2\ngear_ratio = 40\n", text)
     truth = [0.9, 1.05, 1.1, 0.95, 1.0, 1.04]
     load = "mass = 2.0, com = [0.15, 0.1, 0.1]"
-    problem = _problem(tmp_path, text, truth, load, "payload:mass=2.0,com=[0.15,0.1,0.1]", 250.0, exact=True)
+    problem = _problem(tmp_path, text, truth, load, "payload:mass=2.0,com=[0.15,0.1,0.1]", 250.0, exact=exact)
     g = _identify(problem)
-    np.testing.assert_allclose(g.ratio, truth, rtol=1e-6)
+    np.testing.assert_allclose(g.ratio, truth, rtol=1e-6 if exact else 0.03)
 
 
 def test_without_a_known_load_the_scale_is_refused_and_bad_loads_are_named(tmp_path):
