@@ -21,7 +21,7 @@ fit takes it.
 Each joint's samples slower than its stick speed (`signals.stick_speed`: 2 % of its 95th-percentile speed, the
 n-joint diagnosis's rule) are left out of that joint's equation: there its friction is whatever stiction holds and
 the Coulomb column, sign(q̇) of an estimated velocity, is noise. Left in, they bias the friction, and through it the
-gain: on the simulated TX40 with the logger's noise (a quarter of its samples that slow) joint 1's gain was off by
+gain: on the simulated TX40 with the logger's noise (33–43 % of its samples that slow) joint 1's gain was off by
 35 % and joint 4's by 5 %, and are within 0.4 % without them (`benchmarks/drive_gains.py`).
 """
 
