@@ -218,3 +218,25 @@ def test_another_robots_results_get_their_own_readme_linked_from_the_parent(tmp_
     assert parent.startswith("# Results for `paper`") and "Results for `dfki-c0`" not in parent.split("\n")[0]
     assert "[dfki/README.md](dfki/README.md)" in parent and "# Results for `dfki-c0`" not in parent
     assert own.startswith("# Results for `dfki-c0`") and "[compare.md](compare.md)" in own
+
+
+def test_trials_that_rest_warn_that_their_friction_is_read_from_slow_samples(default_run):
+    """`slow_samples`: MERIt's trials rest most of the time (56–73 % of each joint's samples slower than its stick
+    speed) and are warned about, naming both joints; the DFKI C.0 trials keep moving (about 2 %) and are not, in
+    compare's JSON either; a model without Coulomb friction is never warned about."""
+    from ident_opt.fitting.trust import check_slow_samples
+
+    merit = load_problem(PROBLEMS / "tudor_2dof.toml")
+    trials = [load_dataset(PROBLEMS.parent / "data" / "merit" / f"exp{k}.csv", merit.data, merit.robot) for k in (1, 2)]
+    model = merit.robot.model()
+    (found,) = check_slow_samples(model, trials, merit.robot.joint_names)
+    assert found.code == "slow_samples"
+    shares = [int(part.split()[-1].rstrip("%,")) for part in found.message.split(" move slower")[0].split(", ")[1:]]
+    assert len(shares) == 2 and all(50 <= s <= 80 for s in shares), found.message
+    dfki = load_problem(DFKI)
+    moving = [load_dataset(trial(k), dfki.data, dfki.robot) for k in (0, 1)]
+    assert check_slow_samples(dfki.robot.model(), moving, dfki.robot.joint_names) == []
+    frictionless = type("NoFriction", (), {"names": ("a1", "b1")})()
+    assert check_slow_samples(frictionless, trials, merit.robot.joint_names) == []
+    _, result = default_run
+    assert "slow_samples" not in [w["code"] for w in result["warnings"]]

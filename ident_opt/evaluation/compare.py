@@ -28,7 +28,7 @@ from ident_opt.fitting.base import base_parameters
 from ident_opt.fitting.drive_gains import DriveGains
 from ident_opt.fitting.fit import LinearFit
 from ident_opt.fitting.recommend import Choice, choose, option
-from ident_opt.fitting.trust import Trust, check_masses
+from ident_opt.fitting.trust import Trust, check_masses, check_slow_samples
 from ident_opt.metrics import METRICS, all_metrics
 from ident_opt.outputs import shown
 from ident_opt.paper.seeds import FitFn, SplitResults, deviation_from_mean, seed_study, split_fits
@@ -301,15 +301,22 @@ def _score_nominal(
 
 
 def _trust(
-    choice: Choice, overlap: list, model: Arm, fits: dict[str, LinearFit], nominal: tuple[Arm, np.ndarray]
+    choice: Choice,
+    overlap: list,
+    model: Arm,
+    fits: dict[str, LinearFit],
+    nominal: tuple[Arm, np.ndarray],
+    joints: tuple[str, ...],
 ) -> Trust:
-    """The recommendation's trust checks with the trials' own warnings first and the fits' link masses checked
-    against the `nominal` (arm, π): everything that qualifies the comparison, in one list."""
+    """The recommendation's trust checks with the trials' own warnings first, the fits' link masses checked
+    against the `nominal` (arm, π) and the training samples too slow to read friction from (the arm's `joints`):
+    everything that qualifies the comparison, in one list."""
     trust = choice.evidence.trust
     trust.warnings[:0] = overlap  # the trials' own (a held-out trial that trains) come first
     nominal_arm, nominal_pi = nominal
     estimates = {k: f.pi for k, f in fits.items() if "base_parameters" not in f.details}  # not a lifted base fit
     trust.warnings += check_masses(model, estimates, nominal_arm.link_masses(nominal_pi))
+    trust.warnings += check_slow_samples(model, choice.evidence.trials, joints)
     return trust
 
 
@@ -364,7 +371,7 @@ def compare(
         metrics["cross_trial"], by_trial = _cross_trial(test_pool, tests, model, fits, sheets)
     _score_nominal(metrics, test_sets, sheets)
     sources = {"train": pool.source, **({"unseen": test_pool.source} if test_pool is not None else {})}
-    trust = _trust(choice, overlap, model, fits, sheets[f"datasheet_{robot.datasheet}"])
+    trust = _trust(choice, overlap, model, fits, sheets[f"datasheet_{robot.datasheet}"], robot.joint_names)
     drives = _drive_gains(problem, model, trains, trust)
     return Comparison(
         model,

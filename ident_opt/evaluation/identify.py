@@ -16,7 +16,7 @@ from ident_opt.data.loader import held_out_overlap
 from ident_opt.data.validate import checked_problem, checked_trials
 from ident_opt.fitting import estimators
 from ident_opt.fitting.recommend import Choice, choose
-from ident_opt.fitting.trust import Trust, check_masses
+from ident_opt.fitting.trust import Trust, check_masses, check_slow_samples
 from ident_opt.metrics import METRICS, all_metrics
 from ident_opt.models.hybrid import RidgeModel, fitted
 from ident_opt.paper.protocols import ProtocolResult, chronological_protocol, cross_trial_protocol, paper_protocol
@@ -162,13 +162,15 @@ def _variants(
 
 def _trust(problem: Problem, choice: Choice, params: dict) -> Trust:
     """The trust checks (`fitting.trust`: the angle convention, the cut-off, OLS against IV) behind the
-    recommendation, and the fits' masses against the nominal ones: what the JSON's `warnings` say."""
+    recommendation, the fits' masses against the nominal ones and the training samples too slow to read friction
+    from: what the JSON's `warnings` say."""
     robot, model = problem.robot, problem.robot.model(())
     trust = choice.evidence.trust
     nominal_arm, nominal_pi = robot.datasheets()[robot.datasheet]
     fits = fitted(robot, choice.estimator).values()
     estimates = {name: model.vector(params[name]) for name in fits if name != "ols"}
     trust.warnings += check_masses(model, estimates, nominal_arm.link_masses(nominal_pi))
+    trust.warnings += check_slow_samples(model, choice.evidence.trials, robot.joint_names)
     return trust
 
 

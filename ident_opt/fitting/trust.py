@@ -10,6 +10,12 @@
   more noise enters the regressor: a move beyond 3 SE and `SENSITIVITY_TOLERANCE` of its value means the
   result depends on the cut-off. The ½× fit is reported, not judged: a cut-off chosen at 1.2× the motion's band
   edge (`derivatives.choose_cutoff`) halved removes part of the motion itself, and the parameters move for that reason.
+- **Slow samples.** A joint's samples slower than its stick speed (`signals.stick_speed`: 2 % of its
+  95th-percentile speed) carry friction that stiction sets, while the model's Coulomb column there is sign(q̇) of an
+  estimated velocity: noise. The fit keeps them; where they are many (`SLOW_SHARE` of a joint's training samples or
+  more) its friction is biased, and through it other parameters: on simulated arm4 trials with 38–76 % such samples
+  least squares read the shoulder's Coulomb friction 0.42 N·m for 1.5 (`docs/effects.md`, "What changed since a
+  model"). The diagnosis and the drive-gain fit leave them out.
 - **Angle convention.** OLS with the `joint_offset` extension's sine gravity columns: the direction of gravity
   per joint, δ1 = atan2(−b1s, b1), δ1 + δ2 = atan2(−b2s, b2) (`docs/conventions.md`), with derivatives at the
   motion's own cut-off (`derivatives.choose_cutoff`, if lower than the trial's) so a noisy cut-off cannot hide
@@ -34,6 +40,7 @@ from ident_opt.data.dataset import Dataset, refiltered
 from ident_opt.fitting import estimators
 from ident_opt.fitting.fit import LinearFit
 from ident_opt.fitting.stats import Stats
+from ident_opt.numerics import signals
 from ident_opt.numerics.derivatives import choose_cutoff
 from ident_opt.warnings import ResultWarning
 
@@ -46,6 +53,9 @@ CONVENTION_TOLERANCE_RAD = 0.15
 #: ... and lies within this of a quarter, half or three-quarter turn [rad]: the zeros robots use (hanging down,
 #: pointing up, the other way). A direction elsewhere is the sine columns absorbing another effect, not a zero.
 QUARTER_TURN_TOLERANCE_RAD = 0.35
+#: A joint with this share of its training samples (or more) slower than its stick speed is the warning
+#: `slow_samples`: the shipped real trials read 56–73 % (MERIt), 24 % (TX40) and 1.5–5 % (the others).
+SLOW_SHARE = 0.2
 #: The parameter kinds the checks judge (friction and armature are small and poorly determined on most trials).
 JUDGED_KINDS = ("inertia", "coupling", "gravity")
 #: The cut-off factors of the sensitivity check.
@@ -247,6 +257,28 @@ def checks(
         warnings += check_ols_iv(model, ols, iv, trials, setting) + cut_warnings
     warnings += check_cutoff_outliers(trials)
     return Trust(sensitivity, cutoffs, direction, warnings)
+
+
+def check_slow_samples(model: Arm, trials: list[Dataset], joints: tuple[str, ...]) -> list[ResultWarning]:
+    """The warning `slow_samples` naming each joint (of `joints`, the arm's names) with at least `SLOW_SHARE` of the
+    training `trials`' samples slower than its stick speed (module doc); none for a model without Coulomb friction."""
+    if not trials or not any(name.startswith("fc") for name in model.names):
+        return []
+    slow = sum((np.abs(d.dq) < signals.stick_speed(d.dq)).sum(axis=0) for d in trials)
+    share = slow / sum(d.n for d in trials)
+    named = [f"{joint} {s:.0%}" for joint, s in zip(joints, share) if s >= SLOW_SHARE]
+    if not named:
+        return []
+    return [
+        ResultWarning(
+            "slow_samples",
+            f"of the training samples, {', '.join(named)} move slower than the joint's stick speed (2 % of its "
+            "95th-percentile speed): there the friction is whatever stiction holds and the model's Coulomb term reads "
+            "the sign of an estimated velocity, which is noise. The fits keep these samples, so their friction (and "
+            "what trades with it) is biased on such trials. Record motion that keeps the joints moving (`ident-opt "
+            "excite`), or read the friction parameters with this in mind.",
+        )
+    ]
 
 
 #: A link's mass beyond this factor of its nominal one (either way), or a total beyond `TOTAL_MASS_RANGE` of the
