@@ -225,7 +225,7 @@ def test_another_robots_results_get_their_own_readme_linked_from_the_parent(tmp_
 def test_trials_that_rest_warn_that_their_friction_is_read_from_slow_samples(default_run):
     """`slow_samples`: MERIt's trials rest most of the time (56–73 % of each joint's samples slower than its stick
     speed) and are warned about, naming both joints; the DFKI C.0 trials keep moving (about 2 %) and are not, in
-    compare's JSON either; a model without Coulomb friction is never warned about."""
+    compare's JSON either; a model without friction parameters is never warned about."""
     from ident_opt.fitting.trust import check_slow_samples
 
     merit = load_problem(PROBLEMS / "tudor_2dof.toml")
@@ -238,7 +238,8 @@ def test_trials_that_rest_warn_that_their_friction_is_read_from_slow_samples(def
     dfki = load_problem(DFKI)
     moving = [load_dataset(trial(k), dfki.data, dfki.robot) for k in (0, 1)]
     assert check_slow_samples(dfki.robot.model(), moving, dfki.robot.joint_names) == []
-    frictionless = type("NoFriction", (), {"names": ("a1", "b1")})()
+    kinds = [type("P", (), {"kind": kind})() for kind in ("inertia", "gravity")]
+    frictionless = type("NoFriction", (), {"parameters": kinds})()
     assert check_slow_samples(frictionless, trials, merit.robot.joint_names) == []
     _, result = default_run
     assert "slow_samples" not in [w["code"] for w in result["warnings"]]

@@ -261,8 +261,9 @@ def checks(
 
 def check_slow_samples(model: Arm, trials: list[Dataset], joints: tuple[str, ...]) -> list[ResultWarning]:
     """The warning `slow_samples` naming each joint (of `joints`, the arm's names) with at least `SLOW_SHARE` of the
-    training `trials`' samples slower than its stick speed (module doc); none for a model without Coulomb friction."""
-    if not trials or not any(name.startswith("fc") for name in model.names):
+    training `trials`' samples slower than its stick speed (module doc); none for a model without friction
+    parameters (by kind, as the consistency constraints tell them: no name is matched)."""
+    if not trials or not any(p.kind == "friction" for p in model.parameters):
         return []
     slow = sum((np.abs(d.dq) < signals.stick_speed(d.dq)).sum(axis=0) for d in trials)
     share = slow / sum(d.n for d in trials)
