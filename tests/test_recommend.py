@@ -27,12 +27,13 @@ def dfki():
     return load_problem(PROBLEMS / "dfki_c0.toml")
 
 
-def simulated(tmp_path, problem, kind: str, rate: float, noise: float, seed: int, setting="auto"):
-    """One trial of the study's plant (seeds ≥ 50: never the study's), read back by the loader."""
+def simulated(tmp_path, problem, kind: str, rate: float, noise: float, seed: int, setting="auto", rests="auto"):
+    """One trial of the study's plant (seeds ≥ 50: never the study's), read back by the loader (`rests`: its
+    `[data] rest_velocity`)."""
     arm, pi = truth(problem.robot)
     path = tmp_path / f"{kind}_{seed}.csv"
     simulate(arm, pi, Condition(kind, rate, noise), seed, duration=15.0).to_csv(path, index=False)
-    return load_dataset(path, DataSpec(derivative_cutoff_hz=setting), problem.robot), arm, pi
+    return load_dataset(path, DataSpec(derivative_cutoff_hz=setting, rest_velocity=rests), problem.robot), arm, pi
 
 
 def test_two_stage_statistics_are_2sls(tmp_path, dfki):
@@ -156,20 +157,23 @@ def test_the_robust_fits_errors_cover_what_its_probes_move_it_by(tmp_path, dfki)
     assert np.all(probed.se >= plain.se) and np.any(probed.se > 1.5 * plain.se)
 
 
-def test_the_recommended_robust_fit_covers_the_truth_where_2sls_errors_do_not(tmp_path, dfki):
+@pytest.mark.parametrize("rests", ["as_read", "auto"])
+def test_the_recommended_robust_fit_covers_the_truth_where_2sls_errors_do_not(tmp_path, dfki, rests):
     """On trials of the study's plant where the robust fit is recommended (a passive joint at 100 and 250 Hz, steps:
     conditions where the 2SLS errors are too narrow; seeds 71–74, never the study's nor used to choose the probes),
-    the recommended fit's judged parameters lie within two of its standard errors far more often than within two of
-    the 2SLS errors, and in at least 85 % of cases."""
+    the recommended fit's judged parameters lie within two of its standard errors in at least 85 % of cases. With
+    the estimated velocities read as they are at rest ("as_read"), far more often than within two of the 2SLS
+    errors; with them held at 0 (the loader's default for estimated velocities) the bias those errors miss is mostly
+    gone (2SLS covers 0.875, the recommended fit 0.9): not less often."""
     from dataclasses import replace
 
     from ident_opt.fitting.trust import JUDGED_KINDS
 
-    problem = replace(dfki, data=DataSpec(derivative_cutoff_hz="auto"))
+    problem = replace(dfki, data=DataSpec(derivative_cutoff_hz="auto", rest_velocity=rests))
     covered = {"2sls": [], "recommended": []}
     for kind, rate, noise in (("passive", 100.0, 0.5), ("passive", 250.0, 0.5), ("steps", 250.0, 1.0)):
         for seed in (71, 72, 73, 74):
-            d, arm, pi = simulated(tmp_path, dfki, kind, rate, noise, seed)
+            d, arm, pi = simulated(tmp_path, dfki, kind, rate, noise, seed, rests=rests)
             found = choose(problem, [d], model=arm)
             fit = found.fit(dfki.robot, arm, [d])
             if found.estimator != "robust":
@@ -180,4 +184,5 @@ def test_the_recommended_robust_fit_covers_the_truth_where_2sls_errors_do_not(tm
             covered["recommended"] += list(err <= 2 * fit.se[judged])
     assert len(covered["recommended"]) >= 30, "the robust fit is recommended on most of these trials"
     share = {k: float(np.mean(v)) for k, v in covered.items()}
-    assert share["recommended"] >= 0.85 and share["recommended"] >= share["2sls"] + 0.1, share
+    assert share["recommended"] >= 0.85, share
+    assert share["recommended"] >= share["2sls"] + (0.1 if rests == "as_read" else 0.0), share

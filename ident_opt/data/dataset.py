@@ -12,7 +12,8 @@ import numpy as np
 import pandas as pd
 
 from ident_opt.errors import InputError
-from ident_opt.numerics.derivatives import estimate_derivatives, instrument_derivatives, lowpass
+from ident_opt.numerics import signals
+from ident_opt.numerics.derivatives import estimate_derivatives, instrument_derivatives, lowpass, segments
 
 
 @dataclass
@@ -35,6 +36,9 @@ class Dataset:
     #: (dq, ddq) of the instruments of IV, estimated at a lower cut-off than the regressor's
     #: (`derivatives.instrument_derivatives`); None when not estimated
     instruments: tuple[np.ndarray, np.ndarray] | None = None
+    #: Whether a resting joint's velocity is held at 0 (`at_rest`; the problem's `[data] rest_velocity` resolved
+    #: for this trial by the loader): derivatives estimated again (`refiltered`) are held alike.
+    rests_held: bool = False
 
     @property
     def tau_fit(self) -> np.ndarray:
@@ -92,12 +96,13 @@ def convert(values: np.ndarray, scale: float, offset: float) -> np.ndarray:
 
 def refiltered(d: Dataset, cutoff_hz: float) -> Dataset:
     """The trial with its derivatives (and the fit's filtered torque) estimated again at `cutoff_hz` [Hz], from
-    its angles (and its logged velocities, if the file had them); logged accelerations stay as they are."""
+    its angles (and its logged velocities, if the file had them); logged accelerations stay as they are; a joint at
+    rest held at 0 where the trial's were (`Dataset.rests_held`)."""
     logged_dq = d.dq if "velocities as logged" in d.derivatives else None
     dq, ddq, how = estimate_derivatives(d.t, d.q, cutoff_hz, logged_dq)
     if "accelerations as logged" in d.derivatives:
         ddq = d.ddq
-    return replace(
+    again = replace(
         d,
         dq=dq,
         ddq=ddq,
@@ -106,6 +111,7 @@ def refiltered(d: Dataset, cutoff_hz: float) -> Dataset:
         tau_filtered=lowpass(d.t, d.tau, cutoff_hz),
         instruments=instrument_derivatives(d.t, d.q, cutoff_hz),
     )
+    return at_rest(again) if d.rests_held else again
 
 
 def concat(trials: list[Dataset]) -> Dataset:
@@ -132,6 +138,7 @@ def concat(trials: list[Dataset]) -> Dataset:
         instruments=None
         if any(d.instruments is None for d in trials)
         else tuple(np.concatenate([d.instruments[i] for d in trials]) for i in (0, 1)),
+        rests_held=all(d.rests_held for d in trials),
     )
 
 
@@ -186,3 +193,37 @@ def _nonempty_parts(n: int, n_train: int) -> None:
             f"a split of {n} samples into {n_train} training and {n - n_train} test samples leaves a part empty; "
             "give more samples or a [split] train_fraction nearer 0.5"
         )
+
+
+def at_rest(trial: Dataset) -> Dataset:
+    """The trial with the velocity of a joint at rest read as exactly 0 (its instruments' velocity too), each
+    gap-free segment read alone (`derivatives.segments`, as its derivatives are): what the loader does where the
+    problem's `[data] rest_velocity` says so (`holds_rests`), and the diagnosis always.
+
+    Coulomb friction at rest is set-valued (stiction holds whatever the controller pushes, up to the breakaway
+    level), and the sign of an estimated velocity at rest is noise: a model's fc·sgn(q̇) there is a random ±fc. A fit
+    that reads it shrinks fc to hedge (simulated arm4, about half its samples at rest: least squares read 0.30, 0.42,
+    0.21, 0.045 N·m for Coulomb levels 1.0, 1.5, 0.8, 0.15; with rests held, 0.999, 1.495, 0.799, 0.149), and a
+    prediction that reads it predicts ±fc at random (results/slow_samples.md). A joint is at rest at a sample
+    (`signals.resting`) when |q̇| is below REST_FRACTION of its speed scale (95th percentile of |q̇|) there and stays
+    below it for REST_WINDOW_S before or after (so the filter ringing just before a start or after a stop counts as
+    rest, but a smooth velocity reversal, slow only for an instant, does not). Holding again changes nothing: the
+    zeros replace samples below the threshold, which leaves the 95th percentile where it was."""
+    if trial.n < 2:
+        return replace(trial, rests_held=True)
+    rest = np.zeros(trial.dq.shape, dtype=bool)
+    for seg in segments(trial.t, trial.cutoff_hz):
+        if seg.stop - seg.start >= 2:
+            rest[seg] = signals.resting(trial.dq[seg], float(np.median(np.diff(trial.t[seg]))))
+    instruments = trial.instruments
+    if instruments is not None:
+        instruments = (np.where(rest, 0.0, instruments[0]), instruments[1])
+    return replace(trial, dq=np.where(rest, 0.0, trial.dq), instruments=instruments, rests_held=True)
+
+
+def holds_rests(rest_velocity: str, trial: Dataset) -> bool:
+    """Whether the loader holds `trial`'s resting velocities at 0 under `[data] rest_velocity` (`DataSpec`): "zero"
+    always, "as_read" never, "auto" where the loader estimated the velocities (`Dataset.derivatives` says how)."""
+    if rest_velocity == "auto":
+        return trial.cutoff_hz is not None and "velocities as logged" not in trial.derivatives
+    return rest_velocity == "zero"

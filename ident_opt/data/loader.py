@@ -31,7 +31,7 @@ from ident_opt.data.checks import (
     _non_increasing,
     _row_label,
 )
-from ident_opt.data.dataset import Dataset, convert
+from ident_opt.data.dataset import Dataset, at_rest, convert, holds_rests
 from ident_opt.data.validate import checked_array
 from ident_opt.errors import InputError, excerpt
 from ident_opt.numerics.derivatives import (
@@ -225,7 +225,8 @@ def from_arrays(
     if (tau is None) == (current is None):
         raise InputError(f"{source}: give the joint torques (tau) or the motor currents (current), one of the two")
     frame = pd.DataFrame(columns)
-    by_role = DataSpec(derivative_cutoff_hz=(spec or DataSpec()).derivative_cutoff_hz)
+    given = spec or DataSpec()
+    by_role = DataSpec(derivative_cutoff_hz=given.derivative_cutoff_hz, rest_velocity=given.rest_velocity)
     return _complete(frame, Path(source), by_role, robot, allow_implausible, False, min_samples)
 
 
@@ -281,7 +282,8 @@ def _complete(
     # Logged derivatives carry the logger's own filters; the instruments come from q at the cut-off the data support.
     instruments = instrument_derivatives(t, q, cutoff_hz if cutoff_hz is not None else choose_cutoff(t, q))
     trial = Dataset(str(path), t, q, dq, ddq, tau, extra, how, dropped, notes, cutoff_hz, tau_filtered, instruments)
-    return trial if cutoff_hz is None else _settled(trial, path, min_samples)
+    trial = trial if cutoff_hz is None else _settled(trial, path, min_samples)
+    return at_rest(trial) if holds_rests(spec.rest_velocity, trial) else trial
 
 
 def _derivatives(

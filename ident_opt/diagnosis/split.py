@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 from scipy import signal
 
-from ident_opt.data.dataset import Dataset, chronological_split, refiltered
+from ident_opt.data.dataset import Dataset, at_rest, chronological_split, refiltered
 from ident_opt.errors import InputError
 from ident_opt.numerics import signals
 from ident_opt.numerics.derivatives import choose_cutoff
@@ -85,22 +85,6 @@ def compared_warnings(train: Dataset, test: Dataset, names: tuple[str, ...]) -> 
             "another trial",
         )
     ]
-
-
-def at_rest(trial: Dataset) -> Dataset:
-    """The trial with the velocity of a joint at rest read as exactly 0.
-
-    Coulomb friction at rest is set-valued (stiction holds whatever the controller pushes, up to the
-    breakaway level), and the sign of an estimated velocity at rest is noise: a rigid model's fc·sgn(dq)
-    there is a random ±fc that no cause explains. A joint is at rest at a sample (`signals.resting`) when |dq| is
-    below REST_FRACTION of its speed scale (95th percentile of |dq|) there and stays below it for REST_WINDOW_S
-    before or after (so the filter ringing just before a start or after a stop counts as rest, but a smooth
-    velocity reversal, slow only for an instant, does not). Every model (nominal and candidates) sees the
-    same velocities, so scores compare like with like; the rest samples stay in (ringing and gravity live
-    there too).
-    """
-    dq = np.where(signals.resting(trial.dq, float(np.median(np.diff(trial.t)))), 0.0, trial.dq)
-    return replace(trial, dq=dq)
 
 
 def logged_bandwidth(trial: Dataset) -> tuple[Dataset, float | None]:

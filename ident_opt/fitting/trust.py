@@ -11,11 +11,12 @@
   result depends on the cut-off. The ½× fit is reported, not judged: a cut-off chosen at 1.2× the motion's band
   edge (`derivatives.choose_cutoff`) halved removes part of the motion itself, and the parameters move for that reason.
 - **Slow samples.** A joint's samples slower than its stick speed (`signals.stick_speed`: 2 % of its
-  95th-percentile speed) carry friction that stiction sets, while the model's Coulomb column there is sign(q̇) of an
-  estimated velocity: noise. The fit keeps them; where they are many (`SLOW_SHARE` of a joint's training samples or
-  more) its friction is biased, and through it other parameters: on simulated arm4 trials with 38–76 % such samples
-  least squares read the shoulder's Coulomb friction 0.42 N·m for 1.5 (`docs/effects.md`, "What changed since a
-  model"). The diagnosis and the drive-gain fit leave them out.
+  95th-percentile speed) carry friction that stiction sets: anything up to the breakaway level, following what the
+  controller commands. Where the loader holds a resting joint's velocity at 0 (`data.dataset.at_rest`, the problem's
+  `[data] rest_velocity`) the model predicts no friction there and its friction is read from the moving samples;
+  where it does not, the sign of a velocity at rest decides the Coulomb term. What stiction holds is in no model,
+  so where such samples are many (`SLOW_SHARE` of a joint's training samples or more) that error weighs in every
+  score of the joint and the friction rests on the other samples alone (results/slow_samples.md).
 - **Angle convention.** OLS with the `joint_offset` extension's sine gravity columns: the direction of gravity
   per joint, δ1 = atan2(−b1s, b1), δ1 + δ2 = atan2(−b2s, b2) (`docs/conventions.md`), with derivatives at the
   motion's own cut-off (`derivatives.choose_cutoff`, if lower than the trial's) so a noisy cut-off cannot hide
@@ -274,10 +275,11 @@ def check_slow_samples(model: Arm, trials: list[Dataset], joints: tuple[str, ...
         ResultWarning(
             "slow_samples",
             f"of the training samples, {', '.join(named)} move slower than the joint's stick speed (2 % of its "
-            "95th-percentile speed): there the friction is whatever stiction holds and the model's Coulomb term reads "
-            "the sign of an estimated velocity, which is noise. The fits keep these samples, so their friction (and "
-            "what trades with it) is biased on such trials. Record motion that keeps the joints moving (`ident-opt "
-            "excite`), or read the friction parameters with this in mind.",
+            "95th-percentile speed): there the torque is whatever stiction holds, which no model predicts, so that "
+            "error weighs in every score of the joint, and the friction is read from the other samples (where "
+            "`[data] rest_velocity` holds a resting joint's velocity at 0) or from the sign of a velocity at rest "
+            "(where it does not). Record motion that keeps the joints moving (`ident-opt excite`) for a sharper "
+            "friction estimate.",
         )
     ]
 

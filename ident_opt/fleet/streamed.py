@@ -40,11 +40,13 @@ from ident_opt.fitting.estimators import INSTRUMENTED
 from ident_opt.fitting.iv import InstrumentStats
 from ident_opt.fitting.recommend import Choice
 from ident_opt.fitting.stats import Stats
-from ident_opt.fleet import chunks
+from ident_opt.fleet import chunks, rests
 from ident_opt.numerics.derivatives import CUTOFF_MAX_FRACTION, INSTRUMENT_RATIO, SETTLE_PERIODS
 
 #: Rows read at a time, and outputs per piece.
 CHUNK_ROWS = 8192
+#: Rows whose regressors are built at once (the largest arrays of a piece's reduction).
+REGRESSOR_ROWS = 2048
 #: A shorter file is read whole: its pieces would be mostly neighbours.
 STREAM_MIN_ROWS = 4 * CHUNK_ROWS
 #: A uniform log's distinct time steps are few (rounding); more, and the file is read whole.
@@ -277,34 +279,90 @@ def _check_pass(path: Path, where: Layout, survey: Survey, cutoff_hz: float, che
         _derivative_checks(dq, ddq, _kept(w, 0, survey), check)
 
 
-def _reduce(path: Path, where: Layout, survey: Survey, arm, choice: Choice, cutoff_hz: float, check: bool):
+def _pieces(path: Path, where: Layout, survey: Survey, fs: float, cutoffs: tuple[float, ...], rows, check):
+    """Each piece's kept samples, derivatives at the first of `cutoffs` [Hz] (the others: what else the piece must
+    be long enough to filter) over the file rows `rows` (r0, r1): (q̇ (k, n), {"w": the piece, "kept", "dq", "ddq"});
+    `check`: the loader's checks of the derivatives (None: none, another pass makes them)."""
+    (r0, r1), cut = rows, cutoffs[0]
+    for w in chunks.windows(_rows(blocks(path, where), r0, r1), CHUNK_ROWS, chunks.margin(fs, *cutoffs)):
+        dq, ddq = chunks.derivatives(w, "q", fs, cut, r1 - r0)
+        kept = _kept(w, r0, survey)
+        if check is not None:
+            _derivative_checks(dq, ddq, kept, check)
+        if kept.any():
+            box = [(dq[kept], {"w": w, "kept": kept, "dq": dq[kept], "ddq": ddq[kept]})]
+            del dq, ddq, w  # neither the piece nor its whole outputs are held here while the caller works
+            yield box.pop()
+
+
+def _rest_speed(path: Path, where: Layout, survey: Survey, fs: float, cutoffs: tuple[float, ...], rows, check):
+    """(n,) [rad/s]: each joint's rest speed over the kept samples (`rests.SpeedScale`: two passes)."""
+    scale = None
+    for dq, _ in _pieces(path, where, survey, fs, cutoffs, rows, check):
+        scale = scale or rests.SpeedScale(dq.shape[1])
+        scale.count(dq)
+    for dq, _ in _pieces(path, where, survey, fs, cutoffs, rows, None):
+        scale.collect(dq)
+    return rests.speed_to_rest(scale.value())
+
+
+def _block(a: dict, rest: np.ndarray, arm) -> Stats | InstrumentStats:
+    """The statistics of a block of kept samples (arrays by name; `dq_z`, `ddq_z`: the instruments'), a joint at rest
+    held at q̇ = 0 (`rest`)."""
+    Y = arm.regressor(a["q"], np.where(rest, 0.0, a["dq"]), a["ddq"])
+    if "dq_z" not in a:
+        return Stats.from_regressor(Y, a["tau"])
+    return InstrumentStats.from_regressors(
+        Y, arm.regressor(a["q"], np.where(rest, 0.0, a["dq_z"]), a["ddq_z"]), a["tau"]
+    )
+
+
+def _reduce(
+    path: Path,
+    where: Layout,
+    survey: Survey,
+    arm,
+    choice: Choice,
+    cutoff_hz: float,
+    check: bool,
+    spec_rest_velocity: str,
+):
     """Pass 3: the statistics of the kept samples at the choice's cut-off (`Choice.at_cutoff`: a raised cut-off
-    differentiates the kept samples anew, as `recommend.raised` does), and the cut-off used [Hz]."""
+    differentiates the kept samples anew, as `recommend.raised` does), a joint at rest held at q̇ = 0 as the loader
+    holds it (`rests`; unless the problem's `[data] rest_velocity` is "as_read"), and the cut-off used [Hz]."""
     raised = choice.factor != 1
     if raised:
         _check_pass(path, where, survey, cutoff_hz, check)
         cut = min(choice.factor * cutoff_hz, CUTOFF_MAX_FRACTION * (1.0 / survey.dt_kept))
-        r0, r1, fs = survey.i0, survey.i1, 1.0 / survey.dt_kept
+        rows, fs = (survey.i0, survey.i1), 1.0 / survey.dt_kept
     else:
-        cut, r0, r1, fs = cutoff_hz, 0, survey.n, 1.0 / survey.dt
+        cut, rows, fs = cutoff_hz, (0, survey.n), 1.0 / survey.dt
     instrumented = choice.estimator in INSTRUMENTED
     cutoffs = (cut, INSTRUMENT_RATIO * cut) if instrumented else (cut,)
+    # The loader's rule (`data.dataset.holds_rests`): these velocities are estimated, so "auto" holds them too.
+    hold = spec_rest_velocity != "as_read"
+    below = _rest_speed(path, where, survey, fs, cutoffs, rows, None if raised else check) if hold else None
+    n = rows[1] - rows[0]
+
+    def kept_arrays():  # each piece reduced to its kept samples' arrays at once: the piece itself is not held
+        for dq, p in _pieces(path, where, survey, fs, cutoffs, rows, None):
+            w, kept = p["w"], p["kept"]
+            arrays = {"q": w.arrays["q"][w.core][kept], "dq": dq, "ddq": p["ddq"]}
+            arrays["tau"] = chunks.lowpassed(w, "tau", fs, cut, n)[kept]
+            if instrumented:
+                dq_z, ddq_z = chunks.derivatives(w, "q", fs, INSTRUMENT_RATIO * cut, n)
+                arrays["dq_z"], arrays["ddq_z"] = dq_z[kept], ddq_z[kept]
+                del dq_z, ddq_z
+            del p, w
+            yield dq, arrays
+
     total = None
-    for w in chunks.windows(_rows(blocks(path, where), r0, r1), CHUNK_ROWS, chunks.margin(fs, *cutoffs)):
-        dq, ddq = chunks.derivatives(w, "q", fs, cut, r1 - r0)
-        kept = _kept(w, r0, survey)
-        if not raised:
-            _derivative_checks(dq, ddq, kept, check)
-        if not kept.any():
-            continue
-        q, tau = w.arrays["q"][w.core][kept], chunks.lowpassed(w, "tau", fs, cut, r1 - r0)[kept]
-        Y = arm.regressor(q, dq[kept], ddq[kept])
-        if instrumented:
-            dq_z, ddq_z = chunks.derivatives(w, "q", fs, INSTRUMENT_RATIO * cut, r1 - r0)
-            one = InstrumentStats.from_regressors(Y, arm.regressor(q, dq_z[kept], ddq_z[kept]), tau)
-        else:
-            one = Stats.from_regressor(Y, tau)
-        total = one if total is None else total + one
+    pieces = rests.held(kept_arrays(), below, survey.dt_kept) if hold else rests.unheld(kept_arrays())
+    for a, rest in pieces:
+        for r in range(0, len(rest), REGRESSOR_ROWS):  # the regressors (rows × joints × parameters) a block at a time
+            one = _block({k: x[r : r + REGRESSOR_ROWS] for k, x in a.items()}, rest[r : r + REGRESSOR_ROWS], arm)
+            total = one if total is None else total + one
+        del a, rest  # not alive while the next piece is read
     return total, cut
 
 
@@ -321,7 +379,7 @@ def statistics(path: Path, s, job, choice: Choice) -> tuple[Stats | InstrumentSt
     cutoff = float(spec.derivative_cutoff_hz)
     survey = _first_pass(path, where, check)
     survey = _second_pass(path, where, survey, cutoff, len(PI_NAMES))
-    total, cut = _reduce(path, where, survey, s.model, choice, cutoff, check)
+    total, cut = _reduce(path, where, survey, s.model, choice, cutoff, check, spec.rest_velocity)
     n = survey.i1 - survey.i0
     effective = n * min(1.0, 2 * cut / (1.0 / survey.dt_kept))  # `estimators._independent`
     if isinstance(total, InstrumentStats):

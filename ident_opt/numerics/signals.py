@@ -179,11 +179,17 @@ def resting(v: np.ndarray, dt: float) -> np.ndarray:
     instant, does not). The rule of `split.at_rest` (joints) and `chain.context.ArmContext` (drives)."""
     w = max(1, round(REST_WINDOW_S / dt))
     slow = np.abs(v) < rest_speed(v)
-    padded = np.pad(slow, ((w, w), (0, 0)), mode="edge").astype(float)
-    windows = np.lib.stride_tricks.sliding_window_view(padded, w + 1, axis=0)  # (N + w, m, w + 1)
-    quiet = windows.min(axis=-1) > 0  # slow throughout the w + 1 samples starting at each index
+    quiet = quiet_runs(np.pad(slow, ((w, w), (0, 0)), mode="edge"), w + 1)
     before, after = quiet[: len(v)], quiet[w : w + len(v)]
     return slow & (before | after)
+
+
+def quiet_runs(slow: np.ndarray, k: int) -> np.ndarray:
+    """(len(slow) − k + 1, m) bool: whether each column of `slow` (N, m) is True throughout the k samples starting
+    at each index; by running counts, so its cost does not grow with k (a log whose time unit is wrong can make k
+    huge)."""
+    counts = np.concatenate([np.zeros((1, slow.shape[1]), dtype=np.int64), np.cumsum(slow, axis=0, dtype=np.int64)])
+    return counts[k:] - counts[:-k] == k
 
 
 def rest_runs(dq: np.ndarray, below: np.ndarray | None = None) -> np.ndarray:

@@ -162,6 +162,7 @@ def parse_data(table: Table, base: Path, n_joints: int = 2) -> DataSpec:
         sheet=table.take("sheet", str, None),
         columns=columns,
         derivative_cutoff_hz=_cutoff(table),
+        rest_velocity=_rest_velocity(table),
         conversions=conversions,
         standard_by_name=table.take("standard_by_name", bool, True),
         ros_topic=table.take("ros_topic", str, DataSpec.ros_topic),
@@ -173,6 +174,20 @@ def parse_data(table: Table, base: Path, n_joints: int = 2) -> DataSpec:
         raise InputError(f"{table.path}: [data] header = false needs 0-based column indices in [data.columns]")
     table.done()
     return spec
+
+
+#: The values of `[data] rest_velocity` (`DataSpec.rest_velocity`).
+REST_VELOCITY = ("auto", "zero", "as_read")
+
+
+def _rest_velocity(table: Table) -> str:
+    """`rest_velocity`: one of `REST_VELOCITY`."""
+    value = table.take("rest_velocity", str, "auto")
+    if value not in REST_VELOCITY:
+        raise InputError(
+            f"{table._name('rest_velocity')} must be one of {', '.join(REST_VELOCITY)}, got {excerpt(value)}"
+        )
+    return value
 
 
 def _int_list(table: Table, key: str, default: list[int], low: int, high: int, longest: int) -> tuple[int, ...]:

@@ -45,6 +45,10 @@ class DataSpec:
     sheet: str | None = None
     columns: dict[str, str | int] = field(default_factory=dict)
     derivative_cutoff_hz: float | str = "auto"  # Hz, or "auto": read from each trial (`derivatives.cutoff_choice`)
+    #: A resting joint's velocity: "zero" (held at 0, `data.dataset.at_rest`), "as_read" (as logged or estimated), or
+    #: "auto": zero where the loader estimated the velocities (their sign at rest is the filter's noise), as read
+    #: where the file logged them (a logger's velocity may carry what the drive measured).
+    rest_velocity: str = "auto"
     conversions: dict[str, tuple[float, float]] = field(default_factory=dict)
     standard_by_name: bool = True
     train: tuple[Path, ...] = ()  # training trials (`train = [...]`): their statistics add up
