@@ -4,7 +4,8 @@ Split: with a second (unseen) trial, the first trial trains and the second is he
 `train_fraction` of it in time trains and the rest is held out (contiguous, so delays and modes survive the split) —
 or, when a joint barely moves in that last part and less so in the first, the first part is held out (`held_out`);
 a joint the held-out part still barely moves is a warning (`compared_warnings`). Both parts are `prepare`d alike:
-the torque low-passed like the derivatives, the velocity of a joint at rest read as 0 (`at_rest`).
+the torque low-passed like the derivatives, the velocity of a joint at rest read as 0 (`data.dataset.at_rest`,
+whatever the problem's `[data] rest_velocity`).
 """
 
 from __future__ import annotations

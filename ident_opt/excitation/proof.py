@@ -132,7 +132,7 @@ def median_relative_error(pi_hat: np.ndarray, pi_true: np.ndarray) -> float:
 
 def identification_row(setup: Setup, ds: Dataset, pi_true: np.ndarray) -> dict:
     """cond, log det and both estimators' median relative error on one simulated trial, as logged and with the
-    velocities of resting joints read as 0 (`diagnosis.split.at_rest`: at rest the sign of an estimated
+    velocities of resting joints read as 0 (`data.dataset.at_rest`: at rest the sign of an estimated
     velocity is noise, and the Coulomb columns would carry it)."""
     row = {k: v for k, v in excitation.criteria(setup, ds.q, ds.dq, ds.ddq).items() if k != "rank"}
     for suffix, d in (("", ds), (" (rests 0)", at_rest(ds))):

@@ -176,7 +176,7 @@ def resting(v: np.ndarray, dt: float) -> np.ndarray:
     """(N, m) bool: the samples where each velocity column of v (N, m) [rad/s] at step `dt` [s] is at rest: below
     `REST_FRACTION` of its speed scale (95th percentile of |v|) there, and staying below it for `REST_WINDOW_S` before
     or after (the filter ringing just before a start or after a stop counts as rest, a smooth reversal, slow only for an
-    instant, does not). The rule of `split.at_rest` (joints) and `chain.context.ArmContext` (drives)."""
+    instant, does not). The rule of `data.dataset.at_rest` (joints) and `chain.context.ArmContext` (drives)."""
     w = max(1, round(REST_WINDOW_S / dt))
     slow = np.abs(v) < rest_speed(v)
     quiet = quiet_runs(np.pad(slow, ((w, w), (0, 0)), mode="edge"), w + 1)
@@ -194,7 +194,7 @@ def quiet_runs(slow: np.ndarray, k: int) -> np.ndarray:
 
 def rest_runs(dq: np.ndarray, below: np.ndarray | None = None) -> np.ndarray:
     """Labels (N, m): for each joint, the index of the rest stretch a sample belongs to (a run of dq = 0
-    exactly, as `diagnosis.at_rest` leaves it), −1 where the joint moves. With `below` (m,) [rad/s], every sample of
+    exactly, as `data.dataset.at_rest` leaves it), −1 where the joint moves. With `below` (m,) [rad/s], every sample of
     joint j slower than below_j (rests included) is a stretch of its own instead: its mean is itself, so
     `demean_runs` removes it from every fit and score (`STICK_SPEEDS`)."""
     labels = np.full(dq.shape, -1, dtype=int)
@@ -211,7 +211,7 @@ def rest_runs(dq: np.ndarray, below: np.ndarray | None = None) -> np.ndarray:
 
 def near_stops(dq: np.ndarray, dt: float, stop_s: float, within_s: float) -> np.ndarray:
     """(N, 2) bool: the samples of each joint within `within_s` [s] of a rest stretch (dq = 0 exactly, as
-    `diagnosis.at_rest` leaves it) that lasts at least `stop_s` [s] — a stop or a start, not the slow instant
+    `data.dataset.at_rest` leaves it) that lasts at least `stop_s` [s] — a stop or a start, not the slow instant
     of a reversal."""
     out = np.zeros(dq.shape, dtype=bool)
     shortest, reach = max(1, round(stop_s / dt)), round(within_s / dt)

@@ -117,7 +117,7 @@ class ArmContext:
     def drive_rest(self, Y: np.ndarray, ds: Dataset) -> np.ndarray:
         """Y (N, n, P) with the Coulomb column of each coupled drive (a row of `Arm.drive_matrix` other than its own
         joint's, a coupled wrist's motor) set to 0 where that drive rests (`signals.resting` on its velocity
-        v_m = C[m] · dq): the joints' rule (`split.at_rest`) for a drive whose joints move while it stands still,
+        v_m = C[m] · dq): the joints' rule (`data.dataset.at_rest`) for a drive whose joints move while it stands still,
         as a wrist's motor does when its joints counter-rotate. Its friction is set-valued there, and
         sgn(v_m) of a velocity of a few 1e-4 rad/s (the encoders' noise) a random ±fc on every row it reaches."""
         v = self.drive_velocity(ds)
@@ -138,7 +138,8 @@ class ArmContext:
 
     def drive_velocity(self, ds: Dataset) -> np.ndarray:
         """v = dq Cᵀ (N, n) [rad/s]: each drive's joint-side velocity along `ds`, a coupled drive's exactly 0 where it
-        rests (`signals.resting`; a drive of its own joint rests with it, `split.at_rest`), remembered per view."""
+        rests (`signals.resting`; a drive of its own joint rests with it, `data.dataset.at_rest`), remembered per
+        view."""
         key = ("v", *view_key(ds))
         if key not in self._cache:
             v = ds.dq @ self.arm.drive_matrix.T

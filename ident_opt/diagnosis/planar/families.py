@@ -94,8 +94,8 @@ class Context:
 
     @cached_property
     def instrumented(self) -> Dataset | None:
-        """The training part at its instruments' kinematics (velocities at rest held at 0, as `split.at_rest` holds
-        the measured ones), or None when the estimator takes no instruments; built once per context."""
+        """The training part at its instruments' kinematics (velocities at rest held at 0, as `data.dataset.at_rest`
+        holds the measured ones), or None when the estimator takes no instruments; built once per context."""
         if self.estimator not in INSTRUMENTED:
             return None
         dq, ddq = instrument_kinematics(self.train)
