@@ -53,10 +53,14 @@ def _with_drives(problem_path: Path, folder: Path) -> Path:
     """A copy of the problem with `TORQUE_CONSTANT`, `GEAR_RATIO` for every joint (paths made absolute)."""
     problem = load_problem(problem_path)
     text = problem_path.read_text(encoding="utf-8").replace('"../', f'"{problem_path.parent.parent}/')
-    tables = "".join(
-        f"\n[robot.{name}]\ntorque_constant = {TORQUE_CONSTANT}\ngear_ratio = {GEAR_RATIO}\n"
-        for name in problem.robot.joint_names
-    )
+    drive = f"torque_constant = {TORQUE_CONSTANT}\ngear_ratio = {GEAR_RATIO}\n"
+    tables = ""
+    for name in problem.robot.joint_names:
+        header = f"[robot.{name}]\n"
+        if header in text:  # the joint has a table of its own already (the TX40's joint 6): the drive goes into it
+            text = text.replace(header, header + drive, 1)
+        else:
+            tables += f"\n{header}{drive}"
     head, sep, tail = text.partition("\n[data]")
     path = folder / problem_path.name
     path.write_text(head + tables + sep + tail, encoding="utf-8")
@@ -98,7 +102,8 @@ def stream_figures(problem_path: Path, folder: Path) -> dict:
             **{f"tau{j}": raw[f"tau{j}"] for j in range(1, n + 1)},
         }
     ).to_csv(path, index=False, float_format="%.17g")
-    spec = dataclasses.replace(problem.data, derivative_cutoff_hz=options.cutoff_hz)
+    # Read as the stream reads its samples: its own rest rule (REST, below), not the loader's (`rest_velocity`).
+    spec = dataclasses.replace(problem.data, derivative_cutoff_hz=options.cutoff_hz, rest_velocity="as_read")
     streamed = load_dataset(path, spec, problem.robot)
     dq = np.where(np.abs(streamed.dq) < REST, 0.0, streamed.dq)
     D = np.concatenate([start.design(train.q, train.dq, train.ddq), start.design(streamed.q, dq, streamed.ddq)])
