@@ -112,6 +112,7 @@ def test_a_long_log_read_in_pieces_gives_the_loaders_statistics(logs, name, choi
     got, n, notes = streamed.statistics(logs / name, s, job, choice)
     whole, n_whole = _loader_statistics(logs / name, choice)
     assert n == n_whole and "read in pieces" in notes[0]
+    assert any(x.startswith("velocity read as 0 where a joint rests") for x in notes)  # said, as the loader says it
     for a, b in zip(_arrays(got), _arrays(whole), strict=True):
         assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max()
 

@@ -52,6 +52,7 @@ def test_a_resting_joint_reads_zero_velocity_and_holding_again_changes_nothing(l
     again = at_rest(d)
     assert np.array_equal(again.dq, d.dq) and np.array_equal(again.instruments[0], d.instruments[0])
     assert (d.instruments[0][rest] == 0).all()  # the instruments' velocity is held at the same samples
+    assert any(n.startswith("velocity read as 0 where a joint rests ([data] rest_velocity = 'auto')") for n in d.notes)
 
 
 def test_the_fit_reads_the_simulated_coulomb_friction(logged):

@@ -227,3 +227,10 @@ def holds_rests(rest_velocity: str, trial: Dataset) -> bool:
     if rest_velocity == "auto":
         return trial.cutoff_hz is not None and "velocities as logged" not in trial.derivatives
     return rest_velocity == "zero"
+
+
+def rest_note(rest_velocity: str, shares: np.ndarray) -> str:
+    """The trial's note that its resting velocities were held at 0 (`at_rest`), with each joint's share of samples
+    at rest (`shares`, (n,)), for `check` and the reports."""
+    listed = ", ".join(f"{s:.0%}" for s in shares)
+    return f"velocity read as 0 where a joint rests ([data] rest_velocity = {rest_velocity!r}): {listed} of the samples"

@@ -31,7 +31,7 @@ from ident_opt.data.checks import (
     _non_increasing,
     _row_label,
 )
-from ident_opt.data.dataset import Dataset, at_rest, convert, holds_rests
+from ident_opt.data.dataset import Dataset, at_rest, convert, holds_rests, rest_note
 from ident_opt.data.validate import checked_array
 from ident_opt.errors import InputError, excerpt
 from ident_opt.numerics.derivatives import (
@@ -283,7 +283,11 @@ def _complete(
     instruments = instrument_derivatives(t, q, cutoff_hz if cutoff_hz is not None else choose_cutoff(t, q))
     trial = Dataset(str(path), t, q, dq, ddq, tau, extra, how, dropped, notes, cutoff_hz, tau_filtered, instruments)
     trial = trial if cutoff_hz is None else _settled(trial, path, min_samples)
-    return at_rest(trial) if holds_rests(spec.rest_velocity, trial) else trial
+    if not holds_rests(spec.rest_velocity, trial):
+        return trial
+    held = at_rest(trial)
+    held.notes.append(rest_note(spec.rest_velocity, np.mean((held.dq == 0) & (trial.dq != 0), axis=0)))
+    return held
 
 
 def _derivatives(

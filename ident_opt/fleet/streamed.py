@@ -35,7 +35,7 @@ import pyarrow.parquet as pq
 from ident_opt.arm.planar import PI_NAMES
 from ident_opt.columns import locate
 from ident_opt.data.checks import PLAUSIBLE, PLAUSIBLE_RATE_HZ
-from ident_opt.data.dataset import MAX_MAGNITUDE, convert
+from ident_opt.data.dataset import MAX_MAGNITUDE, convert, rest_note
 from ident_opt.fitting.estimators import INSTRUMENTED
 from ident_opt.fitting.iv import InstrumentStats
 from ident_opt.fitting.recommend import Choice
@@ -329,7 +329,8 @@ def _reduce(
 ):
     """Pass 3: the statistics of the kept samples at the choice's cut-off (`Choice.at_cutoff`: a raised cut-off
     differentiates the kept samples anew, as `recommend.raised` does), a joint at rest held at q̇ = 0 as the loader
-    holds it (`rests`; unless the problem's `[data] rest_velocity` is "as_read"), and the cut-off used [Hz]."""
+    holds it (`rests`; unless the problem's `[data] rest_velocity` is "as_read"), the cut-off used [Hz] and each
+    joint's count of samples held (None: none held)."""
     raised = choice.factor != 1
     if raised:
         _check_pass(path, where, survey, cutoff_hz, check)
@@ -358,12 +359,14 @@ def _reduce(
 
     total = None
     pieces = rests.held(kept_arrays(), below, survey.dt_kept) if hold else rests.unheld(kept_arrays())
+    resting = 0  # per joint, the samples whose velocity is held at 0 (the loader's note, `data.dataset.rest_note`)
     for a, rest in pieces:
+        resting = resting + (rest & (a["dq"] != 0)).sum(axis=0)
         for r in range(0, len(rest), REGRESSOR_ROWS):  # the regressors (rows × joints × parameters) a block at a time
             one = _block({k: x[r : r + REGRESSOR_ROWS] for k, x in a.items()}, rest[r : r + REGRESSOR_ROWS], arm)
             total = one if total is None else total + one
         del a, rest  # not alive while the next piece is read
-    return total, cut
+    return total, cut, (resting if hold else None)
 
 
 def statistics(path: Path, s, job, choice: Choice) -> tuple[Stats | InstrumentStats, int, list[str]]:
@@ -379,7 +382,7 @@ def statistics(path: Path, s, job, choice: Choice) -> tuple[Stats | InstrumentSt
     cutoff = float(spec.derivative_cutoff_hz)
     survey = _first_pass(path, where, check)
     survey = _second_pass(path, where, survey, cutoff, len(PI_NAMES))
-    total, cut = _reduce(path, where, survey, s.model, choice, cutoff, check, spec.rest_velocity)
+    total, cut, resting = _reduce(path, where, survey, s.model, choice, cutoff, check, spec.rest_velocity)
     n = survey.i1 - survey.i0
     effective = n * min(1.0, 2 * cut / (1.0 / survey.dt_kept))  # `estimators._independent`
     if isinstance(total, InstrumentStats):
@@ -396,4 +399,6 @@ def statistics(path: Path, s, job, choice: Choice) -> tuple[Stats | InstrumentSt
         f"{survey.n - n} sample(s) within {1 / cutoff:.3g} s of the trial's ends left out: the zero-phase filter's "
         "edge error is still in their derivatives there",
     ]
+    if resting is not None:
+        notes.append(rest_note(spec.rest_velocity, np.asarray(resting) / n))
     return total, n, notes
