@@ -100,7 +100,7 @@ def test_rests_held_in_pieces_are_the_whole_trials(seed, dt):
     pieces = [(p, {"i": np.arange(len(p))}) for p in np.split(v, cuts)]
     parts = list(rests.held(pieces, signals.rest_speed(v), dt))
     mask = np.concatenate([m for _, m in parts])
-    assert np.array_equal(mask, signals.resting(v, dt))
+    assert np.array_equal(mask, signals.resting(v, dt, signals.HOLD_WINDOW_S))
     assert sum(len(a["i"]) for a, _ in parts) == len(v)
 
 

@@ -195,7 +195,7 @@ def _nonempty_parts(n: int, n_train: int) -> None:
         )
 
 
-def at_rest(trial: Dataset) -> Dataset:
+def at_rest(trial: Dataset, window_s: float = signals.HOLD_WINDOW_S) -> Dataset:
     """The trial with the velocity of a joint at rest read as exactly 0 (its instruments' velocity too), each
     gap-free segment read alone (`derivatives.segments`, as its derivatives are): what the loader does where the
     problem's `[data] rest_velocity` says so (`holds_rests`), and the diagnosis always.
@@ -203,18 +203,20 @@ def at_rest(trial: Dataset) -> Dataset:
     Coulomb friction at rest is set-valued (stiction holds whatever the controller pushes, up to the breakaway
     level), and the sign of an estimated velocity at rest is noise: a model's fc·sgn(q̇) there is a random ±fc. A fit
     that reads it shrinks fc to hedge (simulated arm4, about half its samples at rest: least squares read 0.30, 0.42,
-    0.21, 0.045 N·m for Coulomb levels 1.0, 1.5, 0.8, 0.15; with rests held, 0.999, 1.495, 0.799, 0.149), and a
+    0.21, 0.045 N·m for Coulomb levels 1.0, 1.5, 0.8, 0.15; with rests held, the true levels within 0.5 %), and a
     prediction that reads it predicts ±fc at random (results/slow_samples.md). A joint is at rest at a sample
     (`signals.resting`) when |q̇| is below REST_FRACTION of its speed scale (95th percentile of |q̇|) there and stays
-    below it for REST_WINDOW_S before or after (so the filter ringing just before a start or after a stop counts as
-    rest, but a smooth velocity reversal, slow only for an instant, does not). Holding again changes nothing: the
-    zeros replace samples below the threshold, which leaves the 95th percentile where it was."""
+    below it for `window_s` before or after: the loader's `HOLD_WINDOW_S` (50 ms: a stop, with the filter's ringing
+    just before a start or after it, and not a smooth reversal, whose friction flips), the diagnosis's
+    `REST_WINDOW_S` (10 ms: it leaves every brief slow stretch out of its comparisons). Holding again with the same
+    or a shorter window changes nothing outside the newly held samples: the zeros replace samples below the
+    threshold, which leaves the 95th percentile where it was."""
     if trial.n < 2:
         return replace(trial, rests_held=True)
     rest = np.zeros(trial.dq.shape, dtype=bool)
     for seg in segments(trial.t, trial.cutoff_hz):
         if seg.stop - seg.start >= 2:
-            rest[seg] = signals.resting(trial.dq[seg], float(np.median(np.diff(trial.t[seg]))))
+            rest[seg] = signals.resting(trial.dq[seg], float(np.median(np.diff(trial.t[seg]))), window_s)
     instruments = trial.instruments
     if instruments is not None:
         instruments = (np.where(rest, 0.0, instruments[0]), instruments[1])

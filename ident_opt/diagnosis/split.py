@@ -122,7 +122,7 @@ def prepare(trial: Dataset, torque_filter_hz: float | str | None) -> Dataset:
     """
     if torque_filter_hz == "auto":  # the problem's `derivative_cutoff_hz = "auto"`: the one this trial was read with
         trial, torque_filter_hz = (trial, trial.cutoff_hz) if trial.cutoff_hz is not None else logged_bandwidth(trial)
-    trial = at_rest(trial)
+    trial = at_rest(trial, signals.REST_WINDOW_S)  # the diagnosis's shorter window (`data.dataset.at_rest`)
     if torque_filter_hz is None:
         return trial
     dt = float(np.median(np.diff(trial.t)))

@@ -47,7 +47,7 @@ from ident_opt.excitation.design import Design
 from ident_opt.excitation.setup import Setup, make_setup
 from ident_opt.fitting import estimators
 from ident_opt.fitting.stats import Stats
-from ident_opt.numerics.signals import TORQUE_FILTER_HZ
+from ident_opt.numerics.signals import REST_WINDOW_S, TORQUE_FILTER_HZ
 from ident_opt.problem.spec import Problem
 from ident_opt.simulator import simulate_trial
 from ident_opt.simulator.fourier import default_base_hz
@@ -135,7 +135,7 @@ def identification_row(setup: Setup, ds: Dataset, pi_true: np.ndarray) -> dict:
     velocities of resting joints read as 0 (`data.dataset.at_rest`: at rest the sign of an estimated
     velocity is noise, and the Coulomb columns would carry it)."""
     row = {k: v for k, v in excitation.criteria(setup, ds.q, ds.dq, ds.ddq).items() if k != "rank"}
-    for suffix, d in (("", ds), (" (rests 0)", at_rest(ds))):
+    for suffix, d in (("", ds), (" (rests 0)", at_rest(ds, REST_WINDOW_S))):
         stats = Stats.from_data(PHYSICAL, d.q, d.dq, d.ddq, d.tau)
         for name in ("ols", "constrained"):
             row[f"error_{name}{suffix}"] = median_relative_error(estimators.fit(name, stats, PHYSICAL).pi, pi_true)

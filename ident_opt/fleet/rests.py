@@ -14,7 +14,7 @@ from collections.abc import Iterable, Iterator
 
 import numpy as np
 
-from ident_opt.numerics.signals import REST_FRACTION, REST_WINDOW_S, quiet_runs
+from ident_opt.numerics.signals import HOLD_WINDOW_S, REST_FRACTION, quiet_runs
 
 #: Mantissa bits a bin keeps, and the powers of two binned: |q̇| below 2^LOW (1e-9 rad/s) shares one bin, and the
 #: loader's plausibility limits keep every velocity far below 2^HIGH. Dense counts: 16385 per joint.
@@ -85,10 +85,10 @@ def held(
 ) -> Iterator[tuple[dict, np.ndarray]]:
     """The pieces (velocities (k, n) [rad/s] and a dict of arrays of the same samples) in order, as parts (a dict of
     those arrays cut to the part, its rest mask (k', n)) as `signals.resting` gives it for the whole trial at step
-    `dt` [s] and rest speed `rest_speed` (n,) [rad/s], its ends padded with their own flags. A sample's mask needs
-    the w = REST_WINDOW_S / dt flags after it: each piece is given but its last w samples, which go with the next
-    (so what is held between pieces is w samples, not a piece)."""
-    w = max(1, round(REST_WINDOW_S / dt))
+    `dt` [s] and rest speed `rest_speed` (n,) [rad/s] (the loader's window, `signals.HOLD_WINDOW_S`), its ends
+    padded with their own flags. A sample's mask needs the w = HOLD_WINDOW_S / dt flags after it: each piece is given
+    but its last w samples, which go with the next (so what is held between pieces is w samples, not a piece)."""
+    w = max(1, round(HOLD_WINDOW_S / dt))
     behind: np.ndarray | None = None  # the w flags before the next sample given
     carry: tuple[dict, np.ndarray] | None = None  # samples not given yet: their arrays and flags
 

@@ -150,8 +150,14 @@ def lag(reference: np.ndarray, x: np.ndarray, dt: float, max_s: float = 0.2) -> 
 
 #: A joint (or drive) moving slower than this fraction of its speed scale (95th percentile of |v|) is at rest.
 REST_FRACTION = 0.01
-#: How long [s] it must stay slow, before or after a sample, for it to count as at rest.
+#: How long [s] it must stay slow, before or after a sample, for it to count as at rest (the diagnosis's rule).
 REST_WINDOW_S = 0.01
+#: The loader's longer window (`data.dataset.at_rest`): a stop, not a smooth reversal. A reversal is slow for
+#: 2·REST_FRACTION·(95th-percentile speed)/|q̈|, about 0.02/ω for a sine of ω rad/s: longer than 10 ms for any
+#: motion slower than 2 rad/s, so the diagnosis's window held the reversals of a swinging passive joint, whose
+#: friction flips there (the cut-off study's passive trials: parameter errors up to 1.2× those of the velocities as
+#: read); 50 ms spares every reversal of a motion faster than a 15 s period and keeps every stop.
+HOLD_WINDOW_S = 0.05
 #: The n-joint diagnosis compares only samples moving faster than this many rest speeds (`rest_speed`): slower, a
 #: joint may be held by stiction, whose torque is anything up to the static friction level, following what the
 #: controller commands. Within a stop that torque ramps by N m on a clean simulated TX40 (a Fourier trajectory's
@@ -172,12 +178,12 @@ def stick_speed(v: np.ndarray) -> np.ndarray:
     return STICK_SPEEDS * rest_speed(v)
 
 
-def resting(v: np.ndarray, dt: float) -> np.ndarray:
+def resting(v: np.ndarray, dt: float, window_s: float = REST_WINDOW_S) -> np.ndarray:
     """(N, m) bool: the samples where each velocity column of v (N, m) [rad/s] at step `dt` [s] is at rest: below
-    `REST_FRACTION` of its speed scale (95th percentile of |v|) there, and staying below it for `REST_WINDOW_S` before
+    `REST_FRACTION` of its speed scale (95th percentile of |v|) there, and staying below it for `window_s` before
     or after (the filter ringing just before a start or after a stop counts as rest, a smooth reversal, slow only for an
     instant, does not). The rule of `data.dataset.at_rest` (joints) and `chain.context.ArmContext` (drives)."""
-    w = max(1, round(REST_WINDOW_S / dt))
+    w = max(1, round(window_s / dt))
     slow = np.abs(v) < rest_speed(v)
     quiet = quiet_runs(np.pad(slow, ((w, w), (0, 0)), mode="edge"), w + 1)
     before, after = quiet[: len(v)], quiet[w : w + len(v)]
