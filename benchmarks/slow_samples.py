@@ -14,7 +14,12 @@ on the held-out trial (or the last 30 % of the one trial), every sample, against
 
 The model's Coulomb column is sign(q̇): where a joint rests, an estimated velocity's sign is noise, so a fit that
 keeps those samples shrinks its Coulomb friction to hedge, and a prediction that reads them predicts ±fc at random.
-Prints nMSE per joint and the fitted Coulomb levels. `python benchmarks/slow_samples.py [PROBLEM ...]`."""
+Prints nMSE per joint and the fitted Coulomb levels. `python benchmarks/slow_samples.py [PROBLEM ...]`.
+
+`python benchmarks/slow_samples.py plant`: the window of the rule, on the cut-off study's plant (the DFKI C.0 arm
+with larger friction, `evaluation.cutoff_plant`; `passive`, `steps`, `driven` and `swing_up` trials of 20 s at 100 and
+1000 Hz, seeds 71–72, never the study's): the recommended fit's parameter error (the study's `_error`) with the
+velocities as read and with rests held over the diagnosis's 10 ms and the loader's 50 ms window."""
 
 from __future__ import annotations
 
@@ -105,10 +110,45 @@ def simulated() -> None:
         study(problem, *iopt.load_trials(_as_read(problem), paths[:2], paths[2:]))
 
 
+def plant() -> None:
+    """The window of the rule on the cut-off study's plant (module doc)."""
+    from ident_opt.evaluation.cutoff_plant import Condition, simulate
+    from ident_opt.evaluation.cutoff_study import _error, truth
+    from ident_opt.fitting.recommend import choose
+    from ident_opt.numerics.signals import HOLD_WINDOW_S, REST_WINDOW_S
+    from ident_opt.problem import DataSpec
+
+    dfki = iopt.load_problem(ROOT / "problems" / "dfki_c0.toml")
+    arm, pi = truth(dfki.robot)
+    problem = replace(dfki, data=DataSpec(derivative_cutoff_hz="auto", rest_velocity="as_read"))
+    ratios: dict[float, list[float]] = {REST_WINDOW_S: [], HOLD_WINDOW_S: []}
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "trial.csv"
+        for kind in ("passive", "steps", "driven", "swing_up"):
+            for rate in (100.0, 1000.0):
+                for seed in (71, 72):
+                    simulate(arm, pi, Condition(kind, rate, 1.0), seed, duration=20.0).to_csv(path, index=False)
+                    d = iopt.load_trials(problem, [path], fit=True)[0][0]
+                    errors = {}
+                    for window in (None, REST_WINDOW_S, HOLD_WINDOW_S):
+                        read = d if window is None else at_rest(d, window)
+                        errors[window] = _error(
+                            arm, choose(problem, [read], model=arm).fit(dfki.robot, arm, [read]).pi, pi
+                        )
+                    line = "  ".join(f"{w * 1000:g} ms {errors[w] / errors[None]:.3f}" for w in ratios)
+                    print(f"  {kind:9s} {rate:6g} Hz seed {seed}: as read {errors[None]:.4g}; held ÷ as read: {line}")
+                    for w in ratios:
+                        ratios[w].append(errors[w] / errors[None])
+    for w, r in ratios.items():
+        print(f"window {w * 1000:g} ms: held ÷ as read median {np.median(r):.3f}, min {min(r):.3f}, max {max(r):.3f}")
+
+
 def main() -> None:
     names = sys.argv[1:] or REAL
     for name in names:
-        if name == "arm4":
+        if name == "plant":
+            plant()
+        elif name == "arm4":
             simulated()
         else:
             problem = iopt.load_problem(ROOT / "problems" / f"{name}.toml")
