@@ -5,6 +5,7 @@ flat in the file's length."""
 
 from __future__ import annotations
 
+import dataclasses
 import tracemalloc
 from pathlib import Path
 
@@ -142,6 +143,22 @@ def test_an_odd_long_log_is_judged_by_the_loader_word_for_word(tmp_path, change,
         load_dataset(path, s.problem.data, s.robot)
     assert result.stats is None and needle in result.reason
     assert result.reason == str(loader.value).replace(f"{path}: ", "").splitlines()[0]
+
+
+@pytest.mark.parametrize("rests", ["auto", "as_read"])
+def test_implausible_estimated_velocities_send_a_long_log_to_the_loader_whatever_the_rest_rule(tmp_path, rests):
+    """A 90 rad jump of q1 (each angle still plausible): its estimated velocity is not, which the loader refuses;
+    the pieces check it in the rest rule's first pass, and without that pass (`rest_velocity = "as_read"`) in their
+    own."""
+    frame = long_trial(PLANAR, 100_000, RATE_HZ, seed=6)
+    frame.loc[50_000:, "q1"] += 90.0
+    path = tmp_path / "jump.parquet"
+    frame.to_parquet(path, index=False)
+    s, job = tasks.setup(PLANAR), tasks.Job(PLANAR)
+    spec = dataclasses.replace(s.problem.data, rest_velocity=rests)
+    s = dataclasses.replace(s, problem=dataclasses.replace(s.problem, data=spec))
+    with pytest.raises(streamed.Whole):
+        streamed.statistics(path, s, job, Choice("ols", "", 1.0))
 
 
 def _peak(job: tasks.Job, path: Path, choice: tasks.RobotChoice) -> tuple[int, tasks.FileStats]:

@@ -290,9 +290,8 @@ def _pieces(path: Path, where: Layout, survey: Survey, fs: float, cutoffs: tuple
         if check is not None:
             _derivative_checks(dq, ddq, kept, check)
         if kept.any():
-            box = [(dq[kept], {"w": w, "kept": kept, "dq": dq[kept], "ddq": ddq[kept]})]
-            del dq, ddq, w  # neither the piece nor its whole outputs are held here while the caller works
-            yield box.pop()
+            v = dq[kept]
+            yield v, {"w": w, "kept": kept, "dq": v, "ddq": ddq[kept]}
 
 
 def _rest_speed(path: Path, where: Layout, survey: Survey, fs: float, cutoffs: tuple[float, ...], rows, check):
@@ -345,8 +344,12 @@ def _reduce(
     below = _rest_speed(path, where, survey, fs, cutoffs, rows, None if raised else check) if hold else None
     n = rows[1] - rows[0]
 
+    # The loader's checks of the derivatives at the trial's cut-off: made by the rest speed's first pass when it runs,
+    # here otherwise (a raised cut-off: `_check_pass` made them).
+    checked_here = None if raised or hold else check
+
     def kept_arrays():  # each piece reduced to its kept samples' arrays at once: the piece itself is not held
-        for dq, p in _pieces(path, where, survey, fs, cutoffs, rows, None):
+        for dq, p in _pieces(path, where, survey, fs, cutoffs, rows, checked_here):
             w, kept = p["w"], p["kept"]
             arrays = {"q": w.arrays["q"][w.core][kept], "dq": dq, "ddq": p["ddq"]}
             arrays["tau"] = chunks.lowpassed(w, "tau", fs, cut, n)[kept]
